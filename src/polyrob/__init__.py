@@ -1,0 +1,38 @@
+"""polyrob: robust controllers with a mathematical guarantee for serial robots.
+
+The data flow is one way: a robot (:func:`load_robot`) and a :class:`Domain`
+give a PLDI (bounds of the Jacobians over the domain), the PLDI an uncertain
+plant, the plant with weights a generalized plant, and that a controller with
+its structured-singular-value certificate.
+"""
+
+from .errors import (
+    BoundsError,
+    CertificationError,
+    DomainError,
+    PolyrobError,
+    RobotError,
+    SolverError,
+    SynthesisError,
+)
+from .robots import Manipulator, Robot, available_robots, load_robot
+from .analytic import AnalyticRobot
+from .domain import Domain
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "AnalyticRobot",
+    "BoundsError",
+    "CertificationError",
+    "Domain",
+    "DomainError",
+    "Manipulator",
+    "PolyrobError",
+    "Robot",
+    "RobotError",
+    "SolverError",
+    "SynthesisError",
+    "available_robots",
+    "load_robot",
+]

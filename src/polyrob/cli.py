@@ -1,0 +1,213 @@
+"""The ``polyrob`` command: a thin layer over the library's functions.
+
+Every user error (a :class:`~polyrob.errors.PolyrobError`) ends as one line on
+stderr and exit status 2; output files are written to a temporary file and
+renamed, so a failed run never leaves a half-written file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+import numpy as np
+
+from .errors import DomainError, PolyrobError
+
+__all__ = ["main", "build_parser"]
+
+DEFAULT_ROBOT = "planar_2r"
+
+
+# --------------------------------------------------------------------------- option parsing
+
+
+def _number(text: str, option: str) -> float:
+    t = text.strip().lower()
+    sign = -1.0 if t.startswith("-") else 1.0
+    t = t.lstrip("+-")
+    try:
+        if t.endswith("pi"):
+            factor = t[:-2].rstrip("*")
+            return sign * (float(factor) if factor else 1.0) * math.pi
+        return sign * float(t)
+    except ValueError:
+        raise DomainError(f"{option}: '{text}' is not a number") from None
+
+
+def parse_joint_values(text: str | None, option: str, *, ranges: bool):
+    """Parse ``4``, ``4,10``, ``joint1=4,joint2=10``, ``-pi:pi`` or ``joint2=-1:1``.
+
+    Returns a value :meth:`polyrob.Domain.from_robot` takes: a number or a
+    ``[lo, hi]`` pair for every joint, a list per joint, or a mapping.
+    """
+    if text is None:
+        return None
+    items = [s for s in text.split(",") if s.strip()]
+    if not items:
+        raise DomainError(f"{option}: empty value")
+
+    def value(s):
+        if ":" in s:
+            lo, hi = s.split(":", 1)
+            return [_number(lo, option), _number(hi, option)]
+        if ranges:
+            raise DomainError(f"{option}: give a range as LO:HI (e.g. {option}=-pi:pi), got '{s}'")
+        return _number(s, option)
+
+    if all("=" in s for s in items):
+        return {k.strip(): value(v) for k, v in (s.split("=", 1) for s in items)}
+    if any("=" in s for s in items):
+        raise DomainError(f"{option}: mix of JOINT=VALUE and plain values in '{text}'")
+    values = [value(s) for s in items]
+    if len(values) == 1:
+        return values[0]
+    return [v if isinstance(v, list) else [-abs(v), abs(v)] for v in values]
+
+
+def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("robot", nargs="?", default=DEFAULT_ROBOT,
+                        help=f"URDF file, bundled or example-robot-data name (default {DEFAULT_ROBOT})")
+    parser.add_argument("--lock", default=None,
+                        help="comma-separated joints to lock (default: grippers/fingers; '' locks none)")
+
+
+def add_domain_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("domain")
+    g.add_argument("--domain", default=None,
+                   help="domain file (JSON/YAML) or a named domain of the robot (e.g. 'paper')")
+    g.add_argument("--q-range", default=None,
+                   help="position range, e.g. --q-range=-pi:pi or joint2=-1.5:1.5,joint3=0:2")
+    g.add_argument("--qdot-max", default=None, help="velocity bound, e.g. 2 or joint1=4,joint2=10")
+    g.add_argument("--u-max", default=None, help="torque bound, e.g. 50 or joint1=0,joint2=5")
+    g.add_argument("--qdot-scale", type=float, default=1.0, help="scale the velocity box")
+    g.add_argument("--u-scale", type=float, default=1.0, help="scale the torque box")
+
+
+def robot_from_args(args):
+    from .robots import load_robot
+
+    lock = None if args.lock is None else [s.strip() for s in args.lock.split(",") if s.strip()]
+    return load_robot(args.robot, lock=lock)
+
+
+def domain_from_args(robot, args):
+    from .domain import Domain
+
+    return Domain.from_robot(
+        robot,
+        args.domain,
+        q_range=parse_joint_values(args.q_range, "--q-range", ranges=True),
+        qdot_max=parse_joint_values(args.qdot_max, "--qdot-max", ranges=False),
+        u_max=parse_joint_values(args.u_max, "--u-max", ranges=False),
+        qdot_scale=args.qdot_scale,
+        u_scale=args.u_scale,
+    )
+
+
+# --------------------------------------------------------------------------- commands
+
+
+def cmd_robots(args) -> int:
+    from .robots import available_robots, load_robot
+
+    rows = []
+    for name, origin in available_robots():
+        try:
+            robot = load_robot(name)
+            rows.append({"name": name, "origin": origin, "m": robot.m, "locked": list(robot.locked)})
+        except PolyrobError as exc:
+            if args.all:
+                rows.append({"name": name, "origin": origin, "m": None, "refused": str(exc).split(": ", 1)[-1]})
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    print(f"{'robot':<28}{'joints':>7}  {'origin':<20} notes")
+    for r in rows:
+        joints = "-" if r["m"] is None else str(r["m"])
+        notes = r.get("refused") or (f"locked: {', '.join(r['locked'])}" if r["locked"] else "")
+        print(f"{r['name']:<28}{joints:>7}  {r['origin']:<20} {notes}")
+    return 0
+
+
+def cmd_info(args) -> int:
+    robot = robot_from_args(args)
+    domain = domain_from_args(robot, args)
+    q0 = np.clip(np.zeros(robot.m), domain.q_lower, domain.q_upper)
+    M = robot.mass_matrix(q0)
+    _, B = robot.jacobians(q0, np.zeros(robot.m), np.zeros(robot.m))
+    info = robot.describe()
+    info["domain"] = domain.to_dict()
+    info["neutral"] = {"q": q0.tolist(), "M": M.tolist(), "B": B.tolist()}
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    print(f"robot   {robot.name}  ({robot.m} actuated joints)")
+    print(f"source  {robot.source}")
+    if robot.locked:
+        print(f"locked  {', '.join(robot.locked)}")
+    print()
+    print(f"{'joint':<24}{'kind':<12}{'position limits':>22}{'velocity':>10}{'effort':>10}{'damping':>9}")
+    for j in info["joints"]:
+        lo, hi = j["position"]
+        pos = "-" if lo is None else f"[{lo:.4g}, {hi:.4g}]"
+        vel = "-" if j["velocity"] is None else f"{j['velocity']:.4g}"
+        eff = "-" if j["effort"] is None else f"{j['effort']:.4g}"
+        print(f"{j['name']:<24}{j['kind']:<12}{pos:>22}{vel:>10}{eff:>10}{j['damping']:>9.4g}")
+    print(f"\ndomain ({domain.name})")
+    print(domain.table())
+    with np.printoptions(precision=5, suppress=True, linewidth=120):
+        print(f"\nat q = {q0}:\nM(q) =\n{M}\nB(q) =\n{B}")
+    return 0
+
+
+# --------------------------------------------------------------------------- entry point
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="polyrob",
+        description="Robust controllers with a mathematical guarantee for serial robots described in URDF.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("robots", help="list the robots polyrob can load")
+    p.add_argument("--all", action="store_true", help="also list refused URDFs with the reason")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_robots)
+
+    p = sub.add_parser("info", help="joints, limits, default domain, M and B at the neutral configuration")
+    add_robot_arguments(p)
+    add_domain_arguments(p)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_info)
+
+    for register in _EXTRA_COMMANDS:
+        register(sub)
+    return parser
+
+
+#: Later stages register their sub-commands here (bounds, analyze, synth, run).
+_EXTRA_COMMANDS: list = []
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except PolyrobError as exc:
+        print(f"polyrob: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:  # `polyrob robots | head`: not an error
+        sys.stderr.close()
+        return 0
+    except KeyboardInterrupt:
+        print("polyrob: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,366 @@
+"""The domain: a box over joint positions ``q``, velocities ``qdot`` and torques ``u``.
+
+Defaults come from the robot's limits (URDF position, velocity and effort
+limits; a continuous joint turns a full circle ``[-pi, pi]``).  Users override
+them per joint or for all joints, scale them, or give the whole domain as a
+JSON/YAML file::
+
+    {"q":    {"joint2": [-3.14159, 3.14159]},
+     "qdot": {"joint1": 4.0, "joint2": [-10, 10]},
+     "u":    0.0}
+
+A single number ``v`` means ``[-v, v]``; entries left out keep the defaults.
+
+Examples
+--------
+>>> from polyrob import load_robot, Domain
+>>> robot = load_robot("planar_2r")
+>>> dom = Domain.from_robot(robot, qdot_max=2.0, u_max={"joint2": 5.0})
+>>> dom.qdot_upper, dom.u_upper
+(array([2., 2.]), array([100.,   5.]))
+>>> dom.dim
+6
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+from scipy.stats import qmc
+
+from .errors import DomainError
+
+__all__ = ["Domain"]
+
+_GROUPS = ("q", "qdot", "u")
+_GROUP_TEXT = {"q": "position", "qdot": "velocity", "u": "torque"}
+_GROUP_OPTION = {"q": "--q-range JOINT=LO:HI", "qdot": "--qdot-max JOINT=VALUE", "u": "--u-max JOINT=VALUE"}
+
+
+@dataclass(frozen=True, eq=False)
+class Domain:
+    """A box ``q_lower <= q <= q_upper``, ``qdot_lower <= qdot <= qdot_upper``, ``u_lower <= u <= u_upper``.
+
+    Build it with :meth:`from_robot` (defaults from limits, with overrides),
+    :meth:`from_file`, or directly from arrays.
+    """
+
+    joint_names: tuple[str, ...]
+    q_lower: np.ndarray
+    q_upper: np.ndarray
+    qdot_lower: np.ndarray
+    qdot_upper: np.ndarray
+    u_lower: np.ndarray
+    u_upper: np.ndarray
+    name: str = field(default="custom")
+
+    def __post_init__(self):
+        m = len(self.joint_names)
+        object.__setattr__(self, "joint_names", tuple(self.joint_names))
+        for group in _GROUPS:
+            for side in ("lower", "upper"):
+                attr = f"{group}_{side}"
+                arr = np.array(getattr(self, attr), dtype=float).reshape(-1)
+                if arr.size == 1:
+                    arr = np.full(m, arr[0])
+                if arr.shape != (m,):
+                    raise DomainError(f"domain: {attr} has {arr.size} values for {m} joints")
+                arr.setflags(write=False)
+                object.__setattr__(self, attr, arr)
+        for group in _GROUPS:
+            lo, hi = getattr(self, f"{group}_lower"), getattr(self, f"{group}_upper")
+            for j, name in enumerate(self.joint_names):
+                if not (np.isfinite(lo[j]) and np.isfinite(hi[j])):
+                    raise DomainError(
+                        f"domain: joint '{name}' has no finite {_GROUP_TEXT[group]} limit "
+                        f"({lo[j]}, {hi[j]}): give it with {_GROUP_OPTION[group]} or a domain file"
+                    )
+                if lo[j] > hi[j]:
+                    raise DomainError(
+                        f"domain: joint '{name}' has an inverted {_GROUP_TEXT[group]} range "
+                        f"[{lo[j]}, {hi[j]}]: give lower <= upper"
+                    )
+
+    # ------------------------------------------------------------------ views
+    @property
+    def m(self) -> int:
+        return len(self.joint_names)
+
+    @property
+    def dim(self) -> int:
+        """Dimension of the box over ``(q, qdot, u)``: ``3 m``."""
+        return 3 * self.m
+
+    @property
+    def lower(self) -> np.ndarray:
+        """Lower corner over ``(q, qdot, u)``."""
+        return np.concatenate([self.q_lower, self.qdot_lower, self.u_lower])
+
+    @property
+    def upper(self) -> np.ndarray:
+        """Upper corner over ``(q, qdot, u)``."""
+        return np.concatenate([self.q_upper, self.qdot_upper, self.u_upper])
+
+    @property
+    def midpoint(self) -> np.ndarray:
+        return 0.5 * (self.lower + self.upper)
+
+    def contains(self, q, qdot, u, *, atol: float = 0.0) -> np.ndarray:
+        """Whether points (arrays (n, m)) lie in the box."""
+        z = np.concatenate([np.atleast_2d(q), np.atleast_2d(qdot), np.atleast_2d(u)], axis=1)
+        return np.all((z >= self.lower - atol) & (z <= self.upper + atol), axis=1)
+
+    def clip(self, q, qdot, u):
+        """Project points onto the box."""
+        lo, hi = self.lower, self.upper
+        z = np.clip(np.concatenate([np.atleast_2d(q), np.atleast_2d(qdot), np.atleast_2d(u)], axis=1), lo, hi)
+        m = self.m
+        return z[:, :m], z[:, m : 2 * m], z[:, 2 * m :]
+
+    def split(self, z):
+        """Split stacked points (n, 3m) into ``(q, qdot, u)``."""
+        z = np.atleast_2d(z)
+        m = self.m
+        return z[:, :m], z[:, m : 2 * m], z[:, 2 * m :]
+
+    # ------------------------------------------------------------------ sampling
+    def sample(self, n: int, *, method: str = "sobol", seed=None, groups=_GROUPS):
+        """``n`` points of the box as ``(q, qdot, u)``, each of shape (n, m).
+
+        Parameters
+        ----------
+        method : {"sobol", "halton", "lhs", "uniform"}
+            A scrambled low-discrepancy design of :mod:`scipy.stats.qmc`, or
+            independent uniform draws.
+        groups : tuple
+            The groups to vary; the others are set to the middle of their range.
+        """
+        lo, hi = self.lower, self.upper
+        m = self.m
+        vary = np.concatenate([np.full(m, g in groups) for g in _GROUPS]) & (hi > lo)
+        k = int(vary.sum())
+        z = np.tile(0.5 * (lo + hi), (n, 1))
+        if k:
+            unit = _unit_design(n, k, method, seed)
+            z[:, vary] = lo[vary] + unit * (hi[vary] - lo[vary])
+        return self.split(z)
+
+    # ------------------------------------------------------------------ building
+    @classmethod
+    def from_robot(
+        cls,
+        robot,
+        domain: str | Path | Mapping | None = None,
+        *,
+        q_range=None,
+        qdot_max=None,
+        u_max=None,
+        qdot_scale: float = 1.0,
+        u_scale: float = 1.0,
+    ) -> "Domain":
+        """The default domain of ``robot``, with overrides.
+
+        Parameters
+        ----------
+        robot : Manipulator
+        domain : str, Path or mapping, optional
+            A domain file (JSON/YAML), a mapping of the same form, or the name
+            of a domain the robot knows (``"paper"`` for ``paper_2r``).
+        q_range : (lo, hi) or mapping joint -> (lo, hi), optional
+        qdot_max, u_max : float, (lo, hi) or mapping joint -> either, optional
+            A single number ``v`` means ``[-v, v]``.
+        qdot_scale, u_scale : float
+            Multiply the velocity / torque box (after overrides).
+        """
+        names = robot.joint_names
+        q_lo = np.array(robot.position_lower, float)
+        q_hi = np.array(robot.position_upper, float)
+        for j, kind in enumerate(robot.joint_kinds):
+            if kind == "continuous" and not (np.isfinite(q_lo[j]) and np.isfinite(q_hi[j])):
+                q_lo[j], q_hi[j] = -np.pi, np.pi
+        v = np.array(robot.velocity_limit, float)
+        e = np.array(robot.effort_limit, float)
+        bounds = {"q": [q_lo, q_hi], "qdot": [-v, v.copy()], "u": [-e, e.copy()]}
+        source = f"{robot.name} limits"
+        # Zero limits in a URDF mean "not given" (e.g. double_pendulum): refuse
+        # them as defaults, but a user may set a zero-width range on purpose.
+        given = {g: np.zeros(len(names), bool) for g in _GROUPS}
+        named = getattr(robot, "named_domains", {}) or {}
+        if domain is None and getattr(robot, "default_domain", None):
+            domain = robot.default_domain
+        if domain is not None:
+            if isinstance(domain, str) and domain in named:
+                spec, source = named[domain], domain
+            elif isinstance(domain, Mapping):
+                spec, source = domain, "custom"
+            else:
+                spec, source = _read_spec(domain, named), str(domain)
+            _apply(bounds, given, names, spec, source)
+        overrides = {"q": q_range, "qdot": qdot_max, "u": u_max}
+        for group, value in overrides.items():
+            if value is not None:
+                _apply(bounds, given, names, {group: value}, f"--{group}")
+                source = source if source != f"{robot.name} limits" else "custom"
+        for group, scale in (("qdot", qdot_scale), ("u", u_scale)):
+            if not (np.isfinite(scale) and scale >= 0):
+                raise DomainError(f"domain: {group} scale must be a finite number >= 0, got {scale}")
+            bounds[group] = [bounds[group][0] * scale, bounds[group][1] * scale]
+        for group in _GROUPS:
+            lo, hi = bounds[group]
+            for j, name in enumerate(names):
+                if not given[group][j] and lo[j] == hi[j] and np.isfinite(lo[j]):
+                    raise DomainError(
+                        f"{robot.source}: joint '{name}' has a zero {_GROUP_TEXT[group]} limit: "
+                        f"give the domain with {_GROUP_OPTION[group]} or a domain file (--domain FILE)"
+                    )
+                if not (np.isfinite(lo[j]) and np.isfinite(hi[j])):
+                    raise DomainError(
+                        f"{robot.source}: joint '{name}' has no {_GROUP_TEXT[group]} limit: "
+                        f"give it with {_GROUP_OPTION[group]} or a domain file (--domain FILE)"
+                    )
+        return cls(
+            names,
+            *bounds["q"],
+            *bounds["qdot"],
+            *bounds["u"],
+            name=source,
+        )
+
+    @classmethod
+    def from_file(cls, robot, path) -> "Domain":
+        """A domain file (JSON or YAML) for ``robot``; see :meth:`from_robot`."""
+        return cls.from_robot(robot, Path(path))
+
+    def with_bounds(self, **arrays) -> "Domain":
+        """A copy with some of ``q_lower``, ``q_upper``, ... replaced."""
+        return replace(self, **arrays)
+
+    # ------------------------------------------------------------------ serialisation
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "joints": list(self.joint_names),
+            **{
+                g: {n: [float(lo), float(hi)] for n, lo, hi in zip(
+                    self.joint_names, getattr(self, f"{g}_lower"), getattr(self, f"{g}_upper"))}
+                for g in _GROUPS
+            },
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> "Domain":
+        names = tuple(data["joints"])
+        arrays = []
+        for g in _GROUPS:
+            pairs = np.array([data[g][n] for n in names], float)
+            arrays += [pairs[:, 0], pairs[:, 1]]
+        return cls(names, *arrays, name=data.get("name", "custom"))
+
+    def table(self) -> str:
+        """A plain-text table of the box, one row per joint."""
+        rows = [f"{'joint':<24}{'q':>26}{'qdot':>24}{'u':>24}"]
+        for j, n in enumerate(self.joint_names):
+            cells = [
+                f"[{getattr(self, g + '_lower')[j]:.4g}, {getattr(self, g + '_upper')[j]:.4g}]"
+                for g in _GROUPS
+            ]
+            rows.append(f"{n:<24}{cells[0]:>26}{cells[1]:>24}{cells[2]:>24}")
+        return "\n".join(rows)
+
+
+def _unit_design(n, k, method, seed):
+    if method == "uniform":
+        return np.random.default_rng(seed).random((n, k))
+    if method == "sobol":
+        with warnings.catch_warnings():
+            # Sobol' balance is exact for n = 2^k only; other n are still far
+            # more even than independent draws, which is all we need here.
+            warnings.simplefilter("ignore", UserWarning)
+            return qmc.Sobol(k, scramble=True, seed=seed).random(n)
+    if method == "halton":
+        return qmc.Halton(k, scramble=True, seed=seed).random(n)
+    if method == "lhs":
+        return qmc.LatinHypercube(k, seed=seed).random(n)
+    raise DomainError(f"unknown sampling method '{method}': use sobol, halton, lhs or uniform")
+
+
+def _read_spec(path, named) -> Mapping:
+    path = Path(path)
+    if not path.is_file():
+        known = ", ".join(named) if named else "none for this robot"
+        raise DomainError(f"{path}: no such domain file (named domains: {known})")
+    text = path.read_text()
+    try:
+        if path.suffix.lower() in (".yaml", ".yml"):
+            import yaml
+
+            spec = yaml.safe_load(text)
+        else:
+            spec = json.loads(text)
+    except Exception as exc:  # json/yaml errors: report as a domain error
+        raise DomainError(f"{path}: cannot read the domain file ({exc})") from None
+    if not isinstance(spec, Mapping):
+        raise DomainError(f"{path}: a domain file holds a mapping with keys q, qdot, u")
+    return spec
+
+
+def _apply(bounds, given, names, spec: Mapping, source: str):
+    """Write the ranges of a domain spec into ``bounds`` (in place)."""
+    unknown_groups = set(spec) - set(_GROUPS) - {"name", "joints"}
+    if unknown_groups:
+        raise DomainError(f"{source}: unknown domain keys {sorted(unknown_groups)}: use q, qdot, u")
+    for group in _GROUPS:
+        if group not in spec or spec[group] is None:
+            continue
+        value = spec[group]
+        if isinstance(value, Mapping):
+            items = value.items()
+        elif _is_per_joint_list(value, len(names)):
+            items = zip(names, value)
+        else:
+            items = ((n, value) for n in names)
+        for joint, rng in items:
+            if joint not in names:
+                raise DomainError(f"{source}: unknown joint '{joint}' (joints: {', '.join(names)})")
+            lo, hi = _range(rng, group, joint, source)
+            j = names.index(joint)
+            bounds[group][0][j], bounds[group][1][j] = lo, hi
+            given[group][j] = True
+
+
+def _is_per_joint_list(value, m) -> bool:
+    """A nested list holds one entry per joint; a flat list of two numbers is
+    one ``[lo, hi]`` range for every joint; a flat list of ``m != 2`` numbers
+    holds one symmetric bound per joint (use a mapping to be explicit)."""
+    if isinstance(value, (str, bytes)) or np.ndim(value) == 0:
+        return False
+    if any(np.ndim(v) > 0 for v in value):
+        return True
+    return len(value) != 2 and len(value) == m
+
+
+def _range(value, group, joint, source):
+    try:
+        arr = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise DomainError(f"{source}: joint '{joint}': {_GROUP_TEXT[group]} range {value!r} is not numeric") from None
+    if arr.size == 1:
+        lo, hi = -abs(arr[0]), abs(arr[0])
+        if np.isnan(arr[0]):
+            lo = hi = np.nan
+    elif arr.size == 2:
+        lo, hi = arr
+    else:
+        raise DomainError(f"{source}: joint '{joint}': give a {_GROUP_TEXT[group]} range as a number or [lo, hi]")
+    if np.isnan(lo) or np.isnan(hi):
+        raise DomainError(f"{source}: joint '{joint}': {_GROUP_TEXT[group]} range contains NaN: give finite numbers")
+    if lo > hi:
+        raise DomainError(
+            f"{source}: joint '{joint}': {_GROUP_TEXT[group]} range [{lo}, {hi}] is inverted: give lower <= upper"
+        )
+    return float(lo), float(hi)

@@ -1,0 +1,49 @@
+"""Shared fixtures: small URDFs that must be refused, and loaded robots."""
+
+from __future__ import annotations
+
+import functools
+
+import pytest
+
+from polyrob import load_robot
+
+
+@functools.lru_cache(maxsize=None)
+def cached_robot(name: str):
+    """Robots are immutable: load each once per test session."""
+    return load_robot(name)
+
+
+LINK = '<link name="{n}"><inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>'
+JOINT = (
+    '<joint name="{n}" type="{t}"><parent link="{p}"/><child link="{c}"/><axis xyz="0 0 1"/>'
+    '<limit lower="-1" upper="1" velocity="1" effort="1"/></joint>'
+)
+
+
+def urdf_text(links, joints) -> str:
+    body = "".join(LINK.format(n=n) for n in links)
+    body += "".join(JOINT.format(n=n, t=t, p=p, c=c) for n, t, p, c in joints)
+    return f'<?xml version="1.0"?><robot name="test">{body}</robot>'
+
+
+@pytest.fixture
+def write_urdf(tmp_path):
+    def write(text: str, name: str = "robot.urdf"):
+        path = tmp_path / name
+        path.write_text(text)
+        return path
+
+    return write
+
+
+BAD_URDFS = {
+    "malformed": '<?xml version="1.0"?><robot name="x"><link name="a"/><joint name="j" type="revolute">',
+    "floating": urdf_text(["base", "body"], [("free", "floating", "base", "body")]),
+    "tree": urdf_text(
+        ["base", "l1", "l2"], [("j1", "revolute", "base", "l1"), ("j2", "revolute", "base", "l2")]
+    ),
+    "no_joint": urdf_text(["base", "l1"], [("j1", "fixed", "base", "l1")]),
+    "not_urdf": '<?xml version="1.0"?><sdf version="1.6"/>',
+}

@@ -1,0 +1,140 @@
+"""Loading robots: sources, reduction to the serial chain, refusals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from polyrob import Robot, RobotError, load_robot
+from polyrob.robots import available_robots, example_robot_data_dir
+
+from conftest import BAD_URDFS, cached_robot
+
+A1, A2, A3 = 48.125, 13.125, 6.25
+
+
+def paper_mass_matrix(q2):
+    c = np.cos(q2)
+    return np.array([[A1 + 2 * A3 * c, A2 + A3 * c], [A2 + A3 * c, A2]])
+
+
+def test_planar_2r_mass_matrix_and_B_match_the_paper():
+    robot = cached_robot("planar_2r")
+    rng = np.random.default_rng(0)
+    for q in rng.uniform(-np.pi, np.pi, size=(100, 2)):
+        M = robot.mass_matrix(q)
+        np.testing.assert_allclose(M, paper_mass_matrix(q[1]), rtol=0, atol=1e-9)
+        _, B = robot.jacobians(q, [0.0, 0.0], [0.0, 0.0])
+        np.testing.assert_allclose(B[2:], np.linalg.inv(paper_mass_matrix(q[1])), rtol=0, atol=1e-9)
+        assert np.all(B[:2] == 0)
+
+
+def test_planar_2r_B_spans_the_paper_intervals():
+    robot = cached_robot("planar_2r")
+    q2 = np.linspace(-np.pi, np.pi, 20001)
+    q = np.column_stack([np.zeros_like(q2), q2])
+    _, B = robot.jacobians_batch(q, np.zeros_like(q), np.zeros_like(q))
+    b = B[:, 2:, :]
+    lo, hi = b.min(axis=0), b.max(axis=0)
+    # The paper prints 3-4 significant digits: b31, b32 = b41, b42.
+    assert (round(lo[0, 0], 4), round(hi[0, 0], 4)) == (0.0286, 0.0312)
+    assert (round(lo[0, 1], 4), round(hi[0, 1], 4)) == (-0.0461, -0.0164)
+    assert (round(lo[1, 0], 4), round(hi[1, 0], 4)) == (-0.0461, -0.0164)
+    assert (round(lo[1, 1], 4), round(hi[1, 1], 3)) == (0.0848, 0.144)
+
+
+def test_planar_2r_has_no_gravity_and_no_damping():
+    robot = cached_robot("planar_2r")
+    acc = robot.acceleration([0.3, -1.2], [0.0, 0.0], [0.0, 0.0])
+    np.testing.assert_allclose(acc, 0.0, atol=1e-12)
+    assert np.all(robot.damping == 0)
+    np.testing.assert_allclose(robot.position_lower, -np.pi)
+    np.testing.assert_allclose(robot.position_upper, np.pi)
+
+
+@pytest.mark.parametrize(
+    "name, m, locked",
+    [
+        ("panda", 7, ("panda_finger_joint1", "panda_finger_joint2")),
+        ("ur5", 6, ()),
+        ("z1", 6, ("jointGripper",)),
+        ("so100", 5, ("gripper",)),
+        ("finger_edu", 3, ()),
+        ("double_pendulum", 2, ()),
+        ("TwoDofs", 2, ()),
+    ],
+)
+def test_example_robot_data_arms_reduce_to_their_serial_joints(name, m, locked):
+    robot = cached_robot(name)
+    assert isinstance(robot, Robot)
+    assert robot.m == m
+    assert robot.locked == locked
+    assert robot.model.nv == m
+    assert all(robot.model.parents[i] == i - 1 for i in range(1, robot.model.njoints))
+
+
+def test_kinova_continuous_joints_use_the_angle():
+    robot = cached_robot("kinova")
+    assert robot.joint_kinds.count("continuous") == 3
+    assert robot.model.nq == 9 and robot.m == 6
+    q = np.array([0.4, 2.0, 1.0, -0.7, 1.5, 3.0])
+    config = robot.configuration(q)
+    i = robot.model.joints[1].idx_q
+    np.testing.assert_allclose(config[i : i + 2], [np.cos(0.4), np.sin(0.4)])
+    # a full turn of a continuous joint is the same configuration
+    q2 = q.copy()
+    q2[0] += 2 * np.pi
+    np.testing.assert_allclose(robot.mass_matrix(q2), robot.mass_matrix(q), atol=1e-12)
+
+
+def test_lock_by_name_and_unknown_joint():
+    robot = load_robot("panda", lock=["panda_joint7", "panda_finger_joint1", "panda_finger_joint2"])
+    assert robot.m == 6 and "panda_joint7" not in robot.joint_names
+    with pytest.raises(RobotError, match="cannot lock nope"):
+        load_robot("panda", lock=["nope"])
+    # lock=[] keeps finger 1 (prismatic); finger 2 mimics it and stays locked
+    robot = load_robot("panda", lock=[])
+    assert robot.m == 8 and robot.joint_kinds[-1] == "prismatic"
+    assert robot.locked == ("panda_finger_joint2",)
+
+
+def test_load_robot_from_a_path(tmp_path):
+    erd = example_robot_data_dir()
+    path = erd / "ur_description/urdf/ur3_robot.urdf"
+    robot = load_robot(str(path))
+    assert robot.name == "ur3_robot" and robot.m == 6
+
+
+@pytest.mark.parametrize(
+    "kind, message",
+    [
+        ("malformed", "malformed URDF"),
+        ("floating", "floating"),
+        ("tree", "branches off"),
+        ("no_joint", "no movable joint"),
+        ("not_urdf", "not a URDF"),
+    ],
+)
+def test_bad_urdfs_are_refused_with_the_file_named(write_urdf, kind, message):
+    path = write_urdf(BAD_URDFS[kind], f"{kind}.urdf")
+    with pytest.raises(RobotError, match=message) as info:
+        load_robot(str(path))
+    assert str(path) in str(info.value)
+
+
+def test_missing_file_and_unknown_name():
+    with pytest.raises(RobotError, match="no such URDF file"):
+        load_robot("/nonexistent/robot.urdf")
+    with pytest.raises(RobotError, match="unknown robot 'robotron'"):
+        load_robot("robotron")
+
+
+def test_legged_robot_is_refused_as_a_tree():
+    with pytest.raises(RobotError, match="serial chain"):
+        load_robot("solo12")
+
+
+def test_available_robots_lists_the_bundled_and_shipped_arms():
+    names = dict(available_robots())
+    for name in ("planar_2r", "paper_2r", "panda", "ur5", "kinova", "double_pendulum", "finger_edu"):
+        assert name in names
