@@ -18,6 +18,7 @@ from .errors import (
 from .robots import Manipulator, Robot, available_robots, load_robot
 from .analytic import AnalyticRobot
 from .domain import Domain
+from .pldi import PLDI, bound_pldi
 
 __version__ = "0.1.0"
 
@@ -33,6 +34,8 @@ __all__ = [
     "RobotError",
     "SolverError",
     "SynthesisError",
+    "PLDI",
     "available_robots",
+    "bound_pldi",
     "load_robot",
 ]

@@ -185,7 +185,8 @@ def paper_2r() -> AnalyticRobot:
 #: docs/paper_2r.md): the paper prints no velocity or torque box.
 PAPER_DOMAIN = {
     "q": [[-np.pi, np.pi], [-np.pi, np.pi]],
-    "qdot": [[-4.0, 4.0], [-10.0, 10.0]],
+    # fitted by scripts/fit_paper_domain.py (output: docs/paper_2r_fit.json)
+    "qdot": [[-3.9564, 3.9564], [-9.9561, 9.9561]],
     "u": [[0.0, 0.0], [0.0, 0.0]],
 }
 

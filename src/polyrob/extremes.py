@@ -1,0 +1,180 @@
+"""Exact extremes of the Jacobian entries over the velocity/torque box, per position.
+
+For a fixed ``q`` every entry of ``A`` and ``B`` is a polynomial in the
+velocities and torques of a known shape (``M^-1`` depends on ``q`` only,
+``d qddot/d qdot`` is linear in ``qdot``, ``d qddot/d q`` is affine in ``u``
+and quadratic in ``qdot``)::
+
+    p(t, u) = c + a . u + b . t + t' Q t,      qdot = centre + half_width * t
+
+so its coefficients follow from ``1 + 3m + m(m-1)/2`` Jacobian evaluations per
+``q`` (:func:`polynomial_coefficients`), and so do the coefficients of any
+linear functional ``d . p`` of the entries.  The maximum over the box is then
+exact: the ``u`` part is separable, and the quadratic part is maximised by
+enumerating the faces of the ``t`` box (``3^m`` of them) for ``m <= 4`` and its
+``2^m`` vertices otherwise (the local search of :mod:`polyrob.pldi` refines
+the rare interior maxima this misses).  Only ``q`` needs sampling.
+
+Examples
+--------
+>>> import numpy as np
+>>> c, a, b = np.zeros((1, 1)), np.zeros((1, 2, 1)), np.array([[[1.0], [0.0]]])
+>>> Q = np.zeros((1, 2, 2, 1)); Q[0, 1, 1, 0] = -1.0     # p = t1 - t2^2
+>>> value, t, u = box_maximum(c, a, b, Q, np.ones(2, bool), np.zeros(2, bool))
+>>> float(value[0, 0]), t[0, 0].tolist()
+(1.0, [1.0, 0.0])
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from .errors import BoundsError
+
+__all__ = ["polynomial_coefficients", "box_maximum", "evaluate_polynomial"]
+
+#: Up to this many joints the faces of the velocity box are enumerated (3^m).
+FACE_ENUMERATION_MAX_JOINTS = 4
+
+
+def _design(m: int):
+    """Points (t, u) in scaled coordinates at which the Jacobians are evaluated."""
+    pts_t, pts_u = [np.zeros(m)], [np.zeros(m)]
+    for k in range(m):
+        e = np.zeros(m)
+        e[k] = 1.0
+        pts_t += [np.zeros(m)]
+        pts_u += [e]
+    for k in range(m):
+        e = np.zeros(m)
+        e[k] = 1.0
+        pts_t += [e, -e]
+        pts_u += [np.zeros(m), np.zeros(m)]
+    for k, l in itertools.combinations(range(m), 2):
+        e = np.zeros(m)
+        e[k] = e[l] = 1.0
+        pts_t += [e]
+        pts_u += [np.zeros(m)]
+    return np.array(pts_t), np.array(pts_u)
+
+
+def polynomial_coefficients(entries_at, q, t_centre, t_scale, u_centre, u_scale):
+    """Coefficients of every entry as a polynomial in scaled ``(t, u)``, per ``q``.
+
+    Parameters
+    ----------
+    entries_at : callable
+        ``entries_at(q, qdot, u) -> (n, k)`` the entries at ``n`` points.
+    q : ndarray (N, m)
+    t_centre, t_scale, u_centre, u_scale : ndarray (m,)
+        ``qdot = t_centre + t_scale * t`` and ``u = u_centre + u_scale * s``
+        with ``t, s`` in ``[-1, 1]`` (a zero scale pins the coordinate).
+
+    Returns
+    -------
+    c (N, k), a (N, m, k), b (N, m, k), Q (N, m, m, k) with ``Q`` symmetric.
+    """
+    N, m = q.shape
+    T, S = _design(m)
+    P = len(T)
+    qq = np.repeat(q, P, axis=0)
+    qdot = t_centre + t_scale * np.tile(T, (N, 1))
+    u = u_centre + u_scale * np.tile(S, (N, 1))
+    vals = entries_at(qq, qdot, u)
+    k = vals.shape[1]
+    vals = vals.reshape(N, P, k)
+    c = vals[:, 0]
+    a = vals[:, 1 : 1 + m] - c[:, None]
+    plus = vals[:, 1 + m : 1 + 3 * m : 2]
+    minus = vals[:, 2 + m : 1 + 3 * m : 2]
+    b = 0.5 * (plus - minus)
+    diag = 0.5 * (plus + minus) - c[:, None]
+    Q = np.zeros((N, m, m, k))
+    idx = np.arange(m)
+    Q[:, idx, idx] = diag
+    for n_pair, (i, j) in enumerate(itertools.combinations(range(m), 2)):
+        cross = vals[:, 1 + 3 * m + n_pair]
+        qij = 0.5 * (cross - c - b[:, i] - b[:, j] - diag[:, i] - diag[:, j])
+        Q[:, i, j] = Q[:, j, i] = qij
+    return c, a, b, Q
+
+
+def evaluate_polynomial(c, a, b, Q, t, u):
+    """Value of the polynomials at points ``t, u`` of shape (N, m): returns (N, k)."""
+    return (
+        c
+        + np.einsum("nmk,nm->nk", a, u)
+        + np.einsum("nmk,nm->nk", b, t)
+        + np.einsum("nijk,ni,nj->nk", Q, t, t)
+    )
+
+
+def _candidates(m: int):
+    """Face patterns: -1 lower bound, +1 upper bound, 0 free (interior)."""
+    if m <= FACE_ENUMERATION_MAX_JOINTS:
+        return np.array(list(itertools.product((-1, 0, 1), repeat=m)), dtype=float)
+    return np.array(list(itertools.product((-1, 1), repeat=m)), dtype=float)
+
+
+def box_maximum(c, a, b, Q, t_active, u_active):
+    """Maximum of ``c + a.u + b.t + t'Qt`` over ``t, u`` in ``[-1, 1]``, and its argmax.
+
+    Parameters
+    ----------
+    c : (N, D); a, b : (N, m, D); Q : (N, m, m, D)
+        ``D`` polynomials per sample.
+    t_active, u_active : (m,) bool
+        Coordinates that may move (a zero-width range is pinned at 0).
+
+    Returns
+    -------
+    value : (N, D); t : (N, D, m); u : (N, D, m)
+    """
+    N, m, D = b.shape
+    t_active = np.asarray(t_active, bool)
+    u_active = np.asarray(u_active, bool)
+    # u part: separable and linear, the sign of each coefficient decides.
+    u_arg = np.where(u_active[None, :, None], np.sign(a), 0.0)
+    u_val = np.sum(np.abs(a) * u_active[None, :, None], axis=1)
+    patterns = np.where(t_active, _candidates(m), 0.0)
+    patterns = np.unique(patterns, axis=0)
+    has_free = np.any((patterns == 0) & t_active, axis=1)
+    # Vertices (and pinned coordinates) all at once: one matrix product.
+    V = patterns[~has_free]
+    VV = np.einsum("pi,pj->pij", V, V).reshape(len(V), m * m)
+    vals = np.einsum("pm,nmd->npd", V, b) + np.einsum("pq,nqd->npd", VV, Q.reshape(N, m * m, D))
+    arg = np.argmax(vals, axis=1)
+    best = np.take_along_axis(vals, arg[:, None, :], axis=1)[:, 0]
+    best_t = V[arg]
+    # Faces with free coordinates (m <= FACE_ENUMERATION_MAX_JOINTS): the
+    # stationary point in the free coordinates, if it lies inside the face.
+    for pattern in patterns[has_free]:
+        free = (pattern == 0) & t_active
+        F = np.flatnonzero(free)
+        fixed = ~free
+        t = np.broadcast_to(pattern[None, None, :], (N, D, m)).copy()
+        QFF = np.moveaxis(Q[:, F][:, :, F], 3, 1)  # (N, D, f, f)
+        rhs = -np.moveaxis(b[:, F], 2, 1)  # (N, D, f)
+        if fixed.any():
+            Qf = np.moveaxis(Q[:, F][:, :, fixed], 3, 1)
+            rhs = rhs - 2 * np.einsum("ndij,ndj->ndi", Qf, t[:, :, fixed])
+        with np.errstate(all="ignore"):
+            det_ok = np.abs(np.linalg.det(QFF)) > 1e-300
+            sol = np.zeros_like(rhs)
+            if det_ok.any():
+                sol[det_ok] = np.linalg.solve(2 * QFF[det_ok], rhs[det_ok][..., None])[..., 0]
+        inside = det_ok & np.all(np.abs(sol) <= 1.0, axis=-1)
+        tf = t[:, :, F]
+        tf[inside] = sol[inside]
+        t[:, :, F] = tf
+        val = np.einsum("nmd,ndm->nd", b, t) + np.einsum("nijd,ndi,ndj->nd", Q, t, t)
+        val = np.where(inside, val, -np.inf)
+        better = val > best
+        best = np.where(better, val, best)
+        best_t[better] = t[better]
+    if not np.all(np.isfinite(best)):
+        raise BoundsError("internal error: no vertex of the velocity box was evaluated")
+    value = c + u_val + best
+    return value, best_t, np.moveaxis(u_arg, 2, 1)
