@@ -19,6 +19,8 @@ from .robots import Manipulator, Robot, available_robots, load_robot
 from .analytic import AnalyticRobot
 from .domain import Domain
 from .pldi import PLDI, bound_pldi
+from .uncertainty import UncertainPlant, uncertain_plant
+from .plant import GeneralizedPlant, closed_loop, generalized_plant, lft, nominal_closed_loop, paper_controller
 
 __version__ = "0.1.0"
 
@@ -34,7 +36,15 @@ __all__ = [
     "RobotError",
     "SolverError",
     "SynthesisError",
+    "GeneralizedPlant",
     "PLDI",
+    "UncertainPlant",
+    "closed_loop",
+    "generalized_plant",
+    "lft",
+    "nominal_closed_loop",
+    "paper_controller",
+    "uncertain_plant",
     "available_robots",
     "bound_pldi",
     "load_robot",

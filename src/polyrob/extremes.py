@@ -118,6 +118,29 @@ def _candidates(m: int):
     return np.array(list(itertools.product((-1, 1), repeat=m)), dtype=float)
 
 
+def _coordinate_ascent(b, Q, t, t_active, sweeps: int = 4):
+    """Exact maximisation along one coordinate at a time, from the best vertex.
+
+    With too many joints to enumerate faces, an interior maximum (negative
+    curvature along a velocity) is reached this way; each step maximises the
+    one-dimensional quadratic exactly, so the value never decreases.
+    """
+    t = t.copy()
+    diag = np.moveaxis(np.diagonal(Q, axis1=1, axis2=2), 2, 1)  # (N, m, D)
+    for _ in range(sweeps):
+        for i in np.flatnonzero(t_active):
+            # p(t_i) = Q_ii t_i^2 + beta t_i + const, beta = b_i + 2 sum_{j != i} Q_ij t_j
+            beta = b[:, i] + 2 * np.einsum("njd,ndj->nd", Q[:, i], t) - 2 * diag[:, i] * t[:, :, i]
+            qii = diag[:, i]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                stat = np.where(qii < 0, -beta / (2 * qii), 0.0)
+            cands = np.stack([-np.ones_like(beta), np.ones_like(beta), np.clip(stat, -1, 1)])
+            vals = qii * cands**2 + beta * cands
+            t[:, :, i] = np.take_along_axis(cands, np.argmax(vals, axis=0)[None], axis=0)[0]
+    value = np.einsum("nmd,ndm->nd", b, t) + np.einsum("nijd,ndi,ndj->nd", Q, t, t)
+    return value, t
+
+
 def box_maximum(c, a, b, Q, t_active, u_active):
     """Maximum of ``c + a.u + b.t + t'Qt`` over ``t, u`` in ``[-1, 1]``, and its argmax.
 
@@ -174,6 +197,8 @@ def box_maximum(c, a, b, Q, t_active, u_active):
         better = val > best
         best = np.where(better, val, best)
         best_t[better] = t[better]
+    if m > FACE_ENUMERATION_MAX_JOINTS:
+        best, best_t = _coordinate_ascent(b, Q, best_t, t_active)
     if not np.all(np.isfinite(best)):
         raise BoundsError("internal error: no vertex of the velocity box was evaluated")
     value = c + u_val + best

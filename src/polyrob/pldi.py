@@ -375,7 +375,9 @@ def _dropped_positions(problem: _Problem, rng) -> tuple[int, ...]:
             dropped.append(j)
             continue
         pts = np.repeat(base, 5, axis=0)
-        pts[:, j] = np.tile(np.linspace(d.q_lower[j], d.q_upper[j], 5), len(base))
+        # random values, not a uniform grid: a grid over [-2 pi, 2 pi] aliases
+        # the 2 q terms of a rotating inertia into identical values
+        pts[:, j] = rng.uniform(d.q_lower[j], d.q_upper[j], len(pts))
         vals = problem.entries_at(pts[:, :m], pts[:, m : 2 * m], pts[:, 2 * m :]).reshape(len(base), 5, -1)
         spread = np.abs(vals - vals[:, :1]).max()
         if spread <= 1e-10 * max(1.0, np.abs(vals).max()):
@@ -446,17 +448,24 @@ def _support_pass(problem: _Problem, q, directions, index, progress, workers):
 
     results = _parallel_map(run, chunks, workers, progress, "bounding")
     vals = np.array([r[0] for r in results])  # (chunks, D)
-    best = np.argmax(vals, axis=0)
+    order = np.argsort(-vals, axis=0)[:3]  # the three best chunks per direction
     cols = np.arange(vals.shape[1])
-    value = vals[best, cols]
-    wq = np.array([results[b][1][c] for c, b in enumerate(best)]).reshape(len(cols), m)
-    wt = np.array([results[b][2][c] for c, b in enumerate(best)]).reshape(len(cols), m)
-    wu = np.array([results[b][3][c] for c, b in enumerate(best)]).reshape(len(cols), m)
-    witness = np.hstack([wq, problem.t_centre + problem.t_scale * wt, problem.u_centre + problem.u_scale * wu])
-    return value, witness
+
+    def witness_of(rank):
+        chunk_of = order[min(rank, len(order) - 1)]
+        wq = np.array([results[b][1][c] for c, b in enumerate(chunk_of)]).reshape(len(cols), m)
+        wt = np.array([results[b][2][c] for c, b in enumerate(chunk_of)]).reshape(len(cols), m)
+        wu = np.array([results[b][3][c] for c, b in enumerate(chunk_of)]).reshape(len(cols), m)
+        return np.hstack([wq, problem.t_centre + problem.t_scale * wt, problem.u_centre + problem.u_scale * wu])
+
+    value = vals[order[0], cols]
+    # best witness first, then the best of two other chunks: extra starts for
+    # the local search where the landscape turns out rough
+    starts = np.stack([witness_of(r) for r in range(3)], axis=1)
+    return value, starts
 
 
-def _refine(problem: _Problem, directions, values, witnesses, index, dropped, progress, workers, maxiter=60):
+def _refine(problem: _Problem, directions, values, starts, index, dropped, progress, workers, maxiter=60):
     """Bounded local search (L-BFGS-B) from each witness; never lowers a support value."""
     m = problem.m
     lo, hi = problem.lo.copy(), problem.hi.copy()
@@ -465,18 +474,17 @@ def _refine(problem: _Problem, directions, values, witnesses, index, dropped, pr
     nfree = int(free.sum())
     span = np.where(free, hi - lo, 1.0)
 
-    def refine_one(k):
+    def local_search(k, x0):
         d = directions[k]
-        x0 = witnesses[k].copy()
         scale = max(abs(values[k]), 1e-12)
         step = 1e-6
+        pos = np.flatnonzero(free)
 
         def fun(y):
             x = x0.copy()
             x[free] = y
             # value and central-difference gradient in one batched evaluation
             pts = np.tile(x, (1 + 2 * nfree, 1))
-            pos = np.flatnonzero(free)
             h = step * span[pos]
             pts[1 + np.arange(nfree), pos] += h
             pts[1 + nfree + np.arange(nfree), pos] -= h
@@ -486,16 +494,29 @@ def _refine(problem: _Problem, directions, values, witnesses, index, dropped, pr
             grad = (vals[1 : 1 + nfree] - vals[1 + nfree :]) / np.where(dh > 0, dh, 1.0)
             return -vals[0] / scale, -grad / scale
 
-        if nfree == 0:
-            return values[k], x0
         res = optimize.minimize(
             fun, x0[free], jac=True, method="L-BFGS-B", bounds=list(zip(lo[free], hi[free])),
             options={"maxiter": maxiter},
         )
         x = x0.copy()
         x[free] = np.clip(res.x, lo[free], hi[free])
-        val = float(problem.entries_at(x[None, :m], x[None, m : 2 * m], x[None, 2 * m :], index)[0] @ d)
-        return (val, x) if val > values[k] else (values[k], x0)
+        return float(problem.entries_at(x[None, :m], x[None, m : 2 * m], x[None, 2 * m :], index)[0] @ d), x
+
+    def refine_one(k):
+        best_val, best_x = values[k], starts[k, 0]
+        if nfree == 0:
+            return best_val, best_x
+        val, x = local_search(k, starts[k, 0])
+        if val > best_val:
+            gain = val - best_val
+            best_val, best_x = val, x
+            # a large gain says the samples missed a peak: try the other starts
+            if gain > 1e-3 * max(abs(best_val), 1e-12):
+                for x0 in starts[k, 1:]:
+                    val, x = local_search(k, x0)
+                    if val > best_val:
+                        best_val, best_x = val, x
+        return best_val, best_x
 
     chunks = [[k] for k in range(len(directions))]
     out = _parallel_map(lambda ks: [refine_one(k) for k in ks], chunks, workers, progress, "refining")
@@ -672,11 +693,12 @@ def bound_pldi(
     _, pcs = _principal_directions(cloud, scale)
     directions = np.vstack([np.eye(k), -np.eye(k), pcs / scale, -pcs / scale]) if k else np.zeros((0, 0))
     t0 = time.perf_counter()
-    values, witnesses = _support_pass(problem, q, directions, index, progress, workers) if k else (np.zeros(0), np.zeros((0, 3 * m)))
+    values, starts = _support_pass(problem, q, directions, index, progress, workers) if k else (np.zeros(0), np.zeros((0, 3, 3 * m)))
+    witnesses = starts[:, 0]
     t_sample = time.perf_counter() - t0
     sampled_width = values[:k] + values[k : 2 * k]
     if refine and k:
-        values, witnesses = _refine(problem, directions, values, witnesses, index, dropped, progress, workers)
+        values, witnesses = _refine(problem, directions, values, starts, index, dropped, progress, workers)
     t_refine = time.perf_counter() - t0 - t_sample
     upper, lower = values[:k], -values[k : 2 * k]
     width = upper - lower

@@ -1,0 +1,251 @@
+"""Frequency weights for mixed-sensitivity and :math:`\\mu` synthesis.
+
+* :func:`makeweight` is MATLAB's ``makeweight(dcgain, [freq, mag], hfgain)``
+  (python-control has no equivalent), including the ``N``-th order
+  Butterworth-pattern variant.
+* :func:`sensitivity_weight` / :func:`complementary_weight` are the paper's
+  parametrised :math:`W_S`, :math:`W_T`; :func:`paper_weights` gives its 2x2
+  diagonal weights from :data:`PAPER_HYPERPARAMETERS`.
+* :func:`diagonal_weight` stacks SISO weights into a diagonal MIMO weight.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence, Union
+
+import control
+import numpy as np
+
+from .errors import PolyrobError
+
+__all__ = [
+    "makeweight",
+    "sensitivity_weight",
+    "complementary_weight",
+    "diagonal_weight",
+    "paper_weights",
+    "PAPER_HYPERPARAMETERS",
+]
+
+#: Hyperparameters of the paper's weights, one entry per joint/output channel.
+PAPER_HYPERPARAMETERS = {
+    "omega_b": (0.5, 0.1),
+    "M_s": (2.0, 3.0),
+    "A_s": (1e-2, 2e-2),
+    "omega_bt": (10.0, 12.0),
+    "M_t": (2.1, 3.0),
+    "A_t": (1e-2, 1e-2),
+}
+
+
+def _positive(name: str, value: float, allow_zero: bool = False) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError) as exc:
+        raise PolyrobError(f"{name} must be a number, got {value!r}") from exc
+    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        kind = "non-negative" if allow_zero else "positive"
+        raise PolyrobError(f"{name} must be a finite {kind} number, got {value!r}")
+    return v
+
+
+def makeweight(
+    dcgain: float,
+    crossover: Union[float, Sequence[float]],
+    hfgain: float,
+    *,
+    order: int = 1,
+) -> control.TransferFunction:
+    """Monotonic weight through a given gain, like MATLAB's ``makeweight``.
+
+    Builds a stable, minimum-phase continuous-time :math:`W(s)` with
+    :math:`W(0) = ` ``dcgain``, :math:`W(\\infty) = ` ``hfgain`` and
+    :math:`|W(j\\,\\mathrm{freq})| = ` ``mag``.
+
+    Parameters
+    ----------
+    dcgain : float
+        Low-frequency gain (>= 0).
+    crossover : float or (freq, mag)
+        ``(freq, mag)``, or just ``freq`` meaning ``mag = 1`` (the gain
+        crossover frequency), in rad/s.
+    hfgain : float
+        High-frequency gain (>= 0).
+    order : int, optional
+        Order ``N``; for ``N > 1`` poles and zeros sit on Butterworth patterns
+        (MATLAB's ``makeweight(..., Ts=0, N)``), giving a steeper transition.
+
+    Returns
+    -------
+    control.TransferFunction
+
+    Raises
+    ------
+    PolyrobError
+        Non-positive inputs, or ``mag`` not strictly between ``dcgain`` and
+        ``hfgain``.
+
+    Notes
+    -----
+    With :math:`p_k` the unit Butterworth poles of order :math:`N`,
+    :math:`W(s) = h \\prod_k (s - \\omega_z p_k)/(s - \\omega_p p_k)`, so
+    :math:`|W(j\\omega)|^2 = (h^2\\omega_z^{2N} + h^2\\omega^{2N})/(\\omega_p^{2N}
+    + \\omega^{2N})`.  The three constraints then give
+    :math:`\\omega_p = \\omega_0 ((h^2 - m^2)/(m^2 - d^2))^{1/2N}` and
+    :math:`\\omega_z = \\omega_p (d/h)^{1/N}`.  For :math:`N = 1` this is
+    :math:`W(s) = (h s + d\\,\\omega_p)/(s + \\omega_p)`.
+
+    Examples
+    --------
+    The MATLAB Answers example ``makeweight(100, 10, 0.1)``:
+
+    >>> from polyrob.weights import makeweight
+    >>> W = makeweight(100, 10, 0.1)
+    >>> W.num[0][0].round(4).tolist(), W.den[0][0].round(4).tolist()
+    ([0.1, 9.9504], [1.0, 0.0995])
+    >>> print(round(float(abs(W(10j))), 12))
+    1.0
+    """
+    if isinstance(crossover, (tuple, list, np.ndarray)):
+        if len(crossover) != 2:
+            raise PolyrobError(f"crossover must be freq or (freq, mag), got {crossover!r}")
+        freq, mag = crossover
+    else:
+        freq, mag = crossover, 1.0
+    dc = _positive("dcgain", dcgain, allow_zero=True)
+    hf = _positive("hfgain", hfgain, allow_zero=True)
+    freq = _positive("crossover frequency", freq)
+    mag = _positive("crossover magnitude", mag)
+    if int(order) != order or order < 1:
+        raise PolyrobError(f"order must be a positive integer, got {order!r}")
+    n = int(order)
+    if not (dc < mag < hf or dc > mag > hf):
+        raise PolyrobError(
+            f"makeweight needs mag strictly between dcgain and hfgain "
+            f"(got dcgain={dc}, mag={mag}, hfgain={hf})"
+        )
+    wp = freq * ((hf**2 - mag**2) / (mag**2 - dc**2)) ** (1.0 / (2 * n))
+    k = np.arange(1, n + 1)
+    bw = np.exp(1j * np.pi * (2 * k + n - 1) / (2 * n))  # unit Butterworth poles
+    den = np.real(np.poly(wp * bw))
+    if hf > 0:
+        wz = wp * (dc / hf) ** (1.0 / n)
+        num = hf * np.real(np.poly(wz * bw))
+    else:  # hfgain = 0: zeros at infinity, W(0) = dc
+        num = np.array([dc * wp**n])
+    return control.tf(num, den)
+
+
+def sensitivity_weight(omega_b: float, M_s: float, A_s: float) -> control.TransferFunction:
+    """Performance weight :math:`W_S(s) = (s/M_S + \\omega_B)/(s + \\omega_B A_S)`.
+
+    :math:`1/|W_S|` bounds the sensitivity: at most ``A_s`` at low
+    frequency, crossing one near ``omega_b``, at most ``M_s`` at high frequency.
+
+    Examples
+    --------
+    >>> from polyrob.weights import sensitivity_weight
+    >>> W = sensitivity_weight(0.5, 2, 1e-2)
+    >>> W.num[0][0].tolist(), W.den[0][0].tolist()
+    ([0.5, 0.5], [1.0, 0.005])
+    """
+    wb = _positive("omega_b", omega_b)
+    ms = _positive("M_s", M_s)
+    a = _positive("A_s", A_s)
+    return control.tf([1.0 / ms, wb], [1.0, wb * a])
+
+
+def complementary_weight(omega_bt: float, M_t: float, A_t: float) -> control.TransferFunction:
+    """Robustness weight :math:`W_T(s) = (s + \\omega_{BT})/(A_T s + \\omega_{BT} M_T)`.
+
+    :math:`1/|W_T|` bounds the complementary sensitivity: at most ``M_t`` at
+    low frequency, rolling off past ``omega_bt`` down to ``A_t``.
+
+    Examples
+    --------
+    >>> from polyrob.weights import complementary_weight
+    >>> W = complementary_weight(10, 2.1, 1e-2)
+    >>> W.num[0][0].tolist(), W.den[0][0].tolist()
+    ([1.0, 10.0], [0.01, 21.0])
+    """
+    wbt = _positive("omega_bt", omega_bt)
+    mt = _positive("M_t", M_t)
+    a = _positive("A_t", A_t)
+    return control.tf([1.0, wbt], [a, wbt * mt])
+
+
+def diagonal_weight(weights: Sequence) -> control.TransferFunction:
+    """Diagonal MIMO weight :math:`\\operatorname{diag}(W_1, \\ldots, W_n)`.
+
+    Parameters
+    ----------
+    weights : sequence of SISO LTI systems or numbers
+        Numbers are static gains.  State-space entries are converted to
+        transfer functions.
+
+    Returns
+    -------
+    control.TransferFunction
+        ``n x n``, off-diagonal entries zero; the diagonal coefficients are
+        exactly those of the inputs (use ``control.ss`` for a realisation).
+
+    Examples
+    --------
+    >>> from polyrob.weights import diagonal_weight
+    >>> W = diagonal_weight([control.tf([1], [1, 1]), 2.0])
+    >>> W.noutputs, W.ninputs, float(W(0)[1, 1].real)
+    (2, 2, 2.0)
+    """
+    if len(weights) == 0:
+        raise PolyrobError("diagonal_weight needs at least one weight")
+    tfs = []
+    for i, w in enumerate(weights):
+        if isinstance(w, (int, float, np.floating, np.integer)):
+            w = control.tf([float(w)], [1.0])
+        elif isinstance(w, control.LTI):
+            if (w.noutputs, w.ninputs) != (1, 1):
+                raise PolyrobError(f"weight {i} is {w.noutputs}x{w.ninputs}, expected SISO")
+            w = control.tf(w)
+        else:
+            raise PolyrobError(f"weight {i} must be a SISO LTI system or a number, got {type(w).__name__}")
+        tfs.append(w)
+    n = len(tfs)
+    num = [[tfs[i].num[0][0] if i == j else np.array([0.0]) for j in range(n)] for i in range(n)]
+    den = [[tfs[i].den[0][0] if i == j else np.array([1.0]) for j in range(n)] for i in range(n)]
+    return control.tf(num, den)
+
+
+def paper_weights(
+    hyperparameters: dict | None = None,
+) -> tuple[control.TransferFunction, control.TransferFunction]:
+    """The paper's diagonal :math:`W_S` and :math:`W_T`.
+
+    Parameters
+    ----------
+    hyperparameters : dict, optional
+        Keys as in :data:`PAPER_HYPERPARAMETERS` (the default), each a tuple
+        with one value per channel.
+
+    Returns
+    -------
+    (W_S, W_T) : tuple of control.TransferFunction
+
+    Examples
+    --------
+    >>> from polyrob.weights import paper_weights
+    >>> WS, WT = paper_weights()
+    >>> WS.num[1][1].round(4).tolist(), WT.den[1][1].tolist()
+    ([0.3333, 0.1], [0.01, 36.0])
+    """
+    h = dict(PAPER_HYPERPARAMETERS if hyperparameters is None else hyperparameters)
+    keys = ("omega_b", "M_s", "A_s", "omega_bt", "M_t", "A_t")
+    missing = [k for k in keys if k not in h]
+    if missing:
+        raise PolyrobError(f"missing weight hyperparameters: {missing}")
+    n = {len(h[k]) for k in keys}
+    if len(n) != 1:
+        raise PolyrobError(f"weight hyperparameters must all have the same length, got {n}")
+    ws = [sensitivity_weight(*p) for p in zip(h["omega_b"], h["M_s"], h["A_s"])]
+    wt = [complementary_weight(*p) for p in zip(h["omega_bt"], h["M_t"], h["A_t"])]
+    return diagonal_weight(ws), diagonal_weight(wt)
