@@ -163,6 +163,54 @@ def cmd_info(args) -> int:
     return 0
 
 
+def cmd_bounds(args) -> int:
+    from .pldi import bound_pldi
+
+    robot = robot_from_args(args)
+    domain = domain_from_args(robot, args)
+    pldi = bound_pldi(
+        robot,
+        domain,
+        samples=args.samples,
+        nominal=args.nominal,
+        certify=args.certify,
+        coverage=args.coverage,
+        seed=args.seed,
+        progress=None if not args.quiet else False,
+    )
+    print(f"robot {robot.name}, domain {domain.name}, {len(pldi.entries)} varying entries")
+    print(pldi.table())
+    poly = pldi.polytope
+    print(
+        f"polytope: {poly.n_halfspaces} half-spaces"
+        + (f", {len(poly.vertices)} vertices" if poly.vertices is not None else "")
+        + f", reduced dimension {poly.reduced_dim}, volume / interval box ~ {poly.volume_ratio:.3g}"
+    )
+    if pldi.coverage_points:
+        print(f"coverage: {pldi.coverage:.4f} of {pldi.coverage_points} fresh points")
+    if pldi.dropped_q:
+        print("positions the dynamics do not depend on: " + ", ".join(robot.joint_names[j] for j in pldi.dropped_q))
+    print(f"time: {pldi.info['seconds_total']:.2f} s")
+    if args.output:
+        json_path, npz_path = pldi.save(args.output)
+        print(f"wrote {json_path} and {npz_path}")
+    return 0
+
+
+def _register_bounds(sub) -> None:
+    p = sub.add_parser("bounds", help="bound the Jacobians over the domain: intervals and a polytope (PLDI)")
+    add_robot_arguments(p)
+    add_domain_arguments(p)
+    p.add_argument("--certify", action="store_true", help="prove the intervals by interval arithmetic (up to 3 joints)")
+    p.add_argument("--samples", type=int, default=None, help="Sobol' positions (default grows with the dimension)")
+    p.add_argument("--nominal", default="equilibrium", choices=["equilibrium", "midpoint"])
+    p.add_argument("--coverage", type=int, default=10_000, help="fresh points for the coverage check (0 skips)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("-o", "--output", default=None, help="write the PLDI (JSON + .npz)")
+    p.set_defaults(func=cmd_bounds)
+
+
 # --------------------------------------------------------------------------- entry point
 
 
@@ -190,7 +238,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Later stages register their sub-commands here (bounds, analyze, synth, run).
-_EXTRA_COMMANDS: list = []
+_EXTRA_COMMANDS: list = [_register_bounds]
 
 
 def main(argv=None) -> int:
