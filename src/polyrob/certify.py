@@ -143,6 +143,22 @@ def _ball(lo, hi):
     return arb(lo) if lo == hi else arb(lo).union(arb(hi))
 
 
+def _neg_definite(H, F):
+    """Is ``H[F, F]`` negative definite?  True / False / None (undecided).
+
+    Sylvester's criterion on ``-H[F, F]``: all leading minors > 0.
+    """
+    N = arb_mat([[-H[j][l] for l in F] for j in F])
+    minors = [N[0, 0]]
+    if len(F) >= 2:
+        minors.append(N[0, 0] * N[1, 1] - N[0, 1] * N[1, 0])
+    if len(F) == 3:
+        minors.append(N.det())
+    if any(mn <= 0 for mn in minors):
+        return False
+    return True if all(mn > 0 for mn in minors) else None
+
+
 def _quad_max(a0, a, H, lo, hi):
     """Rigorous max of ``a0 + a.x + x^T H x`` over the box ``[lo, hi]``.
 
@@ -156,58 +172,53 @@ def _quad_max(a0, a, H, lo, hi):
     """
     m = len(a)
     free = [j for j in range(m) if lo[j] < hi[j]]
+    # definiteness depends only on the set of free coordinates of a face
+    status = {F: _neg_definite(H, F) for r in range(1, len(free) + 1)
+              for F in itertools.combinations(free, r)}
     best_ub, best_val, best_x = -np.inf, -np.inf, None
+    ends = [(arb(lo[j]), arb(hi[j])) for j in range(m)]
     for choice in itertools.product((0, 1, 2), repeat=len(free)):
-        x = [arb(lo[j]) for j in range(m)]
-        F = []
+        F = tuple(j for j, c in zip(free, choice) if c == 2)
+        if F and status[F] is False:
+            continue  # not negative definite: no interior maximum on this face
+        x = [ends[j][0] for j in range(m)]
         for j, c in zip(free, choice):
             if c == 1:
-                x[j] = arb(hi[j])
-            elif c == 2:
-                F.append(j)
+                x[j] = ends[j][1]
         X = [j for j in range(m) if j not in F]
-        const = a0 + sum((a[j] * x[j] for j in X), arb(0)) + sum((H[j][l] * x[j] * x[l] for j in X for l in X), arb(0))
-        lin = [a[j] + 2 * sum((H[j][l] * x[l] for l in X), arb(0)) for j in F]
-        pt = [float(x[j].mid()) for j in range(m)]
-        if not F:
-            val = const
-        else:
+        # f = const + lin . x_F + x_F^T H_FF x_F on the face
+        hx = {j: sum((H[j][l] * x[l] for l in X), arb(0)) for j in range(m)}
+        const = a0 + sum((x[j] * (a[j] + hx[j]) for j in X), arb(0))
+        val = const if not F else None
+        sol = None
+        if F:
+            lin = [a[j] + 2 * hx[j] for j in F]
+        if F and status[F]:
             k = len(F)
-            N = arb_mat([[-H[j][l] for l in F] for j in F])  # must be positive definite
-            minors = [N[0, 0]]
-            if k >= 2:
-                minors.append(N[0, 0] * N[1, 1] - N[0, 1] * N[1, 0])
-            if k == 3:
-                minors.append(N.det())
-            if any(mn <= 0 for mn in minors):
-                continue  # not negative definite: no interior maximum on this face
-            val = None
-            if all(mn > 0 for mn in minors):
-                try:
-                    xs = (2 * N).solve(arb_mat([[c] for c in lin]))
-                    xs = [xs[n, 0] for n in range(k)]
-                except ZeroDivisionError:
-                    xs = None
-                if xs is not None:
-                    if any(xs[n] < lo[j] or xs[n] > hi[j] for n, j in enumerate(F)):
-                        continue  # stationary point outside the face
-                    val = const + sum((lin[n] * xs[n] for n in range(k)), arb(0)) / 2
-                    for n, j in enumerate(F):
-                        pt[j] = min(max(float(xs[n].mid()), lo[j]), hi[j])
-            if val is None:  # undecided: naive enclosure over the face
-                B = [_ball(lo[j], hi[j]) for j in F]
-                val = const + sum((lin[n] * B[n] for n in range(k)), arb(0))
-                for n, j in enumerate(F):
-                    val += H[j][j] * _sq(B[n])
-                    for n2 in range(n + 1, k):
-                        val += 2 * H[j][F[n2]] * B[n] * B[n2]
-                for n, j in enumerate(F):
-                    pt[j] = 0.5 * (lo[j] + hi[j])
+            try:
+                xs = (-2 * arb_mat([[H[j][l] for l in F] for j in F])).solve(arb_mat([[c] for c in lin]))
+                sol = [xs[n, 0] for n in range(k)]
+            except ZeroDivisionError:
+                sol = None
+            if sol is not None:
+                if any(sol[n] < lo[j] or sol[n] > hi[j] for n, j in enumerate(F)):
+                    continue  # stationary point outside the face
+                val = const + sum((lin[n] * sol[n] for n in range(k)), arb(0)) / 2
+        if val is None:  # undecided: naive enclosure over the face
+            B = [_ball(lo[j], hi[j]) for j in F]
+            val = const + sum((lin[n] * B[n] for n in range(len(F))), arb(0))
+            for n, j in enumerate(F):
+                val += H[j][j] * _sq(B[n])
+                for n2 in range(n + 1, len(F)):
+                    val += 2 * H[j][F[n2]] * B[n] * B[n2]
         ub = arb_upper(val)
-        vm = float(val.mid())
         best_ub = max(best_ub, ub)
+        vm = float(val.mid())
         if vm > best_val:
-            best_val, best_x = vm, pt
+            best_val = vm
+            best_x = [float(x[j].mid()) for j in range(m)]
+            for n, j in enumerate(F):
+                best_x[j] = 0.5 * (lo[j] + hi[j]) if sol is None else min(max(float(sol[n].mid()), lo[j]), hi[j])
     return best_ub, best_x
 
 
@@ -276,10 +287,29 @@ class _Problem:
             terms = self.remainder(e, c2, R, delta2, U, [_ball(x, y) for x, y in zip(Slo, Shi)])
             rem = sum(terms.values(), arb(0))
         out = []
+        cheap = None
+        if rem is not None:
+            # cheap enclosure first: when it already settles a side, skip the
+            # exact vertex/face enumeration
+            S = [_ball(x, y) for x, y in zip(Slo, Shi)]
+            mv = self.monos(U, S)
+            cheap = sum((c * x for c, x in zip(c0[e], mv) if not c.is_zero()), arb(0)) + rem
+            for p, rows in c1.items():
+                cheap += sum((c * x for c, x in zip(rows[e], mv) if not c.is_zero()), arb(0)) * delta[p]
+            xc = [0.5 * (x + y) for x, y in zip(Slo, Shi)]
+            val = self._value(*base, xc)
+            self.in_hi[e], self.in_lo[e] = max(self.in_hi[e], val), min(self.in_lo[e], val)
         for side, sgn in ((4, 1), (5, -1)):
             if not it[side]:
                 out.append(None)
                 continue
+            if cheap is not None:
+                if sgn > 0 and arb_upper(cheap) <= self.in_hi[e] + self.tol(e):
+                    out.append(arb_upper(cheap))
+                    continue
+                if sgn < 0 and arb_lower(cheap) >= self.in_lo[e] - self.tol(e):
+                    out.append(arb_lower(cheap))
+                    continue
             best = -np.inf
             for dv in verts:
                 a0, a, H = base

@@ -184,7 +184,9 @@ def cmd_bounds(args) -> int:
     print(
         f"polytope: {poly.n_halfspaces} half-spaces"
         + (f", {len(poly.vertices)} vertices" if poly.vertices is not None else "")
-        + f", reduced dimension {poly.reduced_dim}, volume / interval box ~ {poly.volume_ratio:.3g}"
+        + f", reduced dimension {poly.reduced_dim}, volume / interval box "
+        + (f"~ {poly.volume_ratio:.3g}" if poly.volume_hits else f"< {poly.volume_ratio_bound:.2g}")
+        + f" ({poly.volume_hits} of {poly.volume_samples} box points inside)"
     )
     if pldi.coverage_points:
         print(f"coverage: {pldi.coverage:.4f} of {pldi.coverage_points} fresh points")

@@ -85,9 +85,11 @@ class Polytope:
         coordinates ``z``.
     basis : ndarray (k, r)
         Principal directions in which the Jacobians vary (normalised units).
-    volume_ratio : float
-        Volume of the polytope over that of the interval box, both cut by the
-        reduced-coordinate subspace (Monte Carlo estimate).
+    volume_hits, volume_samples : int
+        Monte Carlo estimate of the volume of the polytope over that of the
+        interval box, both cut by the reduced-coordinate subspace:
+        ``volume_hits`` of ``volume_samples`` uniform points of the box lie
+        in the polytope.
     """
 
     normals: np.ndarray
@@ -95,7 +97,18 @@ class Polytope:
     vertices: np.ndarray | None
     centre: np.ndarray
     basis: np.ndarray
-    volume_ratio: float
+    volume_hits: int
+    volume_samples: int
+
+    @property
+    def volume_ratio(self) -> float:
+        """Estimated volume ratio polytope / interval box (0 when no point hit)."""
+        return self.volume_hits / self.volume_samples if self.volume_samples else 1.0
+
+    @property
+    def volume_ratio_bound(self) -> float:
+        """A 95 % upper bound of the ratio (the rule of three when no point hit)."""
+        return max(self.volume_hits, 3) / self.volume_samples if self.volume_samples else 1.0
 
     @property
     def n_halfspaces(self) -> int:
@@ -262,7 +275,8 @@ class PLDI:
                 "halfspaces": self.polytope.n_halfspaces,
                 "vertices": None if self.polytope.vertices is None else len(self.polytope.vertices),
                 "reduced_dim": self.polytope.reduced_dim,
-                "volume_ratio": self.polytope.volume_ratio,
+                "volume_hits": self.polytope.volume_hits,
+                "volume_samples": self.polytope.volume_samples,
             },
             "info": self.info,
             "arrays": npz.name,
@@ -295,7 +309,8 @@ class PLDI:
             vertices=data["polytope_vertices"] if "polytope_vertices" in data else None,
             centre=data["polytope_centre"],
             basis=data["polytope_basis"],
-            volume_ratio=meta["polytope"]["volume_ratio"],
+            volume_hits=meta["polytope"]["volume_hits"],
+            volume_samples=meta["polytope"]["volume_samples"],
         )
         return cls(
             robot_name=meta["robot"]["name"],
@@ -406,14 +421,15 @@ def _position_design(problem: _Problem, n: int, dropped, seed) -> np.ndarray:
     return q
 
 
-def _pilot(problem: _Problem, seed, n=2048):
-    """Random Jacobians: which entries vary, their scale, and the principal directions."""
+def _pilot(problem: _Problem, seed, n=4096):
+    """Random Jacobians: which entries vary, their scale, the principal directions,
+    and the points themselves (extra starts for the local search)."""
     q, qdot, u = problem.domain.sample(n, method="uniform", seed=seed)
     vals = problem.entries_at(q, qdot, u)
     spread = vals.max(axis=0) - vals.min(axis=0)
     scale_all = np.maximum(np.abs(vals).max(axis=0), 1e-300)
     varying = spread > 1e-12 * np.maximum(1.0, scale_all)
-    return vals, varying
+    return vals, varying, np.hstack([q, qdot, u])
 
 
 def _principal_directions(vals: np.ndarray, scale: np.ndarray, max_dirs: int = 12):
@@ -534,7 +550,18 @@ def _call_in_fork(i):
 
 
 def _parallel_map(fn, items, workers, progress, label):
-    """Map over items on ``workers`` forked processes (inheriting the robot), with a bar."""
+    """Map over items on ``workers`` forked processes (inheriting the robot), with a bar.
+
+    BLAS runs single-threaded inside: the work is many small problems, and a
+    multi-threaded OpenBLAS makes each L-BFGS-B step about 10x slower here.
+    """
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _parallel_map_inner(fn, items, workers, progress, label)
+
+
+def _parallel_map_inner(fn, items, workers, progress, label):
     from tqdm.auto import tqdm
 
     workers = (os.cpu_count() or 1) if workers is None else workers
@@ -573,9 +600,9 @@ def _polytope(normals, offsets, n_box, cloud, scale, rng, n_mc=200_000) -> Polyt
     r = basis.shape[1]
     G = normals @ basis
     g = offsets - normals @ centre
-    vertices, volume_ratio = None, float("nan")
+    vertices = None
     if r == 0:
-        return Polytope(normals, offsets, None, centre, basis, 1.0)
+        return Polytope(normals, offsets, None, centre, basis, 0, 0)
     box_rows = np.arange(len(normals)) < n_box
     # Bounding box, in z, of the interval box cut by the reduced subspace
     # (2r LPs): the volume estimate samples it.
@@ -608,8 +635,7 @@ def _polytope(normals, offsets, n_box, cloud, scale, rng, n_mc=200_000) -> Polyt
     z = box_z[:, 0] + rng.random((n_mc, r)) * (box_z[:, 1] - box_z[:, 0])
     in_poly = np.all(z @ G.T <= g + 1e-12, axis=1)
     in_box = np.all(z @ G[box_rows].T <= g[box_rows] + 1e-12, axis=1)
-    volume_ratio = float(in_poly.sum() / max(in_box.sum(), 1))
-    return Polytope(normals, offsets, vertices, centre, basis, volume_ratio)
+    return Polytope(normals, offsets, vertices, centre, basis, int(in_poly.sum()), int(in_box.sum()))
 
 
 def _nominal(robot, domain: Domain, nominal):
@@ -685,7 +711,7 @@ def bound_pldi(
     problem = _Problem(robot, domain)
     m = robot.m
 
-    pilot_vals, varying = _pilot(problem, seed)
+    pilot_vals, varying, pilot_points = _pilot(problem, seed)
     index = problem.all_index[varying]
     k = len(index)
     dropped = _dropped_positions(problem, rng)
@@ -700,6 +726,16 @@ def bound_pldi(
     directions = np.vstack([np.eye(k), -np.eye(k), pcs / scale, -pcs / scale]) if k else np.zeros((0, 0))
     t0 = time.perf_counter()
     values, starts = _support_pass(problem, q, directions, index, progress, workers) if k else (np.zeros(0), np.zeros((0, 3, 3 * m)))
+    if k:
+        # the best random pilot point per direction is one more start: a
+        # second, independent design catches peaks the Sobol' positions miss
+        proj = pilot_vals[:, varying] @ directions.T
+        best_pilot = np.argmax(proj, axis=0)
+        pilot_value = proj[best_pilot, np.arange(len(directions))]
+        starts = np.concatenate([starts, pilot_points[best_pilot][:, None]], axis=1)
+        swap = pilot_value > values
+        values = np.where(swap, pilot_value, values)
+        starts[swap, 0], starts[swap, -1] = starts[swap, -1], starts[swap, 0]
     witnesses = starts[:, 0]
     t_sample = time.perf_counter() - t0
     sampled_width = values[:k] + values[k : 2 * k]
