@@ -1,0 +1,75 @@
+"""The result of a μ-synthesis: what MATLAB's ``musyn`` returns as ``info``, and more."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import control
+import numpy as np
+
+__all__ = ["MusynResult"]
+
+
+@dataclass(frozen=True, eq=False)
+class MusynResult:
+    """A controller with its robustness certificate.
+
+    Attributes
+    ----------
+    controller : control.StateSpace
+        ``K`` (``n_u x n_y``), ``u = K y_meas``.
+    structure : str
+        ``"full"``, ``"tf3"`` (each K_ij a third-order transfer function),
+        ``"pid"``, ``"ss:N"``, or ``"reduced:N"`` for a reduced full-order one.
+    order : int
+        Number of states of ``controller``.
+    peak_mu : float
+        Certified peak of the μ upper bound of the closed loop ``lft(P, K)``
+        over a peak-refined frequency grid (the number to quote).
+    peak_mu_lower : float
+        Peak of the μ lower bound on the same grid.
+    peak_frequency : float
+        Where the upper bound peaks (rad/s).
+    mu_history : ndarray
+        Peak μ upper bound after each iteration (MATLAB's ``info.MussvBnds``).
+    gamma_history : ndarray
+        H∞ norm reached by each K-step (or the scaled objective for fixed structure).
+    scalings : tuple
+        The D (and G) scalings of the last iteration (filters or per-frequency data).
+    closed_loop : control.StateSpace
+        ``lft(P, K)``: ``[d; w] -> [v; z]``.
+    certificate : object
+        The :class:`~polyrob.mu.MuBoundsResult` behind ``peak_mu``.
+    iterations : int
+    seconds : float
+    info : dict
+        Regularisation applied, solver notes, per-iteration timings.
+    """
+
+    controller: control.StateSpace
+    structure: str
+    order: int
+    peak_mu: float
+    peak_mu_lower: float
+    peak_frequency: float
+    mu_history: np.ndarray
+    gamma_history: np.ndarray
+    scalings: tuple
+    closed_loop: control.StateSpace
+    certificate: object
+    iterations: int
+    seconds: float
+    info: dict = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        """Plain figures for reports and JSON."""
+        return {
+            "structure": self.structure,
+            "order": int(self.order),
+            "peak_mu_upper": float(self.peak_mu),
+            "peak_mu_lower": float(self.peak_mu_lower),
+            "peak_frequency": float(self.peak_frequency),
+            "iterations": int(self.iterations),
+            "mu_history": [float(x) for x in np.asarray(self.mu_history)],
+            "seconds": round(float(self.seconds), 3),
+        }
