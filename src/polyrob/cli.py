@@ -213,6 +213,118 @@ def _register_bounds(sub) -> None:
     p.set_defaults(func=cmd_bounds)
 
 
+def add_weight_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group(
+        "performance weights W_S = (s/M_S + wB)/(s + wB A_S), W_T = (s + wBT)/(A_T s + wBT M_T)",
+        "one value for every joint or one per joint (comma-separated); default: the paper's",
+    )
+    for key, text in (("omega_b", "wb"), ("M_s", "ms"), ("A_s", "as"), ("omega_bt", "wbt"), ("M_t", "mt"), ("A_t", "at")):
+        g.add_argument(f"--{text}", dest=key, default=None, help=f"{key}")
+    g.add_argument("--bandwidth-scale", type=float, default=1.0, help="multiply wB and wBT")
+
+
+def weights_from_args(m: int, args):
+    """The paper's weights with per-channel overrides, for ``m`` channels."""
+    from .weights import PAPER_HYPERPARAMETERS, paper_weights
+
+    h = {}
+    for key, paper in PAPER_HYPERPARAMETERS.items():
+        text = getattr(args, key, None)
+        if text is None:
+            vals = list(paper) if m == len(paper) else [paper[0]] * m
+        else:
+            vals = [_number(t, f"--{key}") for t in text.split(",")]
+            vals = vals * m if len(vals) == 1 else vals
+            if len(vals) != m:
+                raise DomainError(f"--{key}: give 1 or {m} values, got {len(vals)}")
+        if key in ("omega_b", "omega_bt"):
+            vals = [v * args.bandwidth_scale for v in vals]
+        h[key] = tuple(vals)
+    return paper_weights(h)
+
+
+def pldi_from_args(robot, args):
+    from .pldi import PLDI, bound_pldi
+
+    if getattr(args, "pldi", None):
+        return PLDI.load(args.pldi)
+    domain = domain_from_args(robot, args)
+    return bound_pldi(robot, domain, coverage=0, progress=None if not args.quiet else False)
+
+
+def controller_from_args(args):
+    from .controller import load_controller
+    from .plant import paper_controller
+
+    if args.controller == "paper":
+        return paper_controller()
+    return load_controller(args.controller)
+
+
+def cmd_analyze(args) -> int:
+    from .plant import generalized_plant
+    from .robust import nominal_performance, robperf, robstab, sample_stability
+    from .uncertainty import uncertain_plant
+
+    robot = robot_from_args(args)
+    pldi = pldi_from_args(robot, args)
+    unc = uncertain_plant(pldi, merge_symmetric=args.merge_symmetric)
+    P = generalized_plant(unc, *weights_from_args(robot.m, args))
+    K = controller_from_args(args)
+    options = {"progress": None if not args.quiet else False}
+    rs = robstab(P, K, **options)
+    rp = robperf(P, K, **options)
+    npf = nominal_performance(P, K)
+    sampling = sample_stability(unc, K, n=args.mc, seed=args.seed)
+    report = {
+        "robot": robot.name,
+        "enclosure": pldi.enclosure,
+        "parameters": unc.n_params,
+        "nominal_stability": rs.nominally_stable,
+        "nominal_performance_hinf": npf,
+        "robust_stability": rs.summary(),
+        "robust_performance": rp.summary(),
+        "monte_carlo": {"samples": sampling.random, "stable_fraction": sampling.random_stable},
+        "corners": {"count": sampling.corners, "stable_fraction": sampling.corners_stable},
+        "worst_sampled": {"delta": sampling.worst_delta.tolist(), "max_pole_real_part": sampling.worst_abscissa},
+    }
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+    print(f"robot {robot.name}: {unc.n_params} real parameters ({pldi.enclosure} PLDI), controller order {_order(K)}")
+    print(f"nominal stability      {'yes' if rs.nominally_stable else 'NO'}")
+    print(f"nominal performance    ||N_zw||inf = {npf:.4g}  ({'met' if npf < 1 else 'not met'})")
+    for title, r in (("robust stability", rs), ("robust performance", rp)):
+        verdict = "certified" if r.robust else ("violated" if r.mu_lower >= 1 else "not certified")
+        print(f"{title:<22} mu in [{r.mu_lower:.4g}, {r.mu_upper:.4g}] at {r.critical_frequency:.4g} rad/s: {verdict}")
+    print(f"monte carlo            {sampling.random_stable:.1%} of {sampling.random} random parameter sets stable")
+    if sampling.corners_stable is not None:
+        print(f"corners                {sampling.corners_stable:.1%} of {sampling.corners} corners stable")
+    print(f"worst sampled          max Re(pole) = {sampling.worst_abscissa:.4g}")
+    return 0
+
+
+def _order(K) -> int:
+    import control
+
+    return control.ss(K).nstates
+
+
+def _register_analyze(sub) -> None:
+    p = sub.add_parser("analyze", help="nominal/robust stability and performance (mu) of a controller")
+    add_robot_arguments(p)
+    add_domain_arguments(p)
+    add_weight_arguments(p)
+    p.add_argument("--controller", required=True, help="controller file (JSON, see polyrob.controller) or 'paper' for K*")
+    p.add_argument("--pldi", default=None, help="a PLDI file from `polyrob bounds -o` (instead of bounding again)")
+    p.add_argument("--merge-symmetric", action="store_true", help="one repeated parameter for b_ij = b_ji")
+    p.add_argument("--mc", type=int, default=500, help="Monte Carlo parameter sets")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_analyze)
+
+
 # --------------------------------------------------------------------------- entry point
 
 
@@ -240,7 +352,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Later stages register their sub-commands here (bounds, analyze, synth, run).
-_EXTRA_COMMANDS: list = [_register_bounds]
+_EXTRA_COMMANDS: list = [_register_bounds, _register_analyze]
 
 
 def main(argv=None) -> int:
