@@ -272,8 +272,9 @@ def cmd_analyze(args) -> int:
     P = generalized_plant(unc, *weights_from_args(robot.m, args))
     K = controller_from_args(args)
     options = {"progress": None if not args.quiet else False}
-    rs = robstab(P, K, **options)
-    rp = robperf(P, K, **options)
+    omega = parse_frequencies(args.omega)
+    rs = robstab(P, K, omega, **options)
+    rp = robperf(P, K, omega, **options)
     npf = nominal_performance(P, K)
     sampling = sample_stability(unc, K, n=args.mc, seed=args.seed)
     report = {
@@ -304,6 +305,20 @@ def cmd_analyze(args) -> int:
     return 0
 
 
+def parse_frequencies(text):
+    """``LO:HI:N`` -> N log-spaced frequencies (rad/s), or None for automatic."""
+    if text is None:
+        return None
+    try:
+        lo, hi, n = text.split(":")
+        lo, hi, n = float(lo), float(hi), int(n)
+    except ValueError:
+        raise DomainError(f"--omega: give LO:HI:N, e.g. 0.01:100:60, got '{text}'") from None
+    if not (0 < lo < hi and n >= 2):
+        raise DomainError(f"--omega: need 0 < LO < HI and N >= 2, got '{text}'")
+    return np.logspace(np.log10(lo), np.log10(hi), n)
+
+
 def _order(K) -> int:
     import control
 
@@ -319,6 +334,7 @@ def _register_analyze(sub) -> None:
     p.add_argument("--pldi", default=None, help="a PLDI file from `polyrob bounds -o` (instead of bounding again)")
     p.add_argument("--merge-symmetric", action="store_true", help="one repeated parameter for b_ij = b_ji")
     p.add_argument("--mc", type=int, default=500, help="Monte Carlo parameter sets")
+    p.add_argument("--omega", default=None, help="frequency grid LO:HI:N in rad/s (log spaced; default automatic)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--quiet", action="store_true")
     p.add_argument("--json", action="store_true")
