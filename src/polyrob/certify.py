@@ -280,6 +280,7 @@ class _Problem:
         e, U, Slo, Shi = it[0], it[1], it[2], it[3]
         base = self.fold(c0[e], U)
         lin = {p: self.fold(rows[e], U) for p, rows in c1.items() if not all(c.is_zero() for c in rows[e])}
+        quad = {k: self.fold(rows[e], U) for k, rows in c2.items() if not all(c.is_zero() for c in rows[e])}
         verts = [dict(zip(lin, d)) for d in itertools.product(*[(delta[p].lower(), delta[p].upper()) for p in lin])]
         if R is None:
             terms, rem = None, None
@@ -322,7 +323,12 @@ class _Problem:
                     a0, a, H = -a0, [-x for x in a], [[-x for x in r] for r in H]
                 ub, x = _quad_max(a0, a, H, Slo, Shi)
                 best = max(best, ub)
-                val = self._value(*base, x)  # attained value f(qc, x, U): an inner bound
+                # inner candidate: the Taylor polynomial at this corner of the
+                # q-box (within the tiny remainder of the true, attained value;
+                # inner values only steer the search)
+                val = self._value(*base, x) + sum(float(dv[p].mid()) * self._value(*lin[p], x) for p in lin)
+                val += sum(float(dv[p].mid()) * float(dv[q].mid()) * self._value(*quad[p, q], x)
+                           for p, q in quad if p in dv and q in dv)
                 if sgn > 0:
                     self.in_hi[e] = max(self.in_hi[e], val)
                 else:
