@@ -139,3 +139,23 @@ def test_certify_refuses_an_analytic_robot():
     robot = cached_robot("paper_2r")
     with pytest.raises(CertificationError, match="URDF robot"):
         bound_pldi(robot, samples=16, refine=False, coverage=0, certify=True, progress=False)
+
+
+def test_cli_bounds_writes_the_pldi(tmp_path, capsys):
+    from polyrob.cli import main
+
+    out = tmp_path / "b.json"
+    code = main(["bounds", "planar_2r", "--samples", "64", "--coverage", "500", "--quiet", "-o", str(out)])
+    text = capsys.readouterr().out
+    assert code == 0 and "b42" in text and "coverage: 1.0000 of 500" in text
+    assert PLDI.load(out).interval("b31")[0] == pytest.approx(0.0285714, abs=1e-7)
+
+
+def test_cli_bounds_certify_on_seven_joints_is_one_line(tmp_path, capsys):
+    from polyrob.cli import main
+
+    out = tmp_path / "p.json"
+    code = main(["bounds", "panda", "--certify", "--quiet", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "up to 3 joints" in err and err.count("\n") == 1
+    assert not out.exists() and not list(tmp_path.iterdir())  # nothing half-written
