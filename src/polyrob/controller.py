@@ -32,7 +32,7 @@ import control
 import numpy as np
 
 from .errors import PolyrobError
-from .pldi import _atomic_write, _json_default
+from ._io import atomic_write, json_default
 
 __all__ = ["save_controller", "load_controller", "read_controller_file", "ControllerFileError"]
 
@@ -56,7 +56,7 @@ def save_controller(K, path, *, certificate: dict | None = None, info: dict | No
         K = control.ss(K)
         data = {"type": "ss", **{k: np.asarray(getattr(K, k), float).tolist() for k in "ABCD"}}
     doc = {"format": FORMAT, **data, "certificate": certificate or {}, "info": info or {}}
-    _atomic_write(path, lambda f: f.write(json.dumps(doc, indent=1, default=_json_default)))
+    atomic_write(path, lambda f: f.write(json.dumps(doc, indent=1, default=json_default)))
     return path
 
 

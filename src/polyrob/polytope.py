@@ -1,0 +1,136 @@
+"""The polytope of a PLDI: half-spaces, reduced coordinates, vertices, volume.
+
+The half-spaces are support values of the Jacobian entries along the axes
+(the interval box) and along the principal directions of the Jacobian cloud;
+linear programs (HiGHS) give the bounding box of the box section in reduced
+coordinates, an interior point (Chebyshev centre) and, in up to
+:data:`VERTEX_MAX_DIM` dimensions, the vertices (qhull).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize
+
+from .errors import BoundsError
+
+__all__ = ["Polytope", "build_polytope", "principal_directions", "VERTEX_MAX_DIM", "COVERAGE_RTOL"]
+
+#: Vertices are enumerated when the Jacobian cloud spans at most this many dimensions.
+VERTEX_MAX_DIM = 6
+#: Relative tolerance for "inside" in the coverage check (rounding only).
+COVERAGE_RTOL = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class Polytope:
+    """``{p : normals @ p <= offsets}`` over the varying entries ``p`` of a PLDI.
+
+    Attributes
+    ----------
+    normals : ndarray (h, k)
+    offsets : ndarray (h,)
+    vertices : ndarray (v, k) or None
+        Vertices, when the reduced dimension is at most :data:`VERTEX_MAX_DIM`.
+    centre : ndarray (k,)
+        Mean of the Jacobian cloud; ``p = centre + basis @ z`` are the reduced
+        coordinates ``z``.
+    basis : ndarray (k, r)
+        Principal directions in which the Jacobians vary (normalised units).
+    volume_hits, volume_samples : int
+        Monte Carlo estimate of the volume of the polytope over that of the
+        interval box, both cut by the reduced-coordinate subspace:
+        ``volume_hits`` of ``volume_samples`` uniform points of the box lie
+        in the polytope.
+    """
+
+    normals: np.ndarray
+    offsets: np.ndarray
+    vertices: np.ndarray | None
+    centre: np.ndarray
+    basis: np.ndarray
+    volume_hits: int
+    volume_samples: int
+
+    @property
+    def volume_ratio(self) -> float:
+        """Estimated volume ratio polytope / interval box (0 when no point hit)."""
+        return self.volume_hits / self.volume_samples if self.volume_samples else 1.0
+
+    @property
+    def volume_ratio_bound(self) -> float:
+        """A 95 % upper bound of the ratio (the rule of three when no point hit)."""
+        return max(self.volume_hits, 3) / self.volume_samples if self.volume_samples else 1.0
+
+    @property
+    def n_halfspaces(self) -> int:
+        return len(self.offsets)
+
+    @property
+    def reduced_dim(self) -> int:
+        return self.basis.shape[1]
+
+    def contains(self, points, *, rtol: float = COVERAGE_RTOL) -> np.ndarray:
+        """Whether points (n, k) satisfy every half-space (up to rounding)."""
+        points = np.atleast_2d(points)
+        slack = rtol * (1.0 + np.abs(self.offsets))
+        return np.all(points @ self.normals.T <= self.offsets + slack, axis=1)
+
+
+def principal_directions(vals: np.ndarray, scale: np.ndarray, max_dirs: int = 12):
+    """Principal axes of the normalised cloud; rank ``r`` = directions that vary."""
+    z = (vals - vals.mean(axis=0)) / scale
+    _, s, vt = np.linalg.svd(z, full_matrices=False)
+    r = int(np.sum(s > 1e-8 * s[0])) if s.size and s[0] > 0 else 0
+    return vt[:r].T, vt[: min(r, max_dirs)]
+
+
+
+def build_polytope(normals, offsets, n_box, cloud, scale, rng, n_mc=200_000) -> Polytope:
+    """Reduced coordinates, LP bounding box, interior point, vertices and volume ratio."""
+    from scipy.spatial import HalfspaceIntersection
+
+    centre = cloud.mean(axis=0)
+    basis_n, _ = principal_directions(cloud, scale, max_dirs=0)
+    basis = basis_n * scale[:, None]  # p = centre + basis @ z
+    r = basis.shape[1]
+    G = normals @ basis
+    g = offsets - normals @ centre
+    vertices = None
+    if r == 0:
+        return Polytope(normals, offsets, None, centre, basis, 0, 0)
+    box_rows = np.arange(len(normals)) < n_box
+    # Bounding box, in z, of the interval box cut by the reduced subspace
+    # (2r LPs): the volume estimate samples it.
+    box_z = []
+    for i in range(r):
+        bounds = []
+        for sgn in (1.0, -1.0):
+            c = np.zeros(r)
+            c[i] = sgn
+            res = optimize.linprog(c, A_ub=G[box_rows], b_ub=g[box_rows], bounds=[(None, None)] * r, method="highs")
+            if res.status != 0:
+                raise BoundsError(f"the polytope LP failed ({res.message})")
+            bounds.append(res.x[i])
+        box_z.append(sorted(bounds))
+    box_z = np.array(box_z)
+    # Interior point (Chebyshev centre) for the vertex enumeration.
+    norms = np.linalg.norm(G, axis=1)
+    res = optimize.linprog(
+        np.r_[np.zeros(r), -1.0], A_ub=np.c_[G, norms], b_ub=g, bounds=[(None, None)] * r + [(0, None)],
+        method="highs",
+    )
+    if r <= VERTEX_MAX_DIM and res.status == 0 and res.x[-1] > 1e-12:
+        try:
+            hs = HalfspaceIntersection(np.c_[G, -g], res.x[:r])
+            vz = np.unique(np.round(hs.intersections, 12), axis=0)
+            vertices = centre + vz @ basis.T
+        except Exception:  # qhull fails on degenerate inputs: no vertices then
+            vertices = None
+    # Volume ratio against the interval box (lo <= centre + basis z <= hi), in z.
+    z = box_z[:, 0] + rng.random((n_mc, r)) * (box_z[:, 1] - box_z[:, 0])
+    in_poly = np.all(z @ G.T <= g + 1e-12, axis=1)
+    in_box = np.all(z @ G[box_rows].T <= g[box_rows] + 1e-12, axis=1)
+    return Polytope(normals, offsets, vertices, centre, basis, int(in_poly.sum()), int(in_box.sum()))
