@@ -15,6 +15,14 @@ def cached_robot(name: str):
     return load_robot(name)
 
 
+@functools.lru_cache(maxsize=None)
+def paper_pldi():
+    """The paper's problem: ``paper_2r`` on ``--domain paper`` (PLDIs are immutable)."""
+    from polyrob import bound_pldi
+
+    return bound_pldi(cached_robot("paper_2r"), samples=256, coverage=0, progress=False)
+
+
 LINK = '<link name="{n}"><inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>'
 JOINT = (
     '<joint name="{n}" type="{t}"><parent link="{p}"/><child link="{c}"/><axis xyz="0 0 1"/>'

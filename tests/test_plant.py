@@ -5,6 +5,8 @@ import numpy as np
 import pytest
 
 import polyrob
+
+from conftest import paper_pldi
 from polyrob.errors import PolyrobError
 from polyrob.plant import (
     ClosedLoop,
@@ -35,8 +37,7 @@ W_T = _diag(control.tf([1, 10], [0.01, 21]), control.tf([1, 12], [0.01, 36]))
 
 @pytest.fixture(scope="module")
 def pldi():
-    robot = polyrob.load_robot("paper_2r")
-    return polyrob.bound_pldi(robot, samples=256, coverage=0, progress=False)
+    return paper_pldi()
 
 
 @pytest.fixture(scope="module")

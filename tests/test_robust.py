@@ -13,14 +13,14 @@ from polyrob.plant import closed_loop
 from polyrob.robust import nominal_performance, robperf, robstab, sample_stability
 from polyrob.weights import paper_weights
 
+from conftest import paper_pldi
+
 OMEGA = np.logspace(-1, 2, 25)
 
 
 @pytest.fixture(scope="module")
 def paper():
-    robot = polyrob.load_robot("paper_2r")
-    pldi = polyrob.bound_pldi(robot, coverage=0, progress=False)
-    unc = polyrob.uncertain_plant(pldi)
+    unc = polyrob.uncertain_plant(paper_pldi())
     P = polyrob.generalized_plant(unc, *paper_weights())
     return unc, P, polyrob.paper_controller()
 

@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 import polyrob
+
+from conftest import paper_pldi
 from polyrob.errors import BoundsError, PolyrobError
 from polyrob.uncertainty import UncertainPlant, uncertain_plant, upper_lft
 
@@ -15,8 +17,7 @@ PAPER_ENTRIES = ("a32", "a33", "a34", "a42", "a43", "a44", "b31", "b32", "b41", 
 
 @pytest.fixture(scope="module")
 def pldi():
-    robot = polyrob.load_robot("paper_2r")
-    return polyrob.bound_pldi(robot, samples=256, coverage=0, progress=False)
+    return paper_pldi()
 
 
 @pytest.fixture(scope="module")
