@@ -7,22 +7,33 @@ contain ``A = df/dx`` and ``B = df/du`` for *every* ``(q, qd, u)`` in a box.
 
 Method (see :mod:`polyrob.interval_rbd` for the dynamics themselves):
 
-* On a q-box ``Q`` every entry is a polynomial in ``(qd, u)`` of degree <= 2
-  whose coefficients ``c(q)`` we enclose in *mean-value form*
-  ``c(q) in c(qc) + sum_p c'(Q)_p (Q_p - qc_p)``: thin values at the centre
-  plus derivative enclosures, so the over-estimation is second order in the
-  box size and branch and bound converges fast.
+* On a q-box every entry is a polynomial in ``(qd, u)`` of degree <= 2 whose
+  coefficients ``c(q)`` are enclosed by order-2 *Taylor models* in
+  ``d = q - qc``: thin value, gradient and Hessian at the box centre plus a
+  rigorous third-order remainder.  Plain interval (or mean-value) forms
+  over-estimate badly here, because ``M^-1`` of an ill-conditioned ``M``
+  multiplies the widths of everything it touches.
+* The Taylor model's linear part is maximised exactly (at a vertex of the
+  q-box, jointly with ``qd`` below); only its quadratic part and remainder are
+  enclosed, so the over-estimation is second order with the true curvature
+  as constant and the branch and bound needs few boxes.
 * ``u`` enters affinely (and ``d qdd/d qd`` is affine in ``qd``), so the
   extremes are at vertices of the u-box (qd-box): they are enumerated, not
   split.  The quadratic dependence of ``d qdd/d q`` on ``qd`` is maximised
-  exactly over a qd-box (enumeration of its faces, in ``arb``); only the
-  small mean-value correction needs qd-splitting, which is done when it
-  dominates.
+  exactly over a qd-box (enumeration of its faces, in ``arb``); the qd-box is
+  bisected only when the enclosed Taylor terms depend mostly on its extent.
 * Branch and bound on outer bounds: for each entry we keep the best inner
-  value (attained at evaluated points) and refine a box only while its
-  enclosure sticks out beyond it by more than ``rel_tol`` x current width.
-  Inner values only steer the search; the result is the union of the
-  enclosures of all leaves, so it is rigorous whatever they are.
+  value (attained at evaluated points, by Pinocchio) and refine a box only
+  while its enclosure sticks out beyond it by more than ``rel_tol`` x the
+  current width.  Inner values only steer the search; the result is the union
+  of the enclosures of all leaves, so it is rigorous whatever they are.
+* Coordinates the dynamics do not depend on (structurally, from the exact
+  polynomials, and numerically, by Pinocchio) are never bisected, and an
+  entry independent of a bisected coordinate follows one half only.
+
+Floats: every ``arb`` result is converted outward (``arb_upper``/``arb_lower``:
+``float()`` rounds to nearest, so the result is moved one ulp outward when an
+exact comparison shows it fell inside).
 """
 
 from __future__ import annotations
@@ -96,6 +107,16 @@ def reference_jacobians(model, damping, q, qdot, u, data=None):
     -------
     A : numpy.ndarray, shape (2m, 2m)
     B : numpy.ndarray, shape (2m, m)
+
+    Examples
+    --------
+    >>> import pinocchio as pin
+    >>> model = pin.buildModelFromUrdf("urdf/planar_2r.urdf")
+    >>> A, B = reference_jacobians(model, [0, 0], [0, 3.14159], [0, 0], [0, 0])
+    >>> A.shape, B.shape
+    ((4, 4), (4, 2))
+    >>> float(round(B[2, 0], 4))
+    0.0312
     """
     import pinocchio as pin
 
@@ -159,7 +180,7 @@ def _neg_definite(H, F):
     return True if all(mn > 0 for mn in minors) else None
 
 
-def _quad_max(a0, a, H, lo, hi):
+def _quad_max(a0, a, H, lo, hi, stop=None):
     """Rigorous max of ``a0 + a.x + x^T H x`` over the box ``[lo, hi]``.
 
     ``a0``, ``a``, ``H`` (symmetric) are thin balls, ``lo``/``hi`` floats.
@@ -169,6 +190,8 @@ def _quad_max(a0, a, H, lo, hi):
     face's boundary), or, when definiteness cannot be decided, we bound the
     face by naive interval evaluation.  Returns ``(upper bound, point)`` where
     ``point`` is where the (approximate) maximum is attained, for inner bounds.
+    With ``stop``, returns early (with a partial, too low bound) once the
+    bound exceeds it: callers then only need to know that it does.
     """
     m = len(a)
     free = [j for j in range(m) if lo[j] < hi[j]]
@@ -219,14 +242,29 @@ def _quad_max(a0, a, H, lo, hi):
             best_x = [float(x[j].mid()) for j in range(m)]
             for n, j in enumerate(F):
                 best_x[j] = 0.5 * (lo[j] + hi[j]) if sol is None else min(max(float(sol[n].mid()), lo[j]), hi[j])
+        if stop is not None and best_ub > stop:
+            break
     return best_ub, best_x
+
+
+def _quad_naive(a0, a, H, S):
+    """Interval enclosure of ``a0 + a.x + x^T H x`` for ``x`` in the balls ``S``."""
+    m = len(a)
+    val = a0 + sum((a[j] * S[j] for j in range(m)), arb(0))
+    for j in range(m):
+        val += H[j][j] * _sq(S[j]) + 2 * sum((H[j][l] * S[j] * S[l] for l in range(j + 1, m)), arb(0))
+    return val
 
 
 class _Problem:
     """State of one branch and bound run (see :func:`certified_jacobian_bounds`)."""
 
-    def __init__(self, sd, damping, vlo, vhi, rel_tol):
+    def __init__(self, sd, damping, vlo, vhi, rel_tol, model=None, ulo=None, uhi=None):
         self.sd, self.m, self.d = sd, sd.m, damping
+        self.model = model
+        self.data = model.createData() if model is not None else None
+        self.uc = None if ulo is None else 0.5 * (np.asarray(ulo) + np.asarray(uhi))
+        self.qc = self.qlo = self.qhi = None
         self.vlo, self.vhi, self.rel_tol = vlo, vhi, rel_tol
         self.entries = entry_list(sd.m)
         n = len(self.entries)
@@ -267,7 +305,7 @@ class _Problem:
         out["R"] = ev(R[e])
         return out
 
-    def evaluate(self, it, tm):
+    def evaluate(self, it, tm, exact=False):
         """Bounds of sub-problem ``it`` on the current q-box; updates inner values.
 
         Order-2 Taylor model in ``q``: ``f(qc + d, v) in P(v) + sum_p d_p G_p(v)
@@ -280,14 +318,13 @@ class _Problem:
         e, U, Slo, Shi = it[0], it[1], it[2], it[3]
         base = self.fold(c0[e], U)
         lin = {p: self.fold(rows[e], U) for p, rows in c1.items() if not all(c.is_zero() for c in rows[e])}
-        quad = {k: self.fold(rows[e], U) for k, rows in c2.items() if not all(c.is_zero() for c in rows[e])}
         verts = [dict(zip(lin, d)) for d in itertools.product(*[(delta[p].lower(), delta[p].upper()) for p in lin])]
         if R is None:
             terms, rem = None, None
         else:
             terms = self.remainder(e, c2, R, delta2, U, [_ball(x, y) for x, y in zip(Slo, Shi)])
             rem = sum(terms.values(), arb(0))
-        out = []
+        out, partial = [], set()
         cheap = None
         if rem is not None:
             # cheap enclosure first: when it already settles a side, skip the
@@ -311,8 +348,16 @@ class _Problem:
                 if sgn < 0 and arb_lower(cheap) >= self.in_lo[e] - self.tol(e):
                     out.append(arb_lower(cheap))
                     continue
+            # Only the decision "settled or not" needs the exact maximum: stop as
+            # soon as it is clearly open (its bound then only orders the queue),
+            # and skip corners whose naive bound cannot beat the best so far.
+            stop = None
+            if rem is not None and not exact:
+                stop = (self.in_hi[e] + self.tol(e) - arb_upper(rem) if sgn > 0
+                        else -self.in_lo[e] + self.tol(e) + arb_lower(rem))
             best = -np.inf
-            for dv in verts:
+            S = [_ball(x, y) for x, y in zip(Slo, Shi)]
+            for dv in sorted(verts, key=lambda dv: -sgn * sum(float((dv[p] * lin[p][0]).mid()) for p in lin)):
                 a0, a, H = base
                 if dv:
                     a0 = a0 + sum((dv[p] * lin[p][0] for p in lin), arb(0))
@@ -321,25 +366,43 @@ class _Problem:
                          for j in range(self.m)]
                 if sgn < 0:
                     a0, a, H = -a0, [-x for x in a], [[-x for x in r] for r in H]
-                ub, x = _quad_max(a0, a, H, Slo, Shi)
+                if best > -np.inf and arb_upper(_quad_naive(a0, a, H, S)) <= best:
+                    continue
+                ub, x = _quad_max(a0, a, H, Slo, Shi, stop)
                 best = max(best, ub)
-                # inner candidate: the Taylor polynomial at this corner of the
-                # q-box (within the tiny remainder of the true, attained value;
-                # inner values only steer the search)
-                val = self._value(*base, x) + sum(float(dv[p].mid()) * self._value(*lin[p], x) for p in lin)
-                val += sum(float(dv[p].mid()) * float(dv[q].mid()) * self._value(*quad[p, q], x)
-                           for p, q in quad if p in dv and q in dv)
+                # inner candidates (they only steer the search): the value at the
+                # box centre, and Pinocchio's value at the q-box corner where the
+                # linearised bound peaks -- the extremes of monotone entries are
+                # at such corners, which box centres only approach slowly
+                val = self._value(*base, x)
+                if dv:
+                    q = list(self.qc)
+                    for p in dv:
+                        q[p] = min(max(self.qc[p] + float(dv[p].mid()), self.qlo[p]), self.qhi[p])
+                    tv = self.true_value(e, q, x, U)
+                    val = max(val, tv) if sgn > 0 else min(val, tv)
                 if sgn > 0:
                     self.in_hi[e] = max(self.in_hi[e], val)
                 else:
                     self.in_lo[e] = min(self.in_lo[e], val)
+                if stop is not None and best > stop:
+                    partial.add(side)  # open: the exact maximum is not needed
+                    break
             if rem is None:
                 out.append(sgn * np.inf)
             elif sgn > 0:
                 out.append(arb_upper(arb(best) + rem))
             else:
                 out.append(arb_lower(rem - arb(best)))
-        return out[0], out[1], terms
+        return out[0], out[1], terms, partial
+
+    def true_value(self, e, q, v, U):
+        """Pinocchio's (floating-point) value of entry ``e`` at one point."""
+        m = self.m
+        blk, i, j = self.entries[e]
+        u = np.asarray(U, float) if any(U) else self.uc
+        A, B = reference_jacobians(self.model, self.d, np.asarray(q), np.asarray(v, float), u, self.data)
+        return float(B[m + i, j] if blk == "B" else A[m + i, m + j] if blk == "Av" else A[m + i, j])
 
     def finalize(self, it, hi, lo):
         e = it[0]
@@ -469,7 +532,7 @@ def certified_jacobian_bounds(model, damping, q_lo, q_hi, qdot_lo, qdot_hi, u_lo
             raise DomainError(f"{n}: lower bound above upper bound ({lo} > {hi})")
     sd = SymbolicDynamics(model)
     split = _relevant_dims(model, d, qlo, qhi, vlo, vhi, ulo, uhi, sd, np.random.default_rng(0))
-    prob = _Problem(sd, d, vlo, vhi, rel_tol)
+    prob = _Problem(sd, d, vlo, vhi, rel_tol, model, ulo, uhi)
     deps = entry_depends(sd)
     root_w = np.where(qhi > qlo, qhi - qlo, 1.0)
 
@@ -512,11 +575,15 @@ def certified_jacobian_bounds(model, damping, q_lo, q_hi, qdot_lo, qdot_hi, u_lo
         if c0 is None:
             raise CertificationError(f"mass matrix not provably invertible at q = {np.add(lo, hi) / 2}")
         delta2 = {(p, q): _sq(delta[p]) if p == q else delta[p] * delta[q] for p, q in c2}
-        alive = _process_box(prob, items, (c0, c1, c2, R, delta, delta2))
+        tm = (c0, c1, c2, R, delta, delta2)
+        prob.qlo, prob.qhi = lo, hi
+        prob.qc = [min(max(0.5 * (a + b), a), b) for a, b in zip(lo, hi)]
+        alive = _process_box(prob, items, tm)
         cand = [p for p in range(m) if split[p] and hi[p] - lo[p] > 1e-9 * root_w[p]]
         if alive and not cand:  # cannot refine further: keep these enclosures
-            for it, h, l, _ in alive:
-                prob.finalize(it, h, l)
+            for it, _, _, _ in alive:
+                h, l, _, _ = prob.evaluate(it, tm, exact=True)
+                prob.finalize(it, h if it[4] else None, l if it[5] else None)
             alive = []
         if alive:
             if R is None:
@@ -556,12 +623,13 @@ def _process_box(prob, items, tm):
     alive, work = [], list(items)
     while work:
         it = work.pop()
-        hi, lo, terms = prob.evaluate(it, tm)
+        hi, lo, terms, partial = prob.evaluate(it, tm)
         e = it[0]
-        if it[4] and hi <= prob.in_hi[e] + prob.tol(e):
+        # a partial bound (search stopped early) is too low: it never settles a side
+        if it[4] and 4 not in partial and hi <= prob.in_hi[e] + prob.tol(e):
             prob.finalize(it, hi, None)
             it[4] = False
-        if it[5] and lo >= prob.in_lo[e] - prob.tol(e):
+        if it[5] and 5 not in partial and lo >= prob.in_lo[e] - prob.tol(e):
             prob.finalize(it, None, lo)
             it[5] = False
         if not (it[4] or it[5]):

@@ -16,9 +16,12 @@ that cancel mathematically (e.g. the dependence of ``M`` on the first joint)
 cancel exactly instead of leaving interval "dust", and the joints the dynamics
 do not depend on are known structurally.  Derivatives of any order are then
 exact polynomial derivatives (chosen over forward-mode AD on ``arb``: the
-branch and bound needs second derivatives of the dynamics on every box, and a
-polynomial evaluation is a single ``arb_mat`` product in C, far cheaper than
-nested dual numbers in Python).
+Taylor models of :func:`box_coefficients` need derivatives of ``M``, ``Gamma``
+and ``g`` up to order 4 on every box, and evaluating all of them is a single
+``arb_mat`` product in C, far cheaper than nested dual numbers in Python).
+On top of them, ``M^-1`` and the Jacobian coefficients are built as order-2
+Taylor models (:class:`_TM`), which keep the dependency between the factors
+that plain interval arithmetic loses.
 
 Evaluating the polynomials on a box uses ``flint.arb`` ball arithmetic, which
 rounds outward, so every value is a rigorous enclosure.
@@ -113,7 +116,8 @@ def interval_inverse(A: arb_mat):
     R = arb_mat([[arb(float(Rf[i, j])) for j in range(n)] for i in range(n)])
     I = arb_mat([[arb(1 if i == j else 0) for j in range(n)] for i in range(n)])
     E = I - R * A
-    beta = max(sum(abs(E[i, j]) for j in range(n)) for i in range(n)).upper()
+    # (Python's max() on overlapping balls may pick the wrong one: compare floats)
+    beta = arb(max(arb_upper(sum(abs(E[i, j]) for j in range(n))) for i in range(n)))
     if not beta < 1:
         return None
     z = beta * beta / (1 - beta)
@@ -145,7 +149,7 @@ class SymbolicDynamics:
 
     def __init__(self, model):
         self.kinds_axes = joint_axes(model)
-        self.m = m = len(self.kinds_axes)
+        self.m = len(self.kinds_axes)
         self.kinds = [k for k, _ in self.kinds_axes]
         names, self._var = [], []  # _var[i] = (index of c or p, index of s or None)
         for i, k in enumerate(self.kinds):
@@ -178,9 +182,6 @@ class SymbolicDynamics:
                     term = term * (1 - gens[ci] ** 2) ** k
             out = out + ctx.from_dict({tuple(e): 1}) * term
         return out
-
-    def _mul(self, a, b):
-        return self._reduce(a * b)
 
     def _dq(self, P, i):
         """d P / d q_i (chain rule through cos/sin for revolute joints)."""
@@ -492,7 +493,7 @@ def _inverse_tm(Mt):
     Nt = _TM(arb_mat(n, n), Mt.c1, Mt.c2, Mt.R, ctx)
     X = _const_tm(ctx, M0inv) * Nt
     Xe = X.enclosure()
-    b = max(sum(abs(Xe[i, j]) for j in range(n)) for i in range(n)).upper()
+    b = arb(max(arb_upper(sum(abs(Xe[i, j]) for j in range(n))) for i in range(n)))
     if not b < 1:
         return None
     tail = arb_upper(b ** 3 / (1 - b))
@@ -659,7 +660,7 @@ def entry_depends(sd: SymbolicDynamics) -> list[set]:
     An entry that does not depend on ``q_p`` has the same range on both halves
     of a box split along ``p``, so the branch and bound follows it in one half only.
     """
-    m, P = sd.m, len(sd.pairs)
+    m = sd.m
     pos = {}
     for key, n in sd.index.items():
         if n is not None and len(key[-1]) <= 1:
