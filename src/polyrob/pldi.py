@@ -293,6 +293,7 @@ def bound_pldi(
     samples: int | None = None,
     nominal="equilibrium",
     refine: bool = True,
+    verify_rounds: int = 3,
     coverage: int = 10_000,
     certify: bool = False,
     certify_options: dict | None = None,
@@ -309,13 +310,16 @@ def bound_pldi(
         Defaults to ``Domain.from_robot(robot)``.
     samples : int, optional
         Sobol' positions (rounded up to a power of two); default grows with
-        the number of positions that matter (256 per dimension, at most 8192).
+        the number of positions that matter (1024 per dimension, at most 8192).
     nominal : "equilibrium", "midpoint" or dict
         ``(A0, B0)`` at ``q = 0`` (clipped into the domain), ``qdot = 0`` and the
         torque that holds it (``u = g(q)``), at the interval midpoints, or at a
         given ``{"q", "qdot", "u"}``.
     refine : bool
         Refine every extreme by local search.
+    verify_rounds : int
+        After refining, up to this many fresh designs (another scramble of the
+        positions) are searched; support values they beat are refined again.
     coverage : int
         Fresh random points for the coverage check (0 to skip).
     certify : bool
@@ -349,7 +353,7 @@ def bound_pldi(
     dropped = search.dropped_positions(problem, rng)
     active_q = m - len(dropped)
     if samples is None:
-        samples = int(min(8192, max(256, 256 * active_q)))
+        samples = int(min(8192, max(256, 1024 * active_q)))
     q = search.position_design(problem, samples, dropped, seed)
 
     cloud = pilot_vals[:, varying]
@@ -368,11 +372,24 @@ def bound_pldi(
         swap = pilot_value > values
         values = np.where(swap, pilot_value, values)
         starts[swap, 0], starts[swap, -1] = starts[swap, -1], starts[swap, 0]
-    witnesses = starts[:, 0]
+    witnesses = starts[:, 0].copy()
     t_sample = time.perf_counter() - t0
     sampled_width = values[:k] + values[k : 2 * k]
+    rounds = 0
     if refine and k:
         values, witnesses = search.refine(problem, directions, values, starts, index, dropped, progress, workers)
+        # Verification rounds: a fresh design (another scramble) must not beat
+        # any support value; where it does, refine again from its witness.
+        for rounds in range(1, verify_rounds + 1):
+            q_new = search.position_design(problem, samples, dropped, seed + 7919 * rounds)
+            v_new, s_new = search.support_pass(problem, q_new, directions, index, progress, workers)
+            beaten = np.flatnonzero(v_new > values + 1e-9 * (1.0 + np.abs(values)))
+            if not beaten.size:
+                break
+            v_ref, w_ref = search.refine(
+                problem, directions[beaten], v_new[beaten], s_new[beaten], index, dropped, progress, workers
+            )
+            values[beaten], witnesses[beaten] = v_ref, w_ref
     t_refine = time.perf_counter() - t0 - t_sample
     upper, lower = values[:k], -values[k : 2 * k]
     width = upper - lower
@@ -439,6 +456,7 @@ def bound_pldi(
             "seconds_refining": round(t_refine, 3),
             "seconds_total": None,
             "max_refinement": float(refinement.max()) if k else 0.0,
+            "verification_rounds": rounds,
             "certify": cert_info,
             "notes": notes,
         },

@@ -137,7 +137,7 @@ def support_pass(problem: Problem, q, directions, index, progress, workers):
     return value, starts
 
 
-def refine(problem: Problem, directions, values, starts, index, dropped, progress, workers, maxiter=60):
+def refine(problem: Problem, directions, values, starts, index, dropped, progress, workers, maxiter=200):
     """Bounded local search (L-BFGS-B) from each witness; never lowers a support value."""
     m = problem.m
     lo, hi = problem.lo.copy(), problem.hi.copy()
@@ -168,7 +168,7 @@ def refine(problem: Problem, directions, values, starts, index, dropped, progres
 
         res = optimize.minimize(
             fun, x0[free], jac=True, method="L-BFGS-B", bounds=list(zip(lo[free], hi[free])),
-            options={"maxiter": maxiter},
+            options={"maxiter": maxiter, "ftol": 1e-14, "gtol": 1e-11},
         )
         x = x0.copy()
         x[free] = np.clip(res.x, lo[free], hi[free])
