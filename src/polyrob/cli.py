@@ -188,6 +188,12 @@ def cmd_bounds(args) -> int:
         + (f"~ {poly.volume_ratio:.3g}" if poly.volume_hits else f"< {poly.volume_ratio_bound:.2g}")
         + f" ({poly.volume_hits} of {poly.volume_samples} box points inside)"
     )
+    if len(pldi.entries) and pldi.enclosure == "sampled":
+        worst = int(np.argmax(pldi.refinement))
+        print(
+            f"local search widened the sampled intervals by at most {100 * pldi.refinement[worst]:.3g} % "
+            f"({pldi.entries[worst]}); {pldi.info.get('verification_rounds', 0)} verification round(s)"
+        )
     if pldi.coverage_points:
         print(f"coverage: {pldi.coverage:.4f} of {pldi.coverage_points} fresh points")
     if pldi.dropped_q:
