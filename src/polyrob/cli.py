@@ -229,9 +229,9 @@ def add_weight_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--bandwidth-scale", type=float, default=1.0, help="multiply wB and wBT")
 
 
-def weights_from_args(m: int, args):
-    """The paper's weights with per-channel overrides, for ``m`` channels."""
-    from .weights import PAPER_HYPERPARAMETERS, paper_weights
+def hyperparameters_from_args(m: int, args) -> dict:
+    """The paper's weight hyperparameters with per-channel overrides, for ``m`` channels."""
+    from .weights import PAPER_HYPERPARAMETERS
 
     h = {}
     for key, paper in PAPER_HYPERPARAMETERS.items():
@@ -246,7 +246,14 @@ def weights_from_args(m: int, args):
         if key in ("omega_b", "omega_bt"):
             vals = [v * args.bandwidth_scale for v in vals]
         h[key] = tuple(vals)
-    return paper_weights(h)
+    return h
+
+
+def weights_from_args(m: int, args):
+    """``(W_S, W_T)`` from the weight options (default: the paper's)."""
+    from .weights import paper_weights
+
+    return paper_weights(hyperparameters_from_args(m, args))
 
 
 def pldi_from_args(robot, args):
@@ -347,6 +354,145 @@ def _register_analyze(sub) -> None:
     p.set_defaults(func=cmd_analyze)
 
 
+def _print_synthesis(result) -> None:
+    hist = list(result.mu_history)
+    gam = list(result.gamma_history)
+    print(f"{'iter':>4}  {'peak mu (upper)':>16}  {'gamma':>10}")
+    for i, mu in enumerate(hist):
+        g = f"{gam[i]:.4g}" if i < len(gam) else "-"
+        print(f"{i + 1:>4}  {mu:>16.5g}  {g:>10}")
+    print(
+        f"controller: {result.structure}, order {result.order}; certified peak mu in "
+        f"[{result.peak_mu_lower:.4g}, {result.peak_mu:.4g}] at {result.peak_frequency:.4g} rad/s "
+        f"({result.iterations} iterations, {result.seconds:.1f} s)"
+    )
+    for note in result.info.get("notes", []) if isinstance(result.info, dict) else []:
+        print(f"note: {note}")
+
+
+def synthesize(robot, args):
+    """PLDI -> uncertain plant -> generalized plant -> musyn (-> reduction)."""
+    from .plant import generalized_plant
+    from .synthesis import musyn, reduce_controller
+    from .uncertainty import uncertain_plant
+
+    pldi = pldi_from_args(robot, args)
+    unc = uncertain_plant(pldi, merge_symmetric=args.merge_symmetric)
+    P = generalized_plant(unc, *weights_from_args(robot.m, args))
+    options = {"progress": None if not args.quiet else False, "max_iter": args.max_iter}
+    if args.structure == "full":
+        options["mixed"] = not args.complex
+    result = musyn(P, structure=args.structure, **options)
+    reduced = None
+    if args.structure == "full" and args.reduce:
+        reduced = reduce_controller(P, result, max_order=args.reduce_max_order)
+    return pldi, unc, P, result, reduced
+
+
+def _certificate(result, P) -> dict:
+    cert = result.summary()
+    cert["block_structure"] = np.asarray(P.block_structure_rp).tolist()
+    return cert
+
+
+def cmd_synth(args) -> int:
+    from .controller import save_controller
+
+    robot = robot_from_args(args)
+    if args.max_bandwidth:
+        return _max_bandwidth(robot, args)
+    pldi, unc, P, result, reduced = synthesize(robot, args)
+    print(f"robot {robot.name}: {unc.n_params} real parameters ({pldi.enclosure} PLDI), structure {args.structure}")
+    _print_synthesis(result)
+    K, cert = result.controller, _certificate(result, P)
+    if reduced is not None:
+        print("order reduction (order: certified peak mu):")
+        for row in reduced.table:
+            print(f"  {row['order']:>4}: {row['peak_mu']:.5g}{'' if row.get('stable', True) else ' (unstable)'}")
+        print(f"reduced controller: order {reduced.order}, certified peak mu {reduced.peak_mu:.5g}")
+        K = reduced.controller
+        cert.update(structure=f"reduced:{reduced.order}", order=int(reduced.order),
+                    peak_mu_upper=float(reduced.peak_mu), peak_mu_lower=float(reduced.peak_mu_lower),
+                    full_order=int(result.order), full_peak_mu_upper=float(result.peak_mu))
+    if args.output:
+        info = {"robot": robot.name, "domain": pldi.domain.to_dict(), "weights": hyperparameters_from_args(robot.m, args)}
+        path = save_controller(K, args.output, certificate=cert, info=info)
+        print(f"wrote {path}")
+    return 0
+
+
+def _max_bandwidth(robot, args) -> int:
+    from .synthesis import max_bandwidth_scaling
+    from .uncertainty import uncertain_plant
+
+    pldi = pldi_from_args(robot, args)
+    unc = uncertain_plant(pldi, merge_symmetric=args.merge_symmetric)
+    res = max_bandwidth_scaling(
+        unc, hyperparameters_from_args(robot.m, args), progress=None if not args.quiet else False,
+        max_iter=args.max_iter,
+    )
+    print(json.dumps({k: v for k, v in vars(res).items() if isinstance(v, (int, float, str, list, dict))},
+                     indent=2, default=str))
+    return 0
+
+
+def cmd_run(args) -> int:
+    """bounds -> synthesis -> analysis in one go."""
+    from .robust import nominal_performance, robperf, robstab, sample_stability
+
+    robot = robot_from_args(args)
+    pldi, unc, P, result, reduced = synthesize(robot, args)
+    print(f"[1/3] bounds: {len(pldi.entries)} varying entries ({pldi.enclosure}), robot {robot.name}")
+    print(pldi.table())
+    print(f"[2/3] synthesis ({args.structure}):")
+    _print_synthesis(result)
+    K = result.controller if reduced is None else reduced.controller
+    if reduced is not None:
+        print(f"reduced to order {reduced.order}: certified peak mu {reduced.peak_mu:.5g}")
+    print("[3/3] analysis:")
+    rs, rp = robstab(P, K, progress=False), robperf(P, K, progress=False)
+    sampling = sample_stability(unc, K, n=args.mc, seed=0)
+    print(f"nominal performance ||N_zw||inf = {nominal_performance(P, K):.4g}")
+    print(f"robust stability   mu in [{rs.mu_lower:.4g}, {rs.mu_upper:.4g}]")
+    print(f"robust performance mu in [{rp.mu_lower:.4g}, {rp.mu_upper:.4g}] ({'certified' if rp.robust else 'not certified'})")
+    print(f"monte carlo: {sampling.random_stable:.1%} of {sampling.random} stable"
+          + (f"; corners: {sampling.corners_stable:.1%} of {sampling.corners} stable" if sampling.corners else ""))
+    if args.output:
+        from .controller import save_controller
+
+        cert = _certificate(result, P)
+        cert.update(robust_stability=rs.summary(), robust_performance=rp.summary())
+        print(f"wrote {save_controller(K, args.output, certificate=cert, info={'robot': robot.name})}")
+    return 0
+
+
+def _add_synthesis_arguments(p) -> None:
+    add_robot_arguments(p)
+    add_domain_arguments(p)
+    add_weight_arguments(p)
+    p.add_argument("--structure", default="full", help="full (D-K / D-G-K), tfN (e.g. tf3: each K_ij of order N), pid, ss:N")
+    p.add_argument("--complex", action="store_true", help="treat the real parameters as complex (plain D-K)")
+    p.add_argument("--max-iter", type=int, default=20, help="D-K iterations")
+    p.add_argument("--reduce", action="store_true", help="reduce the full-order controller (balanced truncation)")
+    p.add_argument("--reduce-max-order", type=int, default=20)
+    p.add_argument("--pldi", default=None, help="a PLDI file from `polyrob bounds -o` (instead of bounding again)")
+    p.add_argument("--merge-symmetric", action="store_true", help="one repeated parameter for b_ij = b_ji")
+    p.add_argument("--quiet", action="store_true")
+    p.add_argument("-o", "--output", default=None, help="write the controller and its certificate (JSON)")
+
+
+def _register_synth(sub) -> None:
+    p = sub.add_parser("synth", help="mu-synthesis: full order (D-K, D-G-K) or fixed structure")
+    _add_synthesis_arguments(p)
+    p.add_argument("--max-bandwidth", action="store_true",
+                   help="find the largest scaling of the weights' bandwidths with certified mu < 1")
+    p.set_defaults(func=cmd_synth)
+    p = sub.add_parser("run", help="bounds -> synthesis -> analysis in one go")
+    _add_synthesis_arguments(p)
+    p.add_argument("--mc", type=int, default=200, help="Monte Carlo parameter sets in the analysis")
+    p.set_defaults(func=cmd_run)
+
+
 # --------------------------------------------------------------------------- entry point
 
 
@@ -374,7 +520,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Later stages register their sub-commands here (bounds, analyze, synth, run).
-_EXTRA_COMMANDS: list = [_register_bounds, _register_analyze]
+_EXTRA_COMMANDS: list = [_register_bounds, _register_analyze, _register_synth]
 
 
 def main(argv=None) -> int:

@@ -1,0 +1,228 @@
+"""Benchmark of polyrob's μ-synthesis, side by side with dkpy and the paper's K*.
+
+Run ``PYTHONPATH=src python benchmarks/synthesis.py`` (about 10-15 min on two
+cores); prints one JSON document.
+
+Problems
+--------
+* ``distillation``: Skogestad & Postlethwaite's distillation column (Table
+  8.1, p. 325; dkpy's ``example_skogestad2006_p325``): diagonal complex input
+  uncertainty and a full 2x2 performance block.  polyrob's full-order D-K
+  (:func:`polyrob.synthesis.musyn`, automatic D orders) against dkpy's
+  ``DkIterAutoOrder`` (HinfSynSlicot, SsvLmiBisection, DScaleFitSlicot,
+  3 iterations, orders up to 4: dkpy's documented example).  Both
+  controllers are also certified with the same :func:`polyrob.mu.mu_bounds`
+  sweep (peak-refined), since each tool reports μ on its own grid.
+* ``paper_2r``: the paper's 2R robot (ten independent real parameters,
+  paper weights): the paper's K* analysed, full-order D-K (reals treated as
+  complex), D-G-K (reals kept real, warm-started from the D-K controller),
+  the reduced controller, the fixed-structure third-order controller
+  (``structure="tf3"``, if :mod:`polyrob.synthesis.fixed` is available, run
+  in a parallel process under a time limit) and the largest bandwidth
+  factor α of the weights with a certified μ < 1 (searched upwards: on this
+  plant μ decreases when both bandwidths grow).
+
+Every μ reported for polyrob is the certified upper bound of ``lft(P, K)``
+from :func:`polyrob.mu.mu_bounds` against the true structure.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+import warnings
+
+import control
+import numpy as np
+
+warnings.simplefilter("ignore")
+
+import polyrob  # noqa: E402
+import polyrob.weights  # noqa: E402
+from polyrob.mu import mu_bounds  # noqa: E402
+from polyrob.synthesis import certify, max_bandwidth_scaling, musyn, reduce_controller  # noqa: E402
+
+DIST_BLK = [[1, 1], [1, 1], [2, 2]]
+
+
+def log(msg: str) -> None:
+    print(f"[synthesis benchmark] {msg}", file=sys.stderr, flush=True)
+DIST_OMEGA = np.logspace(-3, 3, 61)
+CERT_OMEGA = np.logspace(-4, 4, 97)
+
+
+def distillation_plant() -> control.StateSpace:
+    """The SP06 generalized plant, built by hand (same data as dkpy's example)."""
+    G0 = np.array([[87.8, -86.4], [108.2, -109.6]])
+    A, B, C, D = (np.zeros((6, 6)) for _ in range(4))
+    for i in range(2):
+        A[i, i] = -1 / 75
+        B[i, 0:2] = G0[i]
+        B[i, 4:6] = G0[i]
+        j, k = 2 + i, 4 + i
+        A[j, j], A[j, i], B[j, 2 + i] = -1e-6, 1 / 75, 1.0  # W_P = 0.5 + (0.05 - 5e-7)/(s + 1e-6)
+        A[k, k], B[k, 4 + i] = -2.0, 1.0  # W_I = 2 - 3.6/(s + 2)
+        C[i, k], D[i, 4 + i] = -3.6, 2.0
+        C[2 + i, j], C[2 + i, i], D[2 + i, 2 + i] = 0.05 - 5e-7, 0.5 / 75, 0.5
+        C[4 + i, i], D[4 + i, 2 + i] = -1 / 75, -1.0
+    return control.ss(A, B, C, D)
+
+
+def bench_distillation() -> dict:
+    P = distillation_plant()
+    out = {}
+    log("distillation: polyrob")
+    t0 = time.perf_counter()
+    res = musyn(P, DIST_BLK, n_u=2, n_y=2, omega=DIST_OMEGA, progress=False)
+    out["polyrob"] = {
+        "peak_mu_certified": res.peak_mu, "peak_mu_lower": res.peak_mu_lower,
+        "peak_mu_grid": res.info["grid_peak_mu"], "order": res.order, "iterations": res.iterations,
+        "mu_history": [round(float(x), 4) for x in res.mu_history], "seconds": round(time.perf_counter() - t0, 2),
+    }
+    mu_same = certify(P, res.controller, DIST_BLK, CERT_OMEGA, n_u=2, n_y=2)[0]
+    out["polyrob"]["peak_mu_certified_common_grid"] = mu_same
+    try:
+        import dkpy
+    except ImportError:
+        out["dkpy"] = "not installed"
+        return out
+    log("distillation: dkpy")
+    eg = dkpy.example_skogestad2006_p325()
+    it = dkpy.DkIterAutoOrder(
+        controller_synthesis=dkpy.HinfSynSlicot(), structured_singular_value=dkpy.SsvLmiBisection(),
+        d_scale_fit=dkpy.DScaleFitSlicot(), max_mu=1, max_mu_fit_error=1e-2, max_iterations=3, max_fit_order=4,
+    )
+    t0 = time.perf_counter()
+    K, N, mu, _, _ = it.synthesize(eg["P"], eg["n_y"], eg["n_u"], DIST_OMEGA, np.array(DIST_BLK))
+    secs = time.perf_counter() - t0
+    Kss = control.ss(K)
+    out["dkpy"] = {
+        "version": getattr(dkpy, "__version__", "?"), "peak_mu_grid": float(mu), "order": int(Kss.nstates),
+        "seconds": round(secs, 2),
+        "peak_mu_certified_common_grid": certify(P, Kss, DIST_BLK, CERT_OMEGA, n_u=2, n_y=2)[0],
+    }
+    return out
+
+
+FIXED_SNIPPET = r"""
+import json, time, warnings, sys
+warnings.simplefilter("ignore")
+import polyrob, polyrob.weights
+from polyrob.synthesis import musyn
+pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), progress=False)
+P = polyrob.generalized_plant(polyrob.uncertain_plant(pldi), *polyrob.weights.paper_weights())
+t0 = time.perf_counter()
+r = musyn(P, structure="tf3", progress=False)
+print(json.dumps({"peak_mu_certified": r.peak_mu, "peak_mu_lower": r.peak_mu_lower, "order": r.order,
+                  "iterations": r.iterations, "seconds": round(time.perf_counter() - t0, 2)}))
+"""
+
+
+def start_fixed():
+    try:
+        import polyrob.synthesis.fixed  # noqa: F401 - only checks availability
+    except ImportError as exc:
+        return None, f"polyrob.synthesis.fixed not available ({exc})"
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    proc = subprocess.Popen([sys.executable, "-c", FIXED_SNIPPET], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            env=env, text=True)
+    return proc, None
+
+
+def finish_fixed(proc, note, timeout):
+    if proc is None:
+        return note
+    try:
+        out, err = proc.communicate(timeout=max(timeout, 1.0))
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        return f"not finished within the benchmark's time limit ({timeout:.0f} s left)"
+    if proc.returncode != 0:
+        return "failed: " + (err.strip().splitlines() or ["?"])[-1]
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def summary(res, seconds=None) -> dict:
+    return {
+        "peak_mu_certified": res.peak_mu, "peak_mu_lower": res.peak_mu_lower,
+        "peak_frequency": res.peak_frequency, "order": res.order, "iterations": res.iterations,
+        "method": res.info.get("method"), "seconds": round(seconds if seconds is not None else res.seconds, 2),
+    }
+
+
+def bench_paper(t_start: float, budget: float) -> dict:
+    out = {}
+    proc, note = start_fixed()  # runs on the other core meanwhile
+    t0 = time.perf_counter()
+    pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), progress=False)
+    unc = polyrob.uncertain_plant(pldi)
+    P = polyrob.generalized_plant(unc, *polyrob.weights.paper_weights())
+    out["plant_seconds"] = round(time.perf_counter() - t0, 2)
+    # the paper's K*
+    log("2R: K* analysis")
+    t0 = time.perf_counter()
+    r = mu_bounds(polyrob.lft(P, polyrob.paper_controller()), P.block_structure_rp, progress=False)
+    out["paper_K_star"] = {"peak_mu_upper": r.peak_upper, "peak_mu_lower": r.peak_lower,
+                           "peak_frequency": r.peak_upper_frequency, "order": 12,
+                           "seconds": round(time.perf_counter() - t0, 2)}
+    # full-order D-K, real parameters treated as complex
+    log("2R: full-order D-K")
+    t0 = time.perf_counter()
+    dk = musyn(P, mixed=False, progress=False)
+    t_dk = time.perf_counter() - t0
+    out["full_order_dk_complex"] = summary(dk, t_dk)
+    out["full_order_dk_complex"]["mu_history_complex"] = [round(float(x), 4) for x in dk.mu_history]
+    # D-G-K, warm-started from the D-K controller
+    log("2R: full-order D-G-K")
+    t0 = time.perf_counter()
+    dgk = musyn(P, mixed=True, initial_controller=dk.controller, progress=False, max_iter=12)
+    t_dgk = time.perf_counter() - t0
+    out["full_order_dgk_mixed"] = summary(dgk, t_dgk)
+    out["full_order_dgk_mixed"]["warm_start"] = "from full_order_dk_complex"
+    out["full_order_dgk_mixed"]["seconds_including_dk"] = round(t_dk + t_dgk, 2)
+    out["full_order_dgk_mixed"]["mu_history_mixed"] = [round(float(x), 4) for x in dgk.mu_history]
+    best = dgk if dgk.peak_mu <= dk.peak_mu else dk
+    # reduced controller
+    log("2R: reduction")
+    t0 = time.perf_counter()
+    red = reduce_controller(P, best, tol=0.05)
+    out["reduced"] = dict(red.summary(), seconds=round(time.perf_counter() - t0, 2),
+                          reduced_from=best.info.get("method"))
+    # bandwidth factor with certified mu < 1 (complex D-K, warm starts).  On
+    # this plant mu *decreases* as both bandwidths grow (W_T's bandwidth must
+    # stay above the unstable pole of the robot, up to sqrt(28) rad/s), so the
+    # search runs upwards from the paper's weights (increasing=False).
+    log("bandwidth scaling")
+    t0 = time.perf_counter()
+    try:
+        bw = max_bandwidth_scaling(unc, alpha_range=(1.0, 4.0), increasing=False, rtol=0.25, mixed=False,
+                                   max_iter=15, initial_controller=best.controller, progress=False)
+        out["bandwidth_scaling"] = {
+            "alpha": bw.alpha, "peak_mu_certified": bw.peak_mu, "order": bw.result.order,
+            "omega_b": bw.hyperparameters["omega_b"], "omega_bt": bw.hyperparameters["omega_bt"],
+            "history": bw.history, "seconds": round(time.perf_counter() - t0, 2),
+        }
+    except Exception as exc:  # noqa: BLE001 - report, do not abort the benchmark
+        out["bandwidth_scaling"] = {"result": f"no alpha found: {exc}",
+                                    "seconds": round(time.perf_counter() - t0, 2)}
+    left = budget - (time.perf_counter() - t_start)
+    log(f"2R: waiting for tf3 (at most {left:.0f} s)")
+    out["fixed_tf3"] = finish_fixed(proc, note, left)
+    return out
+
+
+def main():
+    t_start = time.perf_counter()
+    doc = {"machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]}}
+    doc["distillation"] = bench_distillation()
+    doc["paper_2r"] = bench_paper(t_start, budget=14 * 60)
+    doc["total_seconds"] = round(time.perf_counter() - t_start, 1)
+    print(json.dumps(doc, indent=2, default=float))
+
+
+if __name__ == "__main__":
+    main()

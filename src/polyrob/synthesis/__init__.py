@@ -1,0 +1,46 @@
+"""Controller synthesis: H∞, full-order D-K / D-G-K μ-synthesis, order reduction.
+
+* :func:`hinfsyn` - H∞ synthesis with scaling, documented regularisation,
+  own γ bisection around SLICOT SB10FD and an LMI fallback.
+* :func:`musyn` - μ-synthesis (D-K for complex, D-G-K for mixed real/complex
+  uncertainty) returning a :class:`MusynResult` with a certified μ; other
+  controller structures are delegated to :mod:`polyrob.synthesis.fixed`.
+* :func:`reduce_controller` - smallest balanced-truncation order whose
+  certified μ stays within a tolerance of the full-order one.
+"""
+
+from .result import MusynResult
+from .hinf import HinfResult, hinfsyn, hinf_norm
+from .dscale import LogMagnitudeFit, SlicotMagnitudeFit
+from .dk import (
+    BandwidthScalingResult,
+    DKIteration,
+    HinfStep,
+    MuUpperBound,
+    certify,
+    frequency_grid,
+    max_bandwidth_scaling,
+    musyn,
+    performance_lower_bound,
+)
+from .reduce import ReductionResult, reduce_controller
+
+__all__ = [
+    "MusynResult",
+    "HinfResult",
+    "hinfsyn",
+    "hinf_norm",
+    "musyn",
+    "DKIteration",
+    "MuUpperBound",
+    "HinfStep",
+    "LogMagnitudeFit",
+    "SlicotMagnitudeFit",
+    "certify",
+    "frequency_grid",
+    "performance_lower_bound",
+    "BandwidthScalingResult",
+    "max_bandwidth_scaling",
+    "ReductionResult",
+    "reduce_controller",
+]
