@@ -382,6 +382,10 @@ def synthesize(robot, args):
     options = {"progress": None if not args.quiet else False, "max_iter": args.max_iter}
     if args.structure == "full":
         options["mixed"] = not args.complex
+    else:
+        options["starts"] = args.starts
+        if args.init:
+            options["init"] = args.init
     result = musyn(P, structure=args.structure, **options)
     reduced = None
     if args.structure == "full" and args.reduce:
@@ -472,7 +476,9 @@ def _add_synthesis_arguments(p) -> None:
     add_weight_arguments(p)
     p.add_argument("--structure", default="full", help="full (D-K / D-G-K), tfN (e.g. tf3: each K_ij of order N), pid, ss:N")
     p.add_argument("--complex", action="store_true", help="treat the real parameters as complex (plain D-K)")
-    p.add_argument("--max-iter", type=int, default=20, help="D-K iterations")
+    p.add_argument("--max-iter", type=int, default=20, help="D-K iterations (fixed structure: outer iterations)")
+    p.add_argument("--starts", type=int, default=5, help="fixed structure: optimisation starts")
+    p.add_argument("--init", default=None, help="fixed structure: 'paper' starts from the paper's K*")
     p.add_argument("--reduce", action="store_true", help="reduce the full-order controller (balanced truncation)")
     p.add_argument("--reduce-max-order", type=int, default=20)
     p.add_argument("--pldi", default=None, help="a PLDI file from `polyrob bounds -o` (instead of bounding again)")
