@@ -18,6 +18,7 @@ from .errors import (
 from .robots import Manipulator, Robot, available_robots, load_robot
 from .analytic import AnalyticRobot
 from .domain import Domain
+from . import weights
 from .pldi import PLDI, bound_pldi
 from .uncertainty import UncertainPlant, uncertain_plant
 from .plant import GeneralizedPlant, closed_loop, generalized_plant, lft, nominal_closed_loop, paper_controller
@@ -45,6 +46,7 @@ __all__ = [
     "nominal_closed_loop",
     "paper_controller",
     "uncertain_plant",
+    "weights",
     "available_robots",
     "bound_pldi",
     "load_robot",

@@ -24,6 +24,8 @@ from .dk import (
     performance_lower_bound,
 )
 from .reduce import ReductionResult, reduce_controller
+from .fixed import FixedStructureOptions, fixed_structure_musyn
+from .structures import controller_structure
 
 __all__ = [
     "MusynResult",
@@ -43,4 +45,7 @@ __all__ = [
     "max_bandwidth_scaling",
     "ReductionResult",
     "reduce_controller",
+    "FixedStructureOptions",
+    "fixed_structure_musyn",
+    "controller_structure",
 ]
