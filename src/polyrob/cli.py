@@ -379,7 +379,9 @@ def synthesize(robot, args):
     pldi = pldi_from_args(robot, args)
     unc = uncertain_plant(pldi, merge_symmetric=args.merge_symmetric)
     P = generalized_plant(unc, *weights_from_args(robot.m, args))
-    options = {"progress": None if not args.quiet else False, "max_iter": args.max_iter}
+    options = {"progress": None if not args.quiet else False}
+    if args.max_iter is not None:
+        options["max_iter"] = args.max_iter
     if args.structure == "full":
         options["mixed"] = not args.complex
     else:
@@ -433,7 +435,7 @@ def _max_bandwidth(robot, args) -> int:
     unc = uncertain_plant(pldi, merge_symmetric=args.merge_symmetric)
     res = max_bandwidth_scaling(
         unc, hyperparameters_from_args(robot.m, args), progress=None if not args.quiet else False,
-        max_iter=args.max_iter,
+        **({} if args.max_iter is None else {"max_iter": args.max_iter}),
     )
     print(json.dumps({k: v for k, v in vars(res).items() if isinstance(v, (int, float, str, list, dict))},
                      indent=2, default=str))
@@ -476,7 +478,8 @@ def _add_synthesis_arguments(p) -> None:
     add_weight_arguments(p)
     p.add_argument("--structure", default="full", help="full (D-K / D-G-K), tfN (e.g. tf3: each K_ij of order N), pid, ss:N")
     p.add_argument("--complex", action="store_true", help="treat the real parameters as complex (plain D-K)")
-    p.add_argument("--max-iter", type=int, default=20, help="D-K iterations (fixed structure: outer iterations)")
+    p.add_argument("--max-iter", type=int, default=None,
+                   help="D-K iterations (default 20; fixed structure: outer iterations, default 40)")
     p.add_argument("--starts", type=int, default=5, help="fixed structure: optimisation starts")
     p.add_argument("--init", default=None, help="fixed structure: 'paper' starts from the paper's K*")
     p.add_argument("--reduce", action="store_true", help="reduce the full-order controller (balanced truncation)")
