@@ -22,7 +22,6 @@ iteration + a local search) exists in no library at all.
 
 from __future__ import annotations
 
-import contextlib
 import sys as _sys
 import warnings
 from dataclasses import dataclass
@@ -32,6 +31,7 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.optimize import minimize
 
+from ._threads import single_blas_thread
 from .blocks import BlkLike, BlockStructure, as_block_structure
 from .errors import PolyrobError, SolverError
 
@@ -44,20 +44,6 @@ __all__ = [
 ]
 
 Method = Literal["auto", "ab13md", "lmi"]
-
-
-def _blas_single_thread():
-    """Limit BLAS to one thread while bounding mu.
-
-    Every matrix here is tiny; multi-threaded OpenBLAS only adds spin-waiting,
-    which on a loaded 2-core machine made SLSQP/eig calls 5-30x slower.
-    threadpoolctl is optional: without it this is a no-op.
-    """
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
 
 
 # =============================================================== results
@@ -680,7 +666,7 @@ def mussv(
     st = as_block_structure(blk)
     M = st.check_m(M)
     meth = _choose_method(st, method)
-    with _blas_single_thread():
+    with single_blas_thread():
         return _mussv(M, st, meth, lower, refine, starts, seed, rtol, solver)
 
 
@@ -964,7 +950,7 @@ def mu_bounds(
     if omega.size == 0 or np.any(omega < 0) or not np.all(np.isfinite(omega)):
         raise PolyrobError("omega must be a non-empty array of finite non-negative frequencies")
     meth = _choose_method(st, method)
-    with _blas_single_thread():
+    with single_blas_thread():
         return _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, progress, rtol, solver)
 
 

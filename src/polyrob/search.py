@@ -210,9 +210,9 @@ def parallel_map(fn, items, workers, progress, label):
     BLAS runs single-threaded inside: the work is many small problems, and a
     multi-threaded OpenBLAS makes each L-BFGS-B step about 10x slower here.
     """
-    from threadpoolctl import threadpool_limits
+    from ._threads import single_blas_thread
 
-    with threadpool_limits(limits=1, user_api="blas"):
+    with single_blas_thread():
         return _parallel_map_inner(fn, items, workers, progress, label)
 
 

@@ -52,7 +52,8 @@ import numpy as np
 from ..blocks import BlockStructure, as_block_structure
 from ..errors import PolyrobError, SynthesisError
 from .dscale import LogMagnitudeFit, ScalingData, Scalings, scaled_plant, scaling_data
-from .hinf import HinfResult, _blas_single_thread, _lft_mats, _is_stable, hinfsyn
+from .._threads import single_blas_thread
+from .hinf import HinfResult, _lft_mats, _is_stable, hinfsyn
 from .result import MusynResult
 
 __all__ = [
@@ -759,7 +760,7 @@ def musyn(
         from ..plant import _controller
 
         K0 = _controller(initial_controller, n_u, n_y)
-    with _blas_single_thread():
+    with single_blas_thread():
         # a warm start of a mixed problem goes straight to D-G-K steps: the
         # controller is presumably already the outcome of D-K steps
         phase0 = "DG" if (mixed and K0 is not None) else "D"

@@ -69,7 +69,6 @@ Examples
 
 from __future__ import annotations
 
-import contextlib
 import math
 import sys
 import time
@@ -81,6 +80,7 @@ import control
 import numpy as np
 from scipy.optimize import minimize
 
+from .._threads import single_blas_thread
 from ..blocks import as_block_structure
 from ..errors import PolyrobError, SynthesisError
 from ..mu import mu_bounds, mussv
@@ -88,15 +88,6 @@ from .result import MusynResult
 from .structures import ControllerStructure, controller_structure
 
 __all__ = ["fixed_structure_musyn", "FixedStructureOptions", "closed_loop_response"]
-
-
-def _blas_single_thread():
-    """Limit BLAS to one thread (tiny matrices: threads only spin-wait, ~10x slower)."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
 
 
 @dataclass(frozen=True)
@@ -1026,7 +1017,7 @@ def fixed_structure_musyn(
     report = _reporter(progress)
     loop = _Loop(sysP, n_u, n_y, strc, st)
 
-    with _blas_single_thread():
+    with single_blas_thread():
         # ---------------------------------------------------------- starts
         if isinstance(init, str):
             if init != "paper":

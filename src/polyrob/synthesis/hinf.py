@@ -52,7 +52,6 @@ References
 
 from __future__ import annotations
 
-import contextlib
 import warnings
 from dataclasses import dataclass, field
 from typing import Literal, Optional
@@ -61,20 +60,12 @@ import control
 import numpy as np
 import scipy.linalg as sla
 
+from .._threads import single_blas_thread
 from ..errors import PolyrobError, SynthesisError
 
 __all__ = ["HinfResult", "hinfsyn", "hinf_norm", "hinf_norm_estimate", "check_stabilizable"]
 
 Method = Literal["auto", "riccati", "lmi"]
-
-
-def _blas_single_thread():
-    """One BLAS thread: every matrix here is small, threads only spin-wait."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
 
 
 # ===================================================================== result
@@ -753,7 +744,7 @@ def hinfsyn(
         raise PolyrobError(f"tol must be in (0, 1), got {tol!r}")
     nw, nz = B.shape[1] - n_u, C.shape[0] - n_y
     check_stabilizable(A, B[:, nw:], C[nz:], labels)
-    with _blas_single_thread():
+    with single_blas_thread():
         return _hinfsyn(A, B, C, D, n_y, n_u, gamma_range, tol, method, epsilon, rank_tol, shifts, solver,
                         lmi_max_states)
 

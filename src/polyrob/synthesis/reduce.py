@@ -33,7 +33,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from ..errors import PolyrobError, SynthesisError
-from .hinf import _blas_single_thread
+from .._threads import single_blas_thread
 from .result import MusynResult
 
 __all__ = ["ReductionResult", "reduce_controller", "stable_unstable_split", "balanced_reduction"]
@@ -305,7 +305,7 @@ def reduce_controller(
         cache[order] = (mu, lo, wpk, N, cert, Kr)
         return cache[order]
 
-    with _blas_single_thread():
+    with single_blas_thread():
         n = K.nstates
         if full_mu is None:
             full_mu = evaluate(n, K)[0]
