@@ -23,6 +23,19 @@ def paper_pldi():
     return bound_pldi(cached_robot("paper_2r"), samples=256, coverage=0, progress=False)
 
 
+@pytest.fixture(scope="session")
+def pldi():
+    """The paper's problem as a PLDI (shared by the plant and uncertainty tests)."""
+    return paper_pldi()
+
+
+@pytest.fixture(scope="session")
+def unc(pldi):
+    from polyrob.uncertainty import uncertain_plant
+
+    return uncertain_plant(pldi)
+
+
 LINK = '<link name="{n}"><inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>'
 JOINT = (
     '<joint name="{n}" type="{t}"><parent link="{p}"/><child link="{c}"/><axis xyz="0 0 1"/>'

@@ -4,9 +4,7 @@ import control
 import numpy as np
 import pytest
 
-import polyrob
 
-from conftest import paper_pldi
 from polyrob.errors import PolyrobError
 from polyrob.plant import (
     ClosedLoop,
@@ -33,16 +31,6 @@ def _diag(*tfs):
 # the paper's weights, transcribed from section 3 (independent of polyrob.weights)
 W_S = _diag(control.tf([0.5, 0.5], [1, 0.005]), control.tf([0.3333, 0.1], [1, 0.002]))
 W_T = _diag(control.tf([1, 10], [0.01, 21]), control.tf([1, 12], [0.01, 36]))
-
-
-@pytest.fixture(scope="module")
-def pldi():
-    return paper_pldi()
-
-
-@pytest.fixture(scope="module")
-def unc(pldi):
-    return uncertain_plant(pldi)
 
 
 @pytest.fixture(scope="module")

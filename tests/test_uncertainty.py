@@ -6,23 +6,11 @@ import control
 import numpy as np
 import pytest
 
-import polyrob
 
-from conftest import paper_pldi
 from polyrob.errors import BoundsError, PolyrobError
 from polyrob.uncertainty import UncertainPlant, uncertain_plant, upper_lft
 
 PAPER_ENTRIES = ("a32", "a33", "a34", "a42", "a43", "a44", "b31", "b32", "b41", "b42")
-
-
-@pytest.fixture(scope="module")
-def pldi():
-    return paper_pldi()
-
-
-@pytest.fixture(scope="module")
-def unc(pldi):
-    return uncertain_plant(pldi)
 
 
 @pytest.fixture(scope="module")
