@@ -179,28 +179,22 @@ def sample_stability(unc, K, *, n: int = 1000, max_corners: int = 1024, seed: in
         corners = unc.delta_samples(kind="corners", max_corners=max_corners)
     worst, worst_abs = None, -np.inf
 
-    def abscissa(delta):
-        cl = closed_loop(unc, K, delta)
-        return float(cl.poles.real.max()) if cl.poles.size else -np.inf
-
-    rand_ok = 0
-    for d in deltas:
-        a = abscissa(d)
-        rand_ok += a < 0
-        if a > worst_abs:
-            worst, worst_abs = d, a
-    corner_ok = None
-    if corners is not None:
-        corner_ok = 0
-        for d in corners:
-            a = abscissa(d)
-            corner_ok += a < 0
+    def stable_fraction(samples):
+        nonlocal worst, worst_abs
+        ok = 0
+        for d in samples:
+            cl = closed_loop(unc, K, d)
+            a = float(cl.poles.real.max()) if cl.poles.size else -np.inf
+            ok += a < 0
             if a > worst_abs:
                 worst, worst_abs = d, a
-        corner_ok = corner_ok / len(corners)
+        return ok / len(samples)
+
+    rand_ok = stable_fraction(deltas)
+    corner_ok = None if corners is None else stable_fraction(corners)
     return StabilitySampling(
         random=len(deltas),
-        random_stable=rand_ok / len(deltas),
+        random_stable=rand_ok,
         corners=0 if corners is None else len(corners),
         corners_stable=corner_ok,
         worst_delta=np.asarray(worst),
