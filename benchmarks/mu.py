@@ -34,28 +34,8 @@ import cvxpy as cp
 import numpy as np
 
 from polyrob.blocks import as_block_structure
+from polyrob.examples import DISTILLATION_BLK, distillation_rp_response
 from polyrob.mu import mu_bounds, mussv
-
-
-def distillation_rp(omega: np.ndarray) -> np.ndarray:
-    """N(jw) of the SP06 distillation robust-performance problem, (F, 4, 4).
-
-    N = [[-Wi T_I, -Wi K S], [Wp S G, Wp S]] with G = G0/(75s+1),
-    K = 0.7 (75s+1)/s G0^-1 (inverse-based), Wi = (s+0.2)/(0.5s+1),
-    Wp = 0.5 (10s+1)/(10s) (as dkpy's ``example_skogestad2006_p325``).
-    """
-    G0 = np.array([[87.8, -86.4], [108.2, -109.6]])
-    I2 = np.eye(2)
-    out = []
-    for s in 1j * omega:
-        G = G0 / (75 * s + 1)
-        K = 0.7 * (75 * s + 1) / (s + 1e-5) * np.linalg.inv(G0)
-        wi = (s + 0.2) / (0.5 * s + 1)
-        wp = 0.5 * (10 * s + 1) / (10 * s + 1e-5)
-        S = np.linalg.inv(I2 + G @ K)
-        TI = np.linalg.inv(I2 + K @ G) @ K @ G
-        out.append(np.block([[-wi * TI, -wi * K @ S], [wp * S @ G, wp * S]]))
-    return np.array(out)
 
 
 def plain_lmi_bisection(M: np.ndarray, blk, rtol: float = 1e-3) -> float:
@@ -155,10 +135,10 @@ def main() -> dict:
     Ha = np.moveaxis(sysa(1j * wa, squeeze=False), -1, 0)
     report["problems"].append(run_problem("mixed_random", Ha, wa, blka, sys=sysa))
     # (b) complex-only: distillation column robust performance
-    blkb = [[1, 1], [1, 1], [2, 2]]
+    blkb = DISTILLATION_BLK
     wb = np.logspace(-3, 3, 61)
-    Hb = distillation_rp(wb)
-    frd = control.frd(np.moveaxis(Hb, 0, -1), wb)
+    frd = distillation_rp_response(wb)
+    Hb = np.moveaxis(np.asarray(frd.fresp), -1, 0)
     res = run_problem("distillation_rp", Hb, wb, blkb, sys=frd)
     res["published_peak"] = 5.77
     res["methods"]["dkpy"] = run_dkpy(Hb, blkb)

@@ -26,47 +26,7 @@ from polyrob.synthesis.dscale import (
     scaling_data,
 )
 from polyrob.blocks import as_block_structure
-
-DISTILLATION_BLK = [[1, 1], [1, 1], [2, 2]]
-
-
-def distillation_plant() -> control.StateSpace:
-    """Skogestad & Postlethwaite (2005), Table 8.1, p. 325 (dkpy's ``example_skogestad2006_p325``).
-
-    ``G = diag(1/(75 s + 1)) [[87.8, -86.4], [108.2, -109.6]]``, input
-    uncertainty ``W_I = (s + 0.2)/(0.5 s + 1)``, performance
-    ``W_P = 0.5 (10 s + 1)/(10 s + 1e-5)``.  Inputs ``[d (2), w (2), u (2)]``,
-    outputs ``[v = W_I u, z = W_P e, y = -e]`` with ``e = w + G (u + d)``.
-    """
-    G0 = np.array([[87.8, -86.4], [108.2, -109.6]])
-    a, b, c = -1 / 75, 1.0, 1 / 75  # 1/(75 s + 1)
-    # W_P = 0.5 (10 s + 1)/(10 s + 1e-5) = 0.5 + (0.05 - 0.5e-6)/(s + 1e-6)
-    ap, bp, cp, dp = -1e-6, 1.0, 0.05 - 0.5e-6, 0.5
-    # W_I = (s + 0.2)/(0.5 s + 1) = 2 + (0.4 - 4)/(s + 2)
-    ai, bi, ci, di = -2.0, 1.0, -3.6, 2.0
-    A = np.zeros((6, 6))
-    B = np.zeros((6, 6))
-    C = np.zeros((6, 6))
-    D = np.zeros((6, 6))
-    for i in range(2):
-        A[i, i] = a
-        B[i, 0:2] = b * G0[i]
-        B[i, 4:6] = b * G0[i]
-        j, k = 2 + i, 4 + i
-        A[j, j] = ap
-        A[j, i] = bp * c
-        B[j, 2 + i] = bp
-        A[k, k] = ai
-        B[k, 4 + i] = bi
-        C[i, k] = ci
-        D[i, 4 + i] = di
-        C[2 + i, j] = cp
-        C[2 + i, i] = dp * c
-        D[2 + i, 2 + i] = dp
-        C[4 + i, i] = -c
-        D[4 + i, 2 + i] = -1.0
-    return control.ss(A, B, C, D)
-
+from polyrob.examples import DISTILLATION_BLK, distillation_plant
 
 @pytest.fixture(scope="module")
 def distillation_result():

@@ -348,16 +348,9 @@ def test_warm_start_guard_falls_back_to_cold_calls(monkeypatch):
 def test_skogestad_distillation_column_robust_performance():
     """SP06 section 8.12: mu_RP of the inverse-based controller is about 5.77
     (the problem dkpy ships as example_skogestad2006_p325)."""
-    import importlib.util
-    import pathlib
+    from polyrob.examples import distillation_rp_response
 
-    spec = importlib.util.spec_from_file_location(
-        "bench_mu", pathlib.Path(__file__).parents[1] / "benchmarks" / "mu.py"
-    )
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    omega = np.logspace(-3, 3, 61)
-    N = control.frd(np.moveaxis(bench.distillation_rp(omega), 0, -1), omega)
+    N = distillation_rp_response(np.logspace(-3, 3, 61))
     res = mu_bounds(N, [[1, 1], [1, 1], [2, 2]], progress=False)
     assert res.peak_upper == pytest.approx(5.77, abs=0.01)
     assert res.peak_lower == pytest.approx(res.peak_upper, rel=1e-3)

@@ -10,7 +10,7 @@ from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.synthesis import musyn, reduce_controller
 from polyrob.synthesis.reduce import balanced_reduction, stable_unstable_split
 
-from test_dk import DISTILLATION_BLK, distillation_plant
+from polyrob.examples import DISTILLATION_BLK, distillation_plant
 
 
 @pytest.fixture(scope="module")
