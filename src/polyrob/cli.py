@@ -428,17 +428,35 @@ def cmd_synth(args) -> int:
 
 
 def _max_bandwidth(robot, args) -> int:
+    """``synth --max-bandwidth``: the largest factor on the weights' bandwidths with certified mu < 1."""
+    from .controller import save_controller
     from .synthesis import max_bandwidth_scaling
     from .uncertainty import uncertain_plant
 
     pldi = pldi_from_args(robot, args)
     unc = uncertain_plant(pldi, merge_symmetric=args.merge_symmetric)
+    options = {"mixed": not args.complex}
+    if args.max_iter is not None:
+        options["max_iter"] = args.max_iter
+    scale = tuple(x.strip() for x in args.bandwidth_scale.split(",") if x.strip())
+    alphas = [_number(a, "--alphas") for a in args.alphas.split(",")] if args.alphas else None
     res = max_bandwidth_scaling(
-        unc, hyperparameters_from_args(robot.m, args), progress=None if not args.quiet else False,
-        **({} if args.max_iter is None else {"max_iter": args.max_iter}),
+        unc, hyperparameters_from_args(robot.m, args), scale=scale,
+        progress=None if not args.quiet else False, **({"alphas": alphas} if alphas else {}), **options,
     )
-    print(json.dumps({k: v for k, v in vars(res).items() if isinstance(v, (int, float, str, list, dict))},
-                     indent=2, default=str))
+    print(f"robot {robot.name}: {unc.n_params} real parameters ({pldi.enclosure} PLDI), scaling {', '.join(scale)}")
+    print(f"{'alpha':>10}  {'certified peak mu':>18}")
+    for alpha, mu in res.history:
+        print(f"{alpha:>10.4g}  {mu:>18.5g}")
+    print(f"largest alpha with certified mu < 1: {res.alpha:.4g} (mu {res.peak_mu:.4g}; "
+          f"alpha {res.bracket[1]:.4g} does not reach it), controller order {res.result.order}")
+    print("weights: " + ", ".join(f"{k} = {list(v)}" for k, v in res.hyperparameters.items()))
+    if args.output:
+        cert = res.result.summary()
+        cert.update(bandwidth_scaling=res.summary())
+        info = {"robot": robot.name, "domain": pldi.domain.to_dict(),
+                "weights": {k: list(v) for k, v in res.hyperparameters.items()}}
+        print(f"wrote {save_controller(res.result.controller, args.output, certificate=cert, info=info)}")
     return 0
 
 
@@ -495,6 +513,10 @@ def _register_synth(sub) -> None:
     _add_synthesis_arguments(p)
     p.add_argument("--max-bandwidth", action="store_true",
                    help="find the largest scaling of the weights' bandwidths with certified mu < 1")
+    p.add_argument("--bandwidth-scale", default="omega_b,omega_bt",
+                   help="--max-bandwidth: weight hyperparameters multiplied by the factor (default both bandwidths)")
+    p.add_argument("--alphas", default=None,
+                   help="--max-bandwidth: comma-separated scan of the factor (default 0.125,0.25,...,32)")
     p.set_defaults(func=cmd_synth)
     p = sub.add_parser("run", help="bounds -> synthesis -> analysis in one go")
     _add_synthesis_arguments(p)

@@ -5,6 +5,8 @@
 * :func:`musyn` - μ-synthesis (D-K for complex, D-G-K for mixed real/complex
   uncertainty) returning a :class:`MusynResult` with a certified μ; other
   controller structures are delegated to :mod:`polyrob.synthesis.fixed`.
+* :func:`max_bandwidth_scaling` - the largest scaling of the weights'
+  bandwidths that still certifies μ < 1.
 * :func:`reduce_controller` - smallest balanced-truncation order whose
   certified μ stays within a tolerance of the full-order one.
 """
@@ -13,16 +15,15 @@ from .result import MusynResult
 from .hinf import HinfResult, hinfsyn, hinf_norm
 from .dscale import LogMagnitudeFit, SlicotMagnitudeFit
 from .dk import (
-    BandwidthScalingResult,
     DKIteration,
     HinfStep,
     MuUpperBound,
     certify,
     frequency_grid,
-    max_bandwidth_scaling,
     musyn,
     performance_lower_bound,
 )
+from .bandwidth import BandwidthScalingResult, max_bandwidth_scaling, scaled_hyperparameters
 from .reduce import ReductionResult, reduce_controller
 from .fixed import FixedStructureOptions, fixed_structure_musyn
 from .structures import controller_structure
@@ -43,6 +44,7 @@ __all__ = [
     "performance_lower_bound",
     "BandwidthScalingResult",
     "max_bandwidth_scaling",
+    "scaled_hyperparameters",
     "ReductionResult",
     "reduce_controller",
     "FixedStructureOptions",

@@ -1,0 +1,66 @@
+"""The bandwidth-factor search (polyrob.synthesis.bandwidth) with stand-in syntheses.
+
+The real syntheses take minutes per α on the paper's robot; the search logic
+is tested here against μ(α) curves whose answer is known in closed form.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import pytest
+
+from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.synthesis.bandwidth import max_bandwidth_scaling, scaled_hyperparameters
+
+
+def _search(mu_of_alpha, **options):
+    calls = []
+
+    def synthesize(P, K0):
+        calls.append((P.alpha, K0))
+        return SimpleNamespace(peak_mu=mu_of_alpha(P.alpha), controller=f"K({P.alpha:g})", order=3)
+
+    res = max_bandwidth_scaling(None, synthesize=synthesize, plant=lambda a, h: SimpleNamespace(alpha=a, h=h),
+                                progress=False, **options)
+    return res, calls
+
+
+def test_u_shaped_mu_gives_the_largest_alpha():
+    # mu < 1 exactly for alpha in (0.5, 3): too small a bandwidth fails too
+    mu = lambda a: 1 + (a - 3) * (a - 0.5) / 10  # noqa: E731
+    res, calls = _search(mu, rtol=0.01)
+    assert res.alpha < 3 < res.bracket[1] <= res.alpha * 1.01
+    assert res.peak_mu == pytest.approx(mu(res.alpha)) and res.peak_mu < 1
+    assert res.hyperparameters["omega_b"] == pytest.approx((0.5 * res.alpha, 0.1 * res.alpha))
+    # warm starts: every synthesis after the first starts from the nearest solved alpha
+    assert calls[0][1] is None and all(K0 is not None for _, K0 in calls[1:])
+    assert [a for a, _ in res.history] == [a for a, _ in calls]
+
+
+def test_largest_grid_point_already_certified():
+    res, _ = _search(lambda a: 0.5, alphas=(1, 2, 4))
+    assert res.alpha == 4 and res.bracket == (4.0, math.inf) and len(res.history) == 1
+
+
+def test_no_alpha_reaches_the_target_lists_the_evidence():
+    with pytest.raises(SynthesisError, match=r"no bandwidth factor alpha .* 0.25: 1\.500"):
+        _search(lambda a: 1.5, alphas=(0.25, 1, 4))
+
+
+def test_failed_syntheses_count_as_not_certified():
+    def mu(a):
+        if a > 2:
+            raise SynthesisError("infeasible")
+        return 0.9
+
+    res, _ = _search(mu, alphas=(1, 2, 4), rtol=0.1)
+    assert 2 <= res.alpha < 4 and (4.0, math.inf) in [(a, m) for a, m in res.history]
+
+
+def test_bad_arguments():
+    with pytest.raises(PolyrobError, match="alphas"):
+        _search(lambda a: 0.5, alphas=(0, 1))
+    with pytest.raises(PolyrobError, match="unknown weight hyperparameter"):
+        scaled_hyperparameters(2.0, scale=("omega_x",))
