@@ -438,7 +438,7 @@ def _max_bandwidth(robot, args) -> int:
     options = {"mixed": not args.complex}
     if args.max_iter is not None:
         options["max_iter"] = args.max_iter
-    scale = tuple(x.strip() for x in args.bandwidth_scale.split(",") if x.strip())
+    scale = tuple(x.strip() for x in args.scale_only.split(",") if x.strip())
     alphas = [_number(a, "--alphas") for a in args.alphas.split(",")] if args.alphas else None
     res = max_bandwidth_scaling(
         unc, hyperparameters_from_args(robot.m, args), scale=scale,
@@ -513,7 +513,7 @@ def _register_synth(sub) -> None:
     _add_synthesis_arguments(p)
     p.add_argument("--max-bandwidth", action="store_true",
                    help="find the largest scaling of the weights' bandwidths with certified mu < 1")
-    p.add_argument("--bandwidth-scale", default="omega_b,omega_bt",
+    p.add_argument("--scale-only", default="omega_b,omega_bt",
                    help="--max-bandwidth: weight hyperparameters multiplied by the factor (default both bandwidths)")
     p.add_argument("--alphas", default=None,
                    help="--max-bandwidth: comma-separated scan of the factor (default 0.125,0.25,...,32)")
