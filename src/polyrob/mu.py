@@ -1052,26 +1052,17 @@ def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, 
 
 
 def _refine_peaks(omega, up, f, n_peaks=3, xtol=1e-7):
-    """Golden-section maximisation (in log omega) around the best local maxima."""
+    """Bounded scalar maximisation (in log omega) around the best local maxima."""
+    from scipy.optimize import minimize_scalar
+
     inner = [i for i in range(omega.size) if (i == 0 or up[i] >= up[i - 1]) and (i == omega.size - 1 or up[i] >= up[i + 1])]
     inner = sorted(inner, key=lambda i: -up[i])[:n_peaks]
     out = []
-    g = (np.sqrt(5) - 1) / 2
     for i in inner:
         lo_i, hi_i = max(i - 1, 0), min(i + 1, omega.size - 1)
-        if omega[lo_i] <= 0:
+        if omega[lo_i] <= 0 or hi_i == lo_i:
             continue
-        a, b = np.log(omega[lo_i]), np.log(omega[hi_i])
-        c, d = b - g * (b - a), a + g * (b - a)
-        fc, fd = f(np.exp(c)), f(np.exp(d))
-        while b - a > xtol:
-            if fc >= fd:
-                b, d, fd = d, c, fc
-                c = b - g * (b - a)
-                fc = f(np.exp(c))
-            else:
-                a, c, fc = c, d, fd
-                d = a + g * (b - a)
-                fd = f(np.exp(d))
-        out.append(float(np.exp(c if fc >= fd else d)))
+        r = minimize_scalar(lambda x: -f(np.exp(x)), bounds=(np.log(omega[lo_i]), np.log(omega[hi_i])),
+                            method="bounded", options={"xatol": xtol})
+        out.append(float(np.exp(r.x)))
     return out

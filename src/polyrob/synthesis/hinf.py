@@ -58,6 +58,7 @@ from typing import Literal, Optional
 
 import control
 import numpy as np
+from scipy.optimize import minimize_scalar
 import scipy.linalg as sla
 
 from .._threads import single_blas_thread
@@ -180,21 +181,10 @@ def hinf_norm_estimate(A, B, C, D, n_grid: int = 200) -> float:
     vals = np.array([sig(x) for x in w])
     k = int(np.argmax(vals))
     best = float(vals[k])
-    # golden-section refinement between the neighbours of the grid maximum
+    # refine between the neighbours of the grid maximum
     a, b = np.log(w[max(k - 1, 0)]), np.log(w[min(k + 1, w.size - 1)])
-    g = (np.sqrt(5) - 1) / 2
-    c, d = b - g * (b - a), a + g * (b - a)
-    fc, fd = sig(np.exp(c)), sig(np.exp(d))
-    for _ in range(30):
-        if fc >= fd:
-            b, d, fd = d, c, fc
-            c = b - g * (b - a)
-            fc = sig(np.exp(c))
-        else:
-            a, c, fc = c, d, fd
-            d = a + g * (b - a)
-            fd = sig(np.exp(d))
-    return float(max(best, fc, fd, sig(0.0)))
+    r = minimize_scalar(lambda x: -sig(np.exp(x)), bounds=(a, b), method="bounded", options={"xatol": 1e-6})
+    return float(max(best, -r.fun, sig(0.0)))
 
 
 def hinf_norm(sys, tol: float = 1e-6) -> float:
@@ -499,30 +489,29 @@ def _bisect_riccati(prob: _Problem, gamma_range, tol: float):
         calls += 1
         if info in _RANK_FAIL:
             return None, {"calls": calls, "last_info": info, "rank_fail": True}
-        if mats is not None:
+        # bracket by decades: down while feasible, or up while infeasible
+        feasible = mats is not None
+        if feasible:
             hi, best = g, mats
-            while g > 1e-10:  # walk down by decades to bracket
-                g /= 10.0
-                m2, info = _sb10fd(prob, g)
-                calls += 1
-                if m2 is None:
-                    lo = g
-                    break
-                hi, best = g, m2
         else:
             lo = g
-            while g < 1e14:
-                g *= 10.0
-                m2, info = _sb10fd(prob, g)
-                calls += 1
-                if info in _RANK_FAIL:
-                    return None, {"calls": calls, "last_info": info, "rank_fail": True}
-                if m2 is not None:
-                    hi, best = g, m2
+        step = 0.1 if feasible else 10.0
+        while 1e-10 < g < 1e14:
+            g *= step
+            m2, info = _sb10fd(prob, g)
+            calls += 1
+            if m2 is not None:
+                hi, best = g, m2
+                if not feasible:
                     break
+            else:
+                if not feasible and info in _RANK_FAIL:
+                    return None, {"calls": calls, "last_info": info, "rank_fail": True}
                 lo = g
-            if hi is None:
-                return None, {"calls": calls, "last_info": info, "rank_fail": False}
+                if feasible:
+                    break
+        if hi is None:
+            return None, {"calls": calls, "last_info": info, "rank_fail": False}
     while hi - lo > tol * hi and calls < 200:
         mid = np.sqrt(lo * hi) if lo > 0 else 0.5 * hi
         m2, _ = _sb10fd(prob, mid)
