@@ -370,6 +370,20 @@ def _print_synthesis(result) -> None:
         print(f"note: {note}")
 
 
+def synthesis_options(args) -> dict:
+    """``musyn`` keyword arguments from the synthesis options of the CLI."""
+    options = {"structure": args.structure, "progress": None if not args.quiet else False}
+    if args.max_iter is not None:
+        options["max_iter"] = args.max_iter
+    if args.structure == "full":
+        options["mixed"] = not args.complex
+    else:
+        options["starts"] = args.starts
+        if args.init:
+            options["init"] = args.init
+    return options
+
+
 def synthesize(robot, args):
     """PLDI -> uncertain plant -> generalized plant -> musyn (-> reduction)."""
     from .plant import generalized_plant
@@ -379,16 +393,8 @@ def synthesize(robot, args):
     pldi = pldi_from_args(robot, args)
     unc = uncertain_plant(pldi, merge_symmetric=args.merge_symmetric)
     P = generalized_plant(unc, *weights_from_args(robot.m, args))
-    options = {"progress": None if not args.quiet else False}
-    if args.max_iter is not None:
-        options["max_iter"] = args.max_iter
-    if args.structure == "full":
-        options["mixed"] = not args.complex
-    else:
-        options["starts"] = args.starts
-        if args.init:
-            options["init"] = args.init
-    result = musyn(P, structure=args.structure, **options)
+    options = synthesis_options(args)
+    result = musyn(P, **options)
     reduced = None
     if args.structure == "full" and args.reduce:
         reduced = reduce_controller(P, result, max_order=args.reduce_max_order)
@@ -430,20 +436,20 @@ def cmd_synth(args) -> int:
 def _max_bandwidth(robot, args) -> int:
     """``synth --max-bandwidth``: the largest factor on the weights' bandwidths with certified mu < 1."""
     from .controller import save_controller
+    from .plant import paper_controller
     from .synthesis import max_bandwidth_scaling
     from .uncertainty import uncertain_plant
 
     pldi = pldi_from_args(robot, args)
     unc = uncertain_plant(pldi, merge_symmetric=args.merge_symmetric)
-    options = {"mixed": not args.complex}
-    if args.max_iter is not None:
-        options["max_iter"] = args.max_iter
+    options = synthesis_options(args)
+    if options.get("init") == "paper":
+        options.pop("init")  # K* starts the first synthesis only; later ones start from the nearest alpha's
+        options["initial_controller"] = paper_controller()
     scale = tuple(x.strip() for x in args.scale_only.split(",") if x.strip())
     alphas = [_number(a, "--alphas") for a in args.alphas.split(",")] if args.alphas else None
-    res = max_bandwidth_scaling(
-        unc, hyperparameters_from_args(robot.m, args), scale=scale,
-        progress=None if not args.quiet else False, **({"alphas": alphas} if alphas else {}), **options,
-    )
+    res = max_bandwidth_scaling(unc, hyperparameters_from_args(robot.m, args), scale=scale,
+                                **({"alphas": alphas} if alphas else {}), **options)
     print(f"robot {robot.name}: {unc.n_params} real parameters ({pldi.enclosure} PLDI), scaling {', '.join(scale)}")
     print(f"{'alpha':>10}  {'certified peak mu':>18}")
     for alpha, mu in res.history:

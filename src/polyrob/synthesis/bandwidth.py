@@ -102,11 +102,12 @@ def scaled_hyperparameters(alpha: float, hyperparameters: dict | None = None,
     return h
 
 
-def _default_synthesis(**musyn_options) -> Callable:
+def _default_synthesis(initial_controller=None, **musyn_options) -> Callable:
+    """:func:`musyn` warm-started from the nearest solved α (else ``initial_controller``)."""
     from .dk import musyn
 
-    def synthesize(P, initial_controller):
-        return musyn(P, initial_controller=initial_controller, **musyn_options)
+    def synthesize(P, K0):
+        return musyn(P, initial_controller=initial_controller if K0 is None else K0, **musyn_options)
 
     return synthesize
 
@@ -141,7 +142,8 @@ def max_bandwidth_scaling(
         ``("omega_b",)`` scales the performance bandwidth only).
     synthesize : callable ``(P, initial_controller) -> MusynResult``, optional
         The synthesis run at each α (strategy); default :func:`musyn` with
-        ``musyn_options``.  Each run is warm-started from the controller of
+        ``musyn_options`` (e.g. ``structure="tf3"``, ``initial_controller``
+        for the first α).  Each run is warm-started from the controller of
         the nearest α already solved.
     plant : callable ``(alpha, hyperparameters) -> GeneralizedPlant``, optional
         Default: :func:`~polyrob.plant.generalized_plant` of ``unc`` with
