@@ -58,3 +58,42 @@ def test_coefficients_reproduce_a_quadratic_exactly():
     np.testing.assert_allclose(a[0], a0[0], atol=1e-12)
     np.testing.assert_allclose(b[0], b0[0], atol=1e-12)
     np.testing.assert_allclose(Q[0], Q0[0], atol=1e-12)
+
+
+def test_seven_joints_exact_enumeration_against_multistart():
+    """Indefinite quadratics in 7 velocities: all 3^7 faces against 150 local solves each."""
+    from scipy import optimize
+
+    rng = np.random.default_rng(7)
+    m, D = 7, 2
+    c, a, b, Q = random_polynomials(rng, 1, m, D)
+    on = np.ones(m, bool)
+    exact, t_exact, _ = box_maximum(c, a, b, Q, on, on, exact=True)
+    ascent, t_ascent, _ = box_maximum(c, a, b, Q, on, on)
+    for d in range(D):
+        bd, Qd = b[0, :, d], Q[0, :, :, d]
+        assert np.linalg.eigvalsh(Qd).min() < 0 < np.linalg.eigvalsh(Qd).max()  # indefinite
+
+        def neg(t):
+            return -(bd @ t + t @ Qd @ t), -(bd + 2 * Qd @ t)
+
+        brute = max(
+            -optimize.minimize(neg, t0, jac=True, method="L-BFGS-B", bounds=[(-1, 1)] * m).fun
+            for t0 in rng.uniform(-1, 1, (150, m))
+        )
+        offset = c[0, d] + np.abs(a[0, :, d]).sum()
+        assert exact[0, d] == pytest.approx(offset + brute, abs=1e-9)
+        for value, t in ((exact, t_exact), (ascent, t_ascent)):
+            tt = t[0, d]
+            assert np.all(np.abs(tt) <= 1.0)
+            assert offset + bd @ tt + tt @ Qd @ tt == pytest.approx(value[0, d], abs=1e-12)  # attained
+        assert ascent[0, d] <= exact[0, d] + 1e-12  # the cheap maximum is a lower bound
+
+
+def test_linear_polynomials_are_maximised_at_a_vertex():
+    rng = np.random.default_rng(3)
+    c, a, b, _ = random_polynomials(rng, 4, 6, 2)
+    Q = np.zeros((4, 6, 6, 2))
+    value, t, _ = box_maximum(c, a, b, Q, np.ones(6, bool), np.ones(6, bool))
+    np.testing.assert_allclose(value, c + np.abs(a).sum(axis=1) + np.abs(b).sum(axis=1))
+    assert np.all(np.abs(t) == 1.0)

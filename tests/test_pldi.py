@@ -159,3 +159,18 @@ def test_cli_bounds_certify_on_seven_joints_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "up to 3 joints" in err and err.count("\n") == 1
     assert not out.exists() and not list(tmp_path.iterdir())  # nothing half-written
+
+
+def test_landscape_peaks_start_on_separate_hills():
+    """Two hills of different heights: the peaks are both tops, the higher first."""
+    from polyrob import search
+
+    robot = cached_robot("planar_2r")
+    problem = search.Problem(robot, Domain.from_robot(robot))
+    lo, hi = problem.lo[1], problem.hi[1]
+    q = np.zeros((201, 2))
+    q[:, 1] = np.linspace(lo, hi, 201)
+    x = (q[:, 1] - lo) / (hi - lo)
+    vals = (np.exp(-((x - 0.2) / 0.05) ** 2) + 2 * np.exp(-((x - 0.7) / 0.05) ** 2))[:, None]
+    peaks = search.landscape_peaks(problem, q, vals, 2)[0]
+    np.testing.assert_allclose(x[peaks], [0.7, 0.2])

@@ -11,14 +11,21 @@ How the bounds are found (``enclosure = "sampled"``):
 1. position coordinates the dynamics do not depend on are detected and dropped;
 2. the remaining positions are sampled with a scrambled Sobol' design plus the
    corners of their box; for each position the extremes over the
-   velocity/torque box are exact (:mod:`polyrob.extremes`);
-3. each extreme is refined by a bounded local search (L-BFGS-B over positions,
-   velocities and torques), and the widening it brought is reported;
-4. the support values along ``+-e_i`` (the intervals) and along the principal
+   velocity/torque box are computed exactly, or attained and nearly always
+   exact beyond four joints (:mod:`polyrob.extremes`);
+3. a dense uniform screen of the whole domain (one Jacobian per point) adds
+   starts near narrow peaks the design straddles;
+4. each extreme is searched by L-BFGS-B over positions, velocities and torques
+   from the highest peaks of the sampled landscape and the best screened
+   points, then from the other directions' witnesses where these are higher
+   (the entries share their sharp peaks, near singular mass matrices), then
+   from a second screen drawn around all witnesses; fresh designs verify the
+   result; the widening all this brought is reported;
+5. the support values along ``+-e_i`` (the intervals) and along the principal
    directions of the Jacobian cloud give the polytope's half-spaces;
    linear programs (HiGHS) give its bounding box, an interior point and,
    in up to :data:`VERTEX_MAX_DIM` reduced dimensions, its vertices;
-5. fresh random points of the domain check the coverage (it must be 1.0).
+6. fresh random points of the domain check the coverage (it must be 1.0).
 
 With ``certify=True`` the intervals are replaced by a guaranteed enclosure
 computed by interval arithmetic (:mod:`polyrob.certify`); ``enclosure`` is
@@ -294,6 +301,9 @@ def bound_pldi(
     nominal="equilibrium",
     refine: bool = True,
     verify_rounds: int = 3,
+    starts_per_direction: int = 3,
+    screen: int | None = None,
+    screen_starts: int = 4,
     coverage: int = 10_000,
     certify: bool = False,
     certify_options: dict | None = None,
@@ -310,7 +320,7 @@ def bound_pldi(
         Defaults to ``Domain.from_robot(robot)``.
     samples : int, optional
         Sobol' positions (rounded up to a power of two); default grows with
-        the number of positions that matter (1024 per dimension, at most 8192).
+        the number of positions that matter (512 per dimension, at most 8192).
     nominal : "equilibrium", "midpoint" or dict
         ``(A0, B0)`` at ``q = 0`` (clipped into the domain), ``qdot = 0`` and the
         torque that holds it (``u = g(q)``), at the interval midpoints, or at a
@@ -320,6 +330,15 @@ def bound_pldi(
     verify_rounds : int
         After refining, up to this many fresh designs (another scramble of the
         positions) are searched; support values they beat are refined again.
+    starts_per_direction : int
+        Local searches per direction (and per beaten direction in each
+        verification round) from the highest peaks of the sampled landscape.
+    screen : int, optional
+        Random points of the domain screened for more starts (0 to skip):
+        once uniformly, once around the witnesses found; default 65,536 per
+        position that matters, at most 524,288.
+    screen_starts : int
+        Starts per direction each screen gives.
     coverage : int
         Fresh random points for the coverage check (0 to skip).
     certify : bool
@@ -347,49 +366,81 @@ def bound_pldi(
     problem = search.Problem(robot, domain)
     m = robot.m
 
-    pilot_vals, varying, pilot_points = search.pilot(problem, seed)
+    pilot_vals, varying, _ = search.pilot(problem, seed)
     index = problem.all_index[varying]
     k = len(index)
     dropped = search.dropped_positions(problem, rng)
     active_q = m - len(dropped)
     if samples is None:
-        samples = int(min(8192, max(256, 1024 * active_q)))
+        samples = int(min(8192, max(256, 512 * active_q)))
     q = search.position_design(problem, samples, dropped, seed)
+    if screen is None:
+        screen = int(min(2**19, 2**16 * active_q))
 
     cloud = pilot_vals[:, varying]
     scale = np.maximum(cloud.max(axis=0) - cloud.min(axis=0), 1e-300)
     _, pcs = principal_directions(cloud, scale)
     directions = np.vstack([np.eye(k), -np.eye(k), pcs / scale, -pcs / scale]) if k else np.zeros((0, 0))
     t0 = time.perf_counter()
-    values, starts = search.support_pass(problem, q, directions, index, progress, workers) if k else (np.zeros(0), np.zeros((0, 3, 3 * m)))
+    stages = {}
     if k:
-        # the best random pilot point per direction is one more start: a
-        # second, independent design catches peaks the Sobol' positions miss
-        proj = pilot_vals[:, varying] @ directions.T
-        best_pilot = np.argmax(proj, axis=0)
-        pilot_value = proj[best_pilot, np.arange(len(directions))]
-        starts = np.concatenate([starts, pilot_points[best_pilot][:, None]], axis=1)
-        swap = pilot_value > values
-        values = np.where(swap, pilot_value, values)
-        starts[swap, 0], starts[swap, -1] = starts[swap, -1], starts[swap, 0]
+        # a dense uniform screen of the whole domain adds start positions
+        # near narrow peaks that the position design straddles
+        extra = search.screen(problem, directions, index, screen, screen_starts, seed, workers) if screen else None
+        stages["screen"] = time.perf_counter() - t0
+        values, starts, depends = search.support_pass(
+            problem, q, directions, index, progress, workers, starts_per_direction, extra
+        )
+        stages["design"] = time.perf_counter() - t0 - stages["screen"]
+    else:
+        values, starts, depends = np.zeros(0), np.zeros((0, 1, 3 * m)), np.zeros((0, 2 * m), bool)
     witnesses = starts[:, 0].copy()
     t_sample = time.perf_counter() - t0
     sampled_width = values[:k] + values[k : 2 * k]
     rounds = 0
     if refine and k:
-        values, witnesses = search.refine(problem, directions, values, starts, index, dropped, progress, workers)
+        t1 = time.perf_counter()
+        values, witnesses = search.refine(
+            problem, directions, values, starts, index, dropped, progress, workers, depends
+        )
+        stages["refine"] = time.perf_counter() - t1
+        values, witnesses = search.cross_seed(
+            problem, directions, values, witnesses, index, dropped, depends, progress, workers
+        )
+        stages["cross_seed"] = time.perf_counter() - t1 - stages["refine"]
+        t1 = time.perf_counter()
+        if screen:
+            # a second screen, around the witnesses of every direction
+            near = search.screen(problem, directions, index, screen, screen_starts, seed + 1, workers, witnesses)
+            starts, _ = search.exact_witnesses(problem, near, directions, index, workers)
+            starts = np.concatenate([witnesses[:, None], starts], axis=1)
+            values, witnesses = search.refine(
+                problem, directions, values, starts, index, dropped, progress, workers, depends
+            )
+            values, witnesses = search.cross_seed(
+                problem, directions, values, witnesses, index, dropped, depends, progress, workers
+            )
+        stages["screen_near_witnesses"] = time.perf_counter() - t1
+        t1 = time.perf_counter()
         # Verification rounds: a fresh design (another scramble) must not beat
         # any support value; where it does, refine again from its witness.
         for rounds in range(1, verify_rounds + 1):
             q_new = search.position_design(problem, samples, dropped, seed + 7919 * rounds)
-            v_new, s_new = search.support_pass(problem, q_new, directions, index, progress, workers)
-            beaten = np.flatnonzero(v_new > values + 1e-9 * (1.0 + np.abs(values)))
+            v_new, _ = search.inner_maxima(problem, q_new, directions, index, progress, workers)
+            beaten = np.flatnonzero(v_new.max(axis=0) > values + 1e-9 * (1.0 + np.abs(values)))
             if not beaten.size:
                 break
+            peaks = q_new[search.landscape_peaks(problem, q_new, v_new[:, beaten], starts_per_direction)]
+            s_new, v_start = search.exact_witnesses(problem, peaks, directions[beaten], index, workers)
             v_ref, w_ref = search.refine(
-                problem, directions[beaten], v_new[beaten], s_new[beaten], index, dropped, progress, workers
+                problem, directions[beaten], v_start[:, 0], s_new, index, dropped, progress, workers,
+                depends[beaten],
             )
             values[beaten], witnesses[beaten] = v_ref, w_ref
+            values, witnesses = search.cross_seed(
+                problem, directions, values, witnesses, index, dropped, depends, progress, workers
+            )
+        stages["verification"] = time.perf_counter() - t1
     t_refine = time.perf_counter() - t0 - t_sample
     upper, lower = values[:k], -values[k : 2 * k]
     width = upper - lower
@@ -454,6 +505,7 @@ def bound_pldi(
             "samples": int(len(q)),
             "seconds_sampling": round(t_sample, 3),
             "seconds_refining": round(t_refine, 3),
+            "seconds_stages": {key: round(v, 3) for key, v in stages.items()},
             "seconds_total": None,
             "max_refinement": float(refinement.max()) if k else 0.0,
             "verification_rounds": rounds,
