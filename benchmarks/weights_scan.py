@@ -47,6 +47,7 @@ CASES = [
     ("weight gains x0.01", 1.0, (), 0.01, "full"),
     ("tf3 from K*, bandwidths x4", 4.0, BOTH, 1.0, "tf3"),
     ("tf3 from K*, bandwidths x8", 8.0, BOTH, 1.0, "tf3"),
+    ("tf3 from K*, then tf4 from it, bandwidths x8", 8.0, BOTH, 1.0, "tf3>tf4"),
 ]
 
 
@@ -72,8 +73,11 @@ def run_case(case):
     t0 = time.perf_counter()
     if structure == "full":
         res = musyn(P, mixed=False, max_iter=25, progress=False)
-    else:  # mixed mu optimised directly over the paper's controller structure
-        res = musyn(P, structure=structure, init="paper", starts=1, max_iter=30, progress=False)
+    else:  # mixed mu optimised directly over the controller's parameters, from K*
+        init = "paper"
+        for step in structure.split(">"):  # "tf3>tf4": each result starts the richer structure
+            res = musyn(P, structure=step, init=init, starts=1, max_iter=30, progress=False)
+            init = res.controller
     rs = robstab(P, res.controller, progress=False)
     out = {"case": name, "structure": structure, "peak_mu_certified": res.peak_mu, "peak_mu_lower": res.peak_mu_lower,
            "peak_frequency": res.peak_frequency, "robust_stability_mu": rs.mu_upper, "order": res.order,
