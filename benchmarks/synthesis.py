@@ -28,6 +28,7 @@ from :func:`polyrob.mu.mu_bounds` against the true structure.
 
 from __future__ import annotations
 
+import importlib.metadata
 import json
 import os
 import subprocess
@@ -85,7 +86,7 @@ def bench_distillation() -> dict:
     secs = time.perf_counter() - t0
     Kss = control.ss(K)
     out["dkpy"] = {
-        "version": getattr(dkpy, "__version__", "?"), "peak_mu_grid": float(mu), "order": int(Kss.nstates),
+        "version": importlib.metadata.version("dkpy"), "peak_mu_grid": float(mu), "order": int(Kss.nstates),
         "seconds": round(secs, 2),
         "peak_mu_certified_common_grid": certify(P, Kss, DIST_BLK, CERT_OMEGA, n_u=2, n_y=2)[0],
     }
