@@ -18,6 +18,7 @@ what its low-frequency plateau hides.
 from __future__ import annotations
 
 import json
+import multiprocessing as mp
 import os
 import sys
 import time
@@ -66,10 +67,13 @@ def plant(unc, alpha, scale, gain):
     return polyrob.generalized_plant(unc, gain * W_S, gain * W_T)
 
 
+#: the uncertain plant, bounded once in main() and inherited by the forked workers
+UNC = None
+
+
 def run_case(case):
     name, alpha, scale, gain, structure = case
-    unc = uncertain()
-    P = plant(unc, alpha, scale, gain)
+    P = plant(UNC, alpha, scale, gain)
     t0 = time.perf_counter()
     if structure == "full":
         res = musyn(P, mixed=False, max_iter=25, progress=False)
@@ -100,7 +104,9 @@ def main():
     parser.add_argument("--cases", default="", help="only the cases whose name contains this text (e.g. tf3)")
     cases = [c for c in CASES if parser.parse_args().cases in c[0]]
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as pool:
+    global UNC
+    UNC = uncertain()
+    with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1), mp_context=mp.get_context("fork")) as pool:
         rows = list(pool.map(run_case, cases))
     print(json.dumps({"machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]},
                       "problem": "paper_2r --domain paper, ten independent real parameters",
