@@ -567,6 +567,7 @@ def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, 
                 u = upper_at(Hn[k])
                 res.append((u, lower_at(Hn[k], refine=True, target=u[0], D=u[1])))
             omega = np.concatenate([omega, w_new])
+            H = np.concatenate([H, Hn])
             up = np.concatenate([up, [r[0][0] for r in res]])
             lo = np.concatenate([lo, [r[1][0] for r in res]])
             Ds = np.concatenate([Ds, np.array([r[0][1] for r in res])])
@@ -577,7 +578,7 @@ def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, 
         for i in {int(np.argmax(lo)), int(np.argmax(up))}:
             if lo[i] >= up[i] * (1 - 1e-7):
                 continue
-            lo_i, d_i = lower_at(st.pad(_freqresp(sys, omega[[i]]))[0], refine=True, target=up[i], D=Ds[i])
+            lo_i, d_i = lower_at(H[i], refine=True, target=up[i], D=Ds[i])
             if lo_i > lo[i]:
                 lo[i], deltas[i] = lo_i, d_i
     finally:

@@ -443,24 +443,31 @@ def generalized_plant(
 # --------------------------------------------------------------------------- lower LFT
 
 
-def _lower_lft(P: control.StateSpace, K: control.StateSpace, n_u: int, n_y: int) -> control.StateSpace:
-    """``Fl(P, K)`` closing the last ``n_u`` inputs with ``u = K y`` on the last ``n_y`` outputs."""
-    A, B, C, D = _mats(P)
-    Ak, Bk, Ck, Dk = _mats(K)
-    nw, nz = P.ninputs - n_u, P.noutputs - n_y
+def _lft_mats(A, B, C, D, Ak, Bk, Ck, Dk, n_u, n_y):
+    """Matrices of ``Fl(P, K)``; raises ``np.linalg.LinAlgError`` if ill posed."""
+    nw, nz = B.shape[1] - n_u, C.shape[0] - n_y
     B1, B2 = B[:, :nw], B[:, nw:]
     C1, C2 = C[:nz], C[nz:]
     D11, D12, D21, D22 = D[:nz, :nw], D[:nz, nw:], D[nz:, :nw], D[nz:, nw:]
     R = np.eye(n_y) - D22 @ Dk
     if np.linalg.cond(R) > 1e12:
-        raise PolyrobError("the lower LFT is ill posed: I - D_yu D_K is singular")
-    # y = Yx x + Yw w + Yk xk and u = Ux x + Uw w + Uk xk
-    Yx, Yw, Yk = np.linalg.solve(R, C2), np.linalg.solve(R, D21), np.linalg.solve(R, D22 @ Ck)
+        raise np.linalg.LinAlgError("I - D22 Dk is singular")
+    Yx, Yw, Yk = (np.linalg.solve(R, X) for X in (C2, D21, D22 @ Ck))
     Ux, Uw, Uk = Dk @ Yx, Dk @ Yw, Ck + Dk @ Yk
     Acl = np.block([[A + B2 @ Ux, B2 @ Uk], [Bk @ Yx, Ak + Bk @ Yk]])
     Bcl = np.vstack([B1 + B2 @ Uw, Bk @ Yw])
     Ccl = np.hstack([C1 + D12 @ Ux, D12 @ Uk])
     Dcl = D11 + D12 @ Uw
+    return Acl, Bcl, Ccl, Dcl
+
+
+def _lower_lft(P: control.StateSpace, K: control.StateSpace, n_u: int, n_y: int) -> control.StateSpace:
+    """``Fl(P, K)`` closing the last ``n_u`` inputs with ``u = K y`` on the last ``n_y`` outputs."""
+    nw, nz = P.ninputs - n_u, P.noutputs - n_y
+    try:
+        Acl, Bcl, Ccl, Dcl = _lft_mats(*_mats(P), *_mats(K), n_u, n_y)
+    except np.linalg.LinAlgError:
+        raise PolyrobError("the lower LFT is ill posed: I - D_yu D_K is singular") from None
     states = list(P.state_labels) + [f"xK[{i}]" for i in range(K.nstates)]
     return control.ss(
         Acl, Bcl, Ccl, Dcl, inputs=P.input_labels[:nw], outputs=P.output_labels[:nz], states=states, dt=0,

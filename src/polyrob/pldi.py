@@ -58,6 +58,9 @@ from .domain import Domain
 from .errors import BoundsError, CertificationError
 from .polytope import COVERAGE_RTOL, VERTEX_MAX_DIM, Polytope, build_polytope, principal_directions
 
+#: Principal directions of the Jacobian cloud searched besides +-e_i.
+PRINCIPAL_DIRECTIONS = 12
+
 __all__ = ["PLDI", "Polytope", "bound_pldi", "entry_name", "VERTEX_MAX_DIM"]
 
 
@@ -366,7 +369,7 @@ def bound_pldi(
     problem = search.Problem(robot, domain)
     m = robot.m
 
-    pilot_vals, varying, _ = search.pilot(problem, seed)
+    pilot_vals, varying = search.pilot(problem, seed)
     index = problem.all_index[varying]
     k = len(index)
     dropped = search.dropped_positions(problem, rng)
@@ -379,7 +382,8 @@ def bound_pldi(
 
     cloud = pilot_vals[:, varying]
     scale = np.maximum(cloud.max(axis=0) - cloud.min(axis=0), 1e-300)
-    _, pcs = principal_directions(cloud, scale)
+    axes = principal_directions(cloud, scale)
+    pcs = axes[:, :PRINCIPAL_DIRECTIONS].T
     directions = np.vstack([np.eye(k), -np.eye(k), pcs / scale, -pcs / scale]) if k else np.zeros((0, 0))
     t0 = time.perf_counter()
     stages = {}
@@ -446,7 +450,7 @@ def bound_pldi(
     width = upper - lower
     refinement = np.where(sampled_width > 0, width / np.where(sampled_width > 0, sampled_width, 1) - 1.0, 0.0)
 
-    polytope = build_polytope(directions, values, 2 * k, cloud, scale, rng)
+    polytope = build_polytope(directions, values, 2 * k, cloud, scale, axes, rng)
 
     # full matrices of bounds (constant entries from any point: here the pilot's first)
     A_any, B_any = robot.jacobians_batch(*domain.sample(1, method="uniform", seed=seed))

@@ -79,21 +79,25 @@ class Polytope:
         return np.all(points @ self.normals.T <= self.offsets + slack, axis=1)
 
 
-def principal_directions(vals: np.ndarray, scale: np.ndarray, max_dirs: int = 12):
-    """Principal axes of the normalised cloud; rank ``r`` = directions that vary."""
+def principal_directions(vals: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Principal axes of the normalised cloud, as columns, strongest first; their
+    number is the rank (the directions that vary)."""
     z = (vals - vals.mean(axis=0)) / scale
     _, s, vt = np.linalg.svd(z, full_matrices=False)
     r = int(np.sum(s > 1e-8 * s[0])) if s.size and s[0] > 0 else 0
-    return vt[:r].T, vt[: min(r, max_dirs)]
+    return vt[:r].T
 
 
 
-def build_polytope(normals, offsets, n_box, cloud, scale, rng, n_mc=200_000) -> Polytope:
-    """Reduced coordinates, LP bounding box, interior point, vertices and volume ratio."""
+def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200_000) -> Polytope:
+    """Reduced coordinates, LP bounding box, interior point, vertices and volume ratio.
+
+    ``basis_n`` are the principal axes of the normalised ``cloud``
+    (:func:`principal_directions`).
+    """
     from scipy.spatial import HalfspaceIntersection
 
     centre = cloud.mean(axis=0)
-    basis_n, _ = principal_directions(cloud, scale, max_dirs=0)
     basis = basis_n * scale[:, None]  # p = centre + basis @ z
     r = basis.shape[1]
     G = normals @ basis

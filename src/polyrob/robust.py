@@ -88,7 +88,7 @@ class RobustnessResult:
         }
 
 
-def _analyse(kind, N, blk, n_params, P: GeneralizedPlant, K, omega, **mu_options) -> RobustnessResult:
+def _analyse(kind, N, blk, P: GeneralizedPlant, K, omega, **mu_options) -> RobustnessResult:
     from .mu import mu_bounds
 
     mu = mu_bounds(N, blk, omega, **mu_options)
@@ -130,13 +130,13 @@ def robstab(P: GeneralizedPlant, K, omega=None, **mu_options) -> RobustnessResul
     N = lft(P, K)
     s_v, s_d = P.output_slices["v"], P.input_slices["d"]
     M = N[s_v, s_d]
-    return _analyse("stability", M, P.block_structure_rs, P.uncertain.n_params, P, K, omega, **mu_options)
+    return _analyse("stability", M, P.block_structure_rs, P, K, omega, **mu_options)
 
 
 def robperf(P: GeneralizedPlant, K, omega=None, **mu_options) -> RobustnessResult:
     """Robust performance of ``lft(P, K)``: μ against uncertainty + performance block."""
     N = lft(P, K)
-    return _analyse("performance", N, P.block_structure_rp, P.uncertain.n_params, P, K, omega, **mu_options)
+    return _analyse("performance", N, P.block_structure_rp, P, K, omega, **mu_options)
 
 
 def nominal_performance(P: GeneralizedPlant, K) -> float:

@@ -69,9 +69,8 @@ def position_design(problem: Problem, n: int, dropped, seed) -> np.ndarray:
     d = problem.domain
     m = problem.m
     active = [j for j in range(m) if j not in dropped]
-    q = np.tile(0.5 * (d.q_lower + d.q_upper), (n, 1))
     if not active:
-        return q[:1]
+        return (0.5 * (d.q_lower + d.q_upper))[None]
     lo, hi = d.q_lower[active], d.q_upper[active]
     unit = qmc.Sobol(len(active), scramble=True, seed=seed).random_base2(int(np.ceil(np.log2(max(n, 2)))))
     q = np.tile(0.5 * (d.q_lower + d.q_upper), (len(unit), 1))
@@ -85,14 +84,13 @@ def position_design(problem: Problem, n: int, dropped, seed) -> np.ndarray:
 
 
 def pilot(problem: Problem, seed, n=4096):
-    """Random Jacobians: which entries vary, their scale, the principal directions,
-    and the points themselves (extra starts for the local search)."""
+    """Random Jacobians (their values) and which entries vary."""
     q, qdot, u = problem.domain.sample(n, method="uniform", seed=seed)
     vals = problem.entries_at(q, qdot, u)
     spread = vals.max(axis=0) - vals.min(axis=0)
     scale_all = np.maximum(np.abs(vals).max(axis=0), 1e-300)
     varying = spread > 1e-12 * np.maximum(1.0, scale_all)
-    return vals, varying, np.hstack([q, qdot, u])
+    return vals, varying
 
 
 #: Relative size below which a coefficient is rounding (an entry that does not

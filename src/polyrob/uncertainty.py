@@ -89,7 +89,8 @@ def upper_lft(M: control.StateSpace, Delta) -> control.StateSpace:
 
     The first ``Δ.shape[0]`` inputs of ``M`` are ``d`` and its first
     ``Δ.shape[1]`` outputs are ``v``; ``d = Δ v`` closes them (MATLAB's
-    ``lft(Delta, M)``).  Written by hand (python-control has no ``lft``):
+    ``lft(Delta, M)``).  python-control's ``StateSpace.lft`` is the lower LFT
+with a system; the upper one with a constant is three matrix products:
     with ``Q = (I - Δ D11)^{-1} Δ`` the result is
     ``(A + B1 Q C1, B2 + B1 Q D12, C2 + D21 Q C1, D22 + D21 Q D12)``.
 

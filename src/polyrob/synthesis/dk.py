@@ -776,7 +776,7 @@ def musyn(
         Pc = P if not isinstance(P, control.StateSpace) else Psys
         kw = {} if not isinstance(P, control.StateSpace) else {"n_u": n_u, "n_y": n_y}
         best = None
-        for rank, i in enumerate(order[:2]):
+        for i in order[:2]:
             rec = hist[i]
             if not np.isfinite(rec.mu_peak):
                 break

@@ -63,6 +63,7 @@ import scipy.linalg as sla
 
 from .._threads import single_blas_thread
 from ..errors import PolyrobError, SynthesisError
+from ..plant import _lft_mats
 
 __all__ = ["HinfResult", "hinfsyn", "hinf_norm", "hinf_norm_estimate", "check_stabilizable"]
 
@@ -117,24 +118,6 @@ def _ss(A, B, C, D) -> control.StateSpace:
         B = np.zeros((0, D.shape[1]))
         C = np.zeros((D.shape[0], 0))
     return control.ss(A, B, C, D, dt=0)
-
-
-def _lft_mats(A, B, C, D, Ak, Bk, Ck, Dk, n_u, n_y):
-    """Matrices of ``Fl(P, K)``; raises ``np.linalg.LinAlgError`` if ill posed."""
-    nw, nz = B.shape[1] - n_u, C.shape[0] - n_y
-    B1, B2 = B[:, :nw], B[:, nw:]
-    C1, C2 = C[:nz], C[nz:]
-    D11, D12, D21, D22 = D[:nz, :nw], D[:nz, nw:], D[nz:, :nw], D[nz:, nw:]
-    R = np.eye(n_y) - D22 @ Dk
-    if np.linalg.cond(R) > 1e12:
-        raise np.linalg.LinAlgError("I - D22 Dk is singular")
-    Yx, Yw, Yk = (np.linalg.solve(R, X) for X in (C2, D21, D22 @ Ck))
-    Ux, Uw, Uk = Dk @ Yx, Dk @ Yw, Ck + Dk @ Yk
-    Acl = np.block([[A + B2 @ Ux, B2 @ Uk], [Bk @ Yx, Ak + Bk @ Yk]])
-    Bcl = np.vstack([B1 + B2 @ Uw, Bk @ Yw])
-    Ccl = np.hstack([C1 + D12 @ Ux, D12 @ Uk])
-    Dcl = D11 + D12 @ Uw
-    return Acl, Bcl, Ccl, Dcl
 
 
 def _is_stable(A, margin=1e-9) -> bool:
@@ -452,9 +435,7 @@ def _sb10fd(prob: _Problem, gamma: float):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             Ak, Bk, Ck, Dk, rcond = slycot.sb10fd(n, m, p, prob.n_u, prob.n_y, gamma, A, B, C, D)
-    except SlycotArithmeticError as exc:
-        return None, int(getattr(exc, "info", -1) or -1)
-    except (SlycotError, ValueError) as exc:
+    except (SlycotArithmeticError, SlycotError, ValueError) as exc:
         return None, int(getattr(exc, "info", -1) or -1)
     mats = (np.asarray(Ak), np.asarray(Bk), np.asarray(Ck), np.asarray(Dk))
     if not all(np.all(np.isfinite(X)) for X in mats):
