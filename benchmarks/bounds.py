@@ -57,7 +57,7 @@ def main():
         t0 = time.perf_counter()
         pldi = bound_pldi(robot, domain, coverage=0, progress=False)
         seconds = time.perf_counter() - t0
-        from polyrob.pldi import coverage_fraction
+        from polyrob.bounds.pldi import coverage_fraction
 
         coverage = coverage_fraction(pldi, robot, 10_000, seed=987)
         width = pldi.upper - pldi.lower

@@ -11,7 +11,7 @@ Problems
   (:func:`polyrob.synthesis.musyn`, automatic D orders) against dkpy's
   ``DkIterAutoOrder`` (HinfSynSlicot, SsvLmiBisection, DScaleFitSlicot,
   3 iterations, orders up to 4: dkpy's documented example).  Both
-  controllers are also certified with the same :func:`polyrob.mu.mu_bounds`
+  controllers are also certified with the same :func:`polyrob.analysis.mu.mu_bounds`
   sweep (peak-refined), since each tool reports μ on its own grid.
 * ``paper_2r``: the paper's 2R robot (ten independent real parameters,
   paper weights): the paper's K* analysed, full-order D-K (reals treated as
@@ -23,7 +23,7 @@ Problems
   scan ``BANDWIDTH_ALPHAS``).
 
 Every μ reported for polyrob is the certified upper bound of ``lft(P, K)``
-from :func:`polyrob.mu.mu_bounds` against the true structure.
+from :func:`polyrob.analysis.mu.mu_bounds` against the true structure.
 """
 
 from __future__ import annotations
@@ -42,9 +42,9 @@ import numpy as np
 warnings.simplefilter("ignore")
 
 import polyrob  # noqa: E402
-import polyrob.weights  # noqa: E402
+import polyrob.plant.weights  # noqa: E402
 from polyrob.examples import DISTILLATION_BLK as DIST_BLK, distillation_plant  # noqa: E402
-from polyrob.mu import mu_bounds  # noqa: E402
+from polyrob.analysis.mu import mu_bounds  # noqa: E402
 from polyrob.synthesis import certify, max_bandwidth_scaling, musyn, reduce_controller  # noqa: E402
 
 
@@ -96,10 +96,10 @@ def bench_distillation() -> dict:
 FIXED_SNIPPET = r"""
 import json, time, warnings, sys
 warnings.simplefilter("ignore")
-import polyrob, polyrob.weights
+import polyrob, polyrob.plant.weights
 from polyrob.synthesis import musyn
 pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), progress=False)
-P = polyrob.generalized_plant(polyrob.uncertain_plant(pldi), *polyrob.weights.paper_weights())
+P = polyrob.generalized_plant(polyrob.uncertain_plant(pldi), *polyrob.plant.weights.paper_weights())
 t0 = time.perf_counter()
 r = musyn(P, structure="tf3", init="paper", starts=2, progress=False)
 print(json.dumps({"peak_mu_certified": r.peak_mu, "peak_mu_lower": r.peak_mu_lower, "order": r.order,
@@ -141,7 +141,7 @@ def bench_paper(t_start: float, budget: float) -> dict:
     t0 = time.perf_counter()
     pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), progress=False)
     unc = polyrob.uncertain_plant(pldi)
-    P = polyrob.generalized_plant(unc, *polyrob.weights.paper_weights())
+    P = polyrob.generalized_plant(unc, *polyrob.plant.weights.paper_weights())
     out["plant_seconds"] = round(time.perf_counter() - t0, 2)
     # the paper's K*
     log("2R: K* analysis")

@@ -9,7 +9,7 @@ Every row is a full-order complex D-K synthesis (:func:`polyrob.synthesis.musyn`
 third-order fixed structure started from K* (one start, mixed μ), on
 ``paper_2r --domain paper`` (ten independent real parameters) with the
 paper's weights modified as named,
-certified by :func:`polyrob.mu.mu_bounds` against the real structure, plus
+certified by :func:`polyrob.analysis.mu.mu_bounds` against the real structure, plus
 the robust-stability μ of the same controller.  A last row adds a lag
 ``(s + 1)/(s + 1e-4)`` per channel to the paper-weights controller to show
 what its low-frequency plateau hides.
@@ -31,10 +31,10 @@ import numpy as np
 warnings.simplefilter("ignore")
 
 import polyrob  # noqa: E402
-from polyrob.mu import mu_bounds  # noqa: E402
-from polyrob.robust import robstab  # noqa: E402
+from polyrob.analysis.mu import mu_bounds  # noqa: E402
+from polyrob.analysis.robust import robstab  # noqa: E402
 from polyrob.synthesis import musyn, scaled_hyperparameters  # noqa: E402
-from polyrob.weights import paper_weights  # noqa: E402
+from polyrob.plant.weights import paper_weights  # noqa: E402
 
 BOTH = ("omega_b", "omega_bt")
 #: (name, bandwidth factor, scaled hyperparameters, gain on both weights, structure)

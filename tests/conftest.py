@@ -31,7 +31,7 @@ def pldi():
 
 @pytest.fixture(scope="session")
 def unc(pldi):
-    from polyrob.uncertainty import uncertain_plant
+    from polyrob.plant.uncertainty import uncertain_plant
 
     return uncertain_plant(pldi)
 

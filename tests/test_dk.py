@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from polyrob.errors import PolyrobError, SynthesisError
-from polyrob.mu import mussv
+from polyrob.analysis.mu import mussv
 from polyrob.synthesis import MusynResult, musyn
 from polyrob.synthesis.dk import frequency_grid, performance_lower_bound
 from polyrob.synthesis.dscale import (
@@ -25,7 +25,7 @@ from polyrob.synthesis.dscale import (
     scaled_plant,
     scaling_data,
 )
-from polyrob.blocks import as_block_structure
+from polyrob.analysis.blocks import as_block_structure
 from polyrob.examples import DISTILLATION_BLK, distillation_plant
 
 @pytest.fixture(scope="module")
@@ -165,7 +165,7 @@ def test_scaled_plant_matches_frequency_formula():
     sc = Scalings((BlockScaling(d0, F), BlockScaling(d1, None), BlockScaling(None, None)), 1.7, st)
     Ps = scaled_plant(P, sc, 1, 1)
     K = control.ss([[-1.0]], [[0.5]], [[0.3]], [[0.1]])
-    from polyrob.plant import lft
+    from polyrob.plant.generalized import lft
 
     w = np.logspace(-1, 1, 7)
     N = lft(P, K, n_u=1, n_y=1)
@@ -200,10 +200,10 @@ def test_mixed_dgk_runs_and_certifies_with_real_block():
 def test_paper_plant_smoke():
     """Two D-K iterations on the paper's 2R plant: runs, stable, certified (mixed μ)."""
     import polyrob
-    import polyrob.weights
+    import polyrob.plant.weights
 
     pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
-    P = polyrob.generalized_plant(polyrob.uncertain_plant(pldi), *polyrob.weights.paper_weights())
+    P = polyrob.generalized_plant(polyrob.uncertain_plant(pldi), *polyrob.plant.weights.paper_weights())
     res = musyn(P, max_iter=2, mixed=False, omega=np.logspace(-3, 3, 31), progress=False,
                 certify_omega=np.logspace(-3, 3, 31))
     assert np.isfinite(res.peak_mu)
@@ -235,7 +235,7 @@ def test_fixed_structure_is_dispatched(monkeypatch):
 
 def test_infeasible_weights():
     import polyrob
-    from polyrob.weights import complementary_weight, sensitivity_weight
+    from polyrob.plant.weights import complementary_weight, sensitivity_weight
 
     pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
     unc = polyrob.uncertain_plant(pldi)

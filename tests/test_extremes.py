@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from polyrob.extremes import box_maximum, evaluate_polynomial, polynomial_coefficients
+from polyrob.bounds.extremes import box_maximum, evaluate_polynomial, polynomial_coefficients
 
 
 def random_polynomials(rng, N, m, D):

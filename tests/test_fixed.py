@@ -13,12 +13,12 @@ import pytest
 
 import polyrob
 from polyrob.errors import PolyrobError, SynthesisError
-from polyrob.mu import mu_bounds
-from polyrob.plant import PAPER_CONTROLLER, generalized_plant, lft, paper_controller
+from polyrob.analysis.mu import mu_bounds
+from polyrob.plant.generalized import PAPER_CONTROLLER, generalized_plant, lft, paper_controller
 from polyrob.synthesis.fixed import closed_loop_response, fixed_structure_musyn
 from polyrob.synthesis.result import MusynResult
 from polyrob.synthesis.structures import controller_structure
-from polyrob.weights import paper_weights
+from polyrob.plant.weights import paper_weights
 
 #: certification grid shared by K* and the synthesised controller (coarse: fast)
 OMEGA = np.logspace(-3, 4, 36)

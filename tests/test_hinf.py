@@ -142,7 +142,7 @@ def test_paper_plant(paper_plant):
 @pytest.fixture(scope="module")
 def paper_plant():
     import polyrob
-    import polyrob.weights
+    import polyrob.plant.weights
 
     pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
-    return polyrob.generalized_plant(polyrob.uncertain_plant(pldi), *polyrob.weights.paper_weights())
+    return polyrob.generalized_plant(polyrob.uncertain_plant(pldi), *polyrob.plant.weights.paper_weights())

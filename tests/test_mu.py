@@ -1,4 +1,4 @@
-"""Tests of polyrob.mu / polyrob.blocks against published and exact values."""
+"""Tests of polyrob.analysis.mu / polyrob.analysis.blocks against published and exact values."""
 
 import time
 
@@ -6,10 +6,10 @@ import control
 import numpy as np
 import pytest
 
-import polyrob.mu as mu_mod
-from polyrob.blocks import BlockStructure, as_block_structure
+import polyrob.analysis.mu as mu_mod
+from polyrob.analysis.blocks import BlockStructure, as_block_structure
 from polyrob.errors import PolyrobError
-from polyrob.mu import TimeLimitedCall, mu_bounds, mussv
+from polyrob.analysis.mu import TimeLimitedCall, mu_bounds, mussv
 
 
 # ------------------------------------------------------------------ data

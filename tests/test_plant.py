@@ -6,7 +6,7 @@ import pytest
 
 
 from polyrob.errors import PolyrobError
-from polyrob.plant import (
+from polyrob.plant.generalized import (
     ClosedLoop,
     GeneralizedPlant,
     closed_loop,
@@ -16,7 +16,7 @@ from polyrob.plant import (
     nominal_closed_loop,
     paper_controller,
 )
-from polyrob.uncertainty import uncertain_plant, upper_lft
+from polyrob.plant.uncertainty import uncertain_plant, upper_lft
 
 FREQS = (0.1, 0.7, 3.0, 20.0, 150.0)
 
@@ -28,7 +28,7 @@ def _diag(*tfs):
     return control.tf(num, den)
 
 
-# the paper's weights, transcribed from section 3 (independent of polyrob.weights)
+# the paper's weights, transcribed from section 3 (independent of polyrob.plant.weights)
 W_S = _diag(control.tf([0.5, 0.5], [1, 0.005]), control.tf([0.3333, 0.1], [1, 0.002]))
 W_T = _diag(control.tf([1, 10], [0.01, 21]), control.tf([1, 12], [0.01, 36]))
 
@@ -99,7 +99,7 @@ def test_block_structures(P, unc, pldi):
 
 
 def test_rp_block_fits_the_closed_loop(P, K):
-    blocks = pytest.importorskip("polyrob.blocks")
+    blocks = pytest.importorskip("polyrob.analysis.blocks")
     N = lft(P, K)
     st = blocks.BlockStructure.from_matlab(P.block_structure_rp)
     assert st.m_shape == (N.noutputs, N.ninputs) == (14, 12)
@@ -222,7 +222,7 @@ def test_lft_rejects_mismatched_controllers(P):
 
 
 def test_paper_weights_from_the_weights_module_agree():
-    weights = pytest.importorskip("polyrob.weights")
+    weights = pytest.importorskip("polyrob.plant.weights")
     WS, WT = weights.paper_weights()
     for w in FREQS:
         np.testing.assert_allclose(WS(1j * w), W_S(1j * w), rtol=1e-3)  # 0.3333 vs 1/3

@@ -163,7 +163,7 @@ def test_cli_bounds_certify_on_seven_joints_is_one_line(tmp_path, capsys):
 
 def test_landscape_peaks_start_on_separate_hills():
     """Two hills of different heights: the peaks are both tops, the higher first."""
-    from polyrob import search
+    from polyrob.bounds import search
 
     robot = cached_robot("planar_2r")
     problem = search.Problem(robot, Domain.from_robot(robot))

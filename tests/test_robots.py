@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from polyrob import Robot, RobotError, load_robot
-from polyrob.robots import available_robots, example_robot_data_dir
+from polyrob.model.robots import available_robots, example_robot_data_dir
 
 from conftest import BAD_URDFS, cached_robot
 

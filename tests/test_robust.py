@@ -9,9 +9,9 @@ import pytest
 
 import polyrob
 from polyrob.cli import main
-from polyrob.plant import closed_loop
-from polyrob.robust import nominal_performance, robperf, robstab, sample_stability
-from polyrob.weights import paper_weights
+from polyrob.plant.generalized import closed_loop
+from polyrob.analysis.robust import nominal_performance, robperf, robstab, sample_stability
+from polyrob.plant.weights import paper_weights
 
 from conftest import paper_pldi
 

@@ -1,4 +1,4 @@
-"""Tests of polyrob.uncertainty: the PLDI as an LFT in normalised real parameters."""
+"""Tests of polyrob.plant.uncertainty: the PLDI as an LFT in normalised real parameters."""
 
 import dataclasses
 
@@ -8,7 +8,7 @@ import pytest
 
 
 from polyrob.errors import BoundsError, PolyrobError
-from polyrob.uncertainty import UncertainPlant, uncertain_plant, upper_lft
+from polyrob.plant.uncertainty import UncertainPlant, uncertain_plant, upper_lft
 
 PAPER_ENTRIES = ("a32", "a33", "a34", "a42", "a43", "a44", "b31", "b32", "b41", "b42")
 
@@ -156,7 +156,7 @@ def test_merge_requires_identical_bounds(pldi):
 
 
 def test_block_structure_is_a_valid_matlab_blk(unc, unc_merged):
-    blocks = pytest.importorskip("polyrob.blocks")
+    blocks = pytest.importorskip("polyrob.analysis.blocks")
     st = blocks.BlockStructure.from_matlab(unc.block_structure)
     assert st.delta_shape == (10, 10) and st.m_shape == (10, 10)
     st = blocks.BlockStructure.from_matlab(unc_merged.block_structure)

@@ -1,11 +1,11 @@
-"""Tests of polyrob.weights: MATLAB makeweight and the paper's weights."""
+"""Tests of polyrob.plant.weights: MATLAB makeweight and the paper's weights."""
 
 import control
 import numpy as np
 import pytest
 
 from polyrob.errors import PolyrobError
-from polyrob.weights import (
+from polyrob.plant.weights import (
     PAPER_HYPERPARAMETERS,
     complementary_weight,
     diagonal_weight,

@@ -6,7 +6,7 @@ plant, the plant with weights a generalized plant, and that a controller with
 its structured-singular-value certificate.
 """
 
-from .errors import (
+from polyrob.errors import (
     BoundsError,
     CertificationError,
     DomainError,
@@ -15,13 +15,13 @@ from .errors import (
     SolverError,
     SynthesisError,
 )
-from .robots import Manipulator, Robot, available_robots, load_robot
-from .analytic import AnalyticRobot
-from .domain import Domain
-from . import weights
-from .pldi import PLDI, bound_pldi
-from .uncertainty import UncertainPlant, uncertain_plant
-from .plant import GeneralizedPlant, closed_loop, generalized_plant, lft, nominal_closed_loop, paper_controller
+from polyrob.model.robots import Manipulator, Robot, available_robots, load_robot
+from polyrob.model.analytic import AnalyticRobot
+from polyrob.bounds.domain import Domain
+from polyrob.plant import weights
+from polyrob.bounds.pldi import PLDI, bound_pldi
+from polyrob.plant.uncertainty import UncertainPlant, uncertain_plant
+from polyrob.plant.generalized import GeneralizedPlant, closed_loop, generalized_plant, lft, nominal_closed_loop, paper_controller
 
 __version__ = "0.1.0"
 

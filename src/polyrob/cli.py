@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 
-from .errors import DomainError, PolyrobError
+from polyrob.errors import DomainError, PolyrobError
 
 __all__ = ["main", "build_parser"]
 
@@ -87,14 +87,14 @@ def add_domain_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def robot_from_args(args):
-    from .robots import load_robot
+    from polyrob.model.robots import load_robot
 
     lock = None if args.lock is None else [s.strip() for s in args.lock.split(",") if s.strip()]
     return load_robot(args.robot, lock=lock)
 
 
 def domain_from_args(robot, args):
-    from .domain import Domain
+    from polyrob.bounds.domain import Domain
 
     return Domain.from_robot(
         robot,
@@ -111,7 +111,7 @@ def domain_from_args(robot, args):
 
 
 def cmd_robots(args) -> int:
-    from .robots import available_robots, load_robot
+    from polyrob.model.robots import available_robots, load_robot
 
     rows = []
     for name, origin in available_robots():
@@ -164,7 +164,7 @@ def cmd_info(args) -> int:
 
 
 def cmd_bounds(args) -> int:
-    from .pldi import bound_pldi
+    from polyrob.bounds.pldi import bound_pldi
 
     robot = robot_from_args(args)
     domain = domain_from_args(robot, args)
@@ -231,7 +231,7 @@ def add_weight_arguments(parser: argparse.ArgumentParser) -> None:
 
 def hyperparameters_from_args(m: int, args) -> dict:
     """The paper's weight hyperparameters with per-channel overrides, for ``m`` channels."""
-    from .weights import PAPER_HYPERPARAMETERS
+    from polyrob.plant.weights import PAPER_HYPERPARAMETERS
 
     h = {}
     for key, paper in PAPER_HYPERPARAMETERS.items():
@@ -251,13 +251,13 @@ def hyperparameters_from_args(m: int, args) -> dict:
 
 def weights_from_args(m: int, args):
     """``(W_S, W_T)`` from the weight options (default: the paper's)."""
-    from .weights import paper_weights
+    from polyrob.plant.weights import paper_weights
 
     return paper_weights(hyperparameters_from_args(m, args))
 
 
 def pldi_from_args(robot, args):
-    from .pldi import PLDI, bound_pldi
+    from polyrob.bounds.pldi import PLDI, bound_pldi
 
     if getattr(args, "pldi", None):
         return PLDI.load(args.pldi)
@@ -266,8 +266,8 @@ def pldi_from_args(robot, args):
 
 
 def controller_from_args(args):
-    from .controller import load_controller
-    from .plant import paper_controller
+    from polyrob.io.controller import load_controller
+    from polyrob.plant.generalized import paper_controller
 
     if args.controller == "paper":
         return paper_controller()
@@ -275,9 +275,9 @@ def controller_from_args(args):
 
 
 def cmd_analyze(args) -> int:
-    from .plant import generalized_plant
-    from .robust import nominal_performance, robperf, robstab, sample_stability
-    from .uncertainty import uncertain_plant
+    from polyrob.plant.generalized import generalized_plant
+    from polyrob.analysis.robust import nominal_performance, robperf, robstab, sample_stability
+    from polyrob.plant.uncertainty import uncertain_plant
 
     robot = robot_from_args(args)
     pldi = pldi_from_args(robot, args)
@@ -343,7 +343,7 @@ def _register_analyze(sub) -> None:
     add_robot_arguments(p)
     add_domain_arguments(p)
     add_weight_arguments(p)
-    p.add_argument("--controller", required=True, help="controller file (JSON, see polyrob.controller) or 'paper' for K*")
+    p.add_argument("--controller", required=True, help="controller file (JSON, see polyrob.io.controller) or 'paper' for K*")
     p.add_argument("--pldi", default=None, help="a PLDI file from `polyrob bounds -o` (instead of bounding again)")
     p.add_argument("--merge-symmetric", action="store_true", help="one repeated parameter for b_ij = b_ji")
     p.add_argument("--mc", type=int, default=500, help="Monte Carlo parameter sets")
@@ -386,9 +386,9 @@ def synthesis_options(args) -> dict:
 
 def synthesize(robot, args):
     """PLDI -> uncertain plant -> generalized plant -> musyn (-> reduction)."""
-    from .plant import generalized_plant
-    from .synthesis import musyn, reduce_controller
-    from .uncertainty import uncertain_plant
+    from polyrob.plant.generalized import generalized_plant
+    from polyrob.synthesis import musyn, reduce_controller
+    from polyrob.plant.uncertainty import uncertain_plant
 
     pldi = pldi_from_args(robot, args)
     unc = uncertain_plant(pldi, merge_symmetric=args.merge_symmetric)
@@ -408,7 +408,7 @@ def _certificate(result, P) -> dict:
 
 
 def cmd_synth(args) -> int:
-    from .controller import save_controller
+    from polyrob.io.controller import save_controller
 
     robot = robot_from_args(args)
     if args.max_bandwidth:
@@ -435,10 +435,10 @@ def cmd_synth(args) -> int:
 
 def _max_bandwidth(robot, args) -> int:
     """``synth --max-bandwidth``: the largest factor on the weights' bandwidths with certified mu < 1."""
-    from .controller import save_controller
-    from .plant import paper_controller
-    from .synthesis import max_bandwidth_scaling
-    from .uncertainty import uncertain_plant
+    from polyrob.io.controller import save_controller
+    from polyrob.plant.generalized import paper_controller
+    from polyrob.synthesis import max_bandwidth_scaling
+    from polyrob.plant.uncertainty import uncertain_plant
 
     pldi = pldi_from_args(robot, args)
     unc = uncertain_plant(pldi, merge_symmetric=args.merge_symmetric)
@@ -468,7 +468,7 @@ def _max_bandwidth(robot, args) -> int:
 
 def cmd_run(args) -> int:
     """bounds -> synthesis -> analysis in one go."""
-    from .robust import nominal_performance, robperf, robstab, sample_stability
+    from polyrob.analysis.robust import nominal_performance, robperf, robstab, sample_stability
 
     robot = robot_from_args(args)
     pldi, unc, P, result, reduced = synthesize(robot, args)
@@ -488,7 +488,7 @@ def cmd_run(args) -> int:
     print(f"monte carlo: {sampling.random_stable:.1%} of {sampling.random} stable"
           + (f"; corners: {sampling.corners_stable:.1%} of {sampling.corners} stable" if sampling.corners else ""))
     if args.output:
-        from .controller import save_controller
+        from polyrob.io.controller import save_controller
 
         cert = _certificate(result, P)
         cert.update(robust_stability=rs.summary(), robust_performance=rp.summary())

@@ -11,10 +11,10 @@
   certified μ stays within a tolerance of the full-order one.
 """
 
-from .result import MusynResult
-from .hinf import HinfResult, hinfsyn, hinf_norm
-from .dscale import LogMagnitudeFit, SlicotMagnitudeFit
-from .dk import (
+from polyrob.synthesis.result import MusynResult
+from polyrob.synthesis.hinf import HinfResult, hinfsyn, hinf_norm
+from polyrob.synthesis.dscale import LogMagnitudeFit, SlicotMagnitudeFit
+from polyrob.synthesis.dk import (
     DKIteration,
     HinfStep,
     MuUpperBound,
@@ -23,10 +23,10 @@ from .dk import (
     musyn,
     performance_lower_bound,
 )
-from .bandwidth import BandwidthScalingResult, max_bandwidth_scaling, scaled_hyperparameters
-from .reduce import ReductionResult, reduce_controller
-from .fixed import FixedStructureOptions, fixed_structure_musyn
-from .structures import controller_structure
+from polyrob.synthesis.bandwidth import BandwidthScalingResult, max_bandwidth_scaling, scaled_hyperparameters
+from polyrob.synthesis.reduce import ReductionResult, reduce_controller
+from polyrob.synthesis.fixed import FixedStructureOptions, fixed_structure_musyn
+from polyrob.synthesis.structures import controller_structure
 
 __all__ = [
     "MusynResult",

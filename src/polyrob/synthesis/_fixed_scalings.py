@@ -18,10 +18,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..mu import mussv
+from polyrob.analysis.mu import mussv
 
 if TYPE_CHECKING:
-    from .fixed import _Loop
+    from polyrob.synthesis.fixed import _Loop
 
 # ============================================================ scalings
 @dataclass(frozen=True, eq=False)

@@ -3,8 +3,8 @@
 When μ < 1 is out of reach under given weights, the question a designer asks
 next is how much performance *can* be certified.  :func:`max_bandwidth_scaling`
 answers it for the paper's parametrised weights
-(:func:`polyrob.weights.sensitivity_weight`,
-:func:`~polyrob.weights.complementary_weight`): the bandwidths ``ω_B`` (and by
+(:func:`polyrob.plant.weights.sensitivity_weight`,
+:func:`~polyrob.plant.weights.complementary_weight`): the bandwidths ``ω_B`` (and by
 default ``ω_BT``) are multiplied by a factor α and a controller is
 synthesised for each α.
 
@@ -27,8 +27,8 @@ from typing import Callable, Optional, Sequence
 
 import numpy as np
 
-from ..errors import PolyrobError, SynthesisError
-from .result import MusynResult
+from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.synthesis.result import MusynResult
 
 __all__ = ["BandwidthScalingResult", "scaled_hyperparameters", "max_bandwidth_scaling"]
 
@@ -92,7 +92,7 @@ def scaled_hyperparameters(alpha: float, hyperparameters: dict | None = None,
     >>> scaled_hyperparameters(0.5, scale=("omega_b",))["omega_bt"]
     (10.0, 12.0)
     """
-    from ..weights import PAPER_HYPERPARAMETERS
+    from polyrob.plant.weights import PAPER_HYPERPARAMETERS
 
     h = dict(PAPER_HYPERPARAMETERS if hyperparameters is None else hyperparameters)
     for key in scale:
@@ -104,7 +104,7 @@ def scaled_hyperparameters(alpha: float, hyperparameters: dict | None = None,
 
 def _default_synthesis(initial_controller=None, **musyn_options) -> Callable:
     """:func:`musyn` warm-started from the nearest solved α (else ``initial_controller``)."""
-    from .dk import musyn
+    from polyrob.synthesis.dk import musyn
 
     def synthesize(P, K0):
         return musyn(P, initial_controller=initial_controller if K0 is None else K0, **musyn_options)
@@ -131,7 +131,7 @@ def max_bandwidth_scaling(
     ----------
     unc : UncertainPlant
     hyperparameters : dict, optional
-        Base hyperparameters (default :data:`polyrob.weights.PAPER_HYPERPARAMETERS`).
+        Base hyperparameters (default :data:`polyrob.plant.weights.PAPER_HYPERPARAMETERS`).
     alphas : sequence of float
         Scan grid of α (sorted, positive); default ``2**-3 ... 2**5``.
     rtol : float
@@ -147,7 +147,7 @@ def max_bandwidth_scaling(
         the nearest α already solved.
     plant : callable ``(alpha, hyperparameters) -> GeneralizedPlant``, optional
         Default: :func:`~polyrob.plant.generalized_plant` of ``unc`` with
-        :func:`~polyrob.weights.paper_weights` of the scaled hyperparameters.
+        :func:`~polyrob.plant.weights.paper_weights` of the scaled hyperparameters.
     progress : bool, optional
         One line per α on stderr; default: only on a terminal.
 
@@ -174,8 +174,8 @@ def max_bandwidth_scaling(
     alpha = 2.484, mu = 0.972, first fail 2.594
     """
     if plant is None:
-        from ..plant import generalized_plant
-        from ..weights import paper_weights
+        from polyrob.plant.generalized import generalized_plant
+        from polyrob.plant.weights import paper_weights
 
         def plant(alpha, h):
             return generalized_plant(unc, *paper_weights(h))

@@ -4,7 +4,7 @@
 
 * a **D-step**: the μ upper bound of the closed loop ``N = Fl(P, K)`` on a
   frequency grid, with its scalings ``D(ω)`` (and ``G(ω)`` for real
-  parameters), computed by SLICOT AB13MD through :func:`polyrob.mu.mussv`;
+  parameters), computed by SLICOT AB13MD through :func:`polyrob.analysis.mu.mussv`;
 * a **fit**: per-block stable, minimum-phase rational filters of the lowest
   order that reproduces the bound (:mod:`polyrob.synthesis.dscale`);
 * a **K-step**: H∞ synthesis (:func:`polyrob.synthesis.hinf.hinfsyn`) for the
@@ -26,7 +26,7 @@ push the scaled norm below ``max|F|``, so it refines but does not rescue a
 poor controller) and continues with D-G-K steps, each guarded: the old
 controller must stabilise the G-transformed plant, and a G step that fails
 falls back on a D step.  Whatever the iteration, the controller is finally
-**certified** with :func:`polyrob.mu.mu_bounds` against the structure
+**certified** with :func:`polyrob.analysis.mu.mu_bounds` against the structure
 ``blk`` (real blocks as real) on a peak-refined grid: that number is
 :attr:`~polyrob.synthesis.result.MusynResult.peak_mu`.
 
@@ -49,12 +49,12 @@ from typing import Callable, Optional, Sequence
 import control
 import numpy as np
 
-from ..blocks import BlockStructure, as_block_structure
-from ..errors import PolyrobError, SynthesisError
-from .dscale import LogMagnitudeFit, ScalingData, Scalings, scaled_plant, scaling_data
-from .._threads import single_blas_thread
-from .hinf import HinfResult, _lft_mats, _is_stable, hinfsyn
-from .result import MusynResult
+from polyrob.analysis.blocks import BlockStructure, as_block_structure
+from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.synthesis.dscale import LogMagnitudeFit, ScalingData, Scalings, scaled_plant, scaling_data
+from polyrob._threads import single_blas_thread
+from polyrob.synthesis.hinf import HinfResult, _lft_mats, _is_stable, hinfsyn
+from polyrob.synthesis.result import MusynResult
 
 __all__ = [
     "musyn",
@@ -74,7 +74,7 @@ class MuUpperBound:
     Parameters
     ----------
     method : {"auto", "ab13md", "lmi"}
-        Passed to :func:`polyrob.mu.mussv` (AB13MD whenever it applies).
+        Passed to :func:`polyrob.analysis.mu.mussv` (AB13MD whenever it applies).
     n_jobs : int, optional
         Worker processes for the sweep (see :class:`~polyrob.synthesis.dscale.MuSweep`;
         default serial).
@@ -85,7 +85,7 @@ class MuUpperBound:
     """
 
     def __init__(self, method: str = "auto", n_jobs: Optional[int] = None):
-        from .dscale import MuSweep
+        from polyrob.synthesis.dscale import MuSweep
 
         self.method = method
         self.sweep = MuSweep(n_jobs=n_jobs, method=method)
@@ -241,15 +241,15 @@ def performance_lower_bound(P) -> tuple[float, float]:
 
     Examples
     --------
-    >>> import polyrob, polyrob.weights
+    >>> import polyrob, polyrob.plant.weights
     >>> from polyrob.synthesis.dk import performance_lower_bound
     >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
-    >>> P = polyrob.generalized_plant(polyrob.uncertain_plant(pldi), *polyrob.weights.paper_weights())
+    >>> P = polyrob.generalized_plant(polyrob.uncertain_plant(pldi), *polyrob.plant.weights.paper_weights())
     >>> b, w = performance_lower_bound(P)
     >>> bool(b < 1)
     True
     """
-    from ..plant import GeneralizedPlant
+    from polyrob.plant.generalized import GeneralizedPlant
 
     if not isinstance(P, GeneralizedPlant) or P.W_S is None or P.W_T is None:
         return 0.0, float("nan")
@@ -275,8 +275,8 @@ def certify(P, K, blk, omega=None, *, n_u=None, n_y=None):
     an unstable closed loop gives ``peak_mu = inf`` and ``certificate = None``
     (μ certifies nothing without nominal stability).
     """
-    from ..mu import mu_bounds
-    from ..plant import lft
+    from polyrob.analysis.mu import mu_bounds
+    from polyrob.plant.generalized import lft
 
     N = lft(P, K, n_u=n_u, n_y=n_y)
     A = np.asarray(N.A, float)
@@ -410,7 +410,7 @@ class DKIteration:
         since_best = 0
         prev = np.inf
         self.failures = []
-        from . import dscale as _dscale
+        from polyrob.synthesis import dscale as _dscale
 
         # the fits' complex D-steps share the D-step's worker
         _dscale._ACTIVE_SWEEP = getattr(self.mu_bound, "sweep", None)
@@ -530,7 +530,7 @@ class DKIteration:
 
 def _scaled_norm(Ps, K, n_u, n_y) -> float:
     """H∞ norm (fast estimate) of the scaled loop with ``K`` (``inf`` if unstable or ill posed)."""
-    from .hinf import hinf_norm_estimate
+    from polyrob.synthesis.hinf import hinf_norm_estimate
 
     A, B, C, D = (np.asarray(X, float) for X in (Ps.A, Ps.B, Ps.C, Ps.D))
     Ak, Bk, Ck, Dk = (np.asarray(X, float) for X in (K.A, K.B, K.C, K.D))
@@ -556,7 +556,7 @@ _STRUCT_RE = re.compile(r"^(full|pid|tf\d+|tfN|ss:\d+)$")
 
 
 def _parse_plant(P, blk, n_u, n_y):
-    from ..plant import GeneralizedPlant
+    from polyrob.plant.generalized import GeneralizedPlant
 
     if isinstance(P, GeneralizedPlant):
         Psys = P.system
@@ -665,7 +665,7 @@ def musyn(
     -------
     MusynResult
         ``peak_mu`` is the certified upper bound of ``Fl(P, K)`` against
-        ``blk`` with :func:`polyrob.mu.mu_bounds` (real blocks real), whatever
+        ``blk`` with :func:`polyrob.analysis.mu.mu_bounds` (real blocks real), whatever
         the iteration optimised; ``mu_history`` the grid peak of the D-step
         bound after each K-step (complex μ for D-K, mixed μ for D-G-K).
         ``info`` has ``method``, ``orders`` (D/G per iteration), ``gamma``,
@@ -702,7 +702,7 @@ def musyn(
         )
     if structure != "full":
         try:
-            from .fixed import fixed_structure_musyn
+            from polyrob.synthesis.fixed import fixed_structure_musyn
         except ImportError as exc:
             raise SynthesisError(
                 f"structure {structure!r} needs polyrob.synthesis.fixed, which is not available ({exc})"
@@ -744,7 +744,7 @@ def musyn(
     omega = np.unique(np.asarray(omega, float).ravel())
     if omega.size < 3 or np.any(omega <= 0) or not np.all(np.isfinite(omega)):
         raise PolyrobError("omega must hold at least three positive finite frequencies")
-    from .hinf import check_stabilizable
+    from polyrob.synthesis.hinf import check_stabilizable
 
     B = np.asarray(Psys.B, float)
     C = np.asarray(Psys.C, float)
@@ -755,7 +755,7 @@ def musyn(
                        target=target, progress=progress)
     K0 = None
     if initial_controller is not None:
-        from ..plant import _controller
+        from polyrob.plant.generalized import _controller
 
         K0 = _controller(initial_controller, n_u, n_y)
     with single_blas_thread():

@@ -2,7 +2,7 @@
 
 The D-step of μ-synthesis gives, at each frequency of a grid, the scalings
 of the μ upper bound of the closed loop ``N = Fl(P, K)`` (see
-:mod:`polyrob.mu`): ``D(ω) > 0`` commuting with ``Δ`` and, for real blocks,
+:mod:`polyrob.analysis.mu`): ``D(ω) > 0`` commuting with ``Δ`` and, for real blocks,
 ``G(ω) = G(ω)^H`` with
 
 .. math:: N^H D^2 N + j(G N - N^H G) - \\beta^2 D^2 \\preceq 0 .
@@ -71,10 +71,10 @@ import control
 import numpy as np
 import scipy.linalg as sla
 
-from ..blocks import BlockStructure, as_block_structure
-from ..errors import PolyrobError
-from .gfit import GFit, fit_g
-from .magfit import MagnitudeFit, _fit_errors, balanced_realization, fit_magnitude
+from polyrob.analysis.blocks import BlockStructure, as_block_structure
+from polyrob.errors import PolyrobError
+from polyrob.synthesis.gfit import GFit, fit_g
+from polyrob.synthesis.magfit import MagnitudeFit, _fit_errors, balanced_realization, fit_magnitude
 
 __all__ = [
     "MagnitudeFit",
@@ -502,7 +502,7 @@ class MuSweep:
     Each matrix costs one SLICOT AB13MD call (20-45 ms for the 2R robust
     performance problem, ~100 per D-step).  With ``n_jobs = k`` the
     frequencies are dealt to ``k`` worker processes running ``slycot.ab13md``
-    (a fresh interpreter through :class:`polyrob.mu.TimeLimitedCall`, never
+    (a fresh interpreter through :class:`polyrob.analysis.mu.TimeLimitedCall`, never
     a fork, and no re-import of the user's script); this process only
     coordinates.  A worker that fails or times out is replaced by a local
     call.
@@ -514,7 +514,7 @@ class MuSweep:
         pay off on an otherwise idle multi-core machine only: on a loaded
         2-core machine, measured, two workers gave no speed-up.
     method : str
-        :func:`polyrob.mu.mussv` method; repeated scalar blocks (LMI) are
+        :func:`polyrob.analysis.mu.mussv` method; repeated scalar blocks (LMI) are
         always computed serially.
     """
 
@@ -529,7 +529,7 @@ class MuSweep:
         return max(1, int(self.n_jobs or 1))
 
     def __call__(self, H: np.ndarray, st: BlockStructure):
-        from ..mu import _upper_ab13md, mussv
+        from polyrob.analysis.mu import _upper_ab13md, mussv
 
         st = as_block_structure(st)
         n = st.padded_size
@@ -552,7 +552,7 @@ class MuSweep:
             return mu, D, G
         import threading
 
-        from ..mu import TimeLimitedCall
+        from polyrob.analysis.mu import TimeLimitedCall
 
         # All AB13MD calls run in worker processes; this process only waits
         # (an AB13MD call here would hold the GIL and starve the threads that

@@ -38,7 +38,7 @@ Each iteration (what musyn's fixed-structure mode alternates, tightened):
    cannot buy its progress with a resonance between grid points.
 3. **D-step** — scalings refreshed where the bound is near the peak (batched
    BFGS warm-started from the previous ones; SLICOT AB13MD via
-   :func:`polyrob.mu.mussv` when progress stalls and for new frequencies);
+   :func:`polyrob.analysis.mu.mussv` when progress stalls and for new frequencies);
    the working grid is refined around the peaks.
 
 The grid peak therefore never increases.  Starts: the given ``init`` (e.g.
@@ -47,7 +47,7 @@ random perturbations of it (HIFOO's multi-start); a start that does not
 stabilise the loop first goes through a spectral-abscissa minimisation
 (HIFOO's stabilisation phase).
 
-The best start is certified by :func:`polyrob.mu.mu_bounds` of
+The best start is certified by :func:`polyrob.analysis.mu.mu_bounds` of
 ``lft(P, K)`` (upper and lower bounds, peak-refined): ``peak_mu`` is that
 certificate's peak, independent of the optimiser.  If the certificate finds
 a peak above the optimised one, it is added to the grid and the iteration
@@ -80,13 +80,13 @@ import control
 import numpy as np
 from scipy.optimize import minimize
 
-from .._threads import single_blas_thread
-from ..blocks import as_block_structure
-from ..errors import PolyrobError, SynthesisError
-from ..mu import mu_bounds
-from ._fixed_scalings import _Scalings, _diagonal_blocks, _dstep, _majorant, _refine_scalings, _scalings_from
-from .result import MusynResult
-from .structures import ControllerStructure, controller_structure
+from polyrob._threads import single_blas_thread
+from polyrob.analysis.blocks import as_block_structure
+from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.analysis.mu import mu_bounds
+from polyrob.synthesis._fixed_scalings import _Scalings, _diagonal_blocks, _dstep, _majorant, _refine_scalings, _scalings_from
+from polyrob.synthesis.result import MusynResult
+from polyrob.synthesis.structures import ControllerStructure, controller_structure
 
 __all__ = ["fixed_structure_musyn", "FixedStructureOptions", "closed_loop_response"]
 
@@ -283,7 +283,7 @@ def closed_loop_response(P, K, omega, *, n_u: Optional[int] = None, n_y: Optiona
 
 
 def _plant_parts(P, n_u, n_y):
-    from ..plant import GeneralizedPlant
+    from polyrob.plant.generalized import GeneralizedPlant
 
     if isinstance(P, GeneralizedPlant):
         return P.system, P.n_u, P.n_y
@@ -702,7 +702,7 @@ def fixed_structure_musyn(
         decade).  Default: ``grid_density`` points per decade over the
         closed-loop poles of the first start, widened by a decade each side.
     certify_omega : array_like, optional
-        Grid of the final certificate (:func:`~polyrob.mu.mu_bounds`, which
+        Grid of the final certificate (:func:`~polyrob.analysis.mu.mu_bounds`, which
         refines the peak); default ``mu_bounds``' own grid for the final
         closed loop.  Also screened during the iteration.
     init : "paper", LTI system, MusynResult, array, or None
@@ -730,7 +730,7 @@ def fixed_structure_musyn(
     Returns
     -------
     MusynResult
-        ``peak_mu`` is the peak of the certificate :func:`~polyrob.mu.mu_bounds`
+        ``peak_mu`` is the peak of the certificate :func:`~polyrob.analysis.mu.mu_bounds`
         of ``lft(P, K)``; ``info`` holds ``theta``, the structure's
         coefficients (``"coefficients"``, for ``"tfN"`` the ``num``/``den`` of
         every ``K_ij``), the per-start summary and the grids.
@@ -777,7 +777,7 @@ def fixed_structure_musyn(
         if isinstance(init, str):
             if init != "paper":
                 raise PolyrobError(f"init must be 'paper', a controller or None, got {init!r}")
-            from ..plant import paper_controller
+            from polyrob.plant.generalized import paper_controller
 
             init = paper_controller()
         if isinstance(init, MusynResult):
@@ -836,7 +836,7 @@ def fixed_structure_musyn(
         cert = None
         for rnd in range(opts.certify_rounds + 1):
             K = strc.controller(best.theta)
-            from ..plant import lft
+            from polyrob.plant.generalized import lft
 
             N = lft(P, K) if hasattr(P, "block_structure_rp") else lft(sysP, K, n_u=n_u, n_y=n_y)
             cert = mu_bounds(N, st, certify_omega, progress=False)

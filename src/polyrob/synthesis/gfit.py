@@ -15,7 +15,7 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.optimize import least_squares
 
-from .magfit import balanced_realization
+from polyrob.synthesis.magfit import balanced_realization
 
 # =================================================================== G fit
 @dataclass(frozen=True, eq=False)

@@ -61,9 +61,9 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 import scipy.linalg as sla
 
-from .._threads import single_blas_thread
-from ..errors import PolyrobError, SynthesisError
-from ..plant import _lft_mats
+from polyrob._threads import single_blas_thread
+from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.plant.generalized import _lft_mats
 
 __all__ = ["HinfResult", "hinfsyn", "hinf_norm", "hinf_norm_estimate", "check_stabilizable"]
 
@@ -598,7 +598,7 @@ def _hinf_lmi(prob: _Problem, tol: float, solver: Optional[str] = None):
 
 # ===================================================================== hinfsyn
 def _parse_plant(P, n_y, n_u):
-    from ..plant import GeneralizedPlant
+    from polyrob.plant.generalized import GeneralizedPlant
 
     labels = None
     if isinstance(P, GeneralizedPlant):

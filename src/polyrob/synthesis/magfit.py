@@ -29,7 +29,7 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.optimize import least_squares
 
-from ..errors import PolyrobError
+from polyrob.errors import PolyrobError
 
 # ================================================================ realisations
 def balanced_realization(A, B, C, D):

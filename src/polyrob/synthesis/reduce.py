@@ -2,7 +2,7 @@
 
 :func:`reduce_controller` reduces a (full-order μ-synthesis) controller by
 balanced truncation and returns the smallest order whose **certified** peak
-μ (recomputed with :func:`polyrob.mu.mu_bounds` on the reduced closed loop,
+μ (recomputed with :func:`polyrob.analysis.mu.mu_bounds` on the reduced closed loop,
 peak-refined) stays below a target, plus the μ-order trade-off table.
 
 Unstable controllers.  Balanced truncation needs a stable system, and H∞
@@ -32,9 +32,9 @@ import control
 import numpy as np
 import scipy.linalg as sla
 
-from ..errors import PolyrobError, SynthesisError
-from .._threads import single_blas_thread
-from .result import MusynResult
+from polyrob.errors import PolyrobError, SynthesisError
+from polyrob._threads import single_blas_thread
+from polyrob.synthesis.result import MusynResult
 
 __all__ = ["ReductionResult", "reduce_controller", "stable_unstable_split", "balanced_reduction"]
 
@@ -260,8 +260,8 @@ def reduce_controller(
     >>> red.order <= res.order, red.meets_target
     (True, True)
     """
-    from .dk import certify, frequency_grid
-    from ..blocks import as_block_structure
+    from polyrob.synthesis.dk import certify, frequency_grid
+    from polyrob.analysis.blocks import as_block_structure
 
     t0 = time.perf_counter()
     if isinstance(result_or_K, MusynResult):
@@ -285,7 +285,7 @@ def reduce_controller(
     if isinstance(P, control.StateSpace) and (n_u is None or n_y is None):
         raise PolyrobError("reduce_controller of a bare StateSpace plant needs n_u and n_y")
     if not isinstance(K, control.StateSpace):
-        from ..plant import _controller
+        from polyrob.plant.generalized import _controller
 
         nu = P.n_u if n_u is None else n_u
         ny = P.n_y if n_y is None else n_y

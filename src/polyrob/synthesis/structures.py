@@ -56,7 +56,7 @@ import control
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from ..errors import PolyrobError
+from polyrob.errors import PolyrobError
 
 __all__ = [
     "ControllerStructure",

@@ -29,8 +29,8 @@ from typing import Callable
 
 import numpy as np
 
-from .errors import RobotError
-from .robots import Manipulator
+from polyrob.errors import RobotError
+from polyrob.model.robots import Manipulator
 
 __all__ = ["AnalyticRobot", "paper_2r", "ANALYTIC_ROBOTS", "PAPER_2R_PARAMETERS"]
 

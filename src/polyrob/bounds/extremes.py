@@ -33,7 +33,7 @@ import itertools
 
 import numpy as np
 
-from .errors import BoundsError
+from polyrob.errors import BoundsError
 
 __all__ = ["polynomial_coefficients", "box_maximum", "evaluate_polynomial"]
 

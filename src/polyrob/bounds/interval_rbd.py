@@ -1,6 +1,6 @@
 """Rigorous interval evaluation of serial-chain rigid-body dynamics.
 
-Used by :mod:`polyrob.certify`.  Pinocchio cannot compute with interval
+Used by :mod:`polyrob.bounds.certify`.  Pinocchio cannot compute with interval
 scalars, so the dynamics are rebuilt here from the model's joint placements,
 axes and inertias.
 

@@ -35,7 +35,7 @@ from typing import Literal, Sequence, Union
 
 import numpy as np
 
-from .errors import PolyrobError
+from polyrob.errors import PolyrobError
 
 __all__ = ["Block", "BlockStructure", "as_block_structure"]
 
@@ -91,7 +91,7 @@ class BlockStructure:
 
     Examples
     --------
-    >>> from polyrob.blocks import BlockStructure
+    >>> from polyrob.analysis.blocks import BlockStructure
     >>> blk = BlockStructure.from_matlab([[-1, 0], [2, 0], [1, 3]])
     >>> [b.kind for b in blk.blocks]
     ['real', 'complex', 'full']
@@ -336,7 +336,7 @@ def as_block_structure(blk: BlkLike) -> BlockStructure:
 
     Examples
     --------
-    >>> from polyrob.blocks import as_block_structure
+    >>> from polyrob.analysis.blocks import as_block_structure
     >>> print(as_block_structure([[-1, 0], [-1, 0], [2, 2], [1, 1], [1, 1]]))
     diag(R, R, C2x2, C, C)
     """

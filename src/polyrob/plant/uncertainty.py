@@ -1,6 +1,6 @@
 """The uncertain plant: a PLDI written as an LFT in normalised real parameters.
 
-:func:`uncertain_plant` turns a :class:`~polyrob.pldi.PLDI` into an
+:func:`uncertain_plant` turns a :class:`~polyrob.bounds.pldi.PLDI` into an
 :class:`UncertainPlant`, MATLAB's ``uss`` built from one ``ureal`` per varying
 Jacobian entry (the paper's section 2, eq. 7-10, and its "ten independent
 real parameters" of section 3).
@@ -47,7 +47,7 @@ conservative, since the two entries can no longer move independently.
 Examples
 --------
 >>> import polyrob
->>> from polyrob.uncertainty import uncertain_plant
+>>> from polyrob.plant.uncertainty import uncertain_plant
 >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
 >>> unc = uncertain_plant(pldi)
 >>> unc.parameter_names
@@ -65,7 +65,7 @@ from dataclasses import dataclass, field
 import control
 import numpy as np
 
-from .errors import BoundsError, PolyrobError
+from polyrob.errors import BoundsError, PolyrobError
 
 __all__ = [
     "UncertainPlant",
@@ -112,7 +112,7 @@ with a system; the upper one with a constant is three matrix products:
     Examples
     --------
     >>> import control, numpy as np
-    >>> from polyrob.uncertainty import upper_lft
+    >>> from polyrob.plant.uncertainty import upper_lft
     >>> M = control.ss([[-1.0]], [[1.0, 1.0]], [[1.0], [1.0]], np.zeros((2, 2)))
     >>> upper_lft(M, [[2.0]]).A    # x' = -x + d, d = 2 x
     array([[1.]])
@@ -263,7 +263,7 @@ class UncertainPlant:
         Examples
         --------
         >>> import polyrob
-        >>> from polyrob.uncertainty import uncertain_plant
+        >>> from polyrob.plant.uncertainty import uncertain_plant
         >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
         >>> G = uncertain_plant(pldi).nominal_system()
         >>> G.ninputs, G.noutputs, G.nstates, G.input_labels
@@ -340,7 +340,7 @@ class UncertainPlant:
         Examples
         --------
         >>> import numpy as np, polyrob
-        >>> from polyrob.uncertainty import uncertain_plant
+        >>> from polyrob.plant.uncertainty import uncertain_plant
         >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
         >>> unc = uncertain_plant(pldi)
         >>> G = unc.plant_at(-np.ones(unc.n_params))
@@ -477,7 +477,7 @@ def uncertain_plant(pldi, *, nominal: str = "pldi", merge_symmetric: bool = Fals
     Examples
     --------
     >>> import polyrob
-    >>> from polyrob.uncertainty import uncertain_plant
+    >>> from polyrob.plant.uncertainty import uncertain_plant
     >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
     >>> unc = uncertain_plant(pldi, merge_symmetric=True)
     >>> unc.n_params, unc.n_delta, unc.merged

@@ -1,6 +1,6 @@
 """Finding the extremes of the Jacobian entries: sampling, exact inner maxima, screens, local search.
 
-Used by :func:`polyrob.pldi.bound_pldi`; see there for the method.
+Used by :func:`polyrob.bounds.pldi.bound_pldi`; see there for the method.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import numpy as np
 from scipy import optimize
 from scipy.stats import qmc
 
-from .domain import Domain
-from .extremes import box_maximum, polynomial_coefficients
+from polyrob.bounds.domain import Domain
+from polyrob.bounds.extremes import box_maximum, polynomial_coefficients
 
 
 class Problem:
@@ -105,7 +105,7 @@ def inner_maxima(problem: Problem, q, directions, index, progress, workers):
     -------
     vals : ndarray (N, D)
         Attained values (vertices and coordinate ascent beyond four joints,
-        see :func:`polyrob.extremes.box_maximum`).
+        see :func:`polyrob.bounds.extremes.box_maximum`).
     depends : ndarray (D, 2m) bool
         Which velocities and torques each direction depends on at all.
     """
@@ -427,7 +427,7 @@ def parallel_map(fn, items, workers, progress, label):
     BLAS runs single-threaded inside: the work is many small problems, and a
     multi-threaded OpenBLAS makes each L-BFGS-B step about 10x slower here.
     """
-    from ._threads import single_blas_thread
+    from polyrob._threads import single_blas_thread
 
     with single_blas_thread():
         return _parallel_map_inner(fn, items, workers, progress, label)

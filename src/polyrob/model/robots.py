@@ -2,7 +2,7 @@
 
 A robot comes from a URDF file, from a robot that ``example-robot-data`` ships
 (found through its installed share folder), from a URDF bundled with polyrob
-(``urdf/``), or from an analytic model (:mod:`polyrob.analytic`, e.g. the
+(``urdf/``), or from an analytic model (:mod:`polyrob.model.analytic`, e.g. the
 paper's printed ``paper_2r``).  Whatever the source, the result is a
 :class:`Manipulator`: ``m`` joints, the joint limits of the URDF, and the
 dynamics ``xdot = f(x, u)`` with ``x = (q, qdot)`` and its Jacobians.
@@ -30,8 +30,8 @@ from typing import Sequence
 import numpy as np
 import pinocchio
 
-from . import dynamics
-from .errors import RobotError
+from polyrob.model import dynamics
+from polyrob.errors import RobotError
 
 __all__ = [
     "Manipulator",
@@ -71,7 +71,7 @@ JOINT_KINDS = ("revolute", "continuous", "prismatic")
 
 def bundled_urdf_dir() -> Path:
     """The folder of the URDFs bundled with polyrob (the repository's ``urdf/``)."""
-    return Path(__file__).resolve().parent / "urdf"
+    return Path(__file__).resolve().parent.parent / "urdf"
 
 
 @functools.lru_cache(maxsize=1)
@@ -232,7 +232,7 @@ class Robot(Manipulator):
     def jacobians_batch(self, q, qdot, u):
         """Jacobians at many points: arrays (n, 2m, 2m) and (n, 2m, m).
 
-        See :func:`polyrob.dynamics.jacobians_batch`.
+        See :func:`polyrob.model.dynamics.jacobians_batch`.
         """
         return dynamics.jacobians_batch(self, q, qdot, u)
 
@@ -257,7 +257,7 @@ def load_robot(source: str | Path = "planar_2r", *, lock: Sequence[str] | None =
     -------
     Manipulator
         A :class:`Robot` for URDF sources, an
-        :class:`~polyrob.analytic.AnalyticRobot` for analytic models.
+        :class:`~polyrob.model.analytic.AnalyticRobot` for analytic models.
 
     Raises
     ------
@@ -274,7 +274,7 @@ def load_robot(source: str | Path = "planar_2r", *, lock: Sequence[str] | None =
     ...
     polyrob.errors.RobotError: unknown robot 'no_such_robot': give a URDF path or one of the names `polyrob robots` lists
     """
-    from . import analytic  # analytic models are bundled by name too
+    from polyrob.model import analytic  # analytic models are bundled by name too
 
     text = str(source)
     if text in analytic.ANALYTIC_ROBOTS:
@@ -498,7 +498,7 @@ def available_robots() -> list[tuple[str, str]]:
     then the aliases of example-robot-data's serial arms, then every other
     URDF file there (which may still be refused, e.g. legged robots are trees).
     """
-    from . import analytic
+    from polyrob.model import analytic
 
     names = [(p.stem, "bundled") for p in sorted(bundled_urdf_dir().glob("*.urdf"))]
     names += [(n, "bundled (analytic)") for n in analytic.ANALYTIC_ROBOTS]

@@ -1,6 +1,6 @@
 """The generalized plant ``P`` of the paper's eq. (10), its LFTs and loop functions.
 
-:func:`generalized_plant` augments an :class:`~polyrob.uncertainty.UncertainPlant`
+:func:`generalized_plant` augments an :class:`~polyrob.plant.uncertainty.UncertainPlant`
 with performance weights (mixed sensitivity, MATLAB's ``augw`` plus the
 uncertainty channels) into the plant ``P`` partitioned as in eq. (10)::
 
@@ -41,9 +41,9 @@ the matrices are bit-for-bit those of the uncertain plant and the weights.
 Examples
 --------
 >>> import polyrob
->>> from polyrob.uncertainty import uncertain_plant
->>> from polyrob.plant import generalized_plant, lft, paper_controller
->>> from polyrob.weights import paper_weights
+>>> from polyrob.plant.uncertainty import uncertain_plant
+>>> from polyrob.plant.generalized import generalized_plant, lft, paper_controller
+>>> from polyrob.plant.weights import paper_weights
 >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
 >>> W_S, W_T = paper_weights()
 >>> P = generalized_plant(uncertain_plant(pldi), W_S, W_T)
@@ -65,8 +65,8 @@ import control
 import numpy as np
 import scipy.linalg as sla
 
-from .errors import PolyrobError
-from .uncertainty import UncertainPlant, upper_lft
+from polyrob.errors import PolyrobError
+from polyrob.plant.uncertainty import UncertainPlant, upper_lft
 
 __all__ = [
     "GeneralizedPlant",
@@ -104,7 +104,7 @@ def paper_controller() -> control.TransferFunction:
 
     Examples
     --------
-    >>> from polyrob.plant import paper_controller
+    >>> from polyrob.plant.generalized import paper_controller
     >>> K = paper_controller()
     >>> K.ninputs, K.noutputs, K.den[1][1].tolist()
     (2, 2, [0.02319, 6.494, 454.6, 1.0])
@@ -339,8 +339,8 @@ def generalized_plant(
     Examples
     --------
     >>> import control, polyrob
-    >>> from polyrob.uncertainty import uncertain_plant
-    >>> from polyrob.plant import generalized_plant
+    >>> from polyrob.plant.uncertainty import uncertain_plant
+    >>> from polyrob.plant.generalized import generalized_plant
     >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
     >>> P = generalized_plant(uncertain_plant(pldi), control.tf([0.5, 0.5], [1, 0.005]), W_KS=1e-3)
     >>> P.z_labels, P.n_z, P.system.nstates
@@ -511,7 +511,7 @@ def lft(P, K, *, n_u: int | None = None, n_y: int | None = None) -> control.Stat
     Examples
     --------
     >>> import control, numpy as np
-    >>> from polyrob.plant import lft
+    >>> from polyrob.plant.generalized import lft
     >>> P = control.ss([[0.0]], [[1.0, 1.0]], [[1.0], [1.0]], [[0.0, 0.0], [0.0, 0.0]])
     >>> N = lft(P, -2.0, n_u=1, n_y=1)   # x' = w + u, u = -2 x
     >>> N.A
@@ -567,7 +567,7 @@ def loop_functions(G: control.StateSpace, K, *, delta=None) -> ClosedLoop:
     Examples
     --------
     >>> import control
-    >>> from polyrob.plant import loop_functions
+    >>> from polyrob.plant.generalized import loop_functions
     >>> cl = loop_functions(control.ss(control.tf([1], [1, 0])), 2.0)   # G = 1/s, K = 2
     >>> abs(complex(cl.S(0))), round(abs(complex(cl.T(0))), 12), cl.stable   # S(0) = 0, T(0) = 1
     (0.0, 1.0, True)
@@ -608,8 +608,8 @@ def closed_loop(unc: UncertainPlant, K, delta, *, strict: bool = True) -> Closed
     Examples
     --------
     >>> import numpy as np, polyrob
-    >>> from polyrob.uncertainty import uncertain_plant
-    >>> from polyrob.plant import closed_loop, paper_controller
+    >>> from polyrob.plant.uncertainty import uncertain_plant
+    >>> from polyrob.plant.generalized import closed_loop, paper_controller
     >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
     >>> cl = closed_loop(uncertain_plant(pldi), paper_controller(), np.zeros(10))
     >>> cl.S.ninputs, cl.T.noutputs, cl.system.nstates

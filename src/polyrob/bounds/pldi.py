@@ -1,6 +1,6 @@
 """The PLDI: every Jacobian the robot can have inside the domain, bounded.
 
-:func:`bound_pldi` takes a robot and a :class:`~polyrob.domain.Domain` and
+:func:`bound_pldi` takes a robot and a :class:`~polyrob.bounds.domain.Domain` and
 returns a :class:`PLDI`: the nominal pair ``(A0, B0)`` at an equilibrium, the
 interval of every entry of ``A`` and ``B`` (the paper's eq. 9 table), the
 witnesses where each bound is attained, and a polytope (half-spaces, and
@@ -12,7 +12,7 @@ How the bounds are found (``enclosure = "sampled"``):
 2. the remaining positions are sampled with a scrambled Sobol' design plus the
    corners of their box; for each position the extremes over the
    velocity/torque box are computed exactly, or attained and nearly always
-   exact beyond four joints (:mod:`polyrob.extremes`);
+   exact beyond four joints (:mod:`polyrob.bounds.extremes`);
 3. a dense uniform screen of the whole domain (one Jacobian per point) adds
    starts near narrow peaks the design straddles;
 4. each extreme is searched by L-BFGS-B over positions, velocities and torques
@@ -28,7 +28,7 @@ How the bounds are found (``enclosure = "sampled"``):
 6. fresh random points of the domain check the coverage (it must be 1.0).
 
 With ``certify=True`` the intervals are replaced by a guaranteed enclosure
-computed by interval arithmetic (:mod:`polyrob.certify`); ``enclosure`` is
+computed by interval arithmetic (:mod:`polyrob.bounds.certify`); ``enclosure`` is
 then ``"certified"``.
 
 Examples
@@ -52,11 +52,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import search
-from ._io import atomic_write, json_default
-from .domain import Domain
-from .errors import BoundsError, CertificationError
-from .polytope import COVERAGE_RTOL, VERTEX_MAX_DIM, Polytope, build_polytope, principal_directions
+from polyrob.bounds import search
+from polyrob.io.atomic import atomic_write, json_default
+from polyrob.bounds.domain import Domain
+from polyrob.errors import BoundsError, CertificationError
+from polyrob.bounds.polytope import COVERAGE_RTOL, VERTEX_MAX_DIM, Polytope, build_polytope, principal_directions
 
 #: Principal directions of the Jacobian cloud searched besides +-e_i.
 PRINCIPAL_DIRECTIONS = 12
@@ -139,7 +139,7 @@ class PLDI:
     @property
     def robot(self):
         """The robot, loaded again from its source."""
-        from .robots import load_robot
+        from polyrob.model.robots import load_robot
 
         return load_robot(self.robot_source if self.robot_source.endswith(".urdf") else self.robot_name)
 
@@ -536,7 +536,7 @@ def coverage_fraction(pldi: PLDI, robot, n: int, *, seed=None) -> float:
 
 
 def _certified(robot, domain: Domain, options: dict, progress: bool):
-    from . import certify as certify_module
+    from polyrob.bounds import certify as certify_module
 
     model = getattr(robot, "model", None)
     if model is None:

@@ -5,7 +5,7 @@ and ``f(x, u) = (qd, M^-1 (u - h - D qd))``, :func:`certified_jacobian_bounds`
 returns entrywise intervals ``[A_lo, A_hi]``, ``[B_lo, B_hi]`` that provably
 contain ``A = df/dx`` and ``B = df/du`` for *every* ``(q, qd, u)`` in a box.
 
-Method (see :mod:`polyrob.interval_rbd` for the dynamics themselves):
+Method (see :mod:`polyrob.bounds.interval_rbd` for the dynamics themselves):
 
 * On a q-box every entry is a polynomial in ``(qd, u)`` of degree <= 2 whose
   coefficients ``c(q)`` are enclosed by order-2 *Taylor models* in
@@ -47,7 +47,7 @@ import numpy as np
 from flint import arb, arb_mat
 
 from polyrob.errors import CertificationError, DomainError
-from polyrob.interval_rbd import (SymbolicDynamics, _sq, arb_lower, arb_upper, box_coefficients, entry_list,
+from polyrob.bounds.interval_rbd import (SymbolicDynamics, _sq, arb_lower, arb_upper, box_coefficients, entry_list,
                                   entry_depends, entry_terms)
 
 __all__ = ["CertifiedEnclosure", "certified_jacobian_bounds", "reference_jacobians"]

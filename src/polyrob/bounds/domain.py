@@ -33,7 +33,7 @@ from typing import Mapping
 import numpy as np
 from scipy.stats import qmc
 
-from .errors import DomainError
+from polyrob.errors import DomainError
 
 __all__ = ["Domain"]
 

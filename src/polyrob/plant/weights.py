@@ -17,7 +17,7 @@ from typing import Sequence, Union
 import control
 import numpy as np
 
-from .errors import PolyrobError
+from polyrob.errors import PolyrobError
 
 __all__ = [
     "makeweight",
@@ -100,7 +100,7 @@ def makeweight(
     --------
     The MATLAB Answers example ``makeweight(100, 10, 0.1)``:
 
-    >>> from polyrob.weights import makeweight
+    >>> from polyrob.plant.weights import makeweight
     >>> W = makeweight(100, 10, 0.1)
     >>> W.num[0][0].round(4).tolist(), W.den[0][0].round(4).tolist()
     ([0.1, 9.9504], [1.0, 0.0995])
@@ -145,7 +145,7 @@ def sensitivity_weight(omega_b: float, M_s: float, A_s: float) -> control.Transf
 
     Examples
     --------
-    >>> from polyrob.weights import sensitivity_weight
+    >>> from polyrob.plant.weights import sensitivity_weight
     >>> W = sensitivity_weight(0.5, 2, 1e-2)
     >>> W.num[0][0].tolist(), W.den[0][0].tolist()
     ([0.5, 0.5], [1.0, 0.005])
@@ -164,7 +164,7 @@ def complementary_weight(omega_bt: float, M_t: float, A_t: float) -> control.Tra
 
     Examples
     --------
-    >>> from polyrob.weights import complementary_weight
+    >>> from polyrob.plant.weights import complementary_weight
     >>> W = complementary_weight(10, 2.1, 1e-2)
     >>> W.num[0][0].tolist(), W.den[0][0].tolist()
     ([1.0, 10.0], [0.01, 21.0])
@@ -192,7 +192,7 @@ def diagonal_weight(weights: Sequence) -> control.TransferFunction:
 
     Examples
     --------
-    >>> from polyrob.weights import diagonal_weight
+    >>> from polyrob.plant.weights import diagonal_weight
     >>> W = diagonal_weight([control.tf([1], [1, 1]), 2.0])
     >>> W.noutputs, W.ninputs, float(W(0)[1, 1].real)
     (2, 2, 2.0)
@@ -233,7 +233,7 @@ def paper_weights(
 
     Examples
     --------
-    >>> from polyrob.weights import paper_weights
+    >>> from polyrob.plant.weights import paper_weights
     >>> WS, WT = paper_weights()
     >>> WS.num[1][1].round(4).tolist(), WT.den[1][1].tolist()
     ([0.3333, 0.1], [0.01, 36.0])

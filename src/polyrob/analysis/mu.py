@@ -8,7 +8,7 @@ model.  Every bound comes with its certificate:
   with :math:`\\Delta`) and :math:`G = G^H` (non-zero on real blocks only) such
   that :math:`M^H D^2 M + j(GM - M^H G) - \\beta^2 D^2 \\preceq 0`
   (Fan, Tits & Doyle 1991), on the padded square problem of
-  :mod:`polyrob.blocks`;
+  :mod:`polyrob.analysis.blocks`;
 * the **lower bound** :math:`\\ell` with a perturbation :math:`\\Delta` in the
   structure, :math:`\\bar\\sigma(\\Delta) = 1/\\ell` and
   :math:`\\det(I - M\\Delta) = 0`.
@@ -29,11 +29,11 @@ from typing import Literal, Optional
 import numpy as np
 import scipy.linalg as sla
 
-from ._threads import single_blas_thread
-from .blocks import BlkLike, BlockStructure, _perron_upper, as_block_structure
-from .errors import PolyrobError, SolverError
-from ._timelimit import TimeLimitedCall
-from .mu_lower import _lower_bound
+from polyrob._threads import single_blas_thread
+from polyrob.analysis.blocks import BlkLike, BlockStructure, _perron_upper, as_block_structure
+from polyrob.errors import PolyrobError, SolverError
+from polyrob.analysis._timelimit import TimeLimitedCall
+from polyrob.analysis.mu_lower import _lower_bound
 
 __all__ = [
     "MussvResult",
@@ -308,7 +308,7 @@ def mussv(
     M : (nc, nr) array_like
         Matrix closing the loop with :math:`\\Delta` (``nr x nc``).
     blk : BlockStructure or array_like
-        MATLAB ``blk`` encoding, see :mod:`polyrob.blocks`.
+        MATLAB ``blk`` encoding, see :mod:`polyrob.analysis.blocks`.
     method : {"auto", "ab13md", "lmi"}
         Upper bound: SLICOT AB13MD (real scalars, full complex blocks) or
         the D-G LMI solved by bisection with cvxpy (also repeated scalars).
@@ -341,7 +341,7 @@ def mussv(
     Skogestad & Postlethwaite, Example 8.5:
 
     >>> import numpy as np
-    >>> from polyrob.mu import mussv
+    >>> from polyrob.analysis.mu import mussv
     >>> M = np.array([[2.0, 2.0], [-1.0, -1.0]])
     >>> r = mussv(M, [[1, 0], [1, 0]])
     >>> print(f"{r.lower:.4f} <= mu <= {r.upper:.4f}")
@@ -469,7 +469,7 @@ def mu_bounds(
     Examples
     --------
     >>> import control
-    >>> from polyrob.mu import mu_bounds
+    >>> from polyrob.analysis.mu import mu_bounds
     >>> G = control.tf([1], [1, 0.2, 1])          # |G| peaks at 1/(2 zeta sqrt(1-zeta^2))
     >>> r = mu_bounds(G, [[1, 1]])
     >>> print(f"{r.peak_upper:.4f} {r.peak_lower:.4f} {r.peak_upper_frequency:.4f}")

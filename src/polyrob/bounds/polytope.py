@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize
 
-from .errors import BoundsError
+from polyrob.errors import BoundsError
 
 __all__ = ["Polytope", "build_polytope", "principal_directions", "VERTEX_MAX_DIM", "COVERAGE_RTOL"]
 

@@ -31,8 +31,8 @@ from pathlib import Path
 import control
 import numpy as np
 
-from .errors import PolyrobError
-from ._io import atomic_write, json_default
+from polyrob.errors import PolyrobError
+from polyrob.io.atomic import atomic_write, json_default
 
 __all__ = ["save_controller", "load_controller", "read_controller_file", "ControllerFileError"]
 
@@ -70,7 +70,7 @@ def read_controller_file(path) -> dict:
     except ValueError as exc:
         raise ControllerFileError(f"{path}: not JSON ({exc})") from None
     if not isinstance(doc, dict) or doc.get("type") not in ("ss", "tf"):
-        raise ControllerFileError(f"{path}: a controller file needs \"type\": \"ss\" or \"tf\" (see polyrob.controller)")
+        raise ControllerFileError(f"{path}: a controller file needs \"type\": \"ss\" or \"tf\" (see polyrob.io.controller)")
     return doc
 
 

@@ -17,7 +17,7 @@ loop poles at random parameters and at the corners of the box.
 Examples
 --------
 >>> import numpy as np, polyrob
->>> from polyrob.weights import paper_weights
+>>> from polyrob.plant.weights import paper_weights
 >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
 >>> unc = polyrob.uncertain_plant(pldi)
 >>> P = polyrob.generalized_plant(unc, *paper_weights())
@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .plant import GeneralizedPlant, closed_loop, lft, nominal_closed_loop
+from polyrob.plant.generalized import GeneralizedPlant, closed_loop, lft, nominal_closed_loop
 
 __all__ = ["RobustnessResult", "StabilitySampling", "robstab", "robperf", "sample_stability", "nominal_performance"]
 
@@ -89,7 +89,7 @@ class RobustnessResult:
 
 
 def _analyse(kind, N, blk, P: GeneralizedPlant, K, omega, **mu_options) -> RobustnessResult:
-    from .mu import mu_bounds
+    from polyrob.analysis.mu import mu_bounds
 
     mu = mu_bounds(N, blk, omega, **mu_options)
     worst = np.asarray(mu.worst_delta)
@@ -125,7 +125,7 @@ def robstab(P: GeneralizedPlant, K, omega=None, **mu_options) -> RobustnessResul
     omega : array_like, optional
         Frequencies; default: automatic grid refined around the peak.
     **mu_options
-        Passed to :func:`polyrob.mu.mu_bounds` (``method``, ``refine_peak``, ...).
+        Passed to :func:`polyrob.analysis.mu.mu_bounds` (``method``, ``refine_peak``, ...).
     """
     N = lft(P, K)
     s_v, s_d = P.output_slices["v"], P.input_slices["d"]

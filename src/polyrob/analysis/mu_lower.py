@@ -6,7 +6,7 @@ structure with :math:`\\bar\\sigma(\\Delta) = 1/\\ell` and
 (complex blocks) and Young & Doyle (mixed), vertex candidates for a few real
 scalars, then a local search (SLSQP) on the singularity condition.  No
 library computes it (python-control, slycot and dkpy stop at the upper
-bound), hence this module.  Used by :func:`polyrob.mu.mussv`.
+bound), hence this module.  Used by :func:`polyrob.analysis.mu.mussv`.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import warnings
 import numpy as np
 from scipy.optimize import minimize
 
-from .blocks import BlockStructure, _perron_upper
+from polyrob.analysis.blocks import BlockStructure, _perron_upper
 
 def _q_from(a: np.ndarray, w: np.ndarray, meta) -> np.ndarray:
     """Structured Q (norm <= 1) aligning ``a`` with ``w`` block by block.
