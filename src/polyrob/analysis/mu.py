@@ -611,3 +611,7 @@ def _refine_peaks(omega, up, f, n_peaks=3, xtol=1e-7):
                             method="bounded", options={"xatol": xtol})
         out.append(float(np.exp(r.x)))
     return out
+
+
+# Public name for the D-scale fit of the synthesis stage.
+upper_bound_ab13md = _upper_ab13md

@@ -621,3 +621,9 @@ def closed_loop(unc: UncertainPlant, K, delta, *, strict: bool = True) -> Closed
 def nominal_closed_loop(unc: UncertainPlant, K) -> ClosedLoop:
     """Loop functions around the nominal ``G_n`` (:meth:`UncertainPlant.nominal_system`)."""
     return loop_functions(unc.nominal_system(), K)
+
+
+# Public names for the synthesis stage (the private spellings above are kept
+# until every caller has moved over).
+lower_lft_matrices = _lft_mats
+as_controller_ss = _controller
