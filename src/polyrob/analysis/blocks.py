@@ -30,8 +30,9 @@ compression :math:`E_r^T \\Delta' E_c` never increases the norm.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal, Sequence, Union
+from typing import Literal, Union
 
 import numpy as np
 
@@ -105,7 +106,7 @@ class BlockStructure:
 
     # ----------------------------------------------------------- construction
     @classmethod
-    def from_matlab(cls, blk: Sequence[Sequence[int]] | np.ndarray) -> "BlockStructure":
+    def from_matlab(cls, blk: Sequence[Sequence[int]] | np.ndarray) -> BlockStructure:
         """Parse MATLAB's ``blk`` (list of rows or an ``N x 2`` array)."""
         try:
             arr = np.asarray(blk, dtype=float)
@@ -345,7 +346,7 @@ def as_block_structure(blk: BlkLike) -> BlockStructure:
     return BlockStructure.from_matlab(blk)
 
 
-def _perron_upper(Ms: np.ndarray, st: BlockStructure) -> tuple[float, np.ndarray]:
+def perron_upper(Ms: np.ndarray, st: BlockStructure) -> tuple[float, np.ndarray]:
     """Cheap D-scaled upper bound (Perron scaling of the block-norm matrix).
 
     ``D = diag(d_i I)`` commutes with every structure, so

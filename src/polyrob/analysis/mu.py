@@ -18,22 +18,31 @@ What is written by hand here and why: no Python library computes mixed
 scalars + full complex blocks and is used whenever it applies; repeated
 scalar blocks need the D-G LMI (solved with cvxpy); the lower bound (power
 iteration + a local search) exists in no library at all.
+
+What the sweep's figures are: :func:`mu_bounds` evaluates the bounds at the
+points of a frequency grid (plus a local refinement around the largest
+maxima).  Its ``peak_upper`` is therefore the **peak μ upper bound on the
+grid**: an upper bound of μ at each grid point, and an estimate from below of
+:math:`\\sup_\\omega \\mu` (a narrow peak between two points can be missed).
+:attr:`MuBoundsResult.covers` states this in words; ``docs/mu.md`` says what
+is and is not covered.
 """
 
 from __future__ import annotations
 
-import warnings
-from dataclasses import dataclass
-from typing import Literal, Optional
+from typing import Literal
 
 import numpy as np
-import scipy.linalg as sla
 
 from polyrob._threads import single_blas_thread
-from polyrob.analysis.blocks import BlkLike, BlockStructure, _perron_upper, as_block_structure
-from polyrob.errors import PolyrobError, SolverError
-from polyrob.analysis._timelimit import TimeLimitedCall
-from polyrob.analysis.mu_lower import _lower_bound
+from polyrob.analysis import mu_upper
+from polyrob.analysis.blocks import BlkLike, BlockStructure, as_block_structure
+from polyrob.analysis.frequency import default_grid, freqresp, refine_peaks
+from polyrob.analysis.mu_lower import lower_bound
+from polyrob.analysis.mu_results import MuBoundsResult, MussvResult
+from polyrob.analysis.mu_upper import LmiUpper
+from polyrob.analysis.timelimit import TimeLimitedCall
+from polyrob.errors import PolyrobError
 
 __all__ = [
     "MussvResult",
@@ -44,238 +53,6 @@ __all__ = [
 ]
 
 Method = Literal["auto", "ab13md", "lmi"]
-
-
-# =============================================================== results
-@dataclass(frozen=True, eq=False)
-class MussvResult:
-    """Bounds on :math:`\\mu` of one matrix and their certificates.
-
-    Attributes
-    ----------
-    upper, lower : float
-        :math:`\\ell \\le \\mu_\\Delta(M) \\le` ``upper``.
-    delta : ndarray
-        Worst perturbation of the lower bound (shape of :math:`\\Delta`):
-        :math:`\\det(I - M\\Delta) \\approx 0`, :math:`\\bar\\sigma(\\Delta) = 1/\\ell`.
-        The zero matrix when ``lower == 0`` (no destabilising Δ was found;
-        for purely real structures μ may truly be 0).
-    D, G : ndarray
-        Upper-bound scalings on the padded square problem (``D`` in square-root
-        form, see module docstring).
-    Dl, Dr : ndarray
-        ``D`` restricted to M's rows and columns: for complex-only structures
-        :math:`\\bar\\sigma(D_l M D_r^{-1}) \\le` ``upper``.
-    structure : BlockStructure
-    method : str
-        Upper-bound method used (``"ab13md"`` or ``"lmi"``).
-    """
-
-    upper: float
-    lower: float
-    delta: np.ndarray
-    D: np.ndarray
-    G: np.ndarray
-    Dl: np.ndarray
-    Dr: np.ndarray
-    structure: BlockStructure
-    method: str
-
-    def lmi_residual(self, M: np.ndarray) -> float:
-        """Largest eigenvalue of the D-G LMI at ``upper``, relative to ``upper**2``.
-
-        ``<= ~1e-8`` means the scalings certify the upper bound.
-        """
-        Ms = self.structure.pad(self.structure.check_m(M))
-        P = self.D @ self.D
-        L = Ms.conj().T @ P @ Ms + 1j * (self.G @ Ms - Ms.conj().T @ self.G) - self.upper**2 * P
-        L = (L + L.conj().T) / 2
-        return float(np.linalg.eigvalsh(L)[-1]) / max(self.upper**2 * np.linalg.norm(P, 2), 1e-300)
-
-
-@dataclass(frozen=True, eq=False)
-class MuBoundsResult:
-    """:math:`\\mu` bounds over frequency (see :func:`mu_bounds`).
-
-    Attributes
-    ----------
-    omega, upper, lower : ndarray
-        Sorted frequencies (rad/s, grid + refinement points) and bounds.
-    D, G : ndarray
-        Upper-bound scalings per frequency, shape ``(N, n, n)`` (padded).
-    peak_upper, peak_upper_frequency : float
-        :math:`\\max_\\omega` upper bound and where it is reached.
-    peak_lower, critical_frequency : float
-        :math:`\\max_\\omega` lower bound and where it is reached.
-    worst_delta : ndarray
-        Destabilising perturbation at ``critical_frequency`` on the boundary:
-        :math:`\\bar\\sigma = 1/` ``peak_lower``, :math:`\\det(I - M(j\\omega_c)\\Delta) = 0`.
-    structure : BlockStructure
-    method : str
-    warm_start_fallbacks : int
-        Number of AB13MD warm starts that timed out or failed (then cold).
-    """
-
-    omega: np.ndarray
-    upper: np.ndarray
-    lower: np.ndarray
-    D: np.ndarray
-    G: np.ndarray
-    peak_upper: float
-    peak_upper_frequency: float
-    peak_lower: float
-    critical_frequency: float
-    worst_delta: np.ndarray
-    structure: BlockStructure
-    method: str
-    warm_start_fallbacks: int = 0
-
-
-# ======================================================== upper bounds
-def _ab13md_impl(Z, nblock, itype, x=None):
-    """Indirection so tests can substitute a misbehaving AB13MD."""
-    import slycot
-
-    return slycot.ab13md(Z, nblock, itype) if x is None else slycot.ab13md(Z, nblock, itype, x)
-
-
-_AB13MD_DEFAULT = _ab13md_impl
-
-
-def _upper_ab13md(Ms: np.ndarray, st: BlockStructure, result=None):
-    """Cold AB13MD call (or use a precomputed ``result``) -> (bound, D, G, x)."""
-    n = Ms.shape[0]
-    if not np.any(Ms):
-        return 0.0, np.eye(n), np.zeros((n, n)), None
-    if result is None:
-        from slycot.exceptions import SlycotError
-
-        nblock, itype = st.ab13md_args
-        try:
-            result = _ab13md_impl(Ms, nblock, itype)
-        except SlycotError as exc:
-            raise SolverError(f"SLICOT AB13MD failed: {exc}") from exc
-    bound, d, g, x = result
-    return float(bound), np.diag(np.asarray(d, float)), np.diag(np.asarray(g, float)), x
-
-
-def _cert_beta(Ms: np.ndarray, P: np.ndarray, G: np.ndarray) -> tuple[float, np.ndarray]:
-    """Smallest beta certified by given (P = D^2, G): a generalized eigenvalue.
-
-    Returns ``(beta, P)`` with ``P`` made safely definite.
-
-    Re-deriving beta from the scalings makes the LMI bound exact whatever the
-    accuracy of the SDP solver.
-    """
-    P = (P + P.conj().T) / 2
-    ev = np.linalg.eigvalsh(P)
-    if ev[-1] <= 0:
-        return np.inf, P
-    if ev[0] < 1e-9 * ev[-1]:
-        # solver noise left P barely definite; a shift by I keeps it in the
-        # commutant of Delta and the certificate below stays exact for it
-        P = P + (1e-9 * ev[-1] - ev[0]) * np.eye(P.shape[0])
-    A = Ms.conj().T @ P @ Ms + 1j * (G @ Ms - Ms.conj().T @ G)
-    A = (A + A.conj().T) / 2
-    try:
-        lam = sla.eigh(A, P, eigvals_only=True)[-1]
-    except np.linalg.LinAlgError:
-        return np.inf, P
-    return float(np.sqrt(max(lam, 0.0))), P
-
-
-class _LmiUpper:
-    """D-G LMI upper bound by bisection on beta (cvxpy).
-
-    One problem is compiled per matrix with ``beta**2`` as a DPP parameter,
-    so the bisection steps only re-solve.  (A Schur form with M as a
-    parameter too would compile once per sweep, but doubles the LMI size and
-    was slower overall.)
-    """
-
-    def __init__(self, st: BlockStructure, solver: Optional[str] = None, kappa: float = 1e6):
-        self.st, self.solver, self.kappa = st, solver, kappa
-
-    def _build(self, Ms: np.ndarray):
-        import cvxpy as cp
-
-        st, n = self.st, self.st.padded_size
-        self.b2 = cp.Parameter(nonneg=True)
-        P, G = 0, 0
-        for b, sl in zip(st.blocks, st.padded_slices):
-            S = np.zeros((n, b.size))
-            S[sl, :] = np.eye(b.size)
-            if b.repeated:  # full Hermitian scalings commute with delta*I
-                Pi = cp.Variable((b.size, b.size), hermitian=True)
-                P = P + S @ Pi @ S.T
-                if b.kind == "real":
-                    Gi = cp.Variable((b.size, b.size), hermitian=True)
-                    G = G + S @ Gi @ S.T
-            else:
-                p = cp.Variable()
-                P = P + p * (S @ S.T)
-                if b.kind == "real":
-                    g = cp.Variable()
-                    G = G + g * (S @ S.T)
-        self.P, self.G = P, G
-        MH = Ms.conj().T
-        # Minimising the LMI's largest eigenvalue t (instead of a pure
-        # feasibility problem) keeps the SDP strictly feasible, which interior
-        # point solvers handle far better next to the boundary.
-        self.t = cp.Variable()
-        L = MH @ P @ Ms - self.b2 * P - self.t * np.eye(n)
-        if not isinstance(G, int):  # G-scalings only exist with real blocks
-            L = L + 1j * (G @ Ms - MH @ G)
-        cons = [(L + L.H) / 2 << 0, P >> np.eye(n) / self.kappa, cp.real(cp.trace(P)) == n]
-        self.prob = cp.Problem(cp.Minimize(self.t), cons)
-
-    def _solve(self, b2: float):
-        self.b2.value = b2
-        with warnings.catch_warnings():
-            # "inaccurate" answers are fine: _cert_beta re-certifies them exactly
-            warnings.simplefilter("ignore")
-            try:
-                self.prob.solve(solver=self.solver or "CLARABEL")
-            except Exception:  # noqa: BLE001 - interior point stalls near the boundary
-                try:
-                    self.prob.solve(solver="SCS", eps=1e-6, max_iters=5000)
-                except Exception:  # noqa: BLE001
-                    return None
-        if self.prob.status not in ("optimal", "optimal_inaccurate"):
-            return None
-        P = np.asarray(self.P.value, dtype=complex)
-        n = P.shape[0]
-        G = np.zeros((n, n), complex) if isinstance(self.G, int) else np.asarray(self.G.value, dtype=complex)
-        return (P + P.conj().T) / 2, (G + G.conj().T) / 2
-
-    def __call__(self, Ms: np.ndarray, lo: float = 0.0, rtol: float = 1e-4):
-        n = Ms.shape[0]
-        best = (float(np.linalg.norm(Ms, 2)), np.eye(n, dtype=complex), np.zeros((n, n), complex))
-        bp, Dp = _perron_upper(Ms, self.st)
-        if bp < best[0]:
-            best = (bp, (Dp @ Dp).astype(complex), best[2])
-        if best[0] == 0.0:
-            return 0.0, np.eye(n), np.zeros((n, n))
-        hi, lo = best[0], min(max(lo, 0.0), best[0])
-        if hi - lo > rtol * hi:
-            self._build(Ms)
-        while hi - lo > rtol * hi:
-            mid = 0.5 * (lo + hi)
-            sol = self._solve(mid**2)
-            if sol is None:
-                lo = mid
-                continue
-            # any (P, G) certifies *some* beta: keep the best one seen
-            beta, P = _cert_beta(Ms, *sol)
-            if beta < best[0]:
-                best = (beta, P, sol[1])
-            if self.t.value is not None and self.t.value <= 0:
-                hi = max(min(mid, beta), lo)
-            else:
-                lo = mid
-        beta, P, G = best
-        D = sla.sqrtm(P)
-        return beta, (D + D.conj().T) / 2, G
 
 
 # ================================================================ mussv
@@ -299,7 +76,7 @@ def mussv(
     starts: int = 4,
     seed: int = 0,
     rtol: float = 1e-4,
-    solver: Optional[str] = None,
+    solver: str | None = None,
 ) -> MussvResult:
     """Bounds on the structured singular value of a complex matrix.
 
@@ -359,15 +136,17 @@ def mussv(
 def _mussv(M, st, meth, lower, refine, starts, seed, rtol, solver) -> MussvResult:
     Ms = st.pad(M)
     n = Ms.shape[0]
-    lo, dsq = 0.0, np.zeros((n, n), complex)
+    lo, dsq, notes = 0.0, np.zeros((n, n), complex), ()
     if meth == "ab13md":
-        up, D, G, _ = _upper_ab13md(Ms, st)
+        up, D, G, _ = mu_upper.upper_ab13md(Ms, st)
     else:
         # a verified lower bound narrows the bisection bracket for free
-        lo, dsq, _ = _lower_bound(Ms, st, starts=1, refine=False, seed=seed)
-        up, D, G = _LmiUpper(st, solver)(Ms, lo=lo * (1 - 1e-9), rtol=rtol)
+        lo, dsq, _ = lower_bound(Ms, st, starts=1, refine=False, seed=seed)
+        lmi = LmiUpper(st, solver)
+        up, D, G = lmi(Ms, lo=lo * (1 - 1e-9), rtol=rtol)
+        notes = tuple(lmi.events)
     if lower:
-        lo2, dsq2, _ = _lower_bound(Ms, st, starts=starts, refine=refine, seed=seed, target=up, D=D)
+        lo2, dsq2, _ = lower_bound(Ms, st, starts=starts, refine=refine, seed=seed, target=up, D=D)
         if lo2 >= lo:
             lo, dsq = lo2, dsq2
     else:
@@ -376,66 +155,22 @@ def _mussv(M, st, meth, lower, refine, starts, seed, rtol, solver) -> MussvResul
     # lower bound when both are tight; they bound the same number.
     up = max(up, lo)
     Dl, Dr = st.restrict_scaling(D)
-    return MussvResult(float(up), float(lo), st.unpad_delta(dsq), D, G, Dl, Dr, st, meth)
+    return MussvResult(float(up), float(lo), st.unpad_delta(dsq), D, G, Dl, Dr, st, meth, notes)
 
 
 # ============================================================ frequency
-def _is_discrete(sys) -> bool:
-    dt = getattr(sys, "dt", 0)
-    return dt not in (0, None, False)
-
-
-def _default_grid(sys, per_decade: int = 40) -> np.ndarray:
-    """Log grid spanning the poles/zeros +- one decade (python-control style).
-
-    Natural frequencies of the poles are inserted too: a lightly damped
-    resonance is then bracketed by grid points, which the peak refinement
-    relies on.
-    """
-    feats = []
-    for attr in ("poles", "zeros"):
-        try:
-            feats.append(np.atleast_1d(getattr(sys, attr)()))
-        except Exception:  # noqa: BLE001 - zeros of non-square/odd systems
-            pass
-    f = np.concatenate(feats).astype(complex) if feats else np.array([], dtype=complex)
-    if _is_discrete(sys):  # map z-plane features to continuous frequencies
-        f = np.log(f[np.abs(f) > 0]) / float(sys.dt)
-    f = np.abs(f)
-    f = f[np.isfinite(f) & (f > 1e-12)]
-    lo, hi = (-1.0, 1.0) if f.size == 0 else (np.floor(np.log10(f.min())) - 1, np.ceil(np.log10(f.max())) + 1)
-    w = np.logspace(lo, hi, int(per_decade * (hi - lo)) + 1)
-    w = np.union1d(w, f)
-    if _is_discrete(sys):
-        w = w[w < np.pi / sys.dt]
-    return w
-
-
-def _freqresp(sys, omega: np.ndarray) -> np.ndarray:
-    """Frequency response as an ``(N, p, m)`` array, vectorised over omega."""
-    import control
-
-    with np.errstate(divide="ignore", invalid="ignore"):  # poles on the grid -> inf
-        if isinstance(sys, control.FrequencyResponseData):
-            H = sys.eval(omega, squeeze=False)
-        else:
-            pts = np.exp(1j * omega * float(sys.dt)) if _is_discrete(sys) else 1j * omega
-            H = sys(pts, squeeze=False, warn_infinite=False)
-    return np.moveaxis(np.asarray(H, dtype=complex).reshape(sys.noutputs, sys.ninputs, -1), -1, 0)
-
-
 def mu_bounds(
     sys,
     blk: BlkLike,
-    omega: Optional[np.ndarray] = None,
+    omega: np.ndarray | None = None,
     *,
     method: Method = "auto",
     refine_peak: bool = True,
     warm_start: bool = False,
     warm_timeout: float = 2.0,
-    progress: Optional[bool] = None,
+    progress: bool | None = None,
     rtol: float = 1e-4,
-    solver: Optional[str] = None,
+    solver: str | None = None,
 ) -> MuBoundsResult:
     """:math:`\\mu` upper and lower bounds of an LTI system over frequency.
 
@@ -486,7 +221,7 @@ def mu_bounds(
         )
     is_frd = isinstance(sys, control.FrequencyResponseData)
     if omega is None:
-        omega = np.asarray(sys.omega if is_frd else _default_grid(sys), dtype=float)
+        omega = np.asarray(sys.omega if is_frd else default_grid(sys), dtype=float)
     omega = np.unique(np.asarray(omega, dtype=float).ravel())
     # near-duplicates (a pole frequency next to a grid point) would make a
     # degenerate bracket for the peak refinement
@@ -501,16 +236,16 @@ def mu_bounds(
 def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, progress, rtol, solver):
     from tqdm import tqdm
 
-    lmi = _LmiUpper(st, solver) if meth == "lmi" else None
+    lmi = LmiUpper(st, solver) if meth == "lmi" else None
     guard = None
     if warm_start and meth == "ab13md":
         import slycot
 
         # slycot's own function when not substituted: the worker then never
         # imports polyrob (and its heavy dependencies)
-        fn = slycot.ab13md if _ab13md_impl is _AB13MD_DEFAULT else _ab13md_impl
+        fn = slycot.ab13md if mu_upper.ab13md_call is mu_upper.AB13MD_DEFAULT else mu_upper.ab13md_call
         guard = TimeLimitedCall(fn, warm_timeout)
-    fallbacks = 0
+    fallbacks, notes = 0, []
     state = {"x": None, "pi": None}
     n = st.padded_size
 
@@ -527,21 +262,22 @@ def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, 
                 res = val
             else:  # hung or failed once: stop warm-starting for this sweep
                 fallbacks += 1
+                notes.append(f"AB13MD warm start failed or exceeded {warm_timeout} s ({val}); cold calls from then on")
                 guard.close()
                 guard = None
-        up, D, G, x = _upper_ab13md(Ms, st, res)
+        up, D, G, x = mu_upper.upper_ab13md(Ms, st, res)
         state["x"] = x if x is not None else state["x"]
         return up, D, G
 
     def lower_at(Ms, refine=False, target=np.inf, D=None):
         if not np.all(np.isfinite(Ms)):
             return np.inf, np.zeros((n, n), complex)
-        lo, dsq, pi = _lower_bound(Ms, st, starts=1 if not refine else 4, refine=refine,
+        lo, dsq, pi = lower_bound(Ms, st, starts=1 if not refine else 4, refine=refine,
                                    init=state["pi"], target=target, D=D)
         state["pi"] = pi if pi is not None else state["pi"]
         return lo, dsq
 
-    H = st.pad(_freqresp(sys, omega))
+    H = st.pad(freqresp(sys, omega))
     show = (omega.size >= 50) if progress is None else progress
     up, lo = np.zeros(omega.size), np.zeros(omega.size)
     Ds, Gs = np.zeros((omega.size, n, n), complex), np.zeros((omega.size, n, n), complex)
@@ -557,11 +293,11 @@ def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, 
         extra = []
         can_eval = not is_frd or getattr(sys, "ifunc", None) is not None
         if refine_peak and can_eval and omega.size >= 3:
-            extra = _refine_peaks(omega, up, lambda w: upper_at(st.pad(_freqresp(sys, np.array([w])))[0])[0])
+            extra = refine_peaks(omega, up, lambda w: upper_at(st.pad(freqresp(sys, np.array([w])))[0])[0])
         # refined points (and the best lower-bound points) get the full treatment
         w_new = np.array([w for w in extra if w not in omega])
         if w_new.size:
-            Hn = st.pad(_freqresp(sys, w_new))
+            Hn = st.pad(freqresp(sys, w_new))
             res = []
             for k in range(w_new.size):
                 u = upper_at(Hn[k])
@@ -593,25 +329,11 @@ def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, 
         peak_lower=float(lo[il]), critical_frequency=float(omega[il]),
         worst_delta=st.unpad_delta(deltas[il]), structure=st, method=meth,
         warm_start_fallbacks=fallbacks,
+        notes=tuple(notes + ([] if lmi is None else lmi.events)),
     )
 
 
-def _refine_peaks(omega, up, f, n_peaks=3, xtol=1e-7):
-    """Bounded scalar maximisation (in log omega) around the best local maxima."""
-    from scipy.optimize import minimize_scalar
-
-    inner = [i for i in range(omega.size) if (i == 0 or up[i] >= up[i - 1]) and (i == omega.size - 1 or up[i] >= up[i + 1])]
-    inner = sorted(inner, key=lambda i: -up[i])[:n_peaks]
-    out = []
-    for i in inner:
-        lo_i, hi_i = max(i - 1, 0), min(i + 1, omega.size - 1)
-        if omega[lo_i] <= 0 or hi_i == lo_i:
-            continue
-        r = minimize_scalar(lambda x: -f(np.exp(x)), bounds=(np.log(omega[lo_i]), np.log(omega[hi_i])),
-                            method="bounded", options={"xatol": xtol})
-        out.append(float(np.exp(r.x)))
-    return out
-
-
-# Public name for the D-scale fit of the synthesis stage.
-upper_bound_ab13md = _upper_ab13md
+# Public name for the D-scale fit of the synthesis stage; the private spelling
+# stays until polyrob.synthesis.dscale has moved over to the public one.
+upper_bound_ab13md = mu_upper.upper_ab13md
+_upper_ab13md = upper_bound_ab13md

@@ -16,7 +16,8 @@ import warnings
 import numpy as np
 from scipy.optimize import minimize
 
-from polyrob.analysis.blocks import BlockStructure, _perron_upper
+from polyrob.analysis.blocks import BlockStructure, perron_upper
+
 
 def _q_from(a: np.ndarray, w: np.ndarray, meta) -> np.ndarray:
     """Structured Q (norm <= 1) aligning ``a`` with ``w`` block by block.
@@ -237,7 +238,7 @@ def _refine(Ms, st, delta0, x0):
     return _candidate(Ms, st, delta / nd_) if nd_ > 0 else None
 
 
-def _lower_bound(Ms, st, *, starts=4, refine=True, seed=0, init=None, real_starts=8,
+def lower_bound(Ms, st, *, starts=4, refine=True, seed=0, init=None, real_starts=8,
                  target=np.inf, D=None):
     """Best verified (lower, padded delta, power-iteration state).
 
@@ -255,7 +256,7 @@ def _lower_bound(Ms, st, *, starts=4, refine=True, seed=0, init=None, real_start
         return 0.0, np.zeros((n, n), complex), None
     rng = np.random.default_rng(seed)
     if D is None:
-        D = _perron_upper(Ms, st)[1]
+        D = perron_upper(Ms, st)[1]
     try:
         Mp = D @ Ms @ np.linalg.inv(D)
     except np.linalg.LinAlgError:

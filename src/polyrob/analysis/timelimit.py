@@ -9,7 +9,8 @@ the limit.  :func:`polyrob.analysis.mu.mu_bounds` uses it for ``warm_start=True`
 from __future__ import annotations
 
 import sys as _sys
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 # The worker is plain stdlib code run by ``python -c``: it imports nothing of
 # polyrob (whose package import is heavy) unless unpickling ``fn`` needs it.
@@ -66,6 +67,7 @@ class TimeLimitedCall:
     def __init__(self, fn: Callable[..., Any], timeout: float = 2.0, startup_timeout: float = 120.0):
         self.fn, self.timeout, self.startup_timeout = fn, float(timeout), float(startup_timeout)
         self._proc = self._queue = None
+        self.start_error = None
 
     def _start(self) -> bool:
         import pickle
@@ -83,19 +85,25 @@ class TimeLimitedCall:
             while True:
                 try:
                     q.put(pickle.load(stdout))
-                except Exception:  # noqa: BLE001 - EOF or garbage: worker is gone
-                    q.put(("dead", None))
+                except (EOFError, OSError, ValueError, pickle.UnpicklingError) as exc:
+                    # EOF or garbage on the pipe: the worker is gone
+                    q.put(("dead", repr(exc)))
                     return
 
         threading.Thread(target=reader, daemon=True).start()
+        self.start_error = None
         try:
             pickle.dump(list(_sys.path), self._proc.stdin)
             pickle.dump(self.fn, self._proc.stdin)
             self._proc.stdin.flush()
-            if q.get(timeout=self.startup_timeout)[0] == "ready":
+            status, detail = q.get(timeout=self.startup_timeout)
+            if status == "ready":
                 return True
-        except Exception:  # noqa: BLE001 - unpicklable fn, broken pipe, timeout
-            pass
+            self.start_error = f"worker {status}: {detail}"
+        except (pickle.PicklingError, TypeError, AttributeError, OSError) as exc:  # unpicklable fn, broken pipe
+            self.start_error = repr(exc)
+        except queue.Empty:
+            self.start_error = f"worker not ready within {self.startup_timeout} s"
         self.close()
         return False
 
@@ -105,7 +113,7 @@ class TimeLimitedCall:
         import queue
 
         if (self._proc is None or self._proc.poll() is not None) and not self._start():
-            return False, "worker did not start"
+            return False, f"worker did not start ({self.start_error})"
         try:
             pickle.dump(args, self._proc.stdin)
             self._proc.stdin.flush()
@@ -113,14 +121,14 @@ class TimeLimitedCall:
         except queue.Empty:
             self.close()  # hung: kill the worker, a fresh one starts next call
             return False, "timeout"
-        except Exception as exc:  # noqa: BLE001 - broken pipe: worker died
+        except (OSError, ValueError) as exc:  # broken pipe / closed file: the worker died
             self.close()
             return False, f"worker failed: {exc!r}"
         if status == "ok":
             return True, value
         if status == "dead":
             self.close()
-            return False, "worker died"
+            return False, f"worker died ({value})"
         return False, value
 
     def close(self):
@@ -128,14 +136,16 @@ class TimeLimitedCall:
         if self._proc is not None:
             if self._proc.poll() is None:
                 self._proc.kill()
+            import subprocess
+
             try:
                 self._proc.wait(timeout=5)
-            except Exception:  # noqa: BLE001
+            except subprocess.TimeoutExpired:  # killed but not reaped yet: the OS finishes it
                 pass
             for f in (self._proc.stdin, self._proc.stdout):
                 try:
                     f.close()
-                except Exception:  # noqa: BLE001
+                except OSError:  # broken pipe on flush of a dead worker's stdin
                     pass
         self._proc = self._queue = None
 
@@ -148,5 +158,6 @@ class TimeLimitedCall:
     def __del__(self):
         try:
             self.close()
-        except Exception:  # noqa: BLE001 - interpreter shutdown
+        except (OSError, TypeError, AttributeError, ImportError):
+            # at interpreter shutdown module globals may already be gone
             pass
