@@ -138,3 +138,62 @@ def test_available_robots_lists_the_bundled_and_shipped_arms():
     names = dict(available_robots())
     for name in ("planar_2r", "paper_2r", "panda", "ur5", "kinova", "double_pendulum", "finger_edu"):
         assert name in names
+
+
+# --------------------------------------------------------------------------- physical data
+
+ONE_LINK = """<?xml version="1.0"?><robot name="bad">
+<link name="base"/>
+<link name="arm"><inertial><origin xyz="0.5 0 0"/><mass value="{mass}"/>
+<inertia ixx="{ixx}" iyy="{iyy}" izz="{izz}" ixy="0" ixz="0" iyz="0"/></inertial></link>
+<joint name="j1" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/>
+<limit lower="-1" upper="1" velocity="1" effort="1"/></joint></robot>"""
+
+
+def one_link(mass=1.0, ixx=0.1, iyy=0.1, izz=0.1):
+    return ONE_LINK.format(mass=mass, ixx=ixx, iyy=iyy, izz=izz)
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        (one_link(mass=0.0, ixx=0.0, iyy=0.0, izz=0.0), r"joint 'j1' moves no inertia .* \(arm\)"),
+        (one_link(izz=-10.0), r"link 'arm' has an inertia that is not positive semidefinite \(principal moments -10"),
+        (one_link(mass=-2.0), r"link 'arm' has mass -2"),
+        (one_link(ixx=0.1, iyy=0.1, izz=0.5), r"link 'arm' has principal moments of inertia 0.1, 0.1, 0.5 that violate"),
+        (one_link(mass=0.0), r"link 'arm' has mass 0 but a non-zero inertia"),
+    ],
+)
+def test_unphysical_inertial_data_is_refused_naming_the_link(write_urdf, text, message):
+    path = write_urdf(text, "bad.urdf")
+    with pytest.raises(RobotError, match=message) as info:
+        load_robot(str(path))
+    assert str(path) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_a_physical_one_link_arm_loads_with_the_analytic_inertia(write_urdf):
+    robot = load_robot(str(write_urdf(one_link(), "good.urdf")))
+    # about the joint axis: izz + m r^2 = 0.1 + 1 * 0.5^2
+    assert robot.mass_matrix([0.3])[0, 0] == pytest.approx(0.35, rel=1e-12)
+
+
+def test_massless_frames_are_accepted():
+    # ur5's ee_link, base and tool0 carry mass 0 and inertia 0
+    assert cached_robot("ur5").m == 6
+
+
+# --------------------------------------------------------------------------- names
+
+
+def test_available_robot_names_are_unique_and_each_reachable():
+    pairs = available_robots()
+    names = [n for n, _ in pairs]
+    assert len(names) == len(set(names))
+    anymals = [n for n in names if n == "anymal" or n.endswith("/anymal")]
+    assert len(anymals) == 2
+    from polyrob.model.robots import resolve_urdf
+
+    paths = {resolve_urdf(n) for n in anymals}
+    assert len(paths) == 2  # the qualified name reaches the second file
+    with pytest.raises(RobotError, match="serial chain|floating"):
+        load_robot(anymals[1])

@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 
 from polyrob.errors import RobotError
-from polyrob.model.robots import Manipulator
+from polyrob.model.base import Manipulator
 
 __all__ = ["AnalyticRobot", "paper_2r", "ANALYTIC_ROBOTS", "PAPER_2R_PARAMETERS"]
 
