@@ -1,0 +1,453 @@
+"""The robot's true nonlinear dynamics in closed loop with the controller.
+
+:func:`simulate` integrates ``xdot = f(x, u)`` of the robot itself (Pinocchio's
+``aba`` with the URDF damping added, or an analytic model's formulas) with
+
+* the continuous controller ``xK' = A_K xK + B_K e``, ``u = u_eq + C_K xK + D_K e``,
+  ``e = r - q`` (one ODE for robot and controller, ``scipy.integrate.solve_ivp``), or
+* its discretisation (``rate`` in Hz): ``e`` sampled every ``h = 1/rate``,
+  the discrete controller updated and ``u`` held constant over each period
+  (the robot integrated by ``solve_ivp`` from one sample to the next).
+
+``u_eq`` is the torque of the PLDI's nominal (the equilibrium the linear
+plant is the linearisation at: the gravity torque at ``q0``), so that the
+controller's output is the deviation the linear design assumes.
+
+The result reports per joint the rise time, overshoot, settling time and
+steady-state error of a step, the peak torque against the effort limit and
+whether the trajectory ``(q, qdot, u)`` ever left the domain over which the
+PLDI was computed: outside it the Jacobians are not bounded and **the
+certificate does not apply** (:attr:`SimulationResult.certificate_applies`).
+
+Examples
+--------
+>>> import control, polyrob
+>>> from polyrob.validate.simulate import simulate, step_reference
+>>> robot = polyrob.load_robot("planar_2r")
+>>> dom = polyrob.Domain.from_robot(robot)
+>>> sim = simulate(robot, polyrob.paper_controller(), dom, step_reference([0.005, -0.002]), t_final=10.0)
+>>> sim.certificate_applies, sim.settled(), bool(abs(sim.q[0, -1] - 0.005) < 1e-4)
+(True, True, True)
+>>> big = simulate(robot, polyrob.paper_controller(), dom, step_reference([0.2, -0.1]), t_final=2.0)
+>>> big.certificate_applies, big.domain_exits[0][:13]
+(False, 'u[joint1] = 1')
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import control
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from polyrob.errors import PolyrobError
+from polyrob.plant.generalized import as_controller_ss
+
+__all__ = [
+    "Reference",
+    "JointMetrics",
+    "SimulationResult",
+    "simulate",
+    "step_reference",
+    "smooth_reference",
+    "equilibrium_torque",
+]
+
+#: Band of the settling time (fraction of the step).
+SETTLING_BAND = 0.02
+#: Relative tolerance of the domain check (a point on the boundary is inside).
+DOMAIN_RTOL = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class Reference:
+    """A joint-space reference ``r(t)`` (shape (m,)).
+
+    Attributes
+    ----------
+    kind : {"step", "smooth", "custom"}
+    start, target : ndarray or None
+        For steps and smooth moves: where it starts (``None``: the initial
+        ``q``) and where it ends.
+    duration : float
+        Duration of a smooth move (0 for a step).
+    function : callable or None
+        ``r(t)`` for custom references.
+    """
+
+    kind: str
+    target: np.ndarray | None = None
+    start: np.ndarray | None = None
+    duration: float = 0.0
+    function: Callable | None = field(default=None, repr=False)
+
+    def bind(self, q0) -> Callable:
+        """``r(t)`` given the initial position (used as the start of a smooth move)."""
+        if self.kind == "custom":
+            return lambda t: np.asarray(self.function(t), float)
+        target = np.asarray(self.target, float)
+        if self.kind == "step":
+            return lambda t: target
+        start = np.asarray(q0 if self.start is None else self.start, float)
+        T = float(self.duration)
+
+        def r(t):
+            s = min(max(t / T, 0.0), 1.0)
+            # minimum-jerk (quintic) profile: zero velocity and acceleration at both ends
+            return start + (target - start) * (10 * s**3 - 15 * s**4 + 6 * s**5)
+
+        return r
+
+
+def step_reference(target) -> Reference:
+    """A step to ``target`` at ``t = 0``."""
+    return Reference("step", target=np.asarray(target, float))
+
+
+def smooth_reference(target, duration: float, start=None) -> Reference:
+    """A minimum-jerk move from ``start`` (default: the initial ``q``) to ``target`` in ``duration`` s."""
+    if not duration > 0:
+        raise PolyrobError(f"a smooth reference needs a positive duration, got {duration}")
+    return Reference("smooth", target=np.asarray(target, float),
+                     start=None if start is None else np.asarray(start, float), duration=float(duration))
+
+
+def equilibrium_torque(robot, q) -> np.ndarray:
+    """The torque that holds the robot still at ``q``: ``g(q) = -M(q) qddot(q, 0, 0)``."""
+    m = robot.m
+    q = np.asarray(q, float)
+    u = -robot.mass_matrix(q) @ robot.acceleration(q, np.zeros(m), np.zeros(m))
+    u[np.abs(u) < 1e-12] = 0.0
+    return u
+
+
+@dataclass(frozen=True)
+class JointMetrics:
+    """Step-response figures of one joint (NaN where they do not apply).
+
+    ``rise_time`` 10-90 % of the step, ``overshoot`` in % of the step,
+    ``settling_time`` into a 2 % band that is not left again,
+    ``steady_state_error`` ``|r - q|`` at the end, ``peak_torque`` ``max |u|``,
+    ``effort_limit`` from the robot (NaN if none), ``max_tracking_error``.
+    """
+
+    joint: str
+    step: float
+    rise_time: float
+    overshoot: float
+    settling_time: float
+    steady_state_error: float
+    max_tracking_error: float
+    peak_torque: float
+    effort_limit: float
+
+    @property
+    def torque_within_limit(self) -> bool:
+        return bool(not np.isfinite(self.effort_limit) or self.peak_torque <= self.effort_limit)
+
+
+@dataclass(frozen=True, eq=False)
+class SimulationResult:
+    """A closed-loop simulation of the nonlinear robot.
+
+    Attributes
+    ----------
+    t : ndarray (n_t,)
+    q, qdot, u, r : ndarray (m, n_t)
+    controller : {"continuous", "discrete"}
+    rate : float or None
+        Sample rate (Hz) of the discrete controller.
+    metrics : tuple of JointMetrics
+    left_domain : bool
+        Whether ``(q, qdot, u)`` left the PLDI's domain at some time.
+    domain_exits : tuple of str
+        What left the domain: ``"qdot[joint2] at t = 0.12 s"``.
+    first_exit_time : float or None
+    time_outside : float
+        Fraction of the samples outside the domain.
+    u_eq : ndarray
+        Torque offset added to the controller's output.
+    success : bool
+        The integrator reached ``t_final``.
+    info : dict
+        Solver, evaluations, notes.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    qdot: np.ndarray
+    u: np.ndarray
+    r: np.ndarray
+    controller: str
+    rate: float | None
+    reference: Reference
+    metrics: tuple
+    left_domain: bool
+    domain_exits: tuple
+    first_exit_time: float | None
+    time_outside: float
+    u_eq: np.ndarray
+    success: bool
+    info: dict = field(default_factory=dict)
+
+    @property
+    def certificate_applies(self) -> bool:
+        """The trajectory stayed in the domain (and the integration finished)."""
+        return bool(self.success and not self.left_domain)
+
+    @property
+    def torque_within_limits(self) -> bool:
+        return all(mt.torque_within_limit for mt in self.metrics)
+
+    def settled(self, tolerance: float = SETTLING_BAND) -> bool:
+        """Final tracking error within ``tolerance`` of each joint's step.
+
+        A joint with a small or zero step is held to ``tolerance`` of a tenth
+        of the largest step (coupling moves it too).
+        """
+        largest = max((abs(mt.step) for mt in self.metrics), default=0.0)
+        return all(
+            mt.steady_state_error <= tolerance * max(abs(mt.step), 0.1 * largest, 1e-9) for mt in self.metrics
+        )
+
+    def verdict(self) -> str:
+        """One line: whether the certificate applies to this trajectory."""
+        if not self.success:
+            return "integration failed: " + str(self.info.get("message", ""))
+        if self.left_domain:
+            return ("LEFT THE DOMAIN (" + "; ".join(self.domain_exits)
+                    + "): the certificate does not apply to this trajectory")
+        return "stayed in the domain: the PLDI (and its certificate) covers this trajectory"
+
+    def summary(self) -> dict:
+        return {
+            "controller": self.controller,
+            "rate_hz": self.rate,
+            "reference": self.reference.kind,
+            "target": None if self.reference.target is None else np.asarray(self.reference.target).tolist(),
+            "left_domain": bool(self.left_domain),
+            "domain_exits": list(self.domain_exits),
+            "certificate_applies": self.certificate_applies,
+            "settled": self.settled(),
+            "torque_within_limits": self.torque_within_limits,
+            "success": bool(self.success),
+            "verdict": self.verdict(),
+            "joints": [{k: (float(v) if isinstance(v, (float, np.floating)) else v)
+                        for k, v in mt.__dict__.items()} for mt in self.metrics],
+        }
+
+
+# --------------------------------------------------------------------------- figures
+
+
+def _metrics(robot, t, q, r, u, q0) -> tuple:
+    out = []
+    tail = max(1, len(t) // 50)
+    for j, name in enumerate(robot.joint_names):
+        target = r[j, -1]
+        step = float(target - q0[j])
+        err = np.abs(r[j] - q[j])
+        sse = float(np.mean(err[-tail:]))
+        rise = overshoot = settle = float("nan")
+        if abs(step) > 1e-12:
+            frac = (q[j] - q0[j]) / step
+            i10 = np.flatnonzero(frac >= 0.1)
+            i90 = np.flatnonzero(frac >= 0.9)
+            if i10.size and i90.size:
+                rise = float(t[i90[0]] - t[i10[0]])
+            overshoot = float(max(0.0, 100.0 * (frac.max() - 1.0)))
+            outside = np.flatnonzero(np.abs(q[j] - target) > SETTLING_BAND * abs(step))
+            if not outside.size:
+                settle = 0.0
+            elif outside[-1] < len(t) - 1:
+                settle = float(t[outside[-1] + 1])
+        out.append(JointMetrics(
+            joint=name, step=step, rise_time=rise, overshoot=overshoot, settling_time=settle,
+            steady_state_error=sse, max_tracking_error=float(err.max()),
+            peak_torque=float(np.abs(u[j]).max()), effort_limit=float(robot.effort_limit[j]),
+        ))
+    return tuple(out)
+
+
+def _domain_check(domain, robot, t, q, qdot, u):
+    z = {"q": q, "qdot": qdot, "u": u}
+    exits, bad_any, first = [], np.zeros(len(t), bool), None
+    for group in ("q", "qdot", "u"):
+        lo, hi = getattr(domain, f"{group}_lower"), getattr(domain, f"{group}_upper")
+        for j, name in enumerate(robot.joint_names):
+            tol = DOMAIN_RTOL * (1.0 + max(abs(lo[j]), abs(hi[j])))
+            bad = (z[group][j] < lo[j] - tol) | (z[group][j] > hi[j] + tol)
+            if bad.any():
+                k = int(np.argmax(bad))
+                peak = float(z[group][j][bad][np.argmax(np.abs(z[group][j][bad]))])
+                exits.append(f"{group}[{name}] = {peak:.4g} outside [{lo[j]:.4g}, {hi[j]:.4g}] from t = {t[k]:.4g} s")
+                first = float(t[k]) if first is None else min(first, float(t[k]))
+                bad_any |= bad
+    return tuple(exits), first, float(bad_any.mean())
+
+
+# --------------------------------------------------------------------------- simulation
+
+
+def _domain_and_offset(robot, domain_or_pldi, u_eq):
+    domain = getattr(domain_or_pldi, "domain", domain_or_pldi)
+    if not hasattr(domain, "q_lower"):
+        raise PolyrobError(f"simulate needs a Domain or a PLDI, got {type(domain_or_pldi).__name__}")
+    if tuple(domain.joint_names) != tuple(robot.joint_names):
+        raise PolyrobError(f"the domain's joints {domain.joint_names} are not the robot's {robot.joint_names}")
+    if u_eq is None:
+        point = getattr(domain_or_pldi, "nominal_point", None)
+        if point is not None:
+            u_eq, source = np.asarray(point["u"], float), "the PLDI's nominal torque"
+        else:
+            q0 = np.clip(np.zeros(robot.m), domain.q_lower, domain.q_upper)
+            u_eq, source = equilibrium_torque(robot, q0), "the gravity torque at q = 0 (clipped)"
+    else:
+        u_eq, source = np.asarray(u_eq, float), "given"
+    return domain, u_eq, source
+
+
+def simulate(
+    robot,
+    K,
+    domain,
+    reference,
+    *,
+    t_final: float,
+    q0=None,
+    qdot0=None,
+    rate: float | None = None,
+    method: str = "tustin",
+    prewarp: float | None = None,
+    u_eq=None,
+    n_points: int = 1001,
+    rtol: float = 1e-7,
+    atol: float = 1e-9,
+) -> SimulationResult:
+    """Simulate the robot's nonlinear dynamics in closed loop with ``K``.
+
+    Parameters
+    ----------
+    robot : Manipulator
+        A URDF :class:`~polyrob.model.robots.Robot` (Pinocchio ``aba``, damping
+        included) or an :class:`~polyrob.model.analytic.AnalyticRobot`.
+    K : LTI system, array, or a discrete controller
+        ``m x m`` from ``e = r - q`` to ``u``; continuous-time (discretised
+        here when ``rate`` is given), or a discrete-time ``control.StateSpace``
+        or :class:`~polyrob.validate.discretize.DiscreteController` (then
+        ``rate`` is its own).
+    domain : Domain or PLDI
+        The box the PLDI was computed over (a PLDI also gives ``u_eq``).
+    reference : Reference, array_like or callable
+        :func:`step_reference`, :func:`smooth_reference`, a constant target
+        (a step) or ``r(t)``.
+    t_final : float
+    q0, qdot0 : array_like, optional
+        Initial state (default: the PLDI's nominal position, clipped ``0``, at rest).
+    rate : float, optional
+        Sample rate in Hz of the sample-and-hold controller; ``None`` for the
+        continuous one.
+    method, prewarp
+        Discretisation (see :func:`polyrob.validate.discretize.discretize`).
+    u_eq : array_like, optional
+        Torque added to the controller output (default: the PLDI's nominal
+        torque, else the gravity torque at the clipped ``q = 0``).
+    n_points : int
+        Output samples of the continuous simulation.
+
+    Returns
+    -------
+    SimulationResult
+    """
+    from polyrob.validate.discretize import DiscreteController, discretize
+
+    m = robot.m
+    dom, u_eq, u_source = _domain_and_offset(robot, domain, u_eq)
+    if not isinstance(reference, Reference):
+        reference = Reference("custom", function=reference) if callable(reference) else step_reference(reference)
+    if q0 is None:
+        point = getattr(domain, "nominal_point", None)
+        q0 = np.asarray(point["q"], float) if point else np.clip(np.zeros(m), dom.q_lower, dom.q_upper)
+    q0 = np.asarray(q0, float)
+    qdot0 = np.zeros(m) if qdot0 is None else np.asarray(qdot0, float)
+    r_of_t = reference.bind(q0)
+    if not t_final > 0:
+        raise PolyrobError(f"t_final must be positive, got {t_final}")
+
+    discrete = isinstance(K, DiscreteController) or (
+        isinstance(K, control.LTI) and getattr(K, "dt", 0) not in (0, None)
+    )
+    if rate is not None and not discrete:
+        K = discretize(K, rate, method=method, prewarp=prewarp)
+        discrete = True
+    if discrete:
+        Kd = K.system if isinstance(K, DiscreteController) else control.ss(K)
+        return _simulate_discrete(robot, Kd, dom, reference, r_of_t, t_final, q0, qdot0, u_eq, u_source, rtol, atol)
+
+    Ks = as_controller_ss(K, m, m)
+    Ak, Bk, Ck, Dk = (np.asarray(X, float) for X in (Ks.A, Ks.B, Ks.C, Ks.D))
+    nk = Ak.shape[0]
+
+    def rhs(t, z):
+        q, qd, xk = z[:m], z[m : 2 * m], z[2 * m :]
+        e = r_of_t(t) - q
+        u = u_eq + Ck @ xk + Dk @ e
+        return np.concatenate([qd, robot.acceleration(q, qd, u), Ak @ xk + Bk @ e])
+
+    sol = solve_ivp(rhs, (0.0, t_final), np.concatenate([q0, qdot0, np.zeros(nk)]), method="LSODA",
+                    dense_output=True, rtol=rtol, atol=atol)
+    # the output grid plus every accepted step: fast transients (torque peaks,
+    # domain exits) fall on the solver's own short steps
+    t = np.union1d(np.linspace(0.0, sol.t[-1], n_points), sol.t)
+    y = sol.sol(t)
+    q, qd, xk = y[:m], y[m : 2 * m], y[2 * m :]
+    r = np.array([r_of_t(ti) for ti in t]).T.reshape(m, len(t))
+    u = u_eq[:, None] + Ck @ xk + Dk @ (r - q)
+    info = {"solver": "solve_ivp LSODA", "nfev": int(sol.nfev), "message": sol.message, "u_eq_source": u_source}
+    return _result(robot, dom, t, q, qd, u, r, "continuous", None, reference, q0, u_eq, bool(sol.success), info)
+
+
+def _simulate_discrete(robot, Kd, dom, reference, r_of_t, t_final, q0, qdot0, u_eq, u_source, rtol, atol):
+    m = robot.m
+    h = float(Kd.dt)
+    Ad, Bd, Cd, Dd = (np.asarray(X, float) for X in (Kd.A, Kd.B, Kd.C, Kd.D))
+    n_steps = int(np.ceil(t_final / h - 1e-9))
+    x = np.concatenate([q0, qdot0])
+    xk = np.zeros(Ad.shape[0])
+    ts, xs, us, rs = [0.0], [x.copy()], [], []
+    ok, message, nfev = True, "reached t_final", 0
+    for k in range(n_steps):
+        tk = k * h
+        rk = r_of_t(tk)
+        e = rk - x[:m]
+        uk = u_eq + Cd @ xk + Dd @ e
+        xk = Ad @ xk + Bd @ e
+        sol = solve_ivp(lambda t, z: robot.f(z, uk), (tk, tk + h), x, method="RK45", rtol=rtol, atol=atol)
+        nfev += sol.nfev
+        if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
+            ok, message = False, f"step {k}: {sol.message}"
+            break
+        x = sol.y[:, -1]
+        us.append(uk)
+        rs.append(rk)
+        ts.append(tk + h)
+        xs.append(x.copy())
+    # u and r are held over each period: report them at the period's end too
+    X = np.array(xs).T
+    U = np.array(us + us[-1:]).T if us else np.tile(u_eq[:, None], (1, 1))
+    R = np.array(rs + [r_of_t(ts[-1])]).T if rs else np.asarray(r_of_t(0.0))[:, None]
+    t = np.array(ts)
+    info = {"solver": "solve_ivp RK45 per hold interval", "nfev": int(nfev), "message": message,
+            "u_eq_source": u_source, "period": h}
+    return _result(robot, dom, t, X[:m], X[m:], U, R, "discrete", 1.0 / h, reference, q0, u_eq, ok, info)
+
+
+def _result(robot, dom, t, q, qd, u, r, kind, rate, reference, q0, u_eq, success, info) -> SimulationResult:
+    exits, first, outside = _domain_check(dom, robot, t, q, qd, u)
+    return SimulationResult(
+        t=t, q=q, qdot=qd, u=u, r=r, controller=kind, rate=rate, reference=reference,
+        metrics=_metrics(robot, t, q, r, u, q0), left_domain=bool(exits), domain_exits=exits,
+        first_exit_time=first, time_outside=outside, u_eq=np.asarray(u_eq, float), success=success, info=info,
+    )
