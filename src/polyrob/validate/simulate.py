@@ -29,8 +29,8 @@ Examples
 >>> sim.certificate_applies, sim.settled(), bool(abs(sim.q[0, -1] - 0.005) < 1e-4)
 (True, True, True)
 >>> big = simulate(robot, polyrob.paper_controller(), dom, step_reference([0.2, -0.1]), t_final=2.0)
->>> big.certificate_applies, big.domain_exits[0][:13]
-(False, 'u[joint1] = 1')
+>>> big.certificate_applies, big.domain_exits[0][:9]
+(False, 'u[joint1]')
 """
 
 from __future__ import annotations
