@@ -1,0 +1,346 @@
+"""Second-order sections and fixed-point coefficients of the discrete controller.
+
+:func:`sos_realization` writes each SISO entry ``K_ij(z)`` of a discrete
+controller as a cascade of second-order sections (biquads, transposed
+direct form II), the numerically sensible realisation for short words: a
+section's poles move little when its two coefficients are rounded, whereas
+the roots of a high-order polynomial move a lot.  ``u_i = Σ_j K_ij(z) e_j``.
+
+:func:`quantize` rounds every coefficient to a signed fixed-point number of
+``word_length`` bits; the numerator coefficients of a section share one Q
+format and its denominator coefficients another (integer bits just enough
+for the largest magnitude, the rest fractional).  Only the *coefficients* are
+quantised: the arithmetic stays floating point (signal quantisation and
+overflow of a fixed-point datapath are not modelled; docs/method.md).
+
+:func:`min_word_length` finds the shortest word length whose quantised
+controller keeps the discretised loop stable and its μ below a threshold.
+
+Examples
+--------
+>>> import control, numpy as np
+>>> from polyrob.validate.discretize import discretize
+>>> from polyrob.validate.quantize import sos_realization, quantize
+>>> Kd = discretize(control.tf([1.0, 3.0], [1.0, 2.0, 5.0]), 100.0)
+>>> sos = sos_realization(Kd)
+>>> sos.sections[0][0].shape
+(1, 6)
+>>> q = quantize(sos, 12)
+>>> q.word_length, bool(np.allclose(q.sections[0][0], sos.sections[0][0], atol=2e-3))
+(12, True)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import control
+import numpy as np
+import scipy.signal as ss
+
+from polyrob.errors import PolyrobError
+
+__all__ = ["SOSController", "WordLengthResult", "sos_realization", "quantize", "min_word_length", "q_format"]
+
+
+@dataclass(frozen=True, eq=False)
+class SOSController:
+    """A MIMO discrete controller as cascades of biquads per entry.
+
+    Attributes
+    ----------
+    sections : tuple of tuple of ndarray
+        ``sections[i][j]`` has shape ``(n_sec, 6)``: rows
+        ``[b0, b1, b2, 1, a1, a2]`` (scipy's ``sos`` layout) of ``K_ij``;
+        zero rows (``n_sec = 0``) for a zero entry.
+    dt : float
+        Sample period, s.
+    word_length : int or None
+        Bits of the quantised coefficients (None: double precision).
+    formats : tuple of tuple of ndarray or None
+        ``formats[i][j]`` ``(n_sec, 2)``: fractional bits of the numerator
+        and of the denominator coefficients of each section.
+    """
+
+    sections: tuple
+    dt: float
+    word_length: int | None = None
+    formats: tuple | None = None
+    info: dict = field(default_factory=dict)
+
+    @property
+    def n_outputs(self) -> int:
+        return len(self.sections)
+
+    @property
+    def n_inputs(self) -> int:
+        return len(self.sections[0])
+
+    @property
+    def rate(self) -> float:
+        return 1.0 / self.dt
+
+    @property
+    def n_sections(self) -> int:
+        return sum(s.shape[0] for row in self.sections for s in row)
+
+    def entries(self):
+        """``(i, j, sections)`` of the non-zero entries, in the order the C code runs them."""
+        for i, row in enumerate(self.sections):
+            for j, s in enumerate(row):
+                if s.shape[0]:
+                    yield i, j, s
+
+    def run(self, e) -> np.ndarray:
+        """Response to the input sequence ``e`` (``n_in x N``): ``u`` (``n_out x N``).
+
+        Transposed direct form II with exactly the operation order of the
+        generated C code (so both agree to rounding, bit for bit on IEEE doubles).
+        """
+        e = np.atleast_2d(np.asarray(e, float))
+        N = e.shape[1]
+        u = np.zeros((self.n_outputs, N))
+        states = {(i, j): np.zeros((s.shape[0], 2)) for i, j, s in self.entries()}
+        for k in range(N):
+            for i, j, secs in self.entries():
+                x = float(e[j, k])
+                st = states[(i, j)]
+                for n, (b0, b1, b2, _, a1, a2) in enumerate(secs):
+                    y = b0 * x + st[n, 0]
+                    st[n, 0] = b1 * x - a1 * y + st[n, 1]
+                    st[n, 1] = b2 * x - a2 * y
+                    x = y
+                u[i, k] += x
+        return u
+
+    def to_ss(self) -> control.StateSpace:
+        """The discrete state-space system of the cascades (block by block, no rounding but the sections')."""
+        p, q = self.n_outputs, self.n_inputs
+        As, Bs, Cs = [], [], []
+        D = np.zeros((p, q))
+        for i, j, secs in self.entries():
+            A, B, C, d = _cascade_ss(secs)
+            D[i, j] += d
+            if A.shape[0]:
+                b = np.zeros((A.shape[0], q))
+                b[:, j] = B
+                c = np.zeros((p, A.shape[0]))
+                c[i] = C
+                As.append(A)
+                Bs.append(b)
+                Cs.append(c)
+        if not As:
+            return control.ss(np.zeros((0, 0)), np.zeros((0, q)), np.zeros((p, 0)), D, dt=self.dt)
+        from scipy.linalg import block_diag
+
+        return control.ss(block_diag(*As), np.vstack(Bs), np.hstack(Cs), D, dt=self.dt)
+
+    def to_dict(self) -> dict:
+        return {
+            "format": "polyrob.sos_controller/1",
+            "dt": self.dt,
+            "rate_hz": self.rate,
+            "word_length": self.word_length,
+            "layout": "sections[i][j] = [[b0, b1, b2, 1, a1, a2], ...]; u_i = sum_j K_ij(z) e_j; transposed direct form II",
+            "sections": [[s.tolist() for s in row] for row in self.sections],
+            "frac_bits": None if self.formats is None else [[f.tolist() for f in row] for row in self.formats],
+            "info": self.info,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "SOSController":
+        sections = tuple(tuple(np.asarray(s, float).reshape(-1, 6) for s in row) for row in data["sections"])
+        fb = data.get("frac_bits")
+        formats = None if fb is None else tuple(tuple(np.asarray(f, int).reshape(-1, 2) for f in row) for row in fb)
+        return cls(sections, float(data["dt"]), data.get("word_length"), formats, dict(data.get("info", {})))
+
+
+def _cascade_ss(secs):
+    """State space ``(A, B, C, D)`` of a biquad cascade (TDF-II states of each section)."""
+    n = 2 * secs.shape[0]
+    A = np.zeros((n, n))
+    B = np.zeros(n)
+    C = np.zeros(n)
+    # signal into section k = C_prev x + D_prev e
+    cin, din = np.zeros(n), 1.0
+    for k, (b0, b1, b2, _, a1, a2) in enumerate(secs):
+        s = slice(2 * k, 2 * k + 2)
+        # y = b0 x + s1; s1' = b1 x - a1 y + s2; s2' = b2 x - a2 y
+        cy = b0 * cin
+        cy[2 * k] += 1.0
+        dy = b0 * din
+        A[2 * k] += b1 * cin - a1 * cy
+        A[2 * k, 2 * k + 1] += 1.0
+        A[2 * k + 1] += b2 * cin - a2 * cy
+        B[s] = [b1 * din - a1 * dy, b2 * din - a2 * dy]
+        cin, din = cy, dy
+    C[:], D = cin, din
+    return A, B, C, D
+
+
+def _structural_entry(sys, i, j) -> control.StateSpace:
+    """Entry ``(i, j)`` keeping only the states that ``e_j`` reaches and that reach ``u_i``.
+
+    Exact zeros of the realisation decide (a controller realised entry by
+    entry, as polyrob does, keeps them through Tustin and ZOH), so no
+    numerical rank decision can keep another entry's modes.
+    """
+    A, B, C = (np.asarray(X, float) for X in (sys.A, sys.B, sys.C))
+    G = np.abs(A) > 0
+    reach, obs = B[:, j] != 0, C[i] != 0
+    for _ in range(A.shape[0]):
+        new_r, new_o = reach | (G @ reach), obs | (G.T @ obs)
+        if np.array_equal(new_r, reach) and np.array_equal(new_o, obs):
+            break
+        reach, obs = new_r, new_o
+    k = np.flatnonzero(reach & obs)
+    return control.ss(A[np.ix_(k, k)], B[k, j : j + 1], C[i : i + 1, k], np.asarray(sys.D)[i : i + 1, j : j + 1],
+                      dt=sys.dt)
+
+
+def sos_realization(controller, *, tol: float = 1e-9) -> SOSController:
+    """Each entry of a discrete controller as biquads (minimal per entry, scipy's pole/zero pairing).
+
+    Parameters
+    ----------
+    controller : DiscreteController or discrete control.StateSpace
+    tol : float
+        Tolerance of the per-entry minimal realisation (``control.minreal``).
+    """
+    sys = getattr(controller, "system", controller)
+    sys = control.ss(sys)
+    if sys.dt in (0, None):
+        raise PolyrobError("sos_realization needs a discrete-time controller (see discretize)")
+    rows = []
+    for i in range(sys.noutputs):
+        row = []
+        for j in range(sys.ninputs):
+            g = _structural_entry(sys, i, j)
+            if g.nstates:
+                g = control.minreal(g, tol=tol, verbose=False)
+            if not g.nstates:
+                d = float(np.asarray(g.D)[0, 0])
+                row.append(np.array([[d, 0.0, 0.0, 1.0, 0.0, 0.0]]) if d else np.zeros((0, 6)))
+                continue
+            row.append(_entry_sos(g))
+        rows.append(tuple(row))
+    return SOSController(tuple(rows), float(sys.dt), info={"source_order": int(sys.nstates)})
+
+
+def _clean_pairs(r):
+    """Roots as exact conjugate pairs and exact reals (scipy's pairing needs them)."""
+    r = np.asarray(r, complex)
+    real = np.abs(r.imag) <= 1e-9 * np.maximum(1.0, np.abs(r))
+    out = list(r[real].real.astype(complex))
+    upper = r[~real & (r.imag > 0)]
+    for z in upper:
+        out += [z, np.conj(z)]
+    return np.array(out, complex)
+
+
+def _entry_sos(g) -> np.ndarray:
+    """Biquads of one SISO entry from its poles (eigenvalues), zeros (SLICOT) and gain.
+
+    Poles and zeros come from the state space directly: expanding a
+    polynomial first (``ss2tf``) loses all accuracy for clustered poles near
+    ``z = 1``, as slow controller modes at a fast sample rate have.
+    """
+    p = _clean_pairs(np.linalg.eigvals(np.asarray(g.A)))
+    z = _clean_pairs(np.atleast_1d(g.zeros()))
+    z = z[np.isfinite(z)]
+    z0 = 0.37 + 0.21j  # a point off the unit circle, away from poles and zeros in practice
+    H = complex(np.asarray(g(z0)).ravel()[0])
+    k = H * np.prod(z0 - p) / np.prod(z0 - z) if z.size else H * np.prod(z0 - p)
+    if abs(k.imag) > 1e-6 * max(abs(k), 1e-300):
+        raise PolyrobError(f"internal error: complex gain {k} of a real controller entry")
+    return np.atleast_2d(ss.zpk2sos(z, p, k.real))
+
+
+def q_format(values, word_length: int) -> int:
+    """Fractional bits of a signed ``word_length``-bit format that holds ``max |values|``."""
+    peak = float(np.max(np.abs(values))) if np.size(values) else 0.0
+    int_bits = 1 if peak == 0.0 else max(1, math.floor(math.log2(peak)) + 2)  # sign bit included
+    return int(word_length - int_bits)
+
+
+def _round(values, frac, word_length):
+    scale = 2.0**frac
+    mant = np.round(np.asarray(values, float) * scale)
+    lim = 2.0 ** (word_length - 1)
+    mant = np.clip(mant, -lim, lim - 1)
+    return mant / scale
+
+
+def quantize(sos: SOSController, word_length: int) -> SOSController:
+    """Coefficients rounded to ``word_length``-bit fixed point (per section: one Q format for b, one for a)."""
+    W = int(word_length)
+    if not 2 <= W <= 53:
+        raise PolyrobError(f"the word length must lie in [2, 53] bits, got {word_length}")
+    rows, fmts = [], []
+    for row in sos.sections:
+        out_row, fmt_row = [], []
+        for secs in row:
+            q = secs.copy()
+            f = np.zeros((secs.shape[0], 2), dtype=int)
+            for k, s in enumerate(secs):
+                fb, fa = q_format(s[:3], W), q_format(s[4:], W)
+                q[k, :3] = _round(s[:3], fb, W)
+                q[k, 4:] = _round(s[4:], fa, W)
+                f[k] = fb, fa
+            out_row.append(q)
+            fmt_row.append(f)
+        rows.append(tuple(out_row))
+        fmts.append(tuple(fmt_row))
+    return SOSController(tuple(rows), sos.dt, W, tuple(fmts), dict(sos.info))
+
+
+@dataclass(frozen=True, eq=False)
+class WordLengthResult:
+    """Shortest word length found (``None`` if ``lengths[-1]`` fails) and every length tried."""
+
+    word_length: int | None
+    mu: float | None
+    threshold: float
+    history: tuple
+    controller: SOSController | None
+
+    def summary(self) -> dict:
+        return {"min_word_length": self.word_length, "mu": self.mu, "threshold": self.threshold,
+                "history": [list(h) for h in self.history]}
+
+
+def min_word_length(P, sos: SOSController, *, threshold: float, lengths=(4, 40), omega=None,
+                    **mu_options) -> WordLengthResult:
+    """Shortest coefficient word length keeping the discretised loop stable with μ <= ``threshold``.
+
+    Bisection over ``lengths = (shortest, longest)`` bits, assuming longer
+    words never do worse (checked at ``longest`` first).
+    """
+    from polyrob.validate.discretize import sampled_data_mu
+
+    history = []
+
+    def check(W):
+        q = quantize(sos, W)
+        res = sampled_data_mu(P, None, sos.rate, controller=q.to_ss(), omega=omega, **mu_options)
+        ok = res.stable and res.mu_upper <= threshold
+        history.append((int(W), float(res.mu_upper), bool(res.stable), bool(ok)))
+        return ok, res.mu_upper, q
+
+    lo, hi = int(lengths[0]), int(lengths[1])
+    ok, mu_hi, q_hi = check(hi)
+    if not ok:
+        return WordLengthResult(None, None, threshold, tuple(history), None)
+    best = (hi, mu_hi, q_hi)
+    ok, mu_lo, q_lo = check(lo)
+    if ok:
+        return WordLengthResult(lo, float(mu_lo), threshold, tuple(history), q_lo)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        ok, mu, q = check(mid)
+        if ok:
+            hi, best = mid, (mid, mu, q)
+        else:
+            lo = mid
+    return WordLengthResult(best[0], float(best[1]), threshold, tuple(history), best[2])

@@ -1,0 +1,108 @@
+"""Generated C: compiles with -std=c99 -Wall -Werror and reproduces the Python discrete controller."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+import polyrob
+from polyrob.validate.discretize import discretize
+from polyrob.validate.export_c import write_c, write_json
+from polyrob.validate.quantize import SOSController, quantize, sos_realization
+
+CC = shutil.which("cc") or shutil.which("gcc")
+N_STEPS = 400
+
+HARNESS = r"""
+#include <stdio.h>
+#include "controller.h"
+int main(void)
+{
+    int j, k, i;
+    for (j = 0; j < CONTROLLER_N_INPUTS; ++j) {
+        controller_state_t st;
+        controller_reset(&st);
+        for (k = 0; k < %d; ++k) {
+            double e[CONTROLLER_N_INPUTS] = {0};
+            double u[CONTROLLER_N_OUTPUTS];
+            e[j] = 1.0;
+            controller_step(&st, e, u);
+            for (i = 0; i < CONTROLLER_N_OUTPUTS; ++i) printf("%%.17g\n", u[i]);
+        }
+    }
+    return 0;
+}
+""" % N_STEPS
+
+
+def _run_c(sos, tmp_path):
+    write_c(sos, tmp_path)
+    (tmp_path / "main.c").write_text(HARNESS)
+    exe = tmp_path / "harness"
+    subprocess.run([CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-o", str(exe),
+                    str(tmp_path / "main.c"), str(tmp_path / "controller.c")], check=True, capture_output=True)
+    out = np.array([float(x) for x in subprocess.run([str(exe)], check=True, capture_output=True,
+                                                     text=True).stdout.split()])
+    m_in, m_out = sos.n_inputs, sos.n_outputs
+    return out.reshape(m_in, N_STEPS, m_out).transpose(2, 0, 1)  # [i, j, k]
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler")
+@pytest.mark.parametrize("word_length", [None, 24])
+def test_c_step_response_matches_python(tmp_path, word_length):
+    dc = discretize(polyrob.paper_controller(), 1000.0, method="tustin", prewarp=10.0)
+    sos = sos_realization(dc)
+    if word_length is not None:
+        sos = quantize(sos, word_length)
+    c_out = _run_c(sos, tmp_path)
+    # the Python sections, same operation order: equal to rounding
+    for j in range(2):
+        e = np.zeros((2, N_STEPS))
+        e[j] = 1.0
+        py = sos.run(e)
+        assert np.max(np.abs(c_out[:, j] - py) / np.maximum(1.0, np.abs(py))) <= 1e-12
+    if word_length is None:
+        # and the discrete state-space controller (another realisation) to 1e-9
+        ref = dc.step_response(N_STEPS)
+        assert np.max(np.abs(c_out - ref) / np.maximum(1.0, np.abs(ref))) <= 1e-9
+        # the value itself: K*(z) at z = 1 equals K*(0) (Tustin keeps DC), the step tends to it slowly;
+        # the first sample is D of the Tustin map
+        assert c_out[0, 0, 0] == pytest.approx(float(np.asarray(dc.system.D)[0, 0]), rel=1e-12)
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler")
+def test_c_float_compiles(tmp_path):
+    sos = sos_realization(discretize(polyrob.paper_controller(), 500.0, method="zoh"))
+    write_c(sos, tmp_path, real="float")
+    subprocess.run([CC, "-std=c99", "-Wall", "-Werror", "-c", "-o", str(tmp_path / "c.o"),
+                    str(tmp_path / "controller.c")], check=True, capture_output=True)
+
+
+def test_quantised_coefficients_are_fixed_point(tmp_path):
+    sos = sos_realization(discretize(polyrob.paper_controller(), 1000.0, prewarp=10.0))
+    q = quantize(sos, 16)
+    for i, j, secs in q.entries():
+        for s, (fb, fa) in zip(secs, q.formats[i][j]):
+            mant_b, mant_a = s[:3] * 2.0**fb, s[4:] * 2.0**fa
+            assert np.all(mant_b == np.round(mant_b)) and np.all(mant_a == np.round(mant_a))
+            assert np.all(np.abs(mant_b) <= 2**15) and np.all(np.abs(mant_a) <= 2**15)
+    # rounding error at most half an LSB of each format
+    for (i, j, a), (_, _, b) in zip(sos.entries(), q.entries()):
+        lsb_b = 2.0 ** -q.formats[i][j][:, 0]
+        assert np.all(np.abs(a[:, :3] - b[:, :3]) <= 0.5 * lsb_b[:, None] + 1e-300)
+    path = write_json(q, tmp_path / "controller.json")
+    back = SOSController.from_dict(json.loads(path.read_text()))
+    assert back.word_length == 16 and np.array_equal(back.sections[1][0], q.sections[1][0])
+
+
+def test_sos_matches_state_space():
+    dc = discretize(polyrob.paper_controller(), 1000.0, prewarp=10.0)
+    sos = sos_realization(dc)
+    assert [s.shape[0] for _, _, s in sos.entries()] == [2, 2, 2, 2]  # third order per entry: 2 biquads
+    z = np.exp(1j * np.array([1e-4, 1e-2, 0.3, 2.0]))
+    H, R = sos.to_ss()(z), dc.system(z)
+    assert np.max(np.abs(H - R) / np.abs(R)) < 1e-8
