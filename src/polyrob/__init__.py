@@ -1,53 +1,131 @@
 """polyrob: robust controllers with a mathematical guarantee for serial robots.
 
-The data flow is one way: a robot (:func:`load_robot`) and a :class:`Domain`
-give a PLDI (bounds of the Jacobians over the domain), the PLDI an uncertain
-plant, the plant with weights a generalized plant, and that a controller with
-its structured-singular-value certificate.
+The data flow is one way, in MATLAB's vocabulary: a robot
+(:func:`load_robot`) and a :class:`Domain` give a :class:`PLDI`
+(:func:`bound_pldi`: bounds of the Jacobians over the domain), the PLDI an
+:class:`UncertainPlant` (:func:`uncertain_plant`), the plant with weights a
+:class:`GeneralizedPlant` (:func:`generalized_plant`); :func:`musyn` gives a
+controller with its structured-singular-value certificate,
+:func:`reduce_controller` a smaller one, and :func:`mussv`,
+:func:`mu_bounds`, :func:`robstab`, :func:`robperf` analyse a loop.
+:func:`build_problem` runs the first three steps at once.
+
+The names are imported on first use (PEP 562), so ``import polyrob`` and the
+``polyrob`` command start fast; every name also stays importable from its
+module (``polyrob.synthesis.dk.HinfStep``, ...).
+
+Examples
+--------
+>>> import polyrob
+>>> "musyn" in polyrob.__all__ and callable(polyrob.load_robot)
+True
 """
 
+from __future__ import annotations
+
+import importlib
+
 from polyrob.errors import (
+    ArgumentError,
     BoundsError,
     CertificationError,
+    ControllerFileError,
     DomainError,
     PolyrobError,
     RobotError,
     SolverError,
     SynthesisError,
 )
-from polyrob.model.robots import Manipulator, Robot, available_robots, load_robot
-from polyrob.model.analytic import AnalyticRobot
-from polyrob.bounds.domain import Domain
-from polyrob.plant import weights
-from polyrob.bounds.pldi import PLDI, bound_pldi
-from polyrob.plant.uncertainty import UncertainPlant, uncertain_plant
-from polyrob.plant.generalized import GeneralizedPlant, closed_loop, generalized_plant, lft, nominal_closed_loop, paper_controller
 
 __version__ = "0.1.0"
 
+#: public name -> module that defines it
+_LAZY = {
+    "load_robot": "polyrob.model.robots",
+    "available_robots": "polyrob.model.robots",
+    "Robot": "polyrob.model.robots",
+    "Manipulator": "polyrob.model.robots",
+    "AnalyticRobot": "polyrob.model.analytic",
+    "Domain": "polyrob.bounds.domain",
+    "PLDI": "polyrob.bounds.pldi",
+    "bound_pldi": "polyrob.bounds.pldi",
+    "UncertainPlant": "polyrob.plant.uncertainty",
+    "uncertain_plant": "polyrob.plant.uncertainty",
+    "GeneralizedPlant": "polyrob.plant.generalized",
+    "generalized_plant": "polyrob.plant.generalized",
+    "lft": "polyrob.plant.generalized",
+    "closed_loop": "polyrob.plant.generalized",
+    "nominal_closed_loop": "polyrob.plant.generalized",
+    "paper_controller": "polyrob.plant.generalized",
+    "makeweight": "polyrob.plant.weights",
+    "paper_weights": "polyrob.plant.weights",
+    "mussv": "polyrob.analysis.mu",
+    "mu_bounds": "polyrob.analysis.mu",
+    "robstab": "polyrob.analysis.robust",
+    "robperf": "polyrob.analysis.robust",
+    "musyn": "polyrob.synthesis.dk",
+    "MusynResult": "polyrob.synthesis.result",
+    "reduce_controller": "polyrob.synthesis.reduce",
+    "load_controller": "polyrob.io.controller",
+    "save_controller": "polyrob.io.controller",
+    "Problem": "polyrob.pipeline.problem",
+    "build_problem": "polyrob.pipeline.problem",
+    "analyze_controller": "polyrob.pipeline.analysis",
+}
+#: modules reachable as attributes (``polyrob.weights.paper_weights``)
+_SUBMODULES = {"weights": "polyrob.plant.weights"}
+
 __all__ = [
-    "AnalyticRobot",
-    "BoundsError",
-    "CertificationError",
+    # the pipeline, in MATLAB's vocabulary
+    "load_robot",
     "Domain",
-    "DomainError",
-    "Manipulator",
-    "PolyrobError",
+    "bound_pldi",
+    "uncertain_plant",
+    "generalized_plant",
+    "mussv",
+    "mu_bounds",
+    "robstab",
+    "robperf",
+    "musyn",
+    "reduce_controller",
+    "load_controller",
+    "save_controller",
+    "build_problem",
+    "analyze_controller",
+    "makeweight",
+    "paper_weights",
+    "paper_controller",
+    "available_robots",
+    # the objects they return
     "Robot",
-    "RobotError",
-    "SolverError",
-    "SynthesisError",
-    "GeneralizedPlant",
     "PLDI",
     "UncertainPlant",
-    "closed_loop",
-    "generalized_plant",
-    "lft",
-    "nominal_closed_loop",
-    "paper_controller",
-    "uncertain_plant",
-    "weights",
-    "available_robots",
-    "bound_pldi",
-    "load_robot",
+    "GeneralizedPlant",
+    "MusynResult",
+    "Problem",
+    # errors
+    "PolyrobError",
+    "ArgumentError",
+    "RobotError",
+    "DomainError",
+    "BoundsError",
+    "CertificationError",
+    "SolverError",
+    "SynthesisError",
+    "ControllerFileError",
 ]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+    elif name in _SUBMODULES:
+        value = importlib.import_module(_SUBMODULES[name])
+    else:
+        raise AttributeError(f"module 'polyrob' has no attribute {name!r}")
+    globals()[name] = value  # the next access skips __getattr__
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY) | set(_SUBMODULES))

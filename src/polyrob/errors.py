@@ -14,6 +14,8 @@ __all__ = [
     "CertificationError",
     "SolverError",
     "SynthesisError",
+    "ArgumentError",
+    "ControllerFileError",
 ]
 
 
@@ -43,3 +45,11 @@ class SolverError(PolyrobError):
 
 class SynthesisError(SolverError):
     """A controller synthesis problem is infeasible or could not be solved."""
+
+
+class ArgumentError(PolyrobError, ValueError):
+    """An argument or option has a wrong value or kind (also a ``ValueError``, as python-control's)."""
+
+
+class ControllerFileError(PolyrobError):
+    """A controller file is missing, malformed, of another format, or made for another problem."""

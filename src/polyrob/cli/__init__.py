@@ -1,0 +1,81 @@
+"""The ``polyrob`` command: a thin layer over the library's functions.
+
+The CLI parses, calls :mod:`polyrob.pipeline` and the stage modules, and
+prints: every command prints a text report or, with ``--json``, one JSON
+document.  Every user error (a :class:`~polyrob.errors.PolyrobError`, or a
+bad option value) ends as one line on stderr and exit status 2; Ctrl-C ends
+with status 130.  Output files are written to a temporary file and renamed,
+and output paths are checked before the work starts, so a failed or
+interrupted run leaves no file.  Only :mod:`argparse` and the standard
+library are imported here: each command imports what it needs when it runs,
+so ``polyrob --help`` is fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import sys
+
+from polyrob.cli.options import parse_joint_values
+from polyrob.errors import PolyrobError
+
+__all__ = ["main", "build_parser", "parse_joint_values"]
+
+
+class PolyrobParser(argparse.ArgumentParser):
+    """argparse with its errors on one line (``polyrob: error: argument --mc: ...``), exit 2."""
+
+    def error(self, message):
+        self.exit(2, f"polyrob: error: {message} (see `{self.prog} --help`)\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from polyrob.cli import analyze, bounds, listing, synth
+    from polyrob.cli.common import HelpFormatter
+
+    parser = PolyrobParser(
+        prog="polyrob",
+        description="Robust controllers with a mathematical guarantee for serial robots described in URDF.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=PolyrobParser)
+    sub.add_parser = functools.partial(sub.add_parser, formatter_class=HelpFormatter)
+    for module in (listing, bounds, analyze, synth):
+        module.register(sub)
+    return parser
+
+
+def _run(args, guard) -> int:
+    try:
+        return int(args.func(args) or 0)
+    except PolyrobError as exc:
+        if guard.interrupted.is_set():
+            raise KeyboardInterrupt from None
+        print(f"polyrob: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:  # `polyrob robots | head`: not an error
+        sys.stderr.close()
+        return 0
+
+
+def main(argv=None) -> int:
+    """Run the ``polyrob`` command with ``argv`` (default ``sys.argv[1:]``); returns the exit status."""
+    from polyrob.cli.interrupt import EXIT_INTERRUPTED, InterruptGuard
+
+    guard = InterruptGuard()
+    try:
+        with guard:
+            args = build_parser().parse_args(argv)
+            return _run(args, guard)
+    except KeyboardInterrupt:
+        pass
+    except Exception:
+        if not guard.interrupted.is_set():
+            raise
+        # an error raised while the interrupt tore down workers is part of the interrupt
+    print("polyrob: interrupted", file=sys.stderr, flush=True)
+    return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

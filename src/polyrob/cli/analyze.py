@@ -1,0 +1,95 @@
+"""``polyrob analyze``: nominal/robust stability and performance (μ) of a controller, and one verdict."""
+
+from __future__ import annotations
+
+from polyrob.cli.common import (
+    Output,
+    add_domain_arguments,
+    add_output_flags,
+    add_robot_arguments,
+    add_weight_arguments,
+    robot_from_args,
+)
+from polyrob.cli.options import int_at_least, parse_frequencies
+from polyrob.cli.plant import add_plant_arguments, problem_from_args
+
+__all__ = ["register", "print_analysis"]
+
+
+def load_controller_args(text):
+    """``(K, info, source)`` of ``--controller``: ``paper`` (K*), a JSON file or a MATLAB .mat."""
+    from polyrob.io.controller import controller_from_mapping, read_controller_file
+    from polyrob.plant.generalized import paper_controller
+
+    if text == "paper":
+        return paper_controller(), {}, "the paper's K*"
+    doc = read_controller_file(text)
+    return controller_from_mapping(doc, text), doc.get("info") or {}, text
+
+
+def print_analysis(a, out) -> None:
+    """The text report of a :class:`polyrob.pipeline.ControllerAnalysis` (shared with ``run``)."""
+    rs, rp, s = a.robust_stability, a.robust_performance, a.sampling
+    npf = a.nominal_performance
+    out.line(f"nominal stability      {'yes' if rs.nominally_stable else 'NO'}")
+    out.line(f"nominal performance    ||N_zw||inf = {npf:.4g}  ({'met' if npf < 1 else 'not met'})")
+    for title, r in (("robust stability", rs), ("robust performance", rp)):
+        out.line(f"{title:<22} mu in [{r.mu_lower:.4g}, {r.mu_upper:.4g}] (peak on the frequency grid) "
+                 f"at {r.critical_frequency:.4g} rad/s: {a.status(r)}")
+    out.line(f"monte carlo            {s.random_stable:.1%} of {s.random} random parameter sets stable")
+    if s.corners_stable is not None:
+        out.line(f"corners                {s.corners_stable:.1%} of {s.corners} corners stable")
+    out.line(f"worst sampled          max Re(pole) = {s.worst_abscissa:.4g}")
+    out.line(a.verdict)
+
+
+def cmd_analyze(args) -> int:
+    from polyrob.pipeline import analyze_controller, check_controller_problem, frequency_grid
+
+    omega_spec = parse_frequencies(args.omega)
+    out = Output(args, stages=2)
+    K, info, source = load_controller_args(args.controller)
+    robot = robot_from_args(args)
+
+    def check(known):  # robot, domain and weights are known before the bounding step
+        check_controller_problem(info, known, source)
+
+    problem = problem_from_args(robot, args, out, check=check if info else None)
+    if info:
+        check_controller_problem(info, problem, source)
+    omega = frequency_grid(*omega_spec) if omega_spec else None
+    out.stage(f"analysis of {source}: mu sweeps (robust stability, robust performance), "
+              f"{args.mc} Monte Carlo parameter sets")
+    a = analyze_controller(problem, K, omega=omega, mc=args.mc, seed=args.seed, progress=out.progress)
+    report = {
+        "robot": robot.name,
+        "controller": source,
+        "enclosure": problem.pldi.enclosure,
+        "uncertainty": problem.model,
+        "parameters": int(problem.unc.n_params),
+        "problem_compared": bool(info),
+        **a.summary(),
+    }
+    out.document(report)
+    out.line(f"robot {robot.name}: {problem.unc.n_params} real parameters ({problem.pldi.enclosure} PLDI, "
+             f"{problem.model} model), controller order {a.order}")
+    if not info and source != "the paper's K*":
+        out.line(f"note: {source} does not record the problem it was made for: not compared")
+    print_analysis(a, out)
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("analyze", help="nominal/robust stability and performance (mu) of a controller")
+    add_robot_arguments(p)
+    add_domain_arguments(p)
+    add_weight_arguments(p)
+    p.add_argument("--controller", required=True,
+                   help="controller file (JSON ss/tf, see polyrob.io.controller, or a MATLAB .mat with A, B, C, D) "
+                        "or 'paper' for the paper's K*")
+    add_plant_arguments(p)
+    p.add_argument("--mc", type=int_at_least(1), default=500, help="Monte Carlo parameter sets")
+    p.add_argument("--omega", default=None, help="frequency grid LO:HI:N in rad/s (log spaced; default automatic)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo sets")
+    add_output_flags(p)
+    p.set_defaults(func=cmd_analyze)

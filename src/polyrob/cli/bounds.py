@@ -1,0 +1,106 @@
+"""``polyrob bounds``: intervals and a polytope of the Jacobians over the domain (a PLDI file)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from polyrob.cli.common import Output, add_domain_arguments, add_output_flags, add_robot_arguments, domain_from_args, robot_from_args
+from polyrob.cli.options import fraction, int_at_least, positive_float
+from polyrob.errors import ArgumentError
+
+__all__ = ["register", "save_pair"]
+
+
+def save_pair(pldi, output) -> tuple[Path, Path]:
+    """Save a PLDI as ``stem.json`` + ``stem.npz``; an interrupted save leaves neither new file."""
+    from polyrob.io.paths import pair_paths
+
+    json_path, npz_path = pair_paths(output)
+    before = {p: p.exists() for p in (json_path, npz_path)}
+    try:
+        return pldi.save(json_path)
+    except BaseException:
+        for p, existed in before.items():
+            if not existed:
+                p.unlink(missing_ok=True)
+        raise
+
+
+def cmd_bounds(args) -> int:
+    from polyrob.bounds.pldi import bound_pldi
+    from polyrob.io.paths import check_output_path, pair_paths
+    from polyrob.pipeline.reports import pldi_report
+
+    if args.output:  # before any work: a refused path leaves nothing behind
+        for path in pair_paths(args.output):
+            check_output_path(path, "-o")
+    if not args.certify and (args.time_limit is not None or args.rel_tol is not None):
+        raise ArgumentError("--time-limit and --rel-tol set the interval-arithmetic proof: use them with --certify")
+    out = Output(args, stages=1)
+    robot = robot_from_args(args)
+    domain = domain_from_args(robot, args)
+    certify_options = {k: v for k, v in (("time_limit", args.time_limit), ("rel_tol", args.rel_tol)) if v is not None}
+    out.stage(f"bounds: {robot.name} ({robot.m} joints) over domain '{domain.name}'"
+              + (", certified by interval arithmetic" if args.certify else ""))
+    pldi = bound_pldi(
+        robot,
+        domain,
+        samples=args.samples,
+        nominal=args.nominal,
+        certify=args.certify,
+        certify_options=certify_options or None,
+        coverage=args.coverage,
+        seed=args.seed,
+        progress=out.progress,
+    )
+    report = pldi_report(pldi, robot.joint_names)
+    if args.output:
+        json_path, npz_path = save_pair(pldi, args.output)
+        report["files"] = [str(json_path), str(npz_path)]
+    out.document(report)
+    if out.json:
+        return 0
+    print(f"robot {robot.name}, domain {domain.name}, {len(pldi.entries)} varying entries")
+    print(pldi.table())
+    poly = report["polytope"]
+    if poly["volume_hits"]:
+        volume = f"volume / interval box ~ {poly['volume_ratio']:.3g} ({poly['volume_hits']} of {poly['volume_samples']} box points inside)"
+    elif poly["volume_samples"]:
+        volume = f"volume / interval box < {poly['volume_ratio_bound']:.2g} (0 of {poly['volume_samples']} box points inside)"
+    else:
+        volume = "volume ratio not computed"
+    print(f"polytope: {poly['halfspaces']} half-spaces"
+          + (f", {poly['vertices']} vertices" if poly["vertices"] is not None else "")
+          + f", reduced dimension {poly['reduced_dim']}, {volume}")
+    if "refinement" in report:
+        r = report["refinement"]
+        print(f"local search widened the sampled intervals by at most {r['max_percent']:.3g} % "
+              f"({r['entry']}); {r['verification_rounds']} verification round(s)")
+    if report["coverage"] is not None:
+        print(f"coverage: {report['coverage']:.4f} of {report['coverage_points']} fresh points")
+    if report["dropped_positions"]:
+        print("positions the dynamics do not depend on: " + ", ".join(report["dropped_positions"]))
+    print(f"time: {report['seconds']:.2f} s")
+    if args.output:
+        print(f"wrote {report['files'][0]} and {report['files'][1]}")
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("bounds", help="bound the Jacobians over the domain: intervals and a polytope (PLDI)")
+    add_robot_arguments(p)
+    add_domain_arguments(p)
+    p.add_argument("--certify", action="store_true", help="prove the intervals by interval arithmetic (up to 3 joints)")
+    p.add_argument("--time-limit", type=positive_float, default=None,
+                   help="--certify: seconds before the proof gives up (default 120)")
+    p.add_argument("--rel-tol", type=fraction, default=None,
+                   help="--certify: width tolerance relative to each interval (default 1e-5)")
+    p.add_argument("--samples", type=int_at_least(1), default=None,
+                   help="Sobol' positions (default grows with the dimension)")
+    p.add_argument("--nominal", default="equilibrium", choices=["equilibrium", "midpoint"], help="where A0, B0 are taken")
+    p.add_argument("--coverage", type=int_at_least(0), default=10_000, help="fresh points for the coverage check (0 skips)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the designs")
+    add_output_flags(p)
+    p.add_argument("-o", "--output", default=None,
+                   help="write the PLDI as STEM.json + STEM.npz (any .json/.npz suffix names the same pair)")
+    p.set_defaults(func=cmd_bounds)

@@ -1,0 +1,205 @@
+"""What the commands share: robot/domain/weight options, output paths, and how results are printed."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+from polyrob.cli.options import nonnegative_float, parse_joint_values, parse_list, positive_float
+from polyrob.errors import ArgumentError, DomainError
+
+__all__ = [
+    "DEFAULT_ROBOT",
+    "HelpFormatter",
+    "Output",
+    "add_robot_arguments",
+    "add_domain_arguments",
+    "add_weight_arguments",
+    "add_output_flags",
+    "robot_from_args",
+    "domain_from_args",
+    "domain_options_given",
+    "hyperparameters_from_args",
+    "to_json",
+]
+
+DEFAULT_ROBOT = "planar_2r"
+#: the CLI option of each domain group (the library names the group only)
+DOMAIN_OPTIONS = {"q": "--q-range", "qdot": "--qdot-max", "u": "--u-max"}
+WEIGHT_OPTIONS = (("omega_b", "wb"), ("M_s", "ms"), ("A_s", "as"), ("omega_bt", "wbt"), ("M_t", "mt"), ("A_t", "at"))
+
+
+# --------------------------------------------------------------------------- printing
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Shows an option's default when it has one and its help does not already say it."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        default = action.default
+        if "default" in text or default in (None, False, argparse.SUPPRESS) or not action.option_strings:
+            return text
+        return f"{text} (default: {default})"
+
+
+
+def _plain(obj):
+    """JSON-ready: non-finite floats become null (strict JSON has no NaN/inf), arrays lists."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, (str, int, bool)) or obj is None:
+        return obj
+    if hasattr(obj, "tolist"):  # numpy scalars and arrays
+        return _plain(obj.tolist())
+    return str(obj)
+
+
+def to_json(doc) -> str:
+    return json.dumps(_plain(doc), indent=2, allow_nan=False)
+
+
+class Output:
+    """Where a command's lines go.
+
+    Text mode: the report on stdout, each stage's start line first (flushed,
+    so a pipe shows it when the stage starts).  ``--json``: one JSON document
+    on stdout, stage lines on stderr (none with ``--quiet``).  Progress bars
+    only on a terminal and without ``--quiet``.
+    """
+
+    def __init__(self, args, stages: int = 0):
+        self.json = bool(getattr(args, "json", False))
+        self.quiet = bool(getattr(args, "quiet", False))
+        self.stages = stages
+        self._stage = 0
+
+    @property
+    def progress(self) -> bool:
+        return not self.quiet and sys.stderr.isatty()
+
+    def stage(self, text: str) -> None:
+        self._stage += 1
+        line = f"[{self._stage}/{self.stages}] {text}"
+        if not self.json:
+            print(line, flush=True)
+        elif not self.quiet:
+            print(line, file=sys.stderr, flush=True)
+
+    def line(self, text: str = "") -> None:
+        if not self.json:
+            print(text, flush=True)
+
+    def document(self, doc) -> None:
+        if self.json:
+            print(to_json(doc), flush=True)
+
+
+def add_output_flags(parser: argparse.ArgumentParser, *, quiet: bool = True) -> None:
+    parser.add_argument("--json", action="store_true", help="print one JSON document instead of the text report")
+    if quiet:
+        parser.add_argument("--quiet", action="store_true",
+                            help="no progress bars (and no stage lines on stderr with --json)")
+
+
+# --------------------------------------------------------------------------- robot and domain
+
+
+def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("robot", nargs="?", default=DEFAULT_ROBOT,
+                        help=f"URDF file, bundled or example-robot-data name (default {DEFAULT_ROBOT})")
+    parser.add_argument("--lock", default=None,
+                        help="comma-separated joints to lock (default: grippers/fingers; '' locks none)")
+
+
+def add_domain_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("domain")
+    g.add_argument("--domain", default=None,
+                   help="domain file (JSON/YAML) or a named domain of the robot (e.g. 'paper')")
+    g.add_argument("--q-range", default=None,
+                   help="position range, e.g. --q-range=-pi:pi or joint2=-1.5:1.5,joint3=0:2")
+    g.add_argument("--qdot-max", default=None, help="velocity bound >= 0, e.g. 2 or joint1=4,joint2=10")
+    g.add_argument("--u-max", default=None, help="torque bound >= 0, e.g. 50 or joint1=0,joint2=5")
+    g.add_argument("--qdot-scale", type=nonnegative_float, default=1.0, help="scale the velocity box")
+    g.add_argument("--u-scale", type=nonnegative_float, default=1.0, help="scale the torque box")
+
+
+def robot_from_args(args):
+    from polyrob.model.robots import load_robot
+
+    lock = None if args.lock is None else [s.strip() for s in args.lock.split(",") if s.strip()]
+    return load_robot(args.robot, lock=lock)
+
+
+def domain_options_given(args) -> bool:
+    return any(getattr(args, k, None) is not None for k in ("domain", "q_range", "qdot_max", "u_max")) or \
+        getattr(args, "qdot_scale", 1.0) != 1.0 or getattr(args, "u_scale", 1.0) != 1.0
+
+
+def domain_from_args(robot, args):
+    from polyrob.bounds.domain import Domain
+
+    try:
+        return Domain.from_robot(
+            robot,
+            args.domain,
+            q_range=parse_joint_values(args.q_range, "--q-range", ranges=True),
+            qdot_max=parse_joint_values(args.qdot_max, "--qdot-max", ranges=False),
+            u_max=parse_joint_values(args.u_max, "--u-max", ranges=False),
+            qdot_scale=args.qdot_scale,
+            u_scale=args.u_scale,
+        )
+    except DomainError as exc:
+        # the library names a group ("--q: ..."); the user typed the option
+        text = str(exc)
+        for group, option in DOMAIN_OPTIONS.items():
+            if text.startswith(f"--{group}:"):
+                raise DomainError(option + text[len(group) + 2:]) from None
+        raise
+
+
+# --------------------------------------------------------------------------- weights
+
+
+def add_weight_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group(
+        "performance weights W_S = (s/M_S + wB)/(s + wB A_S), W_T = (s + wBT)/(A_T s + wBT M_T)",
+        "one value > 0 for every joint or one per joint (comma-separated); default: the paper's",
+    )
+    for key, text in WEIGHT_OPTIONS:
+        g.add_argument(f"--{text}", dest=key, default=None, help=f"{key}")
+    g.add_argument("--bandwidth-scale", type=positive_float, default=1.0, help="multiply wB and wBT")
+
+
+def hyperparameters_from_args(m: int, args) -> dict:
+    """The paper's weight hyperparameters with the per-channel overrides of the options."""
+    from polyrob.pipeline.problem import default_hyperparameters
+
+    overrides = {}
+    for key, text in WEIGHT_OPTIONS:
+        vals = parse_list(getattr(args, key, None), f"--{text}")
+        if vals is not None:
+            if len(vals) not in (1, m):
+                raise ArgumentError(f"--{text}: give 1 or {m} values (one per joint), got {len(vals)}")
+            overrides[key] = vals
+    return default_hyperparameters(m, overrides, bandwidth_scale=args.bandwidth_scale)
+
+
+def scale_names(text: str) -> tuple:
+    from polyrob.pipeline.problem import WEIGHT_KEYS
+
+    names = tuple(x.strip() for x in text.split(",") if x.strip())
+    unknown = [n for n in names if n not in WEIGHT_KEYS]
+    if not names or unknown:
+        raise ArgumentError(f"--scale-only: give weight hyperparameters among {', '.join(WEIGHT_KEYS)}, got '{text}'")
+    return names
+
+
+def alphas_from_args(text):
+    return parse_list(text, "--alphas")

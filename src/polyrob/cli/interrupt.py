@@ -1,0 +1,87 @@
+"""One Ctrl-C ends a command within seconds, worker processes included.
+
+Python runs a SIGINT handler only between bytecodes of the main thread: a
+parent blocked joining a process pool, or inside a long C routine, would not
+see it, and pool workers left alive keep the interpreter from exiting.  A
+wake-up file descriptor (:func:`signal.set_wakeup_fd`) is written by the C
+level handler at once, whatever the main thread does; a watchdog thread
+reading it stops this process's multiprocessing children and, if the
+process is still alive after a grace period, ends it with status 130.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+
+__all__ = ["EXIT_INTERRUPTED", "InterruptGuard"]
+
+EXIT_INTERRUPTED = 130
+GRACE_SECONDS = 4.0
+
+
+def stop_children(timeout: float = 1.0) -> None:
+    """Terminate (then kill) the multiprocessing children of this process."""
+    import multiprocessing
+
+    children = multiprocessing.active_children()
+    for child in children:
+        child.terminate()
+    for child in children:
+        child.join(timeout)
+        if child.is_alive():
+            child.kill()
+
+
+class InterruptGuard:
+    """Context manager: a watchdog for SIGINT while a command runs (main thread only).
+
+    ``interrupted`` tells whether a SIGINT arrived; after one, the watchdog
+    stops the children at once and ends the process after
+    :data:`GRACE_SECONDS` unless it has exited by then (the main thread has
+    that long to remove temporary files and print its line).
+    """
+
+    def __init__(self, grace: float = GRACE_SECONDS):
+        self.grace = grace
+        self.interrupted = threading.Event()
+        self._fds = None
+        self._previous_fd = -1
+
+    def __enter__(self):
+        if threading.current_thread() is not threading.main_thread():
+            return self
+        r, w = os.pipe()
+        os.set_blocking(w, False)
+        try:
+            self._previous_fd = signal.set_wakeup_fd(w, warn_on_full_buffer=False)
+        except (ValueError, OSError):  # not the main interpreter: no watchdog
+            os.close(r)
+            os.close(w)
+            return self
+        self._fds = (r, w)
+        threading.Thread(target=self._watch, args=(r,), name="polyrob-sigint", daemon=True).start()
+        return self
+
+    def _watch(self, r: int) -> None:
+        with os.fdopen(r, "rb", buffering=0) as pipe:  # closed here, never under a running read
+            while True:
+                data = pipe.read(64)
+                if not data:  # the write end was closed: the command is over
+                    return
+                if signal.SIGINT in data:
+                    break
+        self.interrupted.set()
+        stop_children()
+        time.sleep(self.grace)
+        os._exit(EXIT_INTERRUPTED)
+
+    def __exit__(self, *exc):
+        if self._fds is None:
+            return False
+        signal.set_wakeup_fd(self._previous_fd)
+        if not self.interrupted.is_set():
+            os.close(self._fds[1])  # the watchdog reads EOF, closes its end and returns
+        return False

@@ -1,0 +1,158 @@
+"""Option values: parsed and validated here, each error naming the option the user typed.
+
+Only the standard library: the numbers are checked with :mod:`math`, the
+arrays are built by the library.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from polyrob.errors import ArgumentError
+
+__all__ = [
+    "number",
+    "parse_joint_values",
+    "parse_list",
+    "parse_frequencies",
+    "int_at_least",
+    "positive_float",
+    "nonnegative_float",
+    "fraction",
+]
+
+
+def number(text: str, option: str, *, finite: bool = True) -> float:
+    """``2``, ``-1.5``, ``pi``, ``2pi``, ``0.5*pi`` -> float; NaN is always refused, inf when ``finite``."""
+    t = str(text).strip().lower()
+    sign = -1.0 if t.startswith("-") else 1.0
+    t = t.lstrip("+-")
+    try:
+        if t.endswith("pi"):
+            factor = t[:-2].rstrip("*")
+            value = sign * (float(factor) if factor else 1.0) * math.pi
+        else:
+            value = sign * float(t)
+    except ValueError:
+        raise ArgumentError(f"{option}: '{text}' is not a number") from None
+    if math.isnan(value):
+        raise ArgumentError(f"{option}: NaN is not a valid value")
+    if finite and math.isinf(value):
+        raise ArgumentError(f"{option}: '{text}' is not a finite number")
+    return value
+
+
+def parse_joint_values(text: str | None, option: str, *, ranges: bool):
+    """Parse ``4``, ``4,10``, ``joint1=4,joint2=10``, ``-pi:pi`` or ``joint2=-1:1``.
+
+    Returns a value :meth:`polyrob.Domain.from_robot` takes: a number or a
+    ``[lo, hi]`` pair for every joint, a list per joint, or a mapping.  Every
+    number must be finite; a single bound (``--qdot-max 2``) must be >= 0 and
+    a range ``LO:HI`` must have ``LO <= HI``.
+    """
+    if text is None:
+        return None
+    items = [s for s in text.split(",") if s.strip()]
+    if not items:
+        raise ArgumentError(f"{option}: empty value")
+
+    def value(s):
+        if ":" in s:
+            lo, hi = s.split(":", 1)
+            pair = [number(lo, option), number(hi, option)]
+            if pair[0] > pair[1]:
+                raise ArgumentError(f"{option}: inverted range '{s}' (give LO:HI with LO <= HI)")
+            return pair
+        if ranges:
+            raise ArgumentError(f"{option}: give a range as LO:HI (e.g. {option}=-pi:pi), got '{s}'")
+        v = number(s, option)
+        if v < 0:
+            raise ArgumentError(f"{option}: a bound must be >= 0 (it means -V:V; give a range LO:HI otherwise), got '{s}'")
+        return v
+
+    if all("=" in s for s in items):
+        return {k.strip(): value(v) for k, v in (s.split("=", 1) for s in items)}
+    if any("=" in s for s in items):
+        raise ArgumentError(f"{option}: mix of JOINT=VALUE and plain values in '{text}'")
+    values = [value(s) for s in items]
+    if len(values) == 1:
+        return values[0]
+    return [v if isinstance(v, list) else [-abs(v), abs(v)] for v in values]
+
+
+def parse_list(text: str | None, option: str, *, positive: bool = True) -> list[float] | None:
+    """Comma-separated finite numbers (``> 0`` when ``positive``), or None."""
+    if text is None:
+        return None
+    items = [s for s in text.split(",") if s.strip()]
+    if not items:
+        raise ArgumentError(f"{option}: empty value")
+    vals = [number(s, option) for s in items]
+    if positive and any(v <= 0 for v in vals):
+        raise ArgumentError(f"{option}: every value must be > 0, got '{text}'")
+    return vals
+
+
+def parse_frequencies(text: str | None):
+    """``LO:HI:N`` -> ``(lo, hi, n)`` with ``0 < LO < HI`` finite and ``N >= 2``, or None."""
+    if text is None:
+        return None
+    try:
+        lo, hi, n = text.split(":")
+        lo, hi, n = float(lo), float(hi), int(n)
+    except ValueError:
+        raise ArgumentError(f"--omega: give LO:HI:N, e.g. 0.01:100:60, got '{text}'") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi and n >= 2):
+        raise ArgumentError(f"--omega: need finite 0 < LO < HI and N >= 2, got '{text}'")
+    return lo, hi, n
+
+
+# --------------------------------------------------------------------------- argparse types
+# argparse reports an ArgumentTypeError as "argument --mc: <message>" on the one line
+# PolyrobParser.error prints.
+
+
+def int_at_least(low: int):
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{text}' is not an integer") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {value}")
+        return value
+
+    parse.__name__ = f"integer >= {low}"
+    return parse
+
+
+def _float(text) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
+    return value
+
+
+def positive_float(text) -> float:
+    value = _float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return value
+
+
+def nonnegative_float(text) -> float:
+    value = _float(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return value
+
+
+def fraction(text) -> float:
+    value = _float(text)
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text}")
+    return value

@@ -1,0 +1,57 @@
+"""Options shared by ``analyze``, ``synth`` and ``run``: the PLDI, the uncertainty model, the problem."""
+
+from __future__ import annotations
+
+from polyrob.cli.common import domain_from_args, domain_options_given, hyperparameters_from_args
+from polyrob.errors import ArgumentError
+
+__all__ = ["add_plant_arguments", "pldi_path", "problem_from_args", "describe_source"]
+
+
+def add_plant_arguments(p) -> None:
+    p.add_argument("--pldi", default=None,
+                   help="a PLDI file from `polyrob bounds -o` (STEM, STEM.json or STEM.npz) instead of bounding again")
+    p.add_argument("--uncertainty", default="auto", choices=["auto", "box", "axes", "lft"],
+                   help="uncertainty model of the PLDI (box: one independent real parameter per entry, the paper's)")
+    p.add_argument("--merge-symmetric", action="store_true", help="one repeated parameter for b_ij = b_ji")
+
+
+def pldi_path(args):
+    """The JSON half of the ``--pldi`` pair, whatever suffix was given."""
+    from polyrob.io.paths import pair_paths
+
+    return pair_paths(args.pldi)[0] if args.pldi else None
+
+
+def describe_source(robot, args) -> str:
+    return f"reading the PLDI {pldi_path(args)}" if args.pldi else f"bounds: {robot.name} ({robot.m} joints)"
+
+
+def problem_from_args(robot, args, out, *, hyperparameters=None, check=None):
+    """Domain (or ``--pldi``), weights and uncertainty model -> :class:`polyrob.pipeline.Problem`.
+
+    ``check(partial_description)`` runs before the (slow) bounding step, on
+    what is known then (robot, domain, weights), so a mismatched controller
+    file is refused at once.
+    """
+    from polyrob.pipeline import build_problem
+
+    h = hyperparameters_from_args(robot.m, args) if hyperparameters is None else hyperparameters
+    pldi = domain = None
+    if args.pldi:
+        from polyrob.bounds.pldi import PLDI
+
+        if domain_options_given(args):
+            raise ArgumentError("--pldi holds its own domain: drop --domain/--q-range/--qdot-max/--u-max/--*-scale")
+        pldi = PLDI.load(pldi_path(args))
+        known_domain = pldi.domain
+    else:
+        domain = domain_from_args(robot, args)
+        known_domain = domain
+    if check is not None:
+        check({"robot": robot.name, "m": robot.m, "domain": known_domain.to_dict(),
+               "weights": {k: list(v) for k, v in h.items()}})
+    out.stage(f"{describe_source(robot, args)} over domain '{known_domain.name}', "
+              f"uncertainty model {args.uncertainty}")
+    return build_problem(robot, domain, hyperparameters=h, uncertainty=args.uncertainty, pldi=pldi,
+                         merge_symmetric=args.merge_symmetric, progress=out.progress)

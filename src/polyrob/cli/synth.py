@@ -1,0 +1,167 @@
+"""``polyrob synth`` and ``polyrob run``: μ-synthesis with its certificate, and the whole pipeline."""
+
+from __future__ import annotations
+
+from polyrob.cli.analyze import print_analysis
+from polyrob.cli.common import (
+    Output,
+    add_domain_arguments,
+    add_output_flags,
+    add_robot_arguments,
+    add_weight_arguments,
+    alphas_from_args,
+    robot_from_args,
+    scale_names,
+)
+from polyrob.cli.options import int_at_least
+from polyrob.cli.plant import add_plant_arguments, problem_from_args
+
+__all__ = ["register"]
+
+
+def _options(args, out) -> dict:
+    from polyrob.pipeline import synthesis_options
+
+    return synthesis_options(structure=args.structure, complex_blocks=args.complex, max_iter=args.max_iter,
+                             starts=args.starts, init=args.init, progress=out.progress)
+
+
+def _check_output(args) -> None:
+    if args.output:
+        from polyrob.io.paths import check_output_path
+
+        check_output_path(args.output, "-o")
+
+
+def print_design(design, out) -> None:
+    r = design.result
+    gam = list(r.gamma_history)
+    out.line(f"{'iter':>4}  {'peak mu (upper)':>16}  {'gamma':>10}")
+    for i, mu in enumerate(r.mu_history):
+        g = f"{gam[i]:.4g}" if i < len(gam) else "-"
+        out.line(f"{i + 1:>4}  {mu:>16.5g}  {g:>10}")
+    out.line(f"controller: {r.structure}, order {r.order}; peak mu in [{r.peak_mu_lower:.4g}, {r.peak_mu:.4g}] "
+             f"(bounds on the frequency grid) at {r.peak_frequency:.4g} rad/s ({r.iterations} iterations, {r.seconds:.1f} s)")
+    if design.reduced is not None:
+        red = design.reduced
+        out.line("order reduction (order: peak mu upper bound):")
+        for row in red.table:
+            out.line(f"  {row['order']:>4}: {row['peak_mu']:.5g}{'' if row.get('stable', True) else ' (unstable)'}")
+        out.line(f"reduced controller: order {red.order}, peak mu in [{red.peak_mu_lower:.4g}, {red.peak_mu:.4g}]")
+    for note in design.notes:
+        out.line(f"note: {note}")
+
+
+def _save(design, problem, args, out, info_extra=None, certificate_extra=None):
+    from polyrob.io.controller import save_controller
+
+    info = problem.description()
+    info.update(info_extra or {})
+    cert = dict(design.certificate, **(certificate_extra or {}))
+    path = save_controller(design.controller, args.output, certificate=cert, info=info)
+    out.line(f"wrote {path}")
+    return str(path)
+
+
+def cmd_synth(args) -> int:
+    from polyrob.pipeline import design_controller, design_max_bandwidth, verdict
+
+    _check_output(args)
+    scale = scale_names(args.scale_only) if args.max_bandwidth else None
+    alphas = alphas_from_args(args.alphas) if args.max_bandwidth else None
+    out = Output(args, stages=2)
+    options = _options(args, out)
+    robot = robot_from_args(args)
+    problem = problem_from_args(robot, args, out)
+    out.line(f"robot {robot.name}: {problem.unc.n_params} real parameters ({problem.pldi.enclosure} PLDI, "
+             f"{problem.model} model), structure {args.structure}")
+    doc = {"robot": robot.name, "problem": problem.description()}
+    if args.max_bandwidth:
+        out.stage(f"largest bandwidth factor with mu < 1 (scaling {', '.join(scale)}; a synthesis per factor)")
+        design, res = design_max_bandwidth(problem, scale=scale, alphas=alphas, **options)
+        out.line(f"{'alpha':>10}  {'peak mu (upper)':>18}")
+        for alpha, mu in res.history:
+            out.line(f"{alpha:>10.4g}  {mu:>18.5g}")
+        out.line(f"largest alpha with mu < 1: {res.alpha:.4g} (mu {res.peak_mu:.4g}; alpha {res.bracket[1]:.4g} "
+                 f"does not reach it), controller order {res.result.order}")
+        out.line("weights: " + ", ".join(f"{k} = {list(v)}" for k, v in res.hyperparameters.items()))
+        extra = {"weights": {k: list(v) for k, v in res.hyperparameters.items()}}
+        doc["problem"].update(extra)
+        doc["bandwidth_scaling"] = res.summary()
+    else:
+        out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
+        design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
+        print_design(design, out)
+        extra = None
+    doc["synthesis"] = design.summary()
+    if args.output:
+        doc["output"] = _save(design, problem, args, out, info_extra=extra)
+    doc["covers"] = problem.covers()
+    doc["verdict"] = verdict(design.peak_mu, design.peak_mu_lower, covers=doc["covers"])
+    out.line(doc["verdict"])
+    out.document(doc)
+    return 0
+
+
+def cmd_run(args) -> int:
+    """bounds -> synthesis -> analysis in one go."""
+    from polyrob.pipeline import analyze_controller, design_controller, pldi_report
+
+    _check_output(args)
+    out = Output(args, stages=3)
+    options = _options(args, out)
+    robot = robot_from_args(args)
+    problem = problem_from_args(robot, args, out)
+    pldi = problem.pldi
+    out.line(f"{len(pldi.entries)} varying entries ({pldi.enclosure}), {problem.unc.n_params} real parameters "
+             f"({problem.model} model)")
+    out.line(pldi.table())
+    out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
+    design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
+    print_design(design, out)
+    out.stage(f"analysis: mu sweeps (robust stability, robust performance), {args.mc} Monte Carlo parameter sets")
+    a = analyze_controller(problem, design.controller, mc=args.mc, seed=0, progress=out.progress)
+    print_analysis(a, out)
+    doc = {"robot": robot.name, "problem": problem.description(), "bounds": pldi_report(pldi, robot.joint_names),
+           "synthesis": design.summary(), "analysis": a.summary(), "covers": a.covers, "verdict": a.verdict}
+    if args.output:
+        doc["output"] = _save(design, problem, args, out, certificate_extra={
+            "robust_stability": a.robust_stability.summary(), "robust_performance": a.robust_performance.summary()})
+    out.document(doc)
+    return 0
+
+
+def _add_synthesis_arguments(p) -> None:
+    add_robot_arguments(p)
+    add_domain_arguments(p)
+    add_weight_arguments(p)
+    add_plant_arguments(p)
+    g = p.add_argument_group("synthesis")
+    g.add_argument("--structure", default="full", help="full (D-K / D-G-K), tfN (e.g. tf3: each K_ij of order N), pid, ss:N")
+    g.add_argument("--complex", action="store_true", help="treat the real parameters as complex (plain D-K)")
+    g.add_argument("--max-iter", type=int_at_least(1), default=None,
+                   help="D-K iterations (default 20; fixed structure: outer iterations, default 40)")
+    g.add_argument("--starts", type=int_at_least(1), default=5, help="fixed structure: optimisation starts")
+    g.add_argument("--init", default=None, choices=["paper"], help="fixed structure: 'paper' starts from the paper's K*")
+    g.add_argument("--reduce", action="store_true", help="reduce the full-order controller (balanced truncation)")
+    g.add_argument("--reduce-max-order", type=int_at_least(1), default=20,
+                   help="--reduce: largest controller order accepted")
+    add_output_flags(p)
+    p.add_argument("-o", "--output", default=None, help="write the controller, its certificate and its problem (JSON)")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("synth", help="mu-synthesis: full order (D-K, D-G-K) or fixed structure")
+    _add_synthesis_arguments(p)
+    g = p.add_argument_group("bandwidth scan")
+    g.add_argument("--max-bandwidth", action="store_true",
+                   help="find the largest scaling of the weights' bandwidths with certified mu < 1")
+    g.add_argument("--scale-only", default="omega_b,omega_bt",
+                   help="--max-bandwidth: weight hyperparameters multiplied by the factor")
+    g.add_argument("--alphas", default=None,
+                   help="--max-bandwidth: comma-separated scan of the factor (default 0.125,0.25,...,32)")
+    p.set_defaults(func=cmd_synth)
+    p = sub.add_parser("run", help="bounds -> synthesis -> analysis in one go")
+    _add_synthesis_arguments(p)
+    p.add_argument("--mc", type=int_at_least(1), default=200, help="Monte Carlo parameter sets in the analysis")
+    p.set_defaults(func=cmd_run)

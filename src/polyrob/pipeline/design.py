@@ -1,0 +1,133 @@
+"""A controller for a problem: μ-synthesis (full order or fixed structure), optional reduction.
+
+``polyrob synth`` and ``polyrob run`` call :func:`design_controller`;
+``synth --max-bandwidth`` calls :func:`design_max_bandwidth`.  Both return
+the controller with the certificate a controller file stores.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from polyrob.errors import ArgumentError
+
+__all__ = ["Design", "design_controller", "design_max_bandwidth", "synthesis_options"]
+
+
+def synthesis_options(*, structure: str = "full", complex_blocks: bool = False, max_iter: int | None = None,
+                      starts: int | None = None, init: str | None = None, progress: bool | None = None) -> dict:
+    """``musyn`` keyword arguments from the plain synthesis choices."""
+    if max_iter is not None and max_iter < 1:
+        raise ArgumentError(f"max_iter must be >= 1, got {max_iter}")
+    if starts is not None and starts < 1:
+        raise ArgumentError(f"starts must be >= 1, got {starts}")
+    options = {"structure": structure, "progress": progress}
+    if max_iter is not None:
+        options["max_iter"] = int(max_iter)
+    if structure == "full":
+        options["mixed"] = not complex_blocks
+    else:
+        if starts is not None:
+            options["starts"] = int(starts)
+        if init:
+            options["init"] = init
+    return options
+
+
+def _certificate(result, P) -> dict:
+    import numpy as np
+
+    cert = result.summary()
+    cert["block_structure"] = np.asarray(P.block_structure_rp).tolist()
+    return cert
+
+
+@dataclass(frozen=True, eq=False)
+class Design:
+    """A designed controller with its certificate.
+
+    Attributes
+    ----------
+    controller : LTI
+        The controller to use (the reduced one when reduction was asked).
+    result : MusynResult
+        The synthesis.
+    reduced : ReductionResult or None
+    certificate : dict
+        What the controller file stores (peak μ bounds, structure, order...).
+    notes : tuple of str
+    """
+
+    controller: object
+    result: object
+    reduced: object
+    certificate: dict
+    notes: tuple = ()
+
+    @property
+    def peak_mu(self) -> float:
+        return float(self.certificate["peak_mu_upper"])
+
+    @property
+    def peak_mu_lower(self) -> float:
+        return float(self.certificate["peak_mu_lower"])
+
+    def summary(self) -> dict:
+        out = dict(self.certificate)
+        out["gamma_history"] = [float(g) for g in self.result.gamma_history]
+        if self.reduced is not None:
+            out["reduction"] = self.reduced.summary()
+        out["notes"] = list(self.notes)
+        return out
+
+
+def design_controller(problem, *, reduce: bool = False, reduce_max_order: int = 20, **options) -> Design:
+    """μ-synthesis on ``problem.P`` (``options`` as from :func:`synthesis_options`), then reduction.
+
+    Parameters
+    ----------
+    problem : Problem
+    reduce : bool
+        Balanced reduction of a full-order controller (ignored for fixed structures).
+    reduce_max_order : int
+        Largest order accepted by the reduction (>= 1).
+    **options
+        Passed to :func:`polyrob.synthesis.musyn`.
+    """
+    from polyrob.synthesis import musyn, reduce_controller
+
+    if reduce and reduce_max_order < 1:
+        raise ArgumentError(f"reduce_max_order must be >= 1, got {reduce_max_order}")
+    result = musyn(problem.P, **options)
+    cert = _certificate(result, problem.P)
+    notes = tuple(result.info.get("notes", [])) if isinstance(result.info, dict) else ()
+    reduced, K = None, result.controller
+    if reduce and options.get("structure", "full") == "full":
+        reduced = reduce_controller(problem.P, result, max_order=reduce_max_order)
+        K = reduced.controller
+        cert.update(structure=f"reduced:{reduced.order}", order=int(reduced.order),
+                    peak_mu_upper=float(reduced.peak_mu), peak_mu_lower=float(reduced.peak_mu_lower),
+                    full_order=int(result.order), full_peak_mu_upper=float(result.peak_mu))
+    return Design(controller=K, result=result, reduced=reduced, certificate=cert, notes=notes)
+
+
+def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None, **options):
+    """The largest bandwidth factor with certified μ < 1; returns ``(Design, BandwidthScalingResult)``."""
+    from polyrob.plant.generalized import paper_controller
+    from polyrob.synthesis import max_bandwidth_scaling
+
+    options = dict(options)
+    if options.get("init") == "paper":
+        options.pop("init")  # K* starts the first synthesis only; later ones start from the nearest alpha's
+        options["initial_controller"] = paper_controller()
+    if alphas is not None:
+        alphas = [float(a) for a in alphas]
+        if not alphas or any(not (a > 0 and a < float("inf")) for a in alphas):
+            raise ArgumentError(f"bandwidth factors must be finite and > 0, got {alphas}")
+        options["alphas"] = alphas
+    res = max_bandwidth_scaling(problem.unc, problem.hyperparameters, scale=tuple(scale), **options)
+    cert = res.result.summary()
+    cert.update(bandwidth_scaling=res.summary())
+    notes = tuple(res.result.info.get("notes", [])) if isinstance(res.result.info, dict) else ()
+    return Design(controller=res.result.controller, result=res.result, reduced=None, certificate=cert,
+                  notes=notes), res

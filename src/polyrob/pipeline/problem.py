@@ -1,0 +1,227 @@
+"""Robot + domain + weights -> PLDI -> uncertain plant -> generalized plant, written once.
+
+The CLI's ``analyze``, ``synth`` and ``run`` and the benchmarks all start
+from the same three steps; :func:`build_problem` does them and returns a
+frozen :class:`Problem` that also knows how to describe itself in a
+controller file and how to compare itself with what a file says.
+
+Examples
+--------
+>>> import polyrob
+>>> from polyrob.pipeline import build_problem
+>>> robot = polyrob.load_robot("paper_2r")
+>>> prob = build_problem(robot, uncertainty="box", bound_options={"samples": 256}, progress=False)
+>>> prob.unc.n_params, prob.P.n_u, prob.model
+(10, 2, 'box')
+"""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import dataclass
+
+from polyrob.errors import ArgumentError
+
+__all__ = ["Problem", "build_problem", "default_hyperparameters", "UNCERTAINTY_MODELS", "WEIGHT_KEYS"]
+
+#: Uncertainty models of :func:`polyrob.plant.uncertainty.uncertain_plant` (``box`` is the paper's).
+UNCERTAINTY_MODELS = ("auto", "box", "axes", "lft")
+#: The weight hyperparameters, in the order of :func:`polyrob.plant.weights.paper_weights`.
+WEIGHT_KEYS = ("omega_b", "M_s", "A_s", "omega_bt", "M_t", "A_t")
+
+
+def default_hyperparameters(m: int, overrides: dict | None = None, *, bandwidth_scale: float = 1.0) -> dict:
+    """The paper's weight hyperparameters for ``m`` channels, with overrides.
+
+    Parameters
+    ----------
+    m : int
+        Number of channels (actuated joints).
+    overrides : dict, optional
+        ``key -> sequence`` of 1 or ``m`` values (keys in :data:`WEIGHT_KEYS`).
+    bandwidth_scale : float
+        Multiplies ``omega_b`` and ``omega_bt``.
+
+    Returns
+    -------
+    dict
+        ``key -> tuple`` of ``m`` floats.
+
+    Examples
+    --------
+    >>> default_hyperparameters(3, {"M_s": [2.5]})["M_s"]
+    (2.5, 2.5, 2.5)
+    >>> default_hyperparameters(2, bandwidth_scale=2)["omega_b"]
+    (1.0, 0.2)
+    """
+    from polyrob.plant.weights import PAPER_HYPERPARAMETERS
+
+    overrides = dict(overrides or {})
+    unknown = sorted(set(overrides) - set(WEIGHT_KEYS))
+    if unknown:
+        raise ArgumentError(f"unknown weight hyperparameter(s) {unknown}; known: {list(WEIGHT_KEYS)}")
+    h = {}
+    for key in WEIGHT_KEYS:
+        paper = PAPER_HYPERPARAMETERS[key]
+        vals = overrides.get(key)
+        if vals is None:
+            vals = list(paper) if m == len(paper) else [paper[0]] * m
+        else:
+            vals = [float(v) for v in vals]
+            vals = vals * m if len(vals) == 1 else vals
+            if len(vals) != m:
+                raise ArgumentError(f"weight {key}: give 1 or {m} values (one per joint), got {len(vals)}")
+        if key in ("omega_b", "omega_bt"):
+            vals = [v * bandwidth_scale for v in vals]
+        h[key] = tuple(float(v) for v in vals)
+    return h
+
+
+def make_uncertain_plant(pldi, uncertainty: str = "auto", *, merge_symmetric: bool = False):
+    """:func:`~polyrob.plant.uncertainty.uncertain_plant` with a named model; returns ``(unc, model)``.
+
+    ``model`` is the model actually built (``"box"`` when the plant module
+    does not take a ``model`` keyword yet and ``"auto"`` was asked).
+    """
+    from polyrob.plant.uncertainty import uncertain_plant
+
+    if uncertainty not in UNCERTAINTY_MODELS:
+        raise ArgumentError(f"unknown uncertainty model {uncertainty!r}: use one of {', '.join(UNCERTAINTY_MODELS)}")
+    takes_model = "model" in inspect.signature(uncertain_plant).parameters
+    if takes_model:
+        unc = uncertain_plant(pldi, model=uncertainty, merge_symmetric=merge_symmetric)
+    elif uncertainty in ("auto", "box"):
+        unc = uncertain_plant(pldi, merge_symmetric=merge_symmetric)
+    else:
+        raise ArgumentError(f"uncertainty model {uncertainty!r} is not available in this polyrob; use 'box'")
+    model = getattr(unc, "model", None) or "box"
+    return unc, str(model)
+
+
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """One robust-control problem: the PLDI, its uncertain plant and the generalized plant.
+
+    Attributes
+    ----------
+    robot : Manipulator
+    pldi : PLDI
+    unc : UncertainPlant
+    P : GeneralizedPlant
+    hyperparameters : dict
+        Weight hyperparameters (``key -> tuple`` per channel).
+    uncertainty : str
+        The model asked for (``"auto"``, ``"box"``, ...).
+    model : str
+        The model built (what ``"auto"`` resolved to).
+    merge_symmetric : bool
+    """
+
+    robot: object
+    pldi: object
+    unc: object
+    P: object
+    hyperparameters: dict
+    uncertainty: str
+    model: str
+    merge_symmetric: bool = False
+
+    @property
+    def domain(self):
+        return self.pldi.domain
+
+    def description(self) -> dict:
+        """What a controller file records about the problem it was made for."""
+        return {
+            "robot": self.robot.name,
+            "m": int(self.robot.m),
+            "domain": self.domain.to_dict(),
+            "weights": {k: list(v) for k, v in self.hyperparameters.items()},
+            "uncertainty": {"requested": self.uncertainty, "model": self.model,
+                            "merge_symmetric": bool(self.merge_symmetric)},
+            "enclosure": self.pldi.enclosure,
+            "parameters": int(self.unc.n_params),
+        }
+
+    def covers(self) -> str:
+        """Plain words for what a μ verdict on this problem covers."""
+        enclosure = ("proved (interval arithmetic)" if self.pldi.enclosure == "certified"
+                     else "sampled and searched (not proved)")
+        return (f"every frozen (constant in time) Jacobian pair in the {self.model} set of {self.unc.n_params} "
+                f"real parameters around the {enclosure} PLDI of {self.robot.name} over domain "
+                f"'{self.domain.name}'")
+
+
+def _check_pldi(robot, pldi, domain) -> None:
+    if pldi.robot_name != robot.name or pldi.m != robot.m:
+        raise ArgumentError(
+            f"the PLDI file is for robot '{pldi.robot_name}' ({pldi.m} joints), not '{robot.name}' "
+            f"({robot.m} joints): give robot {pldi.robot_name} or bound {robot.name} with `polyrob bounds`"
+        )
+    if domain is not None and domain.to_dict() != pldi.domain.to_dict():
+        raise ArgumentError("give either a PLDI file or domain options, not both (the PLDI file holds its domain)")
+
+
+def build_problem(
+    robot,
+    domain=None,
+    *,
+    hyperparameters: dict | None = None,
+    uncertainty: str = "auto",
+    pldi=None,
+    merge_symmetric: bool = False,
+    progress: bool | None = None,
+    bound_options: dict | None = None,
+) -> Problem:
+    """Bound the Jacobians (or take ``pldi``), build the uncertain and the generalized plant.
+
+    Parameters
+    ----------
+    robot : Manipulator
+        From :func:`polyrob.load_robot`.
+    domain : Domain, optional
+        Default: the robot's default domain.  Not with ``pldi``.
+    hyperparameters : dict, optional
+        Weight hyperparameters (see :func:`default_hyperparameters`); default the paper's.
+    uncertainty : {"auto", "box", "axes", "lft"}
+        Model of :func:`polyrob.plant.uncertainty.uncertain_plant`; ``"box"``
+        is the paper's (one independent real parameter per entry).
+    pldi : PLDI, optional
+        A PLDI already computed (e.g. :meth:`polyrob.PLDI.load`); it must be
+        of ``robot``.
+    merge_symmetric : bool
+        One repeated parameter for entries equal by symmetry.
+    progress : bool, optional
+        Progress bars of the bounding step (default: on a terminal).
+    bound_options : dict, optional
+        Passed to :func:`polyrob.bound_pldi` (``samples``, ``certify``, ...;
+        ``coverage`` defaults to 0 here).
+
+    Returns
+    -------
+    Problem
+
+    Raises
+    ------
+    ArgumentError
+        A PLDI of another robot, weights of the wrong length, unknown model.
+    """
+    from polyrob.plant.generalized import generalized_plant
+    from polyrob.plant.weights import paper_weights
+
+    h = default_hyperparameters(robot.m) if hyperparameters is None else dict(hyperparameters)
+    if {len(v) for v in h.values()} != {robot.m}:
+        raise ArgumentError(f"weight hyperparameters need {robot.m} values each (one per joint of {robot.name})")
+    if pldi is None:
+        from polyrob.bounds.domain import Domain
+        from polyrob.bounds.pldi import bound_pldi
+
+        domain = Domain.from_robot(robot) if domain is None else domain
+        options = {"coverage": 0, **(bound_options or {})}
+        pldi = bound_pldi(robot, domain, progress=progress, **options)
+    else:
+        _check_pldi(robot, pldi, domain)
+    unc, model = make_uncertain_plant(pldi, uncertainty, merge_symmetric=merge_symmetric)
+    P = generalized_plant(unc, *paper_weights(h))
+    return Problem(robot=robot, pldi=pldi, unc=unc, P=P, hyperparameters={k: tuple(v) for k, v in h.items()},
+                   uncertainty=uncertainty, model=model, merge_symmetric=merge_symmetric)

@@ -1,0 +1,69 @@
+"""Plain, JSON-ready descriptions of a robot and of a PLDI (what ``polyrob info``/``bounds`` print).
+
+Examples
+--------
+>>> import polyrob
+>>> robot = polyrob.load_robot("planar_2r")
+>>> info = robot_report(robot, polyrob.Domain.from_robot(robot))
+>>> info["neutral"]["M"]
+[[60.625, 19.375], [19.375, 13.125]]
+"""
+
+from __future__ import annotations
+
+__all__ = ["robot_report", "pldi_report", "format_matrix"]
+
+
+def format_matrix(rows, precision: int = 5) -> str:
+    """A plain-text matrix of a list of lists (``numpy``-like, without numpy)."""
+    cells = [[f"{float(x) + 0.0:.{precision}g}" for x in row] for row in rows]
+    width = max((len(c) for row in cells for c in row), default=1)
+    return "\n".join("[" + " ".join(c.rjust(width) for c in row) + "]" for row in cells)
+
+
+def robot_report(robot, domain) -> dict:
+    """Joints, limits, the domain, and ``M``/``B`` at the neutral point (``q = 0`` clipped into the domain)."""
+    import numpy as np
+
+    q0 = np.clip(np.zeros(robot.m), domain.q_lower, domain.q_upper)
+    M = robot.mass_matrix(q0)
+    _, B = robot.jacobians(q0, np.zeros(robot.m), np.zeros(robot.m))
+    info = robot.describe()
+    info["domain"] = domain.to_dict()
+    info["neutral"] = {"q": q0.tolist(), "M": M.tolist(), "B": B.tolist()}
+    return info
+
+
+def pldi_report(pldi, joint_names=None) -> dict:
+    """The figures of a PLDI a user reads: entries, polytope, search, coverage, time."""
+    import numpy as np
+
+    poly = pldi.polytope
+    names = list(joint_names or pldi.domain.joint_names)
+    out = {
+        "robot": pldi.robot_name,
+        "domain": pldi.domain.to_dict(),
+        "enclosure": pldi.enclosure,
+        "entries": [
+            {"name": n, "lower": float(lo), "upper": float(hi), "nominal": float(nm)}
+            for n, lo, hi, nm in zip(pldi.entries, pldi.lower, pldi.upper, pldi.nominal)
+        ],
+        "polytope": {
+            "halfspaces": int(poly.n_halfspaces),
+            "vertices": None if poly.vertices is None else int(len(poly.vertices)),
+            "reduced_dim": int(poly.reduced_dim),
+            "volume_samples": int(poly.volume_samples),
+            "volume_hits": int(poly.volume_hits),
+            "volume_ratio": float(poly.volume_ratio) if poly.volume_hits else None,
+            "volume_ratio_bound": float(poly.volume_ratio_bound) if poly.volume_samples else None,
+        },
+        "coverage": float(pldi.coverage) if pldi.coverage_points else None,
+        "coverage_points": int(pldi.coverage_points),
+        "dropped_positions": [names[j] for j in pldi.dropped_q],
+        "seconds": float(pldi.info.get("seconds_total", float("nan"))),
+    }
+    if len(pldi.entries) and pldi.enclosure == "sampled":
+        worst = int(np.argmax(pldi.refinement))
+        out["refinement"] = {"max_percent": float(100 * pldi.refinement[worst]), "entry": pldi.entries[worst],
+                             "verification_rounds": int(pldi.info.get("verification_rounds", 0))}
+    return out
