@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import sys
-import time
-import types
-
 import control
 import numpy as np
 import pytest
@@ -213,24 +209,39 @@ def test_paper_plant_smoke():
 
 # ------------------------------------------------------------ dispatch, errors
 def test_unknown_structure():
-    with pytest.raises(SynthesisError, match="unknown controller structure"):
+    # the structure name is validated once, by controller_structure (no second parser in musyn)
+    with pytest.raises(PolyrobError, match="unknown controller structure 'magic'; valid"):
         musyn(distillation_plant(), DISTILLATION_BLK, structure="magic", n_u=2, n_y=2)
 
 
-def test_fixed_structure_is_dispatched(monkeypatch):
+def test_fixed_structure_is_dispatched_with_options_passed_through(monkeypatch):
+    import polyrob.synthesis.robust_synthesis as musyn_module
+    from polyrob.synthesis.fixed_options import FixedStructureOptions
+
     calls = {}
 
     def fake(P, blk, structure, **kw):
         calls.update(P=P, blk=blk, structure=structure, kw=kw)
         return "fixed-result"
 
-    mod = types.ModuleType("polyrob.synthesis.fixed")
-    mod.fixed_structure_musyn = fake
-    monkeypatch.setitem(sys.modules, "polyrob.synthesis.fixed", mod)
+    monkeypatch.setattr(musyn_module, "fixed_structure_musyn", fake)
     P = distillation_plant()
-    out = musyn(P, DISTILLATION_BLK, structure="tf3", max_iter=7)
+    opts = FixedStructureOptions(grid_density=5.0)
+    out = musyn(P, DISTILLATION_BLK, structure="tf3", max_iter=7, starts=2, options=opts, n_u=2, n_y=2)
     assert out == "fixed-result"
-    assert calls["structure"] == "tf3" and calls["kw"] == {"max_iter": 7}
+    kw = calls["kw"]
+    assert calls["structure"] == "tf3"
+    # given values pass through unchanged, the options object by identity; the
+    # others are None ("the fixed-structure solver's own default"), not musyn's defaults
+    assert kw["max_iter"] == 7 and kw["starts"] == 2 and kw["options"] is opts
+    assert kw["tol"] is None and kw["mixed"] is None and kw["omega"] is None
+
+
+def test_full_order_options_refused_for_a_fixed_structure():
+    with pytest.raises(PolyrobError, match="full-order synthesis only"):
+        musyn(distillation_plant(), DISTILLATION_BLK, structure="tf3", d_order=(0, 1), n_u=2, n_y=2)
+    with pytest.raises(PolyrobError, match="unexpected options"):
+        musyn(distillation_plant(), DISTILLATION_BLK, starts=3, n_u=2, n_y=2)
 
 
 def test_infeasible_weights():

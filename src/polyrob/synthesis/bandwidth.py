@@ -104,7 +104,7 @@ def scaled_hyperparameters(alpha: float, hyperparameters: dict | None = None,
 
 def _default_synthesis(initial_controller=None, **musyn_options) -> Callable:
     """:func:`musyn` warm-started from the nearest solved α (else ``initial_controller``)."""
-    from polyrob.synthesis.dk import musyn
+    from polyrob.synthesis.robust_synthesis import musyn
 
     def synthesize(P, K0):
         return musyn(P, initial_controller=initial_controller if K0 is None else K0, **musyn_options)

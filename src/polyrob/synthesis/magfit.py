@@ -313,7 +313,7 @@ def fit_magnitude(
     if n == 0:
         e = (y - k0) / np.log(10)
         return MagnitudeFit(0, float(np.exp(k0)), np.zeros(0, complex), np.zeros(0, complex),
-                            *_fit_errors(e, wt), np.array([k0]))
+                            *fit_errors(e, wt), np.array([k0]))
     lo_w, hi_w = np.log(w.min()), np.log(w.max())
     lz0, lz1 = np.log(zeta_bounds[0]), np.log(zeta_bounds[1])
     lb, ub = [-np.inf], [np.inf]
@@ -361,10 +361,10 @@ def fit_magnitude(
     p = best.x
     z, pl = _params_to_roots(p, n)
     e = (_logmag(p, w, n) - y) / np.log(10)
-    return MagnitudeFit(n, float(np.exp(p[0])), z, pl, *_fit_errors(e, wt), p)
+    return MagnitudeFit(n, float(np.exp(p[0])), z, pl, *fit_errors(e, wt), p)
 
 
-def _fit_errors(e, wt):
+def fit_errors(e, wt):
     """Weighted RMS of the log10 error, and its largest value where the weight is high."""
     wt = np.asarray(wt, float)
     rms = float(np.sqrt(np.sum(wt * e * e) / max(np.sum(wt), 1e-300)))

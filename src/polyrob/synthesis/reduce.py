@@ -6,16 +6,17 @@ balanced truncation and returns the smallest order whose **certified** peak
 peak-refined) stays below a target, plus the μ-order trade-off table.
 
 Unstable controllers.  Balanced truncation needs a stable system, and H∞
-controllers are often unstable (or have near-integrators).  The controller
-is split additively, ``K = K_s + K_u``, by an ordered real Schur form and a
-Sylvester equation (the stable/unstable decomposition of Hsu & Hou, 1991,
-also used by SLICOT AB09MD and ``control.balred``): the unstable part,
-including poles on or within ``1e-9`` of the imaginary axis, is kept
-exactly; the stable part is reduced by square-root balanced truncation
-(SLICOT AB09AD), or by singular perturbation (``method="matchdc"``), which
-keeps its DC gain: the low-frequency performance weights of robot plants
-ask for a sensitivity of 1% below 0.005 rad/s, and a truncation error there
-shows up directly in μ.
+controllers are often unstable (or have near-integrators).  The
+stable/unstable decomposition of Hsu & Hou (1991), ``K = K_s + K_u``, is
+what SLICOT AB09MD/AB09ND do inside ``control.balred(..., alpha=...)``:
+the unstable part, including poles on or within ``1e-9`` (relative) of the
+imaginary axis, is kept exactly; the stable part is reduced by square-root
+balanced truncation, or by singular perturbation (``method="matchdc"``),
+which keeps its DC gain: the low-frequency performance weights of robot
+plants ask for a sensitivity of 1% below 0.005 rad/s, and a truncation
+error there shows up directly in μ.  :func:`stable_unstable_split` gives
+the same split explicitly (its stable part's Hankel singular values,
+``control.hsvd``, are reported).
 
 The order search bisects on the order (μ is nearly monotone in it) with a
 certificate at each order visited; when the final order's certificate
@@ -32,8 +33,11 @@ import control
 import numpy as np
 import scipy.linalg as sla
 
-from polyrob.errors import PolyrobError, SynthesisError
 from polyrob._threads import single_blas_thread
+from polyrob.analysis.blocks import as_block_structure
+from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.plant.generalized import as_controller_ss
+from polyrob.synthesis.dk_frequency import certify, frequency_grid
 from polyrob.synthesis.result import MusynResult
 
 __all__ = ["ReductionResult", "reduce_controller", "stable_unstable_split", "balanced_reduction"]
@@ -148,29 +152,14 @@ def stable_unstable_split(K: control.StateSpace, margin: float = 1e-9):
     return Ks, Ku
 
 
-def _add(K1: control.StateSpace, K2: control.StateSpace) -> control.StateSpace:
-    A = sla.block_diag(np.asarray(K1.A, float), np.asarray(K2.A, float))
-    B = np.vstack([np.asarray(K1.B, float).reshape(-1, K1.ninputs), np.asarray(K2.B, float).reshape(-1, K2.ninputs)])
-    C = np.hstack([np.asarray(K1.C, float).reshape(K1.noutputs, -1), np.asarray(K2.C, float).reshape(K2.noutputs, -1)])
-    D = np.asarray(K1.D, float) + np.asarray(K2.D, float)
-    if A.size == 0:
-        return control.ss(np.zeros((0, 0)), np.zeros((0, D.shape[1])), np.zeros((D.shape[0], 0)), D)
-    return control.ss(A.reshape(B.shape[0], B.shape[0]), B, C, D)
-
-
-def _hankel(Ks: control.StateSpace) -> np.ndarray:
-    if Ks.nstates == 0:
-        return np.zeros(0)
-    A, B, C = (np.asarray(X, float) for X in (Ks.A, Ks.B, Ks.C))
-    Wc = sla.solve_continuous_lyapunov(A, -B @ B.T)
-    Wo = sla.solve_continuous_lyapunov(A.T, -C.T @ C)
-    ev = np.linalg.eigvals(Wc @ Wo)
-    return np.sort(np.sqrt(np.abs(ev.real)))[::-1]
-
-
 def balanced_reduction(K: control.StateSpace, order: int, method: str = "truncate",
                        margin: float = 1e-9) -> control.StateSpace:
     """Reduce ``K`` to ``order`` states: unstable part kept, stable part balanced-truncated.
+
+    ``control.balred`` with ``alpha = -margin max(1, ρ(A))``: SLICOT AB09MD
+    (truncation) or AB09ND (singular perturbation, ``"matchdc"``) keep the
+    modes right of ``alpha`` (unstable, on or within the margin of the axis)
+    exactly and reduce the rest.
 
     Examples
     --------
@@ -182,22 +171,18 @@ def balanced_reduction(K: control.StateSpace, order: int, method: str = "truncat
     """
     if method not in ("truncate", "matchdc"):
         raise PolyrobError(f"method must be 'truncate' or 'matchdc', got {method!r}")
-    Ks, Ku = stable_unstable_split(K, margin)
-    nu = Ku.nstates
+    A = np.asarray(K.A, float)
+    if K.nstates == 0 or order >= K.nstates:
+        return K
+    lam = np.linalg.eigvals(A)
+    alpha = -margin * max(1.0, float(np.max(np.abs(lam))))
+    nu = int(np.sum(lam.real >= alpha))
     if order < nu:
         raise PolyrobError(f"cannot reduce below the {nu} unstable/marginal poles of the controller")
-    rs = order - nu
-    if rs >= Ks.nstates:
-        Kr = Ks
-    elif rs == 0:
-        D = np.asarray(Ks.D, float)
-        if method == "matchdc" and Ks.nstates:
-            D = np.real(np.asarray(Ks(0), complex)).reshape(D.shape) if Ks.ninputs * Ks.noutputs > 1 else \
-                np.array([[np.real(complex(Ks(0)))]])
-        Kr = control.ss(np.zeros((0, 0)), np.zeros((0, Ks.ninputs)), np.zeros((Ks.noutputs, 0)), D)
-    else:
-        Kr = control.balred(Ks, rs, method=method)
-    return _add(Kr, Ku) if nu else Kr
+    Kc = control.ss(A, np.asarray(K.B, float), np.asarray(K.C, float), np.asarray(K.D, float))
+    if nu == 0 and method == "truncate" and order > 0:
+        return control.balred(Kc, order, method="truncate")  # AB09AD (alpha is for AB09MD only)
+    return control.balred(Kc, order, method=method, alpha=alpha)
 
 
 # ================================================================ search
@@ -260,8 +245,6 @@ def reduce_controller(
     >>> red.order <= res.order, red.meets_target
     (True, True)
     """
-    from polyrob.synthesis.dk import certify, frequency_grid
-    from polyrob.analysis.blocks import as_block_structure
 
     t0 = time.perf_counter()
     if isinstance(result_or_K, MusynResult):
@@ -285,11 +268,9 @@ def reduce_controller(
     if isinstance(P, control.StateSpace) and (n_u is None or n_y is None):
         raise PolyrobError("reduce_controller of a bare StateSpace plant needs n_u and n_y")
     if not isinstance(K, control.StateSpace):
-        from polyrob.plant.generalized import _controller
-
         nu = P.n_u if n_u is None else n_u
         ny = P.n_y if n_y is None else n_y
-        K = _controller(K, nu, ny)
+        K = as_controller_ss(K, nu, ny)
     if omega is None:
         base = frequency_grid(P.system if hasattr(P, "system") else P)
         omega = np.logspace(np.log10(base.min()) - 1, np.log10(base.max()) + 1,
@@ -313,7 +294,7 @@ def reduce_controller(
             raise SynthesisError("the full-order controller does not stabilise the plant: nothing to reduce")
         tgt = float(target) if target is not None else full_mu * (1 + tol)
         Ks, Ku = stable_unstable_split(K)
-        hsv = _hankel(Ks)
+        hsv = np.real(np.asarray(control.hsvd(Ks))) if Ks.nstates else np.zeros(0)
         nu = Ku.nstates
         cap = n if max_order is None else int(min(max_order, n))
         if cap < nu:

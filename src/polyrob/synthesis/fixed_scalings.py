@@ -4,28 +4,29 @@ At every frequency of the working grid the mixed-μ upper bound needs its
 own ``D`` (and ``G`` for real blocks).  The fixed-structure optimisation
 re-optimises them at every trial controller, for hundreds of frequencies at
 once: a batched BFGS on the closed-form value and gradient of the D-G bound's
-largest eigenvalue (``_dg_value_grad``, ``_batched_bfgs``), warm-started
-from AB13MD's scalings (``_dstep``).  scipy's minimisers take one problem at
+largest eigenvalue (:func:`dg_value_grad`, :func:`batched_bfgs`), warm-started
+from AB13MD's scalings (:func:`dstep`).  scipy's minimisers take one problem at
 a time; the batch runs every frequency in one vectorised loop, hence it is
-written here.
+written here.  ``loop`` arguments are :class:`~polyrob.synthesis.fixed_loop.FixedLoop`
+objects (duck-typed: ``response``, ``npad``, ``ec``, ``er``, ``diag``).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from polyrob.analysis.mu import mussv
 
-if TYPE_CHECKING:
-    from polyrob.synthesis.fixed import _Loop
+__all__ = ["PerFrequencyScalings", "scalings_from", "dstep", "dg_value_grad", "batched_bfgs", "refine_scalings",
+           "majorant"]
+
 
 # ============================================================ scalings
 @dataclass(frozen=True, eq=False)
-class _Scalings:
+class PerFrequencyScalings:
     """Per-frequency D-G scalings in the form used by the majorant."""
 
     omega: np.ndarray          # (F,)
@@ -36,16 +37,16 @@ class _Scalings:
     mu: np.ndarray             # (F,)  upper bound where the scalings were computed
 
     def take(self, idx):
-        return _Scalings(self.omega[idx], self.Dm[idx], self.Dinv[idx], self.Gt[idx], self.G[idx], self.mu[idx])
+        return PerFrequencyScalings(self.omega[idx], self.Dm[idx], self.Dinv[idx], self.Gt[idx], self.G[idx], self.mu[idx])
 
-    def merged(self, other: "_Scalings") -> "_Scalings":
+    def merged(self, other: "PerFrequencyScalings") -> "PerFrequencyScalings":
         """Union, ``other`` overriding equal frequencies; sorted."""
         keep = ~np.isin(self.omega, other.omega)
         parts = [self.take(np.flatnonzero(keep)), other]
         omega = np.concatenate([p.omega for p in parts])
         order = np.argsort(omega)
         cat = lambda a: np.concatenate([getattr(p, a) for p in parts])[order]  # noqa: E731
-        return _Scalings(omega[order], cat("Dm"), cat("Dinv"), cat("Gt"), cat("G"), cat("mu"))
+        return PerFrequencyScalings(omega[order], cat("Dm"), cat("Dinv"), cat("Gt"), cat("G"), cat("mu"))
 
     def nearest(self, omega: np.ndarray) -> np.ndarray:
         """Index of the nearest (in log ω) scaling for each frequency."""
@@ -58,14 +59,14 @@ class _Scalings:
         return np.where(left, i - 1, i)
 
 
-def _scalings_from(D: np.ndarray, G: np.ndarray, omega, mu) -> _Scalings:
+def scalings_from(D: np.ndarray, G: np.ndarray, omega, mu) -> PerFrequencyScalings:
     D = np.asarray(D, complex)
     G = np.asarray(G, complex)
     Dinv = np.linalg.inv(D)
-    return _Scalings(np.asarray(omega, float), D, Dinv, Dinv @ G @ Dinv, G, np.asarray(mu, float))
+    return PerFrequencyScalings(np.asarray(omega, float), D, Dinv, Dinv @ G @ Dinv, G, np.asarray(mu, float))
 
 
-def _dstep(loop: _Loop, theta, omega: np.ndarray, blk) -> _Scalings:
+def dstep(loop, theta, omega: np.ndarray, blk) -> PerFrequencyScalings:
     """μ upper bound and its (D, G) at each frequency (cold AB13MD via :func:`mussv`)."""
     N = loop.response(theta, omega)
     Ds, Gs, mus = [], [], []
@@ -76,28 +77,15 @@ def _dstep(loop: _Loop, theta, omega: np.ndarray, blk) -> _Scalings:
             continue
         r = mussv(N[k], blk, lower=False)
         Ds.append(r.D), Gs.append(r.G), mus.append(r.upper)
-    sc = _scalings_from(np.array(Ds), np.array(Gs), omega, mus)
+    sc = scalings_from(np.array(Ds), np.array(Gs), omega, mus)
     # the value the K-step will see is the one these scalings certify
     # (recomputed here; equal to AB13MD's bound to rounding)
-    beta = _majorant(loop, theta, sc, n_eig=1)[:, 0]
+    beta = majorant(loop, theta, sc, n_eig=1)[:, 0]
     return replace(sc, mu=np.where(np.isfinite(sc.mu), beta, np.inf))
 
 
-def _diagonal_blocks(st):
-    """Block membership matrix ``E`` (blocks x padded size) and real-block mask, if AB13MD-like.
 
-    The fast D-step handles structures whose optimal scalings are diagonal
-    (real scalars and full complex blocks); ``None`` otherwise.
-    """
-    if st.has_repeated:
-        return None
-    E = np.zeros((len(st.blocks), st.padded_size))
-    for k, sl in enumerate(st.padded_slices):
-        E[k, sl] = 1.0
-    return E, np.array([b.kind == "real" for b in st.blocks])
-
-
-def _dg_value_grad(Mp: np.ndarray, x: np.ndarray, E: np.ndarray, real: np.ndarray):
+def dg_value_grad(Mp: np.ndarray, x: np.ndarray, E: np.ndarray, real: np.ndarray):
     """``λ_max`` of the D-G matrix and its gradient, batched over frequencies.
 
     ``x = [log d (per block), g̃ (per real block)]`` per row; ``Mp`` is ``(F, n, n)``.
@@ -132,7 +120,7 @@ def _dg_value_grad(Mp: np.ndarray, x: np.ndarray, E: np.ndarray, real: np.ndarra
     return f, grad
 
 
-def _batched_bfgs(fg, x0: np.ndarray, maxiter: int = 40, rtol: float = 1e-8):
+def batched_bfgs(fg, x0: np.ndarray, maxiter: int = 40, rtol: float = 1e-8):
     """Independent BFGS minimisations (one per row), vectorised; Armijo backtracking.
 
     Every AB13MD call costs ~40 ms on the paper's loop; one eigen-decomposition
@@ -193,17 +181,17 @@ def _batched_bfgs(fg, x0: np.ndarray, maxiter: int = 40, rtol: float = 1e-8):
     return x, f
 
 
-def _refine_scalings(loop: _Loop, theta, sc: _Scalings, idx: np.ndarray, maxiter: int = 40) -> _Scalings:
+def refine_scalings(loop, theta, sc: PerFrequencyScalings, idx: np.ndarray, maxiter: int = 40) -> PerFrequencyScalings:
     """Warm-started improvement of diagonal D-G scalings at the frequencies ``idx``.
 
     Minimises ``λ_max(M̃^H M̃ + j(G̃ M̃ - M̃^H G̃))`` over ``log d`` (per block) and
-    ``g̃`` (per real block) from the current scalings by :func:`_batched_bfgs`.
+    ``g̃`` (per real block) from the current scalings by :func:`batched_bfgs`.
     Any scalings certify their value, so this need not reach the optimum;
     started from the previous iteration's scalings it lands within ~1e-5 of
     AB13MD on the paper's loop, and it never returns a larger value than the
     start.
     """
-    E, real = loop._diag
+    E, real = loop.diag
     nb = E.shape[0]
     sub = sc.take(np.asarray(idx, int))
     if sub.omega.size == 0:
@@ -215,7 +203,7 @@ def _refine_scalings(loop: _Loop, theta, sc: _Scalings, idx: np.ndarray, maxiter
     d0 = np.real(np.diagonal(sub.Dm, axis1=1, axis2=2))
     g0 = np.real(np.diagonal(sub.Gt, axis1=1, axis2=2))
     x0 = np.concatenate([(np.log(np.maximum(d0, 1e-300)) @ E.T) / counts, ((g0 @ E.T) / counts)[:, real]], axis=1)
-    x, lam = _batched_bfgs(lambda rows, xx: _dg_value_grad(Mp[rows], xx, E, real), x0, maxiter=maxiter)
+    x, lam = batched_bfgs(lambda rows, xx: dg_value_grad(Mp[rows], xx, E, real), x0, maxiter=maxiter)
     d = np.exp(np.clip(x[:, :nb] - x[:, :1], -60.0, 60.0) @ E)   # normalised like AB13MD: first block d = 1
     gh = np.zeros((x.shape[0], nb))
     gh[:, real] = x[:, nb:]
@@ -226,10 +214,10 @@ def _refine_scalings(loop: _Loop, theta, sc: _Scalings, idx: np.ndarray, maxiter
     Gt = gt[:, :, None] * eye
     G = (d * gt * d)[:, :, None] * eye
     mu = np.sqrt(np.maximum(lam, 0.0))
-    return _Scalings(sub.omega, Dm, Dinv, Gt, G, np.where(np.isfinite(lam), mu, np.inf))
+    return PerFrequencyScalings(sub.omega, Dm, Dinv, Gt, G, np.where(np.isfinite(lam), mu, np.inf))
 
 
-def _majorant(loop: _Loop, theta, sc: _Scalings, idx=None, *, n_eig=1, jac=False):
+def majorant(loop, theta, sc: PerFrequencyScalings, idx=None, *, n_eig=1, jac=False):
     """``β_{D,G}(N(jω; θ))`` for the top ``n_eig`` eigenvalues, and its gradient.
 
     Returns ``beta (F, n_eig)`` and, with ``jac``, ``dbeta (F, n_eig, n_params)``.
@@ -267,3 +255,4 @@ def _majorant(loop: _Loop, theta, sc: _Scalings, idx=None, *, n_eig=1, jac=False
         dbeta = dlam / (2.0 * np.maximum(beta, 1e-300))[:, :, None]
     dbeta[bad] = 0.0
     return beta, dbeta
+

@@ -1,0 +1,198 @@
+"""The H∞ norm helper of the synthesis stage: true upper bounds only.
+
+* :func:`hinf_norm` - ``‖G‖∞`` of a stable continuous-time system from SLICOT
+  AB13DD; when AB13DD fails, a bisection on the Hamiltonian test
+  :func:`hinf_norm_below` gives a level that the norm is *proved* to stay
+  below (never a grid value, which is an estimate from below and can miss a
+  sharp resonance).  ``inf`` for an unstable system (python-control's
+  ``linfnorm`` is finite for ``1/(s - 1)``: an L∞ norm, not an H∞ one).
+* :func:`hinf_norm_below` - the Hamiltonian test ``‖G‖∞ < γ`` (Boyd,
+  Balakrishnan & Kabamba 1989): the only check a controller is accepted on.
+* :func:`hinf_norm_estimate` - a fast grid value, an estimate *from below*;
+  used only to rank candidate controllers, never as γ or a certificate.
+
+Examples
+--------
+>>> import control
+>>> from polyrob.synthesis.norms import hinf_norm, hinf_norm_below
+>>> G = control.ss(control.tf([1], [1, 0.2, 1]))
+>>> round(hinf_norm(G), 4), hinf_norm_below(G, 5.03), hinf_norm_below(G, 5.02)
+(5.0252, True, False)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+from scipy.optimize import minimize_scalar
+
+from polyrob.errors import SynthesisError
+
+__all__ = ["hinf_norm", "hinf_norm_below", "hinf_norm_upper", "hinf_norm_estimate", "is_stable", "state_matrices"]
+
+
+def state_matrices(sys) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(A, B, C, D)`` of a state-space object (or a 4-tuple) as float arrays."""
+    if isinstance(sys, tuple):
+        return tuple(np.asarray(X, float) for X in sys)
+    return tuple(np.array(X, dtype=float) for X in (sys.A, sys.B, sys.C, sys.D))
+
+
+def is_stable(A, margin: float = 1e-9) -> bool:
+    """Every eigenvalue of ``A`` has ``Re λ < -margin max(1, |λ|)`` (an empty ``A`` is stable)."""
+    A = np.asarray(A, float)
+    if A.size == 0:
+        return True
+    if not np.all(np.isfinite(A)):
+        return False
+    ev = np.linalg.eigvals(A)
+    return bool(np.all(ev.real < -margin * np.maximum(1.0, np.abs(ev))))
+
+
+def _sigma(A, B, C, D, w: float) -> float:
+    n = A.shape[0]
+    H = C @ np.linalg.solve(1j * w * np.eye(n) - A, B) + D if n else D
+    return float(np.linalg.norm(H, 2))
+
+
+def hinf_norm_below(sys, gamma: float, *, rtol: float = 1e-9) -> bool:
+    """Is ``‖G‖∞ < γ``?  Hamiltonian test, for a stable ``G`` (``False`` if unstable).
+
+    For ``σ̄(D) < γ`` and stable ``A``, ``‖G‖∞ < γ`` iff the Hamiltonian
+
+    .. math:: H_γ = \\begin{pmatrix} A + B R^{-1} D^T C & B R^{-1} B^T \\\\
+              -C^T (I + D R^{-1} D^T) C & -(A + B R^{-1} D^T C)^T \\end{pmatrix},
+              \\quad R = γ^2 I - D^T D,
+
+    has no eigenvalue on the imaginary axis.  An eigenvalue within ``rtol``
+    (relative) of the axis counts as on it, and ``σ̄(G(jω))`` is evaluated
+    at every such frequency: rounding can only make the answer ``False``.
+    """
+    A, B, C, D = state_matrices(sys)
+    gamma = float(gamma)
+    if not (gamma > 0) or not np.isfinite(gamma):
+        return False
+    if not is_stable(A, 0.0):
+        return False
+    if D.size and np.linalg.norm(D, 2) >= gamma:
+        return False
+    n = A.shape[0]
+    if n == 0:
+        return True
+    m = B.shape[1]
+    R = gamma**2 * np.eye(m) - D.T @ D
+    Ri = np.linalg.inv(R)
+    Ah = A + B @ Ri @ D.T @ C
+    H = np.block([[Ah, B @ Ri @ B.T], [-C.T @ (np.eye(C.shape[0]) + D @ Ri @ D.T) @ C, -Ah.T]])
+    if not np.all(np.isfinite(H)):
+        return False
+    lam = sla.eigvals(H)
+    near = np.abs(lam.real) <= max(rtol, 1e-12) * np.maximum(1.0, np.abs(lam))
+    if np.any(near):
+        return False
+    # belt and braces: the frequencies of the eigenvalues closest to the axis
+    k = np.argsort(np.abs(lam.real) / np.maximum(1.0, np.abs(lam)))[:4]
+    for w in np.unique(np.abs(lam[k].imag)):
+        if _sigma(A, B, C, D, float(w)) >= gamma:
+            return False
+    return True
+
+
+def hinf_norm_upper(sys, *, rtol: float = 1e-6, lower: float = 0.0) -> float:
+    """An upper bound of ``‖G‖∞`` within ``rtol`` of the norm, by bisection on :func:`hinf_norm_below`.
+
+    ``inf`` for an unstable system; raises :class:`SynthesisError` when no
+    level passes the Hamiltonian test (numerically degenerate data).
+    """
+    A, B, C, D = state_matrices(sys)
+    if not is_stable(A, 0.0):
+        return float("inf")
+    lo = max(float(lower), hinf_norm_estimate(A, B, C, D), float(np.linalg.norm(D, 2)) if D.size else 0.0)
+    hi = max(lo, 1e-300) * (1 + rtol)
+    tries = 0
+    while not hinf_norm_below((A, B, C, D), hi):
+        lo, hi = hi, 2.0 * hi
+        tries += 1
+        if tries > 80:
+            raise SynthesisError("no H∞ upper bound: the Hamiltonian test fails at every level tried")
+    while hi - lo > rtol * hi:
+        mid = 0.5 * (lo + hi)
+        if hinf_norm_below((A, B, C, D), mid):
+            hi = mid
+        else:
+            lo = mid
+    return float(hi)
+
+
+def hinf_norm(sys, tol: float = 1e-6) -> float:
+    """H∞ norm of a stable continuous-time system (SLICOT AB13DD); ``inf`` if unstable.
+
+    If AB13DD fails, the value is the level of a Hamiltonian bisection
+    (:func:`hinf_norm_upper`), an upper bound within ``tol``; never a sampled
+    value.
+
+    Examples
+    --------
+    >>> import control
+    >>> from polyrob.synthesis.norms import hinf_norm
+    >>> round(hinf_norm(control.ss(control.tf([1], [1, 0.2, 1]))), 4)
+    5.0252
+    >>> hinf_norm(control.ss(control.tf([1], [1, -1])))
+    inf
+    """
+    A, B, C, D = state_matrices(sys)
+    if A.size and not is_stable(A, 0.0):
+        return float("inf")
+    if A.size == 0:
+        return float(np.linalg.norm(D, 2)) if D.size else 0.0
+    import slycot
+    from slycot.exceptions import SlycotArithmeticError, SlycotError
+
+    n, m, p = A.shape[0], B.shape[1], C.shape[0]
+    try:
+        g, _ = slycot.ab13dd("C", "I", "N", "D", n, m, p, A, np.eye(n), B, C, D, tol)
+    except (SlycotError, SlycotArithmeticError, ValueError, np.linalg.LinAlgError):
+        # AB13DD failed: a bound that is a bound (Hamiltonian bisection), not a grid value
+        return hinf_norm_upper((A, B, C, D), rtol=tol)
+    return float(g)
+
+
+def hinf_norm_estimate(A, B, C, D, n_grid: int = 200) -> float:
+    """Fast grid value of the H∞ norm: an estimate from below (``inf`` if unstable).
+
+    A log grid over the poles' decades plus every pole's natural frequency,
+    refined around the largest value.  For ranking candidates only (AB13DD
+    on 100+ states costs ~1 s); never reported as γ or used as a certificate.
+    """
+    A, B, C, D = (np.asarray(X, float) for X in (A, B, C, D))
+    if A.size == 0:
+        return float(np.linalg.norm(D, 2)) if D.size else 0.0
+    lam, V = np.linalg.eig(A)
+    if not np.all(lam.real < 0):
+        return float("inf")
+    wn = np.abs(lam)
+    wn = wn[wn > 0]
+    lo = np.log10(max(wn.min() if wn.size else 1e-3, 1e-8)) - 2
+    hi = np.log10(wn.max() if wn.size else 1e3) + 2
+    w = np.union1d(np.logspace(lo, hi, n_grid), wn)
+    try:
+        cond = np.linalg.cond(V)
+    except np.linalg.LinAlgError:
+        cond = np.inf
+    if cond < 1e8:
+        Vb = np.linalg.solve(V, B)
+        CV = C @ V
+
+        def sig(x):
+            return np.linalg.norm((CV / (1j * x - lam)[None, :]) @ Vb + D, 2)
+    else:
+
+        def sig(x):
+            return _sigma(A, B, C, D, x)
+
+    vals = np.array([sig(x) for x in w])
+    k = int(np.argmax(vals))
+    best = float(vals[k])
+    a, b = np.log(w[max(k - 1, 0)]), np.log(w[min(k + 1, w.size - 1)])
+    r = minimize_scalar(lambda x: -sig(np.exp(x)), bounds=(a, b), method="bounded", options={"xatol": 1e-6})
+    return float(max(best, -r.fun, sig(0.0)))
