@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["is_discrete", "default_grid", "freqresp", "refine_peaks"]
+__all__ = ["is_discrete", "default_grid", "freqresp", "freqresp_extended", "response_error", "refine_peaks"]
 
 
 def is_discrete(sys) -> bool:
@@ -49,9 +49,16 @@ def default_grid(sys, per_decade: int = 40) -> np.ndarray:
     return w
 
 
-def freqresp(sys, omega: np.ndarray) -> np.ndarray:
-    """Frequency response as an ``(N, p, m)`` array, vectorised over omega."""
+def freqresp(sys, omega: np.ndarray, *, bits: int | None = None) -> np.ndarray:
+    """Frequency response as an ``(N, p, m)`` array, vectorised over omega.
+
+    ``bits`` evaluates a continuous-time state-space system in extended
+    precision instead (:func:`freqresp_extended`).
+    """
     import control
+
+    if bits is not None and isinstance(sys, control.StateSpace) and not is_discrete(sys):
+        return freqresp_extended(sys, omega, bits)
 
     with np.errstate(divide="ignore", invalid="ignore"):  # poles on the grid -> inf
         if isinstance(sys, control.FrequencyResponseData):
@@ -77,3 +84,51 @@ def refine_peaks(omega, up, f, n_peaks=3, xtol=1e-7):
                             method="bounded", options={"xatol": xtol})
         out.append(float(np.exp(r.x)))
     return out
+
+
+def freqresp_extended(sys, omega, bits: int = 212) -> np.ndarray:
+    """``C (jωI - A)^{-1} B + D`` solved in ``bits``-bit arithmetic (python-flint).
+
+    The realisation's entries are taken as exact; only the final rounding to
+    double remains.  Double-precision evaluation of a badly conditioned
+    realisation can be wrong in every digit (dkpy's distillation controller
+    after diagonal balancing: errors of 500x its size), this one is not.
+    About 8 ms per frequency for 28 states.
+    """
+    import flint
+
+    A, B, C, D = (np.asarray(getattr(sys, k), dtype=float) for k in "ABCD")
+    n, omega = A.shape[0], np.atleast_1d(np.asarray(omega, dtype=float))
+    out = np.empty((omega.size,) + D.shape, dtype=complex)
+    if n == 0:
+        out[:] = D
+        return out
+    old = flint.ctx.prec
+    flint.ctx.prec = int(bits)
+    try:
+        negA = flint.acb_mat((-A).tolist())
+        eye = flint.acb_mat([[1 if i == j else 0 for j in range(n)] for i in range(n)])
+        Bm, Cm = flint.acb_mat(B.tolist()), flint.acb_mat(C.tolist())
+        for k, w in enumerate(omega):
+            try:
+                Y = Cm * (negA + flint.acb(0, float(w)) * eye).solve(Bm)
+            except ZeroDivisionError:  # jω is an eigenvalue: the response is infinite
+                out[k] = np.inf
+                continue
+            out[k] = np.array([[complex(Y[i, j]) for j in range(Y.ncols())] for i in range(Y.nrows())]) + D
+    finally:
+        flint.ctx.prec = old
+    return out
+
+
+def response_error(sys, omega, bits: int = 212) -> float:
+    """Largest error of the double-precision response on ``omega``, relative to its peak.
+
+    Measured against :func:`freqresp_extended`; a cheap check (a few
+    frequencies) of whether double precision can be trusted for ``sys``.
+    """
+    Hd = freqresp(sys, omega)
+    He = freqresp_extended(sys, omega, bits)
+    scale = float(np.max(np.abs(He[np.isfinite(He)]), initial=0.0)) or 1.0
+    diff = np.abs(Hd - He)
+    return float(np.max(np.where(np.isfinite(diff), diff, np.inf), initial=0.0)) / scale

@@ -171,6 +171,7 @@ def mu_bounds(
     progress: bool | None = None,
     rtol: float = 1e-4,
     solver: str | None = None,
+    response_bits: int | None = None,
 ) -> MuBoundsResult:
     """:math:`\\mu` upper and lower bounds of an LTI system over frequency.
 
@@ -196,6 +197,11 @@ def mu_bounds(
         tqdm progress bar; default: shown on a terminal for long sweeps.
     rtol, solver
         LMI method options, see :func:`mussv`.
+    response_bits : int, optional
+        Evaluate the frequency response of a state-space ``sys`` in this
+        extended precision (python-flint) instead of double: for badly
+        conditioned realisations, see
+        :func:`polyrob.analysis.frequency.response_error`.
 
     Returns
     -------
@@ -230,10 +236,11 @@ def mu_bounds(
         raise PolyrobError("omega must be a non-empty array of finite non-negative frequencies")
     meth = _choose_method(st, method)
     with single_blas_thread():
-        return _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, progress, rtol, solver)
+        return _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, progress, rtol, solver,
+                      response_bits)
 
 
-def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, progress, rtol, solver):
+def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, progress, rtol, solver, bits):
     from tqdm import tqdm
 
     lmi = LmiUpper(st, solver) if meth == "lmi" else None
@@ -277,7 +284,7 @@ def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, 
         state["pi"] = pi if pi is not None else state["pi"]
         return lo, dsq
 
-    H = st.pad(freqresp(sys, omega))
+    H = st.pad(freqresp(sys, omega, bits=bits))
     show = (omega.size >= 50) if progress is None else progress
     up, lo = np.zeros(omega.size), np.zeros(omega.size)
     Ds, Gs = np.zeros((omega.size, n, n), complex), np.zeros((omega.size, n, n), complex)
@@ -293,11 +300,11 @@ def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, 
         extra = []
         can_eval = not is_frd or getattr(sys, "ifunc", None) is not None
         if refine_peak and can_eval and omega.size >= 3:
-            extra = refine_peaks(omega, up, lambda w: upper_at(st.pad(freqresp(sys, np.array([w])))[0])[0])
+            extra = refine_peaks(omega, up, lambda w: upper_at(st.pad(freqresp(sys, np.array([w]), bits=bits))[0])[0])
         # refined points (and the best lower-bound points) get the full treatment
         w_new = np.array([w for w in extra if w not in omega])
         if w_new.size:
-            Hn = st.pad(freqresp(sys, w_new))
+            Hn = st.pad(freqresp(sys, w_new, bits=bits))
             res = []
             for k in range(w_new.size):
                 u = upper_at(Hn[k])
@@ -329,7 +336,8 @@ def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, 
         peak_lower=float(lo[il]), critical_frequency=float(omega[il]),
         worst_delta=st.unpad_delta(deltas[il]), structure=st, method=meth,
         warm_start_fallbacks=fallbacks,
-        notes=tuple(notes + ([] if lmi is None else lmi.events)),
+        notes=tuple(notes + ([] if lmi is None else lmi.events)
+                    + ([] if bits is None else [f"frequency responses evaluated at {bits} bits"])),
     )
 
 

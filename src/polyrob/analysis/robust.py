@@ -11,6 +11,13 @@ Both take the generalized plant ``P`` and a controller ``K``, close
   complex performance block; ``μ < 1`` certifies robust performance (the main
   loop theorem).
 
+Both certify only when ``N`` is stable at ``Δ = 0`` -- the loop around the
+plant the LFT is built on (the interval midpoints), not the equilibrium
+plant -- as decided by :func:`polyrob.analysis.stability.stability_verdict`,
+and both report μ as the **peak on the frequency grid** (see
+:attr:`RobustnessResult.covers` and ``docs/mu.md``).  :func:`loop_mu` does
+the same for a bare state-space generalized plant.
+
 :func:`sample_stability` adds the checks a μ bound is read against: closed-
 loop poles at random parameters and at the corners of the box.
 
@@ -32,9 +39,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from polyrob.analysis.frequency import response_error
+from polyrob.analysis.stability import StabilityVerdict, stability_verdict
 from polyrob.plant.generalized import GeneralizedPlant, closed_loop, lft, nominal_closed_loop
 
-__all__ = ["RobustnessResult", "StabilitySampling", "robstab", "robperf", "sample_stability", "nominal_performance"]
+__all__ = ["RobustnessResult", "StabilitySampling", "robstab", "robperf", "loop_mu", "sample_stability", "nominal_performance"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,9 +54,11 @@ class RobustnessResult:
     ----------
     kind : {"stability", "performance"}
     mu_upper, mu_lower : float
-        Peak μ bounds over frequency.
+        Peak μ upper and lower bounds **on the frequency grid** (see
+        :attr:`covers`): ``mu_upper`` bounds μ at every grid point, not
+        between them.
     margin_lower, margin_upper : float
-        ``1/mu_upper`` (guaranteed margin) and ``1/mu_lower``.
+        ``1/mu_upper`` and ``1/mu_lower`` (on the grid, as above).
     critical_frequency : float
         Where the lower bound peaks (rad/s).
     worst_delta : ndarray
@@ -56,7 +67,22 @@ class RobustnessResult:
     worst_perturbation : ndarray
         The whole perturbation matrix at the critical frequency.
     nominally_stable : bool
+        The loop around the nominal plant ``G_n`` (the PLDI's equilibrium
+        linearisation) is proved stable.  μ needs more: :attr:`stability`.
     mu : MuBoundsResult
+    stability : StabilityVerdict or None
+        Stability of ``lft(P, K)`` at ``Δ = 0``, i.e. around the plant the
+        LFT is built on (the interval midpoints), weights included.  μ only
+        certifies when this is ``"stable"``.
+    nominal_stability : StabilityVerdict or None
+        The verdict behind ``nominally_stable``.
+    response_error : float
+        Error of the double-precision frequency response of the loop at a
+        few grid frequencies, relative to its peak (against 212-bit
+        arithmetic); above ``1e-6`` the whole sweep was evaluated at 212 bits
+        (then ``mu.notes`` says so).
+    model : str
+        Uncertainty model the block structure stands for (``""`` if unknown).
     """
 
     kind: str
@@ -69,54 +95,129 @@ class RobustnessResult:
     worst_perturbation: np.ndarray
     nominally_stable: bool
     mu: object
+    stability: StabilityVerdict | None = None
+    nominal_stability: StabilityVerdict | None = None
+    response_error: float = 0.0
+    model: str = ""
+
+    @property
+    def failed(self) -> tuple[str, ...]:
+        """Why the loop is not certified (empty when it is)."""
+        out = []
+        if self.stability is None or not self.stability.stable:
+            v = "not checked" if self.stability is None else str(self.stability)
+            out.append(f"lft(P, K) at Delta = 0 not proved stable ({v})")
+        if not self.mu_upper < 1.0:
+            out.append(f"peak mu upper bound on the grid {self.mu_upper:.4g} >= 1")
+        return tuple(out)
 
     @property
     def robust(self) -> bool:
-        """Certified: ``mu_upper < 1``."""
-        return bool(self.mu_upper < 1.0)
+        """Certified on the grid: ``lft(P, K)`` stable at ``Δ = 0`` and peak ``mu_upper < 1``."""
+        return not self.failed
+
+    @property
+    def covers(self) -> str:
+        """What the certificate covers, one paragraph the CLI can print verbatim."""
+        what = "robust stability" if self.kind == "stability" else "robust performance (uncertainty + performance block)"
+        model = f" of the uncertainty model '{self.model}'" if self.model else ""
+        return (
+            f"{what}: {self.mu.covers}. Real parameters{model} are constant in time "
+            "(every frozen plant in the box, not a time-varying one); the loop at Delta = 0 is "
+            f"{'not checked' if self.stability is None else self.stability.verdict}."
+        )
+
+    def __str__(self) -> str:
+        return (f"{self.kind}: peak mu on the grid in [{self.mu_lower:.4g}, {self.mu_upper:.4g}], "
+                f"{'certified' if self.robust else 'not certified: ' + '; '.join(self.failed)}")
 
     def summary(self) -> dict:
         return {
             "kind": self.kind,
             "mu_upper": float(self.mu_upper),
             "mu_lower": float(self.mu_lower),
+            "mu_scope": "peak on the frequency grid",
             "margin_lower": float(self.margin_lower),
             "margin_upper": float(self.margin_upper),
             "critical_frequency": float(self.critical_frequency),
             "nominally_stable": bool(self.nominally_stable),
+            "stable_at_delta0": None if self.stability is None else self.stability.summary(),
             "certified_robust": self.robust,
+            "failed": list(self.failed),
+            "covers": self.covers,
+            "notes": list(getattr(self.mu, "notes", ())),
         }
 
 
-def _analyse(kind, N, blk, P: GeneralizedPlant, K, omega, **mu_options) -> RobustnessResult:
+RESPONSE_BITS, RESPONSE_TOL = 212, 1e-6
+
+
+def _check_frequencies(M, omega, k: int = 9) -> np.ndarray:
+    """A few frequencies spread over the grid (log-spaced) for the response check."""
+    from polyrob.analysis.frequency import default_grid
+
+    w = np.asarray(default_grid(M) if omega is None else omega, dtype=float).ravel()
+    w = w[w > 0] if np.any(w > 0) else w
+    return np.unique(np.quantile(w, np.linspace(0, 1, k))) if w.size else np.array([1.0])
+
+
+def _inv(x) -> float:
+    return float(np.inf) if x == 0 else 1.0 / float(x)
+
+
+def _analyse(kind, N, M, blk, omega, *, unc=None, K=None, model="", **mu_options) -> RobustnessResult:
+    """μ of ``M`` (a sub-block of the closed loop ``N``) with the verdicts μ needs."""
     from polyrob.analysis.mu import mu_bounds
 
-    mu = mu_bounds(N, blk, omega, **mu_options)
+    centre = stability_verdict(N)
+    # Double-precision responses of a badly conditioned realisation can be wrong
+    # in every digit (and diagonal balancing made dkpy's controller worse, not
+    # better): check a few frequencies against 212-bit arithmetic and switch the
+    # whole sweep to it when double precision is off by more than 1e-6.
+    w_check = _check_frequencies(M, omega)
+    err = response_error(M, w_check, RESPONSE_BITS)
+    if err > RESPONSE_TOL and "response_bits" not in mu_options:
+        mu_options["response_bits"] = RESPONSE_BITS
+    mu = mu_bounds(M, blk, omega, **mu_options)
     worst = np.asarray(mu.worst_delta)
-    diag = np.real(np.diag(worst))[: P.n_delta] if worst.size else np.zeros(P.n_delta)
-    # one δ per parameter: merged parameters occupy several channels
-    unc = P.uncertain
-    delta = np.zeros(unc.n_params)
-    for channel, param in enumerate(unc.channel_parameter):
-        delta[param] = diag[channel]
-    nominal = nominal_closed_loop(unc, K)
-    inv = lambda x: float(np.inf) if x == 0 else 1.0 / float(x)  # noqa: E731
+    nominal = centre
+    delta = np.real(np.diag(worst)) if worst.size else np.zeros(0)
+    if unc is not None:
+        diag = delta[: unc.n_delta] if delta.size else np.zeros(unc.n_delta)
+        # one δ per parameter: merged parameters occupy several channels
+        delta = np.zeros(unc.n_params)
+        for channel, param in enumerate(unc.channel_parameter):
+            delta[param] = diag[channel]
+        nominal = stability_verdict(nominal_closed_loop(unc, K).system)
     return RobustnessResult(
         kind=kind,
         mu_upper=float(mu.peak_upper),
         mu_lower=float(mu.peak_lower),
-        margin_lower=inv(mu.peak_upper),
-        margin_upper=inv(mu.peak_lower),
+        margin_lower=_inv(mu.peak_upper),
+        margin_upper=_inv(mu.peak_lower),
         critical_frequency=float(mu.critical_frequency),
         worst_delta=delta,
         worst_perturbation=worst,
-        nominally_stable=bool(nominal.stable),
+        nominally_stable=nominal.stable,
         mu=mu,
+        stability=centre,
+        nominal_stability=nominal,
+        response_error=err,
+        model=model,
     )
+
+
+def _model_name(P: GeneralizedPlant) -> str:
+    info = getattr(P.uncertain, "info", None) or {}
+    return str(info.get("model", "") or info.get("uncertainty_model", "") or "")
 
 
 def robstab(P: GeneralizedPlant, K, omega=None, **mu_options) -> RobustnessResult:
     """Robust stability of ``lft(P, K)``: μ of the uncertainty loop ``d -> v``.
+
+    Certified (``robust``) only when ``lft(P, K)`` is proved stable at
+    ``Δ = 0`` (:func:`~polyrob.analysis.stability.stability_verdict`) and the
+    peak μ upper bound on the grid is below 1.
 
     Parameters
     ----------
@@ -129,21 +230,58 @@ def robstab(P: GeneralizedPlant, K, omega=None, **mu_options) -> RobustnessResul
     """
     N = lft(P, K)
     s_v, s_d = P.output_slices["v"], P.input_slices["d"]
-    M = N[s_v, s_d]
-    return _analyse("stability", M, P.block_structure_rs, P, K, omega, **mu_options)
+    return _analyse("stability", N, N[s_v, s_d], P.block_structure_rs, omega, unc=P.uncertain, K=K,
+                    model=_model_name(P), **mu_options)
 
 
 def robperf(P: GeneralizedPlant, K, omega=None, **mu_options) -> RobustnessResult:
-    """Robust performance of ``lft(P, K)``: μ against uncertainty + performance block."""
+    """Robust performance of ``lft(P, K)``: μ against uncertainty + performance block.
+
+    Certified only when ``lft(P, K)`` is proved stable at ``Δ = 0`` and the
+    peak μ upper bound on the grid is below 1 (main loop theorem).
+    """
     N = lft(P, K)
-    return _analyse("performance", N, P.block_structure_rp, P, K, omega, **mu_options)
+    return _analyse("performance", N, N, P.block_structure_rp, omega, unc=P.uncertain, K=K,
+                    model=_model_name(P), **mu_options)
+
+
+def loop_mu(P, K, blk, omega=None, *, n_u: int, n_y: int, kind: str = "performance", **mu_options) -> RobustnessResult:
+    """μ analysis of ``lft(P, K)`` for a bare state-space generalized plant.
+
+    For published problems given as one ``StateSpace`` (e.g.
+    :func:`polyrob.examples.distillation_plant`): the controls are the last
+    ``n_u`` inputs, the measurements the last ``n_y`` outputs, and ``blk``
+    covers all remaining channels.  ``worst_delta`` is then the diagonal of
+    the worst perturbation.
+
+    Examples
+    --------
+    >>> import numpy as np, control
+    >>> from polyrob.analysis.robust import loop_mu
+    >>> P = control.ss([[-1.0]], [[1.0, 1.0]], [[1.0], [1.0]], [[0.0, 0.0], [0.0, 0.0]])
+    >>> r = loop_mu(P, -1.0, [[1, 1]], np.logspace(-2, 2, 41), n_u=1, n_y=1)
+    >>> r.stability.verdict, round(r.mu_upper, 4)          # N = 1/(s + 2)
+    ('stable', 0.5)
+    """
+    N = lft(P, K, n_u=n_u, n_y=n_y)
+    return _analyse(kind, N, N, blk, omega, **mu_options)
 
 
 def nominal_performance(P: GeneralizedPlant, K) -> float:
-    """H∞ norm from ``w`` to ``z`` of the loop around the nominal plant ``G_n``."""
+    """H∞ norm from ``w`` to ``z`` of the loop around the nominal plant ``G_n``.
+
+    ``inf`` when that loop is proved unstable (an unstable system has no
+    finite H∞ norm, whatever ``control.linfnorm`` returns for it), ``nan``
+    when its stability is undecided at double precision.
+    """
     import control
 
     N = lft(P.at(P.uncertain.nominal_delta, strict=False), K, n_u=P.n_u, n_y=P.n_y)
+    verdict = stability_verdict(N)
+    if verdict.unstable:
+        return float("inf")
+    if not verdict.stable:
+        return float("nan")
     return float(control.linfnorm(N)[0])
 
 
@@ -161,6 +299,9 @@ class StabilitySampling:
         The sampled ``δ`` with the largest closed-loop spectral abscissa.
     worst_abscissa : float
         Its largest real part of a closed-loop pole (> 0: unstable).
+    undecided : int
+        Samples whose stability is undecided at double precision (counted
+        as not stable in the fractions).
     """
 
     random: int
@@ -169,6 +310,7 @@ class StabilitySampling:
     corners_stable: float | None
     worst_delta: np.ndarray
     worst_abscissa: float
+    undecided: int = 0
 
 
 def sample_stability(unc, K, *, n: int = 1000, max_corners: int = 1024, seed: int = 0) -> StabilitySampling:
@@ -177,17 +319,17 @@ def sample_stability(unc, K, *, n: int = 1000, max_corners: int = 1024, seed: in
     corners = None
     if 2**unc.n_params <= max_corners:
         corners = unc.delta_samples(kind="corners", max_corners=max_corners)
-    worst, worst_abs = None, -np.inf
+    worst, worst_abs, undecided = None, -np.inf, 0
 
     def stable_fraction(samples):
-        nonlocal worst, worst_abs
+        nonlocal worst, worst_abs, undecided
         ok = 0
         for d in samples:
-            cl = closed_loop(unc, K, d)
-            a = float(cl.poles.real.max()) if cl.poles.size else -np.inf
-            ok += a < 0
-            if a > worst_abs:
-                worst, worst_abs = d, a
+            v = stability_verdict(closed_loop(unc, K, d).system)
+            ok += v.stable
+            undecided += not (v.stable or v.unstable)
+            if v.abscissa > worst_abs:
+                worst, worst_abs = d, v.abscissa
         return ok / len(samples)
 
     rand_ok = stable_fraction(deltas)
@@ -199,4 +341,5 @@ def sample_stability(unc, K, *, n: int = 1000, max_corners: int = 1024, seed: in
         corners_stable=corner_ok,
         worst_delta=np.asarray(worst),
         worst_abscissa=worst_abs,
+        undecided=undecided,
     )
