@@ -37,7 +37,7 @@ import control
 import numpy as np
 
 from polyrob.errors import PolyrobError
-from polyrob.plant.generalized import GeneralizedPlant, as_controller_ss, lower_lft_matrices
+from polyrob.plant.generalized import as_controller_ss, lower_lft_matrices
 
 __all__ = [
     "DiscreteController",
@@ -203,7 +203,7 @@ def _grid(omega, rate):
 
 
 def sampled_data_mu(
-    P: GeneralizedPlant,
+    P,
     K,
     rate: float,
     *,
@@ -241,7 +241,7 @@ def sampled_data_mu(
     """
     from polyrob.analysis.mu import mu_bounds
 
-    if not isinstance(P, GeneralizedPlant):
+    if not (hasattr(P, "system") and hasattr(P, "block_structure_rp")):
         raise PolyrobError(f"sampled_data_mu needs a GeneralizedPlant, got {type(P).__name__}")
     h = 1.0 / float(rate)
     if controller is None:
@@ -302,7 +302,7 @@ class MinRateResult:
                 "history": [list(h) for h in self.history]}
 
 
-def continuous_mu(P: GeneralizedPlant, K, omega=None, *, performance: bool = True, **mu_options) -> float:
+def continuous_mu(P, K, omega=None, *, performance: bool = True, **mu_options) -> float:
     """Peak μ upper bound of the continuous loop on ``omega`` (same options as the discrete check)."""
     from polyrob.analysis.mu import mu_bounds
     from polyrob.plant.generalized import lft
@@ -317,7 +317,7 @@ def continuous_mu(P: GeneralizedPlant, K, omega=None, *, performance: bool = Tru
 
 
 def min_sample_rate(
-    P: GeneralizedPlant,
+    P,
     K,
     *,
     mu_continuous: float | None = None,

@@ -29,8 +29,7 @@ import control
 import numpy as np
 
 from polyrob.errors import PolyrobError
-from polyrob.plant.generalized import GeneralizedPlant, loop_functions
-from polyrob.plant.uncertainty import UncertainPlant
+from polyrob.plant.generalized import loop_functions
 
 __all__ = ["MonteCarloResult", "monte_carlo", "frequency_response", "weight_shape"]
 
@@ -216,11 +215,12 @@ def monte_carlo(
     -------
     MonteCarloResult
     """
-    if isinstance(unc, GeneralizedPlant):
+    # duck-typed: any uncertain-plant model that samples δ and gives G(δ) (box, oriented, ...)
+    if hasattr(unc, "uncertain") and hasattr(unc, "block_structure_rp"):
         W_S = unc.W_S if W_S is None else W_S
         W_T = unc.W_T if W_T is None else W_T
         unc = unc.uncertain
-    if not isinstance(unc, UncertainPlant):
+    if not all(hasattr(unc, a) for a in ("delta_samples", "plant_at", "nominal_system")):
         raise PolyrobError(f"monte_carlo needs an UncertainPlant or GeneralizedPlant, got {type(unc).__name__}")
     if isinstance(n, str):
         if n != "corners":

@@ -1,0 +1,1 @@
+"""Figures and the HTML/Markdown report of a run (see :func:`polyrob.report.html.write_report`)."""

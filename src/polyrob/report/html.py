@@ -1,0 +1,256 @@
+"""The run report: ``report.html`` and ``report.md`` with figures, tables and verdicts.
+
+:func:`write_report` takes the objects a run already has (each optional) and
+writes, under ``run_dir``::
+
+    report.html        self-contained page (no external CSS, scripts or URLs)
+    report.md          the same content in Markdown
+    figures/*.png      the figures the pages show (relative links)
+    validation.json    the validation figures as plain data
+
+Certificates are plain dicts (``{"name": {...figures...}}``) so that any
+stage can contribute one: the constant-parameter μ certificate, and the
+time-varying one where it exists.  Every write is atomic.
+"""
+
+from __future__ import annotations
+
+import datetime
+import html
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from polyrob.io.atomic import atomic_write, json_default
+from polyrob.report import plots
+
+__all__ = ["ReportFiles", "write_report"]
+
+CSS = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}
+table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:2px 8px;text-align:right}
+th{background:#eee}td.l,th.l{text-align:left}.bad{color:#c00;font-weight:bold}.ok{color:#070}
+img{max-width:100%;border:1px solid #ddd;margin:0.5em 0}"""
+
+
+@dataclass(frozen=True)
+class ReportFiles:
+    """Paths written by :func:`write_report`."""
+
+    html: Path
+    markdown: Path
+    validation: Path
+    figures: tuple
+
+
+def _fmt(v) -> str:
+    if isinstance(v, (bool, np.bool_)):
+        return "yes" if v else "no"
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        # a spectral radius 0.99999997 must not print as 1
+        return f"{v:.12g}" if 0 < abs(abs(v) - 1.0) < 1e-4 else f"{v:.5g}"
+    if isinstance(v, (list, tuple)) and len(v) > 6:
+        return f"[{len(v)} values]"
+    return str(v)
+
+
+class _Doc:
+    """HTML and Markdown built side by side."""
+
+    def __init__(self, title):
+        self.h = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+                  f"<style>{CSS}</style></head><body><h1>{html.escape(title)}</h1>"]
+        self.md = [f"# {title}", ""]
+
+    def heading(self, text):
+        self.h.append(f"<h2>{html.escape(text)}</h2>")
+        self.md += [f"## {text}", ""]
+
+    def para(self, text, bad=False):
+        cls = " class='bad'" if bad else ""
+        self.h.append(f"<p{cls}>{html.escape(text)}</p>")
+        self.md += [f"**{text}**" if bad else text, ""]
+
+    def table(self, header, rows, bad_rows=()):
+        self.h.append("<table><tr>" + "".join(f"<th class='l'>{html.escape(str(c))}</th>" for c in header) + "</tr>")
+        for k, row in enumerate(rows):
+            cls = " class='bad'" if k in bad_rows else ""
+            self.h.append(f"<tr{cls}>" + "".join(
+                f"<td class='l'>{html.escape(_fmt(c))}</td>" if i == 0 else f"<td>{html.escape(_fmt(c))}</td>"
+                for i, c in enumerate(row)) + "</tr>")
+        self.h.append("</table>")
+        self.md += ["| " + " | ".join(map(str, header)) + " |", "|" + "---|" * len(header)]
+        self.md += ["| " + " | ".join(_fmt(c) for c in row) + " |" for row in rows]
+        self.md.append("")
+
+    def figure(self, rel, caption):
+        self.h.append(f"<figure><img src='{html.escape(rel)}' alt='{html.escape(caption)}'>"
+                      f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+        self.md += [f"![{caption}]({rel})", ""]
+
+    def text(self):
+        return "\n".join(self.h + ["</body></html>"]), "\n".join(self.md)
+
+
+def _certificate_rows(certificates: dict):
+    rows = []
+    for name, cert in certificates.items():
+        if not isinstance(cert, dict):
+            rows.append((name, "", cert))
+            continue
+        for key, val in cert.items():
+            if isinstance(val, dict):
+                for k2, v2 in val.items():
+                    if not isinstance(v2, (dict, list)) or len(v2) <= 6:
+                        rows.append((name, f"{key}.{k2}", v2))
+            elif not isinstance(val, list) or len(val) <= 6:
+                rows.append((name, key, val))
+    return rows
+
+
+def write_report(
+    run_dir,
+    *,
+    title: str | None = None,
+    robot_name: str = "",
+    pldi=None,
+    unc=None,
+    controller=None,
+    controllers: dict | None = None,
+    certificates: dict | None = None,
+    monte_carlo=None,
+    simulations=(),
+    discretization: dict | None = None,
+    mu_curves: dict | None = None,
+    notes=(),
+) -> ReportFiles:
+    """Write ``report.html``, ``report.md``, ``figures/`` and ``validation.json`` into ``run_dir``.
+
+    Parameters
+    ----------
+    run_dir : path
+    title, robot_name : str
+    pldi : PLDI, optional
+        Its interval table (the paper's eq. 9) goes into the report.
+    unc : UncertainPlant, optional
+        For the Bode magnitude of the PLDI's plants (paper Fig. 3).
+    controller : LTI, optional
+        The run's controller (shown in the controller comparison).
+    controllers : dict, optional
+        More controllers to compare, ``{name: K}`` (paper Fig. 5).
+    certificates : dict, optional
+        ``{name: {figure: value}}`` plain dicts, e.g. ``{"constant-parameter μ":
+        {...}, "time-varying (quadratic)": {...}}``.
+    monte_carlo : MonteCarloResult, optional
+        S and T against the weight shapes (paper Fig. 4) and step responses.
+    simulations : sequence of SimulationResult
+        Nonlinear closed-loop runs; one that left the domain is shown in red.
+    discretization : dict, optional
+        Plain figures of the discretisation/quantisation analysis.
+    mu_curves : dict, optional
+        ``{name: (omega, upper, lower)}`` for the μ plot.
+    notes : sequence of str
+        Extra remarks (fallbacks, approximations) printed under the summary.
+
+    Returns
+    -------
+    ReportFiles
+    """
+    run = Path(run_dir)
+    figdir = run / "figures"
+    figdir.mkdir(parents=True, exist_ok=True)
+    title = title or f"polyrob report: {robot_name}"
+    doc = _Doc(title)
+    figures = []
+    validation = {"robot": robot_name}
+
+    def fig(name, make, caption):
+        path = make(figdir / name)
+        figures.append(path)
+        doc.figure(f"figures/{name}", caption)
+
+    doc.para(f"Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC by polyrob.")
+    # ------------------------------------------------------------------ verdicts first
+    doc.heading("Certificates")
+    if certificates:
+        doc.table(["certificate", "figure", "value"], _certificate_rows(certificates))
+        validation["certificates"] = certificates
+    else:
+        doc.para("No certificate was given.")
+    for note in notes:
+        doc.para(str(note))
+
+    sims = list(simulations)
+    if sims:
+        doc.heading("Nonlinear closed loop (the robot's own dynamics)")
+        left = [s for s in sims if not s.certificate_applies]
+        if left:
+            doc.para(f"{len(left)} of {len(sims)} simulations left the domain of the PLDI: the certificate does "
+                     "not apply to those trajectories.", bad=True)
+        else:
+            doc.para(f"All {len(sims)} simulations stayed in the domain of the PLDI.")
+        rows, bad = [], []
+        for k, s in enumerate(sims):
+            label = s.controller + (f" @ {s.rate:.4g} Hz" if s.rate else "")
+            target = "" if s.reference.target is None else np.round(np.asarray(s.reference.target), 4).tolist()
+            for mt in s.metrics:
+                rows.append((f"#{k + 1} {s.reference.kind} {target} ({label})", mt.joint, mt.rise_time,
+                             mt.overshoot, mt.settling_time, mt.steady_state_error, mt.peak_torque,
+                             mt.effort_limit, "no" if s.left_domain else "yes"))
+                if s.left_domain:
+                    bad.append(len(rows) - 1)
+        doc.table(["simulation", "joint", "rise time (s)", "overshoot (%)", "settling (s)", "steady-state error",
+                   "peak torque", "effort limit", "in domain"], rows, bad_rows=bad)
+        for k, s in enumerate(sims):
+            doc.para(f"#{k + 1}: {s.verdict()}", bad=s.left_domain or not s.success)
+        fig("tracking.png", lambda p: plots.plot_tracking(sims, p, joint_names=[m.joint for m in sims[0].metrics]),
+            "Nonlinear closed loop: positions and references, torques against the effort limits "
+            "(red: after leaving the domain)")
+        validation["simulations"] = [s.summary() for s in sims]
+
+    if discretization:
+        doc.heading("Discretisation and quantisation")
+        doc.table(["figure", "value"], [(k, v) for k, v in discretization.items()
+                                       if not isinstance(v, (dict, list)) or len(v) <= 6])
+        validation["discretization"] = discretization
+
+    # ------------------------------------------------------------------ the problem
+    if pldi is not None:
+        doc.heading("PLDI: bounds of the Jacobians over the domain")
+        doc.para(f"Enclosure: {pldi.enclosure}; coverage {pldi.coverage:.4g} of {pldi.coverage_points} fresh points; "
+                 f"domain '{pldi.domain.name}'.")
+        doc.table(["entry", "lower", "upper", "nominal"],
+                  [(n, lo, hi, nm) for n, lo, hi, nm in zip(pldi.entries, pldi.lower, pldi.upper, pldi.nominal)])
+    if unc is not None:
+        fig("pldi_bode.png", lambda p: plots.plot_pldi_bode(unc, p), "Bode magnitude of sampled and corner plants "
+            "of the uncertain plant, and the nominal (paper Fig. 3)")
+    if monte_carlo is not None:
+        doc.heading("Monte Carlo over the uncertain plant")
+        s = monte_carlo.summary()
+        doc.table(["figure", "value"], [(k, v) for k, v in s.items() if not isinstance(v, dict)]
+                  + [(f"max |{k}| · |W_{k}| over samples", v) for k, v in s["weight_ratio"].items()])
+        doc.para("Sampled plants illustrate; they certify nothing about the plants between them.")
+        fig("sensitivities.png", lambda p: plots.plot_sensitivities(monte_carlo, p),
+            "S and T of the sampled plants (grey), the nominal (black) and 1/|W_S|, 1/|W_T| (red) (paper Fig. 4)")
+        fig("steps.png", lambda p: plots.plot_steps(monte_carlo, p), "Step responses of the sampled linear loops")
+        validation["monte_carlo"] = s
+    comp = dict(controllers or {})
+    if controller is not None:
+        comp = {"this run": controller, **comp}
+    if comp:
+        doc.heading("Controllers")
+        fig("controllers.png", lambda p: plots.plot_controllers(comp, p),
+            "Magnitude of each controller entry (paper Fig. 5)")
+    if mu_curves:
+        doc.heading("μ over frequency")
+        fig("mu.png", lambda p: plots.plot_mu(mu_curves, p), "μ upper (solid) and lower (dashed) bounds")
+
+    page, md = doc.text()
+    h, m = run / "report.html", run / "report.md"
+    v = run / "validation.json"
+    atomic_write(h, lambda f: f.write(page))
+    atomic_write(m, lambda f: f.write(md))
+    atomic_write(v, lambda f: f.write(json.dumps(validation, indent=1, default=json_default)))
+    return ReportFiles(html=h, markdown=m, validation=v, figures=tuple(figures))
