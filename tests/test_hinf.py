@@ -9,6 +9,7 @@ import pytest
 
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.synthesis.hinf import check_stabilizable, hinf_norm, hinf_norm_estimate, hinfsyn
+from test_synthesis_checks import closed_loop, dense_peak, hamiltonian_below, response
 
 # control.augw builds its plants with the deprecated control.connect
 pytestmark = pytest.mark.filterwarnings("ignore:connect\\(\\) is deprecated:FutureWarning")
@@ -50,8 +51,16 @@ def test_control_hinfsyn_fails_but_ours_does_not():
     assert any("imaginary-axis" in r for r in res.regularization)
     # |W_S(inf)| = 0.5 and S(inf) = 1 for a strictly proper plant: gamma >= 0.5
     assert 0.5 - 1e-6 <= res.gamma < 0.52
-    # reported gamma is the true closed-loop norm of the user's plant
-    assert res.gamma == pytest.approx(hinf_norm(res.closed_loop), rel=1e-6)
+    _check_gamma_is_the_closed_loop_norm(P, res)
+
+
+def _check_gamma_is_the_closed_loop_norm(P, res, n_u=1, n_y=1):
+    """γ is the norm of Fl(P, K) with the user's plant, checked without polyrob's code."""
+    cl = closed_loop(P, res.K, n_u, n_y)  # python-control's LFT
+    w = np.logspace(-4, 4, 9)
+    np.testing.assert_allclose(response(res.closed_loop, w), response(cl, w), rtol=1e-7, atol=1e-10)
+    assert dense_peak(cl) <= res.gamma * (1 + 1e-9)  # nothing above γ on a dense grid
+    assert hamiltonian_below(cl, res.gamma * (1 + 1e-6))  # and provably nothing between grid points
 
 
 def test_double_integrator_with_complementary_weight():
@@ -59,14 +68,16 @@ def test_double_integrator_with_complementary_weight():
     assert np.all(np.linalg.eigvals(res.closed_loop.A).real < 0)
     assert res.gamma <= res.gamma_bound * (1 + 1e-2)
     assert res.gamma < 0.6
+    _check_gamma_is_the_closed_loop_norm(_double_integrator_plant(with_wt=True), res)
 
 
 def test_regular_plant_matches_slicot_optimum():
     P = _scherer_plant()
     ref = control.hinfsyn(P, 1, 1)[2]
     res = hinfsyn(P, 1, 1, tol=1e-4)
-    assert res.regularization == ()
+    assert res.regularization == () and res.fallbacks == ()
     assert res.gamma == pytest.approx(ref, rel=2e-3)
+    _check_gamma_is_the_closed_loop_norm(P, res)
 
 
 def test_lmi_route_agrees_with_riccati():
@@ -124,6 +135,66 @@ def test_bad_sizes_are_polyrob_errors():
         hinfsyn(P)
     with pytest.raises(PolyrobError, match="method"):
         hinfsyn(P, 1, 1, method="magic")
+
+
+def _resonance(zeta=1e-4, w0=1.2345):
+    G = control.ss(control.tf([w0**2], [1, 2 * zeta * w0, w0**2]))
+    return G, 1 / (2 * zeta * np.sqrt(1 - zeta**2))  # analytic peak
+
+
+def test_hinf_norm_is_an_upper_bound_when_ab13dd_fails(monkeypatch):
+    """Before the fix a 2000-point grid value was returned: 139 for a true norm of 5000."""
+    import slycot
+    from slycot.exceptions import SlycotArithmeticError
+
+    G, peak = _resonance()
+
+    def fail(*args, **kwargs):
+        raise SlycotArithmeticError("forced failure", 1)
+
+    monkeypatch.setattr(slycot, "ab13dd", fail)
+    g = hinf_norm(G)
+    assert peak * (1 - 1e-12) <= g <= peak * (1 + 1e-5)
+    assert hamiltonian_below(G, g * (1 + 1e-9))
+
+
+def test_unstable_system_has_infinite_norm():
+    G = control.ss(control.tf([1], [1, -1]))
+    assert control.linfnorm(G)[0] == pytest.approx(1.0)  # python-control: L∞, finite
+    assert hinf_norm(G) == np.inf
+
+
+def test_controller_accepted_only_below_gamma():
+    """The accept check is the Hamiltonian test, so a resonance between grid points cannot pass."""
+    from polyrob.synthesis.hinf_problem import SynthesisProblem
+    from polyrob.synthesis.hinf_riccati import verify_controller
+
+    G, peak = _resonance()
+    A, B, C = (np.asarray(X, float) for X in (G.A, G.B, G.C))
+    # inputs [w, u], outputs [z, y]; with K = 0 the loop is G itself
+    prob = SynthesisProblem(A, np.hstack([B, B]), np.vstack([C, C]), np.zeros((2, 2)), 1, 1)
+    K0 = (np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), np.zeros((1, 1)))
+    assert not verify_controller(prob, K0, peak * 0.99, rtol=0.0)
+    assert verify_controller(prob, K0, peak * 1.001, rtol=0.0)
+
+
+def test_failed_lmi_conditioning_pass_is_recorded(monkeypatch):
+    import cvxpy as cp
+
+    real_solve = cp.Problem.solve
+    calls = []
+
+    def solve(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:  # the second (conditioning) pass
+            raise cp.error.SolverError("forced failure")
+        return real_solve(self, *args, **kwargs)
+
+    monkeypatch.setattr(cp.Problem, "solve", solve)
+    # without the conditioning pass the reconstruction from X, Y is singular
+    # here: the error says which pass failed (no silent fallback)
+    with pytest.raises(SynthesisError, match="conditioning pass .* failed"):
+        hinfsyn(_scherer_plant(), 1, 1, method="lmi")
 
 
 def test_norm_estimate_close_to_ab13dd():

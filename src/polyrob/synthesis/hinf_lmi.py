@@ -99,7 +99,8 @@ def lmi_controller(prob: SynthesisProblem, tol: float, solver: Optional[str] = N
     # U V^T = I - X Y, split by an SVD for balance
     Um, s, Vt = np.linalg.svd(np.eye(n) - Xv @ Yv)
     if s[-1] <= 1e-12 * max(1.0, s[0]):
-        raise SynthesisError("H∞ LMI synthesis: I - XY is singular, controller reconstruction impossible")
+        raise SynthesisError("H∞ LMI synthesis: I - XY is singular, controller reconstruction impossible"
+                             + "".join(f" ({f})" for f in fallbacks))
     U = Um * np.sqrt(s)[None, :]
     V = Vt.T * np.sqrt(s)[None, :]
     Dk = Dhv
