@@ -8,7 +8,7 @@ import pytest
 
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.analysis.mu import mussv
-from polyrob.synthesis import MusynResult, musyn
+from polyrob.synthesis import musyn
 from polyrob.synthesis.dk import frequency_grid, performance_lower_bound
 from polyrob.synthesis.dscale import (
     BlockScaling,
@@ -23,13 +23,14 @@ from polyrob.synthesis.dscale import (
 )
 from polyrob.analysis.blocks import as_block_structure
 from polyrob.examples import DISTILLATION_BLK, distillation_plant
+from test_synthesis_checks import closed_loop, dscaled_mu, loop_stable, response
+
 
 @pytest.fixture(scope="module")
 def distillation_result():
     P = distillation_plant()
-    t0 = time.perf_counter()
     res = musyn(P, DISTILLATION_BLK, n_u=2, n_y=2, max_iter=8, omega=np.logspace(-3, 3, 61), progress=False)
-    return P, res, time.perf_counter() - t0
+    return P, res
 
 
 def test_distillation_plant_matches_textbook():
@@ -42,34 +43,49 @@ def test_distillation_plant_matches_textbook():
 
 
 def test_distillation_mu_below_1_05(distillation_result):
-    P, res, seconds = distillation_result
-    assert isinstance(res, MusynResult)
+    P, res = distillation_result
     assert res.peak_mu <= 1.05  # dkpy reports 1.03-1.04 on this example
     assert res.peak_mu_lower <= res.peak_mu + 1e-9
-    assert seconds < 60
-    # the certificate is recomputed on the closed loop and refined at the peak
-    assert res.certificate.peak_upper == pytest.approx(res.peak_mu)
     assert res.certificate.omega.min() < 1e-3  # a decade beyond the D-step grid
-    assert np.all(np.linalg.eigvals(res.closed_loop.A).real < 0)
+
+
+def test_distillation_certificate_checked_independently(distillation_result):
+    """μ of Fl(P, K) recomputed without polyrob: python-control's LFT and, for three
+    complex full blocks, μ = min_D σ̄(D N D⁻¹) (Doyle 1982), on a dense grid."""
+    P, res = distillation_result
+    N = closed_loop(P, res.controller, 2, 2)
+    assert np.max(np.linalg.eigvals(np.asarray(N.A)).real) < 0  # nominal (internal) stability
+    w = np.union1d(np.logspace(-4, 3, 141), [res.peak_frequency])
+    H = response(N, w)
+    mu, x = np.zeros(w.size), None
+    for k in range(w.size):
+        mu[k], x = dscaled_mu(H[k], [1, 1, 2], x)
+    # no frequency exceeds the certified peak, and the peak is where the certificate says
+    assert mu.max() <= res.peak_mu * (1 + 1e-3)
+    assert mu[np.searchsorted(w, res.peak_frequency)] == pytest.approx(res.peak_mu, rel=2e-3)
+    # robust stability (implied by robust performance): real input gains within 1/μ keep the loop stable
+    r = 0.999 / res.peak_mu
+    for d1 in (-r, r):
+        for d2 in (-r, r):
+            assert loop_stable(N, np.diag([d1, d2]))
 
 
 def test_result_bookkeeping(distillation_result):
-    _, res, _ = distillation_result
+    _, res = distillation_result
     assert res.structure == "full"
-    assert res.order == res.controller.nstates
     assert len(res.mu_history) == len(res.gamma_history) == res.iterations
     assert res.mu_history[0] > res.mu_history.min()  # D-K improved on the plain H∞ controller
     assert res.info["method"] == "D-K"
     best = res.info["best_iteration"] - 1
     assert res.mu_history[best] == pytest.approx(res.info["grid_peak_mu"])
-    s = res.summary()
-    assert s["order"] == res.order and s["iterations"] == res.iterations
+    # what the iteration did instead of the plain route is recorded, not hidden
+    assert isinstance(res.info["fallbacks"], list)
     sc = res.scalings[0]
     assert sc is None or sc.blocks[-1].d is None  # performance block normalised to d = 1
 
 
 def test_balanced_filters_are_moderate(distillation_result):
-    _, res, _ = distillation_result
+    _, res = distillation_result
     sc = res.scalings[0]
     if sc is None:
         pytest.skip("best controller was the unscaled one")

@@ -114,7 +114,11 @@ def dg_mixed_upper(M: np.ndarray, n_real: int, tol: float = 1e-4) -> float:
 
 def stable_under(P: control.StateSpace, K, delta: np.ndarray, n_u: int, n_y: int) -> bool:
     """Is the loop with ``w_Δ = Δ z_Δ`` (first channels) and ``u = K y`` (last channels) stable?"""
-    N = closed_loop(P, K, n_u, n_y)
+    return loop_stable(closed_loop(P, K, n_u, n_y), delta)
+
+
+def loop_stable(N: control.StateSpace, delta: np.ndarray) -> bool:
+    """Is ``N`` closed with the constant ``w_Δ = Δ z_Δ`` on its first channels stable?"""
     A, B, C, D = (np.asarray(X, float) for X in (N.A, N.B, N.C, N.D))
     delta = np.asarray(delta, float)
     nd_in, nd_out = delta.shape  # w_Δ (nd_in) = Δ z_Δ (nd_out)
