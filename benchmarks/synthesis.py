@@ -43,14 +43,16 @@ warnings.simplefilter("ignore")
 
 import polyrob  # noqa: E402
 import polyrob.plant.weights  # noqa: E402
-from polyrob.examples import DISTILLATION_BLK as DIST_BLK, distillation_plant  # noqa: E402
 from polyrob.analysis.mu import mu_bounds  # noqa: E402
+from polyrob.examples import DISTILLATION_BLK as DIST_BLK  # noqa: E402
+from polyrob.examples import distillation_plant  # noqa: E402
 from polyrob.synthesis import certify, max_bandwidth_scaling, musyn, reduce_controller  # noqa: E402
-
 
 
 def log(msg: str) -> None:
     print(f"[synthesis benchmark] {msg}", file=sys.stderr, flush=True)
+
+
 DIST_OMEGA = np.logspace(-3, 3, 61)
 CERT_OMEGA = np.logspace(-4, 4, 97)
 #: scan of the bandwidth factor (the full default scan takes too long here)
@@ -64,9 +66,13 @@ def bench_distillation() -> dict:
     t0 = time.perf_counter()
     res = musyn(P, DIST_BLK, n_u=2, n_y=2, omega=DIST_OMEGA, progress=False)
     out["polyrob"] = {
-        "peak_mu_certified": res.peak_mu, "peak_mu_lower": res.peak_mu_lower,
-        "peak_mu_grid": res.info["grid_peak_mu"], "order": res.order, "iterations": res.iterations,
-        "mu_history": [round(float(x), 4) for x in res.mu_history], "seconds": round(time.perf_counter() - t0, 2),
+        "peak_mu_certified": res.peak_mu,
+        "peak_mu_lower": res.peak_mu_lower,
+        "peak_mu_grid": res.info["grid_peak_mu"],
+        "order": res.order,
+        "iterations": res.iterations,
+        "mu_history": [round(float(x), 4) for x in res.mu_history],
+        "seconds": round(time.perf_counter() - t0, 2),
     }
     mu_same = certify(P, res.controller, DIST_BLK, CERT_OMEGA, n_u=2, n_y=2)[0]
     out["polyrob"]["peak_mu_certified_common_grid"] = mu_same
@@ -78,15 +84,22 @@ def bench_distillation() -> dict:
     log("distillation: dkpy")
     eg = dkpy.example_skogestad2006_p325()
     it = dkpy.DkIterAutoOrder(
-        controller_synthesis=dkpy.HinfSynSlicot(), structured_singular_value=dkpy.SsvLmiBisection(),
-        d_scale_fit=dkpy.DScaleFitSlicot(), max_mu=1, max_mu_fit_error=1e-2, max_iterations=3, max_fit_order=4,
+        controller_synthesis=dkpy.HinfSynSlicot(),
+        structured_singular_value=dkpy.SsvLmiBisection(),
+        d_scale_fit=dkpy.DScaleFitSlicot(),
+        max_mu=1,
+        max_mu_fit_error=1e-2,
+        max_iterations=3,
+        max_fit_order=4,
     )
     t0 = time.perf_counter()
     K, N, mu, _, _ = it.synthesize(eg["P"], eg["n_y"], eg["n_u"], DIST_OMEGA, np.array(DIST_BLK))
     secs = time.perf_counter() - t0
     Kss = control.ss(K)
     out["dkpy"] = {
-        "version": importlib.metadata.version("dkpy"), "peak_mu_grid": float(mu), "order": int(Kss.nstates),
+        "version": importlib.metadata.version("dkpy"),
+        "peak_mu_grid": float(mu),
+        "order": int(Kss.nstates),
         "seconds": round(secs, 2),
         "peak_mu_certified_common_grid": certify(P, Kss, DIST_BLK, CERT_OMEGA, n_u=2, n_y=2)[0],
     }
@@ -110,8 +123,9 @@ print(json.dumps({"peak_mu_certified": r.peak_mu, "peak_mu_lower": r.peak_mu_low
 
 def start_fixed():
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
-    proc = subprocess.Popen([sys.executable, "-c", FIXED_SNIPPET], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            env=env, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", FIXED_SNIPPET], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True
+    )
     return proc
 
 
@@ -129,9 +143,13 @@ def finish_fixed(proc, timeout):
 
 def summary(res, seconds=None) -> dict:
     return {
-        "peak_mu_certified": res.peak_mu, "peak_mu_lower": res.peak_mu_lower,
-        "peak_frequency": res.peak_frequency, "order": res.order, "iterations": res.iterations,
-        "method": res.info.get("method"), "seconds": round(seconds if seconds is not None else res.seconds, 2),
+        "peak_mu_certified": res.peak_mu,
+        "peak_mu_lower": res.peak_mu_lower,
+        "peak_frequency": res.peak_frequency,
+        "order": res.order,
+        "iterations": res.iterations,
+        "method": res.info.get("method"),
+        "seconds": round(seconds if seconds is not None else res.seconds, 2),
     }
 
 
@@ -147,9 +165,13 @@ def bench_paper(t_start: float, budget: float) -> dict:
     log("2R: K* analysis")
     t0 = time.perf_counter()
     r = mu_bounds(polyrob.lft(P, polyrob.paper_controller()), P.block_structure_rp, progress=False)
-    out["paper_K_star"] = {"peak_mu_upper": r.peak_upper, "peak_mu_lower": r.peak_lower,
-                           "peak_frequency": r.peak_upper_frequency, "order": 12,
-                           "seconds": round(time.perf_counter() - t0, 2)}
+    out["paper_K_star"] = {
+        "peak_mu_upper": r.peak_upper,
+        "peak_mu_lower": r.peak_lower,
+        "peak_frequency": r.peak_upper_frequency,
+        "order": 12,
+        "seconds": round(time.perf_counter() - t0, 2),
+    }
     # full-order D-K, real parameters treated as complex
     log("2R: full-order D-K")
     t0 = time.perf_counter()
@@ -169,8 +191,9 @@ def bench_paper(t_start: float, budget: float) -> dict:
     log("2R: reduction")
     t0 = time.perf_counter()
     red = reduce_controller(P, best, tol=0.05)
-    out["reduced"] = dict(red.summary(), seconds=round(time.perf_counter() - t0, 2),
-                          reduced_from=best.info.get("method"))
+    out["reduced"] = dict(
+        red.summary(), seconds=round(time.perf_counter() - t0, 2), reduced_from=best.info.get("method")
+    )
     # the largest bandwidth factor of the weights with certified mu < 1
     log("bandwidth scaling")
     t0 = time.perf_counter()

@@ -33,8 +33,8 @@ warnings.simplefilter("ignore")
 import polyrob  # noqa: E402
 from polyrob.analysis.mu import mu_bounds  # noqa: E402
 from polyrob.analysis.robust import robstab  # noqa: E402
-from polyrob.synthesis import musyn, scaled_hyperparameters  # noqa: E402
 from polyrob.plant.weights import paper_weights  # noqa: E402
+from polyrob.synthesis import musyn, scaled_hyperparameters  # noqa: E402
 
 BOTH = ("omega_b", "omega_bt")
 #: (name, bandwidth factor, scaled hyperparameters, gain on both weights, structure)
@@ -83,16 +83,26 @@ def run_case(case):
             res = musyn(P, structure=step, init=init, starts=1, max_iter=30, progress=False)
             init = res.controller
     rs = robstab(P, res.controller, progress=False)
-    out = {"case": name, "structure": structure, "peak_mu_certified": res.peak_mu, "peak_mu_lower": res.peak_mu_lower,
-           "peak_frequency": res.peak_frequency, "robust_stability_mu": rs.mu_upper, "order": res.order,
-           "iterations": res.iterations, "seconds": round(time.perf_counter() - t0, 1)}
+    out = {
+        "case": name,
+        "structure": structure,
+        "peak_mu_certified": res.peak_mu,
+        "peak_mu_lower": res.peak_mu_lower,
+        "peak_frequency": res.peak_frequency,
+        "robust_stability_mu": rs.mu_upper,
+        "order": res.order,
+        "iterations": res.iterations,
+        "seconds": round(time.perf_counter() - t0, 1),
+    }
     if name == "paper weights":
         lag = control.ss(control.tf([1, 1], [1, 1e-4]))
         K = control.ss(res.controller) * control.append(lag, lag)
         w = np.logspace(-5, 3, 33)
         mu = mu_bounds(polyrob.lft(P, K), P.block_structure_rp, w, progress=False, refine_peak=False).upper
-        out["with_lag"] = {"mu_below_1e-3_rad_s": float(mu[w < 1e-3].max()),
-                           "mu_0.1_to_30_rad_s": float(mu[(w >= 0.1) & (w <= 30)].max())}
+        out["with_lag"] = {
+            "mu_below_1e-3_rad_s": float(mu[w < 1e-3].max()),
+            "mu_0.1_to_30_rad_s": float(mu[(w >= 0.1) & (w <= 30)].max()),
+        }
     log(f"{name}: mu {res.peak_mu:.4f} (RS {rs.mu_upper:.4f}), order {res.order}, {out['seconds']} s")
     return out
 
@@ -108,9 +118,18 @@ def main():
     UNC = uncertain()
     with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1), mp_context=mp.get_context("fork")) as pool:
         rows = list(pool.map(run_case, cases))
-    print(json.dumps({"machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]},
-                      "problem": "paper_2r --domain paper, ten independent real parameters",
-                      "rows": rows, "total_seconds": round(time.perf_counter() - t0, 1)}, indent=2, default=float))
+    print(
+        json.dumps(
+            {
+                "machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]},
+                "problem": "paper_2r --domain paper, ten independent real parameters",
+                "rows": rows,
+                "total_seconds": round(time.perf_counter() - t0, 1),
+            },
+            indent=2,
+            default=float,
+        )
+    )
 
 
 if __name__ == "__main__":

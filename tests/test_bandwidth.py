@@ -22,8 +22,9 @@ def _search(mu_of_alpha, **options):
         calls.append((P.alpha, K0))
         return SimpleNamespace(peak_mu=mu_of_alpha(P.alpha), controller=f"K({P.alpha:g})", order=3)
 
-    res = max_bandwidth_scaling(None, synthesize=synthesize, plant=lambda a, h: SimpleNamespace(alpha=a, h=h),
-                                progress=False, **options)
+    res = max_bandwidth_scaling(
+        None, synthesize=synthesize, plant=lambda a, h: SimpleNamespace(alpha=a, h=h), progress=False, **options
+    )
     return res, calls
 
 

@@ -5,9 +5,12 @@ from __future__ import annotations
 import control
 import numpy as np
 import pytest
+from test_synthesis_checks import closed_loop, dscaled_mu, loop_stable, response
 
-from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.analysis.blocks import as_block_structure
 from polyrob.analysis.mu import mussv
+from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.examples import DISTILLATION_BLK, distillation_plant
 from polyrob.synthesis import musyn
 from polyrob.synthesis.dk import frequency_grid, performance_lower_bound
 from polyrob.synthesis.dscale import (
@@ -21,9 +24,6 @@ from polyrob.synthesis.dscale import (
     scaled_plant,
     scaling_data,
 )
-from polyrob.analysis.blocks import as_block_structure
-from polyrob.examples import DISTILLATION_BLK, distillation_plant
-from test_synthesis_checks import closed_loop, dscaled_mu, loop_stable, response
 
 
 @pytest.fixture(scope="module")
@@ -158,7 +158,10 @@ def test_j_factorisation_certifies_mixed_mu():
         T = np.diag(dl) @ (Nt + Fr) @ np.linalg.inv(np.eye(4) + Fr.T @ Nt) @ np.diag(1 / dl)
         assert np.linalg.norm(T, 2) == pytest.approx(1.0, abs=1e-6)
         # complex D scaling alone does not reach it
-        assert np.linalg.norm(np.diag(np.r_[sd.d[0, :2], 1, 1]) @ Nt @ np.diag(1 / np.r_[sd.d[0, :2], 1, 1]), 2) >= 1 - 1e-9
+        assert (
+            np.linalg.norm(np.diag(np.r_[sd.d[0, :2], 1, 1]) @ Nt @ np.diag(1 / np.r_[sd.d[0, :2], 1, 1]), 2)
+            >= 1 - 1e-9
+        )
 
 
 def test_scaled_plant_matches_frequency_formula():
@@ -169,9 +172,15 @@ def test_scaled_plant_matches_frequency_formula():
     nr, nc = st.m_shape  # 4 rows (outputs), 3 cols (inputs)
     n = 4
     A = rng.standard_normal((n, n)) - 4 * np.eye(n)
-    P = control.ss(A, rng.standard_normal((n, nc + 1)), rng.standard_normal((nr + 1, n)),
-                   0.1 * rng.standard_normal((nr + 1, nc + 1)))
-    d0 = fit_magnitude(np.logspace(-1, 1, 20), np.abs((1j * np.logspace(-1, 1, 20) + 2) / (1j * np.logspace(-1, 1, 20) + 0.5)), 1)
+    P = control.ss(
+        A,
+        rng.standard_normal((n, nc + 1)),
+        rng.standard_normal((nr + 1, n)),
+        0.1 * rng.standard_normal((nr + 1, nc + 1)),
+    )
+    d0 = fit_magnitude(
+        np.logspace(-1, 1, 20), np.abs((1j * np.logspace(-1, 1, 20) + 2) / (1j * np.logspace(-1, 1, 20) + 0.5)), 1
+    )
     d1 = MagnitudeFit(0, 3.0, np.zeros(0, complex), np.zeros(0, complex), 0.0, 0.0, np.array([np.log(3.0)]))
     F = GFit(2, 0.1, np.array([0.2]), np.array([1.5]), 0.0, 0.3, np.array([[2.0, 0.3, 0.1, -0.2]]))
     sc = Scalings((BlockScaling(d0, F), BlockScaling(d1, None), BlockScaling(None, None)), 1.7, st)
@@ -216,8 +225,9 @@ def test_paper_plant_smoke():
 
     pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
     P = polyrob.generalized_plant(polyrob.uncertain_plant(pldi), *polyrob.plant.weights.paper_weights())
-    res = musyn(P, max_iter=2, mixed=False, omega=np.logspace(-3, 3, 31), progress=False,
-                certify_omega=np.logspace(-3, 3, 31))
+    res = musyn(
+        P, max_iter=2, mixed=False, omega=np.logspace(-3, 3, 31), progress=False, certify_omega=np.logspace(-3, 3, 31)
+    )
     assert np.isfinite(res.peak_mu)
     assert res.mu_history[-1] < res.mu_history[0]
     assert res.certificate.structure.has_real  # certified with the real parameters

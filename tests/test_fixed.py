@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 import polyrob
-from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.analysis.mu import mu_bounds
+from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import PAPER_CONTROLLER, generalized_plant, lft, paper_controller
+from polyrob.plant.weights import paper_weights
 from polyrob.synthesis.fixed import closed_loop_response, fixed_structure_musyn
 from polyrob.synthesis.result import MusynResult
 from polyrob.synthesis.structures import controller_structure
-from polyrob.plant.weights import paper_weights
 
 #: certification grid shared by K* and the synthesised controller (coarse: fast)
 OMEGA = np.logspace(-3, 4, 36)
@@ -45,8 +45,9 @@ def mu_k_star(paper_plant):
 
 @pytest.fixture(scope="module")
 def tf3(paper_plant):
-    return fixed_structure_musyn(paper_plant, structure="tf3", init="paper", starts=1, max_iter=2,
-                                 omega=OMEGA, certify_omega=OMEGA, seed=0)
+    return fixed_structure_musyn(
+        paper_plant, structure="tf3", init="paper", starts=1, max_iter=2, omega=OMEGA, certify_omega=OMEGA, seed=0
+    )
 
 
 def _tiny_plant():
@@ -130,8 +131,10 @@ def _independent(s, th):
         entries = [[0 * sv] * 2 for _ in range(2)]
         for i in range(2):
             entries[i][i] = d["Kp"][i] + d["Ki"][i] / sv + d["Kd"][i] * sv / (d["tau"][i] * sv + 1)
-        return control.tf([[entries[i][j].num[0][0] for j in range(2)] for i in range(2)],
-                          [[entries[i][j].den[0][0] for j in range(2)] for i in range(2)])
+        return control.tf(
+            [[entries[i][j].num[0][0] for j in range(2)] for i in range(2)],
+            [[entries[i][j].den[0][0] for j in range(2)] for i in range(2)],
+        )
     return control.ss(d["A"], d["B"], d["C"], d["D"])
 
 
@@ -169,8 +172,9 @@ def test_closed_loop_response_matches_lft(paper_plant):
     K = paper_controller()
     w = np.logspace(-2, 3, 20)
     ref = _fr(lft(paper_plant, K), w)
-    np.testing.assert_allclose(closed_loop_response(paper_plant.system, K, w, n_u=2, n_y=2), ref,
-                               rtol=1e-7, atol=1e-9 * np.abs(ref).max())
+    np.testing.assert_allclose(
+        closed_loop_response(paper_plant.system, K, w, n_u=2, n_y=2), ref, rtol=1e-7, atol=1e-9 * np.abs(ref).max()
+    )
 
 
 # ----------------------------------------------------------------- errors and small plants
@@ -189,16 +193,26 @@ def test_unstabilisable_plant_raises_synthesis_error():
     # the unstable mode does not see u: no controller can stabilise the loop
     P = control.ss([[1.0]], [[1.0, 0.0, 0.0]], [[1.0], [1.0], [1.0]], np.zeros((3, 3)))
     with pytest.raises(SynthesisError, match="no start stabilises"):
-        fixed_structure_musyn(P, [[-1, 0], [1, 1]], "tf1", n_u=1, n_y=1, starts=2, max_iter=1,
-                              omega=np.logspace(-1, 1, 5), certify_omega=np.logspace(-1, 1, 5))
+        fixed_structure_musyn(
+            P,
+            [[-1, 0], [1, 1]],
+            "tf1",
+            n_u=1,
+            n_y=1,
+            starts=2,
+            max_iter=1,
+            omega=np.logspace(-1, 1, 5),
+            certify_omega=np.logspace(-1, 1, 5),
+        )
 
 
 @pytest.mark.parametrize("structure", ["pid", "ss:1", "tf2"])
 def test_small_plant_structures_are_internally_stable(structure):
     P, blk = _tiny_plant()
     w = np.logspace(-2, 2, 21)
-    r = fixed_structure_musyn(P, blk, structure, n_u=1, n_y=1, init=-4.0, starts=1, max_iter=3,
-                              omega=w, certify_omega=w)
+    r = fixed_structure_musyn(
+        P, blk, structure, n_u=1, n_y=1, init=-4.0, starts=1, max_iter=3, omega=w, certify_omega=w
+    )
     poles = np.linalg.eigvals(np.asarray(lft(P, r.controller, n_u=1, n_y=1).A))
     assert np.max(poles.real) < 0
     assert r.order == {"pid": 2, "ss:1": 1, "tf2": 2}[structure]

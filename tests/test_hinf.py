@@ -1,15 +1,14 @@
 """H∞ synthesis: robot-type plants that control.hinfsyn refuses, γ accuracy, clear errors."""
 
-
 from __future__ import annotations
 
 import control
 import numpy as np
 import pytest
+from test_synthesis_checks import closed_loop, dense_peak, hamiltonian_below, response
 
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.synthesis.hinf import check_stabilizable, hinf_norm, hinf_norm_estimate, hinfsyn
-from test_synthesis_checks import closed_loop, dense_peak, hamiltonian_below, response
 
 # control.augw builds its plants with the deprecated control.connect
 pytestmark = pytest.mark.filterwarnings("ignore:connect\\(\\) is deprecated:FutureWarning")

@@ -5,13 +5,12 @@ from __future__ import annotations
 import control
 import numpy as np
 import pytest
+from test_synthesis_checks import closed_loop, dscaled_mu, response
 
 from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.examples import DISTILLATION_BLK, distillation_plant
 from polyrob.synthesis import musyn, reduce_controller
 from polyrob.synthesis.reduce import balanced_reduction, stable_unstable_split
-
-from polyrob.examples import DISTILLATION_BLK, distillation_plant
-from test_synthesis_checks import closed_loop, dscaled_mu, response
 
 
 @pytest.fixture(scope="module")
@@ -22,8 +21,7 @@ def distillation():
 
 
 def test_split_reconstructs_an_unstable_controller():
-    K = control.ss(control.tf([[[1, 3], [2]], [[1], [1, 0.5, 1]]],
-                              [[[1, 1, -2], [1, 5]], [[1, 0], [1, 2, 10]]]))
+    K = control.ss(control.tf([[[1, 3], [2]], [[1], [1, 0.5, 1]]], [[[1, 1, -2], [1, 5]], [[1, 0], [1, 2, 10]]]))
     Ks, Ku = stable_unstable_split(K)
     assert np.all(np.linalg.eigvals(Ks.A).real < 0)
     assert np.all(np.linalg.eigvals(Ku.A).real >= -1e-9)
@@ -54,8 +52,12 @@ def _hankel_singular_values(G: control.StateSpace) -> np.ndarray:
 @pytest.mark.parametrize("method", ["truncate", "matchdc"])
 def test_reduction_error_within_the_hankel_bounds(method):
     """σ_{r+1} <= ‖K - K_r‖∞ <= 2 Σ_{i>r} σ_i (Glover 1984), the unstable part kept exactly."""
-    Ks = control.ss(control.tf([1, 3], [1, 1]) * control.tf([2, 1], [1, 5, 40]) * control.tf([1], [1, 0.3])
-                    * control.tf([1, 20], [1, 2, 200]))
+    Ks = control.ss(
+        control.tf([1, 3], [1, 1])
+        * control.tf([2, 1], [1, 5, 40])
+        * control.tf([1], [1, 0.3])
+        * control.tf([1, 20], [1, 2, 200])
+    )
     Ku = control.ss(control.tf([0.7], [1, -0.5]))
     K = control.ss(control.parallel(Ks, Ku))
     hsv = _hankel_singular_values(Ks)

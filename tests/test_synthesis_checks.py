@@ -59,8 +59,9 @@ def hamiltonian_below(sys, gamma: float) -> bool:
     R = gamma**2 * np.eye(D.shape[1]) - D.T @ D
     S = gamma**2 * np.eye(D.shape[0]) - D @ D.T
     Ri = np.linalg.inv(R)
-    H = np.block([[A + B @ Ri @ D.T @ C, B @ Ri @ B.T],
-                  [-C.T @ (gamma**2 * np.linalg.inv(S)) @ C, -(A + B @ Ri @ D.T @ C).T]])
+    H = np.block(
+        [[A + B @ Ri @ D.T @ C, B @ Ri @ B.T], [-C.T @ (gamma**2 * np.linalg.inv(S)) @ C, -(A + B @ Ri @ D.T @ C).T]]
+    )
     lam = sla.eigvals(H)
     return bool(np.all(np.abs(lam.real) > 1e-8 * np.maximum(1.0, np.abs(lam))))
 

@@ -11,18 +11,18 @@
   certified μ stays within a tolerance of the full-order one.
 """
 
-from polyrob.synthesis.result import MusynResult
-from polyrob.synthesis.norms import hinf_norm
-from polyrob.synthesis.hinf import HinfResult, hinfsyn
+from polyrob.synthesis.bandwidth import BandwidthScalingResult, max_bandwidth_scaling, scaled_hyperparameters
 from polyrob.synthesis.dfit import LogMagnitudeFit, SlicotMagnitudeFit
 from polyrob.synthesis.dk import DKIteration
-from polyrob.synthesis.dk_strategies import HinfStep, MuUpperBound
 from polyrob.synthesis.dk_frequency import certify, frequency_grid, performance_lower_bound
-from polyrob.synthesis.robust_synthesis import musyn
-from polyrob.synthesis.bandwidth import BandwidthScalingResult, max_bandwidth_scaling, scaled_hyperparameters
-from polyrob.synthesis.reduce import ReductionResult, reduce_controller
+from polyrob.synthesis.dk_strategies import HinfStep, MuUpperBound
 from polyrob.synthesis.fixed import fixed_structure_musyn
 from polyrob.synthesis.fixed_options import FixedStructureOptions
+from polyrob.synthesis.hinf import HinfResult, hinfsyn
+from polyrob.synthesis.norms import hinf_norm
+from polyrob.synthesis.reduce import ReductionResult, reduce_controller
+from polyrob.synthesis.result import MusynResult
+from polyrob.synthesis.robust_synthesis import musyn
 from polyrob.synthesis.structures import controller_structure
 
 __all__ = [

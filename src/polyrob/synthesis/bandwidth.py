@@ -22,8 +22,8 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Optional, Sequence
 
 import numpy as np
 
@@ -73,15 +73,20 @@ class BandwidthScalingResult:
     def summary(self) -> dict:
         """JSON-ready figures (the controller itself is in ``result``)."""
         return {
-            "alpha": self.alpha, "peak_mu": self.peak_mu, "scale": list(self.scale),
-            "bracket": list(self.bracket), "order": int(self.result.order),
+            "alpha": self.alpha,
+            "peak_mu": self.peak_mu,
+            "scale": list(self.scale),
+            "bracket": list(self.bracket),
+            "order": int(self.result.order),
             "hyperparameters": {k: list(v) for k, v in self.hyperparameters.items()},
-            "history": [list(h) for h in self.history], "seconds": round(self.seconds, 2),
+            "history": [list(h) for h in self.history],
+            "seconds": round(self.seconds, 2),
         }
 
 
-def scaled_hyperparameters(alpha: float, hyperparameters: dict | None = None,
-                           scale: Sequence[str] = ("omega_b", "omega_bt")) -> dict:
+def scaled_hyperparameters(
+    alpha: float, hyperparameters: dict | None = None, scale: Sequence[str] = ("omega_b", "omega_bt")
+) -> dict:
     """Weight hyperparameters with the entries named in ``scale`` multiplied by ``alpha``.
 
     Examples
@@ -120,9 +125,9 @@ def max_bandwidth_scaling(
     rtol: float = 0.05,
     target: float = 1.0,
     scale: Sequence[str] = ("omega_b", "omega_bt"),
-    synthesize: Optional[Callable] = None,
-    plant: Optional[Callable] = None,
-    progress: Optional[bool] = None,
+    synthesize: Callable | None = None,
+    plant: Callable | None = None,
+    progress: bool | None = None,
     **musyn_options,
 ) -> BandwidthScalingResult:
     """The largest factor α on the weights' bandwidths with a certified μ < ``target``.
@@ -232,6 +237,12 @@ def max_bandwidth_scaling(
         ok, fail = lo, hi
     res, mu, h = solved[ok]
     return BandwidthScalingResult(
-        alpha=float(ok), peak_mu=mu, result=res, history=history, hyperparameters=h, scale=tuple(scale),
-        bracket=(float(ok), math.inf if fail is None else float(fail)), seconds=time.perf_counter() - t0,
+        alpha=float(ok),
+        peak_mu=mu,
+        result=res,
+        history=history,
+        hyperparameters=h,
+        scale=tuple(scale),
+        bracket=(float(ok), math.inf if fail is None else float(fail)),
+        seconds=time.perf_counter() - t0,
     )

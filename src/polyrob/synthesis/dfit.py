@@ -10,7 +10,7 @@ order that reproduces the bound, and realise the G scalings of real blocks
 
 from __future__ import annotations
 
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
 import control
 import numpy as np
@@ -51,14 +51,20 @@ class LogMagnitudeFit:
         matters where μ is close to its peak.
     """
 
-    def __init__(self, orders: Sequence[int] = (0, 1, 2, 3, 4), g_orders: Sequence[int] = (0, 1, 2),
-                 tol: float = 0.02, block_tol: float = 0.05, peak_power: float = 4.0):
+    def __init__(
+        self,
+        orders: Sequence[int] = (0, 1, 2, 3, 4),
+        g_orders: Sequence[int] = (0, 1, 2),
+        tol: float = 0.02,
+        block_tol: float = 0.05,
+        peak_power: float = 4.0,
+    ):
         self.orders = tuple(int(o) for o in orders)
         self.g_orders = tuple(int(o) for o in g_orders)
         self.tol, self.block_tol, self.peak_power = float(tol), float(block_tol), float(peak_power)
         #: the μ sweep of the fits' complex D-steps (set by DKIteration.run to
         #: share the D-step's worker; ``None``: a serial sweep)
-        self.sweep: Optional[MuSweep] = None
+        self.sweep: MuSweep | None = None
         if not self.orders or min(self.orders) < 0:
             raise PolyrobError(f"D-scale orders must be non-negative integers, got {orders!r}")
 
@@ -106,10 +112,11 @@ class LogMagnitudeFit:
                         Fs[i] = F
         best = None
         near = mu >= 0.3 * peak  # frequencies that matter for the fit
-        for F_route in ([Fs, {}] if Fs else [{}]):
+        for F_route in [Fs, {}] if Fs else [{}]:
             if F_route:
-                sc0 = Scalings(tuple(BlockScaling(None, F_route.get(i)) for i in range(len(st.blocks))),
-                               float(beta), st)
+                sc0 = Scalings(
+                    tuple(BlockScaling(None, F_route.get(i)) for i in range(len(st.blocks))), float(beta), st
+                )
                 X = sc0.transformed(Nw, omega)
                 c, dmat = complex_dscales(X, st, near, data.d, sweep=self.sweep)
             elif data.complex_d is not None:
@@ -160,7 +167,7 @@ class LogMagnitudeFit:
         best, best_level = None, np.inf
         for attempt in range(4):
             blocks = []
-            for i, b in enumerate(st.blocks):
+            for i in range(len(st.blocks)):
                 if i == len(st.blocks) - 1:
                     blocks.append(BlockScaling(None, None))  # normalised: d = 1
                     continue
@@ -174,8 +181,9 @@ class LogMagnitudeFit:
             if bad.size == 0 or attempt == 3:
                 break
             if X is None:
-                X = Scalings(tuple(BlockScaling(None, Fs.get(i)) for i in range(len(st.blocks))),
-                             float(beta), st).transformed(Nw, omega)
+                X = Scalings(
+                    tuple(BlockScaling(None, Fs.get(i)) for i in range(len(st.blocks))), float(beta), st
+                ).transformed(Nw, omega)
             s = 1j * omega
             for k in bad:
                 lfit = np.array([np.log(np.abs(b.d_at(s[k]))) for b in sc.blocks[:-1]])
@@ -234,8 +242,9 @@ def _descend_level(X: np.ndarray, l0: np.ndarray, target: float, st: BlockStruct
         Y = dl[:, None] * X / dr[None, :]
         U, sv, Vh = np.linalg.svd(Y)
         u, v = U[:, 0], Vh[0].conj()
-        g = np.array([sv[0] * (np.sum(np.abs(u[rows[i]]) ** 2) - np.sum(np.abs(v[cols[i]]) ** 2))
-                      for i in range(nb - 1)])
+        g = np.array(
+            [sv[0] * (np.sum(np.abs(u[rows[i]]) ** 2) - np.sum(np.abs(v[cols[i]]) ** 2)) for i in range(nb - 1)]
+        )
         return sv[0], g
 
     l = np.array(l0, float)
@@ -283,4 +292,3 @@ def _sb10yd_fit(omega, dv, order, wt):
     fit = MagnitudeFit(int(p.size), k, z, p, 0.0, 0.0)
     e = np.log10(np.abs(fit(1j * omega))) - np.log10(dv)
     return MagnitudeFit(int(p.size), k, z, p, *fit_errors(e, wt))
-

@@ -37,13 +37,12 @@ rejected (a numerically failed synthesis); the two best controllers are
 certified when the first one's certificate exceeds its grid value by 2%.
 """
 
-
 from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Optional
 
 import control
 import numpy as np
@@ -84,7 +83,7 @@ class IterationRecord:
     mu_peak: float
     gamma: float
     orders: list
-    scalings: Optional[Scalings]
+    scalings: Scalings | None
     seconds: dict
     notes: tuple
     phase: str = "D"
@@ -122,9 +121,19 @@ class DKIteration:
     5
     """
 
-    def __init__(self, mu_bound=None, d_fit=None, hinf_step=None, *, max_iter: int = 20,
-                 tol: float = 1e-3, patience: int = 2, target: Optional[float] = None,
-                 progress: Optional[bool] = None, switch_tol: float = 0.02):
+    def __init__(
+        self,
+        mu_bound=None,
+        d_fit=None,
+        hinf_step=None,
+        *,
+        max_iter: int = 20,
+        tol: float = 1e-3,
+        patience: int = 2,
+        target: float | None = None,
+        progress: bool | None = None,
+        switch_tol: float = 0.02,
+    ):
         self.mu_bound = mu_bound or MuUpperBound()
         self.d_fit = d_fit or LogMagnitudeFit()
         self.hinf_step = hinf_step or HinfStep()
@@ -156,13 +165,24 @@ class DKIteration:
             # K-step solves the regularised problem, and its controller can
             # still lower μ, so it is kept.)
             self.failures.append(
-                f"iteration {it + 1}: K-step gamma {hres.gamma:.4g} above the old controller's {level_old:.4g}")
+                f"iteration {it + 1}: K-step gamma {hres.gamma:.4g} above the old controller's {level_old:.4g}"
+            )
             return None
         return hres
 
-    def run(self, Psys: control.StateSpace, n_u: int, n_y: int, blk, omega, *, mixed: bool,
-            initial_controller=None, callback: Optional[Callable] = None,
-            start_phase: Optional[str] = None) -> list[IterationRecord]:
+    def run(
+        self,
+        Psys: control.StateSpace,
+        n_u: int,
+        n_y: int,
+        blk,
+        omega,
+        *,
+        mixed: bool,
+        initial_controller=None,
+        callback: Callable | None = None,
+        start_phase: str | None = None,
+    ) -> list[IterationRecord]:
         """Run the iteration; returns the per-iteration records (best is the lowest ``mu_peak``).
 
         With ``mixed=True`` the iteration runs in two phases: D-K steps
@@ -183,7 +203,7 @@ class DKIteration:
         omega = np.asarray(omega, float)
         A, B, C, D = (np.asarray(X, float) for X in (Psys.A, Psys.B, Psys.C, Psys.D))
         hist: list[IterationRecord] = []
-        show = (sys.stderr.isatty() if self.progress is None else bool(self.progress))
+        show = sys.stderr.isatty() if self.progress is None else bool(self.progress)
         bar = tqdm(total=self.max_iter, disable=not show, desc="musyn", leave=False, file=sys.stderr)
         K = initial_controller
         gamma, notes, orders, scal = float("nan"), (), [], None
@@ -211,8 +231,9 @@ class DKIteration:
                 except np.linalg.LinAlgError:
                     stable = False
                 if not stable:
-                    rec = IterationRecord(K, np.inf, gamma, orders, scal, {"mu": 0.0, "fit": t_fit, "hinf": t_hinf}, notes,
-                                phase)
+                    rec = IterationRecord(
+                        K, np.inf, gamma, orders, scal, {"mu": 0.0, "fit": t_fit, "hinf": t_hinf}, notes, phase
+                    )
                     hist.append(rec)
                     if show:
                         bar.write(f"musyn iter {it + 1}: closed loop unstable, stopping")
@@ -229,7 +250,9 @@ class DKIteration:
                     peak = float(np.max(mu))
                     best, since_best = np.inf, 0
                 t_mu = time.perf_counter() - t0
-                rec = IterationRecord(K, peak, gamma, orders, scal, {"mu": t_mu, "fit": t_fit, "hinf": t_hinf}, notes, phase)
+                rec = IterationRecord(
+                    K, peak, gamma, orders, scal, {"mu": t_mu, "fit": t_fit, "hinf": t_hinf}, notes, phase
+                )
                 hist.append(rec)
                 if callback is not None:
                     callback(rec)
@@ -243,9 +266,11 @@ class DKIteration:
                     bar.update(1)
                     bar.set_postfix(mu=f"{peak:.4f}", best=f"{best:.4f}", gamma=f"{gamma:.4g}", nK=K.nstates)
                     bound = "mixed" if phase == "DG" else "complex" if st.has_real else ""
-                    bar.write(f"musyn iter {it + 1:2d}: peak mu {peak:.4f} {bound}(best {best:.4f}), "
-                              f"gamma {gamma:.4g}, K order {K.nstates}, D/G orders {orders}, "
-                              f"{sum(rec.seconds.values()):.1f} s")
+                    bar.write(
+                        f"musyn iter {it + 1:2d}: peak mu {peak:.4f} {bound}(best {best:.4f}), "
+                        f"gamma {gamma:.4g}, K order {K.nstates}, D/G orders {orders}, "
+                        f"{sum(rec.seconds.values()):.1f} s"
+                    )
                 if it + 1 >= self.max_iter:
                     break
                 if since_best >= self.patience:
@@ -342,4 +367,3 @@ def _d_route(d_fit, data, H, beta):
     if call is not None:
         return call(data, H, beta)
     return d_fit(data, H, beta, False)
-

@@ -77,7 +77,6 @@ def frequency_response_matrices(A, B, C, D, omega) -> np.ndarray:
     return out
 
 
-
 def performance_lower_bound(P) -> tuple[float, float]:
     """A priori lower bound on robust-performance μ from ``W_S`` and ``W_T`` alone.
 
@@ -142,9 +141,7 @@ def certify(P, K, blk, omega=None, *, n_u=None, n_y=None):
     return float(r.peak_upper), float(r.peak_lower), float(r.peak_upper_frequency), N, r
 
 
-
 def _response(sys, w) -> np.ndarray:
     """``sys(jω)`` as ``(n, p, m)`` (python-control's evaluation)."""
     H = np.asarray(sys(1j * np.asarray(w), squeeze=False))
     return np.moveaxis(H.reshape(sys.noutputs, sys.ninputs, -1), -1, 0)
-

@@ -9,8 +9,6 @@ bounds or synthesis methods plug in with the same call signatures.
 
 from __future__ import annotations
 
-from typing import Optional
-
 import control
 import numpy as np
 
@@ -38,7 +36,7 @@ class MuUpperBound:
     problem (``(n, k, k)``).
     """
 
-    def __init__(self, method: str = "auto", n_jobs: Optional[int] = None):
+    def __init__(self, method: str = "auto", n_jobs: int | None = None):
         self.method = method
         self.sweep = MuSweep(n_jobs=n_jobs, method=method)
 
@@ -109,4 +107,3 @@ class HinfStep:
 
     def __call__(self, P: control.StateSpace, n_y: int, n_u: int) -> HinfResult:
         return hinfsyn(P, n_y, n_u, tol=self.tol, method=self.method, epsilon=self.epsilon)
-

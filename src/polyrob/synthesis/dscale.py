@@ -64,10 +64,11 @@ Examples
 
 from __future__ import annotations
 
+from polyrob.synthesis.balanced import balanced_realization
 from polyrob.synthesis.dfit import LogMagnitudeFit, SlicotMagnitudeFit
 from polyrob.synthesis.dscale_data import BlockScaling, ScalingData, Scalings, scaling_data
 from polyrob.synthesis.gfit import GFit, fit_g
-from polyrob.synthesis.magfit import MagnitudeFit, balanced_realization, fit_magnitude
+from polyrob.synthesis.magfit import MagnitudeFit, fit_magnitude
 from polyrob.synthesis.musweep import MuSweep
 from polyrob.synthesis.scaled_plant import scaled_plant
 

@@ -11,7 +11,6 @@ transformed loop ``T = D (N/β + F)(I + F N/β)^{-1} D^{-1}`` of the K-step
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 import scipy.linalg as sla
@@ -56,8 +55,8 @@ class ScalingData:
     d: np.ndarray
     g: np.ndarray
     structure: BlockStructure
-    complex_mu: Optional[np.ndarray] = None
-    complex_d: Optional[np.ndarray] = None
+    complex_mu: np.ndarray | None = None
+    complex_d: np.ndarray | None = None
 
 
 def scaling_data(omega, mu, D, G, blk, *, M=None, beta=None) -> ScalingData:
@@ -131,8 +130,8 @@ def _shrink_g(Ms, P, G, beta) -> float:
 class BlockScaling:
     """Fitted scaling of one block: ``d`` (``None``: the constant one) and ``F`` (real blocks)."""
 
-    d: Optional[MagnitudeFit]
-    F: Optional[GFit] = None
+    d: MagnitudeFit | None
+    F: GFit | None = None
 
     @property
     def d_order(self) -> int:
@@ -199,4 +198,3 @@ class Scalings:
                 X = Nt
             out[k] = dl[:, None] * X / dr[None, :]
         return out
-

@@ -71,7 +71,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
-from typing import Optional, Union
 
 import numpy as np
 from control.exception import ControlArgument
@@ -82,7 +81,15 @@ from polyrob.analysis.blocks import as_block_structure
 from polyrob.analysis.mu import mu_bounds
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import lft, paper_controller
-from polyrob.synthesis.fixed_iteration import StartRun, check_grid, grid_span, log_grid, optimise_start, reporter, screen_grid
+from polyrob.synthesis.fixed_iteration import (
+    StartRun,
+    check_grid,
+    grid_span,
+    log_grid,
+    optimise_start,
+    reporter,
+    screen_grid,
+)
 from polyrob.synthesis.fixed_kstep import default_controller, stabilise
 from polyrob.synthesis.fixed_loop import FixedLoop, closed_loop_response, plant_parts
 from polyrob.synthesis.fixed_options import FixedStructureOptions
@@ -96,22 +103,22 @@ __all__ = ["fixed_structure_musyn", "FixedStructureOptions", "closed_loop_respon
 def fixed_structure_musyn(
     P,
     blk=None,
-    structure: Union[str, ControllerStructure] = "tf3",
+    structure: str | ControllerStructure = "tf3",
     *,
     starts: int = 5,
     seed: int = 0,
-    max_iter: Optional[int] = None,
+    max_iter: int | None = None,
     omega=None,
     certify_omega=None,
     init=None,
     initial_controller=None,
     progress=None,
-    tol: Optional[float] = None,
-    target: Optional[float] = None,
-    mixed: Optional[bool] = None,
-    n_u: Optional[int] = None,
-    n_y: Optional[int] = None,
-    options: Optional[FixedStructureOptions] = None,
+    tol: float | None = None,
+    target: float | None = None,
+    mixed: bool | None = None,
+    n_u: int | None = None,
+    n_y: int | None = None,
+    options: FixedStructureOptions | None = None,
 ) -> MusynResult:
     """Fixed-structure μ-synthesis (MATLAB ``musyn`` with a tunable controller).
 
@@ -200,8 +207,9 @@ def fixed_structure_musyn(
         # complex μ: every real block becomes a complex one of the same size
         st = as_block_structure([[b.rows, 0] if b.kind == "real" else list(b.matlab) for b in st.blocks])
     if st.m_shape != (sysP.noutputs - n_y, sysP.ninputs - n_u):
-        raise PolyrobError(f"blk {st} needs a {st.m_shape} closed loop; lft(P, K) is "
-                           f"{sysP.noutputs - n_y}x{sysP.ninputs - n_u}")
+        raise PolyrobError(
+            f"blk {st} needs a {st.m_shape} closed loop; lft(P, K) is {sysP.noutputs - n_y}x{sysP.ninputs - n_u}"
+        )
     if int(starts) < 1:
         raise PolyrobError(f"starts must be >= 1, got {starts}")
     omega, certify_omega = check_grid(omega, "omega"), check_grid(certify_omega, "certify_omega")
@@ -226,8 +234,14 @@ def fixed_structure_musyn(
             try:
                 theta0 = strc.from_controller(default_controller(sysP, n_u, n_y))
                 origin = "h2"
-            except (ValueError, ArithmeticError, np.linalg.LinAlgError, SlycotError, ControlArgument,
-                    PolyrobError) as exc:
+            except (
+                ValueError,
+                ArithmeticError,
+                np.linalg.LinAlgError,
+                SlycotError,
+                ControlArgument,
+                PolyrobError,
+            ) as exc:
                 # e.g. an unstabilisable plant (no LQR/Kalman solution): a random start, recorded
                 theta0 = strc.initial(int(seed))
                 origin = "random"
@@ -248,8 +262,10 @@ def fixed_structure_musyn(
             a_full = loop.abscissa(th, full=True)
             if not a_full < 0:
                 # modes of P that no controller moves (not in the u -> y channel)
-                failures.append(f"{label}: P has unstable modes outside the u -> y channel "
-                                f"({np.round(loop.fixed_modes[loop.fixed_modes.real >= 0], 4).tolist()})")
+                failures.append(
+                    f"{label}: P has unstable modes outside the u -> y channel "
+                    f"({np.round(loop.fixed_modes[loop.fixed_modes.real >= 0], 4).tolist()})"
+                )
                 continue
             if span is None:
                 span = grid_span(loop, th, omega)
@@ -285,8 +301,10 @@ def fixed_structure_musyn(
             extra = scalings_from(cert.D[[i]], cert.G[[i]], cert.omega[[i]], cert.upper[[i]])
             best.sc = best.sc.merged(extra)
             best.peak = float(np.max(best.sc.mu))
-            best.notes.append(f"certificate round {rnd}: peak {cert.peak_upper:.5g} at {cert.omega[i]:.4g} rad/s "
-                              "above the grid peak; added")
+            best.notes.append(
+                f"certificate round {rnd}: peak {cert.peak_upper:.5g} at {cert.omega[i]:.4g} rad/s "
+                "above the grid peak; added"
+            )
             screen = np.union1d(screen, cert.omega[cert.omega > 0])
             optimise_start(loop, best, st, opts, max(3, int(max_iter) // 4), screen, report, "certify", target)
 
@@ -296,13 +314,14 @@ def fixed_structure_musyn(
     seconds = time.perf_counter() - t_start
     info = {
         "method": f"D-G-K over per-frequency scalings ({opts.kstep} K-step: SLSQP epigraph, trust region, "
-                  "closed-loop spectral abscissa constraint; scalings by warm-started batched BFGS and "
-                  "AB13MD); adaptive grid with rigorous screening; certificate by mu_bounds",
+        "closed-loop spectral abscissa constraint; scalings by warm-started batched BFGS and "
+        "AB13MD); adaptive grid with rigorous screening; certificate by mu_bounds",
         "theta": best.theta.tolist(),
         "coefficients": strc.describe(best.theta),
         "start": best.notes[0] if best.notes else "",
-        "starts": [{"start": r.notes[0] if r.notes else "", "grid_peak_mu": r.peak, "iterations": r.iterations}
-                   for r in runs],
+        "starts": [
+            {"start": r.notes[0] if r.notes else "", "grid_peak_mu": r.peak, "iterations": r.iterations} for r in runs
+        ],
         "failed_starts": failures,
         # what was done instead of the planned route (e.g. a random start after a failed H2 start)
         "fallbacks": fallbacks + list(loop.notes),
@@ -313,12 +332,18 @@ def fixed_structure_musyn(
         "closed_loop_poles": poles,
     }
     return MusynResult(
-        controller=K, structure=strc.name, order=int(K.nstates),
-        peak_mu=float(cert.peak_upper), peak_mu_lower=float(cert.peak_lower),
+        controller=K,
+        structure=strc.name,
+        order=int(K.nstates),
+        peak_mu=float(cert.peak_upper),
+        peak_mu_lower=float(cert.peak_lower),
         peak_frequency=float(cert.peak_upper_frequency),
         mu_history=np.array(best.history + [cert.peak_upper], float),
         gamma_history=np.array(best.gammas, float),
         scalings=(best.sc.omega.copy(), best.sc.Dm.copy(), best.sc.G.copy()),
-        closed_loop=N, certificate=cert, iterations=int(best.iterations), seconds=seconds, info=info,
+        closed_loop=N,
+        certificate=cert,
+        iterations=int(best.iterations),
+        seconds=seconds,
+        info=info,
     )
-

@@ -12,8 +12,8 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Callable, Optional
 
 import numpy as np
 
@@ -23,8 +23,20 @@ from polyrob.synthesis.fixed_loop import FixedLoop
 from polyrob.synthesis.fixed_options import FixedStructureOptions
 from polyrob.synthesis.fixed_scalings import PerFrequencyScalings, dstep, majorant, refine_scalings
 
-__all__ = ["StartRun", "check_grid", "grid_span", "log_grid", "refine_points", "screen_points", "screen_grid",
-           "grid_bound", "screen_check", "accept_step", "optimise_start", "reporter"]
+__all__ = [
+    "StartRun",
+    "check_grid",
+    "grid_span",
+    "log_grid",
+    "refine_points",
+    "screen_points",
+    "screen_grid",
+    "grid_bound",
+    "screen_check",
+    "accept_step",
+    "optimise_start",
+    "reporter",
+]
 
 
 def check_grid(omega, name):
@@ -116,7 +128,9 @@ def screen_grid(loop: FixedLoop, run: StartRun, screen: np.ndarray, blk, opts) -
     return int(fail.size)
 
 
-def grid_bound(loop: FixedLoop, theta, sc: PerFrequencyScalings, blk, opts, *, exact: bool = False) -> PerFrequencyScalings:
+def grid_bound(
+    loop: FixedLoop, theta, sc: PerFrequencyScalings, blk, opts, *, exact: bool = False
+) -> PerFrequencyScalings:
     """The grid bound at ``θ``: scalings refreshed where the stale majorant is near its peak.
 
     Elsewhere the majorant with the old scalings is itself the (valid) bound.
@@ -162,7 +176,9 @@ def screen_check(loop: FixedLoop, theta, sc: PerFrequencyScalings, screen: np.nd
     return bool(np.all(fixed.mu < level)), fixed
 
 
-def accept_step(loop: FixedLoop, theta0, theta1, sc: PerFrequencyScalings, peak0: float, blk, opts, screen, halvings: int = 4):
+def accept_step(
+    loop: FixedLoop, theta0, theta1, sc: PerFrequencyScalings, peak0: float, blk, opts, screen, halvings: int = 4
+):
     """Backtrack from ``theta1`` towards ``theta0`` until the loop is stable and the bound decreased.
 
     "Decreased" on the working grid and, rigorously, on the screening grid.
@@ -181,8 +197,17 @@ def accept_step(loop: FixedLoop, theta0, theta1, sc: PerFrequencyScalings, peak0
     return None, sc
 
 
-def optimise_start(loop: FixedLoop, run: StartRun, blk, opts: FixedStructureOptions, max_iter: int, screen: np.ndarray,
-              report: Callable[[dict], None], label: str, target: Optional[float] = None):
+def optimise_start(
+    loop: FixedLoop,
+    run: StartRun,
+    blk,
+    opts: FixedStructureOptions,
+    max_iter: int,
+    screen: np.ndarray,
+    report: Callable[[dict], None],
+    label: str,
+    target: float | None = None,
+):
     radius = opts.trust_region
     stall = 0
     for _ in range(max_iter):
@@ -213,9 +238,18 @@ def optimise_start(loop: FixedLoop, run: StartRun, blk, opts: FixedStructureOpti
         added = screen_grid(loop, run, screen, blk, opts)
         run.history.append(run.peak)
         run.gammas.append(run.peak)
-        report({"start": label, "iteration": run.iterations, "peak_mu": run.peak, "kstep": msg,
-                "grid": int(run.sc.omega.size), "screen_added": added, "radius": radius,
-                "seconds": time.perf_counter() - t0})
+        report(
+            {
+                "start": label,
+                "iteration": run.iterations,
+                "peak_mu": run.peak,
+                "kstep": msg,
+                "grid": int(run.sc.omega.size),
+                "screen_added": added,
+                "radius": radius,
+                "seconds": time.perf_counter() - t0,
+            }
+        )
         if theta_new is not None:
             stall = stall + 1 if run.peak > old * (1 - opts.tol) else 0
         if stall >= opts.patience or radius < 1e-4:
@@ -227,9 +261,14 @@ def reporter(progress) -> Callable[[dict], None]:
     if callable(progress):
         return progress
     if progress:
+
         def out(d):
-            print(f"[fixed {d['start']}] it {d['iteration']:3d}  peak mu {d['peak_mu']:.5f}  grid {d['grid']}"
-                  f"  (+{d['screen_added']})  {d['seconds']:.2f}s  r {d['radius']:.3g}  {d['kstep']}", file=sys.stderr, flush=True)
+            print(
+                f"[fixed {d['start']}] it {d['iteration']:3d}  peak mu {d['peak_mu']:.5f}  grid {d['grid']}"
+                f"  (+{d['screen_added']})  {d['seconds']:.2f}s  r {d['radius']:.3g}  {d['kstep']}",
+                file=sys.stderr,
+                flush=True,
+            )
+
         return out
     return lambda d: None
-

@@ -102,9 +102,15 @@ def kstep(loop: FixedLoop, theta0, sc: PerFrequencyScalings, opts: FixedStructur
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
-            res = minimize(lambda x: x[n], x0, jac=lambda x: np.eye(n + 1)[n], method="SLSQP",
-                           bounds=bounds, constraints=[{"type": "ineq", "fun": cons, "jac": cons_jac}],
-                           options={"maxiter": int(opts.kstep_iter), "ftol": 1e-8})
+            res = minimize(
+                lambda x: x[n],
+                x0,
+                jac=lambda x: np.eye(n + 1)[n],
+                method="SLSQP",
+                bounds=bounds,
+                constraints=[{"type": "ineq", "fun": cons, "jac": cons_jac}],
+                options={"maxiter": int(opts.kstep_iter), "ftol": 1e-8},
+            )
             msg = str(res.message)
         except (ValueError, np.linalg.LinAlgError) as exc:
             msg = f"SLSQP failed: {exc}"
@@ -125,7 +131,9 @@ def stabilise(loop: FixedLoop, theta, min_decay: float, max_iter: int = 300, res
     best = [theta, a]
     rng = np.random.default_rng(seed)
     for attempt in range(restarts + 1):
-        base = best[0] if attempt == 0 else best[0] + 0.1 * loop.structure.scale(best[0]) * rng.standard_normal(theta.size)
+        base = (
+            best[0] if attempt == 0 else best[0] + 0.1 * loop.structure.scale(best[0]) * rng.standard_normal(theta.size)
+        )
         S = loop.structure.scale(base)
 
         def f(x):
@@ -145,8 +153,14 @@ def stabilise(loop: FixedLoop, theta, min_decay: float, max_iter: int = 300, res
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             try:
-                minimize(f, np.zeros(theta.size), jac=g, method="BFGS", callback=stop,
-                         options={"maxiter": max_iter, "gtol": 1e-12})
+                minimize(
+                    f,
+                    np.zeros(theta.size),
+                    jac=g,
+                    method="BFGS",
+                    callback=stop,
+                    options={"maxiter": max_iter, "gtol": 1e-12},
+                )
             except (ValueError, np.linalg.LinAlgError):
                 pass
         if best[1] <= target:
@@ -172,4 +186,3 @@ def default_controller(sysP, n_u, n_y, eps=1e-2):
     Lk, *_ = control.lqe(A, np.eye(n), C2, W, eps**2 * np.eye(n_y))
     Ak = A - B2 @ Fk - Lk @ C2 + Lk @ D[nz:, nw:] @ Fk
     return control.ss(Ak, Lk, -Fk, np.zeros((n_u, n_y)))
-

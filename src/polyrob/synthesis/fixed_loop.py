@@ -10,7 +10,6 @@ the same algebra for a given controller, a cross-check against
 from __future__ import annotations
 
 import math
-from typing import Optional
 
 import control
 import numpy as np
@@ -69,7 +68,9 @@ class FixedLoop:
                 self._cache.clear()
             n = self.A.shape[0]
             s = 1j * omega
-            X = np.linalg.solve(s[:, None, None] * np.eye(n) - self.A, np.broadcast_to(self.B, (s.size,) + self.B.shape))
+            X = np.linalg.solve(
+                s[:, None, None] * np.eye(n) - self.A, np.broadcast_to(self.B, (s.size,) + self.B.shape)
+            )
             H = self.C @ X + self.D
             nz, nw = self.nz, self.nw
             self._cache[key] = (H[:, :nz, :nw], H[:, :nz, nw:], H[:, nz:, :nw], H[:, nz:, nw:])
@@ -84,7 +85,7 @@ class FixedLoop:
             K, dK = self.structure.freqresp(theta, omega), None
         Iy, Iu = np.eye(self.n_y), np.eye(self.n_u)
         with np.errstate(all="ignore"):
-            R = np.linalg.solve(Iy - P22 @ K, P21)            # (I - P22 K)^-1 P21
+            R = np.linalg.solve(Iy - P22 @ K, P21)  # (I - P22 K)^-1 P21
             N = P11 + P12 @ (K @ R)
             if not jac:
                 return N
@@ -125,7 +126,7 @@ class FixedLoop:
         return w[np.isfinite(w) & (w > 0)]
 
 
-def closed_loop_response(P, K, omega, *, n_u: Optional[int] = None, n_y: Optional[int] = None) -> np.ndarray:
+def closed_loop_response(P, K, omega, *, n_u: int | None = None, n_y: int | None = None) -> np.ndarray:
     """``lft(P, K)(jω)`` as an ``(N, n_out, n_in)`` array, computed from ``P(jω)`` and ``K(jω)``.
 
     A cross-check of the K-step's algebra against :func:`polyrob.plant.lft`.
@@ -177,4 +178,3 @@ def diagonal_blocks(st):
     for k, sl in enumerate(st.padded_slices):
         E[k, sl] = 1.0
     return E, np.array([b.kind == "real" for b in st.blocks])
-

@@ -69,4 +69,3 @@ class FixedStructureOptions:
     active_ratio: float = 0.8
     live_iter: int = 12
     exact_ratio: float = 0.95
-

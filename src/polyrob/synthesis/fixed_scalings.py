@@ -20,8 +20,15 @@ import numpy as np
 
 from polyrob.analysis.mu import mussv
 
-__all__ = ["PerFrequencyScalings", "scalings_from", "dstep", "dg_value_grad", "batched_bfgs", "refine_scalings",
-           "majorant"]
+__all__ = [
+    "PerFrequencyScalings",
+    "scalings_from",
+    "dstep",
+    "dg_value_grad",
+    "batched_bfgs",
+    "refine_scalings",
+    "majorant",
+]
 
 
 # ============================================================ scalings
@@ -29,17 +36,19 @@ __all__ = ["PerFrequencyScalings", "scalings_from", "dstep", "dg_value_grad", "b
 class PerFrequencyScalings:
     """Per-frequency D-G scalings in the form used by the majorant."""
 
-    omega: np.ndarray          # (F,)
-    Dm: np.ndarray             # (F, n, n)  D (Hermitian square root of the D² scaling)
-    Dinv: np.ndarray           # (F, n, n)
-    Gt: np.ndarray             # (F, n, n)  D⁻¹ G D⁻¹
-    G: np.ndarray              # (F, n, n)  G as returned
-    mu: np.ndarray             # (F,)  upper bound where the scalings were computed
+    omega: np.ndarray  # (F,)
+    Dm: np.ndarray  # (F, n, n)  D (Hermitian square root of the D² scaling)
+    Dinv: np.ndarray  # (F, n, n)
+    Gt: np.ndarray  # (F, n, n)  D⁻¹ G D⁻¹
+    G: np.ndarray  # (F, n, n)  G as returned
+    mu: np.ndarray  # (F,)  upper bound where the scalings were computed
 
     def take(self, idx):
-        return PerFrequencyScalings(self.omega[idx], self.Dm[idx], self.Dinv[idx], self.Gt[idx], self.G[idx], self.mu[idx])
+        return PerFrequencyScalings(
+            self.omega[idx], self.Dm[idx], self.Dinv[idx], self.Gt[idx], self.G[idx], self.mu[idx]
+        )
 
-    def merged(self, other: "PerFrequencyScalings") -> "PerFrequencyScalings":
+    def merged(self, other: PerFrequencyScalings) -> PerFrequencyScalings:
         """Union, ``other`` overriding equal frequencies; sorted."""
         keep = ~np.isin(self.omega, other.omega)
         parts = [self.take(np.flatnonzero(keep)), other]
@@ -82,7 +91,6 @@ def dstep(loop, theta, omega: np.ndarray, blk) -> PerFrequencyScalings:
     # (recomputed here; equal to AB13MD's bound to rounding)
     beta = majorant(loop, theta, sc, n_eig=1)[:, 0]
     return replace(sc, mu=np.where(np.isfinite(sc.mu), beta, np.inf))
-
 
 
 def dg_value_grad(Mp: np.ndarray, x: np.ndarray, E: np.ndarray, real: np.ndarray):
@@ -204,7 +212,7 @@ def refine_scalings(loop, theta, sc: PerFrequencyScalings, idx: np.ndarray, maxi
     g0 = np.real(np.diagonal(sub.Gt, axis1=1, axis2=2))
     x0 = np.concatenate([(np.log(np.maximum(d0, 1e-300)) @ E.T) / counts, ((g0 @ E.T) / counts)[:, real]], axis=1)
     x, lam = batched_bfgs(lambda rows, xx: dg_value_grad(Mp[rows], xx, E, real), x0, maxiter=maxiter)
-    d = np.exp(np.clip(x[:, :nb] - x[:, :1], -60.0, 60.0) @ E)   # normalised like AB13MD: first block d = 1
+    d = np.exp(np.clip(x[:, :nb] - x[:, :1], -60.0, 60.0) @ E)  # normalised like AB13MD: first block d = 1
     gh = np.zeros((x.shape[0], nb))
     gh[:, real] = x[:, nb:]
     gt = gh @ E
@@ -245,14 +253,13 @@ def majorant(loop, theta, sc: PerFrequencyScalings, idx=None, *, n_eig=1, jac=Fa
     if not jac:
         return beta
     # dλ = 2 Re(u^H dM̃ v), u = (M̃ - j G̃) v, dM̃ = D dMp D⁻¹, dMp[ec, er] = L dK R
-    U = (Mt - 1j * sc.Gt) @ V                       # (F, n, k)
-    Ut = np.conj(np.swapaxes(sc.Dm, 1, 2)) @ U      # D^H u
-    Vt = sc.Dinv @ V                                # D⁻¹ v
-    a = np.conj(np.swapaxes(L, 1, 2)) @ Ut[:, loop.ec, :]   # (F, n_u, k)
-    b = R @ Vt[:, loop.er, :]                                # (F, n_y, k)
+    U = (Mt - 1j * sc.Gt) @ V  # (F, n, k)
+    Ut = np.conj(np.swapaxes(sc.Dm, 1, 2)) @ U  # D^H u
+    Vt = sc.Dinv @ V  # D⁻¹ v
+    a = np.conj(np.swapaxes(L, 1, 2)) @ Ut[:, loop.ec, :]  # (F, n_u, k)
+    b = R @ Vt[:, loop.er, :]  # (F, n_y, k)
     dlam = 2.0 * np.real(np.einsum("fik,fpij,fjk->fkp", np.conj(a), dK, b))
     with np.errstate(all="ignore"):
         dbeta = dlam / (2.0 * np.maximum(beta, 1e-300))[:, :, None]
     dbeta[bad] = 0.0
     return beta, dbeta
-

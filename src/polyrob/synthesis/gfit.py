@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
+
 import numpy as np
 import scipy.linalg as sla
 from scipy.optimize import least_squares
 
-from polyrob.synthesis.magfit import balanced_realization
+from polyrob.synthesis.balanced import balanced_realization
+
 
 # =================================================================== G fit
 @dataclass(frozen=True, eq=False)
@@ -57,7 +59,7 @@ class GFit:
             out = out + (al * wl * wl + bl * wl * s) / (s * s + 2 * zl * wl * s + wl * wl)
         return out
 
-    def scaled(self, f: float) -> "GFit":
+    def scaled(self, f: float) -> GFit:
         p = self.pairs.copy()
         p[:, 2:] *= f
         return GFit(self.order, self.c0 * f, self.residues * f, self.poles, self.error, self.hinf * f, p)
@@ -70,8 +72,11 @@ class GFit:
             blocks.append((np.array([[-a]]), np.array([[g]]), np.array([[np.sign(c) * g]])))
         for wl, zl, al, bl in self.pairs:
             A2, B2, C2, _ = balanced_realization(
-                np.array([[0.0, 1.0], [-wl * wl, -2 * zl * wl]]), np.array([[0.0], [1.0]]),
-                np.array([[al * wl * wl, bl * wl]]), np.zeros((1, 1)))
+                np.array([[0.0, 1.0], [-wl * wl, -2 * zl * wl]]),
+                np.array([[0.0], [1.0]]),
+                np.array([[al * wl * wl, bl * wl]]),
+                np.zeros((1, 1)),
+            )
             blocks.append((A2, B2, C2))
         if not blocks:
             return np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), np.array([[self.c0]])
@@ -109,8 +114,9 @@ def _g_basis(w, layout, x):
     return np.array(cols_i).T, np.array(cols_r).T
 
 
-def fit_g(omega, h, order: int, weight=None, *, max_gain: float = 0.95,
-          re_weight: float = 0.05, ridge: float = 1e-3) -> GFit:
+def fit_g(
+    omega, h, order: int, weight=None, *, max_gain: float = 0.95, re_weight: float = 0.05, ridge: float = 1e-3
+) -> GFit:
     """Stable ``F`` with ``-2 Im F(jω)/(1 - |F(jω)|^2) ≈ h(ω)`` and ``‖F‖∞ < 1``.
 
     ``h = g/(β p)`` is the normalised G scaling of a real scalar block (see
@@ -219,8 +225,15 @@ def _fit_g_layout(w, h, wt, sw, layout, centre, lo, hi, re_weight, ridge):
                 pairs.append([np.exp(x[i]), np.exp(x[i + 1]), c[j], c[j + 1]])
                 i += 2
                 j += 2
-        return GFit(len(layout) + sum(k == "c" for k in layout), float(c[0]), np.array(res, float),
-                    np.array(pol, float), 0.0, 0.0, np.array(pairs, float).reshape(-1, 4))
+        return GFit(
+            len(layout) + sum(k == "c" for k in layout),
+            float(c[0]),
+            np.array(res, float),
+            np.array(pol, float),
+            0.0,
+            0.0,
+            np.array(pairs, float).reshape(-1, 4),
+        )
 
     tau = -h / (1 + np.sqrt(1 + h * h))  # Im F if F were purely imaginary
     x = x0
@@ -228,8 +241,13 @@ def _fit_g_layout(w, h, wt, sw, layout, centre, lo, hi, re_weight, ridge):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             try:
-                sol = least_squares(lambda v: solve_c(v, tau)[1], x, bounds=(np.array(lb), np.array(ub)),
-                                    method="trf", max_nfev=60 * (len(x) + 1))
+                sol = least_squares(
+                    lambda v: solve_c(v, tau)[1],
+                    x,
+                    bounds=(np.array(lb), np.array(ub)),
+                    method="trf",
+                    max_nfev=60 * (len(x) + 1),
+                )
             except ValueError:
                 return None
         x = sol.x

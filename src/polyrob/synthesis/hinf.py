@@ -53,7 +53,7 @@ References
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, Optional
+from typing import Literal
 
 import control
 import numpy as np
@@ -112,7 +112,6 @@ class HinfResult:
     fallbacks: tuple = ()
 
 
-
 def _ss(A, B, C, D) -> control.StateSpace:
     A, B, C, D = (np.atleast_2d(np.asarray(X, float)) for X in (A, B, C, D))
     n = A.shape[0] if A.size else 0
@@ -144,9 +143,7 @@ def _parse_plant(P, n_y, n_u):
         raise PolyrobError("hinfsyn of a bare StateSpace needs n_y and n_u")
     n_y, n_u = int(n_y), int(n_u)
     if not (0 < n_u < P.ninputs and 0 < n_y < P.noutputs):
-        raise PolyrobError(
-            f"n_u={n_u}, n_y={n_y} do not fit a {P.noutputs}x{P.ninputs} plant (need exogenous w and z)"
-        )
+        raise PolyrobError(f"n_u={n_u}, n_y={n_y} do not fit a {P.noutputs}x{P.ninputs} plant (need exogenous w and z)")
     if labels is None:
         labels = list(getattr(P, "state_labels", None) or []) or None
     A, B, C, D = state_matrices(P)
@@ -166,7 +163,7 @@ def hinfsyn(
     epsilon: float = 1e-4,
     rank_tol: float = 1e-7,
     shifts: tuple[float, ...] = (1e-3, 1e-2, 1e-1),
-    solver: Optional[str] = None,
+    solver: str | None = None,
     lmi_max_states: int = 40,
 ) -> HinfResult:
     """H∞ (sub)optimal output-feedback controller with explicit regularisation.
@@ -239,12 +236,12 @@ def hinfsyn(
     nw, nz = B.shape[1] - n_u, C.shape[0] - n_y
     check_stabilizable(A, B[:, nw:], C[nz:], labels)
     with single_blas_thread():
-        return _hinfsyn(A, B, C, D, n_y, n_u, gamma_range, tol, method, epsilon, rank_tol, shifts, solver,
-                        lmi_max_states)
+        return _hinfsyn(
+            A, B, C, D, n_y, n_u, gamma_range, tol, method, epsilon, rank_tol, shifts, solver, lmi_max_states
+        )
 
 
-def _hinfsyn(A, B, C, D, n_y, n_u, gamma_range, tol, method, epsilon, rank_tol, shifts, solver,
-             lmi_max_states=40):
+def _hinfsyn(A, B, C, D, n_y, n_u, gamma_range, tol, method, epsilon, rank_tol, shifts, solver, lmi_max_states=40):
     def fresh(eps):
         pr = SynthesisProblem(A, B, C, D, n_u, n_y)
         pr.balance()
@@ -267,16 +264,28 @@ def _hinfsyn(A, B, C, D, n_y, n_u, gamma_range, tol, method, epsilon, rank_tol, 
         info.update(extra)
         info["state_scaling_range"] = float(prob.T.max() / prob.T.min()) if prob.T.size else 1.0
         return HinfResult(
-            K=K, gamma=hinf_norm(cl), gamma_bound=float(extra.get("gamma", np.nan)), closed_loop=cl,
-            method=meth, regularization=tuple(prob.notes), info=info,
+            K=K,
+            gamma=hinf_norm(cl),
+            gamma_bound=float(extra.get("gamma", np.nan)),
+            closed_loop=cl,
+            method=meth,
+            regularization=tuple(prob.notes),
+            info=info,
             fallbacks=tuple(failures) + tuple(extra.get("fallbacks", ())),
         )
 
-    codes = {1: "rank loss of [A-jwI B2; C1 D12] on the jw axis",
-             2: "rank loss of [A-jwI B1; C2 D21] on the jw axis",
-             3: "D12 rank deficient", 4: "D21 rank deficient", 5: "SVD failure",
-             6: "no admissible gamma", 7: "X-Riccati failed", 8: "Y-Riccati failed",
-             9: "ill-posed loop", 10: "controller numerically inaccurate"}
+    codes = {
+        1: "rank loss of [A-jwI B2; C1 D12] on the jw axis",
+        2: "rank loss of [A-jwI B1; C2 D21] on the jw axis",
+        3: "D12 rank deficient",
+        4: "D21 rank deficient",
+        5: "SVD failure",
+        6: "no admissible gamma",
+        7: "X-Riccati failed",
+        8: "Y-Riccati failed",
+        9: "ill-posed loop",
+        10: "controller numerically inaccurate",
+    }
     failures = []
     if method in ("auto", "riccati"):
         # a larger regularisation eps is tried when the controller does not

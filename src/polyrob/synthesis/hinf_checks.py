@@ -107,4 +107,3 @@ def balance_state(A, B, C):
 def format_complex(x) -> str:
     x = complex(x)
     return f"{x.real:.4g}" if abs(x.imag) < 1e-12 else f"{x:.4g}"
-

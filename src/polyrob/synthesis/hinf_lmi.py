@@ -11,7 +11,6 @@ done instead is recorded in ``info["fallbacks"]``.
 from __future__ import annotations
 
 import warnings
-from typing import Optional
 
 import numpy as np
 
@@ -21,7 +20,7 @@ from polyrob.synthesis.hinf_problem import SynthesisProblem
 __all__ = ["lmi_controller"]
 
 
-def lmi_controller(prob: SynthesisProblem, tol: float, solver: Optional[str] = None):
+def lmi_controller(prob: SynthesisProblem, tol: float, solver: str | None = None):
     """Full-order H∞ LMI (Scherer-Gahinet-Chilali change of variables) + reconstruction."""
     import cvxpy as cp
 
@@ -43,11 +42,13 @@ def lmi_controller(prob: SynthesisProblem, tol: float, solver: Optional[str] = N
     BB = cp.vstack([B1 + B2 @ Dh @ D21, X @ B1 + Bh @ D21])
     CC = cp.hstack([C1 @ Y + D12 @ Ch, C1 + D12 @ Dh @ C2])
     DD = D11 + D12 @ Dh @ D21
-    L = cp.bmat([
-        [AA + AA.T, BB, CC.T],
-        [BB.T, -g * np.eye(nw), DD.T],
-        [CC, DD, -g * np.eye(nz)],
-    ])
+    L = cp.bmat(
+        [
+            [AA + AA.T, BB, CC.T],
+            [BB.T, -g * np.eye(nw), DD.T],
+            [CC, DD, -g * np.eye(nz)],
+        ]
+    )
     XY = cp.bmat([[Y, np.eye(n)], [np.eye(n), X]])
     kappa = 1e6
     delta = 1e-7
@@ -55,7 +56,8 @@ def lmi_controller(prob: SynthesisProblem, tol: float, solver: Optional[str] = N
     cons = [
         (L + L.T) / 2 << -delta * np.eye(N),
         (XY + XY.T) / 2 >> delta * np.eye(2 * n),
-        X << kappa * np.eye(n), Y << kappa * np.eye(n),
+        X << kappa * np.eye(n),
+        Y << kappa * np.eye(n),
     ]
     fallbacks = []
     with warnings.catch_warnings():
@@ -81,7 +83,10 @@ def lmi_controller(prob: SynthesisProblem, tol: float, solver: Optional[str] = N
         cons2 = [
             (L + L.T) / 2 << -delta * np.eye(N),
             (XY + XY.T) / 2 >> eta * np.eye(2 * n),
-            X << kappa * np.eye(n), Y << kappa * np.eye(n), g == gfix, eta <= 1.0,
+            X << kappa * np.eye(n),
+            Y << kappa * np.eye(n),
+            g == gfix,
+            eta <= 1.0,
         ]
         prob2 = cp.Problem(cp.Maximize(eta), cons2)
         try:
@@ -93,14 +98,18 @@ def lmi_controller(prob: SynthesisProblem, tol: float, solver: Optional[str] = N
             saved = [np.array(V.value) for V in (X, Y, Ah, Bh, Ch, Dh)]
         else:
             gfix = gstar
-            fallbacks.append(f"LMI: the conditioning pass at gamma = {gstar * (1 + max(tol, 1e-2)):.4g} failed "
-                             f"({status2}); controller reconstructed from the first pass")
+            fallbacks.append(
+                f"LMI: the conditioning pass at gamma = {gstar * (1 + max(tol, 1e-2)):.4g} failed "
+                f"({status2}); controller reconstructed from the first pass"
+            )
     Xv, Yv, Ahv, Bhv, Chv, Dhv = saved
     # U V^T = I - X Y, split by an SVD for balance
     Um, s, Vt = np.linalg.svd(np.eye(n) - Xv @ Yv)
     if s[-1] <= 1e-12 * max(1.0, s[0]):
-        raise SynthesisError("H∞ LMI synthesis: I - XY is singular, controller reconstruction impossible"
-                             + "".join(f" ({f})" for f in fallbacks))
+        raise SynthesisError(
+            "H∞ LMI synthesis: I - XY is singular, controller reconstruction impossible"
+            + "".join(f" ({f})" for f in fallbacks)
+        )
     U = Um * np.sqrt(s)[None, :]
     V = Vt.T * np.sqrt(s)[None, :]
     Dk = Dhv
@@ -116,6 +125,9 @@ def lmi_controller(prob: SynthesisProblem, tol: float, solver: Optional[str] = N
         Ak = Ak - Bk @ D22 @ Ck2
         Bk = Bk - Bk @ D22 @ Dk2
         Ck, Dk = Ck2, Dk2
-    return (Ak, Bk, Ck, Dk), {"gamma": gfix, "gamma_lmi_opt": gstar, "solver_status": prob1.status,
-                              "fallbacks": fallbacks}
-
+    return (Ak, Bk, Ck, Dk), {
+        "gamma": gfix,
+        "gamma_lmi_opt": gstar,
+        "solver_status": prob1.status,
+        "fallbacks": fallbacks,
+    }

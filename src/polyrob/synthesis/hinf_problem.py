@@ -139,4 +139,3 @@ class SynthesisProblem:
         su, sy = self.su, self.sy
         Ak = Ak - self.axis_shift * np.eye(Ak.shape[0])  # K(s) = K_eps(s + eps)
         return Ak, Bk * sy[None, :], su[:, None] * Ck, su[:, None] * Dk * sy[None, :]
-

@@ -145,4 +145,3 @@ def riccati_controller(prob: SynthesisProblem, gamma_range, tol):
     info["last_info"] = 10
     info["rank_fail"] = False
     return None, info
-

@@ -23,61 +23,15 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
-from typing import Optional
 
 import numpy as np
-import scipy.linalg as sla
 from scipy.optimize import least_squares
 
 from polyrob.errors import PolyrobError
+from polyrob.synthesis.balanced import balanced_realization
+
 
 # ================================================================ realisations
-def balanced_realization(A, B, C, D):
-    """Balanced realisation of a stable system (square-root method).
-
-    Both Gramians become the same diagonal matrix of Hankel singular values,
-    so every state carries comparable energy: entries stay of the order of the
-    system's gains, where companion forms of a D-scale reach ~1e10.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from polyrob.synthesis.dscale import balanced_realization
-    >>> A, B, C, D = balanced_realization(np.array([[-1.0, 0], [0, -100.0]]), np.array([[1.0], [1e3]]),
-    ...                                   np.array([[1.0, 1e-3]]), np.array([[1.0]]))
-    >>> bool(np.abs(B).max() < 10)
-    True
-    """
-    A, B, C, D = (np.atleast_2d(np.asarray(X, float)) for X in (A, B, C, D))
-    n = A.shape[0] if A.size else 0
-    if n == 0:
-        return A.reshape(0, 0), B.reshape(0, D.shape[1]), C.reshape(D.shape[0], 0), D
-    try:
-        Wc = sla.solve_continuous_lyapunov(A, -B @ B.T)
-        Wo = sla.solve_continuous_lyapunov(A.T, -C.T @ C)
-        Wc, Wo = (Wc + Wc.T) / 2, (Wo + Wo.T) / 2
-        Lc = _psd_factor(Wc)
-        Lo = _psd_factor(Wo)
-        U, s, Vt = np.linalg.svd(Lo.T @ Lc)
-        if s[-1] <= 1e-14 * s[0]:
-            return A, B, C, D  # non-minimal: keep the given (already sane) realisation
-        S = np.diag(s ** -0.5)
-        T = S @ U.T @ Lo.T  # x_b = T x
-        Ti = Lc @ Vt.T @ S
-        return T @ A @ Ti, T @ B, C @ Ti, D
-    except (np.linalg.LinAlgError, ValueError):
-        return A, B, C, D
-
-
-def _psd_factor(W):
-    """``L`` with ``L L^T = W`` for a (numerically) positive semidefinite ``W``."""
-    try:
-        return np.linalg.cholesky(W)
-    except np.linalg.LinAlgError:
-        ev, V = np.linalg.eigh(W)
-        return V * np.sqrt(np.maximum(ev, 0.0))[None, :]
-
-
 def _sections_ss(k: float, sos_z, sos_p, first_z, first_p):
     """Cascade realisation of ``k * prod(num)/prod(den)`` (biproper sections)."""
     # each section (s^2 + a1 s + a0)/(s^2 + b1 s + b0) = 1 + ((a1-b1) s + (a0-b0))/(s^2 + b1 s + b0)
@@ -93,7 +47,7 @@ def _sections_ss(k: float, sos_z, sos_p, first_z, first_p):
     B = np.zeros((0, 1))
     C = np.zeros((1, 0))
     D = np.array([[k]])
-    for (a, b, c, d) in blocks:  # series: new = blk * current
+    for a, b, c, d in blocks:  # series: new = blk * current
         n1 = A.shape[0]
         A = np.block([[A, np.zeros((n1, a.shape[0]))], [b @ C, a]])
         B = np.vstack([B, b @ D])
@@ -152,6 +106,7 @@ class MagnitudeFit:
 
 def _split_sections(zeros, poles):
     """Pair roots into real second-order sections ``(a1, a0)`` plus first-order ones."""
+
     def split(r):
         r = np.asarray(r, complex)
         cplx = r[r.imag > 1e-12 * np.maximum(1.0, np.abs(r))]
@@ -179,7 +134,7 @@ def _logmag(params, w, n):
     w2 = w * w
     i = 1
     for _ in range(n // 2):
-        lwz, lzz, lwp, lzp = params[i:i + 4]
+        lwz, lzz, lwp, lzp = params[i : i + 4]
         wz, zz, wp, zp = np.exp(lwz), np.exp(lzz), np.exp(lwp), np.exp(lzp)
         out += 0.5 * np.log((wz * wz - w2) ** 2 + (2 * zz * wz * w) ** 2 + 1e-300)
         out -= 0.5 * np.log((wp * wp - w2) ** 2 + (2 * zp * wp * w) ** 2 + 1e-300)
@@ -255,7 +210,7 @@ def _params_to_roots(params, n):
     zeros, poles = [], []
     i = 1
     for _ in range(n // 2):
-        wz, zz, wp, zp = np.exp(params[i:i + 4])
+        wz, zz, wp, zp = np.exp(params[i : i + 4])
         zeros += list(np.roots([1.0, 2 * zz * wz, wz * wz]))
         poles += list(np.roots([1.0, 2 * zp * wp, wp * wp]))
         i += 4
@@ -266,7 +221,12 @@ def _params_to_roots(params, n):
 
 
 def fit_magnitude(
-    omega, mag, order: int, weight=None, *, init: Optional[MagnitudeFit] = None,
+    omega,
+    mag,
+    order: int,
+    weight=None,
+    *,
+    init: MagnitudeFit | None = None,
     zeta_bounds: tuple[float, float] = (0.05, 3.0),
 ) -> MagnitudeFit:
     """Stable minimum-phase biproper filter with ``|d(jω)| ≈ mag`` (log-magnitude LS).
@@ -312,8 +272,9 @@ def fit_magnitude(
     k0 = float(np.sum(wt * y) / np.sum(wt))
     if n == 0:
         e = (y - k0) / np.log(10)
-        return MagnitudeFit(0, float(np.exp(k0)), np.zeros(0, complex), np.zeros(0, complex),
-                            *fit_errors(e, wt), np.array([k0]))
+        return MagnitudeFit(
+            0, float(np.exp(k0)), np.zeros(0, complex), np.zeros(0, complex), *fit_errors(e, wt), np.array([k0])
+        )
     lo_w, hi_w = np.log(w.min()), np.log(w.max())
     lz0, lz1 = np.log(zeta_bounds[0]), np.log(zeta_bounds[1])
     lb, ub = [-np.inf], [np.inf]
@@ -339,8 +300,13 @@ def fit_magnitude(
     def jac(p):
         lr = _root_logs(p, n)
         Jr = _root_logs_jac(p, n)
-        return np.vstack([sw[:, None] * _logmag_jac(p, w, n),
-                          -pen * (lw_min - lr > 0)[:, None] * Jr, pen * (lr - lw_max > 0)[:, None] * Jr])
+        return np.vstack(
+            [
+                sw[:, None] * _logmag_jac(p, w, n),
+                -pen * (lw_min - lr > 0)[:, None] * Jr,
+                pen * (lr - lw_max > 0)[:, None] * Jr,
+            ]
+        )
 
     starts = []
     if init is not None and init.params is not None:
@@ -352,8 +318,17 @@ def fit_magnitude(
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             try:
-                sol = least_squares(resid, x0, jac=jac, bounds=(lb, ub), method="trf", x_scale=1.0,
-                                    max_nfev=100 * (len(x0) + 1), xtol=1e-8, ftol=1e-8)
+                sol = least_squares(
+                    resid,
+                    x0,
+                    jac=jac,
+                    bounds=(lb, ub),
+                    method="trf",
+                    x_scale=1.0,
+                    max_nfev=100 * (len(x0) + 1),
+                    xtol=1e-8,
+                    ftol=1e-8,
+                )
             except ValueError:
                 continue
         if best is None or sol.cost < best.cost:
@@ -396,8 +371,8 @@ def _extend_params(init: MagnitudeFit, n, w, y, wt):
     res = np.sqrt(wt) * np.abs(_logmag(p0, w, n0) - y)
     lw = np.log(w[int(np.argmax(res))])
     # rebuild parameters in the layout of order n from the roots of the old fit
-    secs = list(p0[1:1 + 4 * (n0 // 2)].reshape(-1, 4))
-    firsts = [p0[1 + 4 * (n0 // 2):]] if n0 % 2 else []
+    secs = list(p0[1 : 1 + 4 * (n0 // 2)].reshape(-1, 4))
+    firsts = [p0[1 + 4 * (n0 // 2) :]] if n0 % 2 else []
     if n % 2 == 0 and n0 % 2 == 1:
         # old first-order term + new first-order term -> one section
         az, ap = np.exp(firsts[0])

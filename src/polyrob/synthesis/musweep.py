@@ -7,8 +7,6 @@ the frequencies; :func:`complex_dscales` is the complex-μ D-step the fits of
 
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
 from polyrob.analysis.blocks import BlockStructure, as_block_structure
@@ -39,7 +37,7 @@ class MuSweep:
         always computed serially.
     """
 
-    def __init__(self, n_jobs: Optional[int] = None, method: str = "auto", timeout: float = 120.0):
+    def __init__(self, n_jobs: int | None = None, method: str = "auto", timeout: float = 120.0):
         self.n_jobs, self.method, self.timeout = n_jobs, method, timeout
         self._worker = None
         self._dead = False
@@ -113,8 +111,10 @@ class MuSweep:
                 up, Dk, Gk, _ = upper_bound_ab13md(Ms, st, val)
                 mu[k], D[k], G[k] = up, Dk, Gk
 
-        threads = [threading.Thread(target=run_remote, args=(wk, todo[j::len(self._worker)]), daemon=True)
-                   for j, wk in enumerate(self._worker)]
+        threads = [
+            threading.Thread(target=run_remote, args=(wk, todo[j :: len(self._worker)]), daemon=True)
+            for j, wk in enumerate(self._worker)
+        ]
         for th in threads:
             th.start()
         for th in threads:
@@ -135,8 +135,9 @@ class MuSweep:
             self._worker = None
 
 
-
-def complex_dscales(X: np.ndarray, st: BlockStructure, mask=None, fallback=None, sweep: Optional["MuSweep"] = None) -> tuple[np.ndarray, np.ndarray]:
+def complex_dscales(
+    X: np.ndarray, st: BlockStructure, mask=None, fallback=None, sweep: MuSweep | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Complex-μ upper bound of each ``X[k]`` (real blocks as complex) and its normalised ``d``.
 
     With ``mask``, only the masked frequencies are swept; elsewhere ``d`` is
@@ -166,4 +167,3 @@ def complex_dscales(X: np.ndarray, st: BlockStructure, mask=None, fallback=None,
                 dr[csl[i]] = d[k, i]
             c[k] = np.linalg.norm(dl[:, None] * X[k] / dr[None, :], 2)
     return c, d
-

@@ -107,8 +107,7 @@ def _balanced(A, B, C):
     """TB01ID balancing of ``[A B; C 0]`` (a similarity: same transfer function, smaller ``‖H‖``)."""
     import slycot
 
-    _, As, Bs, Cs, _ = slycot.tb01id(A.shape[0], B.shape[1], C.shape[0], 0.0, A.copy(), B.copy(), C.copy(),
-                                     job="A")
+    _, As, Bs, Cs, _ = slycot.tb01id(A.shape[0], B.shape[1], C.shape[0], 0.0, A.copy(), B.copy(), C.copy(), job="A")
     return np.asarray(As, float), np.asarray(Bs, float), np.asarray(Cs, float)
 
 
@@ -120,8 +119,9 @@ def _local_peak(A, B, C, D, w: float) -> float:
     vals = np.array([_sigma(A, B, C, D, x) for x in grid])
     k = int(np.argmax(vals))
     a, b = np.log(grid[max(k - 1, 0)]), np.log(grid[min(k + 1, grid.size - 1)])
-    r = minimize_scalar(lambda x: -_sigma(A, B, C, D, float(np.exp(x))), bounds=(a, b), method="bounded",
-                        options={"xatol": 1e-10})
+    r = minimize_scalar(
+        lambda x: -_sigma(A, B, C, D, float(np.exp(x))), bounds=(a, b), method="bounded", options={"xatol": 1e-10}
+    )
     return float(max(vals[k], -r.fun, _sigma(A, B, C, D, 0.0)))
 
 

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Optional
 
 import control
 import numpy as np
@@ -101,8 +100,10 @@ class ReductionResult:
             "meets_target": bool(self.meets_target),
             "full_order": int(self.full_order),
             "full_peak_mu": float(self.full_peak_mu),
-            "table": [{k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in row.items()}
-                      for row in self.table],
+            "table": [
+                {k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in row.items()}
+                for row in self.table
+            ],
             "seconds": round(float(self.seconds), 3),
         }
 
@@ -126,8 +127,7 @@ def stable_unstable_split(K: control.StateSpace, margin: float = 1e-9):
     A, B, C, D = (np.asarray(X, float) for X in (K.A, K.B, K.C, K.D))
     n = A.shape[0]
     if n == 0:
-        return K, control.ss(np.zeros((0, 0)), np.zeros((0, B.shape[1])), np.zeros((C.shape[0], 0)),
-                             np.zeros_like(D))
+        return K, control.ss(np.zeros((0, 0)), np.zeros((0, B.shape[1])), np.zeros((C.shape[0], 0)), np.zeros_like(D))
 
     def is_stable(re, im):
         return re < -margin * max(1.0, abs(complex(re, im)))
@@ -145,15 +145,22 @@ def stable_unstable_split(K: control.StateSpace, margin: float = 1e-9):
     else:
         T11, T22 = T, np.zeros((0, 0))
         Bs, Bu, Cs, Cu = Bt, Bt[:0], Ct, Ct[:, :0]
-    Ks = control.ss(T11, Bs, Cs, D) if k else control.ss(np.zeros((0, 0)), np.zeros((0, B.shape[1])),
-                                                        np.zeros((C.shape[0], 0)), D)
-    Ku = control.ss(T22, Bu, Cu, np.zeros_like(D)) if k < n else control.ss(
-        np.zeros((0, 0)), np.zeros((0, B.shape[1])), np.zeros((C.shape[0], 0)), np.zeros_like(D))
+    Ks = (
+        control.ss(T11, Bs, Cs, D)
+        if k
+        else control.ss(np.zeros((0, 0)), np.zeros((0, B.shape[1])), np.zeros((C.shape[0], 0)), D)
+    )
+    Ku = (
+        control.ss(T22, Bu, Cu, np.zeros_like(D))
+        if k < n
+        else control.ss(np.zeros((0, 0)), np.zeros((0, B.shape[1])), np.zeros((C.shape[0], 0)), np.zeros_like(D))
+    )
     return Ks, Ku
 
 
-def balanced_reduction(K: control.StateSpace, order: int, method: str = "truncate",
-                       margin: float = 1e-9) -> control.StateSpace:
+def balanced_reduction(
+    K: control.StateSpace, order: int, method: str = "truncate", margin: float = 1e-9
+) -> control.StateSpace:
     """Reduce ``K`` to ``order`` states: unstable part kept, stable part balanced-truncated.
 
     ``control.balred`` with ``alpha = -margin max(1, ρ(A))``: SLICOT AB09MD
@@ -191,13 +198,13 @@ def reduce_controller(
     result_or_K,
     blk=None,
     *,
-    target: Optional[float] = None,
-    max_order: Optional[int] = None,
+    target: float | None = None,
+    max_order: int | None = None,
     tol: float = 0.05,
     method: str = "matchdc",
     omega=None,
-    n_u: Optional[int] = None,
-    n_y: Optional[int] = None,
+    n_u: int | None = None,
+    n_y: int | None = None,
 ) -> ReductionResult:
     """Smallest balanced-truncation order whose certified μ stays below ``target``.
 
@@ -254,8 +261,7 @@ def reduce_controller(
             blk = result_or_K.certificate.structure
         if omega is None and "omega" in result_or_K.info:
             w = np.asarray(result_or_K.info["omega"], float)
-            omega = np.logspace(np.log10(w.min()) - 1, np.log10(w.max()) + 1,
-                                int(8 * np.log10(w.max() / w.min())) + 17)
+            omega = np.logspace(np.log10(w.min()) - 1, np.log10(w.max()) + 1, int(8 * np.log10(w.max() / w.min())) + 17)
     else:
         K = result_or_K
         full_mu = None
@@ -273,8 +279,9 @@ def reduce_controller(
         K = as_controller_ss(K, nu, ny)
     if omega is None:
         base = frequency_grid(P.system if hasattr(P, "system") else P)
-        omega = np.logspace(np.log10(base.min()) - 1, np.log10(base.max()) + 1,
-                            int(8 * np.log10(base.max() / base.min())) + 17)
+        omega = np.logspace(
+            np.log10(base.min()) - 1, np.log10(base.max()) + 1, int(8 * np.log10(base.max() / base.min())) + 17
+        )
     cache = {}
 
     def evaluate(order, Kr=None):
@@ -317,18 +324,41 @@ def reduce_controller(
             finite = {o: v for o, v in cache.items() if o <= cap}
             chosen = min(finite, key=lambda o: finite[o][0])
         mu, mlo, wpk, N, cert, Kr = cache[chosen]
-    table = [{"order": int(o), "peak_mu": float(v[0]), "stable": bool(np.isfinite(v[0])), "method": method}
-             for o, v in sorted(cache.items())]
+    table = [
+        {"order": int(o), "peak_mu": float(v[0]), "stable": bool(np.isfinite(v[0])), "method": method}
+        for o, v in sorted(cache.items())
+    ]
     meets = bool(mu <= tgt)
     mres = MusynResult(
-        controller=Kr, structure=f"reduced:{chosen}", order=int(chosen), peak_mu=float(mu),
-        peak_mu_lower=float(mlo), peak_frequency=float(wpk), mu_history=np.array([mu]),
-        gamma_history=np.array([np.nan]), scalings=(), closed_loop=N, certificate=cert, iterations=0,
+        controller=Kr,
+        structure=f"reduced:{chosen}",
+        order=int(chosen),
+        peak_mu=float(mu),
+        peak_mu_lower=float(mlo),
+        peak_frequency=float(wpk),
+        mu_history=np.array([mu]),
+        gamma_history=np.array([np.nan]),
+        scalings=(),
+        closed_loop=N,
+        certificate=cert,
+        iterations=0,
         seconds=time.perf_counter() - t0,
         info={"reduction": method, "full_order": n, "full_peak_mu": full_mu, "table": table},
     )
     return ReductionResult(
-        controller=Kr, order=int(chosen), peak_mu=float(mu), peak_mu_lower=float(mlo), target=tgt,
-        meets_target=meets, full_order=int(n), full_peak_mu=float(full_mu), table=table, hankel=hsv,
-        n_unstable=int(nu), method=method, certificate=cert, result=mres, seconds=time.perf_counter() - t0,
+        controller=Kr,
+        order=int(chosen),
+        peak_mu=float(mu),
+        peak_mu_lower=float(mlo),
+        target=tgt,
+        meets_target=meets,
+        full_order=int(n),
+        full_peak_mu=float(full_mu),
+        table=table,
+        hankel=hsv,
+        n_unstable=int(nu),
+        method=method,
+        certificate=cert,
+        result=mres,
+        seconds=time.perf_counter() - t0,
     )

@@ -13,7 +13,7 @@ Whatever the iteration optimised, the controller is certified by
 from __future__ import annotations
 
 import time
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
 import control
 import numpy as np
@@ -32,8 +32,14 @@ from polyrob.synthesis.result import MusynResult
 __all__ = ["musyn"]
 
 #: defaults of the full-order iteration for the options left at ``None``
-FULL_ORDER_DEFAULTS = {"max_iter": 20, "tol": 1e-3, "patience": 2, "d_order": (0, 1, 2, 3, 4),
-                       "g_order": (0, 1, 2), "fit_tol": 0.01}
+FULL_ORDER_DEFAULTS = {
+    "max_iter": 20,
+    "tol": 1e-3,
+    "patience": 2,
+    "d_order": (0, 1, 2, 3, 4),
+    "g_order": (0, 1, 2),
+    "fit_tol": 0.01,
+}
 
 
 def _parse_plant(P, blk, n_u, n_y):
@@ -70,24 +76,24 @@ def musyn(
     blk=None,
     *,
     structure: str = "full",
-    mixed: Optional[bool] = None,
-    max_iter: Optional[int] = None,
-    tol: Optional[float] = None,
-    patience: Optional[int] = None,
-    d_order: Optional[Sequence[int]] = None,
-    g_order: Optional[Sequence[int]] = None,
-    fit_tol: Optional[float] = None,
+    mixed: bool | None = None,
+    max_iter: int | None = None,
+    tol: float | None = None,
+    patience: int | None = None,
+    d_order: Sequence[int] | None = None,
+    g_order: Sequence[int] | None = None,
+    fit_tol: float | None = None,
     omega=None,
-    progress: Optional[bool] = None,
-    target: Optional[float] = None,
+    progress: bool | None = None,
+    target: float | None = None,
     initial_controller=None,
     mu_bound=None,
     d_fit=None,
     hinf_step=None,
     certify_omega=None,
     check_weights: bool = True,
-    n_u: Optional[int] = None,
-    n_y: Optional[int] = None,
+    n_u: int | None = None,
+    n_y: int | None = None,
     **structure_options,
 ) -> MusynResult:
     """Robust controller by μ-synthesis (MATLAB's ``musyn``), with its μ certificate.
@@ -184,22 +190,48 @@ def musyn(
     if not isinstance(structure, str):
         raise SynthesisError(f"unknown controller structure {structure!r}: give a string such as 'full' or 'tf3'")
     if structure != "full":
-        full_only = {"patience": patience, "d_order": d_order, "g_order": g_order, "fit_tol": fit_tol,
-                     "mu_bound": mu_bound, "d_fit": d_fit, "hinf_step": hinf_step}
+        full_only = {
+            "patience": patience,
+            "d_order": d_order,
+            "g_order": g_order,
+            "fit_tol": fit_tol,
+            "mu_bound": mu_bound,
+            "d_fit": d_fit,
+            "hinf_step": hinf_step,
+        }
         given = sorted(k for k, v in full_only.items() if v is not None)
         if given:
             raise PolyrobError(f"options {given} apply to the full-order synthesis only, not to {structure!r}")
         # the fixed-structure solver validates the structure name (controller_structure)
         return fixed_structure_musyn(
-            P, blk, structure, mixed=mixed, max_iter=max_iter, tol=tol, omega=omega, progress=progress,
-            target=target, initial_controller=initial_controller, n_u=n_u, n_y=n_y,
-            certify_omega=certify_omega, **structure_options,
+            P,
+            blk,
+            structure,
+            mixed=mixed,
+            max_iter=max_iter,
+            tol=tol,
+            omega=omega,
+            progress=progress,
+            target=target,
+            initial_controller=initial_controller,
+            n_u=n_u,
+            n_y=n_y,
+            certify_omega=certify_omega,
+            **structure_options,
         )
     if structure_options:
         raise PolyrobError(f"unexpected options for a full-order synthesis: {sorted(structure_options)}")
-    opt = {k: (v if v is not None else FULL_ORDER_DEFAULTS[k]) for k, v in
-           {"max_iter": max_iter, "tol": tol, "patience": patience, "d_order": d_order, "g_order": g_order,
-            "fit_tol": fit_tol}.items()}
+    opt = {
+        k: (v if v is not None else FULL_ORDER_DEFAULTS[k])
+        for k, v in {
+            "max_iter": max_iter,
+            "tol": tol,
+            "patience": patience,
+            "d_order": d_order,
+            "g_order": g_order,
+            "fit_tol": fit_tol,
+        }.items()
+    }
     Psys, st, n_u, n_y = _parse_plant(P, blk, n_u, n_y)
     if check_weights:
         lb, wlb = performance_lower_bound(P)
@@ -222,8 +254,16 @@ def musyn(
     check_stabilizable(np.asarray(Psys.A, float), B[:, -n_u:], C[-n_y:], list(Psys.state_labels))
     if d_fit is None:
         d_fit = LogMagnitudeFit(orders=opt["d_order"], g_orders=opt["g_order"], tol=opt["fit_tol"])
-    loop = DKIteration(mu_bound, d_fit, hinf_step, max_iter=opt["max_iter"], tol=opt["tol"],
-                       patience=opt["patience"], target=target, progress=progress)
+    loop = DKIteration(
+        mu_bound,
+        d_fit,
+        hinf_step,
+        max_iter=opt["max_iter"],
+        tol=opt["tol"],
+        patience=opt["patience"],
+        target=target,
+        progress=progress,
+    )
     K0 = None
     if initial_controller is not None:
         K0 = as_controller_ss(initial_controller, n_u, n_y)
@@ -240,8 +280,13 @@ def musyn(
         if not np.isfinite(hist[order[0]].mu_peak):
             raise SynthesisError("musyn: no controller stabilised the plant")
         # the certificate looks a decade beyond the D-step grid on both sides
-        cw = certify_omega if certify_omega is not None else np.logspace(
-            np.log10(omega.min()) - 1, np.log10(omega.max()) + 1, int(12 * np.log10(omega.max() / omega.min())) + 25)
+        cw = (
+            certify_omega
+            if certify_omega is not None
+            else np.logspace(
+                np.log10(omega.min()) - 1, np.log10(omega.max()) + 1, int(12 * np.log10(omega.max() / omega.min())) + 25
+            )
+        )
         Pc = P if not isinstance(P, control.StateSpace) else Psys
         kw = {} if not isinstance(P, control.StateSpace) else {"n_u": n_u, "n_y": n_y}
         best = None
@@ -268,15 +313,26 @@ def musyn(
         "fallbacks": list(loop.failures),
         "timings": [h.seconds for h in hist],
         "omega": omega,
-        "reference": ("P. M. Young, Controller design with real parametric uncertainty, IJC 65(3), 1996; "
-                      "G-scalings via J-spectral factorisation (see polyrob.synthesis.dscale)") if mixed else
-                     "J. C. Doyle, Structured uncertainty in control system design, CDC 1985 (D-K iteration)",
+        "reference": (
+            "P. M. Young, Controller design with real parametric uncertainty, IJC 65(3), 1996; "
+            "G-scalings via J-spectral factorisation (see polyrob.synthesis.dscale)"
+        )
+        if mixed
+        else "J. C. Doyle, Structured uncertainty in control system design, CDC 1985 (D-K iteration)",
     }
     return MusynResult(
-        controller=rec.K, structure="full", order=int(rec.K.nstates), peak_mu=float(peak_mu),
-        peak_mu_lower=float(peak_lo), peak_frequency=float(peak_w),
-        mu_history=np.array([h.mu_peak for h in hist]), gamma_history=np.array([h.gamma for h in hist]),
-        scalings=(rec.scalings,), closed_loop=N, certificate=cert, iterations=len(hist),
-        seconds=float(seconds), info=info,
+        controller=rec.K,
+        structure="full",
+        order=int(rec.K.nstates),
+        peak_mu=float(peak_mu),
+        peak_mu_lower=float(peak_lo),
+        peak_frequency=float(peak_w),
+        mu_history=np.array([h.mu_peak for h in hist]),
+        gamma_history=np.array([h.gamma for h in hist]),
+        scalings=(rec.scalings,),
+        closed_loop=N,
+        certificate=cert,
+        iterations=len(hist),
+        seconds=float(seconds),
+        info=info,
     )
-

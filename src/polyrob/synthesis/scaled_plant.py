@@ -19,7 +19,7 @@ __all__ = ["scaled_plant"]
 def _diag_ss(items, n_ch):
     """Block-diagonal MIMO system from a list of per-channel SISO ``(A, B, C, D)``."""
     As, Bs, Cs, Ds = [], [], [], []
-    for (A, B, C, D) in items:
+    for A, B, C, D in items:
         As.append(A)
         Bs.append(B)
         Cs.append(C)
@@ -32,8 +32,8 @@ def _diag_ss(items, n_ch):
     r = 0
     for ch, (a, b, c, d) in enumerate(items):
         k = a.shape[0]
-        B[r:r + k, ch] = b[:, 0]
-        C[ch, r:r + k] = c[0, :]
+        B[r : r + k, ch] = b[:, 0]
+        C[ch, r : r + k] = c[0, :]
         D[ch, ch] = d[0, 0]
         r += k
     return A, B, C, D
@@ -49,7 +49,7 @@ def _connect(systems, Q, R, H, E):
     Cs = Cs.reshape(Ds.shape[0], A.shape[0])
     L = np.eye(Q.shape[0]) - Q @ Ds
     Li = np.linalg.solve(L, np.hstack([Q @ Cs, R]))
-    LQ, LR = Li[:, :A.shape[0]], Li[:, A.shape[0]:]
+    LQ, LR = Li[:, : A.shape[0]], Li[:, A.shape[0] :]
     Acl = A + Bs @ LQ
     Bcl = Bs @ LR
     Ccl = H @ (Cs + Ds @ LQ)
@@ -107,13 +107,13 @@ def scaled_plant(P: control.StateSpace, scalings: Scalings, n_u: int, n_y: int) 
         nY = nc + ny_all + nr
         Q = np.zeros((nU, nY))
         R = np.zeros((nU, nc + n_u))
-        Q[nc:nc + nc, :nc] = np.eye(nc)  # P's x <- Sdr out
-        Q[nc + nu_all:, nc:nc + nr] = np.eye(nr)  # Sdl in <- P's y
+        Q[nc : nc + nc, :nc] = np.eye(nc)  # P's x <- Sdr out
+        Q[nc + nu_all :, nc : nc + nr] = np.eye(nr)  # Sdl in <- P's y
         R[:nc, :nc] = np.eye(nc)  # Sdr in <- x̃
-        R[nc + nc:nc + nu_all, nc:] = np.eye(n_u)  # P's u <- u
+        R[nc + nc : nc + nu_all, nc:] = np.eye(n_u)  # P's u <- u
         Hm = np.zeros((nr + n_y, nY))
-        Hm[:nr, nc + ny_all:] = np.eye(nr)  # ỹ <- Sdl out
-        Hm[nr:, nc + nr:nc + ny_all] = np.eye(n_y)  # y_meas
+        Hm[:nr, nc + ny_all :] = np.eye(nr)  # ỹ <- Sdl out
+        Hm[nr:, nc + nr : nc + ny_all] = np.eye(n_y)  # y_meas
         E = np.zeros((nr + n_y, nc + n_u))
     else:
         nf = len(Fs)
@@ -132,23 +132,22 @@ def scaled_plant(P: control.StateSpace, scalings: Scalings, n_u: int, n_y: int) 
         nY = oL + nr
         Q = np.zeros((nU, nY))
         R = np.zeros((nU, nc + n_u))
-        R[iS:iS + nc, :nc] = np.eye(nc)
+        R[iS : iS + nc, :nc] = np.eye(nc)
         # P's x = x' - Ec^T f1
-        Q[iP:iP + nc, oS:oS + nc] = np.eye(nc)
-        Q[iP:iP + nc, o1:o1 + nf] = -Ec.T
-        R[iP + nc:iP + nu_all, nc:] = np.eye(n_u)
+        Q[iP : iP + nc, oS : oS + nc] = np.eye(nc)
+        Q[iP : iP + nc, o1 : o1 + nf] = -Ec.T
+        R[iP + nc : iP + nu_all, nc:] = np.eye(n_u)
         # SF1 in = y_real = Er y
-        Q[i1:i1 + nf, oP:oP + nr] = Er
+        Q[i1 : i1 + nf, oP : oP + nr] = Er
         # SF2 in = x_real = Ec x = Ec (x' - Ec^T f1)
-        Q[i2:i2 + nf, oS:oS + nc] = Ec
-        Q[i2:i2 + nf, o1:o1 + nf] = -Ec @ Ec.T
+        Q[i2 : i2 + nf, oS : oS + nc] = Ec
+        Q[i2 : i2 + nf, o1 : o1 + nf] = -Ec @ Ec.T
         # Sdl in = y + Er^T f2
-        Q[iL:iL + nr, oP:oP + nr] = np.eye(nr)
-        Q[iL:iL + nr, o2:o2 + nf] = Er.T
+        Q[iL : iL + nr, oP : oP + nr] = np.eye(nr)
+        Q[iL : iL + nr, o2 : o2 + nf] = Er.T
         Hm = np.zeros((nr + n_y, nY))
-        Hm[:nr, oL:oL + nr] = np.eye(nr)
-        Hm[nr:, oP + nr:oP + ny_all] = np.eye(n_y)
+        Hm[:nr, oL : oL + nr] = np.eye(nr)
+        Hm[nr:, oP + nr : oP + ny_all] = np.eye(n_y)
         E = np.zeros((nr + n_y, nc + n_u))
     As, Bs, Cs, Ds = _connect(systems, Q, R, Hm, E)
     return control.ss(As, Bs, Cs, Ds, dt=0)
-

@@ -116,6 +116,7 @@ class ControllerStructure:
 
 # =================================================================== tfN
 
+
 def as_lti(K, n_u, n_y):
     """A python-control LTI controller (a matrix becomes a static gain), sizes checked."""
     if isinstance(K, np.ndarray) or np.isscalar(K):
@@ -154,7 +155,13 @@ def siso_tf(Kij, N: int) -> tuple[np.ndarray, np.ndarray]:
             g = control.minreal(g, verbose=False)
             if g.nstates > N:
                 g = control.balred(g, N, method="matchdc")
-        except (ValueError, np.linalg.LinAlgError, SlycotError, ControlArgument, ControlSlycot) as exc:  # SLICOT reduction failures
+        except (
+            ValueError,
+            np.linalg.LinAlgError,
+            SlycotError,
+            ControlArgument,
+            ControlSlycot,
+        ) as exc:  # SLICOT reduction failures
             raise PolyrobError(f"cannot reduce a controller entry of order {g.nstates} to order {N}: {exc}") from None
         t = control.tf(g)
         num = np.trim_zeros(np.asarray(t.num[0][0], float), "f")

@@ -47,7 +47,6 @@ Examples
 """
 
 from __future__ import annotations
-from __future__ import annotations
 
 import re
 
@@ -111,4 +110,3 @@ def controller_structure(structure, n_u: int, n_y: int) -> ControllerStructure:
         if m := re.fullmatch(r"ss:(\d+)", s):
             return StateSpaceStructure(n_u, n_y, int(m.group(1)))
     raise PolyrobError(f"unknown controller structure {structure!r}; valid: {', '.join(VALID_STRUCTURES)}")
-

@@ -12,7 +12,7 @@ from scipy.optimize import minimize_scalar
 from polyrob.errors import PolyrobError
 from polyrob.synthesis.structure_base import ControllerStructure, as_lti, as_theta
 
-__all__ = ['PIDStructure']
+__all__ = ["PIDStructure"]
 
 
 @dataclass(frozen=True)
@@ -145,7 +145,10 @@ class PIDStructure(ControllerStructure):
         g = self.gains(theta)
         return {
             "theta": as_theta(theta, self.n_params).tolist(),
-            "Kp": g[:, 0].tolist(), "Ki": g[:, 1].tolist(), "Kd": g[:, 2].tolist(), "tau": g[:, 3].tolist(),
+            "Kp": g[:, 0].tolist(),
+            "Ki": g[:, 1].tolist(),
+            "Kd": g[:, 2].tolist(),
+            "tau": g[:, 3].tolist(),
         }
 
 

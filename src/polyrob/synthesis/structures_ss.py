@@ -12,7 +12,7 @@ from slycot.exceptions import SlycotError
 from polyrob.errors import PolyrobError
 from polyrob.synthesis.structure_base import ControllerStructure, as_lti, as_theta
 
-__all__ = ['StateSpaceStructure']
+__all__ = ["StateSpaceStructure"]
 
 
 @dataclass(frozen=True)
@@ -54,8 +54,12 @@ class StateSpaceStructure(ControllerStructure):
         th = as_theta(theta, self.n_params)
         N, m, p = self.N, self.n_u, self.n_y
         k = np.cumsum([0, N * N, N * p, m * N, m * p])
-        return (th[k[0]:k[1]].reshape(N, N), th[k[1]:k[2]].reshape(N, p),
-                th[k[2]:k[3]].reshape(m, N), th[k[3]:k[4]].reshape(m, p))
+        return (
+            th[k[0] : k[1]].reshape(N, N),
+            th[k[1] : k[2]].reshape(N, p),
+            th[k[2] : k[3]].reshape(m, N),
+            th[k[3] : k[4]].reshape(m, p),
+        )
 
     def freqresp(self, theta, omega, *, jac: bool = False):
         s = 1j * np.asarray(omega, dtype=float).ravel()
@@ -66,7 +70,7 @@ class StateSpaceStructure(ControllerStructure):
             XB = CX = None
         else:
             Z = s[:, None, None] * np.eye(N) - A
-            XB = np.linalg.solve(Z, np.broadcast_to(B, (s.size, N, p)))            # (sI-A)^-1 B
+            XB = np.linalg.solve(Z, np.broadcast_to(B, (s.size, N, p)))  # (sI-A)^-1 B
             CX = np.swapaxes(np.linalg.solve(np.swapaxes(Z, 1, 2), np.broadcast_to(C.T, (s.size, N, m))), 1, 2)
             K = C @ XB + D
         if not jac:
@@ -75,16 +79,19 @@ class StateSpaceStructure(ControllerStructure):
         q = 0
         if N:
             # ∂K/∂A_kl = (C X)[:, k] (X B)[l, :]
-            dK[:, q:q + N * N] = (CX[:, :, :, None, None].transpose(0, 2, 3, 1, 4)
-                                  * XB[:, None, :, None, :]).reshape(s.size, N * N, m, p)
+            dK[:, q : q + N * N] = (CX[:, :, :, None, None].transpose(0, 2, 3, 1, 4) * XB[:, None, :, None, :]).reshape(
+                s.size, N * N, m, p
+            )
             q += N * N
             # ∂K/∂B_kl = (C X)[:, k] e_l^T
-            dK[:, q:q + N * p] = (CX.transpose(0, 2, 1)[:, :, None, :, None]
-                                  * np.eye(p)[None, None, :, None, :]).reshape(s.size, N * p, m, p)
+            dK[:, q : q + N * p] = (
+                CX.transpose(0, 2, 1)[:, :, None, :, None] * np.eye(p)[None, None, :, None, :]
+            ).reshape(s.size, N * p, m, p)
             q += N * p
             # ∂K/∂C_kl = e_k (X B)[l, :]
-            dK[:, q:q + m * N] = (np.eye(m)[None, :, None, :, None]
-                                  * XB[:, None, :, None, :]).reshape(s.size, m * N, m, p)
+            dK[:, q : q + m * N] = (np.eye(m)[None, :, None, :, None] * XB[:, None, :, None, :]).reshape(
+                s.size, m * N, m, p
+            )
             q += m * N
         dK[:, q:] = np.eye(m * p).reshape(m * p, m, p)[None]
         return K, dK
@@ -115,7 +122,9 @@ class StateSpaceStructure(ControllerStructure):
             fast = 10.0 * max(1.0, float(np.max(np.abs(np.linalg.eigvals(A))))) if n else 1.0
             rng = np.random.default_rng(0)
             A = np.block([[A, np.zeros((n, extra))], [np.zeros((extra, n)), -fast * np.eye(extra)]])
-            eps = 1e-3 * max(np.max(np.abs(D)), np.max(np.abs(B)) if B.size else 0, np.max(np.abs(C)) if C.size else 0, 1e-6)
+            eps = 1e-3 * max(
+                np.max(np.abs(D)), np.max(np.abs(B)) if B.size else 0, np.max(np.abs(C)) if C.size else 0, 1e-6
+            )
             B = np.vstack([B, eps * rng.standard_normal((extra, self.n_y))])
             C = np.hstack([C, eps * rng.standard_normal((self.n_u, extra))])
         return np.concatenate([A.ravel(), B.ravel(), C.ravel(), D.ravel()])
@@ -140,7 +149,11 @@ class StateSpaceStructure(ControllerStructure):
 
     def describe(self, theta) -> dict:
         A, B, C, D = self.realization(theta)
-        return {"theta": as_theta(theta, self.n_params).tolist(), "A": A.tolist(), "B": B.tolist(),
-                "C": C.tolist(), "D": D.tolist(), "poles": np.linalg.eigvals(A).tolist() if self.N else []}
-
-
+        return {
+            "theta": as_theta(theta, self.n_params).tolist(),
+            "A": A.tolist(),
+            "B": B.tolist(),
+            "C": C.tolist(),
+            "D": D.tolist(),
+            "poles": np.linalg.eigvals(A).tolist() if self.N else [],
+        }

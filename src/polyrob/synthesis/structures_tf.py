@@ -10,7 +10,7 @@ import numpy as np
 from polyrob.errors import PolyrobError
 from polyrob.synthesis.structure_base import ControllerStructure, as_lti, as_theta, siso_tf
 
-__all__ = ['TransferFunctionStructure', 'hurwitz_factors', 'tf_string']
+__all__ = ["TransferFunctionStructure", "hurwitz_factors", "tf_string"]
 
 
 def hurwitz_factors(den: np.ndarray) -> tuple[np.ndarray, list[tuple[float, float]]]:
@@ -34,7 +34,6 @@ def hurwitz_factors(den: np.ndarray) -> tuple[np.ndarray, list[tuple[float, floa
 
 
 @dataclass(frozen=True)
-
 class TransferFunctionStructure(ControllerStructure):
     """Each ``K_ij`` a stable proper transfer function of order ``N`` (``"tfN"``).
 
@@ -196,9 +195,9 @@ class TransferFunctionStructure(ControllerStructure):
                 # compares coefficients of different powers on one footing
                 rho = abs(den[-1]) ** (1.0 / self.N) if self.N else 1.0
                 rho = min(max(rho, 1e-6), 1e6)
-                mag = np.abs(nums[i, j]) * rho ** k
+                mag = np.abs(nums[i, j]) * rho**k
                 ref = max(mag.max(), 1e-12)
-                sc[i, j, self.N :] = np.maximum(mag, 0.05 * ref) / rho ** k
+                sc[i, j, self.N :] = np.maximum(mag, 0.05 * ref) / rho**k
         return sc.ravel()
 
     def describe(self, theta) -> dict:
@@ -216,7 +215,6 @@ class TransferFunctionStructure(ControllerStructure):
         return out
 
 
-
 def tf_string(num, den) -> str:
     def poly(p):
         n = len(p) - 1
@@ -230,4 +228,3 @@ def tf_string(num, den) -> str:
         return " + ".join(terms).replace("+ -", "- ") if terms else "0"
 
     return f"({poly(num)}) / ({poly(den)})"
-
