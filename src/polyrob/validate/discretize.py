@@ -195,6 +195,20 @@ class SampledDataResult:
                 "mu_upper": self.mu_upper, "mu_lower": self.mu_lower, "peak_frequency": self.peak_frequency}
 
 
+def _mu_curve(sys, blk, w, upper_only, mu_options):
+    """μ bounds on the grid: both (mu_bounds) or the upper bound alone (mussv per point, no lower-bound search)."""
+    from polyrob.analysis.mu import mu_bounds, mussv
+    from polyrob.validate.monte_carlo import frequency_response
+
+    if not upper_only:
+        mu = mu_bounds(sys, blk, w, **{"refine_peak": False, "progress": False, **mu_options})
+        return mu.omega, mu.upper, mu.lower
+    H = frequency_response(sys, w)
+    up = np.array([mussv(H[k], blk, lower=False).upper if np.all(np.isfinite(H[k])) else np.inf
+                   for k in range(len(w))])
+    return np.asarray(w, float), up, np.full(len(w), np.nan)
+
+
 def _grid(omega, rate):
     nyq = math.pi * rate
     w = np.asarray(omega, float)
@@ -212,6 +226,7 @@ def sampled_data_mu(
     omega=None,
     performance: bool = True,
     controller: DiscreteController | control.StateSpace | None = None,
+    upper_only: bool = False,
     **mu_options,
 ) -> SampledDataResult:
     """Stability and μ of ``K`` discretised at ``rate`` Hz around ``P`` discretised by ZOH.
@@ -226,7 +241,7 @@ def sampled_data_mu(
     method : {"tustin", "zoh"}
     prewarp : float, "crossover" or None
         Tustin pre-warping frequency; ``"crossover"`` uses the nominal loop's
-        gain crossover (capped at half the Nyquist frequency).
+        gain crossover (capped at half the Nyquist frequency); ignored for ZOH.
     omega : array_like, optional
         Frequencies (rad/s); those at or above Nyquist are dropped.  Default:
         60 points log-spaced from 1e-3 rad/s to Nyquist.
@@ -236,16 +251,19 @@ def sampled_data_mu(
     controller : DiscreteController or discrete StateSpace, optional
         Use this discrete controller (e.g. a quantised one) instead of
         discretising ``K``.
+    upper_only : bool
+        Only the upper bound (``mussv`` per frequency, no lower-bound
+        search; ``lower`` is NaN): what the rate and word-length searches need.
     **mu_options
         Passed to :func:`~polyrob.analysis.mu.mu_bounds` (default ``refine_peak=False``).
     """
-    from polyrob.analysis.mu import mu_bounds
-
     if not (hasattr(P, "system") and hasattr(P, "block_structure_rp")):
         raise PolyrobError(f"sampled_data_mu needs a GeneralizedPlant, got {type(P).__name__}")
     h = 1.0 / float(rate)
     if controller is None:
-        if prewarp == "crossover":
+        if method != "tustin":
+            prewarp = None
+        elif prewarp == "crossover":
             wc = crossover_frequency(P.uncertain.nominal_system(), K)
             prewarp = float(min(wc, 0.5 * math.pi * rate))
         dc = discretize(K, rate, method=method, prewarp=prewarp)
@@ -268,8 +286,9 @@ def sampled_data_mu(
         sys, blk = N[P.output_slices["v"], P.input_slices["d"]], P.block_structure_rs
     stable = rho < 1.0
     if stable:
-        mu = mu_bounds(sys, blk, w, **{"refine_peak": False, "progress": False, **mu_options})
-        up, lo, pk, ww, uu, ll = mu.peak_upper, mu.peak_lower, mu.peak_upper_frequency, mu.omega, mu.upper, mu.lower
+        ww, uu, ll = _mu_curve(sys, blk, w, upper_only, mu_options)
+        k = int(np.argmax(uu))
+        up, lo, pk = float(uu[k]), float(np.nanmax(ll)) if not upper_only else float("nan"), float(ww[k])
     else:  # an unstable loop has no finite μ certificate
         up, lo, pk, ww, uu, ll = np.inf, np.inf, float("nan"), w, np.full(w.size, np.inf), np.full(w.size, np.inf)
     return SampledDataResult(
@@ -302,9 +321,8 @@ class MinRateResult:
                 "history": [list(h) for h in self.history]}
 
 
-def continuous_mu(P, K, omega=None, *, performance: bool = True, **mu_options) -> float:
+def continuous_mu(P, K, omega=None, *, performance: bool = True, upper_only: bool = True, **mu_options) -> float:
     """Peak μ upper bound of the continuous loop on ``omega`` (same options as the discrete check)."""
-    from polyrob.analysis.mu import mu_bounds
     from polyrob.plant.generalized import lft
 
     N = lft(P, K)
@@ -313,7 +331,7 @@ def continuous_mu(P, K, omega=None, *, performance: bool = True, **mu_options) -
         sys, blk = N, P.block_structure_rp
     else:
         sys, blk = N[P.output_slices["v"], P.input_slices["d"]], P.block_structure_rs
-    return float(mu_bounds(sys, blk, w, **{"refine_peak": False, "progress": False, **mu_options}).peak_upper)
+    return float(np.max(_mu_curve(sys, blk, w, upper_only, mu_options)[1]))
 
 
 def min_sample_rate(
@@ -351,7 +369,7 @@ def min_sample_rate(
     history = []
 
     def passes(rate):
-        res = sampled_data_mu(P, K, rate, method=method, omega=omega, **options)
+        res = sampled_data_mu(P, K, rate, method=method, omega=omega, **{"upper_only": True, **options})
         ok = res.stable and res.mu_upper <= threshold
         history.append((float(rate), float(res.mu_upper), bool(res.stable), bool(ok)))
         return ok, res.mu_upper

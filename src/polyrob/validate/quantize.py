@@ -323,7 +323,8 @@ def min_word_length(P, sos: SOSController, *, threshold: float, lengths=(4, 40),
 
     def check(W):
         q = quantize(sos, W)
-        res = sampled_data_mu(P, None, sos.rate, controller=q.to_ss(), omega=omega, **mu_options)
+        res = sampled_data_mu(P, None, sos.rate, controller=q.to_ss(), omega=omega,
+                              **{"upper_only": True, **mu_options})
         ok = res.stable and res.mu_upper <= threshold
         history.append((int(W), float(res.mu_upper), bool(res.stable), bool(ok)))
         return ok, res.mu_upper, q

@@ -1,0 +1,79 @@
+"""Discretisation and quantisation of the paper's fixed-structure controller K*, as JSON.
+
+    python benchmarks/validation.py [--rate HZ] [--grid N]
+
+On the paper's problem (``paper_2r --domain paper``, the paper's weights, the
+box of 10 real parameters): the peak μ of the continuous loop on a grid,
+the lowest sample rate whose discretised loop (plant by ZOH, K* by Tustin
+pre-warped at the loop crossover, and by ZOH) keeps μ within 5 %, the
+shortest coefficient word length (biquads per entry) at that rate and at
+``--rate``, and whether the generated C reproduces the Python controller.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--rate", type=float, default=1000.0)
+    ap.add_argument("--grid", type=int, default=30)
+    args = ap.parse_args()
+
+    import polyrob
+    from polyrob.plant.weights import paper_weights
+    from polyrob.validate.discretize import continuous_mu, min_sample_rate, sampled_data_mu
+    from polyrob.validate.export_c import write_c
+    from polyrob.validate.quantize import min_word_length, sos_realization
+
+    t0 = time.perf_counter()
+    pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=512, coverage=0, progress=False)
+    P = polyrob.generalized_plant(polyrob.uncertain_plant(pldi), *paper_weights())
+    K = polyrob.paper_controller()
+    w = np.logspace(-3, 3.5, args.grid)
+    out = {"problem": "paper_2r --domain paper, paper weights, box (10 real parameters), controller K*",
+           "grid_points": args.grid}
+    t = time.perf_counter()
+    mu_c = continuous_mu(P, K, w)
+    out["mu_continuous_grid"] = mu_c
+    for method in ("tustin", "zoh"):
+        mr = min_sample_rate(P, K, mu_continuous=mu_c, omega=w, method=method, rate_bounds=(1.0, 1e5), rel_tol=0.02)
+        out[f"min_rate_{method}"] = mr.summary()
+    out["seconds_rate_search"] = round(time.perf_counter() - t, 1)
+    for label, rate in (("at_min_rate", out["min_rate_tustin"]["min_rate_hz"]), ("at_rate", args.rate)):
+        if rate is None:
+            continue
+        sd = sampled_data_mu(P, K, rate, omega=w)
+        sos = sos_realization(sd.controller)
+        t = time.perf_counter()
+        wl = min_word_length(P, sos, threshold=1.05 * mu_c, omega=w, lengths=(8, 48))
+        out[f"word_length_{label}"] = {"rate_hz": rate, "mu_discrete": sd.mu_upper, **wl.summary(),
+                                       "seconds": round(time.perf_counter() - t, 1)}
+    cc = shutil.which("cc")
+    if cc:
+        sos = sos_realization(sampled_data_mu(P, K, args.rate, omega=w[:3]).controller)
+        d = Path(tempfile.mkdtemp())
+        write_c(sos, d)
+        (d / "m.c").write_text('#include <stdio.h>\n#include "controller.h"\nint main(void){controller_state_t s;'
+                               'double e[2]={1.0,0.0},u[2];int k;controller_reset(&s);for(k=0;k<1000;++k){'
+                               'controller_step(&s,e,u);printf("%.17g %.17g\\n",u[0],u[1]);}return 0;}\n')
+        subprocess.run([cc, "-std=c99", "-Wall", "-Werror", "-o", str(d / "h"), str(d / "m.c"), str(d / "controller.c")],
+                       check=True)
+        c_out = np.loadtxt(subprocess.run([str(d / "h")], capture_output=True, text=True, check=True).stdout.splitlines())
+        py = sos.run(np.vstack([np.ones(1000), np.zeros(1000)])).T
+        out["c_vs_python_max_rel_diff"] = float(np.max(np.abs(c_out - py) / np.maximum(1, np.abs(py))))
+    out["seconds_total"] = round(time.perf_counter() - t0, 1)
+    print(json.dumps(out, indent=1))
+
+
+if __name__ == "__main__":
+    main()
