@@ -2,18 +2,20 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
+import control
 import numpy as np
 import pytest
+from conftest import paper_pldi
 
 import polyrob
-from polyrob.cli import main
-from polyrob.plant.generalized import closed_loop
 from polyrob.analysis.robust import nominal_performance, robperf, robstab, sample_stability
+from polyrob.analysis.stability import stability_verdict
+from polyrob.cli import main
+from polyrob.plant.generalized import closed_loop, lft, nominal_closed_loop
 from polyrob.plant.weights import paper_weights
-
-from conftest import paper_pldi
 
 OMEGA = np.logspace(-1, 2, 25)
 
@@ -28,15 +30,19 @@ def paper():
 def test_paper_controller_robust_stability_is_not_certified(paper):
     unc, P, K = paper
     rs = robstab(P, K, omega=OMEGA)
-    assert rs.nominally_stable
+    assert rs.nominally_stable and rs.stability.verdict == "stable"
     assert rs.mu_lower <= rs.mu_upper + 1e-9
     # the lower bound exceeds 1: a destabilising perturbation inside the box
     assert 1.4 < rs.mu_lower and rs.mu_upper < 1.9
-    assert rs.margin_lower == pytest.approx(1 / rs.mu_upper)
-    # the perturbation the lower bound returns puts a closed-loop pole on the jw axis
+    assert not rs.robust and len(rs.failed) == 1 and "mu upper bound" in rs.failed[0]
+    # the perturbation the lower bound returns has size 1/mu_lower and puts a
+    # closed-loop pole on the jw axis, checked on the plant G(delta) itself
+    assert np.max(np.abs(rs.worst_delta)) == pytest.approx(1 / rs.mu_lower, rel=1e-6)
     cl = closed_loop(unc, K, rs.worst_delta)
     assert abs(cl.poles.real.max()) < 1e-6
-    assert np.max(np.abs(rs.worst_delta)) == pytest.approx(1 / rs.mu_lower, rel=1e-6)
+    # ... and 2 % more of it, still inside the box, destabilises the loop
+    assert np.max(np.abs(1.02 * rs.worst_delta)) < 1
+    assert stability_verdict(closed_loop(unc, K, 1.02 * rs.worst_delta).system).verdict == "unstable"
 
 
 def test_paper_controller_robust_performance_bounds(paper):
@@ -49,7 +55,53 @@ def test_paper_controller_robust_performance_bounds(paper):
 
 def test_paper_controller_nominal_performance_is_met(paper):
     _, P, K = paper
-    assert nominal_performance(P, K) < 1.0
+    gamma = nominal_performance(P, K)
+    assert gamma < 1.0
+    # independent: the largest singular value of w -> z on a dense grid, from the
+    # upper LFT at the nominal delta (never above the H-inf norm, close to it)
+    N = lft(P.at(P.uncertain.nominal_delta, strict=False), K, n_u=P.n_u, n_y=P.n_y)
+    w = np.logspace(-3, 3, 2001)
+    H = np.moveaxis(np.asarray(N(1j * w, squeeze=False)), -1, 0)
+    peak = max(np.linalg.norm(h, 2) for h in H)
+    assert peak <= gamma * (1 + 1e-9) and peak == pytest.approx(gamma, rel=1e-3)
+
+
+def _with_unstable_hidden_mode(K):
+    """K with an extra state at +1 that neither input nor output sees: same transfer function."""
+    Ks = control.ss(K)
+    n = Ks.nstates
+    A = np.block([[Ks.A, np.zeros((n, 1))], [np.zeros((1, n)), np.ones((1, 1))]])
+    B = np.vstack([Ks.B, np.zeros((1, Ks.ninputs))])
+    C = np.hstack([Ks.C, np.zeros((Ks.noutputs, 1))])
+    return control.ss(A, B, C, Ks.D)
+
+
+def test_nominal_performance_of_an_unstable_loop_is_infinite(paper):
+    _, P, K = paper
+    Kbad = _with_unstable_hidden_mode(K)
+    N = lft(P.at(P.uncertain.nominal_delta, strict=False), Kbad, n_u=P.n_u, n_y=P.n_y)
+    # what the old check read: python-control returns a finite norm for an unstable loop
+    assert np.isfinite(control.linfnorm(N)[0]) and control.linfnorm(N)[0] < 1
+    assert stability_verdict(N).verdict == "unstable"
+    assert nominal_performance(P, Kbad) == np.inf
+
+
+def test_loop_unstable_at_delta0_with_small_mu_is_not_robust(paper):
+    """The LFT centre (interval midpoints) matters, not the equilibrium plant."""
+    unc, _, K = paper
+    A = np.array(unc.A_mid, dtype=float)
+    A[2, 0] += 20.0  # negative stiffness at the centre of the box only
+    A[3, 1] += 20.0
+    # a box 10x smaller than the paper's: mu far below 1
+    u2 = dataclasses.replace(unc, A_mid=A, B_d=0.1 * np.asarray(unc.B_d))
+    P2 = polyrob.generalized_plant(u2, *paper_weights())
+    assert nominal_closed_loop(u2, K).stable  # the equilibrium loop is unchanged and stable
+    rs = robstab(P2, K, omega=OMEGA, refine_peak=False)
+    assert rs.mu_upper < 0.5 and rs.nominally_stable
+    assert rs.stability.verdict == "unstable" and rs.stability.abscissa > 0.1
+    assert not rs.robust
+    assert rs.failed == (f"lft(P, K) at Delta = 0 not proved stable ({rs.stability})",)
+    assert "unstable" in rs.covers and "peak mu on a grid of" in rs.covers
 
 
 def test_monte_carlo_and_corners_find_unstable_plants(paper):
@@ -58,6 +110,7 @@ def test_monte_carlo_and_corners_find_unstable_plants(paper):
     assert s.corners == 1024
     assert 0.80 < s.corners_stable < 0.90  # about 16 % of the corners are unstable
     assert s.worst_abscissa > 5  # a real pole near +9.3
+    assert s.undecided == 0
     # the worst corner: every a-entry at its upper bound, every b-entry at its lower
     np.testing.assert_array_equal(s.worst_delta, [1, 1, 1, 1, 1, 1, -1, -1, -1, -1])
 
