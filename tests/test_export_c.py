@@ -26,17 +26,17 @@ int main(void)
     for (j = 0; j < CONTROLLER_N_INPUTS; ++j) {
         controller_state_t st;
         controller_reset(&st);
-        for (k = 0; k < %d; ++k) {
+        for (k = 0; k < N_STEPS; ++k) {
             double e[CONTROLLER_N_INPUTS] = {0};
             double u[CONTROLLER_N_OUTPUTS];
             e[j] = 1.0;
             controller_step(&st, e, u);
-            for (i = 0; i < CONTROLLER_N_OUTPUTS; ++i) printf("%%.17g\n", u[i]);
+            for (i = 0; i < CONTROLLER_N_OUTPUTS; ++i) printf("%.17g\n", u[i]);
         }
     }
     return 0;
 }
-""" % N_STEPS
+""".replace("N_STEPS", str(N_STEPS))
 
 
 def _run_c(sos, tmp_path):

@@ -20,7 +20,7 @@ FIXTURE = Path(__file__).parent / "fixtures" / "validate_planar_2r_K.json"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _paper():
     from polyrob.plant.weights import paper_weights
 

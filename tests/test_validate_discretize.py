@@ -16,7 +16,7 @@ from polyrob.validate.quantize import min_word_length, quantize, sos_realization
 GRID = np.logspace(-2, 3, 10)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _P():
     from polyrob.plant.weights import paper_weights
 

@@ -12,7 +12,7 @@ import polyrob
 from polyrob.validate.monte_carlo import frequency_response, monte_carlo, weight_shape
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _problem():
     from polyrob.plant.weights import paper_weights
 
@@ -21,7 +21,7 @@ def _problem():
     return unc, polyrob.generalized_plant(unc, *paper_weights()), paper_weights()
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _mc():
     unc, P, _ = _problem()
     return monte_carlo(P, polyrob.paper_controller(), n=4, seed=3, omega=np.logspace(-2, 3, 50),

@@ -16,7 +16,7 @@ from polyrob.validate.simulate import equilibrium_torque, simulate, smooth_refer
 FIXTURE = Path(__file__).parent / "fixtures" / "validate_planar_2r_K.json"
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _setup():
     robot = polyrob.load_robot("planar_2r")
     return robot, polyrob.Domain.from_robot(robot), load_controller(FIXTURE)

@@ -31,6 +31,7 @@ Examples
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -39,7 +40,7 @@ from polyrob.errors import PolyrobError
 from polyrob.io.atomic import atomic_write, json_default
 from polyrob.validate.quantize import SOSController
 
-__all__ = ["write_c", "write_json", "c_sources"]
+__all__ = ["write_c", "write_json", "c_sources", "export_controller", "ExportResult"]
 
 
 def _num(x: float, real: str) -> str:
@@ -85,7 +86,7 @@ void {name}_step({name}_state_t *state, const {real} e[{P}_N_INPUTS], {real} u[{
 """
     rows, ent = [], []
     k = 0
-    for idx, (i, j, secs) in enumerate(entries):
+    for i, j, secs in entries:
         ent.append(f"    {{{i}, {j}, {k}, {secs.shape[0]}}}")
         for n, s in enumerate(secs):
             coefs = [s[0], s[1], s[2], s[4], s[5]]
@@ -167,3 +168,46 @@ def write_json(sos: SOSController, path, *, discrete=None, extra: dict | None = 
         doc.update(extra)
     atomic_write(path, lambda f: f.write(json.dumps(doc, indent=1, default=json_default)))
     return path
+
+
+@dataclass(frozen=True, eq=False)
+class ExportResult:
+    """What :func:`export_controller` wrote and the controller it wrote."""
+
+    header: Path
+    source: Path
+    json: Path
+    sos: SOSController
+    discrete: object
+
+    def summary(self) -> dict:
+        return {"header": str(self.header), "source": str(self.source), "json": str(self.json),
+                "rate_hz": self.sos.rate, "word_length": self.sos.word_length, "sections": self.sos.n_sections,
+                "method": self.discrete.method, "prewarp_rad_s": self.discrete.prewarp}
+
+
+def export_controller(K, rate: float, out_dir, *, word_length: int | None = None, method: str = "tustin",
+                      prewarp: float | None = None, real: str = "double", name: str = "controller",
+                      extra: dict | None = None) -> ExportResult:
+    """``polyrob export``: discretise ``K`` at ``rate`` Hz, biquads per entry, optional quantisation, C + JSON.
+
+    Writes ``out_dir/<name>.h``, ``out_dir/<name>.c`` and ``out_dir/<name>.json``.
+
+    Examples
+    --------
+    >>> import tempfile, polyrob
+    >>> from polyrob.validate.export_c import export_controller
+    >>> res = export_controller(polyrob.paper_controller(), 1000.0, tempfile.mkdtemp(), word_length=24, prewarp=10.0)
+    >>> res.header.name, res.sos.word_length, res.sos.n_sections
+    ('controller.h', 24, 8)
+    """
+    from polyrob.validate.discretize import discretize
+    from polyrob.validate.quantize import quantize, sos_realization
+
+    dc = discretize(K, rate, method=method, prewarp=prewarp)
+    sos = sos_realization(dc)
+    if word_length is not None:
+        sos = quantize(sos, word_length)
+    h, c = write_c(sos, out_dir, name=name, real=real)
+    j = write_json(sos, Path(out_dir) / f"{name}.json", discrete=dc, extra=extra)
+    return ExportResult(header=h, source=c, json=j, sos=sos, discrete=dc)

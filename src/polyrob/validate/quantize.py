@@ -149,7 +149,7 @@ class SOSController:
         }
 
     @classmethod
-    def from_dict(cls, data: dict) -> "SOSController":
+    def from_dict(cls, data: dict) -> SOSController:
         sections = tuple(tuple(np.asarray(s, float).reshape(-1, 6) for s in row) for row in data["sections"])
         fb = data.get("frac_bits")
         formats = None if fb is None else tuple(tuple(np.asarray(f, int).reshape(-1, 2) for f in row) for row in fb)
