@@ -1,0 +1,152 @@
+"""``polyrob batch``: the pipeline for many robots, locally in processes or on a Dask cluster.
+
+Thin: the options become jobs and settings for :func:`polyrob.fleet.run_batch`,
+whose rows are printed as a table (or, with ``--json``, its summary
+document).  Exit status 0 when every robot ran, 1 when some robot failed
+(its row says why), 2 for a user error, 130 on Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import json
+
+from polyrob.cli.common import Output, add_output_flags
+from polyrob.cli.options import (
+    int_at_least,
+    nonnegative_float,
+    parse_frequencies,
+    parse_joint_values,
+    parse_list,
+    positive_float,
+)
+from polyrob.errors import ArgumentError
+
+__all__ = ["register", "jobs_from_args", "settings_from_args"]
+
+
+def _jobs_file(path: str) -> list:
+    try:
+        with open(path, encoding="utf-8") as f:
+            doc = json.load(f)
+    except (OSError, ValueError) as exc:
+        raise ArgumentError(f"--jobs {path}: cannot read a JSON list of jobs ({exc})") from None
+    if not isinstance(doc, list):
+        raise ArgumentError(f"--jobs {path}: give a JSON list of jobs (robot names or objects with 'robot')")
+    return doc
+
+
+def jobs_from_args(args) -> list:
+    """Robot names / job mappings from the positional robots, ``--all-serial`` and ``--jobs``."""
+    from polyrob.fleet.batch import serial_arms
+
+    names = list(args.robots)
+    if args.all_serial:
+        names += [n for n in serial_arms() if n not in names]
+    common = {
+        "domain": args.domain,
+        "q_range": parse_joint_values(args.q_range, "--q-range", ranges=True),
+        "qdot_max": parse_joint_values(args.qdot_max, "--qdot-max", ranges=False),
+        "u_max": parse_joint_values(args.u_max, "--u-max", ranges=False),
+        "qdot_scale": args.qdot_scale,
+        "u_scale": args.u_scale,
+        "auto_weights": not args.paper_weights,
+        "bandwidth_scale": args.bandwidth_scale,
+        "uncertainty": args.uncertainty,
+    }
+    common = {k: v for k, v in common.items() if v is not None}
+    jobs = [dict(common, robot=n) for n in names]
+    if args.jobs:
+        for item in _jobs_file(args.jobs):
+            jobs.append(dict(common, robot=item) if isinstance(item, str) else dict(common, **item))
+    if not jobs:
+        raise ArgumentError("give robots (e.g. `polyrob batch planar_2r panda`), --all-serial or --jobs FILE")
+    return jobs
+
+
+def settings_from_args(args) -> dict:
+    """Keyword options of :func:`polyrob.fleet.run_batch` shared by every robot."""
+    synthesis = {"structure": args.structure}
+    if args.max_iter is not None:
+        synthesis["max_iter"] = args.max_iter
+    bound_options = {} if args.samples is None else {"samples": args.samples}
+    return {
+        "bound_options": bound_options, "synthesis": synthesis, "omega": parse_frequencies(args.omega),
+        "search_bandwidth": args.max_bandwidth, "alphas": parse_list(args.alphas, "--alphas"),
+        "analyze": not args.no_analysis, "mc": args.mc, "validate": not args.no_validate,
+    }
+
+
+def _fmt(value, spec: str = ".4g") -> str:
+    return "-" if value is None else format(value, spec)
+
+
+def cmd_batch(args) -> int:
+    from polyrob.fleet import run_batch
+
+    out = Output(args, stages=1)
+    if args.output:
+        from pathlib import Path
+
+        from polyrob.io.paths import check_output_path
+
+        check_output_path(Path(args.output) / "summary.json", "-o")
+    jobs = jobs_from_args(args)
+    options = settings_from_args(args)
+    if args.workers < 1:
+        raise ArgumentError(f"-j must be >= 1, got {args.workers}")
+    where = f"Dask scheduler {args.scheduler}" if args.scheduler else f"{args.workers} local worker(s)"
+    out.stage(f"{len(jobs)} robot(s) on {where}")
+    res = run_batch(jobs, workers=args.workers, scheduler=args.scheduler, out_dir=args.output,
+                    progress=not out.quiet, **options)
+    doc = res.summary()
+    if args.output:
+        doc["files"] = res.files
+    out.document(doc)
+    out.line(f"{'robot':<22}{'joints':>7}{'params':>8}{'mu':>10}{'order':>7}{'alpha':>8}{'time s':>9}  result")
+    for r in res.results:
+        result = ("certified" if r.certified else "not certified") if r.ok else f"FAILED {r.error}: {r.message}"
+        if r.ok and r.validation:
+            result += f"; validation: {r.validation}"
+        out.line(f"{r.name:<22}{_fmt(r.joints, 'd'):>7}{_fmt(r.parameters, 'd'):>8}{_fmt(r.mu_upper):>10}"
+                 f"{_fmt(r.order, 'd'):>7}{_fmt(r.alpha):>8}{r.seconds:>9.1f}  {result}")
+    out.line(f"{len(res.certified)} of {len(res.results)} certified, {len(res.failed)} failed, "
+             f"{res.seconds:.1f} s on {res.executor}")
+    if args.output:
+        out.line(f"wrote {res.files['summary']['markdown']} and one folder per robot in {args.output}")
+    return 1 if res.failed else 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("batch", help="bounds -> synthesis -> analysis for many robots, locally or on a Dask cluster")
+    p.add_argument("robots", nargs="*", help="robot names or URDF paths")
+    p.add_argument("--all-serial", action="store_true", help="every serial arm polyrob knows (polyrob.fleet.SERIAL_ARMS)")
+    p.add_argument("--jobs", default=None, help="JSON list of jobs: robot names or objects of polyrob.fleet.Job fields")
+    p.add_argument("-j", "--workers", type=int_at_least(1), default=1, help="local worker processes")
+    p.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://HOST:8786) instead of local workers")
+    p.add_argument("-o", "--output", default=None,
+                   help="folder: per robot a controller file and certificate, summary.json and summary.md")
+    g = p.add_argument_group("domain (every robot)")
+    g.add_argument("--domain", default=None, help="a named domain of the robots or a domain file")
+    g.add_argument("--q-range", default=None, help="position range, e.g. -pi:pi")
+    g.add_argument("--qdot-max", default=None, help="velocity bound >= 0")
+    g.add_argument("--u-max", default=None, help="torque bound >= 0")
+    g.add_argument("--qdot-scale", type=nonnegative_float, default=1.0, help="scale the velocity box")
+    g.add_argument("--u-scale", type=nonnegative_float, default=1.0, help="scale the torque box")
+    g = p.add_argument_group("weights and model")
+    g.add_argument("--paper-weights", action="store_true",
+                   help="the paper's weights (default: automatic, from the joint count and the domain)")
+    g.add_argument("--bandwidth-scale", type=positive_float, default=1.0, help="multiply both bandwidths")
+    g.add_argument("--max-bandwidth", action="store_true",
+                   help="search the largest bandwidth factor with certified mu < 1 (a synthesis per factor)")
+    g.add_argument("--alphas", default=None, help="--max-bandwidth: comma-separated factors to scan")
+    g.add_argument("--uncertainty", default="auto", choices=["auto", "box", "axes", "lft"], help="uncertainty model")
+    g = p.add_argument_group("work per robot")
+    g.add_argument("--samples", type=int_at_least(2), default=None, help="bounds: Sobol' positions")
+    g.add_argument("--structure", default="full", help="controller structure (full, tfN, pid, ss:N)")
+    g.add_argument("--max-iter", type=int_at_least(1), default=None, help="D-K iterations")
+    g.add_argument("--omega", default=None, help="frequency grid LO:HI:N (rad/s) of synthesis and analysis")
+    g.add_argument("--mc", type=int_at_least(1), default=200, help="Monte Carlo parameter sets in the analysis")
+    g.add_argument("--no-analysis", action="store_true", help="skip the mu analysis after the synthesis")
+    g.add_argument("--no-validate", action="store_true", help="skip the nonlinear closed-loop step")
+    add_output_flags(p)
+    p.set_defaults(func=cmd_batch)

@@ -1,0 +1,348 @@
+"""One robot of a batch: what to do (:class:`Job`, :class:`Settings`), doing it (:func:`run_job`), what came out.
+
+:func:`run_job` is the unit of work a batch sends to a worker process or a
+Dask worker: a module-level function of two small frozen, picklable objects,
+returning a picklable :class:`RobotResult` (the controller travels back as
+plain arrays, :func:`controller_data`, since python-control systems hold
+lambdas; files are written by the caller, which may be on another machine
+than the worker).  It never raises for a robot's own
+failure: the error class and its one-line message are recorded instead, so
+one robot cannot stop the others.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import PurePath
+
+from polyrob.errors import ArgumentError
+
+__all__ = ["Job", "Settings", "RobotResult", "run_job", "as_job"]
+
+
+@dataclass(frozen=True)
+class Job:
+    """A robot and its domain / weight options.
+
+    Attributes
+    ----------
+    robot : str
+        A name :func:`polyrob.load_robot` accepts, or a URDF path.
+    domain : str, optional
+        A named domain of the robot (e.g. ``"paper"``) or a domain file.
+    q_range, qdot_max, u_max : optional
+        As :meth:`polyrob.Domain.from_robot` takes them (a number or a pair
+        applies to every joint; a mapping names joints).
+    qdot_scale, u_scale : float
+    weights : dict, optional
+        Weight hyperparameter overrides (``key -> sequence`` of 1 or ``m``).
+    auto_weights : bool
+        Weights from :func:`polyrob.fleet.automatic_hyperparameters` (joint
+        count and domain); ``False``: the paper's (as ``polyrob run``).
+    bandwidth_scale : float
+        Multiplies both bandwidths after the weights are chosen.
+    uncertainty : str
+        Uncertainty model (``"auto"``, ``"box"``, ...).
+    lock : tuple of str, optional
+        Joints to lock (default: the loader's).
+    label : str, optional
+        Name of the result (default the robot's); must be unique in a batch.
+    """
+
+    robot: str
+    domain: str | None = None
+    q_range: object = None
+    qdot_max: object = None
+    u_max: object = None
+    qdot_scale: float = 1.0
+    u_scale: float = 1.0
+    weights: dict | None = None
+    auto_weights: bool = True
+    bandwidth_scale: float = 1.0
+    uncertainty: str = "auto"
+    lock: tuple | None = None
+    label: str | None = None
+
+    @property
+    def name(self) -> str:
+        """The label, else the robot name (a URDF path's file stem)."""
+        if self.label:
+            return self.label
+        text = str(self.robot)
+        return PurePath(text).stem if text.lower().endswith(".urdf") else text
+
+    def to_dict(self) -> dict:
+        return {k: v for k, v in self.__dict__.items() if v is not None}
+
+
+def as_job(item) -> Job:
+    """A :class:`Job` from a job, a robot name, or a mapping of :class:`Job` fields."""
+    if isinstance(item, Job):
+        return item
+    if isinstance(item, str):
+        return Job(robot=item)
+    if isinstance(item, dict):
+        unknown = sorted(set(item) - set(Job.__dataclass_fields__))
+        if unknown or "robot" not in item:
+            raise ArgumentError(f"a job needs 'robot' and takes only {sorted(Job.__dataclass_fields__)}; "
+                                f"got {sorted(item)}")
+        item = dict(item)
+        if item.get("lock") is not None:
+            item["lock"] = tuple(item["lock"])
+        return Job(**item)
+    raise ArgumentError(f"a job is a robot name, a mapping or a Job, not {type(item).__name__}")
+
+
+@dataclass(frozen=True)
+class Settings:
+    """What every job of a batch shares (bounding, synthesis, analysis options).
+
+    Attributes
+    ----------
+    bound_options : dict
+        Passed to :func:`polyrob.bound_pldi` (``workers`` defaults to 1 here:
+        the batch already runs robots side by side).
+    synthesis : dict
+        Passed to :func:`polyrob.pipeline.synthesis_options` (``structure``,
+        ``max_iter``, ...).
+    omega : (lo, hi, n), optional
+        Frequency grid of the synthesis and the analysis (default: automatic).
+    search_bandwidth : bool
+        Find the largest bandwidth factor with certified μ < 1
+        (:func:`polyrob.pipeline.design_max_bandwidth`) instead of one synthesis.
+    alphas : tuple of float, optional
+        The factors the search scans (default its own).
+    analyze : bool
+        μ analysis of the controller (robust stability/performance, sampling).
+    mc : int
+        Monte Carlo parameter sets of the analysis.
+    validate : bool
+        Nonlinear closed-loop simulation of a small step
+        (:func:`polyrob.validate.simulate.simulate`).
+    validate_step : float
+        The step, as a fraction of each joint's half position range.
+    validate_time : float
+        Simulated seconds.
+    """
+
+    bound_options: dict = field(default_factory=dict)
+    synthesis: dict = field(default_factory=dict)
+    omega: tuple | None = None
+    search_bandwidth: bool = False
+    alphas: tuple | None = None
+    analyze: bool = True
+    mc: int = 200
+    validate: bool = True
+    validate_step: float = 0.02
+    validate_time: float = 20.0
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass(frozen=True, eq=False)
+class RobotResult:
+    """What one job gave (or why it failed).
+
+    ``ok`` is False when the job raised; then ``error`` is the exception
+    class name and ``message`` its one line, and the figures are ``None``.
+    ``mu_upper`` / ``mu_lower`` are the synthesis certificate's peak bounds
+    (the analysis' when it ran); ``certified`` is ``mu_upper < 1`` with a
+    nominally stable loop.  ``validation`` is the nonlinear simulation's
+    verdict line when it ran (``None`` otherwise).
+    """
+
+    name: str
+    robot: str
+    ok: bool
+    error: str | None = None
+    message: str | None = None
+    joints: int | None = None
+    entries: int | None = None
+    parameters: int | None = None
+    model: str | None = None
+    enclosure: str | None = None
+    mu_upper: float | None = None
+    mu_lower: float | None = None
+    certified: bool | None = None
+    order: int | None = None
+    alpha: float | None = None
+    verdict: str | None = None
+    validation: str | None = None
+    seconds: float = 0.0
+    timings: dict = field(default_factory=dict)
+    controller: dict | None = None
+    certificate: dict = field(default_factory=dict)
+    problem: dict = field(default_factory=dict)
+    details: dict = field(default_factory=dict)
+
+    def controller_system(self):
+        """The controller as a python-control system (``None`` for a failed job)."""
+        return None if self.controller is None else controller_system(self.controller)
+
+    def row(self) -> dict:
+        """The summary table's row (JSON-ready)."""
+        keys = ("name", "robot", "ok", "error", "message", "joints", "entries", "parameters", "model",
+                "enclosure", "mu_upper", "mu_lower", "certified", "order", "alpha", "verdict", "validation")
+        out = {k: getattr(self, k) for k in keys}
+        out["seconds"] = round(float(self.seconds), 2)
+        out["timings"] = {k: round(float(v), 2) for k, v in self.timings.items()}
+        return out
+
+
+def controller_data(K) -> dict:
+    """A controller as plain arrays (python-control systems do not pickle: they hold lambdas)."""
+    import control
+    import numpy as np
+
+    if isinstance(K, control.TransferFunction):
+        return {"type": "tf", "num": [[np.asarray(K.num[i][j], float) for j in range(K.ninputs)]
+                                      for i in range(K.noutputs)],
+                "den": [[np.asarray(K.den[i][j], float) for j in range(K.ninputs)] for i in range(K.noutputs)]}
+    K = control.ss(K)
+    return {"type": "ss", **{k: np.asarray(getattr(K, k), float) for k in "ABCD"}}
+
+
+def controller_system(data: dict):
+    """The python-control system of :func:`controller_data`."""
+    import control
+
+    if data["type"] == "tf":
+        return control.tf(data["num"], data["den"])
+    return control.ss(data["A"], data["B"], data["C"], data["D"])
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def _problem(job: Job, settings: Settings, timings: dict):
+    import polyrob
+    from polyrob.bounds.domain import Domain
+    from polyrob.fleet.autoweights import automatic_hyperparameters
+    from polyrob.pipeline import build_problem, default_hyperparameters
+
+    robot = polyrob.load_robot(job.robot, lock=None if job.lock is None else list(job.lock))
+    domain = Domain.from_robot(robot, job.domain, q_range=job.q_range, qdot_max=job.qdot_max, u_max=job.u_max,
+                               qdot_scale=job.qdot_scale, u_scale=job.u_scale)
+    if job.auto_weights:
+        h = automatic_hyperparameters(robot.m, domain, job.weights)
+    else:
+        h = default_hyperparameters(robot.m, job.weights)
+    if job.bandwidth_scale != 1.0:
+        h = default_hyperparameters(robot.m, h, bandwidth_scale=job.bandwidth_scale)
+    t0 = time.perf_counter()
+    options = {"workers": 1, **settings.bound_options}
+    problem = build_problem(robot, domain, hyperparameters=h, uncertainty=job.uncertainty, progress=False,
+                            bound_options=options)
+    timings["bounds"] = time.perf_counter() - t0
+    return problem
+
+
+def _validate(problem, K, settings: Settings) -> dict:
+    """A small step on the robot's own nonlinear dynamics, from the PLDI's nominal position."""
+    import numpy as np
+
+    from polyrob.validate.simulate import simulate, step_reference
+
+    dom = problem.domain
+    lo, hi = np.asarray(dom.q_lower, float), np.asarray(dom.q_upper, float)
+    start = np.clip(np.asarray(problem.pldi.nominal_point["q"], float), lo, hi)  # simulate's own q0
+    step = settings.validate_step * 0.5 * (hi - lo)
+    # step towards the farther end of each joint's range, so the target stays in the domain
+    target = np.where(hi - start >= start - lo, start + step, start - step)
+    sim = simulate(problem.robot, K, problem.pldi, step_reference(target), t_final=settings.validate_time)
+    out = sim.summary()
+    out.pop("joints", None)
+    return out
+
+
+def _design(problem, settings: Settings, timings: dict):
+    import numpy as np
+
+    from polyrob.pipeline import design_controller, design_max_bandwidth, synthesis_options
+
+    options = synthesis_options(progress=False, **settings.synthesis)
+    if settings.omega is not None:
+        lo, hi, n = settings.omega
+        options["omega"] = np.logspace(np.log10(lo), np.log10(hi), int(n))
+    t0 = time.perf_counter()
+    if settings.search_bandwidth:
+        design, res = design_max_bandwidth(problem, alphas=settings.alphas, **options)
+        alpha, hyper = float(res.alpha), res.hyperparameters
+    else:
+        design = design_controller(problem, **options)
+        alpha, hyper = None, problem.hyperparameters
+    timings["synthesis"] = time.perf_counter() - t0
+    return design, alpha, hyper, options.get("omega")
+
+
+def run_job(job: Job, settings: Settings) -> RobotResult:
+    """Bounds, weights, synthesis (or bandwidth search), analysis and validation of one robot.
+
+    Never raises for the robot's own failure (an exception of any class
+    becomes ``ok=False`` with its class and message); KeyboardInterrupt and
+    SystemExit pass.  BLAS is limited to one thread while it runs.
+    """
+    from polyrob._threads import single_blas_thread
+
+    t0 = time.perf_counter()
+    timings: dict = {}
+    with single_blas_thread():
+        try:
+            return _run(job, settings, timings, t0)
+        except Exception as exc:  # noqa: BLE001 - one robot's failure is data (recorded), not the batch's end
+            return RobotResult(name=job.name, robot=str(job.robot), ok=False, error=type(exc).__name__,
+                               message=_one_line(exc), seconds=time.perf_counter() - t0, timings=timings)
+
+
+def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
+    from polyrob.pipeline import analyze_controller, verdict
+
+    problem = _problem(job, settings, timings)
+    design, alpha, hyper, omega = _design(problem, settings, timings)
+    if alpha is not None:
+        # the certificate is at the found bandwidth: the same PLDI (no new bounding) with the scaled weights
+        from polyrob.pipeline import build_problem
+
+        problem = build_problem(problem.robot, hyperparameters=hyper, uncertainty=job.uncertainty,
+                                pldi=problem.pldi, progress=False)
+    description = problem.description()
+    description["job"] = job.to_dict()
+    mu_upper, mu_lower, stable = design.peak_mu, design.peak_mu_lower, True
+    line = verdict(mu_upper, mu_lower, covers=problem.covers())
+    details = {"synthesis": design.summary()}
+    if settings.analyze:
+        t1 = time.perf_counter()
+        a = analyze_controller(problem, design.controller, omega=omega, mc=settings.mc, progress=False)
+        timings["analysis"] = time.perf_counter() - t1
+        details["analysis"] = a.summary()
+        rp = a.robust_performance
+        mu_upper, mu_lower, stable = float(rp.mu_upper), float(rp.mu_lower), bool(a.robust_stability.nominally_stable)
+        line = a.verdict
+    validation = None
+    if settings.validate:
+        t1 = time.perf_counter()
+        try:
+            sim = _validate(problem, design.controller, settings)
+            details["validation"] = sim
+            settled = "settled" if sim["settled"] else "NOT settled"
+            validation = f"{settled}; {sim['verdict']}"
+        except Exception as exc:  # noqa: BLE001 - recorded: a failed simulation is a finding about this robot
+            validation = f"simulation failed: {type(exc).__name__}: {_one_line(exc)}"
+        timings["validation"] = time.perf_counter() - t1
+    K = controller_data(design.controller)
+    return RobotResult(
+        name=job.name, robot=problem.robot.name, ok=True, joints=int(problem.robot.m),
+        entries=len(problem.pldi.entries), parameters=int(problem.unc.n_params), model=problem.model,
+        enclosure=problem.pldi.enclosure, mu_upper=float(mu_upper), mu_lower=float(mu_lower),
+        certified=bool(stable and mu_upper < 1), order=int(design.certificate.get("order", design.result.order)),
+        alpha=alpha, verdict=line, validation=validation, seconds=time.perf_counter() - t0, timings=timings,
+        controller=K, certificate=dict(design.certificate), problem=description, details=details,
+    )
+
+
+def with_label(job: Job, label: str) -> Job:
+    """``job`` named ``label``."""
+    return replace(job, label=label)

@@ -1,0 +1,107 @@
+"""The files of a batch: per robot a controller file and a JSON certificate, and the summary table.
+
+Layout of ``out_dir``::
+
+    summary.json            the batch (settings, executor, one row per robot)
+    summary.md              the same rows as a Markdown table
+    ROBOT/controller.json   the controller, its certificate and its problem
+                            (:func:`polyrob.io.controller.save_controller`)
+    ROBOT/certificate.json  the robot's row, certificate, problem and details
+                            (synthesis, analysis, validation), or its error
+
+Every file is written atomically (temporary file, then rename); the summary
+is rewritten as each robot finishes, so an interrupted batch leaves a
+summary of the robots done.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+
+__all__ = ["robot_dir_name", "write_robot", "write_summary", "markdown_table", "plain"]
+
+COLUMNS = (("robot", "robot"), ("joints", "joints"), ("entries", "entries"), ("parameters", "parameters"),
+           ("mu_upper", "mu (upper)"), ("order", "order"), ("alpha", "bandwidth factor"),
+           ("seconds", "time (s)"), ("status", "status"), ("validation", "validation"))
+
+
+def plain(obj):
+    """JSON-ready: non-finite floats become null, tuples lists, numpy values Python ones."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {str(k): plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [plain(v) for v in obj]
+    if isinstance(obj, (str, int, bool)) or obj is None:
+        return obj
+    if hasattr(obj, "tolist"):
+        return plain(obj.tolist())
+    return str(obj)
+
+
+def robot_dir_name(name: str) -> str:
+    """A file-system-safe folder name for a result name (``a/b c`` -> ``a_b_c``)."""
+    return re.sub(r"[^A-Za-z0-9_.+-]+", "_", str(name)).strip("._") or "robot"
+
+
+def _dump(path: Path, doc) -> None:
+    from polyrob.io.atomic import atomic_write
+
+    atomic_write(path, lambda f: f.write(json.dumps(plain(doc), indent=1, allow_nan=False) + "\n"))
+
+
+def write_robot(out_dir, result) -> dict:
+    """Write one robot's files; returns ``{"certificate": path, "controller": path or None}``."""
+    folder = Path(out_dir) / robot_dir_name(result.name)
+    paths = {"certificate": str(folder / "certificate.json"), "controller": None}
+    if result.ok and result.controller is not None:
+        from polyrob.io.controller import save_controller
+
+        paths["controller"] = str(save_controller(result.controller_system(), folder / "controller.json",
+                                                  certificate=plain(result.certificate), info=plain(result.problem)))
+    doc = {"row": result.row(), "certificate": result.certificate, "problem": result.problem,
+           "details": result.details, "files": paths}
+    _dump(folder / "certificate.json", doc)
+    return paths
+
+
+def _status(row: dict) -> str:
+    if not row["ok"]:
+        return f"FAILED: {row['error']}: {row['message']}"
+    return "certified (mu < 1)" if row.get("certified") else "not certified"
+
+
+def _cell(value) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value).replace("|", "\\|").replace("\n", " ")
+
+
+def markdown_table(rows) -> str:
+    """The summary rows as a Markdown table (one line per robot)."""
+    lines = ["| " + " | ".join(title for _, title in COLUMNS) + " |",
+             "|" + "|".join("---" for _ in COLUMNS) + "|"]
+    for row in rows:
+        row = dict(row, status=_status(row))
+        lines.append("| " + " | ".join(_cell(row.get(key)) for key, _ in COLUMNS) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_summary(out_dir, doc: dict) -> dict:
+    """``summary.json`` (the whole ``doc``) and ``summary.md`` (its rows); returns their paths."""
+    from polyrob.io.atomic import atomic_write
+
+    out = Path(out_dir)
+    _dump(out / "summary.json", doc)
+    head = (f"# polyrob batch\n\n{doc.get('done', 0)} of {doc.get('total', 0)} robot(s) done on "
+            f"{doc.get('executor', '')}; {doc.get('certified', 0)} certified, {doc.get('failed', 0)} failed; "
+            f"{doc.get('seconds', 0):.1f} s.\n\n")
+    text = head + markdown_table(doc.get("rows", []))
+    atomic_write(out / "summary.md", lambda f: f.write(text))
+    return {"json": str(out / "summary.json"), "markdown": str(out / "summary.md")}
