@@ -19,9 +19,9 @@ whole convex hull once it holds at these vertices.
     the ``2^k`` corners of the interval box of the ``k`` varying entries:
     a superset of the polytope, with fewer vertices in low dimension.
 ``"auto"``
-    the set with fewer vertices among those that fit in ``max_vertices``
-    (the box contains the polytope, so either one is a valid enclosure of
-    the same Jacobians; the one used is recorded in :attr:`VertexSet.source`).
+    the polytope when its vertices are enumerated and fit in ``max_vertices``
+    (it is the tighter set), else the box's corners when they fit; the one
+    used is recorded in :attr:`VertexSet.source`.
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ import numpy as np
 
 from polyrob.errors import PolyrobError
 
-__all__ = ["VertexSet", "vertex_set", "POLYTOPE_MAX_DIM", "MAX_VERTICES"]
+__all__ = ["VertexSet", "vertex_set", "closed_loop_vertices", "augmented_vertices", "performance_vertices",
+           "controller_mats", "POLYTOPE_MAX_DIM", "MAX_VERTICES"]
 
 #: Reduced dimension up to which the polytope's vertices are enumerated here.
 POLYTOPE_MAX_DIM = 8
@@ -189,7 +190,7 @@ def _from_pldi(pldi, which: str, max_vertices: int) -> VertexSet:
             f"no '{which}' vertex set with at most {max_vertices} vertices ({note}); use the constant-D "
             "scaled small-gain test on an LFT model (polyrob.analysis.quadratic_smallgain.scaled_small_gain)"
         )
-    _, src = min(choices)
+    src = choices[0][1]  # the polytope first: it is the tighter of the two
     if src == "box":
         lo, hi = pldi.lower, pldi.upper
         pts = np.array([np.where(c, hi, lo) for c in itertools.product((False, True), repeat=k)])
@@ -254,17 +255,15 @@ def closed_loop_vertices(vs: VertexSet, K) -> np.ndarray:
     return np.concatenate([top, bot], axis=1)
 
 
-def performance_vertices(vs: VertexSet, K, W_S=None, W_T=None, W_KS=None):
-    """Closed loops ``r -> z = [W_S e; W_T y; W_KS u]`` at every vertex: stacks ``(A, B, C, D)``.
+def augmented_vertices(vs: VertexSet, W_S=None, W_T=None, W_KS=None):
+    """Open weighted plants ``[r; u] -> [z; e]`` at every vertex: stacks ``(A, B, C, D)``.
 
     The same channels, states and realisation of the weights as
-    :func:`polyrob.plant.generalized.generalized_plant` (without the
-    uncertainty channels): states ``[x, W_S, W_T, W_KS, K]``.
+    :func:`polyrob.plant.generalized.generalized_plant` without the
+    uncertainty channels: ``z = [W_S e; W_T y; W_KS u]``, ``e = r - y``,
+    states ``[x, W_S, W_T, W_KS]``.
     """
-    from polyrob.plant.generalized import lower_lft_matrices
-
     m, n = vs.m, vs.n_x
-    Kmats = controller_mats(K, m)
     ws = [(w, lab) for w, lab in ((_weight_mats(W_S, m, "W_S"), "e"), (_weight_mats(W_T, m, "W_T"), "y"),
                                   (_weight_mats(W_KS, m, "W_KS"), "u")) if w is not None]
     if not ws:
@@ -273,23 +272,32 @@ def performance_vertices(vs: VertexSet, K, W_S=None, W_T=None, W_KS=None):
     I_m, Z_m = np.eye(m), np.zeros((m, m))
     feeds = {"e": (-C, I_m, Z_m), "y": (C, Z_m, Z_m), "u": (np.zeros((m, n)), Z_m, I_m)}
     N = n + sum(w[0].shape[0] for w, _ in ws)
-    nz = m * len(ws)
-    out = []
-    for Ai, Bi in zip(vs.A, vs.B):
-        A = np.zeros((N, N))
-        B = np.zeros((N, 2 * m))
-        Cz = np.zeros((nz + m, N))
-        D = np.zeros((nz + m, 2 * m))
-        A[:n, :n], B[:n, m:] = Ai, Bi
-        s, row = n, 0
-        for (Aw, Bw, Cw, Dw), lab in ws:
-            fx, fr, fu = feeds[lab]
-            sl = slice(s, s + Aw.shape[0])
-            A[sl, sl], A[sl, :n] = Aw, Bw @ fx
-            B[sl] = Bw @ np.hstack([fr, fu])
-            Cz[row:row + m, sl], Cz[row:row + m, :n] = Cw, Dw @ fx
-            D[row:row + m] = Dw @ np.hstack([fr, fu])
-            s, row = s + Aw.shape[0], row + m
-        Cz[nz:, :n], D[nz:, :m] = -C, I_m  # the measurement e = r - y
-        out.append(lower_lft_matrices(A, B, Cz, D, *Kmats, m, m))
+    nz, v = m * len(ws), vs.n_vertices
+    A = np.zeros((v, N, N))
+    B = np.zeros((v, N, 2 * m))
+    Cz = np.zeros((v, nz + m, N))
+    D = np.zeros((v, nz + m, 2 * m))
+    A[:, :n, :n], B[:, :n, m:] = vs.A, vs.B
+    s, row = n, 0
+    for (Aw, Bw, Cw, Dw), lab in ws:
+        fx, fr, fu = feeds[lab]
+        sl = slice(s, s + Aw.shape[0])
+        A[:, sl, sl], A[:, sl, :n] = Aw, Bw @ fx
+        B[:, sl] = Bw @ np.hstack([fr, fu])
+        Cz[:, row:row + m, sl], Cz[:, row:row + m, :n] = Cw, Dw @ fx
+        D[:, row:row + m] = Dw @ np.hstack([fr, fu])
+        s, row = s + Aw.shape[0], row + m
+    Cz[:, nz:, :n], D[:, nz:, :m] = -C, I_m  # the measurement e = r - y
+    return A, B, Cz, D
+
+
+def performance_vertices(vs: VertexSet, K, W_S=None, W_T=None, W_KS=None):
+    """Closed loops ``r -> z = [W_S e; W_T y; W_KS u]`` at every vertex: stacks ``(A, B, C, D)``.
+
+    States ``[x, W_S, W_T, W_KS, x_K]`` (see :func:`augmented_vertices`).
+    """
+    from polyrob.plant.generalized import lower_lft_matrices
+
+    Kmats = controller_mats(K, vs.m)
+    out = [lower_lft_matrices(*mats, *Kmats, vs.m, vs.m) for mats in zip(*augmented_vertices(vs, W_S, W_T, W_KS))]
     return tuple(np.stack(X) for X in zip(*out))
