@@ -12,7 +12,7 @@ import numpy as np
 from polyrob.analysis.blocks import BlockStructure, as_block_structure
 from polyrob.synthesis.dscale_data import complexified, scaling_data
 
-__all__ = ["MuSweep", "complex_dscales"]
+__all__ = ["MuSweep", "complex_dscales", "SingleThreadAB13MD"]
 
 
 class MuSweep:
@@ -41,6 +41,8 @@ class MuSweep:
         self.n_jobs, self.method, self.timeout = n_jobs, method, timeout
         self._worker = None
         self._dead = False
+        #: what did not go as planned (failed worker calls), in words
+        self.notes: list[str] = []
 
     def _jobs(self, H, st) -> int:
         if st.has_repeated or self.method == "lmi":
@@ -77,26 +79,10 @@ class MuSweep:
         # (an AB13MD call here would hold the GIL and starve the threads that
         # talk to the workers).
         if self._worker is None:
-            import os
-
-            import slycot
-
-            # one BLAS thread per worker: k workers with multi-threaded
-            # OpenBLAS on k cores spin-wait against each other (no speed-up)
-            keys = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
-            saved = {k: os.environ.get(k) for k in keys}
-            try:
-                for k in keys:
-                    os.environ[k] = "1"
-                self._worker = [TimeLimitedCall(slycot.ab13md, timeout=self.timeout) for _ in range(jobs)]
-                for wk in self._worker:
-                    wk._start()
-            finally:
-                for k, v in saved.items():
-                    if v is None:
-                        os.environ.pop(k, None)
-                    else:
-                        os.environ[k] = v
+            # one BLAS thread per worker (set inside the worker, not through this
+            # process's environment): k workers with multi-threaded OpenBLAS on
+            # k cores spin-wait against each other (no speed-up)
+            self._worker = [TimeLimitedCall(SingleThreadAB13MD(), timeout=self.timeout) for _ in range(jobs)]
         nblock, itype = st.ab13md_args
         todo = [k for k in range(N) if np.all(np.isfinite(H[k])) and np.any(H[k])]
         failed = []
@@ -123,8 +109,11 @@ class MuSweep:
             local(k)
         for k in failed:
             local(k)
+        if failed:
+            self.notes.append(f"{len(failed)} of {len(todo)} AB13MD calls failed in a worker; computed in this process")
         if todo and len(failed) == len(todo):
             self._dead = True  # the workers do not work here: stay serial
+            self.notes.append("the worker processes do not work here: the sweep continues serially")
         return mu, D, G
 
     def close(self):
@@ -133,6 +122,32 @@ class MuSweep:
             for wk in self._worker:
                 wk.close()
             self._worker = None
+
+
+class SingleThreadAB13MD:
+    """``slycot.ab13md`` limited to one BLAS thread, for a worker process.
+
+    The limit is taken on the first call in the worker (``threadpoolctl``)
+    and kept by the instance, which lives in that process only.
+    """
+
+    def __init__(self):
+        self._limit = None
+
+    def __getstate__(self):
+        return {}
+
+    def __setstate__(self, state):
+        self._limit = None
+
+    def __call__(self, *args):
+        import slycot
+
+        if self._limit is None:
+            from threadpoolctl import threadpool_limits
+
+            self._limit = threadpool_limits(limits=1)
+        return slycot.ab13md(*args)
 
 
 def complex_dscales(
