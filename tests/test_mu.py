@@ -342,7 +342,23 @@ def test_warm_start_guard_falls_back_to_cold_calls(monkeypatch):
     warm = mu_bounds(G, blk, omega, refine_peak=False, warm_start=True, warm_timeout=0.5)
     assert time.perf_counter() - t0 < 60
     assert warm.warm_start_fallbacks == 1  # hung once, then cold for the rest
+    assert len(warm.notes) == 1 and "timeout" in warm.notes[0] and cold.notes == ()  # recorded, not silent
     np.testing.assert_allclose(warm.upper, cold.upper, rtol=1e-9)
+
+
+def test_covers_names_the_grid_and_extended_precision_response():
+    G = control.tf([1], [1, 0.2, 1])
+    omega = np.logspace(-1, 1, 21)
+    r = mu_bounds(control.ss(G), [[1, 1]], omega, refine_peak=False)
+    assert r.covers.startswith("peak mu on a grid of 21 frequencies in [0.1, 10] rad/s")
+    # 212-bit responses of a well-conditioned system agree with double precision
+    re = mu_bounds(control.ss(G), [[1, 1]], omega, refine_peak=False, response_bits=212)
+    np.testing.assert_allclose(re.upper, r.upper, rtol=1e-12)
+    assert re.notes == ("frequency responses evaluated at 212 bits",)
+    # |G(j omega)| analytic at the grid points: the "peak on the grid" is the grid maximum,
+    # below the true peak 1/(2 zeta sqrt(1 - zeta^2)) = 5.0252 that lies between grid points
+    mag = 1 / np.abs(1 - omega**2 + 0.2j * omega)
+    assert r.peak_upper == pytest.approx(mag.max(), rel=1e-9) and r.peak_upper < 5.0252 - 0.02
 
 
 def test_skogestad_distillation_column_robust_performance():
