@@ -15,7 +15,10 @@ from conftest import BAD_URDFS
 
 
 def run(capsys, *argv):
-    code = main(list(argv))
+    try:
+        code = main(list(argv))
+    except SystemExit as exc:  # argparse: --help, or a value of the wrong type
+        code = exc.code
     out, err = capsys.readouterr()
     return code, out, err
 
@@ -83,3 +86,92 @@ def test_parse_joint_values():
     assert parse_joint_values("4,10", "--qdot-max", ranges=False) == [[-4.0, 4.0], [-10.0, 10.0]]
     assert parse_joint_values("j2=-pi:pi", "--q-range", ranges=True) == {"j2": [-np.pi, np.pi]}
     assert parse_joint_values("-2pi:0.5", "--q-range", ranges=True) == [-2 * np.pi, 0.5]
+
+
+def test_robots_json_is_one_document(capsys):
+    code, out, _ = run(capsys, "robots", "--json")
+    rows = json.loads(out)
+    assert code == 0 and {r["name"]: r["m"] for r in rows}["panda"] == 7
+
+
+@pytest.mark.parametrize(
+    "argv, option",
+    [
+        (["analyze", "--controller", "paper", "--mc", "0"], "--mc"),  # was ZeroDivisionError
+        (["run", "--mc", "-2"], "--mc"),
+        (["analyze", "--controller", "paper", "--omega", "1:0.1:5"], "--omega"),
+        (["analyze", "--controller", "paper", "--omega", "0.1:inf:5"], "--omega"),
+        (["synth", "--max-bandwidth", "--alphas", "0.5,-1"], "--alphas"),
+        (["synth", "--max-bandwidth", "--scale-only", "bandwidth"], "--scale-only"),
+        (["synth", "--wb", "-1"], "--wb"),
+        (["synth", "--ms", "nan"], "--ms"),
+        (["synth", "--wb", "1,2,3"], "--wb"),
+        (["synth", "--bandwidth-scale", "0"], "--bandwidth-scale"),
+        (["synth", "--max-iter", "0"], "--max-iter"),
+        (["synth", "--starts", "0"], "--starts"),
+        (["synth", "--reduce-max-order", "0"], "--reduce-max-order"),
+        (["bounds", "planar_2r", "--coverage", "-1"], "--coverage"),  # was ValueError: negative dimensions
+        (["bounds", "planar_2r", "--samples", "-3"], "--samples"),  # was accepted silently
+        (["bounds", "planar_2r", "--time-limit", "5"], "--certify"),
+        (["bounds", "planar_2r", "--certify", "--rel-tol", "2"], "--rel-tol"),
+        (["info", "--qdot-max", "-1"], "--qdot-max"),  # was silently [-1, 1]
+        (["info", "--u-max", "inf"], "--u-max"),  # blamed the URDF
+        (["info", "--q-range=-inf:inf"], "--q-range"),  # blamed the URDF
+        (["info", "--q-range", "joint9=0:1"], "--q-range"),  # was "--q:"
+        (["info", "--qdot-scale", "-1"], "--qdot-scale"),
+    ],
+)
+def test_every_numeric_option_is_validated_on_one_line(capsys, argv, option):
+    code, out, err = run(capsys, *argv)
+    assert code == 2 and out == ""
+    assert err.startswith("polyrob: error: ") and err.count("\n") == 1, err
+    assert option in err and "Traceback" not in err
+    assert "URDF" not in err and "no torque limit" not in err and "--q:" not in err
+
+
+def test_wrong_kind_errors_are_argument_errors_not_domain_errors():
+    from polyrob.errors import ArgumentError, DomainError
+
+    with pytest.raises(ArgumentError) as info:
+        parse_joint_values("abc", "--qdot-max", ranges=False)
+    assert isinstance(info.value, ValueError) and not isinstance(info.value, DomainError)
+
+
+def test_help_texts_and_defaults(capsys):
+    code, out, _ = run(capsys, "synth", "--help")
+    assert code == 0
+    flat = " ".join(out.split())
+    assert "--starts STARTS fixed structure: optimisation starts (default: 5)" in flat
+    assert "--reduce-max-order REDUCE_MAX_ORDER --reduce: largest controller order accepted (default: 20)" in flat
+    assert "--quiet no progress bars" in flat
+    code, out, _ = run(capsys, "bounds", "--help")
+    flat = " ".join(out.split())
+    assert "--time-limit TIME_LIMIT --certify:" in flat and "--rel-tol REL_TOL --certify:" in flat
+
+
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["bounds", "planar_2r", "--coverage", "-1"], "--coverage"),
+        (["info", "--u-max", "inf"], "--u-max"),
+        (["analyze", "--controller", "paper", "--mc", "0"], "--mc"),
+    ],
+)
+def test_console_script_one_line_errors(argv, needle):
+    done = subprocess.run(["polyrob", *argv], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and needle in done.stderr
+    assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr and done.stdout == ""
+
+
+def test_bounds_json_and_stage_line(tmp_path, capsys):
+    code, out, err = run(capsys, "bounds", "paper_2r", "--domain", "paper", "--samples", "64", "--coverage", "0",
+                         "--json", "-o", str(tmp_path / "q.npz"))
+    doc = json.loads(out)
+    assert code == 0 and err.startswith("[1/1] bounds: paper_2r")
+    names = [e["name"] for e in doc["entries"]]
+    assert len(names) == 10 and doc["dropped_positions"] == ["joint1"]
+    # -o q.npz: the JSON beside the arrays, not over them
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["q.json", "q.npz"]
+    assert doc["files"] == [str(tmp_path / "q.json"), str(tmp_path / "q.npz")]
+    meta = json.loads((tmp_path / "q.json").read_text())
+    assert meta["format"] == "polyrob.pldi/1" and [e["name"] for e in meta["entries"]] == names

@@ -32,7 +32,7 @@ def cmd_bounds(args) -> int:
     from polyrob.pipeline.reports import pldi_report
 
     if args.output:  # before any work: a refused path leaves nothing behind
-        for path in pair_paths(args.output):
+        for path in (args.output, *pair_paths(args.output)):
             check_output_path(path, "-o")
     if not args.certify and (args.time_limit is not None or args.rel_tol is not None):
         raise ArgumentError("--time-limit and --rel-tol set the interval-arithmetic proof: use them with --certify")

@@ -13,7 +13,7 @@ from polyrob.cli.common import (
     robot_from_args,
     scale_names,
 )
-from polyrob.cli.options import int_at_least
+from polyrob.cli.options import int_at_least, parse_frequencies
 from polyrob.cli.plant import add_plant_arguments, problem_from_args
 
 __all__ = ["register"]
@@ -105,8 +105,9 @@ def cmd_synth(args) -> int:
 
 def cmd_run(args) -> int:
     """bounds -> synthesis -> analysis in one go."""
-    from polyrob.pipeline import analyze_controller, design_controller, pldi_report
+    from polyrob.pipeline import analyze_controller, design_controller, frequency_grid, pldi_report
 
+    omega_spec = parse_frequencies(args.omega)
     _check_output(args)
     out = Output(args, stages=3)
     options = _options(args, out)
@@ -120,7 +121,8 @@ def cmd_run(args) -> int:
     design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
     print_design(design, out)
     out.stage(f"analysis: mu sweeps (robust stability, robust performance), {args.mc} Monte Carlo parameter sets")
-    a = analyze_controller(problem, design.controller, mc=args.mc, seed=0, progress=out.progress)
+    omega = frequency_grid(*omega_spec) if omega_spec else None
+    a = analyze_controller(problem, design.controller, omega=omega, mc=args.mc, seed=0, progress=out.progress)
     print_analysis(a, out)
     doc = {"robot": robot.name, "problem": problem.description(), "bounds": pldi_report(pldi, robot.joint_names),
            "synthesis": design.summary(), "analysis": a.summary(), "covers": a.covers, "verdict": a.verdict}
@@ -164,4 +166,5 @@ def register(sub) -> None:
     p = sub.add_parser("run", help="bounds -> synthesis -> analysis in one go")
     _add_synthesis_arguments(p)
     p.add_argument("--mc", type=int_at_least(1), default=200, help="Monte Carlo parameter sets in the analysis")
+    p.add_argument("--omega", default=None, help="analysis frequency grid LO:HI:N in rad/s (default automatic)")
     p.set_defaults(func=cmd_run)

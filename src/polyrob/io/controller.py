@@ -95,10 +95,11 @@ def _check_format(path: Path, doc: dict) -> None:
 
 def _read_mat(path: Path) -> dict:
     from scipy.io import loadmat
+    from scipy.io.matlab import MatReadError
 
     try:
         raw = loadmat(str(path))
-    except (OSError, ValueError, TypeError, NotImplementedError) as exc:
+    except (MatReadError, OSError, ValueError, TypeError, NotImplementedError) as exc:
         raise ControllerFileError(f"{path}: not a MATLAB .mat file scipy can read ({exc})") from None
     missing = [k for k in "ABCD" if k not in raw]
     if missing:
