@@ -39,7 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyrob.analysis.frequency import response_error
+from polyrob.analysis.blocks import as_block_structure
+from polyrob.analysis.frequency import default_grid, response_error
 from polyrob.analysis.stability import StabilityVerdict, stability_verdict
 from polyrob.plant.generalized import GeneralizedPlant, closed_loop, lft, nominal_closed_loop
 
@@ -121,9 +122,13 @@ class RobustnessResult:
         """What the certificate covers, one paragraph the CLI can print verbatim."""
         what = "robust stability" if self.kind == "stability" else "robust performance (uncertainty + performance block)"
         model = f" of the uncertainty model '{self.model}'" if self.model else ""
+        st = getattr(self.mu, "structure", None)
+        params = ("Real parameters" + model + " are constant in time (every frozen plant in the box, "
+                  "not a time-varying one); complex blocks stand for stable LTI perturbations"
+                  if st is not None and st.has_real else
+                  "Complex blocks" + model + " stand for stable LTI perturbations (not time-varying ones)")
         return (
-            f"{what}: {self.mu.covers}. Real parameters{model} are constant in time "
-            "(every frozen plant in the box, not a time-varying one); the loop at Delta = 0 is "
+            f"{what}: {self.mu.covers}. {params}; the loop at Delta = 0 is "
             f"{'not checked' if self.stability is None else self.stability.verdict}."
         )
 
@@ -154,8 +159,6 @@ RESPONSE_BITS, RESPONSE_TOL = 212, 1e-6
 
 def _check_frequencies(M, omega, k: int = 9) -> np.ndarray:
     """A few frequencies spread over the grid (log-spaced) for the response check."""
-    from polyrob.analysis.frequency import default_grid
-
     w = np.asarray(default_grid(M) if omega is None else omega, dtype=float).ravel()
     w = w[w > 0] if np.any(w > 0) else w
     return np.unique(np.quantile(w, np.linspace(0, 1, k))) if w.size else np.array([1.0])
@@ -174,6 +177,12 @@ def _analyse(kind, N, M, blk, omega, *, unc=None, K=None, model="", **mu_options
     # in every digit (and diagonal balancing made dkpy's controller worse, not
     # better): check a few frequencies against 212-bit arithmetic and switch the
     # whole sweep to it when double precision is off by more than 1e-6.
+    st = as_block_structure(blk)
+    if st.has_real:
+        # real parameters move real poles through s = 0: real mu is discontinuous
+        # there and a grid of positive frequencies can miss it entirely
+        w = default_grid(M) if omega is None else np.asarray(omega, dtype=float).ravel()
+        omega = np.union1d(w, [0.0])
     w_check = _check_frequencies(M, omega)
     err = response_error(M, w_check, RESPONSE_BITS)
     if err > RESPONSE_TOL and "response_bits" not in mu_options:
