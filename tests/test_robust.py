@@ -126,3 +126,19 @@ def test_cli_analyze_json(capsys):
 def test_cli_analyze_missing_controller_file(capsys):
     code = main(["analyze", "paper_2r", "--controller", "nope.json", "--quiet"])
     assert code == 2 and "no such controller file" in capsys.readouterr().err
+
+
+def test_real_parameter_crossing_at_zero_frequency_is_on_the_grid():
+    """N = 1/(s + 2) against one real scalar: mu = 0.5, reached only at omega = 0."""
+    from polyrob.analysis.robust import loop_mu
+
+    P = control.ss([[-1.0]], [[1.0, 1.0]], [[1.0], [1.0]], [[0.0, 0.0], [0.0, 0.0]])  # with u = -x: 1/(s+2)
+    r = loop_mu(P, -1.0, [[-1, 0]], np.logspace(-2, 2, 41), n_u=1, n_y=1, kind="stability")
+    # every positive frequency gives a complex N(jw): real mu is 0 there
+    assert r.mu_upper == pytest.approx(0.5, rel=1e-9) and r.mu_lower == pytest.approx(0.5, rel=1e-9)
+    assert r.critical_frequency == 0.0 and "in [0, 100] rad/s" in r.covers
+    # independent check: delta = 1/mu closes the loop x' = -2x + delta x on a pole at 0,
+    # 1 % more puts it in the right half-plane
+    delta = float(np.real(r.worst_perturbation[0, 0]))
+    assert abs(delta) == pytest.approx(2.0, rel=1e-9)
+    assert stability_verdict(np.array([[-2.0 + 1.01 * delta]])).verdict == "unstable"
