@@ -96,11 +96,15 @@ def test_build_report_from_run_directory(tmp_path):
     (tmp_path / "certificate.json").write_text(json.dumps({"time-varying": {"feasible": False}}))
     from polyrob.report.build import build_report
 
-    files = build_report(tmp_path, rate=None, mc=3, mu_omega=np.logspace(-2, 2, 8))
+    files = build_report(tmp_path, rate=100.0, mc=3, mu_omega=np.logspace(-2, 2, 8), search_rate=False,
+                         word_lengths=(30, 34), discrete_omega=np.logspace(-2, 2, 4))
     page = files.html.read_text()
     _check_links(tmp_path, page, r"<img src='([^']+)'")
-    assert "time-varying" in page and "reduced:9" in page
-    assert len(json.loads(files.validation.read_text())["simulations"]) == 2  # continuous step, smooth move
+    assert "time-varying" in page and "reduced:9" in page and "Discretisation and quantisation" in page
+    val = json.loads(files.validation.read_text())
+    assert len(val["simulations"]) == 3  # continuous step, sampled step at 100 Hz, smooth move
+    assert val["simulations"][1]["rate_hz"] == 100.0
+    assert val["discretization"]["rate_hz"] == 100.0 and val["discretization"]["discrete_loop_stable"]
 
 
 def test_build_report_needs_the_run_files(tmp_path):

@@ -75,7 +75,7 @@ def default_scenarios(robot, domain, q0, *, rate: float | None = None):
 
 def validate_controller(problem, K, *, rate: float | None = 1000.0, mc: int | str = 20, seed: int = 0,
                         scenarios=None, word_lengths=(8, 40), search_rate: bool = True,
-                        mu_omega=None) -> Validation:
+                        mu_omega=None, discrete_omega=None) -> Validation:
     """Monte Carlo, nonlinear simulations, discretisation/quantisation and μ of ``K`` on ``problem``.
 
     Parameters
@@ -96,6 +96,8 @@ def validate_controller(problem, K, *, rate: float | None = 1000.0, mc: int | st
         Also search the lowest sample rate keeping μ within 5 %.
     mu_omega : array_like, optional
         Grid of the μ curve (default 60 points, 1e-3 .. 1e4 rad/s).
+    discrete_omega : array_like, optional
+        Grid of the discretisation checks (default :data:`DISCRETE_GRID`).
     """
     from polyrob.analysis.mu import mu_bounds
     from polyrob.plant.generalized import lft
@@ -120,21 +122,22 @@ def validate_controller(problem, K, *, rate: float | None = 1000.0, mc: int | st
                  "is in the table above.")
 
     disc = None
+    dgrid = DISCRETE_GRID if discrete_omega is None else np.asarray(discrete_omega, float)
     if rate:
-        mu_c = continuous_mu(P, K, DISCRETE_GRID)
-        sd = sampled_data_mu(P, K, rate, omega=DISCRETE_GRID)
+        mu_c = continuous_mu(P, K, dgrid)
+        sd = sampled_data_mu(P, K, rate, omega=dgrid)
         curves[f"discretised loop @ {rate:.4g} Hz"] = (sd.omega, sd.upper, sd.lower)
         disc = {"rate_hz": rate, "method": sd.method, "prewarp_rad_s": sd.prewarp,
                 "discrete_loop_stable": sd.stable, "spectral_radius": sd.spectral_radius,
                 "mu_continuous_grid": mu_c, "mu_discrete_grid": sd.mu_upper,
                 "mu_threshold (continuous + 5 %)": 1.05 * mu_c}
         if search_rate:
-            mr = min_sample_rate(P, K, mu_continuous=mu_c, omega=DISCRETE_GRID, rel_tol=0.1,
+            mr = min_sample_rate(P, K, mu_continuous=mu_c, omega=dgrid, rel_tol=0.1,
                                  rate_bounds=(max(1.0, rate / 1000.0), max(rate, 10.0) * 10.0))
             disc["min_rate_hz"] = mr.rate
             disc["mu_at_min_rate"] = mr.mu
         sos = sos_realization(sd.controller)
-        wl = min_word_length(P, sos, threshold=1.05 * mu_c, lengths=word_lengths, omega=DISCRETE_GRID)
+        wl = min_word_length(P, sos, threshold=1.05 * mu_c, lengths=word_lengths, omega=dgrid)
         disc["min_word_length_bits"] = wl.word_length
         disc["mu_at_min_word_length"] = wl.mu
         disc["sections"] = sos.n_sections
