@@ -25,7 +25,7 @@ __all__ = [
     "save_figure",
 ]
 
-DPI = 110
+DPI = 100
 GREY = "0.65"
 
 
@@ -33,7 +33,7 @@ def save_figure(fig: Figure, path) -> Path:
     """Write ``fig`` as PNG to ``path`` atomically."""
     path = Path(path)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight")
+    fig.savefig(buf, format="png", dpi=DPI)
     atomic_write(path, lambda f: f.write(buf.getvalue()), binary=True)
     return path
 
@@ -50,7 +50,7 @@ def plot_pldi_bode(unc, path, *, n: int = 20, omega=None, seed: int = 0) -> Path
     deltas = list(unc.delta_samples(n, kind="uniform", seed=seed))
     deltas += list(unc.delta_samples(16, kind="corners", seed=seed + 1))
     m = unc.m
-    fig = Figure(figsize=(3.2 * m, 2.6 * m))
+    fig = Figure(layout="tight", figsize=(3.2 * m, 2.6 * m))
     axes = np.array(fig.subplots(m, m, squeeze=False))
     for d in deltas:
         H = frequency_response(unc.plant_at(d), omega)
@@ -76,7 +76,7 @@ def plot_pldi_bode(unc, path, *, n: int = 20, omega=None, seed: int = 0) -> Path
 def plot_sensitivities(mc, path) -> Path:
     """``|S_ii|``, ``|T_ii|`` of the Monte Carlo plants against ``1/|W_S|``, ``1/|W_T|`` (paper Fig. 4)."""
     m = mc.m
-    fig = Figure(figsize=(3.4 * m, 5.2))
+    fig = Figure(layout="tight", figsize=(3.4 * m, 5.2))
     axes = np.array(fig.subplots(2, m, squeeze=False))
     for row, (name, H, Hn, inv) in enumerate((("S", mc.S, mc.S_nominal, mc.inv_W_S),
                                               ("T", mc.T, mc.T_nominal, mc.inv_W_T))):
@@ -98,7 +98,7 @@ def plot_sensitivities(mc, path) -> Path:
 def plot_steps(mc, path) -> Path:
     """Step responses ``r_j -> y_i`` of the Monte Carlo plants."""
     m = mc.m
-    fig = Figure(figsize=(3.2 * m, 2.6 * m))
+    fig = Figure(layout="tight", figsize=(3.2 * m, 2.6 * m))
     axes = np.array(fig.subplots(m, m, squeeze=False))
     for i in range(m):
         for j in range(m):
@@ -120,7 +120,7 @@ def plot_controllers(controllers: dict, path, *, omega=None) -> Path:
     omega = np.logspace(-3, 4, 400) if omega is None else np.asarray(omega, float)
     resp = {name: frequency_response(K, omega) for name, K in controllers.items()}
     p, q = next(iter(resp.values())).shape[1:]
-    fig = Figure(figsize=(3.4 * q, 2.6 * p))
+    fig = Figure(layout="tight", figsize=(3.4 * q, 2.6 * p))
     axes = np.array(fig.subplots(p, q, squeeze=False))
     for name, H in resp.items():
         for i in range(p):
@@ -136,7 +136,7 @@ def plot_controllers(controllers: dict, path, *, omega=None) -> Path:
 
 def plot_mu(curves: dict, path, *, title: str = "μ bounds") -> Path:
     """μ upper (solid) and lower (dashed) bounds over frequency; ``curves[name] = (omega, upper, lower)``."""
-    fig = Figure(figsize=(6.4, 3.6))
+    fig = Figure(layout="tight", figsize=(6.4, 3.6))
     ax = fig.subplots()
     for k, (name, (w, up, lo)) in enumerate(curves.items()):
         color = f"C{k}"
@@ -157,7 +157,7 @@ def plot_tracking(sims, path, *, joint_names=None) -> Path:
     sims = list(sims)
     m = sims[0].q.shape[0]
     names = joint_names or [f"joint {j + 1}" for j in range(m)]
-    fig = Figure(figsize=(4.0 * len(sims), 2.2 * (m + 1)))
+    fig = Figure(layout="tight", figsize=(4.0 * len(sims), 2.2 * (m + 1)))
     axes = np.array(fig.subplots(m + 1, len(sims), squeeze=False))
     for c, sim in enumerate(sims):
         label = f"{sim.controller}" + (f" {sim.rate:.4g} Hz" if sim.rate else "")
