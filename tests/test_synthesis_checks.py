@@ -81,10 +81,31 @@ def dscaled_mu(M: np.ndarray, sizes, x0=None) -> tuple[float, np.ndarray]:
 
 
 def dg_mixed_upper(M: np.ndarray, n_real: int, tol: float = 1e-4) -> float:
-    """Mixed-μ D-G upper bound for ``n_real`` real scalars then one complex full block (LMI bisection)."""
+    """Mixed-μ D-G upper bound for ``n_real`` real scalars then one complex full block (LMI bisection).
+
+    ``M`` maps the block outputs to the block inputs (``N = Fl(P, K)``): rows
+    ``n_real + p``, columns ``n_real + q`` for a ``q x p`` full block.
+    """
     import cvxpy as cp
 
-    n = M.shape[0]
+    # a non-square full block: pad with zero rows/columns (μ unchanged)
+    n = max(M.shape)
+    Mp = np.zeros((n, n), complex)
+    Mp[: M.shape[0], : M.shape[1]] = M
+    # a diagonal similarity commuting with Δ (block-wise Osborne balancing) leaves μ
+    # unchanged and brings the optimal D near 1: the scalings of robot loops span 1e-8
+    blk = np.r_[np.arange(n_real), np.full(n - n_real, n_real)]
+    s = np.ones(n_real + 1)
+    for _ in range(50):
+        for b in range(n_real + 1):
+            m = blk == b
+            sv = s[blk]
+            row = np.linalg.norm((sv[:, None] * Mp / sv[None, :])[m])
+            col = np.linalg.norm((sv[:, None] * Mp / sv[None, :])[:, m])
+            if row > 0 and col > 0:
+                s[b] *= np.sqrt(col / row)
+    s = s / s[-1]
+    M = s[blk][:, None] * Mp / s[blk][None, :]
     nf = n - n_real
     d = cp.Variable(n_real + 1)
     g = cp.Variable(n_real)
