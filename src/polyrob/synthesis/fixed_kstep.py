@@ -162,7 +162,7 @@ def stabilise(loop: FixedLoop, theta, min_decay: float, max_iter: int = 300, res
                     options={"maxiter": max_iter, "gtol": 1e-12},
                 )
             except (ValueError, np.linalg.LinAlgError):
-                pass
+                pass  # the best point seen is kept; a start left unstable is reported by the caller
         if best[1] <= target:
             break
     return best[0], best[1]

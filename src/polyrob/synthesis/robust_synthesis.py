@@ -160,7 +160,9 @@ def musyn(
         the iteration optimised; ``mu_history`` the grid peak of the D-step
         bound after each K-step (complex μ for D-K, mixed μ for D-G-K).
         ``info`` has ``method``, ``orders`` (D/G per iteration), ``gamma``,
-        ``timings``, ``regularization``, ``best_iteration``, ``grid_peak_mu``.
+        ``timings``, ``regularization``, ``best_iteration``, ``grid_peak_mu``,
+        ``fallbacks`` (rejected K-steps, G steps replaced by D steps, failed
+        worker calls: what was done instead of the planned route).
 
     Raises
     ------
@@ -310,7 +312,7 @@ def musyn(
         "orders": [h.orders for h in hist],
         "regularization": list(rec.notes),
         # K-steps rejected, G steps replaced by D steps: what the iteration did instead
-        "fallbacks": list(loop.failures),
+        "fallbacks": list(loop.failures) + list(getattr(getattr(loop.mu_bound, "sweep", None), "notes", [])),
         "timings": [h.seconds for h in hist],
         "omega": omega,
         "reference": (
