@@ -175,3 +175,18 @@ def test_bounds_json_and_stage_line(tmp_path, capsys):
     assert doc["files"] == [str(tmp_path / "q.json"), str(tmp_path / "q.npz")]
     meta = json.loads((tmp_path / "q.json").read_text())
     assert meta["format"] == "polyrob.pldi/1" and [e["name"] for e in meta["entries"]] == names
+
+
+def test_export_writes_c_and_json(tmp_path, capsys):
+    from polyrob.io.controller import save_controller
+    from polyrob.plant.generalized import paper_controller
+
+    K = save_controller(paper_controller(), tmp_path / "K.json")
+    out = tmp_path / "ctrl"
+    code, stdout, err = run(capsys, "export", str(K), "--rate", "1000", "--word-length", "24", "--json", "-o", str(out))
+    doc = json.loads(stdout)
+    assert code == 0 and err.startswith("[1/1] export")
+    assert sorted(p.name for p in out.iterdir()) == ["controller.c", "controller.h", "controller.json"]
+    assert doc["header"] == str(out / "controller.h")
+    code, _, err = run(capsys, "export", str(K), "--rate", "0", "-o", str(out))
+    assert code == 2 and "--rate" in err and err.count("\n") == 1

@@ -33,6 +33,16 @@ def _check_output(args) -> None:
         check_output_path(args.output, "-o")
 
 
+def _run_dir(args):
+    """``run -o DIR`` (no ``.json`` suffix): a run directory with K.json, the PLDI and the report."""
+    if not args.output or args.output.lower().endswith(".json"):
+        _check_output(args)
+        return None
+    from polyrob.cli.files import check_output_dir
+
+    return check_output_dir(args.output)
+
+
 def print_design(design, out) -> None:
     r = design.result
     gam = list(r.gamma_history)
@@ -52,13 +62,13 @@ def print_design(design, out) -> None:
         out.line(f"note: {note}")
 
 
-def _save(design, problem, args, out, info_extra=None, certificate_extra=None):
+def _save(design, problem, args, out, info_extra=None, certificate_extra=None, path=None):
     from polyrob.io.controller import save_controller
 
     info = problem.description()
     info.update(info_extra or {})
     cert = dict(design.certificate, **(certificate_extra or {}))
-    path = save_controller(design.controller, args.output, certificate=cert, info=info)
+    path = save_controller(design.controller, path or args.output, certificate=cert, info=info)
     out.line(f"wrote {path}")
     return str(path)
 
@@ -108,8 +118,8 @@ def cmd_run(args) -> int:
     from polyrob.pipeline import analyze_controller, design_controller, frequency_grid, pldi_report
 
     omega_spec = parse_frequencies(args.omega)
-    _check_output(args)
-    out = Output(args, stages=3)
+    run_dir = _run_dir(args)
+    out = Output(args, stages=3 if run_dir is None else 4)
     options = _options(args, out)
     robot = robot_from_args(args)
     problem = problem_from_args(robot, args, out)
@@ -126,9 +136,18 @@ def cmd_run(args) -> int:
     print_analysis(a, out)
     doc = {"robot": robot.name, "problem": problem.description(), "bounds": pldi_report(pldi, robot.joint_names),
            "synthesis": design.summary(), "analysis": a.summary(), "covers": a.covers, "verdict": a.verdict}
-    if args.output:
-        doc["output"] = _save(design, problem, args, out, certificate_extra={
-            "robust_stability": a.robust_stability.summary(), "robust_performance": a.robust_performance.summary()})
+    extra = {"robust_stability": a.robust_stability.summary(), "robust_performance": a.robust_performance.summary()}
+    if run_dir is not None:
+        from polyrob.report.build import write_run_report
+
+        doc["output"] = _save(design, problem, args, out, certificate_extra=extra, path=run_dir / "K.json")
+        out.stage(f"validation and report into {run_dir} (nonlinear simulations, discretisation)")
+        files = write_run_report(run_dir, problem, design.controller,
+                                 certificates={"constant-parameter μ": dict(design.certificate, **extra)})
+        doc["report"] = str(files.html)
+        out.line(f"wrote {files.html}")
+    elif args.output:
+        doc["output"] = _save(design, problem, args, out, certificate_extra=extra)
     out.document(doc)
     return 0
 
@@ -167,4 +186,8 @@ def register(sub) -> None:
     _add_synthesis_arguments(p)
     p.add_argument("--mc", type=int_at_least(1), default=200, help="Monte Carlo parameter sets in the analysis")
     p.add_argument("--omega", default=None, help="analysis frequency grid LO:HI:N in rad/s (default automatic)")
+    for a in p._actions:
+        if a.dest == "output":  # run: a directory unless the name ends in .json
+            a.help = ("FILE.json: the controller, its certificate and its problem; DIR: a run directory with "
+                      "K.json, pldi.json/.npz and the validation report (report.html)")
     p.set_defaults(func=cmd_run)

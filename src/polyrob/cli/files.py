@@ -1,0 +1,73 @@
+"""``polyrob report`` (a run directory's report, rebuilt from its files) and ``polyrob export`` (C code)."""
+
+from __future__ import annotations
+
+from polyrob.cli.common import Output, add_output_flags
+from polyrob.cli.options import int_at_least, positive_float
+from polyrob.errors import ArgumentError
+
+__all__ = ["register", "check_output_dir"]
+
+
+def check_output_dir(path, option: str = "-o"):
+    """A directory to write into: may exist; must not be a file, a virtual file system or read-only."""
+    from pathlib import Path
+
+    from polyrob.io.paths import check_output_path
+
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise ArgumentError(f"{option} {path}: is a file, not a directory")
+    check_output_path(p / "controller.json", option)  # same place rules as for a file inside it
+    return p
+
+
+def cmd_report(args) -> int:
+    from polyrob.report.build import build_report
+
+    out = Output(args, stages=1)
+    out.stage(f"report: validating the controller of {args.run_dir} and writing the report")
+    files = build_report(args.run_dir, controller=args.controller, pldi=args.pldi)
+    doc = {"html": str(files.html), "markdown": str(files.markdown), "validation": str(files.validation),
+           "figures": [str(f) for f in files.figures]}
+    out.document(doc)
+    out.line(f"wrote {files.html}, {files.markdown}, {files.validation} and {len(files.figures)} figure(s)")
+    return 0
+
+
+def cmd_export(args) -> int:
+    from polyrob.io.controller import load_controller
+    from polyrob.validate.export_c import export_controller
+
+    out_dir = check_output_dir(args.output)
+    out = Output(args, stages=1)
+    K = load_controller(args.controller)
+    out.stage(f"export: {args.controller} at {args.rate:g} Hz ({args.method}"
+              + (f", {args.word_length}-bit coefficients" if args.word_length else "") + f") into {out_dir}")
+    res = export_controller(K, args.rate, out_dir, word_length=args.word_length, method=args.method,
+                            prewarp=args.prewarp, real=args.real, name=args.name)
+    out.document(res.summary())
+    out.line(f"wrote {res.header}, {res.source} and {res.json}")
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("report", help="rebuild a run directory's report (HTML + Markdown) from its files")
+    p.add_argument("run_dir", help="directory written by `polyrob run ROBOT -o DIR`")
+    p.add_argument("--controller", default="K.json", help="controller file inside the directory")
+    p.add_argument("--pldi", default="pldi.json", help="PLDI file inside the directory")
+    add_output_flags(p)
+    p.set_defaults(func=cmd_report)
+
+    p = sub.add_parser("export", help="discretise a controller and write it as C (second-order sections)")
+    p.add_argument("controller", help="controller file (JSON or MATLAB .mat)")
+    p.add_argument("--rate", type=positive_float, required=True, help="sample rate in Hz")
+    p.add_argument("--word-length", type=int_at_least(2), default=None,
+                   help="round the coefficients to this many bits of fixed point (default: floating point)")
+    p.add_argument("--method", default="tustin", choices=["tustin", "zoh"], help="discretisation")
+    p.add_argument("--prewarp", type=positive_float, default=None, help="Tustin pre-warping frequency (rad/s)")
+    p.add_argument("--real", default="double", choices=["double", "float"], help="C type of the signals")
+    p.add_argument("--name", default="controller", help="base name of the .h/.c/.json files")
+    p.add_argument("-o", "--output", required=True, help="directory for the C and JSON files")
+    add_output_flags(p)
+    p.set_defaults(func=cmd_export)
