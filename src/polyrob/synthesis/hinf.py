@@ -26,15 +26,20 @@ conditions (strictly proper double integrators: ``D12 = 0``, poles at
    which guarantees closed-loop poles left of ``-ε`` and
    ``‖Fl(P, K)‖∞ <= γ`` (moving only the offending poles to ``-ε`` gives no
    such guarantee: the central controller cancels them).  γ then depends on
-   ε: the reported :attr:`HinfResult.gamma` is always the H∞ norm of the
-   closed loop with the *user's* plant.  When a controller does not verify
-   (see 4), ε is raised tenfold (twice at most) and the raise recorded.
+   ε: the reported :attr:`HinfResult.gamma` is always an upper bound of the
+   H∞ norm of the closed loop with the *user's* plant
+   (:func:`~polyrob.synthesis.norms.hinf_norm`: AB13DD confirmed by a
+   Hamiltonian test, never a grid value).  When a controller does not
+   verify (see 4), ε is raised tenfold (twice at most) and the failed
+   attempts are listed in :attr:`HinfResult.fallbacks`.
 4. **Own γ bisection** around SLICOT SB10FD (central controller at a given
    γ) with an explicit closed-loop eigenvalue check at every step, then a
-   check of the closed-loop norm of the returned controller: near the
-   optimal γ the Riccati equations are ill conditioned and SB10FD can return
-   a stabilising controller that misses γ by orders of magnitude; γ is then
-   backed off (1%, 3%, 10%, 30%, 100%) until the controller verifies.
+   check of the returned controller by the Hamiltonian test
+   ``‖Fl(P_s, K)‖∞ < γ (1 + 1%)`` (:mod:`polyrob.synthesis.hinf_riccati`):
+   near the optimal γ the Riccati equations are ill conditioned and SB10FD
+   can return a stabilising controller that misses γ by orders of
+   magnitude; γ is then backed off (1%, 3%, 10%, 30%, 100%) until the
+   controller verifies.
 5. **LMI fallback** (``method="lmi"``, or automatic when the Riccati route
    fails): the full-order LMI of Gahinet & Apkarian (1994) in the
    linearising change of variables of Scherer, Gahinet & Chilali (1997),
