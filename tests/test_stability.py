@@ -9,8 +9,8 @@ import control
 import numpy as np
 import pytest
 
-from polyrob.analysis.robust import loop_mu
 from polyrob.analysis.frequency import freqresp_extended, response_error
+from polyrob.analysis.robust import loop_mu
 from polyrob.analysis.stability import stability_verdict
 from polyrob.examples import DISTILLATION_BLK, distillation_plant
 from polyrob.plant.generalized import lft
@@ -64,14 +64,22 @@ def test_stable_loop_under_similarity_of_condition_1e10_is_stable():
     assert v.transform_condition > 1e9  # the balancing undid the scaling and says so
 
 
-def test_undecided_when_margin_inside_bound():
-    # a Jordan block at -1e-12 of size 3 perturbed by rounding: no precision decides it
-    # from the eigenvalues' first-order bound (infinite condition): not "stable", not "unstable"
-    A = np.array([[-1e-12, 1.0, 0.0], [0.0, -1e-12, 1.0], [0.0, 0.0, -1e-12]])
+def test_undecided_when_the_margin_is_inside_the_bound():
+    # a defective triple eigenvalue at -1e-9: relative changes of 4 eps in the entries
+    # move it by ~(4 eps)^(1/3) ~ 1e-5, so no precision can call the given data stable
+    a = -1e-9
+    v = stability_verdict(np.array([[a, 1.0, 0.0], [0.0, a, 1.0], [0.0, 0.0, a]]))
+    assert v.verdict == "undecided at double precision"
+    assert v.error_bound > 1e-5 and len(v.tests) == 3
+
+
+def test_extended_precision_decides_what_double_precision_cannot():
+    # eigenvalue -1e-14 with condition ~1e3: double precision bound 4e-10 > 1e-14
+    A = np.array([[-1e-14, 1e3], [0.0, -1.0]])
+    assert stability_verdict(A, extended_bits=0).verdict == "undecided at double precision"
     v = stability_verdict(A)
-    assert v.verdict in ("undecided at double precision", "stable")
-    # the sign of the abscissa is never reported as instability
-    assert v.verdict != "unstable"
+    # triangular: the eigenvalues are the diagonal entries, exactly
+    assert v.verdict == "stable" and v.abscissa == -1e-14 and v.precision_bits == 212
 
 
 def test_dkpy_distillation_controller_double_precision_is_fooled():
