@@ -240,8 +240,36 @@ def _refine(Ms, st, delta0, x0):
 
 def lower_bound(Ms, st, *, starts=4, refine=True, seed=0, init=None, real_starts=8,
                  target=np.inf, D=None):
-    """Best verified (lower, padded delta, power-iteration state).
+    """Lower bound of ``mu(Ms)`` with its verified perturbation.
 
+    Parameters
+    ----------
+    Ms : (n, n) complex ndarray
+        Padded square matrix (:meth:`BlockStructure.pad`).
+    st : BlockStructure
+    starts, seed : int
+        Power-iteration starts (singular vectors + random) and their seed.
+    refine : bool
+        Polish with the local search (SLSQP).
+    init : tuple, optional
+        Power-iteration state of a neighbouring frequency (warm start).
+    real_starts : int
+        Extra random seeds of the local search for real blocks.
+    target : float
+        A known upper bound: the search stops once it is reached.
+    D : ndarray, optional
+        Upper-bound scaling used to balance the power iteration.
+
+    Returns
+    -------
+    lower : float
+    delta : ndarray
+        Padded perturbation with ``det(I - Ms delta) = 0`` (verified), or zeros.
+    state : tuple or None
+        Power-iteration state for the next frequency.
+
+    Notes
+    -----
     ``D`` (upper-bound scaling, commuting with Delta) balances the matrix for
     the power iteration: ``rho(D M D^-1 Q) = rho(M Q)`` so its Q's are valid
     for M, and the scaled matrix's singular vectors are far better starts
