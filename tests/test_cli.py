@@ -8,10 +8,9 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import BAD_URDFS
 
 from polyrob.cli import main, parse_joint_values
-
-from conftest import BAD_URDFS
 
 
 def run(capsys, *argv):
@@ -42,7 +41,17 @@ def test_info_default_robot_json(capsys):
 
 
 def test_info_with_domain_options(capsys):
-    code, out, _ = run(capsys, "info", "double_pendulum", "--q-range=-pi:pi", "--qdot-max", "5", "--u-max", "joint1=2,joint2=1", "--json")
+    code, out, _ = run(
+        capsys,
+        "info",
+        "double_pendulum",
+        "--q-range=-pi:pi",
+        "--qdot-max",
+        "5",
+        "--u-max",
+        "joint1=2,joint2=1",
+        "--json",
+    )
     assert code == 0
     d = json.loads(out)["domain"]
     assert d["u"]["joint2"] == [-1.0, 1.0] and d["qdot"]["joint1"] == [-5.0, 5.0]
@@ -164,8 +173,20 @@ def test_console_script_one_line_errors(argv, needle):
 
 
 def test_bounds_json_and_stage_line(tmp_path, capsys):
-    code, out, err = run(capsys, "bounds", "paper_2r", "--domain", "paper", "--samples", "64", "--coverage", "0",
-                         "--json", "-o", str(tmp_path / "q.npz"))
+    code, out, err = run(
+        capsys,
+        "bounds",
+        "paper_2r",
+        "--domain",
+        "paper",
+        "--samples",
+        "64",
+        "--coverage",
+        "0",
+        "--json",
+        "-o",
+        str(tmp_path / "q.npz"),
+    )
     doc = json.loads(out)
     assert code == 0 and err.startswith("[1/1] bounds: paper_2r")
     names = [e["name"] for e in doc["entries"]]

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -73,8 +72,10 @@ def test_sigint_during_imports_is_one_line():
 
 def test_cli_import_is_light():
     """`polyrob --help` imports no numerical package (before: scipy.stats and python-control, 1.7 s)."""
-    code = ("import sys, polyrob, polyrob.cli; polyrob.cli.build_parser(); "
-            "print(sorted(m for m in ('numpy', 'scipy', 'control', 'pinocchio', 'cvxpy', 'slycot') if m in sys.modules))")
+    code = (
+        "import sys, polyrob, polyrob.cli; polyrob.cli.build_parser(); "
+        "print(sorted(m for m in ('numpy', 'scipy', 'control', 'pinocchio', 'cvxpy', 'slycot') if m in sys.modules))"
+    )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0 and done.stdout.strip() == "[]", done.stdout + done.stderr
     done = subprocess.run(["polyrob", "--help"], capture_output=True, text=True, timeout=60)
@@ -84,9 +85,26 @@ def test_cli_import_is_light():
 def test_top_level_api_in_matlabs_vocabulary():
     import polyrob
 
-    for name in ["load_robot", "Domain", "bound_pldi", "uncertain_plant", "generalized_plant", "mussv", "mu_bounds",
-                 "robstab", "robperf", "musyn", "reduce_controller", "load_controller", "PLDI", "UncertainPlant",
-                 "GeneralizedPlant", "PolyrobError", "ArgumentError", "ControllerFileError"]:
+    for name in [
+        "load_robot",
+        "Domain",
+        "bound_pldi",
+        "uncertain_plant",
+        "generalized_plant",
+        "mussv",
+        "mu_bounds",
+        "robstab",
+        "robperf",
+        "musyn",
+        "reduce_controller",
+        "load_controller",
+        "PLDI",
+        "UncertainPlant",
+        "GeneralizedPlant",
+        "PolyrobError",
+        "ArgumentError",
+        "ControllerFileError",
+    ]:
         assert name in polyrob.__all__ and getattr(polyrob, name) is not None, name
     from polyrob.synthesis.dk import musyn
 

@@ -49,7 +49,8 @@ def test_bad_output_paths_are_refused_before_any_work(tmp_path, capsys, no_work,
 
 
 def test_console_script_refuses_a_directory(tmp_path):
-    done = subprocess.run(["polyrob", "bounds", "paper_2r", "-o", str(tmp_path)], capture_output=True, text=True,
-                          timeout=120)
+    done = subprocess.run(
+        ["polyrob", "bounds", "paper_2r", "-o", str(tmp_path)], capture_output=True, text=True, timeout=120
+    )
     assert done.returncode == 2 and "is a directory" in done.stderr and done.stderr.count("\n") == 1
     assert list(tmp_path.iterdir()) == []

@@ -11,10 +11,9 @@ import contextlib
 import json
 
 import pytest
+from conftest import paper_pldi
 
 from polyrob.cli import main
-
-from conftest import paper_pldi
 
 FAST = ["--complex", "--max-iter", "1"]
 GRID = ["--omega", "0.01:1000:40"]  # peak-refined; the automatic grid costs 10x more here
@@ -36,8 +35,9 @@ def files(tmp_path_factory):
     paper_pldi().save(d / "paper.json")
     K = d / "K.json"
     with open(d / "synth.out", "w") as stdout, contextlib.redirect_stdout(stdout):
-        code = main(["synth", "paper_2r", "--pldi", str(d / "paper.npz"), *FAST, "--reduce", "--json", "--quiet",
-                     "-o", str(K)])
+        code = main(
+            ["synth", "paper_2r", "--pldi", str(d / "paper.npz"), *FAST, "--reduce", "--json", "--quiet", "-o", str(K)]
+        )
     assert code == 0
     return d, K
 
@@ -61,11 +61,23 @@ def test_synth_text_verdict_is_not_certified_when_mu_exceeds_one(files, capsys, 
     from polyrob.pipeline import Design
 
     d, _ = files
-    result = SimpleNamespace(mu_history=[2.5, 2.227], gamma_history=[3.0, 2.5], structure="full", order=8,
-                             peak_mu=2.227, peak_mu_lower=2.226, peak_frequency=7.8, iterations=2, seconds=1.0)
+    result = SimpleNamespace(
+        mu_history=[2.5, 2.227],
+        gamma_history=[3.0, 2.5],
+        structure="full",
+        order=8,
+        peak_mu=2.227,
+        peak_mu_lower=2.226,
+        peak_frequency=7.8,
+        iterations=2,
+        seconds=1.0,
+    )
     cert = {"structure": "full", "order": 8, "peak_mu_upper": 2.227, "peak_mu_lower": 2.226}
-    monkeypatch.setattr(pipeline, "design_controller",
-                        lambda *a, **k: Design(controller=None, result=result, reduced=None, certificate=cert))
+    monkeypatch.setattr(
+        pipeline,
+        "design_controller",
+        lambda *a, **k: Design(controller=None, result=result, reduced=None, certificate=cert),
+    )
     code, out, _ = run(capsys, "synth", "paper_2r", "--pldi", d / "paper.json", "--quiet")
     assert code == 0
     assert "certified peak mu" not in out  # before: "certified peak mu in [2.226, 2.227]"
@@ -85,8 +97,20 @@ def test_synth_json_is_one_document(files):
 def test_analyze_reproduces_the_reduced_certificate(files, capsys):
     d, K = files
     cert = json.loads(K.read_text())["certificate"]
-    code, out, _ = run(capsys, "analyze", "paper_2r", "--pldi", d / "paper.json", "--controller", K, "--mc", "5",
-                       *GRID, "--quiet", "--json")
+    code, out, _ = run(
+        capsys,
+        "analyze",
+        "paper_2r",
+        "--pldi",
+        d / "paper.json",
+        "--controller",
+        K,
+        "--mc",
+        "5",
+        *GRID,
+        "--quiet",
+        "--json",
+    )
     report = json.loads(out)
     assert code == 0 and report["problem_compared"] is True
     rp = report["robust_performance"]
@@ -117,8 +141,9 @@ def test_run_json_announces_stages_when_they_start_and_matches_synth(files, caps
     monkeypatch.setattr(pipeline, "design_controller", design)
     monkeypatch.setattr(pipeline, "analyze_controller", analyze)
     out_file = d / "K_run.json"
-    code, out, _ = run(capsys, "run", "paper_2r", "--pldi", d / "paper.json", *FAST, "--mc", "5", *GRID,
-                       "--json", "-o", out_file)
+    code, out, _ = run(
+        capsys, "run", "paper_2r", "--pldi", d / "paper.json", *FAST, "--mc", "5", *GRID, "--json", "-o", out_file
+    )
     assert code == 0
     doc = json.loads(out)  # stage lines went to stderr, stdout holds one document
     # before: "[1/3] bounds" was printed after the synthesis, nothing during the analysis
@@ -168,8 +193,10 @@ def test_analyze_refuses_a_pldi_of_another_robot(tmp_path, capsys):
 
 def test_analyze_nan_controller_is_one_line(tmp_path, capsys):
     path = tmp_path / "K.json"
-    path.write_text('{"format": "polyrob.controller/1", "type": "ss", "A": [[NaN]], "B": [[1, 0, 0, 0]], '
-                    '"C": [[1], [0]], "D": [[0, 0, 0, 0], [0, 0, 0, 0]]}')
+    path.write_text(
+        '{"format": "polyrob.controller/1", "type": "ss", "A": [[NaN]], "B": [[1, 0, 0, 0]], '
+        '"C": [[1], [0]], "D": [[0, 0, 0, 0], [0, 0, 0, 0]]}'
+    )
     code, _, err = run(capsys, "analyze", "paper_2r", "--controller", path)
     assert code == 2 and "non-finite" in err and err.count("\n") == 1  # before: LinAlgError
 
@@ -177,7 +204,8 @@ def test_analyze_nan_controller_is_one_line(tmp_path, capsys):
 def test_bad_structure_leaves_no_controller_file(files, tmp_path, capsys):
     d, _ = files
     out = tmp_path / "K.json"
-    code, _, err = run(capsys, "synth", "paper_2r", "--pldi", d / "paper.json", "--structure", "tf0x", "--quiet",
-                       "-o", out)
+    code, _, err = run(
+        capsys, "synth", "paper_2r", "--pldi", d / "paper.json", "--structure", "tf0x", "--quiet", "-o", out
+    )
     assert code == 2 and err.count("\n") == 1 and "structure" in err
     assert not out.exists() and list(tmp_path.iterdir()) == []

@@ -29,7 +29,11 @@ def test_round_trip_keeps_the_response_and_the_info(tmp_path):
 
 @pytest.mark.parametrize(
     "fmt, needle",
-    [("polyrob.controller/2", "version '2'"), ("polyrob.pldi/1", "not a controller file"), ("xyz", "not a controller file")],
+    [
+        ("polyrob.controller/2", "version '2'"),
+        ("polyrob.pldi/1", "not a controller file"),
+        ("xyz", "not a controller file"),
+    ],
 )
 def test_other_formats_and_versions_are_refused(tmp_path, fmt, needle):
     path = tmp_path / "K.json"
@@ -80,9 +84,13 @@ def test_pair_paths_share_one_stem():
 def test_output_paths_refused_before_the_work(tmp_path):
     afile = tmp_path / "file.txt"
     afile.write_text("x")
-    for bad, needle in [(tmp_path, "is a directory"), (f"{tmp_path}/", "is a directory"),
-                        ("/proc/polyrob.json", "/proc"), ("/sys/x/polyrob.json", "/sys"),
-                        (afile / "out.json", "is a file, not a directory")]:
+    for bad, needle in [
+        (tmp_path, "is a directory"),
+        (f"{tmp_path}/", "is a directory"),
+        ("/proc/polyrob.json", "/proc"),
+        ("/sys/x/polyrob.json", "/sys"),
+        (afile / "out.json", "is a file, not a directory"),
+    ]:
         with pytest.raises(ArgumentError, match=needle) as info:
             check_output_path(bad, "-o")
         assert str(info.value).startswith("-o ")

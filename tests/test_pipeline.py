@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
+from conftest import cached_robot, paper_pldi
 
 from polyrob.errors import ArgumentError, ControllerFileError, DomainError, PolyrobError
 from polyrob.pipeline import (
@@ -15,8 +16,6 @@ from polyrob.pipeline import (
     make_uncertain_plant,
     verdict,
 )
-
-from conftest import cached_robot, paper_pldi
 
 
 @pytest.fixture(scope="module")
@@ -87,8 +86,12 @@ def test_controller_problem_differences_name_the_options(problem):
 
 @pytest.mark.parametrize(
     "upper, lower, stable, word",
-    [(0.9, 0.85, True, "CERTIFIED"), (2.227, 2.226, True, "VIOLATED"), (1.2, 0.9, True, "NOT certified"),
-     (0.5, 0.4, False, "NOT certified")],
+    [
+        (0.9, 0.85, True, "CERTIFIED"),
+        (2.227, 2.226, True, "VIOLATED"),
+        (1.2, 0.9, True, "NOT certified"),
+        (0.5, 0.4, False, "NOT certified"),
+    ],
 )
 def test_verdict_certifies_only_below_one_on_a_stable_loop(upper, lower, stable, word):
     line = verdict(upper, lower, nominally_stable=stable, covers="the box")
@@ -96,3 +99,8 @@ def test_verdict_certifies_only_below_one_on_a_stable_loop(upper, lower, stable,
     assert ("CERTIFIED" in line) == (upper < 1 and stable)
     if word != "CERTIFIED":
         assert "try" in line  # what to do next
+
+
+def test_verdict_does_not_certify_when_the_analysis_says_why_not():
+    line = verdict(0.8, 0.7, covers="the box", failed=("lft(P, K) at Delta = 0 not proved stable (unstable)",))
+    assert "NOT certified" in line and "CERTIFIED" not in line and "Delta = 0" in line

@@ -34,8 +34,10 @@ def print_analysis(a, out) -> None:
     out.line(f"nominal stability      {'yes' if rs.nominally_stable else 'NO'}")
     out.line(f"nominal performance    ||N_zw||inf = {npf:.4g}  ({'met' if npf < 1 else 'not met'})")
     for title, r in (("robust stability", rs), ("robust performance", rp)):
-        out.line(f"{title:<22} mu in [{r.mu_lower:.4g}, {r.mu_upper:.4g}] (peak on the frequency grid) "
-                 f"at {r.critical_frequency:.4g} rad/s: {a.status(r)}")
+        out.line(
+            f"{title:<22} mu in [{r.mu_lower:.4g}, {r.mu_upper:.4g}] (peak on the frequency grid) "
+            f"at {r.critical_frequency:.4g} rad/s: {a.status(r)}"
+        )
     out.line(f"monte carlo            {s.random_stable:.1%} of {s.random} random parameter sets stable")
     if s.corners_stable is not None:
         out.line(f"corners                {s.corners_stable:.1%} of {s.corners} corners stable")
@@ -58,8 +60,9 @@ def cmd_analyze(args) -> int:
     if info:
         check_controller_problem(info, problem, source)
     omega = frequency_grid(*omega_spec) if omega_spec else None
-    out.stage(f"analysis of {source}: mu sweeps (robust stability, robust performance), "
-              f"{args.mc} Monte Carlo parameter sets")
+    out.stage(
+        f"analysis of {source}: mu sweeps (robust stability, robust performance), {args.mc} Monte Carlo parameter sets"
+    )
     a = analyze_controller(problem, K, omega=omega, mc=args.mc, seed=args.seed, progress=out.progress)
     report = {
         "robot": robot.name,
@@ -71,8 +74,10 @@ def cmd_analyze(args) -> int:
         **a.summary(),
     }
     out.document(report)
-    out.line(f"robot {robot.name}: {problem.unc.n_params} real parameters ({problem.pldi.enclosure} PLDI, "
-             f"{problem.model} model), controller order {a.order}")
+    out.line(
+        f"robot {robot.name}: {problem.unc.n_params} real parameters ({problem.pldi.enclosure} PLDI, "
+        f"{problem.model} model), controller order {a.order}"
+    )
     if not info and source != "the paper's K*":
         out.line(f"note: {source} does not record the problem it was made for: not compared")
     print_analysis(a, out)
@@ -84,9 +89,12 @@ def register(sub) -> None:
     add_robot_arguments(p)
     add_domain_arguments(p)
     add_weight_arguments(p)
-    p.add_argument("--controller", required=True,
-                   help="controller file (JSON ss/tf, see polyrob.io.controller, or a MATLAB .mat with A, B, C, D) "
-                        "or 'paper' for the paper's K*")
+    p.add_argument(
+        "--controller",
+        required=True,
+        help="controller file (JSON ss/tf, see polyrob.io.controller, or a MATLAB .mat with A, B, C, D) "
+        "or 'paper' for the paper's K*",
+    )
     add_plant_arguments(p)
     p.add_argument("--mc", type=int_at_least(1), default=500, help="Monte Carlo parameter sets")
     p.add_argument("--omega", default=None, help="frequency grid LO:HI:N in rad/s (log spaced; default automatic)")

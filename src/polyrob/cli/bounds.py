@@ -4,7 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from polyrob.cli.common import Output, add_domain_arguments, add_output_flags, add_robot_arguments, domain_from_args, robot_from_args
+from polyrob.cli.common import (
+    Output,
+    add_domain_arguments,
+    add_output_flags,
+    add_robot_arguments,
+    domain_from_args,
+    robot_from_args,
+)
 from polyrob.cli.options import fraction, int_at_least, positive_float
 from polyrob.errors import ArgumentError
 
@@ -40,8 +47,10 @@ def cmd_bounds(args) -> int:
     robot = robot_from_args(args)
     domain = domain_from_args(robot, args)
     certify_options = {k: v for k, v in (("time_limit", args.time_limit), ("rel_tol", args.rel_tol)) if v is not None}
-    out.stage(f"bounds: {robot.name} ({robot.m} joints) over domain '{domain.name}'"
-              + (", certified by interval arithmetic" if args.certify else ""))
+    out.stage(
+        f"bounds: {robot.name} ({robot.m} joints) over domain '{domain.name}'"
+        + (", certified by interval arithmetic" if args.certify else "")
+    )
     pldi = bound_pldi(
         robot,
         domain,
@@ -69,13 +78,17 @@ def cmd_bounds(args) -> int:
         volume = f"volume / interval box < {poly['volume_ratio_bound']:.2g} (0 of {poly['volume_samples']} box points inside)"
     else:
         volume = "volume ratio not computed"
-    print(f"polytope: {poly['halfspaces']} half-spaces"
-          + (f", {poly['vertices']} vertices" if poly["vertices"] is not None else "")
-          + f", reduced dimension {poly['reduced_dim']}, {volume}")
+    print(
+        f"polytope: {poly['halfspaces']} half-spaces"
+        + (f", {poly['vertices']} vertices" if poly["vertices"] is not None else "")
+        + f", reduced dimension {poly['reduced_dim']}, {volume}"
+    )
     if "refinement" in report:
         r = report["refinement"]
-        print(f"local search widened the sampled intervals by at most {r['max_percent']:.3g} % "
-              f"({r['entry']}); {r['verification_rounds']} verification round(s)")
+        print(
+            f"local search widened the sampled intervals by at most {r['max_percent']:.3g} % "
+            f"({r['entry']}); {r['verification_rounds']} verification round(s)"
+        )
     if report["coverage"] is not None:
         print(f"coverage: {report['coverage']:.4f} of {report['coverage_points']} fresh points")
     if report["dropped_positions"]:
@@ -91,16 +104,33 @@ def register(sub) -> None:
     add_robot_arguments(p)
     add_domain_arguments(p)
     p.add_argument("--certify", action="store_true", help="prove the intervals by interval arithmetic (up to 3 joints)")
-    p.add_argument("--time-limit", type=positive_float, default=None,
-                   help="--certify: seconds before the proof gives up (default 120)")
-    p.add_argument("--rel-tol", type=fraction, default=None,
-                   help="--certify: width tolerance relative to each interval (default 1e-5)")
-    p.add_argument("--samples", type=int_at_least(1), default=None,
-                   help="Sobol' positions (default grows with the dimension)")
-    p.add_argument("--nominal", default="equilibrium", choices=["equilibrium", "midpoint"], help="where A0, B0 are taken")
-    p.add_argument("--coverage", type=int_at_least(0), default=10_000, help="fresh points for the coverage check (0 skips)")
+    p.add_argument(
+        "--time-limit",
+        type=positive_float,
+        default=None,
+        help="--certify: seconds before the proof gives up (default 120)",
+    )
+    p.add_argument(
+        "--rel-tol",
+        type=fraction,
+        default=None,
+        help="--certify: width tolerance relative to each interval (default 1e-5)",
+    )
+    p.add_argument(
+        "--samples", type=int_at_least(1), default=None, help="Sobol' positions (default grows with the dimension)"
+    )
+    p.add_argument(
+        "--nominal", default="equilibrium", choices=["equilibrium", "midpoint"], help="where A0, B0 are taken"
+    )
+    p.add_argument(
+        "--coverage", type=int_at_least(0), default=10_000, help="fresh points for the coverage check (0 skips)"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the designs")
     add_output_flags(p)
-    p.add_argument("-o", "--output", default=None,
-                   help="write the PLDI as STEM.json + STEM.npz (any .json/.npz suffix names the same pair)")
+    p.add_argument(
+        "-o",
+        "--output",
+        default=None,
+        help="write the PLDI as STEM.json + STEM.npz (any .json/.npz suffix names the same pair)",
+    )
     p.set_defaults(func=cmd_bounds)

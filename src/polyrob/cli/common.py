@@ -45,7 +45,6 @@ class HelpFormatter(argparse.HelpFormatter):
         return f"{text} (default: {default})"
 
 
-
 def _plain(obj):
     """JSON-ready: non-finite floats become null (strict JSON has no NaN/inf), arrays lists."""
     if isinstance(obj, float):
@@ -104,26 +103,34 @@ class Output:
 def add_output_flags(parser: argparse.ArgumentParser, *, quiet: bool = True) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON document instead of the text report")
     if quiet:
-        parser.add_argument("--quiet", action="store_true",
-                            help="no progress bars (and no stage lines on stderr with --json)")
+        parser.add_argument(
+            "--quiet", action="store_true", help="no progress bars (and no stage lines on stderr with --json)"
+        )
 
 
 # --------------------------------------------------------------------------- robot and domain
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("robot", nargs="?", default=DEFAULT_ROBOT,
-                        help=f"URDF file, bundled or example-robot-data name (default {DEFAULT_ROBOT})")
-    parser.add_argument("--lock", default=None,
-                        help="comma-separated joints to lock (default: grippers/fingers; '' locks none)")
+    parser.add_argument(
+        "robot",
+        nargs="?",
+        default=DEFAULT_ROBOT,
+        help=f"URDF file, bundled or example-robot-data name (default {DEFAULT_ROBOT})",
+    )
+    parser.add_argument(
+        "--lock", default=None, help="comma-separated joints to lock (default: grippers/fingers; '' locks none)"
+    )
 
 
 def add_domain_arguments(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("domain")
-    g.add_argument("--domain", default=None,
-                   help="domain file (JSON/YAML) or a named domain of the robot (e.g. 'paper')")
-    g.add_argument("--q-range", default=None,
-                   help="position range, e.g. --q-range=-pi:pi or joint2=-1.5:1.5,joint3=0:2")
+    g.add_argument(
+        "--domain", default=None, help="domain file (JSON/YAML) or a named domain of the robot (e.g. 'paper')"
+    )
+    g.add_argument(
+        "--q-range", default=None, help="position range, e.g. --q-range=-pi:pi or joint2=-1.5:1.5,joint3=0:2"
+    )
     g.add_argument("--qdot-max", default=None, help="velocity bound >= 0, e.g. 2 or joint1=4,joint2=10")
     g.add_argument("--u-max", default=None, help="torque bound >= 0, e.g. 50 or joint1=0,joint2=5")
     g.add_argument("--qdot-scale", type=nonnegative_float, default=1.0, help="scale the velocity box")
@@ -138,8 +145,11 @@ def robot_from_args(args):
 
 
 def domain_options_given(args) -> bool:
-    return any(getattr(args, k, None) is not None for k in ("domain", "q_range", "qdot_max", "u_max")) or \
-        getattr(args, "qdot_scale", 1.0) != 1.0 or getattr(args, "u_scale", 1.0) != 1.0
+    return (
+        any(getattr(args, k, None) is not None for k in ("domain", "q_range", "qdot_max", "u_max"))
+        or getattr(args, "qdot_scale", 1.0) != 1.0
+        or getattr(args, "u_scale", 1.0) != 1.0
+    )
 
 
 def domain_from_args(robot, args):
@@ -160,7 +170,7 @@ def domain_from_args(robot, args):
         text = str(exc)
         for group, option in DOMAIN_OPTIONS.items():
             if text.startswith(f"--{group}:"):
-                raise DomainError(option + text[len(group) + 2:]) from None
+                raise DomainError(option + text[len(group) + 2 :]) from None
         raise
 
 

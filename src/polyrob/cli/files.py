@@ -28,8 +28,12 @@ def cmd_report(args) -> int:
     out = Output(args, stages=1)
     out.stage(f"report: validating the controller of {args.run_dir} and writing the report")
     files = build_report(args.run_dir, controller=args.controller, pldi=args.pldi)
-    doc = {"html": str(files.html), "markdown": str(files.markdown), "validation": str(files.validation),
-           "figures": [str(f) for f in files.figures]}
+    doc = {
+        "html": str(files.html),
+        "markdown": str(files.markdown),
+        "validation": str(files.validation),
+        "figures": [str(f) for f in files.figures],
+    }
     out.document(doc)
     out.line(f"wrote {files.html}, {files.markdown}, {files.validation} and {len(files.figures)} figure(s)")
     return 0
@@ -42,10 +46,21 @@ def cmd_export(args) -> int:
     out_dir = check_output_dir(args.output)
     out = Output(args, stages=1)
     K = load_controller(args.controller)
-    out.stage(f"export: {args.controller} at {args.rate:g} Hz ({args.method}"
-              + (f", {args.word_length}-bit coefficients" if args.word_length else "") + f") into {out_dir}")
-    res = export_controller(K, args.rate, out_dir, word_length=args.word_length, method=args.method,
-                            prewarp=args.prewarp, real=args.real, name=args.name)
+    out.stage(
+        f"export: {args.controller} at {args.rate:g} Hz ({args.method}"
+        + (f", {args.word_length}-bit coefficients" if args.word_length else "")
+        + f") into {out_dir}"
+    )
+    res = export_controller(
+        K,
+        args.rate,
+        out_dir,
+        word_length=args.word_length,
+        method=args.method,
+        prewarp=args.prewarp,
+        real=args.real,
+        name=args.name,
+    )
     out.document(res.summary())
     out.line(f"wrote {res.header}, {res.source} and {res.json}")
     return 0
@@ -62,8 +77,12 @@ def register(sub) -> None:
     p = sub.add_parser("export", help="discretise a controller and write it as C (second-order sections)")
     p.add_argument("controller", help="controller file (JSON or MATLAB .mat)")
     p.add_argument("--rate", type=positive_float, required=True, help="sample rate in Hz")
-    p.add_argument("--word-length", type=int_at_least(2), default=None,
-                   help="round the coefficients to this many bits of fixed point (default: floating point)")
+    p.add_argument(
+        "--word-length",
+        type=int_at_least(2),
+        default=None,
+        help="round the coefficients to this many bits of fixed point (default: floating point)",
+    )
     p.add_argument("--method", default="tustin", choices=["tustin", "zoh"], help="discretisation")
     p.add_argument("--prewarp", type=positive_float, default=None, help="Tustin pre-warping frequency (rad/s)")
     p.add_argument("--real", default="double", choices=["double", "float"], help="C type of the signals")

@@ -68,7 +68,9 @@ def parse_joint_values(text: str | None, option: str, *, ranges: bool):
             raise ArgumentError(f"{option}: give a range as LO:HI (e.g. {option}=-pi:pi), got '{s}'")
         v = number(s, option)
         if v < 0:
-            raise ArgumentError(f"{option}: a bound must be >= 0 (it means -V:V; give a range LO:HI otherwise), got '{s}'")
+            raise ArgumentError(
+                f"{option}: a bound must be >= 0 (it means -V:V; give a range LO:HI otherwise), got '{s}'"
+            )
         return v
 
     if all("=" in s for s in items):

@@ -9,10 +9,17 @@ __all__ = ["add_plant_arguments", "pldi_path", "problem_from_args", "describe_so
 
 
 def add_plant_arguments(p) -> None:
-    p.add_argument("--pldi", default=None,
-                   help="a PLDI file from `polyrob bounds -o` (STEM, STEM.json or STEM.npz) instead of bounding again")
-    p.add_argument("--uncertainty", default="auto", choices=["auto", "box", "axes", "lft"],
-                   help="uncertainty model of the PLDI (box: one independent real parameter per entry, the paper's)")
+    p.add_argument(
+        "--pldi",
+        default=None,
+        help="a PLDI file from `polyrob bounds -o` (STEM, STEM.json or STEM.npz) instead of bounding again",
+    )
+    p.add_argument(
+        "--uncertainty",
+        default="auto",
+        choices=["auto", "box", "axes", "lft"],
+        help="uncertainty model of the PLDI (box: one independent real parameter per entry, the paper's)",
+    )
     p.add_argument("--merge-symmetric", action="store_true", help="one repeated parameter for b_ij = b_ji")
 
 
@@ -49,9 +56,21 @@ def problem_from_args(robot, args, out, *, hyperparameters=None, check=None):
         domain = domain_from_args(robot, args)
         known_domain = domain
     if check is not None:
-        check({"robot": robot.name, "m": robot.m, "domain": known_domain.to_dict(),
-               "weights": {k: list(v) for k, v in h.items()}})
-    out.stage(f"{describe_source(robot, args)} over domain '{known_domain.name}', "
-              f"uncertainty model {args.uncertainty}")
-    return build_problem(robot, domain, hyperparameters=h, uncertainty=args.uncertainty, pldi=pldi,
-                         merge_symmetric=args.merge_symmetric, progress=out.progress)
+        check(
+            {
+                "robot": robot.name,
+                "m": robot.m,
+                "domain": known_domain.to_dict(),
+                "weights": {k: list(v) for k, v in h.items()},
+            }
+        )
+    out.stage(f"{describe_source(robot, args)} over domain '{known_domain.name}', uncertainty model {args.uncertainty}")
+    return build_problem(
+        robot,
+        domain,
+        hyperparameters=h,
+        uncertainty=args.uncertainty,
+        pldi=pldi,
+        merge_symmetric=args.merge_symmetric,
+        progress=out.progress,
+    )

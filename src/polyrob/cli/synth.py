@@ -22,8 +22,14 @@ __all__ = ["register"]
 def _options(args, out) -> dict:
     from polyrob.pipeline import synthesis_options
 
-    return synthesis_options(structure=args.structure, complex_blocks=args.complex, max_iter=args.max_iter,
-                             starts=args.starts, init=args.init, progress=out.progress)
+    return synthesis_options(
+        structure=args.structure,
+        complex_blocks=args.complex,
+        max_iter=args.max_iter,
+        starts=args.starts,
+        init=args.init,
+        progress=out.progress,
+    )
 
 
 def _check_output(args) -> None:
@@ -50,8 +56,10 @@ def print_design(design, out) -> None:
     for i, mu in enumerate(r.mu_history):
         g = f"{gam[i]:.4g}" if i < len(gam) else "-"
         out.line(f"{i + 1:>4}  {mu:>16.5g}  {g:>10}")
-    out.line(f"controller: {r.structure}, order {r.order}; peak mu in [{r.peak_mu_lower:.4g}, {r.peak_mu:.4g}] "
-             f"(bounds on the frequency grid) at {r.peak_frequency:.4g} rad/s ({r.iterations} iterations, {r.seconds:.1f} s)")
+    out.line(
+        f"controller: {r.structure}, order {r.order}; peak mu in [{r.peak_mu_lower:.4g}, {r.peak_mu:.4g}] "
+        f"(bounds on the frequency grid) at {r.peak_frequency:.4g} rad/s ({r.iterations} iterations, {r.seconds:.1f} s)"
+    )
     if design.reduced is not None:
         red = design.reduced
         out.line("order reduction (order: peak mu upper bound):")
@@ -83,8 +91,10 @@ def cmd_synth(args) -> int:
     options = _options(args, out)
     robot = robot_from_args(args)
     problem = problem_from_args(robot, args, out)
-    out.line(f"robot {robot.name}: {problem.unc.n_params} real parameters ({problem.pldi.enclosure} PLDI, "
-             f"{problem.model} model), structure {args.structure}")
+    out.line(
+        f"robot {robot.name}: {problem.unc.n_params} real parameters ({problem.pldi.enclosure} PLDI, "
+        f"{problem.model} model), structure {args.structure}"
+    )
     doc = {"robot": robot.name, "problem": problem.description()}
     if args.max_bandwidth:
         out.stage(f"largest bandwidth factor with mu < 1 (scaling {', '.join(scale)}; a synthesis per factor)")
@@ -92,8 +102,10 @@ def cmd_synth(args) -> int:
         out.line(f"{'alpha':>10}  {'peak mu (upper)':>18}")
         for alpha, mu in res.history:
             out.line(f"{alpha:>10.4g}  {mu:>18.5g}")
-        out.line(f"largest alpha with mu < 1: {res.alpha:.4g} (mu {res.peak_mu:.4g}; alpha {res.bracket[1]:.4g} "
-                 f"does not reach it), controller order {res.result.order}")
+        out.line(
+            f"largest alpha with mu < 1: {res.alpha:.4g} (mu {res.peak_mu:.4g}; alpha {res.bracket[1]:.4g} "
+            f"does not reach it), controller order {res.result.order}"
+        )
         out.line("weights: " + ", ".join(f"{k} = {list(v)}" for k, v in res.hyperparameters.items()))
         extra = {"weights": {k: list(v) for k, v in res.hyperparameters.items()}}
         doc["problem"].update(extra)
@@ -124,8 +136,10 @@ def cmd_run(args) -> int:
     robot = robot_from_args(args)
     problem = problem_from_args(robot, args, out)
     pldi = problem.pldi
-    out.line(f"{len(pldi.entries)} varying entries ({pldi.enclosure}), {problem.unc.n_params} real parameters "
-             f"({problem.model} model)")
+    out.line(
+        f"{len(pldi.entries)} varying entries ({pldi.enclosure}), {problem.unc.n_params} real parameters "
+        f"({problem.model} model)"
+    )
     out.line(pldi.table())
     out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
     design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
@@ -134,16 +148,27 @@ def cmd_run(args) -> int:
     omega = frequency_grid(*omega_spec) if omega_spec else None
     a = analyze_controller(problem, design.controller, omega=omega, mc=args.mc, seed=0, progress=out.progress)
     print_analysis(a, out)
-    doc = {"robot": robot.name, "problem": problem.description(), "bounds": pldi_report(pldi, robot.joint_names),
-           "synthesis": design.summary(), "analysis": a.summary(), "covers": a.covers, "verdict": a.verdict}
+    doc = {
+        "robot": robot.name,
+        "problem": problem.description(),
+        "bounds": pldi_report(pldi, robot.joint_names),
+        "synthesis": design.summary(),
+        "analysis": a.summary(),
+        "covers": a.covers,
+        "verdict": a.verdict,
+    }
     extra = {"robust_stability": a.robust_stability.summary(), "robust_performance": a.robust_performance.summary()}
     if run_dir is not None:
         from polyrob.report.build import write_run_report
 
         doc["output"] = _save(design, problem, args, out, certificate_extra=extra, path=run_dir / "K.json")
         out.stage(f"validation and report into {run_dir} (nonlinear simulations, discretisation)")
-        files = write_run_report(run_dir, problem, design.controller,
-                                 certificates={"constant-parameter μ": dict(design.certificate, **extra)})
+        files = write_run_report(
+            run_dir,
+            problem,
+            design.controller,
+            certificates={"constant-parameter μ": dict(design.certificate, **extra)},
+        )
         doc["report"] = str(files.html)
         out.line(f"wrote {files.html}")
     elif args.output:
@@ -158,15 +183,24 @@ def _add_synthesis_arguments(p) -> None:
     add_weight_arguments(p)
     add_plant_arguments(p)
     g = p.add_argument_group("synthesis")
-    g.add_argument("--structure", default="full", help="full (D-K / D-G-K), tfN (e.g. tf3: each K_ij of order N), pid, ss:N")
+    g.add_argument(
+        "--structure", default="full", help="full (D-K / D-G-K), tfN (e.g. tf3: each K_ij of order N), pid, ss:N"
+    )
     g.add_argument("--complex", action="store_true", help="treat the real parameters as complex (plain D-K)")
-    g.add_argument("--max-iter", type=int_at_least(1), default=None,
-                   help="D-K iterations (default 20; fixed structure: outer iterations, default 40)")
+    g.add_argument(
+        "--max-iter",
+        type=int_at_least(1),
+        default=None,
+        help="D-K iterations (default 20; fixed structure: outer iterations, default 40)",
+    )
     g.add_argument("--starts", type=int_at_least(1), default=5, help="fixed structure: optimisation starts")
-    g.add_argument("--init", default=None, choices=["paper"], help="fixed structure: 'paper' starts from the paper's K*")
+    g.add_argument(
+        "--init", default=None, choices=["paper"], help="fixed structure: 'paper' starts from the paper's K*"
+    )
     g.add_argument("--reduce", action="store_true", help="reduce the full-order controller (balanced truncation)")
-    g.add_argument("--reduce-max-order", type=int_at_least(1), default=20,
-                   help="--reduce: largest controller order accepted")
+    g.add_argument(
+        "--reduce-max-order", type=int_at_least(1), default=20, help="--reduce: largest controller order accepted"
+    )
     add_output_flags(p)
     p.add_argument("-o", "--output", default=None, help="write the controller, its certificate and its problem (JSON)")
 
@@ -175,12 +209,19 @@ def register(sub) -> None:
     p = sub.add_parser("synth", help="mu-synthesis: full order (D-K, D-G-K) or fixed structure")
     _add_synthesis_arguments(p)
     g = p.add_argument_group("bandwidth scan")
-    g.add_argument("--max-bandwidth", action="store_true",
-                   help="find the largest scaling of the weights' bandwidths with certified mu < 1")
-    g.add_argument("--scale-only", default="omega_b,omega_bt",
-                   help="--max-bandwidth: weight hyperparameters multiplied by the factor")
-    g.add_argument("--alphas", default=None,
-                   help="--max-bandwidth: comma-separated scan of the factor (default 0.125,0.25,...,32)")
+    g.add_argument(
+        "--max-bandwidth",
+        action="store_true",
+        help="find the largest scaling of the weights' bandwidths with certified mu < 1",
+    )
+    g.add_argument(
+        "--scale-only",
+        default="omega_b,omega_bt",
+        help="--max-bandwidth: weight hyperparameters multiplied by the factor",
+    )
+    g.add_argument(
+        "--alphas", default=None, help="--max-bandwidth: comma-separated scan of the factor (default 0.125,0.25,...,32)"
+    )
     p.set_defaults(func=cmd_synth)
     p = sub.add_parser("run", help="bounds -> synthesis -> analysis in one go")
     _add_synthesis_arguments(p)
@@ -188,6 +229,8 @@ def register(sub) -> None:
     p.add_argument("--omega", default=None, help="analysis frequency grid LO:HI:N in rad/s (default automatic)")
     for a in p._actions:
         if a.dest == "output":  # run: a directory unless the name ends in .json
-            a.help = ("FILE.json: the controller, its certificate and its problem; DIR: a run directory with "
-                      "K.json, pldi.json/.npz and the validation report (report.html)")
+            a.help = (
+                "FILE.json: the controller, its certificate and its problem; DIR: a run directory with "
+                "K.json, pldi.json/.npz and the validation report (report.html)"
+            )
     p.set_defaults(func=cmd_run)

@@ -131,10 +131,10 @@ def read_controller_file(path) -> dict:
         raise ControllerFileError(f"{path}: a controller file is a JSON object (see polyrob.io.controller)")
     _check_format(path, doc)
     if doc.get("type") not in ("ss", "tf"):
-        raise ControllerFileError(f"{path}: a controller file needs \"type\": \"ss\" or \"tf\" (see polyrob.io.controller)")
+        raise ControllerFileError(f'{path}: a controller file needs "type": "ss" or "tf" (see polyrob.io.controller)')
     for key in ("info", "certificate"):
         if not isinstance(doc.get(key, {}), dict):
-            raise ControllerFileError(f"{path}: \"{key}\" must be a JSON object")
+            raise ControllerFileError(f'{path}: "{key}" must be a JSON object')
     return doc
 
 
@@ -143,7 +143,9 @@ def _finite(path: Path, name: str, values) -> None:
     flat = np.asarray(values, float).ravel()
     bad = np.flatnonzero(~np.isfinite(flat))
     if bad.size:
-        raise ControllerFileError(f"{path}: {name} has {bad.size} non-finite value(s) (NaN or inf); a controller needs finite numbers")
+        raise ControllerFileError(
+            f"{path}: {name} has {bad.size} non-finite value(s) (NaN or inf); a controller needs finite numbers"
+        )
 
 
 def controller_from_mapping(doc: dict, path="controller"):

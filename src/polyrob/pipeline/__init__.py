@@ -6,6 +6,9 @@ generalized plant), :func:`design_controller` (μ-synthesis, reduction),
 :func:`check_controller_problem` (is a controller file made for this problem?).
 """
 
+from polyrob.pipeline.analysis import ControllerAnalysis, analyze_controller, controller_order, frequency_grid, verdict
+from polyrob.pipeline.design import Design, design_controller, design_max_bandwidth, synthesis_options
+from polyrob.pipeline.matching import check_controller_problem, controller_differences
 from polyrob.pipeline.problem import (
     UNCERTAINTY_MODELS,
     WEIGHT_KEYS,
@@ -14,9 +17,6 @@ from polyrob.pipeline.problem import (
     default_hyperparameters,
     make_uncertain_plant,
 )
-from polyrob.pipeline.analysis import ControllerAnalysis, analyze_controller, controller_order, frequency_grid, verdict
-from polyrob.pipeline.design import Design, design_controller, design_max_bandwidth, synthesis_options
-from polyrob.pipeline.matching import check_controller_problem, controller_differences
 from polyrob.pipeline.reports import format_matrix, pldi_report, robot_report
 
 __all__ = [

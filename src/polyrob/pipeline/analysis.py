@@ -21,24 +21,42 @@ from polyrob.errors import ArgumentError
 __all__ = ["ControllerAnalysis", "analyze_controller", "verdict", "frequency_grid", "controller_order", "NEXT_STEPS"]
 
 #: What to try when robust performance is not certified.
-NEXT_STEPS = ("try: lower performance targets (`polyrob synth --max-bandwidth` finds the largest bandwidth "
-              "factor with mu < 1, or --bandwidth-scale < 1), a smaller domain (--qdot-max, --u-max, --q-range), "
-              "or a tighter uncertainty model (--uncertainty)")
+NEXT_STEPS = (
+    "try: lower performance targets (`polyrob synth --max-bandwidth` finds the largest bandwidth "
+    "factor with mu < 1, or --bandwidth-scale < 1), a smaller domain (--qdot-max, --u-max, --q-range), "
+    "or a tighter uncertainty model (--uncertainty)"
+)
 
 
-def verdict(mu_upper: float, mu_lower: float, *, nominally_stable: bool = True, covers: str = "") -> str:
-    """One plain line: the robust-performance verdict, what it covers, what to try next when it fails."""
+def verdict(mu_upper: float, mu_lower: float, *, nominally_stable: bool = True, covers: str = "", failed=()) -> str:
+    """One plain line: the robust-performance verdict, what it covers, what to try next when it fails.
+
+    ``failed`` are the analysis' own reasons not to certify (e.g. the loop at
+    ``Δ = 0`` not proved stable); with any, μ < 1 certifies nothing.
+    """
     where = f" for {covers}" if covers else ""
     if not nominally_stable:
-        return ("verdict: NOT certified: the nominal closed loop is unstable, so mu certifies nothing; "
-                "try another controller (e.g. `polyrob synth`)")
+        return (
+            "verdict: NOT certified: the nominal closed loop is unstable, so mu certifies nothing; "
+            "try another controller (e.g. `polyrob synth`)"
+        )
+    blocking = [f for f in failed if "mu upper bound" not in f]
+    if mu_upper < 1 and blocking:
+        return (
+            f"verdict: robust performance NOT certified although mu < 1 ({'; '.join(blocking)}){where}; "
+            "try another controller (e.g. `polyrob synth`)"
+        )
     if mu_upper < 1:
         return f"verdict: robust performance CERTIFIED (peak mu upper bound {mu_upper:.4g} < 1 on the frequency grid){where}"
     if mu_lower >= 1:
-        return (f"verdict: robust performance VIOLATED (mu lower bound {mu_lower:.4g} >= 1: some parameters "
-                f"in the set break it){where}; {NEXT_STEPS}")
-    return (f"verdict: robust performance NOT certified (mu in [{mu_lower:.4g}, {mu_upper:.4g}] straddles 1){where}; "
-            f"{NEXT_STEPS}")
+        return (
+            f"verdict: robust performance VIOLATED (mu lower bound {mu_lower:.4g} >= 1: some parameters "
+            f"in the set break it){where}; {NEXT_STEPS}"
+        )
+    return (
+        f"verdict: robust performance NOT certified (mu in [{mu_lower:.4g}, {mu_upper:.4g}] straddles 1){where}; "
+        f"{NEXT_STEPS}"
+    )
 
 
 def frequency_grid(lo: float, hi: float, n: int):
@@ -94,15 +112,22 @@ class ControllerAnalysis:
     @property
     def verdict(self) -> str:
         rp = self.robust_performance
-        return verdict(rp.mu_upper, rp.mu_lower, nominally_stable=self.robust_stability.nominally_stable,
-                       covers=self.covers)
+        return verdict(
+            rp.mu_upper,
+            rp.mu_lower,
+            nominally_stable=self.robust_stability.nominally_stable,
+            covers=self.covers,
+            failed=tuple(getattr(rp, "failed", ())),
+        )
 
     @staticmethod
     def status(r) -> str:
         """``certified`` / ``violated`` / ``not certified`` for one robustness result."""
         if not r.nominally_stable:
             return "not certified (nominally unstable)"
-        return "certified" if r.mu_upper < 1 else ("violated" if r.mu_lower >= 1 else "not certified")
+        if r.mu_lower >= 1:
+            return "violated"
+        return "certified" if getattr(r, "robust", r.mu_upper < 1) and r.mu_upper < 1 else "not certified"
 
     def summary(self) -> dict:
         s = self.sampling
@@ -116,15 +141,18 @@ class ControllerAnalysis:
             "robust_performance": rp,
             "monte_carlo": {"samples": s.random, "stable_fraction": s.random_stable},
             "corners": {"count": s.corners, "stable_fraction": s.corners_stable},
-            "worst_sampled": {"delta": [float(x) for x in s.worst_delta.ravel()],
-                              "max_pole_real_part": float(s.worst_abscissa)},
+            "worst_sampled": {
+                "delta": [float(x) for x in s.worst_delta.ravel()],
+                "max_pole_real_part": float(s.worst_abscissa),
+            },
             "covers": self.covers,
             "verdict": self.verdict,
         }
 
 
-def analyze_controller(problem, K, *, omega=None, mc: int = 500, seed: int = 0,
-                       progress: bool | None = None) -> ControllerAnalysis:
+def analyze_controller(
+    problem, K, *, omega=None, mc: int = 500, seed: int = 0, progress: bool | None = None
+) -> ControllerAnalysis:
     """Nominal/robust stability and performance of ``K`` on ``problem``, and sampled stability.
 
     Parameters
@@ -153,5 +181,11 @@ def analyze_controller(problem, K, *, omega=None, mc: int = 500, seed: int = 0,
     covers = getattr(rp, "covers", None)  # the analysis' own wording when it provides one
     covers = covers() if callable(covers) else covers
     covers = covers or problem.covers()
-    return ControllerAnalysis(robust_stability=rs, robust_performance=rp, nominal_performance=float(npf),
-                              sampling=sampling, order=controller_order(K), covers=str(covers))
+    return ControllerAnalysis(
+        robust_stability=rs,
+        robust_performance=rp,
+        nominal_performance=float(npf),
+        sampling=sampling,
+        order=controller_order(K),
+        covers=str(covers),
+    )

@@ -14,8 +14,15 @@ from polyrob.errors import ArgumentError
 __all__ = ["Design", "design_controller", "design_max_bandwidth", "synthesis_options"]
 
 
-def synthesis_options(*, structure: str = "full", complex_blocks: bool = False, max_iter: int | None = None,
-                      starts: int | None = None, init: str | None = None, progress: bool | None = None) -> dict:
+def synthesis_options(
+    *,
+    structure: str = "full",
+    complex_blocks: bool = False,
+    max_iter: int | None = None,
+    starts: int | None = None,
+    init: str | None = None,
+    progress: bool | None = None,
+) -> dict:
     """``musyn`` keyword arguments from the plain synthesis choices."""
     if max_iter is not None and max_iter < 1:
         raise ArgumentError(f"max_iter must be >= 1, got {max_iter}")
@@ -105,9 +112,14 @@ def design_controller(problem, *, reduce: bool = False, reduce_max_order: int = 
     if reduce and options.get("structure", "full") == "full":
         reduced = reduce_controller(problem.P, result, max_order=reduce_max_order)
         K = reduced.controller
-        cert.update(structure=f"reduced:{reduced.order}", order=int(reduced.order),
-                    peak_mu_upper=float(reduced.peak_mu), peak_mu_lower=float(reduced.peak_mu_lower),
-                    full_order=int(result.order), full_peak_mu_upper=float(result.peak_mu))
+        cert.update(
+            structure=f"reduced:{reduced.order}",
+            order=int(reduced.order),
+            peak_mu_upper=float(reduced.peak_mu),
+            peak_mu_lower=float(reduced.peak_mu_lower),
+            full_order=int(result.order),
+            full_peak_mu_upper=float(result.peak_mu),
+        )
     return Design(controller=K, result=result, reduced=reduced, certificate=cert, notes=notes)
 
 
@@ -129,5 +141,4 @@ def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None,
     cert = res.result.summary()
     cert.update(bandwidth_scaling=res.summary())
     notes = tuple(res.result.info.get("notes", [])) if isinstance(res.result.info, dict) else ()
-    return Design(controller=res.result.controller, result=res.result, reduced=None, certificate=cert,
-                  notes=notes), res
+    return Design(controller=res.result.controller, result=res.result, reduced=None, certificate=cert, notes=notes), res

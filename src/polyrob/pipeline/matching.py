@@ -65,16 +65,22 @@ def controller_differences(info: dict, problem) -> list[str]:
         for key, vals in saved_w.items():
             now = given_w.get(key)
             if now is None or len(now) != len(vals) or not all(same_number(a, b) for a, b in zip(vals, now)):
-                diffs.append(f"weight {key} = {_values(vals)} (given {_values(now or [])}; "
-                             f"{_WEIGHT_OPTIONS.get(key, key)} {_values(vals)})")
+                diffs.append(
+                    f"weight {key} = {_values(vals)} (given {_values(now or [])}; "
+                    f"{_WEIGHT_OPTIONS.get(key, key)} {_values(vals)})"
+                )
     saved_u, given_u = info.get("uncertainty"), given.get("uncertainty")
     if isinstance(saved_u, dict) and given_u is not None:
         if "model" in saved_u and saved_u["model"] != given_u.get("model"):
-            diffs.append(f"uncertainty model '{saved_u['model']}' (given '{given_u.get('model')}'; "
-                         f"--uncertainty {saved_u['model']})")
+            diffs.append(
+                f"uncertainty model '{saved_u['model']}' (given '{given_u.get('model')}'; "
+                f"--uncertainty {saved_u['model']})"
+            )
         if "merge_symmetric" in saved_u and bool(saved_u["merge_symmetric"]) != bool(given_u.get("merge_symmetric")):
-            diffs.append("merged symmetric parameters" + (" (--merge-symmetric)" if saved_u["merge_symmetric"]
-                                                          else " off (drop --merge-symmetric)"))
+            diffs.append(
+                "merged symmetric parameters"
+                + (" (--merge-symmetric)" if saved_u["merge_symmetric"] else " off (drop --merge-symmetric)")
+            )
     return diffs
 
 

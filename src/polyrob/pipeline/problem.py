@@ -137,19 +137,27 @@ class Problem:
             "m": int(self.robot.m),
             "domain": self.domain.to_dict(),
             "weights": {k: list(v) for k, v in self.hyperparameters.items()},
-            "uncertainty": {"requested": self.uncertainty, "model": self.model,
-                            "merge_symmetric": bool(self.merge_symmetric)},
+            "uncertainty": {
+                "requested": self.uncertainty,
+                "model": self.model,
+                "merge_symmetric": bool(self.merge_symmetric),
+            },
             "enclosure": self.pldi.enclosure,
             "parameters": int(self.unc.n_params),
         }
 
     def covers(self) -> str:
         """Plain words for what a μ verdict on this problem covers."""
-        enclosure = ("proved (interval arithmetic)" if self.pldi.enclosure == "certified"
-                     else "sampled and searched (not proved)")
-        return (f"every frozen (constant in time) Jacobian pair in the {self.model} set of {self.unc.n_params} "
-                f"real parameters around the {enclosure} PLDI of {self.robot.name} over domain "
-                f"'{self.domain.name}'")
+        enclosure = (
+            "proved (interval arithmetic)"
+            if self.pldi.enclosure == "certified"
+            else "sampled and searched (not proved)"
+        )
+        return (
+            f"every frozen (constant in time) Jacobian pair in the {self.model} set of {self.unc.n_params} "
+            f"real parameters around the {enclosure} PLDI of {self.robot.name} over domain "
+            f"'{self.domain.name}'"
+        )
 
 
 def _check_pldi(robot, pldi, domain) -> None:
@@ -223,5 +231,13 @@ def build_problem(
         _check_pldi(robot, pldi, domain)
     unc, model = make_uncertain_plant(pldi, uncertainty, merge_symmetric=merge_symmetric)
     P = generalized_plant(unc, *paper_weights(h))
-    return Problem(robot=robot, pldi=pldi, unc=unc, P=P, hyperparameters={k: tuple(v) for k, v in h.items()},
-                   uncertainty=uncertainty, model=model, merge_symmetric=merge_symmetric)
+    return Problem(
+        robot=robot,
+        pldi=pldi,
+        unc=unc,
+        P=P,
+        hyperparameters={k: tuple(v) for k, v in h.items()},
+        uncertainty=uncertainty,
+        model=model,
+        merge_symmetric=merge_symmetric,
+    )

@@ -64,6 +64,9 @@ def pldi_report(pldi, joint_names=None) -> dict:
     }
     if len(pldi.entries) and pldi.enclosure == "sampled":
         worst = int(np.argmax(pldi.refinement))
-        out["refinement"] = {"max_percent": float(100 * pldi.refinement[worst]), "entry": pldi.entries[worst],
-                             "verification_rounds": int(pldi.info.get("verification_rounds", 0))}
+        out["refinement"] = {
+            "max_percent": float(100 * pldi.refinement[worst]),
+            "entry": pldi.entries[worst],
+            "verification_rounds": int(pldi.info.get("verification_rounds", 0)),
+        }
     return out
