@@ -33,7 +33,7 @@ def pldi():
 def unc(pldi):
     from polyrob.plant.uncertainty import uncertain_plant
 
-    return uncertain_plant(pldi)
+    return uncertain_plant(pldi, model="box")
 
 
 LINK = '<link name="{n}"><inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>'

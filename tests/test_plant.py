@@ -93,7 +93,7 @@ def test_block_structures(P, unc, pldi):
     assert P.block_structure_rs.tolist() == [[-1, 0]] * 10
     assert P.block_structure_rp.tolist() == [[-1, 0]] * 10 + [[2, 4]]  # Δ_perf is n_w x n_z
     np.testing.assert_array_equal(P.block_structure_rs, unc.block_structure)
-    Pm = generalized_plant(uncertain_plant(pldi, merge_symmetric=True), W_S, W_T)
+    Pm = generalized_plant(uncertain_plant(pldi, model="box", merge_symmetric=True), W_S, W_T)
     assert Pm.n_delta == 10
     assert Pm.block_structure_rp.tolist() == [[-1, 0]] * 7 + [[-2, 0], [-1, 0], [2, 4]]
 
@@ -109,7 +109,7 @@ def test_rp_block_fits_the_closed_loop(P, K):
 
 @pytest.mark.parametrize("merge", [False, True])
 def test_lft_with_delta_equals_the_direct_closed_loop(pldi, K, merge):
-    u = uncertain_plant(pldi, merge_symmetric=merge)
+    u = uncertain_plant(pldi, model="box", merge_symmetric=merge)
     P = generalized_plant(u, W_S, W_T)
     N = lft(P, K)
     assert (N.ninputs, N.noutputs, N.nstates) == (12, 14, 8 + 12)
@@ -130,11 +130,11 @@ def test_lft_with_delta_equals_the_direct_closed_loop(pldi, K, merge):
 
 def test_nominal_sensitivity_from_the_lft(pldi, K):
     # midpoint nominal: G_n is the LFT centre, so Δ = 0 gives W_S S_n
-    u_mid = uncertain_plant(pldi, nominal="midpoint")
+    u_mid = uncertain_plant(pldi, model="box", nominal="midpoint")
     N = lft(generalized_plant(u_mid, W_S, W_T), K)
     Nww = upper_lft(N, np.zeros((10, 10)))
     # PLDI nominal (equilibrium, off-centre): Δ = diag(nominal_delta) gives W_S S_n
-    u = uncertain_plant(pldi)
+    u = uncertain_plant(pldi, model="box")
     Nn = upper_lft(lft(generalized_plant(u, W_S, W_T), K), u.delta_matrix(u.nominal_delta))
     for w in FREQS:
         s = 1j * w

@@ -15,7 +15,7 @@ PAPER_ENTRIES = ("a32", "a33", "a34", "a42", "a43", "a44", "b31", "b32", "b41", 
 
 @pytest.fixture(scope="module")
 def unc_merged(pldi):
-    return uncertain_plant(pldi, merge_symmetric=True)
+    return uncertain_plant(pldi, model="box", merge_symmetric=True)
 
 
 def _entries(unc, A, B):
@@ -64,7 +64,7 @@ def test_plant_at_nominal_delta_is_the_nominal(pldi, unc):
 
 
 def test_midpoint_nominal(pldi):
-    u = uncertain_plant(pldi, nominal="midpoint")
+    u = uncertain_plant(pldi, model="box", nominal="midpoint")
     G = u.nominal_system()
     np.testing.assert_allclose(_entries(u, G.A, G.B), 0.5 * (pldi.lower + pldi.upper), rtol=0, atol=1e-15)
     np.testing.assert_array_equal(u.nominal_delta, np.zeros(10))
@@ -74,7 +74,7 @@ def test_midpoint_nominal(pldi):
 
 @pytest.mark.parametrize("merge", [False, True])
 def test_upper_lft_reproduces_plant_at(pldi, merge):
-    u = uncertain_plant(pldi, merge_symmetric=merge)
+    u = uncertain_plant(pldi, model="box", merge_symmetric=merge)
     M = u.lft_system()
     assert M.ninputs == M.noutputs == u.n_delta + 2
     assert M.input_labels[: u.n_delta] == [f"d_{n}" for n in u.channel_names]
@@ -150,7 +150,7 @@ def test_merge_requires_identical_bounds(pldi):
     B_upper = pldi.B_upper.copy()
     B_upper[3, 0] += 1e-3  # b41's upper bound no longer equals b32's
     other = dataclasses.replace(pldi, B_upper=B_upper)
-    u = uncertain_plant(other, merge_symmetric=True)
+    u = uncertain_plant(other, model="box", merge_symmetric=True)
     assert u.n_params == 10 and u.merged == ()
     assert u.block_structure.tolist() == [[-1, 0]] * 10
 
@@ -179,10 +179,10 @@ def test_bad_inputs_raise_clear_errors(pldi, unc):
     with pytest.raises(PolyrobError, match="needs a number"):
         unc.delta_samples()
     with pytest.raises(PolyrobError, match="unknown nominal"):
-        uncertain_plant(pldi, nominal="equilibrium")
+        uncertain_plant(pldi, model="box", nominal="equilibrium")
     A_lower = pldi.A_lower.copy()
     A_lower[2, 1] = pldi.A_upper[2, 1] + 1.0
     with pytest.raises(BoundsError, match="a32"):
-        uncertain_plant(dataclasses.replace(pldi, A_lower=A_lower))
+        uncertain_plant(dataclasses.replace(pldi, A_lower=A_lower), model="box")
     with pytest.raises(PolyrobError, match="ill posed"):
         upper_lft(control.ss([], [], [], [[1.0]]), [[1.0]])

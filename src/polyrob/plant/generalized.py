@@ -66,7 +66,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from polyrob.errors import PolyrobError
-from polyrob.plant.uncertainty import UncertainPlant, upper_lft
+from polyrob.plant.lftplant import UncertainPlant, upper_lft
 
 __all__ = [
     "GeneralizedPlant",
@@ -413,6 +413,7 @@ def generalized_plant(
     Cv = np.zeros((nd, N))
     Cv[:, :n] = unc.C_v
     Dv = np.zeros((nd, n_in))
+    Dv[:, :nd] = unc.D_vd
     Dv[:, nd + m :] = unc.D_vu
     Ce = np.zeros((m, N))
     Ce[:, :n] = -C_g

@@ -1,0 +1,239 @@
+"""The ``axes`` uncertainty model: an oriented box in the principal directions, plus a residual block.
+
+The varying Jacobian entries ``p`` (``k`` of them) are written::
+
+    p = c + Σ_{j <= r} b_j z_j + e,     z_j ∈ [z_lo_j, z_hi_j],   e = W_l Δ W_r,  ‖Δ‖ <= 1
+
+* ``b_j`` are the ``r`` strongest principal directions of the Jacobian cloud
+  that :func:`~polyrob.bounds.pldi.bound_pldi` computed (``pldi.polytope.basis``),
+  and ``[z_lo_j, z_hi_j]`` come from the PLDI's support values along ``±w_j``
+  (its half-spaces: the same sampled, searched and verified extreme search
+  as the intervals; ``w_j · b_i = δ_ij``);
+* the residual ``e`` (what the retained directions leave out) is bounded
+  entry by entry by linear programs over the PLDI's polytope (every Jacobian
+  lies in it, and ``e`` is linear in ``p``), then covered by one full complex
+  block ``Δ`` of the lower rows of ``[A B]`` with diagonal scalings chosen so that
+  ``‖W_l^{-1} E W_r^{-1}‖_F <= 1`` for every ``E`` with those entry bounds.
+
+Each retained direction moves a rank-``rank(b_j)`` matrix (both lower rows of
+``[A B]`` in general), so it is a repeated real scalar ``[-rank, 0]``: the
+entries it couples move together, as the real arm's do.  ``n_directions``
+is chosen as the smallest ``r`` whose residual gain falls below
+``residual_tol`` of the total spread, or given by hand.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import optimize
+
+from polyrob.errors import BoundsError, PolyrobError
+from polyrob.plant.lftplant import UncertainPlant
+
+__all__ = ["axes_plant", "axes_contains", "RESIDUAL_TOL"]
+
+#: Default: keep directions until the residual gain is at most this fraction of the total.
+RESIDUAL_TOL = 0.1
+
+
+def _residual_bounds(pldi, centre, basis_r, W_r):
+    """Entrywise range of ``e = (I - b W)(p - c)`` over the polytope (2k LPs)."""
+    poly = pldi.polytope
+    k = len(centre)
+    Pi = np.eye(k) - basis_r @ W_r
+    lo, hi = np.zeros(k), np.zeros(k)
+    for i in range(k):
+        row = Pi[i]
+        if np.abs(row).max() < 1e-14:
+            continue
+        for sgn in (1.0, -1.0):
+            res = optimize.linprog(-sgn * row, A_ub=poly.normals, b_ub=poly.offsets,
+                                   bounds=[(None, None)] * k, method="highs")
+            if res.status != 0:
+                raise BoundsError(f"the residual LP failed ({res.message})")
+            val = sgn * (row @ res.x - row @ centre)
+            if sgn > 0:
+                hi[i] = val
+            else:
+                lo[i] = val
+    return lo, hi
+
+
+def _layout(pldi):
+    """Index of the entries in the lower block rows of ``[A B]``: (row - m, column of [x; u])."""
+    m = pldi.m
+    idx = np.asarray(pldi.entry_index, int).reshape(-1, 3)
+    return np.array([(r - m, c if mat == 0 else 2 * m + c) for mat, r, c in idx], int).reshape(-1, 2)
+
+
+def _full_block_gains(rho_mat):
+    """``W_l`` (rows), ``W_r`` (cols) with ``‖diag(1/W_l) E diag(1/W_r)‖_F <= 1`` whenever ``|E| <= rho_mat``."""
+    rows = np.flatnonzero(rho_mat.max(axis=1) > 0)
+    cols = np.flatnonzero(rho_mat.max(axis=0) > 0)
+    R = rho_mat[np.ix_(rows, cols)]
+    b = np.sqrt(R.max(axis=0))
+    a = np.sqrt(len(rows) * ((R / b[None, :]) ** 2).sum(axis=1))
+    return rows, cols, a, b
+
+
+def axes_plant(pldi, *, n_directions: int | None = None, residual_tol: float = RESIDUAL_TOL,
+               nominal: str = "pldi") -> UncertainPlant:
+    """The ``axes`` model of a PLDI (see the module docstring).
+
+    Parameters
+    ----------
+    pldi : PLDI
+    n_directions : int, optional
+        Retained principal directions (default: automatic, see ``residual_tol``).
+    residual_tol : float
+        Automatic choice: the smallest ``r`` whose residual gain ``‖ρ‖_F`` (in
+        the PLDI's normalised units) is at most this fraction of the total spread.
+    nominal : {"pldi", "midpoint"}
+
+    Raises
+    ------
+    PolyrobError
+        ``n_directions`` out of range, unknown nominal.
+    """
+    if nominal not in ("pldi", "midpoint"):
+        raise PolyrobError(f"unknown nominal '{nominal}': use 'pldi' or 'midpoint'")
+    poly = pldi.polytope
+    m, k = pldi.m, len(pldi.entries)
+    n = 2 * m
+    lower, upper = np.asarray(pldi.lower, float), np.asarray(pldi.upper, float)
+    # the principal directions whose supports the PLDI searched: rows 2k.. of the half-spaces
+    n_pc = (poly.n_halfspaces - 2 * k) // 2
+    W_all = poly.normals[2 * k : 2 * k + n_pc]  # w_j (normals), w_j . b_i = δ_ij
+    basis_all = poly.basis[:, :n_pc]
+    h_plus, h_minus = poly.offsets[2 * k : 2 * k + n_pc], poly.offsets[2 * k + n_pc : 2 * k + 2 * n_pc]
+    centre0 = poly.centre
+    spread = np.linalg.norm((upper - lower) / 2.0 / np.maximum(upper - lower, 1e-300))
+    norm_unit = np.maximum(upper - lower, 1e-300)
+
+    def build(r):
+        W_r, b_r = W_all[:r], basis_all[:, :r]
+        z_hi, z_lo = h_plus[:r] - W_r @ centre0, -h_minus[:r] - W_r @ centre0
+        e_lo, e_hi = _residual_bounds(pldi, centre0, b_r, W_r)
+        return W_r, b_r, z_lo, z_hi, e_lo, e_hi
+
+    if n_directions is None:
+        chosen = None
+        for r in range(0, n_pc + 1):
+            parts = build(r)
+            e_lo, e_hi = parts[4], parts[5]
+            if np.linalg.norm(0.5 * (e_hi - e_lo) / norm_unit) <= residual_tol * spread:
+                chosen = (r, parts)
+                break
+        if chosen is None:
+            chosen = (n_pc, build(n_pc))
+        r, (W_r, b_r, z_lo, z_hi, e_lo, e_hi) = chosen
+    else:
+        r = int(n_directions)
+        if not 0 <= r <= n_pc:
+            raise PolyrobError(f"n_directions must lie in [0, {n_pc}] (the searched principal directions), got {r}")
+        W_r, b_r, z_lo, z_hi, e_lo, e_hi = build(r)
+
+    # centre: the cloud mean moved to the middle of the z box and of the residual box
+    z_mid, z_rad = 0.5 * (z_lo + z_hi), 0.5 * (z_hi - z_lo)
+    e_mid, rho = 0.5 * (e_lo + e_hi), 0.5 * (e_hi - e_lo)
+    centre = centre0 + b_r @ z_mid + e_mid
+    lay = _layout(pldi)
+    A0, B0 = np.asarray(pldi.A0, float), np.asarray(pldi.B0, float)
+    AB = np.hstack([A0[m:], B0[m:]])
+    AB[lay[:, 0], lay[:, 1]] = centre
+    A_mid = A0.copy()
+    A_mid[m:] = AB[:, :n]
+    B_mid = B0.copy()
+    B_mid[m:] = AB[:, n:]
+
+    # residual full block (first in Δ), then one repeated real scalar per direction
+    rho_mat = np.zeros((m, 3 * m))
+    rho_mat[lay[:, 0], lay[:, 1]] = rho
+    blocks_B, blocks_C, blk, names, ch_names, ch_param = [], [], [], [], [], []
+    rows, cols, a, b = _full_block_gains(rho_mat) if rho.max() > 0 else (np.zeros(0, int),) * 2 + (None, None)
+    size = max(len(rows), len(cols))
+    if size:
+        Bf = np.zeros((m, size))
+        Bf[rows, np.arange(len(rows))] = a
+        Cf = np.zeros((size, 3 * m))
+        Cf[np.arange(len(cols)), cols] = b
+        blocks_B.append(Bf)
+        blocks_C.append(Cf)
+        blk.append([size, size])
+        ch_names += [f"res#{i}" for i in range(size)]
+        ch_param += [-1] * size
+    for j in range(r):
+        E = np.zeros((m, 3 * m))
+        E[lay[:, 0], lay[:, 1]] = b_r[:, j] * z_rad[j]
+        Uu, s, Vt = np.linalg.svd(E)
+        rank = int(np.sum(s > 1e-12 * max(s[0], 1e-300)))
+        blocks_B.append(Uu[:, :rank] * s[:rank])
+        blocks_C.append(Vt[:rank])
+        blk.append([-rank, 0])
+        names.append(f"z{j + 1}")
+        ch_names += [f"z{j + 1}#{i}" for i in range(rank)]
+        ch_param += [j] * rank
+    low = np.zeros((n, m))
+    low[m:] = np.eye(m)
+    Bd_low = np.hstack(blocks_B) if blocks_B else np.zeros((m, 0))
+    Cvu = np.vstack(blocks_C) if blocks_C else np.zeros((0, 3 * m))
+    plant = UncertainPlant(
+        robot_name=pldi.robot_name, nominal_kind=nominal, A_nom=A_mid, B_nom=B_mid,
+        C=np.hstack([np.eye(m), np.zeros((m, m))]), A_mid=A_mid, B_mid=B_mid, B_d=low @ Bd_low,
+        C_v=Cvu[:, :n], D_vu=Cvu[:, n:], parameter_names=tuple(names), parameter_lower=z_lo + 0.0,
+        parameter_upper=z_hi + 0.0, channel_names=tuple(ch_names), channel_parameter=np.array(ch_param, int),
+        channel_index=None, channel_lower=None, channel_upper=None, nominal_delta=np.zeros(r),
+        offset=np.zeros(r), block_structure=np.array(blk, int).reshape(-1, 2),
+        info={"enclosure": pldi.enclosure, "n_directions": r, "searched_directions": n_pc,
+              "residual_gain": float(np.linalg.norm(rho / norm_unit)), "spread": float(spread),
+              "centre": centre, "basis": b_r, "W": W_r, "z_mid": z_mid, "z_rad": z_rad,
+              "residual_rows": rows, "residual_cols": cols, "W_l": a, "W_r": b, "layout": lay},
+        model="axes",
+    )
+    if nominal == "midpoint":
+        return plant
+    p0 = np.asarray(pldi.nominal, float)
+    z0 = W_r @ (p0 - centre)
+    nd = np.where(z_rad > 0, z0 / np.where(z_rad > 0, z_rad, 1.0), 0.0)
+    return plant.with_figures(A_nom=A0, B_nom=B0, nominal_delta=nd, offset=-z_rad * nd)
+
+
+def axes_contains(unc: UncertainPlant, A, B, *, rtol: float = 1e-9) -> np.ndarray:
+    """Whether Jacobians lie in an ``axes`` model's set.
+
+    ``z = W (p - c)`` must lie in the directions' ranges and the residual
+    ``E = p - c - b z`` (as a matrix of the lower rows of ``[A B]``) must satisfy
+    ``‖diag(1/W_l) E diag(1/W_r)‖_2 <= 1``; constant entries must equal the centre's.
+    """
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    if A.ndim == 2:
+        A, B = A[None], B[None]
+    info = unc.info
+    m, n = unc.m, unc.n_x
+    lay = info["layout"]
+    AB = np.concatenate([A[:, m:], B[:, m:]], axis=2)  # (N, m, 3m)
+    AB_c = np.hstack([unc.A_mid[m:], unc.B_mid[m:]])
+    p = AB[:, lay[:, 0], lay[:, 1]]
+    d = p - info["centre"]
+    z = d @ info["W"].T
+    zr = info["z_rad"]
+    ok = np.all(np.abs(z) <= zr * (1 + rtol) + rtol, axis=1)
+    e = d - z @ info["basis"].T
+    E = np.zeros_like(AB)
+    E[:, lay[:, 0], lay[:, 1]] = e
+    const = AB.copy()
+    const[:, lay[:, 0], lay[:, 1]] = 0.0
+    AB_c0 = AB_c.copy()
+    AB_c0[lay[:, 0], lay[:, 1]] = 0.0
+    ok &= np.all(np.abs(const - AB_c0) <= rtol * (1 + np.abs(AB_c0)), axis=(1, 2))
+    ok &= np.all(np.abs(A[:, :m] - unc.A_mid[:m]) <= rtol, axis=(1, 2)) & np.all(np.abs(B[:, :m]) <= rtol, axis=(1, 2))
+    rows, cols = info["residual_rows"], info["residual_cols"]
+    if len(rows):
+        S = E[:, rows][:, :, cols] / info["W_l"][None, :, None] / info["W_r"][None, None, :]
+        ok &= np.linalg.norm(S, 2, axis=(1, 2)) <= 1.0 + rtol
+        outside = np.ones((m, 3 * m), bool)
+        outside[np.ix_(rows, cols)] = False
+        ok &= np.all(np.abs(E[:, outside]) <= rtol, axis=1)
+    else:
+        ok &= np.all(np.abs(e) <= rtol * (1 + np.abs(p)), axis=1)
+    return ok

@@ -1,0 +1,120 @@
+"""How well an uncertainty model fits the robot: coverage on fresh samples and size against the polytope.
+
+* :func:`model_contains` — whether given Jacobians lie in a model's set
+  (each model has its own exact membership test);
+* :func:`coverage_fraction` — the fraction of fresh uniform points of the
+  domain whose Jacobians the model contains (it must be 1.0);
+* :func:`volume_ratio` — the model's size over the PLDI polytope's, in the
+  polytope's reduced coordinates: ``vol(model ∩ interval box) / vol(polytope)``
+  estimated on the same uniform points of the interval box (the polytope
+  and the box model lie inside the box; for the other models the part
+  outside the box is not counted, see docs/uncertainty.md).  A model that is
+  lower-dimensional (the ``lft`` model's ``B`` block is a curve) has ratio 0
+  by this measure; :func:`det_b_range` gives a number that separates them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from polyrob.errors import PolyrobError
+from polyrob.plant.lftplant import UncertainPlant
+
+__all__ = ["model_contains", "coverage_fraction", "volume_ratio", "det_b_range"]
+
+
+def model_contains(unc: UncertainPlant, A, B) -> np.ndarray:
+    """Whether Jacobians ``A`` (n, 2m, 2m), ``B`` (n, 2m, m) lie in the model's set (n,) bool."""
+    if unc.model == "box":
+        from polyrob.plant.box import box_contains
+
+        return box_contains(unc, A, B)
+    if unc.model == "lft":
+        from polyrob.plant.inertia_lft import inertia_lft_contains
+
+        return inertia_lft_contains(unc, A, B)
+    if unc.model == "axes":
+        from polyrob.plant.axes import axes_contains
+
+        return axes_contains(unc, A, B)
+    raise PolyrobError(f"no membership test for the model '{unc.model}'")
+
+
+def coverage_fraction(unc: UncertainPlant, robot, domain, n: int = 2000, *, seed: int = 12345) -> float:
+    """Fraction of ``n`` fresh uniform points of ``domain`` whose Jacobians the model contains.
+
+    The points are drawn with a seed of their own, not the PLDI's design.
+    """
+    q, qdot, u = domain.sample(int(n), method="uniform", seed=seed)
+    A, B = robot.jacobians_batch(q, qdot, u)
+    return float(model_contains(unc, A, B).mean())
+
+
+def _box_points(pldi, n: int, rng):
+    """Uniform points of the interval box in the polytope's reduced coordinates, and their entries."""
+    poly = pldi.polytope
+    lo, hi = np.asarray(pldi.lower, float), np.asarray(pldi.upper, float)
+    k = len(lo)
+    G = poly.normals[: 2 * k] @ poly.basis
+    g = poly.offsets[: 2 * k] - poly.normals[: 2 * k] @ poly.centre
+    from scipy import optimize
+
+    r = poly.basis.shape[1]
+    box_z = []
+    for i in range(r):
+        b = []
+        for sgn in (1.0, -1.0):
+            c = np.zeros(r)
+            c[i] = sgn
+            res = optimize.linprog(c, A_ub=G, b_ub=g, bounds=[(None, None)] * r, method="highs")
+            b.append(res.x[i])
+        box_z.append(sorted(b))
+    box_z = np.array(box_z)
+    z = box_z[:, 0] + rng.random((n, r)) * (box_z[:, 1] - box_z[:, 0])
+    p = poly.centre + z @ poly.basis.T
+    in_box = np.all((p >= lo - 1e-12 * (1 + abs(lo))) & (p <= hi + 1e-12 * (1 + abs(hi))), axis=1)
+    return p[in_box]
+
+
+def volume_ratio(unc: UncertainPlant, pldi, n: int = 100_000, *, seed: int = 0) -> dict:
+    """``vol(model ∩ box) / vol(polytope)`` and ``vol(box) / vol(polytope)`` by Monte Carlo.
+
+    Returns a dict with ``model_over_polytope``, ``box_over_polytope``,
+    ``box_points`` and ``polytope_hits`` (the sampling behind them).
+    """
+    rng = np.random.default_rng(seed)
+    p = _box_points(pldi, n, rng)
+    in_poly = pldi.polytope.contains(p)
+    m = pldi.m
+    A = np.repeat(np.asarray(unc.A_mid, float)[None], len(p), axis=0)
+    B = np.repeat(np.asarray(unc.B_mid, float)[None], len(p), axis=0)
+    for j, (mat, r, c) in enumerate(np.asarray(pldi.entry_index, int).reshape(-1, 3)):
+        (A if mat == 0 else B)[:, r, c] = p[:, j]
+    # the constant entries are the PLDI's
+    A[:, :m] = np.asarray(pldi.A0, float)[:m]
+    in_model = model_contains(unc, A, B) if len(p) else np.zeros(0, bool)
+    hits = int(in_poly.sum())
+    return {
+        "model_over_polytope": float(in_model.sum() / hits) if hits else float("nan"),
+        "box_over_polytope": float(len(p) / hits) if hits else float("inf"),
+        "box_points": int(len(p)),
+        "polytope_hits": hits,
+    }
+
+
+def det_b_range(unc: UncertainPlant, n: int = 4000, *, seed: int = 0) -> tuple[float, float]:
+    """Range of ``det B_low`` over random members of the model, relative to the centre's.
+
+    The paper's box lets ``det B`` fall far below anything the arm reaches
+    (12 % of its midpoint on ``paper_2r``); a tight model keeps it in range.
+    """
+    m = unc.m
+    deltas = unc.delta_samples(n, kind="uniform", seed=seed)
+    corners = unc.delta_samples(min(n, 2**unc.n_params), kind="corners", seed=seed + 1)
+    res = unc.residual_samples(2 * n, seed=seed + 2)
+    d0 = np.linalg.det(unc.B_mid[m:])
+    vals = []
+    for d, r in zip(np.vstack([deltas, corners]), res):
+        vals.append(np.linalg.det(unc.matrices_at(d, residual=r if r else None)[1][m:]))
+    vals = np.real(np.array(vals)) / d0
+    return float(vals.min()), float(vals.max())
