@@ -1,0 +1,104 @@
+"""Batch benchmark: per robot joints, parameters, bound and synthesis time, certified mu, order; 2-worker speed-up.
+
+Prints one JSON document::
+
+    {"machine": {...}, "settings": {...},
+     "robots": [{"robot", "joints", "entries" (uncertain parameters before
+                 reduction: one per varying Jacobian entry, the paper's box),
+                 "parameters" (after: the model "auto" resolves to), "model",
+                 "bound_s", "synthesis_s", "analysis_s", "mu_upper",
+                 "certified", "order", "alpha", "validation", "error"}, ...],
+     "batch_seconds": ...,
+     "speedup": {"robots": [...], "seconds_1_worker", "seconds_2_workers", "speedup"}}
+
+Usage (the figures in docs/fleet.md)::
+
+    python benchmarks/fleet.py --robots planar_2r,paper_2r:paper,TwoDofs,so101 \\
+        --speedup-robots planar_2r,TwoDofs --max-iter 2 --samples 256
+
+A robot is ``NAME`` or ``NAME:DOMAIN`` (a named domain, e.g. ``paper_2r:paper``).
+The robots of ``--robots`` run in one batch with ``-j`` workers; the speed-up
+runs ``--speedup-robots`` once with 1 worker and once with 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+
+
+def _jobs(text: str) -> list:
+    jobs = []
+    for item in (x.strip() for x in text.split(",") if x.strip()):
+        name, _, domain = item.partition(":")
+        jobs.append({"robot": name, "domain": domain or None, "label": item.replace(":", "@")})
+    return jobs
+
+
+def _row(r) -> dict:
+    t = r.timings
+    return {
+        "robot": r.name, "joints": r.joints, "entries": r.entries, "parameters": r.parameters, "model": r.model,
+        "enclosure": r.enclosure, "bound_s": round(t.get("bounds", 0.0), 2),
+        "synthesis_s": round(t.get("synthesis", 0.0), 2), "analysis_s": round(t.get("analysis", 0.0), 2),
+        "total_s": round(r.seconds, 2), "mu_upper": r.mu_upper, "mu_lower": r.mu_lower, "certified": r.certified,
+        "order": r.order, "alpha": r.alpha, "validation": r.validation,
+        "error": None if r.ok else f"{r.error}: {r.message}",
+    }
+
+
+def main(argv=None) -> int:
+    from polyrob.fleet import run_batch
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--robots", default="planar_2r,paper_2r:paper,TwoDofs,so101")
+    p.add_argument("--speedup-robots", default="planar_2r,TwoDofs")
+    p.add_argument("-j", "--workers", type=int, default=2, help="workers of the main batch")
+    p.add_argument("--samples", type=int, default=256, help="bounds: Sobol' positions")
+    p.add_argument("--max-iter", type=int, default=2, help="D-K iterations")
+    p.add_argument("--omega", default="0.01:1000:30", help="frequency grid LO:HI:N")
+    p.add_argument("--mc", type=int, default=50)
+    p.add_argument("--max-bandwidth", action="store_true", help="search the largest bandwidth factor")
+    p.add_argument("--alphas", default=None, help="factors of the bandwidth search (comma-separated)")
+    p.add_argument("--uncertainty", default="auto")
+    p.add_argument("--no-validate", action="store_true")
+    args = p.parse_args(argv)
+    lo, hi, n = args.omega.split(":")
+    options = dict(
+        bound_options={"samples": args.samples}, synthesis={"max_iter": args.max_iter},
+        omega=(float(lo), float(hi), int(n)), mc=args.mc, validate=not args.no_validate,
+        search_bandwidth=args.max_bandwidth,
+        alphas=None if args.alphas is None else tuple(float(a) for a in args.alphas.split(",")),
+    )
+
+    def jobs(text):
+        return [dict(j, uncertainty=args.uncertainty) for j in _jobs(text)]
+
+    def show(r, done, total):
+        print(f"[{done}/{total}] {r.name}: " + (f"mu {r.mu_upper:.4g} ({r.seconds:.0f} s)" if r.ok else
+              f"FAILED {r.error}: {r.message}"), file=sys.stderr, flush=True)
+
+    doc = {"machine": {"platform": platform.platform(), "machine": platform.machine(),
+                       "cores": len(os.sched_getaffinity(0)), "load_average_at_start": os.getloadavg()},
+           "settings": {**options, "uncertainty": args.uncertainty, "workers": args.workers}}
+    res = run_batch(jobs(args.robots), workers=args.workers, progress=show, **options)
+    doc["robots"] = [_row(r) for r in res.results]
+    doc["batch_seconds"] = round(res.seconds, 1)
+    if args.speedup_robots:
+        sp = jobs(args.speedup_robots)
+        one = run_batch(sp, workers=1, progress=show, **options)
+        two = run_batch(sp, workers=2, progress=show, **options)
+        doc["speedup"] = {"robots": [j["label"] for j in sp], "seconds_1_worker": round(one.seconds, 1),
+                          "seconds_2_workers": round(two.seconds, 1), "speedup": round(one.seconds / two.seconds, 2),
+                          "same_mu": [a.mu_upper == b.mu_upper for a, b in zip(one.results, two.results)]}
+    doc["load_average_at_end"] = os.getloadavg()
+    print(json.dumps(doc, indent=1, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
