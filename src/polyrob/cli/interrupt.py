@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 import threading
 import time
 
@@ -50,9 +51,19 @@ class InterruptGuard:
         self._fds = None
         self._previous_fd = -1
 
+    def _unraisable(self, unraisable) -> None:
+        # a SIGINT landing in an at-fork or __del__ hook (logging's lock release
+        # while a pool forks) is "ignored" with a traceback: it is the interrupt
+        if issubclass(unraisable.exc_type, KeyboardInterrupt):
+            self.interrupted.set()
+            return
+        self._previous_hook(unraisable)
+
     def __enter__(self):
         if threading.current_thread() is not threading.main_thread():
             return self
+        self._previous_hook = sys.unraisablehook
+        sys.unraisablehook = self._unraisable
         r, w = os.pipe()
         os.set_blocking(w, False)
         try:
@@ -79,6 +90,8 @@ class InterruptGuard:
         os._exit(EXIT_INTERRUPTED)
 
     def __exit__(self, *exc):
+        if getattr(self, "_previous_hook", None) is not None and not self.interrupted.is_set():
+            sys.unraisablehook = self._previous_hook
         if self._fds is None:
             return False
         signal.set_wakeup_fd(self._previous_fd)
