@@ -211,3 +211,11 @@ def test_export_writes_c_and_json(tmp_path, capsys):
     assert doc["header"] == str(out / "controller.h")
     code, _, err = run(capsys, "export", str(K), "--rate", "0", "-o", str(out))
     assert code == 2 and "--rate" in err and err.count("\n") == 1
+
+
+def test_certify_errors_name_the_cli_options(capsys):
+    """Before: 'raise time_limit or rel_tol', options the CLI did not have."""
+    code, _, err = run(capsys, "bounds", "finger_edu", "--certify", "--time-limit", "0.5", "--quiet")
+    assert code == 2 and err.count("\n") == 1
+    assert "time_limit" not in err and "rel_tol" not in err
+    assert "--time-limit" in err

@@ -13,7 +13,7 @@ from polyrob.cli.common import (
     robot_from_args,
 )
 from polyrob.cli.options import fraction, int_at_least, positive_float
-from polyrob.errors import ArgumentError
+from polyrob.errors import ArgumentError, CertificationError
 
 __all__ = ["register", "save_pair"]
 
@@ -51,17 +51,21 @@ def cmd_bounds(args) -> int:
         f"bounds: {robot.name} ({robot.m} joints) over domain '{domain.name}'"
         + (", certified by interval arithmetic" if args.certify else "")
     )
-    pldi = bound_pldi(
-        robot,
-        domain,
-        samples=args.samples,
-        nominal=args.nominal,
-        certify=args.certify,
-        certify_options=certify_options or None,
-        coverage=args.coverage,
-        seed=args.seed,
-        progress=out.progress,
-    )
+    try:
+        pldi = bound_pldi(
+            robot,
+            domain,
+            samples=args.samples,
+            nominal=args.nominal,
+            certify=args.certify,
+            certify_options=certify_options or None,
+            coverage=args.coverage,
+            seed=args.seed,
+            progress=out.progress,
+        )
+    except CertificationError as exc:  # the library names its parameters; the user typed options
+        text = str(exc).replace("time_limit", "--time-limit").replace("rel_tol", "--rel-tol")
+        raise CertificationError(text) from None
     report = pldi_report(pldi, robot.joint_names)
     if args.output:
         json_path, npz_path = save_pair(pldi, args.output)
