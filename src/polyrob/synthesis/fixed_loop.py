@@ -30,7 +30,13 @@ class FixedLoop:
         self.n_u, self.n_y = n_u, n_y
         self.nw, self.nz = sysP.ninputs - n_u, sysP.noutputs - n_y
         self.structure, self.st = structure, st
-        self.ec, self.er = st._embeddings()  # rows / cols of N inside the padded square problem
+        # rows / cols of N inside the padded square problem (BlockStructure.pad's placement)
+        self.ec = np.array(
+            [i for b, sl in zip(st.blocks, st.padded_slices) for i in range(sl.start, sl.start + b.cols)], int
+        )
+        self.er = np.array(
+            [i for b, sl in zip(st.blocks, st.padded_slices) for i in range(sl.start, sl.start + b.rows)], int
+        )
         self.npad = st.padded_size
         self._cache = {}
         self.diag = diagonal_blocks(st)
