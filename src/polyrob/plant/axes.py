@@ -37,21 +37,28 @@ RESIDUAL_TOL = 0.1
 
 
 def _residual_bounds(pldi, centre, basis_r, W_r):
-    """Entrywise range of ``e = (I - b W)(p - c)`` over the polytope (2k LPs)."""
+    """Entrywise range of ``e = (I - b W)(p - c)`` over the polytope (2k LPs).
+
+    The LPs run in the polytope's reduced coordinates ``p = c + basis z``
+    (the Jacobians span that affine subspace: ``b32 = b41`` and the like hold
+    exactly; the coverage check on fresh samples confirms it).
+    """
     poly = pldi.polytope
     k = len(centre)
-    Pi = np.eye(k) - basis_r @ W_r
+    Pi = (np.eye(k) - basis_r @ W_r) @ poly.basis
+    G = poly.normals @ poly.basis
+    g = poly.offsets - poly.normals @ centre
+    r_all = poly.basis.shape[1]
     lo, hi = np.zeros(k), np.zeros(k)
     for i in range(k):
         row = Pi[i]
-        if np.abs(row).max() < 1e-14:
+        if np.abs(row).max() < 1e-12 * (1.0 + np.abs(poly.basis[i]).max()):
             continue
         for sgn in (1.0, -1.0):
-            res = optimize.linprog(-sgn * row, A_ub=poly.normals, b_ub=poly.offsets,
-                                   bounds=[(None, None)] * k, method="highs")
+            res = optimize.linprog(-sgn * row, A_ub=G, b_ub=g, bounds=[(None, None)] * r_all, method="highs")
             if res.status != 0:
                 raise BoundsError(f"the residual LP failed ({res.message})")
-            val = sgn * (row @ res.x - row @ centre)
+            val = row @ res.x
             if sgn > 0:
                 hi[i] = val
             else:
@@ -121,7 +128,7 @@ def axes_plant(pldi, *, n_directions: int | None = None, residual_tol: float = R
         for r in range(0, n_pc + 1):
             parts = build(r)
             e_lo, e_hi = parts[4], parts[5]
-            if np.linalg.norm(0.5 * (e_hi - e_lo) / norm_unit) <= residual_tol * spread:
+            if np.linalg.norm(np.maximum(np.abs(e_lo), np.abs(e_hi)) / norm_unit) <= residual_tol * spread:
                 chosen = (r, parts)
                 break
         if chosen is None:
@@ -133,10 +140,12 @@ def axes_plant(pldi, *, n_directions: int | None = None, residual_tol: float = R
             raise PolyrobError(f"n_directions must lie in [0, {n_pc}] (the searched principal directions), got {r}")
         W_r, b_r, z_lo, z_hi, e_lo, e_hi = build(r)
 
-    # centre: the cloud mean moved to the middle of the z box and of the residual box
+    # centre: the cloud mean moved to the middle of the z box; the residual
+    # (I - b W)(p - c0) keeps its own centre 0 (an entrywise mid-point would
+    # leave the residual subspace and shift z), so its bound is max(|lo|, |hi|)
     z_mid, z_rad = 0.5 * (z_lo + z_hi), 0.5 * (z_hi - z_lo)
-    e_mid, rho = 0.5 * (e_lo + e_hi), 0.5 * (e_hi - e_lo)
-    centre = centre0 + b_r @ z_mid + e_mid
+    rho = np.maximum(np.abs(e_lo), np.abs(e_hi))
+    centre = centre0 + b_r @ z_mid
     lay = _layout(pldi)
     A0, B0 = np.asarray(pldi.A0, float), np.asarray(pldi.B0, float)
     AB = np.hstack([A0[m:], B0[m:]])
@@ -199,7 +208,11 @@ def axes_plant(pldi, *, n_directions: int | None = None, residual_tol: float = R
 
 
 def axes_contains(unc: UncertainPlant, A, B, *, rtol: float = 1e-9) -> np.ndarray:
-    """Whether Jacobians lie in an ``axes`` model's set.
+    """Whether Jacobians lie in an ``axes`` model's set (a sufficient test).
+
+    The split ``p = c + b z + e`` is the projection used to bound the
+    residual (the one every Jacobian of the robot has), so ``True`` proves
+    membership; a member built with another split may test ``False``.
 
     ``z = W (p - c)`` must lie in the directions' ranges and the residual
     ``E = p - c - b z`` (as a matrix of the lower rows of ``[A B]``) must satisfy

@@ -70,7 +70,7 @@ def uncertain_plant(
     repeated: bool = False,
     robot=None,
     coverage: int = 2000,
-    volume_samples: int = 20_000,
+    volume_samples: int = 200_000,
     seed: int = 12345,
 ) -> UncertainPlant:
     """The uncertain plant of a PLDI under an uncertainty model.
