@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import BAD_URDFS, cached_robot
 
 from polyrob import Robot, RobotError, load_robot
 from polyrob.model.robots import available_robots, example_robot_data_dir
-
-from conftest import BAD_URDFS, cached_robot
 
 A1, A2, A3 = 48.125, 13.125, 6.25
 

@@ -26,9 +26,9 @@ from __future__ import annotations
 
 import json
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 from scipy.stats import qmc
@@ -40,6 +40,10 @@ __all__ = ["Domain"]
 _GROUPS = ("q", "qdot", "u")
 _GROUP_TEXT = {"q": "position", "qdot": "velocity", "u": "torque"}
 _GROUP_OPTION = {"q": "--q-range JOINT=LO:HI", "qdot": "--qdot-max JOINT=VALUE", "u": "--u-max JOINT=VALUE"}
+#: Largest URDF velocity limit (rad/s or m/s) taken as a default: some URDFs
+#: state 1,000-10,000 rad/s (finger_edu, borinot_flying_arm_2), placeholders
+#: that make the Jacobians ~1e7 and the bounds meaningless.
+MAX_DEFAULT_VELOCITY = 100.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,7 +166,7 @@ class Domain:
         u_max=None,
         qdot_scale: float = 1.0,
         u_scale: float = 1.0,
-    ) -> "Domain":
+    ) -> Domain:
         """The default domain of ``robot``, with overrides.
 
         Parameters
@@ -210,6 +214,16 @@ class Domain:
             if not (np.isfinite(scale) and scale >= 0):
                 raise DomainError(f"domain: {group} scale must be a finite number >= 0, got {scale}")
             bounds[group] = [bounds[group][0] * scale, bounds[group][1] * scale]
+        for j, name in enumerate(names):
+            # a placeholder limit of the URDF, not a velocity the joint reaches
+            top = max(abs(bounds["qdot"][0][j]), abs(bounds["qdot"][1][j]))
+            if not given["qdot"][j] and top > MAX_DEFAULT_VELOCITY:
+                raise DomainError(
+                    f"{robot.source}: joint '{name}' has a default velocity limit of {top:g} (from its URDF), above the "
+                    f"{MAX_DEFAULT_VELOCITY:g} polyrob takes as a default (likely a placeholder): give the "
+                    f"velocity range with {_GROUP_OPTION['qdot']} (or --qdot-max VALUE for every joint) "
+                    "or a domain file (--domain FILE)"
+                )
         for group in _GROUPS:
             lo, hi = bounds[group]
             for j, name in enumerate(names):
@@ -232,11 +246,11 @@ class Domain:
         )
 
     @classmethod
-    def from_file(cls, robot, path) -> "Domain":
+    def from_file(cls, robot, path) -> Domain:
         """A domain file (JSON or YAML) for ``robot``; see :meth:`from_robot`."""
         return cls.from_robot(robot, Path(path))
 
-    def with_bounds(self, **arrays) -> "Domain":
+    def with_bounds(self, **arrays) -> Domain:
         """A copy with some of ``q_lower``, ``q_upper``, ... replaced."""
         return replace(self, **arrays)
 
@@ -253,7 +267,7 @@ class Domain:
         }
 
     @classmethod
-    def from_dict(cls, data: Mapping) -> "Domain":
+    def from_dict(cls, data: Mapping) -> Domain:
         names = tuple(data["joints"])
         arrays = []
         for g in _GROUPS:
@@ -302,11 +316,20 @@ def _read_spec(path, named) -> Mapping:
             spec = yaml.safe_load(text)
         else:
             spec = json.loads(text)
-    except Exception as exc:  # json/yaml errors: report as a domain error
+    except (ValueError, _yaml_error()) as exc:  # json/yaml syntax errors: a domain error
         raise DomainError(f"{path}: cannot read the domain file ({exc})") from None
     if not isinstance(spec, Mapping):
         raise DomainError(f"{path}: a domain file holds a mapping with keys q, qdot, u")
     return spec
+
+
+def _yaml_error():
+    """YAML's error class (a never-raised stand-in when PyYAML is not installed)."""
+    try:
+        import yaml
+    except ImportError:
+        return ValueError
+    return yaml.YAMLError
 
 
 def _apply(bounds, given, names, spec: Mapping, source: str):

@@ -12,7 +12,8 @@ How the bounds are found (``enclosure = "sampled"``):
 2. the remaining positions are sampled with a scrambled Sobol' design plus the
    corners of their box; for each position the extremes over the
    velocity/torque box are computed exactly, or attained and nearly always
-   exact beyond four joints (:mod:`polyrob.bounds.extremes`);
+   exact beyond four joints (:mod:`polyrob.bounds.extremes`); the first
+   samples also check that ``M(q)`` is positive definite;
 3. a dense uniform screen of the whole domain (one Jacobian per point) adds
    starts near narrow peaks the design straddles;
 4. each extreme is searched by L-BFGS-B over positions, velocities and torques
@@ -29,7 +30,12 @@ How the bounds are found (``enclosure = "sampled"``):
 
 With ``certify=True`` the intervals are replaced by a guaranteed enclosure
 computed by interval arithmetic (:mod:`polyrob.bounds.certify`); ``enclosure`` is
-then ``"certified"``.
+then ``"certified"``, and every entry whose certified interval has a non-zero
+width is a varying entry (whatever the samples say), so that the uncertain
+plant built from the PLDI covers the whole proved box.
+
+The parallel steps run on one :class:`~polyrob.bounds.parallel.WorkerPool`
+(spawned processes) per call; Ctrl-C stops them at once.
 
 Examples
 --------
@@ -45,239 +51,27 @@ Examples
 
 from __future__ import annotations
 
-import json
+import sys
 import time
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from polyrob.bounds import search
-from polyrob.io.atomic import atomic_write, json_default
+from polyrob.bounds import local_search, search
 from polyrob.bounds.domain import Domain
-from polyrob.errors import BoundsError, CertificationError
+from polyrob.bounds.parallel import WorkerPool, available_cores
+from polyrob.bounds.pldi_result import PLDI, entry_name
 from polyrob.bounds.polytope import COVERAGE_RTOL, VERTEX_MAX_DIM, Polytope, build_polytope, principal_directions
+from polyrob.errors import ArgumentError, BoundsError, CertificationError
+
+__all__ = ["PLDI", "Polytope", "bound_pldi", "coverage_fraction", "entry_name", "VERTEX_MAX_DIM",
+           "PRINCIPAL_DIRECTIONS"]
 
 #: Principal directions of the Jacobian cloud searched besides +-e_i.
 PRINCIPAL_DIRECTIONS = 12
-
-__all__ = ["PLDI", "Polytope", "bound_pldi", "entry_name", "VERTEX_MAX_DIM"]
-
-
-
-def entry_name(matrix: str, row: int, col: int, n: int) -> str:
-    """The paper's name of an entry (1-based): ``a32``, ``b41``; ``a10_11`` when n >= 10."""
-    sep = "_" if n >= 10 else ""
-    return f"{matrix.lower()}{row + 1}{sep}{col + 1}"
-
-
-# --------------------------------------------------------------------------- results
-
-
-@dataclass(frozen=True, eq=False)
-class PLDI:
-    """Bounds of ``A = df/dx`` and ``B = df/du`` over a domain, and a polytope.
-
-    Attributes
-    ----------
-    robot_name, robot_source : str
-    domain : Domain
-    nominal_point : dict
-        ``q``, ``qdot``, ``u`` of the nominal (``None`` for the midpoint nominal).
-    A0, B0 : ndarray
-        The nominal pair.
-    A_lower, A_upper, B_lower, B_upper : ndarray
-        Entrywise bounds.
-    entries : tuple of str
-        Names of the entries that vary (``a32``, ``b41``, ...).
-    entry_index : ndarray (k, 3)
-        For each varying entry: matrix (0 = A, 1 = B), row, column.
-    witness_lower, witness_upper : ndarray (k, 3m)
-        A point ``(q, qdot, u)`` at which each sampled bound is attained.
-    polytope : Polytope
-        Holds every sampled Jacobian; its half-spaces are sampled supports.
-    enclosure : {"sampled", "certified"}
-        Whether the intervals are extremes found by search or proved.
-    coverage : float
-        Fraction of fresh random points whose Jacobians lie in the intervals and
-        the polytope; ``coverage_points`` of them were drawn.
-    refinement : ndarray (k,)
-        Relative widening of each interval by the local search.
-    dropped_q : tuple of int
-        Position coordinates the dynamics do not depend on.
-    info : dict
-        Samples, timings and notes.
-    """
-
-    robot_name: str
-    robot_source: str
-    domain: Domain
-    nominal_point: dict | None
-    A0: np.ndarray
-    B0: np.ndarray
-    A_lower: np.ndarray
-    A_upper: np.ndarray
-    B_lower: np.ndarray
-    B_upper: np.ndarray
-    entries: tuple[str, ...]
-    entry_index: np.ndarray
-    witness_lower: np.ndarray
-    witness_upper: np.ndarray
-    polytope: Polytope
-    enclosure: str
-    coverage: float
-    coverage_points: int
-    refinement: np.ndarray
-    dropped_q: tuple[int, ...]
-    info: dict = field(default_factory=dict)
-
-    # ------------------------------------------------------------------ views
-    @property
-    def m(self) -> int:
-        return self.B0.shape[1]
-
-    @property
-    def robot(self):
-        """The robot, loaded again from its source."""
-        from polyrob.model.robots import load_robot
-
-        return load_robot(self.robot_source if self.robot_source.endswith(".urdf") else self.robot_name)
-
-    def entry_values(self, A, B) -> np.ndarray:
-        """The varying entries of Jacobians ``A`` (n, 2m, 2m), ``B`` (n, 2m, m): (n, k)."""
-        A, B = np.asarray(A), np.asarray(B)
-        if A.ndim == 2:
-            A, B = A[None], B[None]
-        idx = self.entry_index
-        out = np.empty((A.shape[0], len(idx)))
-        isA = idx[:, 0] == 0
-        out[:, isA] = A[:, idx[isA, 1], idx[isA, 2]]
-        out[:, ~isA] = B[:, idx[~isA, 1], idx[~isA, 2]]
-        return out
-
-    @property
-    def lower(self) -> np.ndarray:
-        """Lower bounds of the varying entries (k,)."""
-        return self.entry_values(self.A_lower, self.B_lower)[0]
-
-    @property
-    def upper(self) -> np.ndarray:
-        return self.entry_values(self.A_upper, self.B_upper)[0]
-
-    @property
-    def nominal(self) -> np.ndarray:
-        return self.entry_values(self.A0, self.B0)[0]
-
-    def interval(self, name: str) -> tuple[float, float]:
-        """``(lower, upper)`` of one entry by its paper name (``"a32"``)."""
-        if name not in self.entries:
-            raise BoundsError(f"no varying entry '{name}' (entries: {', '.join(self.entries)})")
-        k = self.entries.index(name)
-        return float(self.lower[k]), float(self.upper[k])
-
-    def contains(self, A, B, *, rtol: float = COVERAGE_RTOL) -> np.ndarray:
-        """Whether Jacobians lie inside the intervals (constant entries included)."""
-        A, B = np.asarray(A), np.asarray(B)
-        if A.ndim == 2:
-            A, B = A[None], B[None]
-
-        def inside(X, lo, hi):
-            tol = rtol * (1.0 + np.maximum(np.abs(lo), np.abs(hi)))
-            return np.all((X >= lo - tol) & (X <= hi + tol), axis=(1, 2))
-
-        return inside(A, self.A_lower, self.A_upper) & inside(B, self.B_lower, self.B_upper)
-
-    def table(self) -> str:
-        """The paper-style table: entry, lower, upper, nominal, enclosure."""
-        rows = [f"{'entry':<8}{'lower':>14}{'upper':>14}{'nominal':>14}  enclosure"]
-        for name, lo, hi, nom in zip(self.entries, self.lower, self.upper, self.nominal):
-            # "+ 0.0" prints a negative zero as 0
-            rows.append(f"{name:<8}{lo + 0.0:>14.6g}{hi + 0.0:>14.6g}{nom + 0.0:>14.6g}  {self.enclosure}")
-        return "\n".join(rows)
-
-    # ------------------------------------------------------------------ serialisation
-    _ARRAYS = ("A0", "B0", "A_lower", "A_upper", "B_lower", "B_upper", "entry_index",
-               "witness_lower", "witness_upper", "refinement")
-
-    def save(self, path) -> tuple[Path, Path]:
-        """Write ``path`` (JSON, readable) and ``path`` with ``.npz`` (all arrays).
-
-        Both are written to temporary files first and renamed, so an
-        interrupted save leaves no half-written file.
-        """
-        path = Path(path)
-        npz = path.with_suffix(".npz")
-        meta = {
-            "format": "polyrob.pldi/1",
-            "robot": {"name": self.robot_name, "source": self.robot_source},
-            "domain": self.domain.to_dict(),
-            "nominal_point": self.nominal_point,
-            "enclosure": self.enclosure,
-            "coverage": self.coverage,
-            "coverage_points": self.coverage_points,
-            "dropped_q": list(self.dropped_q),
-            "entries": [
-                {"name": n, "lower": float(lo), "upper": float(hi), "nominal": float(nm)}
-                for n, lo, hi, nm in zip(self.entries, self.lower, self.upper, self.nominal)
-            ],
-            "polytope": {
-                "halfspaces": self.polytope.n_halfspaces,
-                "vertices": None if self.polytope.vertices is None else len(self.polytope.vertices),
-                "reduced_dim": self.polytope.reduced_dim,
-                "volume_hits": self.polytope.volume_hits,
-                "volume_samples": self.polytope.volume_samples,
-            },
-            "info": self.info,
-            "arrays": npz.name,
-        }
-        arrays = {k: getattr(self, k) for k in self._ARRAYS}
-        arrays.update(
-            polytope_normals=self.polytope.normals,
-            polytope_offsets=self.polytope.offsets,
-            polytope_centre=self.polytope.centre,
-            polytope_basis=self.polytope.basis,
-        )
-        if self.polytope.vertices is not None:
-            arrays["polytope_vertices"] = self.polytope.vertices
-        atomic_write(npz, lambda f: np.savez_compressed(f, **arrays), binary=True)
-        atomic_write(path, lambda f: f.write(json.dumps(meta, indent=2, default=json_default)))
-        return path, npz
-
-    @classmethod
-    def load(cls, path) -> "PLDI":
-        """Read a PLDI written by :meth:`save`."""
-        path = Path(path)
-        try:
-            meta = json.loads(path.read_text())
-            data = np.load(path.parent / meta["arrays"])
-        except (OSError, ValueError, KeyError) as exc:
-            raise BoundsError(f"{path}: not a PLDI file written by polyrob ({exc})") from None
-        polytope = Polytope(
-            normals=data["polytope_normals"],
-            offsets=data["polytope_offsets"],
-            vertices=data["polytope_vertices"] if "polytope_vertices" in data else None,
-            centre=data["polytope_centre"],
-            basis=data["polytope_basis"],
-            volume_hits=meta["polytope"]["volume_hits"],
-            volume_samples=meta["polytope"]["volume_samples"],
-        )
-        return cls(
-            robot_name=meta["robot"]["name"],
-            robot_source=meta["robot"]["source"],
-            domain=Domain.from_dict(meta["domain"]),
-            nominal_point=meta["nominal_point"],
-            entries=tuple(e["name"] for e in meta["entries"]),
-            polytope=polytope,
-            enclosure=meta["enclosure"],
-            coverage=meta["coverage"],
-            coverage_points=meta["coverage_points"],
-            dropped_q=tuple(meta["dropped_q"]),
-            info=meta["info"],
-            **{k: data[k] for k in cls._ARRAYS},
-        )
-
-
-# --------------------------------------------------------------------------- bounding
+#: With ``workers=None``, robots whose dynamics depend on at most this many
+#: positions are bounded in one process: starting workers costs more than
+#: it saves there.
+SERIAL_MAX_ACTIVE_POSITIONS = 2
 
 
 def _nominal(robot, domain: Domain, nominal):
@@ -346,14 +140,31 @@ def bound_pldi(
         Fresh random points for the coverage check (0 to skip).
     certify : bool
         Replace the intervals by a guaranteed enclosure (interval arithmetic).
+    certify_options : dict, optional
+        Keyword arguments of
+        :func:`~polyrob.bounds.certify.certified_jacobian_bounds`:
+        ``rel_tol`` (default here 1e-5), ``time_limit`` (s, default 120),
+        ``max_joints`` (default 3).
     workers : int, optional
-        Processes (default: every core).
+        Worker processes (spawned; ``1`` runs everything in this process).
+        Default: one for robots whose dynamics depend on at most
+        :data:`SERIAL_MAX_ACTIVE_POSITIONS` positions, else every available core.
     progress : bool, optional
         Progress bars (default: when stderr is a terminal).
-    """
-    import sys
 
+    Raises
+    ------
+    ArgumentError
+        A negative or zero count.
+    BoundsError
+        The domain is not the robot's, ``M(q)`` is not positive definite at a
+        sampled position, or the polytope's linear programs fail.
+    CertificationError
+        With ``certify=True``, when no guaranteed enclosure can be produced.
+    """
     t_start = time.perf_counter()
+    _check_counts(samples=samples, screen=screen, coverage=coverage, verify_rounds=verify_rounds,
+                  starts_per_direction=starts_per_direction, screen_starts=screen_starts, workers=workers)
     if domain is None:
         domain = Domain.from_robot(robot)
     if tuple(domain.joint_names) != tuple(robot.joint_names):
@@ -370,6 +181,12 @@ def bound_pldi(
     m = robot.m
 
     pilot_vals, varying = search.pilot(problem, seed)
+    if certified is not None:
+        # every entry the proof lets vary is a parameter of the plant, even
+        # when the 4096 pilot samples saw it constant
+        c_lo = problem.entries_from(certified[0][None], certified[2][None])[0]
+        c_hi = problem.entries_from(certified[1][None], certified[3][None])[0]
+        varying = varying | (c_hi > c_lo)
     index = problem.all_index[varying]
     k = len(index)
     dropped = search.dropped_positions(problem, rng)
@@ -379,80 +196,36 @@ def bound_pldi(
     q = search.position_design(problem, samples, dropped, seed)
     if screen is None:
         screen = int(min(2**19, 2**16 * active_q))
+    if workers is None:
+        workers = 1 if active_q <= SERIAL_MAX_ACTIVE_POSITIONS else available_cores()
 
     cloud = pilot_vals[:, varying]
-    scale = np.maximum(cloud.max(axis=0) - cloud.min(axis=0), 1e-300)
-    axes = principal_directions(cloud, scale)
+    spread = cloud.max(axis=0) - cloud.min(axis=0)
+    # entries constant over the cloud (certified ones may be) take no part in
+    # the principal directions: a tiny scale would blow their rounding up
+    moving = spread > 1e-12 * np.maximum(1.0, np.abs(cloud).max(axis=0, initial=0.0))
+    scale = np.where(moving, spread, 1.0)
+    axes = np.zeros((k, 0))
+    if moving.any():
+        sub = principal_directions(cloud[:, moving], scale[moving])
+        axes = np.zeros((k, sub.shape[1]))
+        axes[moving] = sub
     pcs = axes[:, :PRINCIPAL_DIRECTIONS].T
     directions = np.vstack([np.eye(k), -np.eye(k), pcs / scale, -pcs / scale]) if k else np.zeros((0, 0))
-    t0 = time.perf_counter()
-    stages = {}
-    if k:
-        # a dense uniform screen of the whole domain adds start positions
-        # near narrow peaks that the position design straddles
-        extra = search.screen(problem, directions, index, screen, screen_starts, seed, workers) if screen else None
-        stages["screen"] = time.perf_counter() - t0
-        values, starts, depends = search.support_pass(
-            problem, q, directions, index, progress, workers, starts_per_direction, extra
+    with WorkerPool(problem, workers) as pool:
+        values, witnesses, sampled_width, stages, rounds, t_sample, t_refine = _supports(
+            problem, q, directions, index, dropped, pool, progress, refine=refine, samples=samples,
+            screen=screen, screen_starts=screen_starts, starts_per_direction=starts_per_direction,
+            verify_rounds=verify_rounds, seed=seed,
         )
-        stages["design"] = time.perf_counter() - t0 - stages["screen"]
-    else:
-        values, starts, depends = np.zeros(0), np.zeros((0, 1, 3 * m)), np.zeros((0, 2 * m), bool)
-    witnesses = starts[:, 0].copy()
-    t_sample = time.perf_counter() - t0
-    sampled_width = values[:k] + values[k : 2 * k]
-    rounds = 0
-    if refine and k:
-        t1 = time.perf_counter()
-        values, witnesses = search.refine(
-            problem, directions, values, starts, index, dropped, progress, workers, depends
-        )
-        stages["refine"] = time.perf_counter() - t1
-        values, witnesses = search.cross_seed(
-            problem, directions, values, witnesses, index, dropped, depends, progress, workers
-        )
-        stages["cross_seed"] = time.perf_counter() - t1 - stages["refine"]
-        t1 = time.perf_counter()
-        if screen:
-            # a second screen, around the witnesses of every direction
-            near = search.screen(problem, directions, index, screen, screen_starts, seed + 1, workers, witnesses)
-            starts, _ = search.exact_witnesses(problem, near, directions, index, workers)
-            starts = np.concatenate([witnesses[:, None], starts], axis=1)
-            values, witnesses = search.refine(
-                problem, directions, values, starts, index, dropped, progress, workers, depends
-            )
-            values, witnesses = search.cross_seed(
-                problem, directions, values, witnesses, index, dropped, depends, progress, workers
-            )
-        stages["screen_near_witnesses"] = time.perf_counter() - t1
-        t1 = time.perf_counter()
-        # Verification rounds: a fresh design (another scramble) must not beat
-        # any support value; where it does, refine again from its witness.
-        for rounds in range(1, verify_rounds + 1):
-            q_new = search.position_design(problem, samples, dropped, seed + 7919 * rounds)
-            v_new, _ = search.inner_maxima(problem, q_new, directions, index, progress, workers)
-            beaten = np.flatnonzero(v_new.max(axis=0) > values + 1e-9 * (1.0 + np.abs(values)))
-            if not beaten.size:
-                break
-            peaks = q_new[search.landscape_peaks(problem, q_new, v_new[:, beaten], starts_per_direction)]
-            s_new, v_start = search.exact_witnesses(problem, peaks, directions[beaten], index, workers)
-            v_ref, w_ref = search.refine(
-                problem, directions[beaten], v_start[:, 0], s_new, index, dropped, progress, workers,
-                depends[beaten],
-            )
-            values[beaten], witnesses[beaten] = v_ref, w_ref
-            values, witnesses = search.cross_seed(
-                problem, directions, values, witnesses, index, dropped, depends, progress, workers
-            )
-        stages["verification"] = time.perf_counter() - t1
-    t_refine = time.perf_counter() - t0 - t_sample
+        fallback = pool.fallback
     upper, lower = values[:k], -values[k : 2 * k]
     width = upper - lower
     refinement = np.where(sampled_width > 0, width / np.where(sampled_width > 0, sampled_width, 1) - 1.0, 0.0)
 
     polytope = build_polytope(directions, values, 2 * k, cloud, scale, axes, rng)
 
-    # full matrices of bounds (constant entries from any point: here the pilot's first)
+    # full matrices of bounds (constant entries from any point of the domain)
     A_any, B_any = robot.jacobians_batch(*domain.sample(1, method="uniform", seed=seed))
     A_lower, A_upper, B_lower, B_upper = A_any[0].copy(), A_any[0].copy(), B_any[0].copy(), B_any[0].copy()
     for (mat, r, c), lo_, hi_ in zip(index, lower, upper):
@@ -460,21 +233,18 @@ def bound_pldi(
         (A_upper if mat == 0 else B_upper)[r, c] = hi_
 
     enclosure = "sampled"
-    notes = []
+    notes = [] if fallback is None else [fallback]
+    cert_info = None
     if certify:
         A_lower, A_upper, B_lower, B_upper, cert_info = certified
         enclosure = "certified"
         notes.append("the polytope's half-spaces are sampled supports; the intervals are certified")
-        lower_s, upper_s = lower, upper
-        tmp = {"A": (A_lower, A_upper), "B": (B_lower, B_upper)}
-        lower = np.array([tmp["AB"[mt]][0][r, c] for mt, r, c in index])
-        upper = np.array([tmp["AB"[mt]][1][r, c] for mt, r, c in index])
-        if np.any(lower > lower_s + COVERAGE_RTOL * (1 + np.abs(lower_s))) or np.any(
-            upper < upper_s - COVERAGE_RTOL * (1 + np.abs(upper_s))
+        lower_c = problem.entries_from(A_lower[None], B_lower[None], index)[0]
+        upper_c = problem.entries_from(A_upper[None], B_upper[None], index)[0]
+        if np.any(lower_c > lower + COVERAGE_RTOL * (1 + np.abs(lower))) or np.any(
+            upper_c < upper - COVERAGE_RTOL * (1 + np.abs(upper))
         ):
             raise CertificationError("internal error: a sampled Jacobian lies outside the certified bounds")
-    else:
-        cert_info = None
 
     point = _nominal(robot, domain, nominal)
     if point is None:
@@ -507,6 +277,7 @@ def bound_pldi(
         dropped_q=dropped,
         info={
             "samples": int(len(q)),
+            "workers": int(workers),
             "seconds_sampling": round(t_sample, 3),
             "seconds_refining": round(t_refine, 3),
             "seconds_stages": {key: round(v, 3) for key, v in stages.items()},
@@ -516,6 +287,7 @@ def bound_pldi(
             "certify": cert_info,
             "notes": notes,
         },
+        robot_locked=tuple(getattr(robot, "locked", ())),
     )
     if coverage:
         frac = coverage_fraction(result, robot, coverage, seed=seed + 1)
@@ -523,6 +295,81 @@ def bound_pldi(
         object.__setattr__(result, "coverage_points", int(coverage))
     result.info["seconds_total"] = round(time.perf_counter() - t_start, 3)
     return result
+
+
+def _check_counts(**counts) -> None:
+    """Sample counts must be whole numbers, positive where zero makes no sense."""
+    positive = {"samples", "starts_per_direction", "workers"}
+    for name, value in counts.items():
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise ArgumentError(f"{name} must be a whole number, got {value!r}")
+        if value < (1 if name in positive else 0):
+            raise ArgumentError(f"{name} must be {'>= 1' if name in positive else '>= 0'}, got {value}")
+
+
+def _supports(problem, q, directions, index, dropped, pool, progress, *, refine, samples, screen, screen_starts,
+              starts_per_direction, verify_rounds, seed):
+    """Support values (and witnesses) along every direction: design, screens, local search, verification."""
+    k = len(index)
+    m = problem.m
+    t0 = time.perf_counter()
+    stages = {}
+    if k:
+        # a dense uniform screen of the whole domain adds start positions
+        # near narrow peaks that the position design straddles
+        extra = search.screen(problem, directions, index, screen, screen_starts, seed, pool) if screen else None
+        stages["screen"] = time.perf_counter() - t0
+        values, starts, depends = search.support_pass(
+            problem, q, directions, index, progress, pool, starts_per_direction, extra
+        )
+        stages["design"] = time.perf_counter() - t0 - stages["screen"]
+    else:
+        values, starts, depends = np.zeros(0), np.zeros((0, 1, 3 * m)), np.zeros((0, 2 * m), bool)
+    witnesses = starts[:, 0].copy()
+    t_sample = time.perf_counter() - t0
+    sampled_width = values[:k] + values[k : 2 * k]
+    rounds = 0
+    if refine and k:
+        args = (index, dropped, depends, progress, pool)
+        t1 = time.perf_counter()
+        values, witnesses = local_search.refine(
+            problem, directions, values, starts, index, dropped, progress, pool, depends
+        )
+        stages["refine"] = time.perf_counter() - t1
+        values, witnesses = local_search.cross_seed(problem, directions, values, witnesses, *args)
+        stages["cross_seed"] = time.perf_counter() - t1 - stages["refine"]
+        t1 = time.perf_counter()
+        if screen:
+            # a second screen, around the witnesses of every direction
+            near = search.screen(problem, directions, index, screen, screen_starts, seed + 1, pool, witnesses)
+            starts, _ = search.exact_witnesses(problem, near, directions, index, pool)
+            starts = np.concatenate([witnesses[:, None], starts], axis=1)
+            values, witnesses = local_search.refine(
+                problem, directions, values, starts, index, dropped, progress, pool, depends
+            )
+            values, witnesses = local_search.cross_seed(problem, directions, values, witnesses, *args)
+        stages["screen_near_witnesses"] = time.perf_counter() - t1
+        t1 = time.perf_counter()
+        # Verification rounds: a fresh design (another scramble) must not beat
+        # any support value; where it does, refine again from its witness.
+        for rounds in range(1, verify_rounds + 1):
+            q_new = search.position_design(problem, samples, dropped, seed + 7919 * rounds)
+            v_new, _ = search.inner_maxima(problem, q_new, directions, index, progress, pool)
+            beaten = np.flatnonzero(v_new.max(axis=0) > values + 1e-9 * (1.0 + np.abs(values)))
+            if not beaten.size:
+                break
+            peaks = q_new[search.landscape_peaks(problem, q_new, v_new[:, beaten], starts_per_direction)]
+            s_new, v_start = search.exact_witnesses(problem, peaks, directions[beaten], index, pool)
+            v_ref, w_ref = local_search.refine(
+                problem, directions[beaten], v_start[:, 0], s_new, index, dropped, progress, pool, depends[beaten],
+            )
+            values[beaten], witnesses[beaten] = v_ref, w_ref
+            values, witnesses = local_search.cross_seed(problem, directions, values, witnesses, *args)
+        stages["verification"] = time.perf_counter() - t1
+    t_refine = time.perf_counter() - t0 - t_sample
+    return values, witnesses, sampled_width, stages, rounds, t_sample, t_refine
 
 
 def coverage_fraction(pldi: PLDI, robot, n: int, *, seed=None) -> float:

@@ -44,6 +44,8 @@ class Polytope:
         interval box, both cut by the reduced-coordinate subspace:
         ``volume_hits`` of ``volume_samples`` uniform points of the box lie
         in the polytope.
+    volume_note : str
+        Why the volume ratio was not computed ("" when it was).
     """
 
     normals: np.ndarray
@@ -53,16 +55,18 @@ class Polytope:
     basis: np.ndarray
     volume_hits: int
     volume_samples: int
+    volume_note: str = ""
 
     @property
-    def volume_ratio(self) -> float:
-        """Estimated volume ratio polytope / interval box (0 when no point hit)."""
-        return self.volume_hits / self.volume_samples if self.volume_samples else 1.0
+    def volume_ratio(self) -> float | None:
+        """Estimated volume ratio polytope / interval box; None when not computed
+        (no sample landed in the box: see :attr:`volume_note`)."""
+        return self.volume_hits / self.volume_samples if self.volume_samples else None
 
     @property
-    def volume_ratio_bound(self) -> float:
-        """A 95 % upper bound of the ratio (the rule of three when no point hit)."""
-        return max(self.volume_hits, 3) / self.volume_samples if self.volume_samples else 1.0
+    def volume_ratio_bound(self) -> float | None:
+        """A 95 % upper bound of the ratio (the rule of three when no point hit); None when not computed."""
+        return max(self.volume_hits, 3) / self.volume_samples if self.volume_samples else None
 
     @property
     def n_halfspaces(self) -> int:
@@ -95,7 +99,7 @@ def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200
     ``basis_n`` are the principal axes of the normalised ``cloud``
     (:func:`principal_directions`).
     """
-    from scipy.spatial import HalfspaceIntersection
+    from scipy.spatial import HalfspaceIntersection, QhullError
 
     centre = cloud.mean(axis=0)
     basis = basis_n * scale[:, None]  # p = centre + basis @ z
@@ -104,8 +108,12 @@ def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200
     g = offsets - normals @ centre
     vertices = None
     if r == 0:
-        return Polytope(normals, offsets, None, centre, basis, 0, 0)
+        return Polytope(normals, offsets, None, centre, basis, 0, 0, "no entry varies: there is no volume to compare")
     box_rows = np.arange(len(normals)) < n_box
+    # rows of entries that are constant over the cloud do not constrain z
+    # (their G row vanishes; their g is 0 up to rounding, possibly < 0)
+    moves = np.abs(G).max(axis=1) > 1e-12 * max(np.abs(G).max(), 1e-300)
+    G, g, box_rows = G[moves], g[moves], box_rows[moves]
     # Bounding box, in z, of the interval box cut by the reduced subspace
     # (2r LPs): the volume estimate samples it.
     box_z = []
@@ -116,7 +124,7 @@ def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200
             c[i] = sgn
             res = optimize.linprog(c, A_ub=G[box_rows], b_ub=g[box_rows], bounds=[(None, None)] * r, method="highs")
             if res.status != 0:
-                raise BoundsError(f"the polytope LP failed ({res.message})")
+                raise BoundsError(_lp_failure(res, offsets))
             bounds.append(res.x[i])
         box_z.append(sorted(bounds))
     box_z = np.array(box_z)
@@ -131,10 +139,24 @@ def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200
             hs = HalfspaceIntersection(np.c_[G, -g], res.x[:r])
             vz = np.unique(np.round(hs.intersections, 12), axis=0)
             vertices = centre + vz @ basis.T
-        except Exception:  # qhull fails on degenerate inputs: no vertices then
+        except (QhullError, ValueError):  # degenerate inputs: no vertices then (the half-spaces remain)
             vertices = None
     # Volume ratio against the interval box (lo <= centre + basis z <= hi), in z.
     z = box_z[:, 0] + rng.random((n_mc, r)) * (box_z[:, 1] - box_z[:, 0])
     in_poly = np.all(z @ G.T <= g + 1e-12, axis=1)
     in_box = np.all(z @ G[box_rows].T <= g[box_rows] + 1e-12, axis=1)
-    return Polytope(normals, offsets, vertices, centre, basis, int(in_poly.sum()), int(in_box.sum()))
+    note = "" if in_box.any() else (
+        f"volume ratio not computed: none of {n_mc} points drawn in the bounding box of the interval box's "
+        f"section ({r} reduced dimensions) landed in the section itself"
+    )
+    return Polytope(normals, offsets, vertices, centre, basis, int(in_poly.sum()), int(in_box.sum()), note)
+
+
+def _lp_failure(res, offsets) -> str:
+    """One line for a failed LP: what failed, and what to change."""
+    span = float(np.max(np.abs(offsets))) if len(offsets) else 0.0
+    return (
+        f"the polytope's bounding-box LP failed (HiGHS status {res.status}: {res.message}) with support values "
+        f"up to {span:.3g}: entries this large usually come from a domain far wider than the robot's real "
+        "range; give a smaller domain (--qdot-max, --u-max, --q-range or a domain file)"
+    )

@@ -1,18 +1,25 @@
-"""Finding the extremes of the Jacobian entries: sampling, exact inner maxima, screens, local search.
+"""Finding the extremes of the Jacobian entries: sampling, exact inner maxima, screens.
 
-Used by :func:`polyrob.bounds.pldi.bound_pldi`; see there for the method.
+Used by :func:`polyrob.bounds.pldi.bound_pldi` (see there for the method);
+the local search from the starts found here is :mod:`polyrob.bounds.local_search`.
+The parallel steps run their tasks on a :class:`~polyrob.bounds.parallel.WorkerPool`
+whose shared state is the :class:`Problem`: each task is a module-level
+function ``fn(problem, item)``.
 """
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
-from scipy import optimize
 from scipy.stats import qmc
 
 from polyrob.bounds.domain import Domain
 from polyrob.bounds.extremes import box_maximum, polynomial_coefficients
+from polyrob.errors import BoundsError
+
+__all__ = [
+    "Problem", "dropped_positions", "position_design", "pilot", "check_mass_matrices", "inner_maxima",
+    "screen", "support_pass", "landscape_peaks", "exact_witnesses", "DEPENDENCE_RTOL",
+]
 
 
 class Problem:
@@ -35,8 +42,12 @@ class Problem:
     def entries_at(self, q, qdot, u, index=None) -> np.ndarray:
         """Entries (n, k) of the Jacobians at ``n`` points."""
         A, B = self.robot.jacobians_batch(q, qdot, u)
+        return self.entries_from(A, B, index)
+
+    def entries_from(self, A, B, index=None) -> np.ndarray:
+        """Entries (n, k) of given Jacobians ``A`` (n, 2m, 2m), ``B`` (n, 2m, m)."""
         idx = self.all_index if index is None else index
-        out = np.empty((len(q), len(idx)))
+        out = np.empty((len(A), len(idx)))
         isA = idx[:, 0] == 0
         out[:, isA] = A[:, idx[isA, 1], idx[isA, 2]]
         out[:, ~isA] = B[:, idx[~isA, 1], idx[~isA, 2]]
@@ -84,13 +95,67 @@ def position_design(problem: Problem, n: int, dropped, seed) -> np.ndarray:
 
 
 def pilot(problem: Problem, seed, n=4096):
-    """Random Jacobians (their values) and which entries vary."""
+    """Random Jacobians (their values) and which entries vary.
+
+    The same samples check that ``M(q)`` is positive definite
+    (:func:`check_mass_matrices`).
+    """
     q, qdot, u = problem.domain.sample(n, method="uniform", seed=seed)
-    vals = problem.entries_at(q, qdot, u)
+    robot = problem.robot
+    try:
+        A, B = robot.jacobians_batch(q, qdot, u)
+    except np.linalg.LinAlgError:  # an analytic M(q) that is singular somewhere
+        A = B = None
+    check_mass_matrices(robot, q, None if B is None else B[:, problem.m :, :])
+    vals = problem.entries_from(A, B)
     spread = vals.max(axis=0) - vals.min(axis=0)
     scale_all = np.maximum(np.abs(vals).max(axis=0), 1e-300)
     varying = spread > 1e-12 * np.maximum(1.0, scale_all)
     return vals, varying
+
+
+def check_mass_matrices(robot, q, minv=None) -> None:
+    """Refuse a robot whose ``M(q)`` is not positive definite at sampled positions.
+
+    Parameters
+    ----------
+    robot : Manipulator
+    q : ndarray (n, m)
+    minv : ndarray (n, m, m), optional
+        ``M(q)^-1`` at ``q`` (the ``B`` block), when already computed.
+
+    Raises
+    ------
+    BoundsError
+        Naming the first configuration where ``M`` is singular, indefinite
+        or not finite.
+    """
+    if minv is not None:
+        finite = np.all(np.isfinite(minv), axis=(1, 2))
+        ok = finite.copy()
+        if finite.any():
+            sym = 0.5 * (minv[finite] + np.swapaxes(minv[finite], 1, 2))
+            ok[finite] = np.linalg.eigvalsh(sym)[:, 0] > 0
+        if ok.all():
+            return
+        bad = int(np.flatnonzero(~ok)[0])
+    else:
+        bad = None
+        for i, qi in enumerate(q):
+            M = robot.mass_matrix(qi)
+            if not np.all(np.isfinite(M)) or np.linalg.eigvalsh(0.5 * (M + M.T))[0] <= 0:
+                bad = i
+                break
+        if bad is None:
+            raise BoundsError(f"{robot.name}: M(q)^-1 cannot be computed, though M(q) is positive definite at "
+                              "every sampled position")
+    M = robot.mass_matrix(q[bad])
+    eig = np.linalg.eigvalsh(0.5 * (M + M.T)) if np.all(np.isfinite(M)) else np.array([np.nan])
+    config = ", ".join(f"{n}={x:.4g}" for n, x in zip(robot.joint_names, q[bad]))
+    raise BoundsError(
+        f"{robot.name}: the mass matrix M(q) is not positive definite at q = ({config}) "
+        f"(smallest eigenvalue {eig[0]:.3g}): the robot's inertial data are not physical"
+    )
 
 
 #: Relative size below which a coefficient is rounding (an entry that does not
@@ -98,7 +163,21 @@ def pilot(problem: Problem, seed, n=4096):
 DEPENDENCE_RTOL = 1e-10
 
 
-def inner_maxima(problem: Problem, q, directions, index, progress, workers):
+def _inner_task(problem: Problem, item):
+    q, directions, index = item
+    c, a, b, Q = polynomial_coefficients(
+        lambda qq, qd, uu: problem.entries_at(qq, qd, uu, index),
+        q, problem.t_centre, problem.t_scale, problem.u_centre, problem.u_scale,
+    )
+    Dt = directions.T  # (k, D)
+    c, a, b, Q = c @ Dt, a @ Dt, b @ Dt, Q @ Dt
+    val, _, _ = box_maximum(c, a, b, Q, problem.t_scale > 0, problem.u_scale > 0)
+    size = np.abs(c).max(axis=0)
+    dep = np.vstack([np.abs(b).max(axis=0) + np.abs(Q).max(axis=(0, 2)), np.abs(a).max(axis=0)])  # (2m, D)
+    return val, dep, size
+
+
+def inner_maxima(problem: Problem, q, directions, index, progress, pool):
     """Max over the velocity/torque box of ``d . p`` at every position and direction.
 
     Returns
@@ -109,25 +188,9 @@ def inner_maxima(problem: Problem, q, directions, index, progress, workers):
     depends : ndarray (D, 2m) bool
         Which velocities and torques each direction depends on at all.
     """
-    t_active = problem.t_scale > 0
-    u_active = problem.u_scale > 0
     chunks = np.array_split(np.arange(len(q)), max(1, int(np.ceil(len(q) / 128))))
-    Dt = directions.T  # (k, D)
-
-    def entries(qq, qd, uu):
-        return problem.entries_at(qq, qd, uu, index)
-
-    def run(chunk):
-        c, a, b, Q = polynomial_coefficients(
-            entries, q[chunk], problem.t_centre, problem.t_scale, problem.u_centre, problem.u_scale
-        )
-        c, a, b, Q = c @ Dt, a @ Dt, b @ Dt, Q @ Dt
-        val, _, _ = box_maximum(c, a, b, Q, t_active, u_active)
-        size = np.abs(c).max(axis=0)
-        dep = np.vstack([np.abs(b).max(axis=0) + np.abs(Q).max(axis=(0, 2)), np.abs(a).max(axis=0)])  # (2m, D)
-        return val, dep, size
-
-    results = parallel_map(run, chunks, workers, progress, "bounding")
+    results = pool.map(_inner_task, [(q[c], directions, index) for c in chunks], progress=progress,
+                       label="bounding")
     vals = np.vstack([r[0] for r in results])
     size = np.max([r[2] for r in results], axis=0)
     dep = np.max([r[1] for r in results], axis=0)
@@ -135,7 +198,31 @@ def inner_maxima(problem: Problem, q, directions, index, progress, workers):
     return vals, depends
 
 
-def screen(problem: Problem, directions, index, n: int, per_direction: int, seed, workers, around=None):
+def _screen_task(problem: Problem, item):
+    b, seed, directions, index, axis, other, col, coef, around = item
+    m, n = problem.m, SCREEN_BATCH
+    if around is None:
+        q, qdot, u = problem.domain.sample(n, method="uniform", seed=[seed, b])
+    else:
+        rng = np.random.default_rng([seed, b])
+        base = around[rng.integers(len(around), size=n)]
+        sigma = np.exp(rng.uniform(np.log(0.03), np.log(0.3), size=(n, 1)))
+        step = rng.standard_normal(base.shape) * sigma * (problem.hi - problem.lo)
+        x = np.clip(base + step, problem.lo, problem.hi)
+        q, qdot, u = x[:, :m], x[:, m : 2 * m], x[:, 2 * m :]
+    e = problem.entries_at(q, qdot, u, index)
+    v = np.empty((len(q), len(directions)))
+    v[:, axis] = e[:, col] * coef
+    v[:, other] = e @ directions[other].T
+    arg = np.argmax(v, axis=0)
+    return v[arg, np.arange(len(directions))], q[arg]
+
+
+#: Points per screening batch; each batch gives its best point per direction.
+SCREEN_BATCH = 16384
+
+
+def screen(problem: Problem, directions, index, n: int, per_direction: int, seed, pool, around=None):
     """The best positions of ``n`` random points of the domain, per direction.
 
     One Jacobian per point (no inner maximisation) makes this ~40 times
@@ -154,39 +241,22 @@ def screen(problem: Problem, directions, index, n: int, per_direction: int, seed
         singular, so the witnesses of all directions mark where to look.
     """
     m = problem.m
-    batches = max(per_direction, int(np.ceil(n / 16384)))
+    batches = max(per_direction, int(np.ceil(n / SCREEN_BATCH)))
     # directions along one entry (the intervals) need a column, not a product
     nonzero = directions != 0
     axis = np.flatnonzero(nonzero.sum(axis=1) == 1)
     other = np.setdiff1d(np.arange(len(directions)), axis)
     col = np.argmax(nonzero[axis], axis=1)
     coef = directions[axis, col]
-
-    def run(b):
-        if around is None:
-            q, qdot, u = problem.domain.sample(16384, method="uniform", seed=[seed, b])
-        else:
-            rng = np.random.default_rng([seed, b])
-            base = around[rng.integers(len(around), size=16384)]
-            sigma = np.exp(rng.uniform(np.log(0.03), np.log(0.3), size=(16384, 1)))
-            step = rng.standard_normal(base.shape) * sigma * (problem.hi - problem.lo)
-            x = np.clip(base + step, problem.lo, problem.hi)
-            q, qdot, u = x[:, :m], x[:, m : 2 * m], x[:, 2 * m :]
-        e = problem.entries_at(q, qdot, u, index)
-        v = np.empty((len(q), len(directions)))
-        v[:, axis] = e[:, col] * coef
-        v[:, other] = e @ directions[other].T
-        arg = np.argmax(v, axis=0)
-        return v[arg, np.arange(len(directions))], q[arg]
-
-    out = parallel_map(run, list(range(batches)), workers, False, "screening")
+    items = [(b, seed, directions, index, axis, other, col, coef, around) for b in range(batches)]
+    out = pool.map(_screen_task, items, label="screening")
     vals = np.array([o[0] for o in out])  # (batches, D)
     pos = np.array([o[1] for o in out])  # (batches, D, m)
     top = np.argsort(-vals, axis=0)[:per_direction]  # (s, D)
     return np.moveaxis(pos[top, np.arange(len(directions))[None]], 0, 1).reshape(len(directions), -1, m)
 
 
-def support_pass(problem: Problem, q, directions, index, progress, workers, n_starts: int = 8, extra=None):
+def support_pass(problem: Problem, q, directions, index, progress, pool, n_starts: int = 8, extra=None):
     """Max over the velocity/torque box of ``d . p`` for each direction, and starts.
 
     Parameters
@@ -207,11 +277,11 @@ def support_pass(problem: Problem, q, directions, index, progress, workers, n_st
     depends : ndarray (D, 2m) bool
         Which velocities and torques each direction depends on at all.
     """
-    vals, depends = inner_maxima(problem, q, directions, index, progress, workers)
+    vals, depends = inner_maxima(problem, q, directions, index, progress, pool)
     positions = q[landscape_peaks(problem, q, vals, n_starts)]  # (D, S, m)
     if extra is not None:
         positions = np.concatenate([positions, extra], axis=1)
-    starts, start_vals = exact_witnesses(problem, positions, directions, index, workers)
+    starts, start_vals = exact_witnesses(problem, positions, directions, index, pool)
     return np.maximum(vals.max(axis=0), start_vals[:, 0]), starts, depends
 
 
@@ -249,7 +319,22 @@ def landscape_peaks(problem: Problem, q, vals, n: int, neighbours: int | None = 
     return np.where(valid, top, best[:, None])
 
 
-def exact_witnesses(problem: Problem, positions, directions, index, workers):
+def _witness_task(problem: Problem, item):
+    qq, d, index = item  # one polynomial d . p per position
+    c, a, b, Q = polynomial_coefficients(
+        lambda x, y, z: problem.entries_at(x, y, z, index),
+        qq, problem.t_centre, problem.t_scale, problem.u_centre, problem.u_scale,
+    )
+    val, t, u = box_maximum(
+        np.einsum("nk,nk->n", c, d)[:, None], np.einsum("nmk,nk->nm", a, d)[..., None],
+        np.einsum("nmk,nk->nm", b, d)[..., None], np.einsum("nijk,nk->nij", Q, d)[..., None],
+        problem.t_scale > 0, problem.u_scale > 0, exact=True,
+    )
+    x = np.hstack([qq, problem.t_centre + problem.t_scale * t[:, 0], problem.u_centre + problem.u_scale * u[:, 0]])
+    return val[:, 0], x
+
+
+def exact_witnesses(problem: Problem, positions, directions, index, pool):
     """The exact maximiser over the velocity/torque box at given positions, per direction.
 
     Parameters
@@ -265,198 +350,11 @@ def exact_witnesses(problem: Problem, positions, directions, index, workers):
     """
     m = problem.m
     D, S, _ = positions.shape
-    t_active = problem.t_scale > 0
-    u_active = problem.u_scale > 0
     pair_dir = np.repeat(np.arange(D), S)
     pair_q = positions.reshape(D * S, m)
-
-    def run(pairs):
-        qq = pair_q[pairs]
-        c, a, b, Q = polynomial_coefficients(
-            lambda x, y, z: problem.entries_at(x, y, z, index),
-            qq, problem.t_centre, problem.t_scale, problem.u_centre, problem.u_scale,
-        )
-        d = directions[pair_dir[pairs]]  # one polynomial per pair
-        val, t, u = box_maximum(
-            np.einsum("nk,nk->n", c, d)[:, None], np.einsum("nmk,nk->nm", a, d)[..., None],
-            np.einsum("nmk,nk->nm", b, d)[..., None], np.einsum("nijk,nk->nij", Q, d)[..., None],
-            t_active, u_active, exact=True,
-        )
-        x = np.hstack([qq, problem.t_centre + problem.t_scale * t[:, 0], problem.u_centre + problem.u_scale * u[:, 0]])
-        return val[:, 0], x
-
     chunks = np.array_split(np.arange(D * S), max(1, int(np.ceil(D * S / 64))))
-    out = parallel_map(run, chunks, workers, False, "witnesses")
+    out = pool.map(_witness_task, [(pair_q[c], directions[pair_dir[c]], index) for c in chunks], label="witnesses")
     vals = np.concatenate([o[0] for o in out]).reshape(D, S)
     points = np.vstack([o[1] for o in out]).reshape(D, S, 3 * m)
     order = np.argsort(-vals, axis=1, kind="stable")
     return np.take_along_axis(points, order[..., None], axis=1), np.take_along_axis(vals, order, axis=1)
-
-
-def cross_seed(problem: Problem, directions, values, witnesses, index, dropped, depends, progress, workers,
-               rounds: int = 3):
-    """Search each direction again from the other directions' witnesses where those are higher.
-
-    The entries share their sharp peaks (where the mass matrix is nearly
-    singular, ``M^-1`` and everything it multiplies is large), so the position
-    where one direction's maximum was found is often a better start for
-    another than any of its own.  Repeats while something improves.
-    """
-    values, witnesses = values.copy(), witnesses.copy()
-    m = problem.m
-    for _ in range(rounds):
-        q = np.unique(witnesses[:, :m], axis=0)
-        vals, _ = inner_maxima(problem, q, directions, index, False, workers)  # (W, D)
-        best = np.argmax(vals, axis=0)
-        better = np.flatnonzero(vals[best, np.arange(len(directions))] > values + 1e-9 * (1.0 + np.abs(values)))
-        if not better.size:
-            break
-        starts, start_vals = exact_witnesses(problem, q[best[better]][:, None], directions[better], index, workers)
-        v_ref, w_ref = refine(problem, directions[better], start_vals[:, 0], starts, index, dropped, progress,
-                              workers, depends[better])
-        up = v_ref > values[better]
-        values[better[up]], witnesses[better[up]] = v_ref[up], w_ref[up]
-    return values, witnesses
-
-
-def refine(problem: Problem, directions, values, starts, index, dropped, progress, workers, depends=None,
-           maxiter=200):
-    """Bounded local search (L-BFGS-B) from every start; never lowers a support value.
-
-    Each search moves the positions that matter and only the velocities and
-    torques the direction depends on (``depends`` (D, 2m); all by default).
-    The best point found is then checked with the exact maximum over the
-    velocity/torque box at its position, and searched from again if that is higher.
-    """
-    m = problem.m
-    lo, hi = problem.lo.copy(), problem.hi.copy()
-    q_free = hi > lo
-    q_free[list(dropped)] = False
-    q_free[m:] = False
-    span = np.where(hi > lo, hi - lo, 1.0)
-    if depends is None:
-        depends = np.ones((len(directions), 2 * m), bool)
-    t_active = problem.t_scale > 0
-    u_active = problem.u_scale > 0
-
-    def local_search(k, x0, free, coarse=False):
-        d = directions[k]
-        scale = max(abs(values[k]), 1e-12)
-        step = 1e-6
-        pos = np.flatnonzero(free)
-        nfree = len(pos)
-
-        def fun(y):
-            x = x0.copy()
-            x[free] = y
-            # value and central-difference gradient in one batched evaluation
-            pts = np.tile(x, (1 + 2 * nfree, 1))
-            h = step * span[pos]
-            pts[1 + np.arange(nfree), pos] += h
-            pts[1 + nfree + np.arange(nfree), pos] -= h
-            pts = np.clip(pts, lo, hi)
-            vals = problem.entries_at(pts[:, :m], pts[:, m : 2 * m], pts[:, 2 * m :], index) @ d
-            dh = pts[1 + np.arange(nfree), pos] - pts[1 + nfree + np.arange(nfree), pos]
-            grad = (vals[1 : 1 + nfree] - vals[1 + nfree :]) / np.where(dh > 0, dh, 1.0)
-            return -vals[0] / scale, -grad / scale
-
-        res = optimize.minimize(
-            fun, x0[free], jac=True, method="L-BFGS-B", bounds=list(zip(lo[free], hi[free])),
-            # a coarse search only ranks its start; the best is then polished
-            options={"maxiter": maxiter, "ftol": 1e-9, "gtol": 1e-6} if coarse
-            else {"maxiter": maxiter, "ftol": 1e-14, "gtol": 1e-11},
-        )
-        x = x0.copy()
-        x[free] = np.clip(res.x, lo[free], hi[free])
-        return float(problem.entries_at(x[None, :m], x[None, m : 2 * m], x[None, 2 * m :], index)[0] @ d), x
-
-    def exact_inner(k, x):
-        """The exact maximum over the velocity/torque box at the position of ``x``."""
-        c, a, b, Q = polynomial_coefficients(
-            lambda qq, qd, uu: problem.entries_at(qq, qd, uu, index),
-            x[None, :m], problem.t_centre, problem.t_scale, problem.u_centre, problem.u_scale,
-        )
-        d = directions[k][:, None]
-        _, t, u = box_maximum(c @ d, a @ d, b @ d, Q @ d, t_active, u_active, exact=True)
-        y = np.concatenate([x[:m], problem.t_centre + problem.t_scale * t[0, 0],
-                            problem.u_centre + problem.u_scale * u[0, 0]])
-        return float(problem.entries_at(y[None, :m], y[None, m : 2 * m], y[None, 2 * m :], index)[0] @ directions[k]), y
-
-    def refine_one(k):
-        best_val, best_x = values[k], starts[k, 0]
-        free = q_free.copy()
-        free[m:] = depends[k] & np.concatenate([t_active, u_active])
-        if not free.any():
-            return best_val, best_x
-        tried, found = [], []
-        for x0 in starts[k]:
-            if any(np.array_equal(x0, y) for y in tried):
-                continue
-            tried.append(x0)
-            found.append(local_search(k, x0, free, coarse=len(starts[k]) > 1))
-        val, x = max(found, key=lambda f: f[0])
-        if len(found) > 1:
-            val, x = local_search(k, x, free)
-        if val > best_val:
-            best_val, best_x = val, x
-        # the local search may leave the velocities at a lower face maximum
-        val, x = exact_inner(k, best_x)
-        if val > best_val + 1e-12 * (1.0 + abs(best_val)):
-            val, x = local_search(k, x, free)
-            if val > best_val:
-                best_val, best_x = val, x
-        return best_val, best_x
-
-    chunks = [[k] for k in range(len(directions))]
-    out = parallel_map(lambda ks: [refine_one(k) for k in ks], chunks, workers, progress, "refining")
-    new_values = np.array([o[0][0] for o in out])
-    new_witness = np.array([o[0][1] for o in out])
-    return new_values, new_witness
-
-
-_FORK_STATE: dict = {}
-
-
-def _call_in_fork(i):
-    return _FORK_STATE["fn"](_FORK_STATE["items"][i])
-
-
-def parallel_map(fn, items, workers, progress, label):
-    """Map over items on ``workers`` forked processes (inheriting the robot), with a bar.
-
-    BLAS runs single-threaded inside: the work is many small problems, and a
-    multi-threaded OpenBLAS makes each L-BFGS-B step about 10x slower here.
-    """
-    from polyrob._threads import single_blas_thread
-
-    with single_blas_thread():
-        return _parallel_map_inner(fn, items, workers, progress, label)
-
-
-def _parallel_map_inner(fn, items, workers, progress, label):
-    from tqdm.auto import tqdm
-
-    workers = (os.cpu_count() or 1) if workers is None else workers
-    bar = tqdm(total=len(items), desc=label, disable=not progress, leave=False)
-    try:
-        if workers <= 1 or len(items) < 4:
-            out = []
-            for it in items:
-                out.append(fn(it))
-                bar.update()
-            return out
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
-
-        _FORK_STATE.update(fn=fn, items=items)
-        try:
-            with ProcessPoolExecutor(workers, mp_context=mp.get_context("fork")) as pool:
-                out = []
-                for r in pool.map(_call_in_fork, range(len(items)), chunksize=max(1, len(items) // (8 * workers))):
-                    out.append(r)
-                    bar.update()
-                return out
-        finally:
-            _FORK_STATE.clear()
-    finally:
-        bar.close()

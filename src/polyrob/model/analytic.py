@@ -24,8 +24,9 @@ array([[ 0.3875,  0.    ],
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -146,22 +147,9 @@ def paper_2r() -> AnalyticRobot:
     is the bundled URDF ``planar_2r``.
     """
     a1, a2, a3 = (PAPER_2R_PARAMETERS[k] for k in ("a1", "a2", "a3"))
-
-    def M(q):
-        c = np.cos(q[:, 1])
-        out = np.empty(q.shape[:1] + (2, 2), dtype=np.result_type(q, float))
-        out[:, 0, 0] = a1 + 2 * a3 * c
-        out[:, 0, 1] = out[:, 1, 0] = a2 + a3 * c
-        out[:, 1, 1] = a2
-        return out
-
-    def C(q, qdot):
-        s = a3 * np.sin(q[:, 1])
-        out = np.zeros(q.shape[:1] + (2, 2), dtype=np.result_type(q, qdot, float))
-        out[:, 0, 0] = -s * qdot[:, 1]
-        out[:, 0, 1] = s * (qdot[:, 0] + qdot[:, 1])
-        out[:, 1, 0] = s * qdot[:, 0]
-        return out
+    # module-level functions with bound parameters: the robot pickles (worker processes)
+    M = functools.partial(_paper_2r_mass, a1, a2, a3)
+    C = functools.partial(_paper_2r_coriolis, a3)
 
     pi = np.pi
     return AnalyticRobot(
@@ -179,6 +167,25 @@ def paper_2r() -> AnalyticRobot:
         named_domains={"paper": PAPER_DOMAIN},
         default_domain="paper",
     )
+
+
+def _paper_2r_mass(a1, a2, a3, q):
+    c = np.cos(q[:, 1])
+    out = np.empty(q.shape[:1] + (2, 2), dtype=np.result_type(q, float))
+    out[:, 0, 0] = a1 + 2 * a3 * c
+    out[:, 0, 1] = out[:, 1, 0] = a2 + a3 * c
+    out[:, 1, 1] = a2
+    return out
+
+
+def _paper_2r_coriolis(a3, q, qdot):
+    """The printed ``C`` (see :func:`paper_2r`)."""
+    s = a3 * np.sin(q[:, 1])
+    out = np.zeros(q.shape[:1] + (2, 2), dtype=np.result_type(q, qdot, float))
+    out[:, 0, 0] = -s * qdot[:, 1]
+    out[:, 0, 1] = s * (qdot[:, 0] + qdot[:, 1])
+    out[:, 1, 0] = s * qdot[:, 0]
+    return out
 
 
 #: The domain that reproduces the paper's A and B intervals best (see

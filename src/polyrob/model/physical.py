@@ -111,12 +111,17 @@ def check_mass_matrix(path, model: pinocchio.Model, n_configurations: int = 8, s
     """
     data = model.createData()
     rng = np.random.default_rng(seed)
-    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
-    finite = np.isfinite(lo) & np.isfinite(hi) & (lo < hi)
     for n in range(n_configurations):
-        q = pinocchio.neutral(model) if n == 0 else pinocchio.randomConfiguration(
-            model, np.where(finite, lo, -np.pi), np.where(finite, hi, np.pi)
-        )
+        q = pinocchio.neutral(model)
+        for i in range(1, model.njoints) if n else ():
+            joint = model.joints[i]
+            lo, hi = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
+            if joint.nq == 2:  # continuous: (cos, sin) of an angle
+                angle = rng.uniform(-np.pi, np.pi)
+                q[joint.idx_q : joint.idx_q + 2] = np.cos(angle), np.sin(angle)
+            else:
+                finite = np.isfinite(lo) and np.isfinite(hi) and lo < hi
+                q[joint.idx_q] = rng.uniform(lo, hi) if finite else rng.uniform(-np.pi, np.pi)
         M = pinocchio.crba(model, data, q)
         M = np.triu(M) + np.triu(M, 1).T
         if not np.all(np.isfinite(M)):

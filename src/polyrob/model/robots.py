@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import functools
 import importlib.metadata
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 from polyrob.errors import RobotError
 from polyrob.model import analytic

@@ -175,8 +175,8 @@ def _num(value, default=np.nan) -> float:
 
 def _read_urdf(path: Path) -> tuple[dict, list]:
     """Validate the XML strictly; read the movable joints and the links with yourdfpy."""
-    from lxml import etree
     import yourdfpy
+    from lxml import etree
 
     if not path.is_file():
         raise RobotError(f"{path}: no such URDF file")

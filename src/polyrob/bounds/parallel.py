@@ -1,0 +1,232 @@
+"""The process model of the bounds stage: one spawn-safe pool of workers per bound.
+
+:class:`WorkerPool` starts its worker processes with the ``spawn`` method
+(fresh interpreters: no inherited locks or BLAS threads, the cause of forked
+workers blocked on a futex after a Ctrl-C), sends each of them the shared,
+read-only state once (the robot, the domain and the entry layout, pickled),
+and then hands out tasks: a top-level function and a picklable item, called
+as ``fn(state, item)``.  Nothing in the parent is switched at run time: no
+module globals, no ``os.environ``.
+
+Each worker talks to the parent over its own pipe, so the parent waits on
+the pipes and on the workers' process sentinels together: a worker that dies
+is an error at once, not a hang.  Workers ignore SIGINT (a terminal sends it
+to the whole process group); on KeyboardInterrupt, or any other exception,
+the parent terminates them and re-raises, so one Ctrl-C ends a bound within
+a second or so.
+
+With one worker, or a state that cannot be pickled (an analytic robot built
+from closures), the tasks run in the calling process; :attr:`WorkerPool.fallback`
+then says why, and :func:`polyrob.bounds.pldi.bound_pldi` records it.
+
+Examples
+--------
+>>> def scaled(state, item):
+...     return state * item
+>>> with WorkerPool(10, workers=1) as pool:
+...     pool.map(scaled, [1, 2, 3])
+[10, 20, 30]
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+from collections import deque
+
+from polyrob.errors import ArgumentError, BoundsError
+
+__all__ = ["WorkerPool", "available_cores"]
+
+#: Seconds a terminated worker gets to exit before it is killed.
+TERMINATE_GRACE = 2.0
+
+
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _worker_main(conn, payload: bytes) -> None:
+    """A worker: load the shared state once, then run tasks until told to stop."""
+    from threadpoolctl import threadpool_limits
+
+    # The parent handles Ctrl-C and terminates the workers; a terminal's
+    # SIGINT reaches the whole process group and must not print tracebacks here.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Many small problems: a multi-threaded BLAS only spin-waits on them.
+    threadpool_limits(limits=1, user_api="blas")
+    state = pickle.loads(payload)
+    while True:
+        try:
+            message = conn.recv()
+        except (EOFError, OSError):  # the parent is gone
+            return
+        if message is None:
+            return
+        index, fn, item = message
+        try:
+            reply = (index, True, fn(state, item))
+        except Exception as exc:  # noqa: BLE001 - not swallowed: relayed to the parent, which raises it
+            reply = (index, False, exc)
+        try:
+            conn.send(reply)
+        except (pickle.PicklingError, TypeError, AttributeError) as exc:
+            conn.send((index, False, BoundsError(f"a worker's result cannot be sent back ({exc})")))
+
+
+def _died(proc) -> None:
+    proc.join(TERMINATE_GRACE)
+    raise BoundsError(
+        f"a bounds worker process died (exit code {proc.exitcode}); "
+        "run with workers=1 (-j 1) to see the error in this process"
+    )
+
+
+class WorkerPool:
+    """Worker processes sharing one read-only state; a context manager.
+
+    Parameters
+    ----------
+    state : object
+        Passed as the first argument of every task; pickled once per worker.
+    workers : int, optional
+        Processes (default: the available cores).  With 1 the tasks run in
+        the calling process.
+
+    Attributes
+    ----------
+    fallback : str or None
+        Why the tasks ran in the calling process although ``workers > 1``.
+    """
+
+    def __init__(self, state, workers: int | None = None):
+        self.state = state
+        self.workers = available_cores() if workers is None else int(workers)
+        if self.workers < 1:
+            raise ArgumentError(f"workers must be at least 1, got {workers}")
+        self.fallback: str | None = None
+        self._procs: list = []
+
+    def __enter__(self) -> WorkerPool:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ running
+    def map(self, fn, items, *, progress: bool = False, label: str = "") -> list:
+        """``[fn(state, item) for item in items]``, on the workers when there are any.
+
+        ``fn`` must be a module-level function (it is pickled by name).
+        """
+        from tqdm.auto import tqdm
+
+        items = list(items)
+        bar = tqdm(total=len(items), desc=label, disable=not progress, leave=False)
+        try:
+            if self.workers > 1 and len(items) > 1 and self._start():
+                return self._map_workers(fn, items, bar)
+            from polyrob._threads import single_blas_thread
+
+            out = []
+            with single_blas_thread():
+                for item in items:
+                    out.append(fn(self.state, item))
+                    bar.update()
+            return out
+        finally:
+            bar.close()
+
+    def _map_workers(self, fn, items, bar) -> list:
+        from multiprocessing.connection import wait
+
+        results = [None] * len(items)
+        pending = deque(enumerate(items))
+        busy = {}
+        try:
+            for proc, conn in self._procs:
+                if pending:
+                    i, item = pending.popleft()
+                    conn.send((i, fn, item))
+                    busy[conn] = proc
+            sentinels = {proc.sentinel: proc for proc, _ in self._procs}
+            while busy:
+                for ready in wait(list(busy) + list(sentinels)):
+                    if ready in sentinels:
+                        _died(sentinels[ready])
+                    if ready not in busy:
+                        continue
+                    try:
+                        i, ok, value = ready.recv()
+                    except (EOFError, OSError):  # the worker is gone: its exit code says how
+                        _died(busy[ready])
+                    if not ok:
+                        raise value
+                    results[i] = value
+                    bar.update()
+                    if pending:
+                        j, item = pending.popleft()
+                        ready.send((j, fn, item))
+                    else:
+                        del busy[ready]
+        except BaseException:
+            # KeyboardInterrupt included: stop the workers now, then re-raise
+            self.terminate()
+            raise
+        return results
+
+    # ------------------------------------------------------------------ lifetime
+    def _start(self) -> bool:
+        """Start the workers (once); False when the state cannot be sent to them."""
+        if self._procs:
+            return True
+        if self.fallback is not None:
+            return False
+        try:
+            payload = pickle.dumps(self.state)
+        except (pickle.PicklingError, TypeError, AttributeError) as exc:
+            self.fallback = f"ran in one process: the robot cannot be sent to worker processes ({exc})"
+            return False
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")
+        try:
+            for _ in range(self.workers):
+                parent, child = ctx.Pipe()
+                proc = ctx.Process(target=_worker_main, args=(child, payload), daemon=True)
+                proc.start()
+                child.close()
+                self._procs.append((proc, parent))
+        except BaseException:
+            self.terminate()
+            raise
+        return True
+
+    def close(self) -> None:
+        """Ask idle workers to exit, then make sure they did."""
+        for _, conn in self._procs:
+            try:
+                conn.send(None)
+            except (OSError, ValueError):  # already gone
+                pass
+        for proc, _ in self._procs:
+            proc.join(TERMINATE_GRACE)
+        self.terminate()
+
+    def terminate(self) -> None:
+        """Stop every worker now (SIGTERM, then SIGKILL after a grace period)."""
+        procs, self._procs = self._procs, []
+        for proc, _ in procs:
+            if proc.is_alive():
+                proc.terminate()
+        for proc, conn in procs:
+            proc.join(TERMINATE_GRACE)
+            if proc.is_alive():
+                proc.kill()
+                proc.join()
+            conn.close()

@@ -1,0 +1,106 @@
+"""The bounds stage's process model: spawned workers, errors relayed, Ctrl-C ends everything."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from polyrob.bounds.parallel import WorkerPool
+from polyrob.errors import BoundsError
+
+
+def scaled(state, item):
+    return state * item
+
+
+def failing(state, item):
+    if item == 3:
+        raise ValueError(f"item {item} is bad")
+    return item
+
+
+def dying(state, item):
+    os._exit(7)
+
+
+def test_workers_compute_what_one_process_computes_and_relay_errors():
+    items = list(range(20))
+    with WorkerPool(3, workers=1) as serial:
+        expected = serial.map(scaled, items)
+    assert expected == [3 * i for i in items]
+    with WorkerPool(3, workers=2) as pool:
+        assert pool.map(scaled, items) == expected
+        with pytest.raises(ValueError, match="item 3 is bad"):
+            pool.map(failing, items)
+        # the pool was stopped by the error; a new map starts it again
+        assert pool.map(scaled, items) == expected
+        with pytest.raises(BoundsError, match=r"worker process died \(exit code 7\)"):
+            pool.map(dying, items)
+        assert pool.fallback is None
+
+
+def test_a_state_that_cannot_be_pickled_runs_here_and_says_so():
+    state = lambda: 2  # noqa: E731  (a closure cannot be sent to another process)
+    with WorkerPool(state, workers=2) as pool:
+        assert pool.map(lambda_free_call, [1, 2]) == [2, 4]
+        assert "one process" in pool.fallback
+
+
+def lambda_free_call(state, item):
+    return state() * item
+
+
+def _children(pid: int) -> set[int]:
+    path = Path(f"/proc/{pid}/task/{pid}/children")
+    return {int(x) for x in path.read_text().split()} if path.exists() else set()
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="reads child processes from /proc (Linux)")
+def test_one_sigint_ends_a_bound_and_its_workers_within_seconds():
+    script = textwrap.dedent(
+        """
+        from polyrob import Domain, bound_pldi, load_robot
+        robot = load_robot("planar_2r")
+        # a screen of 2^24 points keeps two workers busy for minutes
+        bound_pldi(robot, Domain.from_robot(robot), workers=2, screen=2**24, coverage=0, progress=False)
+        """
+    )
+    proc = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        workers: set[int] = set()
+        while len(workers) < 2 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            workers = _children(proc.pid)
+        assert len(workers) >= 2, "the bound never started its workers"
+        time.sleep(3.0)  # let the workers load the robot and compute
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=10)
+        elapsed = time.monotonic() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    err = proc.stderr.read()
+    assert proc.returncode != 0 and "KeyboardInterrupt" in err
+    assert elapsed < 10
+    time.sleep(0.5)
+    alive = [pid for pid in workers if Path(f"/proc/{pid}").exists() and "Z" not in _state(pid)]
+    assert not alive, f"workers still running after Ctrl-C: {alive}"
+    # one traceback, the parent's: the workers ignore SIGINT
+    assert err.count("Traceback") == 1
+
+
+def _state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
+    except OSError:
+        return "Z"
