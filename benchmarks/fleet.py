@@ -28,7 +28,6 @@ import json
 import os
 import platform
 import sys
-import time
 
 
 def _jobs(text: str) -> list:
@@ -41,10 +40,14 @@ def _jobs(text: str) -> list:
 
 def _row(r) -> dict:
     t = r.timings
+
+    def secs(key):  # None: the stage did not run (or the robot failed before it)
+        return round(t[key], 2) if key in t else None
+
     return {
         "robot": r.name, "joints": r.joints, "entries": r.entries, "parameters": r.parameters, "model": r.model,
-        "enclosure": r.enclosure, "bound_s": round(t.get("bounds", 0.0), 2),
-        "synthesis_s": round(t.get("synthesis", 0.0), 2), "analysis_s": round(t.get("analysis", 0.0), 2),
+        "enclosure": r.enclosure, "bound_s": secs("bounds"),
+        "synthesis_s": secs("synthesis"), "analysis_s": secs("analysis"),
         "total_s": round(r.seconds, 2), "mu_upper": r.mu_upper, "mu_lower": r.mu_lower, "certified": r.certified,
         "order": r.order, "alpha": r.alpha, "validation": r.validation,
         "error": None if r.ok else f"{r.error}: {r.message}",

@@ -6,7 +6,6 @@ D-K synthesis take about a second each) and a name that does not exist.
 
 from __future__ import annotations
 
-import argparse
 import functools
 import json
 import math
