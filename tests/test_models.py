@@ -40,8 +40,8 @@ def _shrunk(unc, factor):
 def test_default_model_is_the_tight_lft_on_the_paper_arm(pldi):
     unc = uncertain_plant(pldi, coverage=0, volume_samples=0)
     assert unc.model == "lft" and "affine" in unc.info["auto"]
-    # four entries of N = M(q) A_low vary, and the inertia moves with cos q2 only
-    assert unc.parameter_names == ("n32", "n34", "n42", "n43", "cos(q2)#1", "cos(q2)#2")
+    # the paper's six A entries, and B = M(q)^-1 moving with cos q2 only (two rank-one pieces)
+    assert unc.parameter_names == ("a32", "a33", "a34", "a42", "a43", "a44", "cos(q2)#1", "cos(q2)#2")
     assert unc.ranges["cos(q2)#1"] == (-1.0, 1.0)
     assert unc.n_params < 10
 
@@ -87,6 +87,23 @@ def test_lft_members_are_in_the_model_and_match_the_state_space(lft, axes, name)
         G = upper_lft(M, model.delta_matrix(delta, res or None))
         np.testing.assert_allclose(G.A, A, atol=1e-9 * (1 + np.abs(A).max()))
         np.testing.assert_allclose(G.B, B, atol=1e-12)
+
+
+def test_lft_torque_variant_and_repeated_scalar(pldi):
+    from polyrob.plant.inertia_lft import inertia_lft_contains, inertia_lft_plant
+
+    tq = inertia_lft_plant(pldi, a_part="torque", repeated=True)
+    assert tq.parameter_names == ("n32", "n34", "n42", "n43", "cos(q2)")
+    assert tq.block_structure.tolist()[-1] == [-2, 0]
+    robot = cached_robot("paper_2r")
+    A, B = robot.jacobians_batch(*pldi.domain.sample(500, method="uniform", seed=99))
+    assert inertia_lft_contains(tq, A, B).all()
+    # the exact curve: B at δ = ±1 of cos(q2) is M(±1)^-1
+    d = np.zeros(tq.n_params)
+    d[-1] = 1.0
+    a1, a2, a3 = 48.125, 13.125, 6.25
+    np.testing.assert_allclose(tq.matrices_at(d)[1][2:], np.linalg.inv([[a1 + 2 * a3, a2 + a3], [a2 + a3, a2]]),
+                               rtol=1e-12)
 
 
 def test_lft_nominal_delta_gives_the_nominal(pldi, lft):

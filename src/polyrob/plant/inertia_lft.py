@@ -1,19 +1,22 @@
 """The ``lft`` uncertainty model: the inverse inertia as an exact LFT in a few joint variables.
 
-The lower rows of the Jacobians of ``ẋ = f(x, u)`` factor as::
+``B_low = M(q)^{-1}`` depends on the positions only.  Where the inertia
+matrix is *affine in the cosines and sines of single joint angles*,
+``M(q) = M_0 + Σ_f φ_f(q) M_f`` (every planar 2R arm: ``M = M_0 + cos q_2 M_1``),
+its inverse is an exact LFT in the real scalars ``φ_f``: the whole ``B``
+block moves along its true curve (``repeated=True``, block ``[-rank M_f, 0]``)
+or, by default, on the sheet spanned by the rank-one pieces of ``M_f`` with
+independent parameters (blocks ``[-1, 0]``, which AB13MD and the fast D-G-K
+steps handle); either way ``det B`` stays near its real range instead of
+falling towards 0 as in the paper's box.
 
-    [A_low(x, u)  B_low(q)] = M(q)^{-1} [N(x, u)  I],     N = M(q) A_low
-
-(``B_low = M(q)^{-1}``; ``N`` is the torque-side Jacobian ``∂(u - h)/∂x - ∂M/∂q q̈``).
-Where the inertia matrix is *affine in the cosines and sines of single joint
-angles*, ``M(q) = M_0 + Σ_f φ_f(q) M_f`` (every planar 2R arm:
-``M = M_0 + cos q_2 M_1``), its inverse is an exact LFT in repeated real
-scalars ``φ_f`` (block ``[-rank M_f, 0]``), with no conservatism at all: the
-whole ``B`` block moves along its true curve, ``det B`` never leaves its real
-range.  ``N``'s varying entries get one real parameter each, bounded by the
-same sampled + searched + verified extreme search as the PLDI's intervals
-(:func:`polyrob.bounds.pldi.bound_pldi` run on ``N``).  The product of the two
-is the model; it ignores only the correlation between ``N`` and ``φ``.
+``A_low`` is modelled as the paper's (``a_part="entries"``, default): one real
+parameter per varying entry with the PLDI's intervals, so the model is a
+subset of the box.  ``a_part="torque"`` writes instead
+``[A_low B_low] = M(q)^{-1} [N(x, u) I]`` with ``N = M(q) A_low`` the
+torque-side Jacobian, boxed with the same sampled + searched + verified
+extreme search as the PLDI (:func:`polyrob.bounds.pldi.bound_pldi` run on
+``N``): fewer parameters, but the product can leave the ``A`` intervals.
 
 The fit of ``M(q)`` is checked on random configurations (relative residual
 below :data:`AFFINE_RTOL`); where it fails (spatial arms with three or more
@@ -140,7 +143,7 @@ def _factor(Mf: np.ndarray):
 
 
 def inertia_lft_plant(pldi, *, robot=None, nominal: str = "pldi", repeated: bool = False,
-                      bound_options: dict | None = None) -> UncertainPlant:
+                      a_part: str = "entries", bound_options: dict | None = None) -> UncertainPlant:
     """The ``lft`` model of a PLDI (see the module docstring).
 
     Parameters
@@ -156,6 +159,13 @@ def inertia_lft_plant(pldi, *, robot=None, nominal: str = "pldi", repeated: bool
         independent parameters over ``φ_f``'s range (blocks ``[-1, 0]``,
         AB13MD and the fast D-G-K steps apply); the inertia then moves on a
         sheet instead of a curve, still nonsingular and far inside the box.
+    a_part : {"entries", "torque"}
+        How ``A_low`` is modelled.  ``"entries"`` (default): one real
+        parameter per varying entry of ``A`` with the PLDI's intervals (the
+        paper's ``A`` part), so the model is the paper's box with its ``B``
+        part replaced by the exact curve: a subset of the box, never larger.
+        ``"torque"``: ``A_low = M(q)^{-1} N`` with a box on ``N``'s entries
+        (fewer parameters, but the product can leave the ``A`` intervals).
     bound_options : dict, optional
         Passed to :func:`~polyrob.bounds.pldi.bound_pldi` when bounding ``N``
         (default: the PLDI's number of samples, no progress bars).
@@ -178,12 +188,20 @@ def inertia_lft_plant(pldi, *, robot=None, nominal: str = "pldi", repeated: bool
     Ms = np.array([robot.mass_matrix(qq) for qq in q])
     if np.abs(Ms @ B_s[:, m:, :] - np.eye(m)).max() > 1e-8:
         raise NotApplicable(f"{robot.name}: B is not [0; M(q)^-1]; the lft model does not apply")
-    opts = {"samples": pldi.info.get("samples"), "progress": False, "coverage": 0, **(bound_options or {})}
-    npldi = bound_pldi(_TorqueJacobians(robot), domain, **opts)
+    if a_part not in ("entries", "torque"):
+        raise PolyrobError(f"unknown a_part '{a_part}': use 'entries' or 'torque'")
+    torque = a_part == "torque"
+    if torque:
+        opts = {"samples": pldi.info.get("samples"), "progress": False, "coverage": 0, **(bound_options or {})}
+        npldi = bound_pldi(_TorqueJacobians(robot), domain, **opts)
+    else:
+        npldi = pldi
     nidx = np.asarray(npldi.entry_index, int).reshape(-1, 3)
-    if np.any(nidx[:, 0] != 0):
+    if torque and np.any(nidx[:, 0] != 0):
         raise NotApplicable(f"{robot.name}: M(q) B is not constant; the lft model does not apply")
-    n_lo, n_hi = np.asarray(npldi.lower, float), np.asarray(npldi.upper, float)
+    n_sel = nidx[:, 0] == 0  # the A entries (the B entries are the inertia's)
+    nidx = nidx[n_sel]
+    n_lo, n_hi = np.asarray(npldi.lower, float)[n_sel], np.asarray(npldi.upper, float)[n_sel]
     n_mid, n_rad = 0.5 * (n_lo + n_hi), 0.5 * (n_hi - n_lo)
     N_c = np.asarray(npldi.A0, float)[m:, :].copy()
     for (_, r, c), v in zip(nidx, n_mid):
@@ -212,18 +230,21 @@ def inertia_lft_plant(pldi, *, robot=None, nominal: str = "pldi", repeated: bool
         C_N[j, c] = 1.0
     low = np.zeros((n, m))
     low[m:] = np.eye(m)
-    B_d = np.hstack([low @ Minv @ E, -(low @ Minv @ U)])
-    C_v = np.vstack([C_N, V @ Minv @ N_c])
+    # torque: x_low' = M^-1 (N x + u); entries: x_low' = A_low x + M^-1 u
+    T = Minv if torque else np.eye(m)
+    B_d = np.hstack([low @ T @ E, -(low @ Minv @ U)])
+    C_v = np.vstack([C_N, V @ Minv @ N_c if torque else np.zeros((nt, n))])
     D_vu = np.vstack([np.zeros((k, m)), V @ Minv])
     D_vd = np.zeros((nd, nd))
-    D_vd[k:, :k] = V @ Minv @ E
+    if torque:
+        D_vd[k:, :k] = V @ Minv @ E
     D_vd[k:, k:] = -V @ Minv @ U
     A_mid = np.zeros((n, n))
     A_mid[:m, m:] = np.eye(m)
-    A_mid[m:] = Minv @ N_c
+    A_mid[m:] = T @ N_c
     B_mid = low @ Minv
 
-    n_names = tuple(entry_name("N", r, c, n) for _, r, c in nidx)
+    n_names = tuple(entry_name("N" if torque else "A", r, c, n) for _, r, c in nidx)
     par_names = n_names + tuple(names)
     ch_param = np.concatenate([np.arange(k), np.repeat(k + np.arange(len(facs)), [Uf.shape[1] for Uf, _ in facs])])
     ch_names = n_names + tuple(f"{names[p - k]}@{i}" for i, p in enumerate(ch_param[k:]))
@@ -235,8 +256,8 @@ def inertia_lft_plant(pldi, *, robot=None, nominal: str = "pldi", repeated: bool
         parameter_upper=np.r_[n_hi, ranges[:, 1]], channel_names=ch_names, channel_parameter=ch_param,
         channel_index=None, channel_lower=None, channel_upper=None, nominal_delta=np.zeros(len(par_names)),
         offset=np.zeros(len(par_names)), block_structure=np.array(blk, int).reshape(-1, 2),
-        info={"enclosure": pldi.enclosure, "N_enclosure": npldi.enclosure, "M0": M0, "Mf": Mf, "repeated": repeated,
-              "N_centre": N_c, "N_index": nidx, "N_seconds": npldi.info.get("seconds_total")},
+        info={"enclosure": pldi.enclosure, "N_enclosure": npldi.enclosure, "M0": M0, "Mf": Mf, "repeated": repeated, "a_part": a_part,
+              "N_centre": N_c, "N_index": nidx, "N_seconds": npldi.info.get("seconds_total") if torque else 0.0},
         model="lft", D_vd=D_vd,
     )
     if nominal == "midpoint":
@@ -276,7 +297,7 @@ def _locate(unc: UncertainPlant, A, B):
     Y = (M - unc.info["M0"]).reshape(n, -1)
     phi = Y @ np.linalg.pinv(X).T if X.shape[1] else np.zeros((n, 0))
     fit &= np.abs(phi @ X.T - Y).max(axis=1) <= 1e-7 * np.abs(M).reshape(n, -1).max(axis=1)
-    N = M @ A[:, m:, :]
+    N = M @ A[:, m:, :] if unc.info["a_part"] == "torque" else A[:, m:, :]
     rows, cols = nidx[:, 1] - m, nidx[:, 2]
     nvals = N[:, rows, cols]
     Nc = np.repeat(unc.info["N_centre"][None], n, axis=0)
