@@ -15,7 +15,8 @@ from conftest import paper_pldi
 
 from polyrob.cli import main
 
-FAST = ["--complex", "--max-iter", "1"]
+BOX = ["--uncertainty", "box"]  # the paper's model: one real parameter per varying entry
+FAST = [*BOX, "--complex", "--max-iter", "1"]
 GRID = ["--omega", "0.01:1000:40"]  # peak-refined; the automatic grid costs 10x more here
 
 
@@ -107,6 +108,7 @@ def test_analyze_reproduces_the_reduced_certificate(files, capsys):
         K,
         "--mc",
         "5",
+        *BOX,
         *GRID,
         "--quiet",
         "--json",
@@ -168,8 +170,10 @@ def _edit(K, tmp_path, **info):
 
 def test_analyze_refuses_a_controller_made_for_another_problem(files, tmp_path, capsys):
     d, K = files
-    pldi = ["--pldi", d / "paper.json"]
+    pldi = ["--pldi", d / "paper.json", *BOX]
     cases = [
+        # the file says box; analyze's default model (auto) resolves to another one on this robot
+        (["--pldi", d / "paper.json", "--controller", K], ["--uncertainty box"]),
         ([*pldi, "--controller", K, "--wb", "1"], ["omega_b", "--wb 0.5,0.1"]),
         (["--domain", "paper", "--qdot-max", "1", "--controller", K], ["domain qdot", "--qdot-max=joint1="]),
         ([*pldi, "--controller", _edit(K, tmp_path, robot="planar_2r")], ["robot 'planar_2r'"]),

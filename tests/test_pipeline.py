@@ -49,7 +49,7 @@ def test_build_problem_matches_the_stage_functions(problem):
     from polyrob.plant.uncertainty import uncertain_plant
     from polyrob.plant.weights import paper_weights
 
-    P = generalized_plant(uncertain_plant(paper_pldi()), *paper_weights())
+    P = generalized_plant(uncertain_plant(paper_pldi(), model="box"), *paper_weights())
     assert problem.unc.n_params == 10 and problem.model == "box"
     np.testing.assert_allclose(problem.P.system.A, P.system.A)
     np.testing.assert_allclose(problem.P.system.D, P.system.D)
