@@ -82,9 +82,17 @@ def _worker_main(conn, payload: bytes) -> None:
 def _died(proc) -> None:
     proc.join(TERMINATE_GRACE)
     raise BoundsError(
-        f"a bounds worker process died (exit code {proc.exitcode}); "
-        "run with workers=1 (-j 1) to see the error in this process"
+        f"a bounds worker process died (exit code {proc.exitcode}); run with workers=1 (-j 1) to see the "
+        "error in this process (from a script: workers are spawned and import it, so keep its code under "
+        "`if __name__ == '__main__':`)"
     )
+
+
+def _send(proc, conn, message) -> None:
+    try:
+        conn.send(message)
+    except (BrokenPipeError, ConnectionResetError, EOFError):
+        _died(proc)
 
 
 class WorkerPool:
@@ -152,7 +160,7 @@ class WorkerPool:
             for proc, conn in self._procs:
                 if pending:
                     i, item = pending.popleft()
-                    conn.send((i, fn, item))
+                    _send(proc, conn, (i, fn, item))
                     busy[conn] = proc
             sentinels = {proc.sentinel: proc for proc, _ in self._procs}
             while busy:
@@ -171,7 +179,7 @@ class WorkerPool:
                     bar.update()
                     if pending:
                         j, item = pending.popleft()
-                        ready.send((j, fn, item))
+                        _send(busy[ready], ready, (j, fn, item))
                     else:
                         del busy[ready]
         except BaseException:
