@@ -43,6 +43,8 @@ def problem_from_args(robot, args, out, *, hyperparameters=None, check=None):
     """
     from polyrob.pipeline import build_problem
 
+    if args.merge_symmetric and args.uncertainty != "box":
+        raise ArgumentError("--merge-symmetric applies to the box model: add --uncertainty box")
     h = hyperparameters_from_args(robot.m, args) if hyperparameters is None else hyperparameters
     pldi = domain = None
     if args.pldi:
