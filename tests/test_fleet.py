@@ -232,3 +232,28 @@ def test_jobs_get_unique_names_and_bad_options_are_refused(pendulums):
     with pytest.raises(ArgumentError):
         run_batch([{"robot": "a", "colour": "red"}])
     assert Job(robot=pendulums[0]).name == "pendulum_a"
+
+
+def test_cli_jobs_from_all_serial_and_a_jobs_file(tmp_path):
+    from polyrob.cli import PolyrobParser
+    from polyrob.cli import batch as batch_cli
+    from polyrob.errors import ArgumentError
+    from polyrob.fleet import SERIAL_ARMS, serial_arms
+
+    parser = PolyrobParser(prog="polyrob")
+    batch_cli.register(parser.add_subparsers(dest="command", required=True, parser_class=PolyrobParser))
+    jobs_file = tmp_path / "jobs.json"
+    jobs_file.write_text(json.dumps(["planar_2r", {"robot": "paper_2r", "domain": "paper", "label": "paper"}]))
+    args = parser.parse_args(["batch", "--all-serial", "--jobs", str(jobs_file), "--qdot-max", "2",
+                              "--paper-weights"])
+    jobs = batch_cli.jobs_from_args(args)
+    # every serial arm once (those installed), then the file's jobs; command-line domain options on each
+    assert [j["robot"] for j in jobs] == [*serial_arms(), "planar_2r", "paper_2r"]
+    assert set(serial_arms()) <= set(SERIAL_ARMS) and "panda" in serial_arms()
+    assert all(j["qdot_max"] == 2.0 and j["auto_weights"] is False for j in jobs)
+    assert jobs[-1]["domain"] == "paper" and jobs[-1]["label"] == "paper"
+    with pytest.raises(ArgumentError):
+        batch_cli.jobs_from_args(parser.parse_args(["batch"]))
+    jobs_file.write_text("{}")
+    with pytest.raises(ArgumentError):
+        batch_cli.jobs_from_args(parser.parse_args(["batch", "--jobs", str(jobs_file)]))
