@@ -1,0 +1,102 @@
+"""Box vs tight uncertainty models on the paper's problem, side by side (prints JSON).
+
+``paper_2r --domain paper`` with the paper's weights: for each model
+(``box``: the paper's; ``lft``: the default tight model; optionally ``axes``)
+the number of real parameters, blocks, coverage on fresh samples, volume
+over the polytope, the robust-performance μ (upper and lower bound) of the
+paper's K*, then a D-G-K controller synthesised on that model (μ, order,
+time) and, for every controller, its μ on every model (so the tight model's
+μ of K* and of the D-K controllers stands beside the box's).
+
+Usage::
+
+    python benchmarks/uncertainty.py [--models box,lft] [--no-synthesis] [--tf3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "src"))
+
+import polyrob  # noqa: E402
+from polyrob.analysis.robust import robperf, robstab  # noqa: E402
+from polyrob.plant.coverage import det_b_range  # noqa: E402
+from polyrob.plant.generalized import generalized_plant, paper_controller  # noqa: E402
+from polyrob.plant.uncertainty import uncertain_plant  # noqa: E402
+from polyrob.plant.weights import paper_weights  # noqa: E402
+
+
+def _mu(P, K):
+    t = time.perf_counter()
+    rp = robperf(P, K)
+    rs = robstab(P, K)
+    return {"rp_upper": round(rp.mu_upper, 4), "rp_lower": round(rp.mu_lower, 4),
+            "rs_upper": round(rs.mu_upper, 4), "seconds": round(time.perf_counter() - t, 1)}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--models", default="box,lft")
+    ap.add_argument("--no-synthesis", action="store_true")
+    ap.add_argument("--tf3", action="store_true", help="also tf3 from K* on the tight model (slow)")
+    ap.add_argument("--samples", type=int, default=256, help="PLDI design size (the tests' 256)")
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    robot = polyrob.load_robot("paper_2r")
+    pldi = polyrob.bound_pldi(robot, samples=args.samples, progress=False)
+    W_S, W_T = paper_weights()
+    out = {
+        "problem": "paper_2r --domain paper, paper's weights",
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}",
+        "pldi": {"samples": args.samples, "coverage": pldi.coverage, "seconds": pldi.info["seconds_total"],
+                 "polytope_over_box": pldi.polytope.volume_ratio},
+        "models": {},
+    }
+    plants, controllers = {}, {"K*": paper_controller()}
+    for name in args.models.split(","):
+        t = time.perf_counter()
+        unc = uncertain_plant(pldi, model=name, coverage=10_000)
+        secs = time.perf_counter() - t
+        P = generalized_plant(unc, W_S, W_T)
+        plants[name] = P
+        lo, hi = det_b_range(unc, 2000)
+        out["models"][name] = {
+            "model": unc.model, "parameters": unc.n_params, "channels": unc.n_delta,
+            "blocks": np.asarray(unc.block_structure).tolist(), "coverage": unc.coverage,
+            "coverage_points": unc.coverage_points, "volume_over_polytope": unc.volume_ratio,
+            "det_B_over_centre": [round(lo, 3), round(hi, 3)], "seconds_model": round(secs, 2),
+        }
+        if not args.no_synthesis:
+            from polyrob.synthesis import musyn
+
+            t = time.perf_counter()
+            res = musyn(P)
+            controllers[f"D-G-K on {name}"] = res.controller
+            out["models"][name]["dgk"] = {"mu": round(res.peak_mu, 4), "mu_lower": round(res.peak_mu_lower, 4),
+                                          "order": res.order, "seconds": round(time.perf_counter() - t, 1)}
+    if args.tf3:
+        from polyrob.synthesis.fixed import fixed_structure_musyn
+
+        tight = [n for n in plants if n != "box"][0]
+        t = time.perf_counter()
+        res = fixed_structure_musyn(plants[tight], structure="tf3", init="paper", starts=1, progress=False)
+        controllers[f"tf3 from K* on {tight}"] = res.controller
+        out["models"][tight]["tf3"] = {"mu": round(res.peak_mu, 4), "mu_lower": round(res.peak_mu_lower, 4),
+                                       "order": res.order, "seconds": round(time.perf_counter() - t, 1)}
+    out["mu_of_each_controller"] = {
+        k: {name: _mu(P, K) for name, P in plants.items()} for k, K in controllers.items()
+    }
+    out["seconds_total"] = round(time.perf_counter() - t0, 1)
+    print(json.dumps(out, indent=2))
+
+
+if __name__ == "__main__":
+    main()
