@@ -165,8 +165,17 @@ def test_bandwidth_search_certifies_at_the_found_factor(pendulums):
 
 
 def test_local_pool_yields_every_result_with_its_index():
-    got = dict(LocalExecutor(2).run(pow, [(2, 3), (3, 2), (5, 1)]))
-    assert got == {0: 8, 1: 9, 2: 5}
+    got = {i: (ok, v) for i, ok, v in LocalExecutor(2).run(pow, [(2, 3), (3, 2), (5, 1)])}
+    assert got == {0: (True, 8), 1: (True, 9), 2: (True, 5)}
+
+
+def test_local_pool_reports_a_dead_worker_instead_of_raising():
+    import os
+    from concurrent.futures.process import BrokenProcessPool
+
+    got = list(LocalExecutor(2).run(os._exit, [(3,), (3,)]))
+    assert sorted(i for i, _, _ in got) == [0, 1]
+    assert all(not ok and isinstance(v, BrokenProcessPool) for _, ok, v in got)
 
 
 def test_local_pool_stops_running_workers_at_once_on_interrupt():

@@ -118,6 +118,13 @@ def _settings(settings, options) -> Settings:
     return Settings(**options)
 
 
+def _lost(job, exc: BaseException, where: str) -> RobotResult:
+    """The failure row of a job whose worker did not return (it died, or the pool broke)."""
+    text = " ".join(str(exc).split()) or "no message"
+    return RobotResult(name=job.name, robot=str(job.robot), ok=False, error=type(exc).__name__,
+                       message=f"the worker did not return ({where}): {text}")
+
+
 def _progress_printer(progress):
     if callable(progress):
         return progress
@@ -191,8 +198,8 @@ def run_batch(jobs, *, workers: int = 1, scheduler=None, out_dir=None, progress=
     results: list = [None] * len(jobs)
     files: dict = {}
     t0 = time.perf_counter()
-    for done, (i, result) in enumerate(executor.run(run_job, [(job, settings) for job in jobs]), start=1):
-        results[i] = result
+    for done, (i, ok, value) in enumerate(executor.run(run_job, [(job, settings) for job in jobs]), start=1):
+        results[i] = result = value if ok else _lost(jobs[i], value, where)
         if out_dir is not None:
             files[result.name] = write_robot(out_dir, result)
             write_summary(out_dir, _summary(results, len(jobs), settings, where, time.perf_counter() - t0))

@@ -1,7 +1,9 @@
 """Where the jobs of a batch run: local worker processes, or a Dask distributed cluster.
 
-Both executors take ``fn`` and its argument tuples and yield ``(index,
-value)`` as the calls finish, in completion order.  ``fn`` is a module-level
+Both executors take ``fn`` and its argument tuples and yield ``(index, ok,
+value)`` as the calls finish, in completion order: ``ok`` False when the call
+itself did not return (its worker process died, the pool broke, the cluster
+lost it), and ``value`` is then the exception.  ``fn`` is a module-level
 function (it is pickled by name), here :func:`polyrob.fleet.jobs.run_job`.
 
 * :class:`LocalExecutor`: one :class:`concurrent.futures.ProcessPoolExecutor`
@@ -53,11 +55,11 @@ class LocalExecutor:
         return f"{self.workers} local worker process(es)" if self.workers > 1 else "this process"
 
     def run(self, fn, calls):
-        """Yield ``(index, fn(*calls[index]))`` as each call finishes."""
+        """Yield ``(index, ok, fn(*calls[index]) or its exception)`` as each call finishes."""
         calls = list(calls)
         if self.workers == 1 or len(calls) <= 1:
-            for i, args in enumerate(calls):
-                yield i, fn(*args)
+            for i, args in enumerate(calls):  # in this process: an exception is the caller's to see
+                yield i, True, fn(*args)
             return
         yield from self._run_pool(fn, calls)
 
@@ -74,7 +76,8 @@ class LocalExecutor:
             while pending:
                 done, pending = wait(pending, return_when=FIRST_COMPLETED)
                 for fut in done:
-                    yield futures[fut], fut.result()
+                    exc = fut.exception()
+                    yield (futures[fut], False, exc) if exc is not None else (futures[fut], True, fut.result())
             clean = True
         finally:
             if clean:
@@ -132,7 +135,7 @@ class DaskExecutor:
             raise ArgumentError(f"cannot reach the Dask scheduler {self.scheduler}: {exc}") from exc
 
     def run(self, fn, calls):
-        """Yield ``(index, fn(*calls[index]))`` as each call finishes on the cluster."""
+        """Yield ``(index, ok, fn(*calls[index]) or its exception)`` as each call finishes on the cluster."""
         from distributed import as_completed
 
         client, owned = self._client()
@@ -143,7 +146,11 @@ class DaskExecutor:
                        for i, args in enumerate(calls)]
             index = {fut.key: i for i, fut in enumerate(futures)}
             for fut in as_completed(futures):
-                yield index[fut.key], fut.result()
+                if fut.status == "finished":
+                    yield index[fut.key], True, fut.result()
+                else:  # erred (e.g. KilledWorker) or cancelled by someone else
+                    yield index[fut.key], False, fut.exception() if fut.status == "error" else \
+                        RuntimeError(f"the cluster reports the call {fut.status}")
             clean = True
         finally:
             if not clean and futures:
