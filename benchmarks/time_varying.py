@@ -61,7 +61,7 @@ def main(argv=None) -> int:
         print(json.dumps(row), file=sys.stderr)
         if r.quadstab.holds:
             K0 = r.controller
-        if r.quadperf.holds:
+        if r.quadperf is not None and r.quadperf.holds:
             best = row
             break
     out["largest_alpha_certified"] = None if best is None else best["alpha"]

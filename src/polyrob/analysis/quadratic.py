@@ -57,6 +57,10 @@ COVERS_NONLINEAR = (
 )
 
 _U = np.finfo(float).eps
+#: Largest condition number of ``P`` the LMIs search over (balanced, time-scaled coordinates).
+COND_MAX = 1e6
+#: Largest L2-gain level quadperf searches over.
+GAMMA_MAX = 1e4
 
 
 def covers_text(vs: VertexSet, what: str) -> str:
@@ -96,8 +100,12 @@ def _rounding(n: int, *prods: float) -> float:
 def _solve(problem, what: str) -> str:
     import cvxpy as cp
 
+    import warnings
+
     try:
-        problem.solve(solver=cp.CLARABEL)
+        with warnings.catch_warnings():  # "may be inaccurate": the status says so, the verification decides
+            warnings.simplefilter("ignore", UserWarning)
+            problem.solve(solver=cp.CLARABEL)
     except cp.error.SolverError as exc:  # a numerical failure is a "not certified", not a crash
         return f"solver error: {exc}"
     return str(problem.status)
@@ -268,13 +276,19 @@ def quadstab(vertices, K, *, which: str = "auto", max_vertices: int = MAX_VERTIC
         Pv, status, used = None, f"vertex {int(np.argmax(abscissa))} unstable (frozen)", 0
     else:
         def solve_subset(idx):
+            # always feasible (bounded P, free level s): interior-point methods are slow to prove
+            # infeasibility; s < 0 is a candidate certificate, s >= 0 means none with cond(P) <= COND_MAX
             P, t = cp.Variable((n, n), symmetric=True), cp.Variable()
-            cons = [P >> eye, P << t * eye] + [Ab[i].T @ P + P @ Ab[i] << -eye for i in idx]
+            cons = [P >> eye, P << COND_MAX * eye] + [Ab[i].T @ P + P @ Ab[i] << t * eye for i in idx]
             st = _solve(cp.Problem(cp.Minimize(t), cons), "quadstab")
-            return (None if P.value is None else 0.5 * (P.value + P.value.T)), st
+            if P.value is None or t.value is None:
+                return None, st
+            if t.value >= 0:
+                return None, f"no common P with cond(P) <= {COND_MAX:g} (best level {t.value:.3g} >= 0)"
+            return 0.5 * (P.value + P.value.T), st
 
-        def violation(P):  # the solver's margin is -I; flag vertices short of half of it
-            return np.linalg.eigvalsh(np.transpose(Ab, (0, 2, 1)) @ P + P @ Ab)[:, -1] + 0.5
+        def violation(P):  # flag vertices not clearly negative (the rounding allowance is far below this)
+            return np.linalg.eigvalsh(np.transpose(Ab, (0, 2, 1)) @ P + P @ Ab)[:, -1] + 1e-9 * np.linalg.norm(P, 2)
 
         Pv, status, used = _active_set(len(Ab), solve_subset, violation, first)
     rate = _verify_stab(Ab, Pv) * c if Pv is not None else np.nan
@@ -380,16 +394,20 @@ def quadperf(vertices, K, W_S=None, W_T=None, W_KS=None, *, which: str = "auto",
     first, abscissa = _first_vertices(Ab)
 
     def solve_subset(idx):
-        P, g = cp.Variable((n, n), symmetric=True), cp.Variable()
-        cons = [P >> eps * np.eye(n)]
+        # bounded P and a free level t on the LMI: always feasible (interior-point methods are slow
+        # to prove infeasibility); the level g is kept only when the solver reaches t < 0
+        P, g, t = cp.Variable((n, n), symmetric=True), cp.Variable(), cp.Variable()
+        cons = [P >> eps * np.eye(n), P << COND_MAX * np.eye(n), g <= GAMMA_MAX, t >= -eps]
         for i in idx:
             a, b, cc, d = Ab[i], Bb[i], Cb[i], Ds[i]
             cons.append(cp.bmat([[a.T @ P + P @ a, P @ b, cc.T],
                                  [b.T @ P, -g * np.eye(p), d.T],
-                                 [cc, d, -g * np.eye(q)]]) << -eps * np.eye(n + p + q))
-        st = _solve(cp.Problem(cp.Minimize(g), cons), "quadperf")
-        if P.value is None or g.value is None:
+                                 [cc, d, -g * np.eye(q)]]) << t * np.eye(n + p + q))
+        st = _solve(cp.Problem(cp.Minimize(g + GAMMA_MAX * t), cons), "quadperf")
+        if P.value is None or g.value is None or t.value is None:
             return None, st
+        if t.value >= 0:
+            return None, f"no common P with gamma <= {GAMMA_MAX:g} (best level {t.value:.3g} >= 0)"
         return (0.5 * (P.value + P.value.T), float(g.value)), st
 
     def violation(sol):
