@@ -311,10 +311,10 @@ def quadperf(vertices, K, W_S=None, W_T=None, W_KS=None, *, which: str = "auto",
     first, abscissa = _first_vertices(Ab)
 
     def solve_subset(idx):
-        # bounded P and a free level t on the LMI: always feasible (interior-point methods are slow
+        # a free level t on the LMI (t >= -eps): always feasible (interior-point methods are slow
         # to prove infeasibility); the level g is kept only when the solver reaches t < 0
         P, g, t = cp.Variable((n, n), symmetric=True), cp.Variable(), cp.Variable()
-        cons = [P >> eps * np.eye(n), P << COND_MAX * np.eye(n), g <= GAMMA_MAX, t >= -eps]
+        cons = [P >> eps * np.eye(n), g <= GAMMA_MAX, t >= -eps]  # bounded by t >= -eps and g >= 0
         for i in idx:
             a, b, cc, d = Ab[i], Bb[i], Cb[i], Ds[i]
             cons.append(cp.bmat([[a.T @ P + P @ a, P @ b, cc.T],
@@ -324,7 +324,7 @@ def quadperf(vertices, K, W_S=None, W_T=None, W_KS=None, *, which: str = "auto",
         if P.value is None or g.value is None or t.value is None:
             return None, st
         if t.value >= 0:
-            return None, f"no common P with gamma <= {GAMMA_MAX:g} (best level {t.value:.3g} >= 0)"
+            return None, f"no common P with gamma <= {GAMMA_MAX:g} (best LMI level {t.value:.3g} >= 0)"
         return (0.5 * (P.value + P.value.T), float(g.value)), st
 
     def violation(sol):
