@@ -22,7 +22,7 @@ OMEGA = np.logspace(-1, 2, 25)
 
 @pytest.fixture(scope="module")
 def paper():
-    unc = polyrob.uncertain_plant(paper_pldi())
+    unc = polyrob.uncertain_plant(paper_pldi(), model="box")  # the paper's model
     P = polyrob.generalized_plant(unc, *paper_weights())
     return unc, P, polyrob.paper_controller()
 

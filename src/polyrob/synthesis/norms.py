@@ -51,8 +51,19 @@ def is_stable(A, margin: float = 1e-9) -> bool:
 
 
 def _sigma(A, B, C, D, w: float) -> float:
+    """``σ̄(G(jω))``; ``inf`` when ``jω`` is (numerically) a pole: the response is unbounded there."""
     n = A.shape[0]
-    H = C @ np.linalg.solve(1j * w * np.eye(n) - A, B) + D if n else D
+    try:
+        H = C @ np.linalg.solve(1j * w * np.eye(n) - A, B) + D if n else D
+    except np.linalg.LinAlgError:
+        return np.inf
+    return _norm2(H)
+
+
+def _norm2(H) -> float:
+    """Spectral norm, ``inf`` for a response with a non-finite entry (a pole on the axis)."""
+    if not np.all(np.isfinite(H)):
+        return np.inf
     return float(np.linalg.norm(H, 2))
 
 
@@ -138,7 +149,7 @@ def _sigma_function(A, B, C, D):
     if cond < 1e8:
         Vb = np.linalg.solve(V, B)
         CV = C @ V
-        return lambda x: float(np.linalg.norm((CV / (1j * x - lam)[None, :]) @ Vb + D, 2))
+        return lambda x: _norm2((CV / (1j * x - lam)[None, :]) @ Vb + D)
     return lambda x: _sigma(A, B, C, D, x)
 
 
