@@ -42,7 +42,11 @@ def uniform_widths(robot, pldi, seconds, seed=123, chunk=20000):
 
 
 def ratio_stats(r, digits=4):
-    return {"min": round(float(r.min()), digits), "median": round(float(np.median(r)), digits), "max": round(float(r.max()), digits)}
+    return {
+        "min": round(float(r.min()), digits),
+        "median": round(float(np.median(r)), digits),
+        "max": round(float(r.max()), digits),
+    }
 
 
 def main():
@@ -76,8 +80,11 @@ def main():
         }
         if name == "panda":
             w10, n10 = uniform_widths(robot, pldi, args.panda_factor * seconds, seed=10_000)
-            rec["uniform_10x_time"] = {"factor": args.panda_factor, "samples": n10,
-                                       "width_over_polyrob": ratio_stats(w10 / width)}
+            rec["uniform_10x_time"] = {
+                "factor": args.panda_factor,
+                "samples": n10,
+                "width_over_polyrob": ratio_stats(w10 / width),
+            }
         if name == "planar_2r":
             t1 = time.perf_counter()
             cert = bound_pldi(robot, domain, coverage=0, certify=True, progress=False)
@@ -87,12 +94,20 @@ def main():
             }
         results.append(rec)
         print(json.dumps(rec), flush=True) if os.environ.get("POLYROB_BENCH_STREAM") else None
-    print(json.dumps({
-        "benchmark": "bounds",
-        "machine": {"processor": platform.processor() or platform.machine(), "cores": os.cpu_count(),
-                    "python": platform.python_version()},
-        "results": results,
-    }, indent=2))
+    print(
+        json.dumps(
+            {
+                "benchmark": "bounds",
+                "machine": {
+                    "processor": platform.processor() or platform.machine(),
+                    "cores": os.cpu_count(),
+                    "python": platform.python_version(),
+                },
+                "results": results,
+            },
+            indent=2,
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -45,11 +45,22 @@ def _row(r) -> dict:
         return round(t[key], 2) if key in t else None
 
     return {
-        "robot": r.name, "joints": r.joints, "entries": r.entries, "parameters": r.parameters, "model": r.model,
-        "enclosure": r.enclosure, "bound_s": secs("bounds"),
-        "synthesis_s": secs("synthesis"), "analysis_s": secs("analysis"),
-        "total_s": round(r.seconds, 2), "mu_upper": r.mu_upper, "mu_lower": r.mu_lower, "certified": r.certified,
-        "order": r.order, "alpha": r.alpha, "validation": r.validation,
+        "robot": r.name,
+        "joints": r.joints,
+        "entries": r.entries,
+        "parameters": r.parameters,
+        "model": r.model,
+        "enclosure": r.enclosure,
+        "bound_s": secs("bounds"),
+        "synthesis_s": secs("synthesis"),
+        "analysis_s": secs("analysis"),
+        "total_s": round(r.seconds, 2),
+        "mu_upper": r.mu_upper,
+        "mu_lower": r.mu_lower,
+        "certified": r.certified,
+        "order": r.order,
+        "alpha": r.alpha,
+        "validation": r.validation,
         "error": None if r.ok else f"{r.error}: {r.message}",
     }
 
@@ -72,8 +83,11 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     lo, hi, n = args.omega.split(":")
     options = dict(
-        bound_options={"samples": args.samples}, synthesis={"max_iter": args.max_iter},
-        omega=(float(lo), float(hi), int(n)), mc=args.mc, validate=not args.no_validate,
+        bound_options={"samples": args.samples},
+        synthesis={"max_iter": args.max_iter},
+        omega=(float(lo), float(hi), int(n)),
+        mc=args.mc,
+        validate=not args.no_validate,
         search_bandwidth=args.max_bandwidth,
         alphas=None if args.alphas is None else tuple(float(a) for a in args.alphas.split(",")),
     )
@@ -82,12 +96,22 @@ def main(argv=None) -> int:
         return [dict(j, uncertainty=args.uncertainty) for j in _jobs(text)]
 
     def show(r, done, total):
-        print(f"[{done}/{total}] {r.name}: " + (f"mu {r.mu_upper:.4g} ({r.seconds:.0f} s)" if r.ok else
-              f"FAILED {r.error}: {r.message}"), file=sys.stderr, flush=True)
+        print(
+            f"[{done}/{total}] {r.name}: "
+            + (f"mu {r.mu_upper:.4g} ({r.seconds:.0f} s)" if r.ok else f"FAILED {r.error}: {r.message}"),
+            file=sys.stderr,
+            flush=True,
+        )
 
-    doc = {"machine": {"platform": platform.platform(), "machine": platform.machine(),
-                       "cores": len(os.sched_getaffinity(0)), "load_average_at_start": os.getloadavg()},
-           "settings": {**options, "uncertainty": args.uncertainty, "workers": args.workers}}
+    doc = {
+        "machine": {
+            "platform": platform.platform(),
+            "machine": platform.machine(),
+            "cores": len(os.sched_getaffinity(0)),
+            "load_average_at_start": os.getloadavg(),
+        },
+        "settings": {**options, "uncertainty": args.uncertainty, "workers": args.workers},
+    }
     res = run_batch(jobs(args.robots), workers=args.workers, progress=show, **options)
     doc["robots"] = [_row(r) for r in res.results]
     doc["batch_seconds"] = round(res.seconds, 1)
@@ -95,9 +119,13 @@ def main(argv=None) -> int:
         sp = jobs(args.speedup_robots)
         one = run_batch(sp, workers=1, progress=show, **options)
         two = run_batch(sp, workers=2, progress=show, **options)
-        doc["speedup"] = {"robots": [j["label"] for j in sp], "seconds_1_worker": round(one.seconds, 1),
-                          "seconds_2_workers": round(two.seconds, 1), "speedup": round(one.seconds / two.seconds, 2),
-                          "same_mu": [a.mu_upper == b.mu_upper for a, b in zip(one.results, two.results)]}
+        doc["speedup"] = {
+            "robots": [j["label"] for j in sp],
+            "seconds_1_worker": round(one.seconds, 1),
+            "seconds_2_workers": round(two.seconds, 1),
+            "speedup": round(one.seconds / two.seconds, 2),
+            "same_mu": [a.mu_upper == b.mu_upper for a, b in zip(one.results, two.results)],
+        }
     doc["load_average_at_end"] = os.getloadavg()
     print(json.dumps(doc, indent=1, default=str))
     return 0

@@ -53,8 +53,12 @@ def finite_differences(robot, config, qdot, tau, h=1e-6):
             qp = pinocchio.integrate(model, config[k], e)
             qm = pinocchio.integrate(model, config[k], -e)
             pinocchio.aba(model, data, qp, qdot[k], tau[k]) - pinocchio.aba(model, data, qm, qdot[k], tau[k])
-            pinocchio.aba(model, data, config[k], qdot[k] + e, tau[k]) - pinocchio.aba(model, data, config[k], qdot[k] - e, tau[k])
-            pinocchio.aba(model, data, config[k], qdot[k], tau[k] + e) - pinocchio.aba(model, data, config[k], qdot[k], tau[k] - e)
+            pinocchio.aba(model, data, config[k], qdot[k] + e, tau[k]) - pinocchio.aba(
+                model, data, config[k], qdot[k] - e, tau[k]
+            )
+            pinocchio.aba(model, data, config[k], qdot[k], tau[k] + e) - pinocchio.aba(
+                model, data, config[k], qdot[k], tau[k] - e
+            )
 
 
 def main():
@@ -89,8 +93,12 @@ def main():
         json.dumps(
             {
                 "benchmark": "jacobians",
-                "machine": {"processor": platform.processor() or platform.machine(), "cores": os.cpu_count(),
-                            "python": platform.python_version(), "pinocchio": pinocchio.__version__},
+                "machine": {
+                    "processor": platform.processor() or platform.machine(),
+                    "cores": os.cpu_count(),
+                    "python": platform.python_version(),
+                    "pinocchio": pinocchio.__version__,
+                },
                 "results": results,
             },
             indent=2,

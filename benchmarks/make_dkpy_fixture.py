@@ -38,8 +38,13 @@ def main() -> int:
     warnings.simplefilter("ignore")
     eg = dkpy.example_skogestad2006_p325()
     it = dkpy.DkIterAutoOrder(
-        controller_synthesis=dkpy.HinfSynSlicot(), structured_singular_value=dkpy.SsvLmiBisection(),
-        d_scale_fit=dkpy.DScaleFitSlicot(), max_mu=1, max_mu_fit_error=1e-2, max_iterations=3, max_fit_order=4,
+        controller_synthesis=dkpy.HinfSynSlicot(),
+        structured_singular_value=dkpy.SsvLmiBisection(),
+        d_scale_fit=dkpy.DScaleFitSlicot(),
+        max_mu=1,
+        max_mu_fit_error=1e-2,
+        max_iterations=3,
+        max_fit_order=4,
     )
     t0 = time.perf_counter()
     K, _, mu, _, _ = it.synthesize(eg["P"], eg["n_y"], eg["n_u"], DIST_OMEGA, np.array(DIST_BLK))

@@ -34,8 +34,8 @@ import cvxpy as cp
 import numpy as np
 
 from polyrob.analysis.blocks import as_block_structure
-from polyrob.examples import DISTILLATION_BLK, distillation_rp_response
 from polyrob.analysis.mu import mu_bounds, mussv
+from polyrob.examples import DISTILLATION_BLK, distillation_rp_response
 
 
 def plain_lmi_bisection(M: np.ndarray, blk, rtol: float = 1e-3) -> float:
@@ -80,8 +80,13 @@ def _timed(fn, items):
 
 
 def run_problem(name: str, H: np.ndarray, omega: np.ndarray, blk, sys=None, n_lmi: int = 12) -> dict:
-    out = {"problem": name, "size": list(H.shape[1:]), "blk": as_block_structure(blk).matlab.tolist(),
-           "n_freq": int(len(omega)), "methods": {}}
+    out = {
+        "problem": name,
+        "size": list(H.shape[1:]),
+        "blk": as_block_structure(blk).matlab.tolist(),
+        "n_freq": int(len(omega)),
+        "methods": {},
+    }
     m = out["methods"]
     t, up = _timed(lambda M: mussv(M, blk, lower=False).upper, H)
     m["polyrob_ab13md"] = {"ms_per_point": 1e3 * t, "peak_upper": float(up.max())}
@@ -90,18 +95,26 @@ def run_problem(name: str, H: np.ndarray, omega: np.ndarray, blk, sys=None, n_lm
         r = mu_bounds(sys, blk, omega, progress=False)
         m["polyrob_mu_bounds"] = {
             "ms_per_point": 1e3 * (time.perf_counter() - t0) / len(omega),
-            "peak_upper": r.peak_upper, "peak_lower": r.peak_lower,
+            "peak_upper": r.peak_upper,
+            "peak_lower": r.peak_lower,
             "peak_frequency": r.peak_upper_frequency,
         }
     # LMI methods are slow: a sub-grid around the peak and elsewhere
-    idx = np.unique(np.r_[np.linspace(0, len(omega) - 1, n_lmi - 2).round().astype(int),
-                          np.argmax(up), max(np.argmax(up) - 1, 0)])
+    idx = np.unique(
+        np.r_[np.linspace(0, len(omega) - 1, n_lmi - 2).round().astype(int), np.argmax(up), max(np.argmax(up) - 1, 0)]
+    )
     t, ul = _timed(lambda M: mussv(M, blk, lower=False, method="lmi", rtol=1e-3).upper, H[idx])
-    m["polyrob_lmi"] = {"ms_per_point": 1e3 * t, "peak_upper_on_subgrid": float(ul.max()),
-                        "max_rel_gap_vs_ab13md": float(np.max(ul / up[idx] - 1))}
+    m["polyrob_lmi"] = {
+        "ms_per_point": 1e3 * t,
+        "peak_upper_on_subgrid": float(ul.max()),
+        "max_rel_gap_vs_ab13md": float(np.max(ul / up[idx] - 1)),
+    }
     t, pl = _timed(lambda M: plain_lmi_bisection(M, blk), H[idx])
-    m["cvxpy_lmi_bisection"] = {"ms_per_point": 1e3 * t, "peak_upper_on_subgrid": float(pl.max()),
-                                "max_rel_gap_vs_ab13md": float(np.max(pl / up[idx] - 1))}
+    m["cvxpy_lmi_bisection"] = {
+        "ms_per_point": 1e3 * t,
+        "peak_upper_on_subgrid": float(pl.max()),
+        "max_rel_gap_vs_ab13md": float(np.max(pl / up[idx] - 1)),
+    }
     m["ab13md_peak_on_subgrid"] = float(up[idx].max())
     return out
 
@@ -127,9 +140,10 @@ def main() -> dict:
     wn, zeta = np.logspace(-1, 1, modes), rng.uniform(0.05, 0.3, modes)
     A = np.zeros((2 * modes, 2 * modes))
     for k in range(modes):
-        A[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = [[0, 1], [-wn[k] ** 2, -2 * zeta[k] * wn[k]]]
-    sysa = control.ss(A, rng.standard_normal((2 * modes, n)), rng.standard_normal((n, 2 * modes)),
-                      0.1 * rng.standard_normal((n, n)))
+        A[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = [[0, 1], [-(wn[k] ** 2), -2 * zeta[k] * wn[k]]]
+    sysa = control.ss(
+        A, rng.standard_normal((2 * modes, n)), rng.standard_normal((n, 2 * modes)), 0.1 * rng.standard_normal((n, n))
+    )
     blka = [[-1, 0], [-1, 0], [-1, 0], [1, 0], [1, 0], [3, 3]]
     wa = np.logspace(-2, 2, 60)
     Ha = np.moveaxis(sysa(1j * wa, squeeze=False), -1, 0)

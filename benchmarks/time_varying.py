@@ -37,22 +37,41 @@ def main(argv=None) -> int:
 
     t0 = time.perf_counter()
     pldi = bound_pldi(load_robot("paper_2r"), samples=256, coverage=0, progress=False)
-    out = {"problem": "paper_2r --domain paper", "enclosure": pldi.enclosure,
-           "machine": f"{platform.machine()}, {__import__('os').cpu_count()} cores", "runs": []}
+    out = {
+        "problem": "paper_2r --domain paper",
+        "enclosure": pldi.enclosure,
+        "machine": f"{platform.machine()}, {__import__('os').cpu_count()} cores",
+        "runs": [],
+    }
     W_S, W_T = paper_weights()
     t = time.perf_counter()
     qs = quadstab(pldi, paper_controller(), which=args.which)
     qp = quadperf(pldi, paper_controller(), W_S, W_T, which=args.which, vertex_norms=False)
-    out["paper_controller"] = {"alpha": 1.0, "order": 12, "quadstab": qs.holds, "quadstab_status": qs.solver_status,
-                               "quadperf": qp.holds, "gamma": qp.gamma, "n_vertices": qs.n_vertices,
-                               "vertex_source": qs.vertex_source, "seconds": round(time.perf_counter() - t, 2)}
+    out["paper_controller"] = {
+        "alpha": 1.0,
+        "order": 12,
+        "quadstab": qs.holds,
+        "quadstab_status": qs.solver_status,
+        "quadperf": qp.holds,
+        "gamma": qp.gamma,
+        "n_vertices": qs.n_vertices,
+        "vertex_source": qs.vertex_source,
+        "seconds": round(time.perf_counter() - t, 2),
+    }
     K0, best = None, None
     for alpha in (float(a) for a in args.alphas.split(",")):
         W_S, W_T = paper_weights(scaled_hyperparameters(alpha))
         t = time.perf_counter()
         try:
-            r = vertex_synthesis(pldi, W_S, W_T, initial=K0, which=args.which, max_iter=args.max_iter,
-                                 progress=lambda msg: print(f"  alpha {alpha}: {msg}", file=sys.stderr))
+            r = vertex_synthesis(
+                pldi,
+                W_S,
+                W_T,
+                initial=K0,
+                which=args.which,
+                max_iter=args.max_iter,
+                progress=lambda msg: print(f"  alpha {alpha}: {msg}", file=sys.stderr),
+            )
         except Exception as exc:  # record and go on to the next alpha
             out["runs"].append({"alpha": alpha, "error": f"{type(exc).__name__}: {exc}"})
             continue

@@ -37,8 +37,11 @@ from polyrob.plant.weights import paper_weights  # noqa: E402
 def _mu(P, K):
     t = time.perf_counter()
     rp = robperf(P, K)
-    return {"rp_upper": round(rp.mu_upper, 4), "rp_lower": round(rp.mu_lower, 4),
-            "seconds": round(time.perf_counter() - t, 1)}
+    return {
+        "rp_upper": round(rp.mu_upper, 4),
+        "rp_lower": round(rp.mu_lower, 4),
+        "seconds": round(time.perf_counter() - t, 1),
+    }
 
 
 def main(argv=None):
@@ -55,8 +58,12 @@ def main(argv=None):
     out = {
         "problem": "paper_2r --domain paper, paper's weights",
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}",
-        "pldi": {"samples": args.samples, "coverage": pldi.coverage, "seconds": pldi.info["seconds_total"],
-                 "polytope_over_box": pldi.polytope.volume_ratio},
+        "pldi": {
+            "samples": args.samples,
+            "coverage": pldi.coverage,
+            "seconds": pldi.info["seconds_total"],
+            "polytope_over_box": pldi.polytope.volume_ratio,
+        },
         "models": {},
     }
     plants, controllers = {}, {"K*": paper_controller()}
@@ -68,10 +75,15 @@ def main(argv=None):
         plants[name] = P
         lo, hi = det_b_range(unc, 2000)
         out["models"][name] = {
-            "model": unc.model, "parameters": unc.n_params, "channels": unc.n_delta,
-            "blocks": np.asarray(unc.block_structure).tolist(), "coverage": unc.coverage,
-            "coverage_points": unc.coverage_points, "volume_over_polytope": unc.volume_ratio,
-            "det_B_over_centre": [round(lo, 3), round(hi, 3)], "seconds_model": round(secs, 2),
+            "model": unc.model,
+            "parameters": unc.n_params,
+            "channels": unc.n_delta,
+            "blocks": np.asarray(unc.block_structure).tolist(),
+            "coverage": unc.coverage,
+            "coverage_points": unc.coverage_points,
+            "volume_over_polytope": unc.volume_ratio,
+            "det_B_over_centre": [round(lo, 3), round(hi, 3)],
+            "seconds_model": round(secs, 2),
         }
         if not args.no_synthesis:
             from polyrob.synthesis import musyn
@@ -79,8 +91,12 @@ def main(argv=None):
             t = time.perf_counter()
             res = musyn(P)
             controllers[f"D-G-K on {name}"] = res.controller
-            out["models"][name]["dgk"] = {"mu": round(res.peak_mu, 4), "mu_lower": round(res.peak_mu_lower, 4),
-                                          "order": res.order, "seconds": round(time.perf_counter() - t, 1)}
+            out["models"][name]["dgk"] = {
+                "mu": round(res.peak_mu, 4),
+                "mu_lower": round(res.peak_mu_lower, 4),
+                "order": res.order,
+                "seconds": round(time.perf_counter() - t, 1),
+            }
     if args.tf3:
         from polyrob.synthesis.fixed import fixed_structure_musyn
 
@@ -88,11 +104,13 @@ def main(argv=None):
         t = time.perf_counter()
         res = fixed_structure_musyn(plants[tight], structure="tf3", init="paper", starts=1, progress=False)
         controllers[f"tf3 from K* on {tight}"] = res.controller
-        out["models"][tight]["tf3"] = {"mu": round(res.peak_mu, 4), "mu_lower": round(res.peak_mu_lower, 4),
-                                       "order": res.order, "seconds": round(time.perf_counter() - t, 1)}
-    out["mu_of_each_controller"] = {
-        k: {name: _mu(P, K) for name, P in plants.items()} for k, K in controllers.items()
-    }
+        out["models"][tight]["tf3"] = {
+            "mu": round(res.peak_mu, 4),
+            "mu_lower": round(res.peak_mu_lower, 4),
+            "order": res.order,
+            "seconds": round(time.perf_counter() - t, 1),
+        }
+    out["mu_of_each_controller"] = {k: {name: _mu(P, K) for name, P in plants.items()} for k, K in controllers.items()}
     out["seconds_total"] = round(time.perf_counter() - t0, 1)
     print(json.dumps(out, indent=2))
 

@@ -40,8 +40,10 @@ def main() -> None:
     P = polyrob.generalized_plant(polyrob.uncertain_plant(pldi), *paper_weights())
     K = polyrob.paper_controller()
     w = np.logspace(-3, 3.5, args.grid)
-    out = {"problem": "paper_2r --domain paper, paper weights, box (10 real parameters), controller K*",
-           "grid_points": args.grid}
+    out = {
+        "problem": "paper_2r --domain paper, paper weights, box (10 real parameters), controller K*",
+        "grid_points": args.grid,
+    }
     t = time.perf_counter()
     mu_c = continuous_mu(P, K, w)
     out["mu_continuous_grid"] = mu_c
@@ -56,19 +58,29 @@ def main() -> None:
         sos = sos_realization(sd.controller)
         t = time.perf_counter()
         wl = min_word_length(P, sos, threshold=1.05 * mu_c, omega=w, lengths=(8, 48))
-        out[f"word_length_{label}"] = {"rate_hz": rate, "mu_discrete": sd.mu_upper, **wl.summary(),
-                                       "seconds": round(time.perf_counter() - t, 1)}
+        out[f"word_length_{label}"] = {
+            "rate_hz": rate,
+            "mu_discrete": sd.mu_upper,
+            **wl.summary(),
+            "seconds": round(time.perf_counter() - t, 1),
+        }
     cc = shutil.which("cc")
     if cc:
         sos = sos_realization(sampled_data_mu(P, K, args.rate, omega=w[:3]).controller)
         d = Path(tempfile.mkdtemp())
         write_c(sos, d)
-        (d / "m.c").write_text('#include <stdio.h>\n#include "controller.h"\nint main(void){controller_state_t s;'
-                               'double e[2]={1.0,0.0},u[2];int k;controller_reset(&s);for(k=0;k<1000;++k){'
-                               'controller_step(&s,e,u);printf("%.17g %.17g\\n",u[0],u[1]);}return 0;}\n')
-        subprocess.run([cc, "-std=c99", "-Wall", "-Werror", "-o", str(d / "h"), str(d / "m.c"), str(d / "controller.c")],
-                       check=True)
-        c_out = np.loadtxt(subprocess.run([str(d / "h")], capture_output=True, text=True, check=True).stdout.splitlines())
+        (d / "m.c").write_text(
+            '#include <stdio.h>\n#include "controller.h"\nint main(void){controller_state_t s;'
+            "double e[2]={1.0,0.0},u[2];int k;controller_reset(&s);for(k=0;k<1000;++k){"
+            'controller_step(&s,e,u);printf("%.17g %.17g\\n",u[0],u[1]);}return 0;}\n'
+        )
+        subprocess.run(
+            [cc, "-std=c99", "-Wall", "-Werror", "-o", str(d / "h"), str(d / "m.c"), str(d / "controller.c")],
+            check=True,
+        )
+        c_out = np.loadtxt(
+            subprocess.run([str(d / "h")], capture_output=True, text=True, check=True).stdout.splitlines()
+        )
         py = sos.run(np.vstack([np.ones(1000), np.zeros(1000)])).T
         out["c_vs_python_max_rel_diff"] = float(np.max(np.abs(c_out - py) / np.maximum(1, np.abs(py))))
     out["seconds_total"] = round(time.perf_counter() - t0, 1)

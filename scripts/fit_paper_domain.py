@@ -18,9 +18,16 @@ from scipy import optimize
 from polyrob import Domain, bound_pldi, load_robot
 
 PAPER = {
-    "a32": (-19.127, 19.6402), "a33": (-1.58, 1.58), "a34": (-3.56, 3.56),
-    "a42": (-13.9637, 28.2362), "a43": (-5.42, 5.42), "a44": (-3.95, 3.95),
-    "b31": (0.0286, 0.0312), "b32": (-0.0461, -0.0164), "b41": (-0.0461, -0.0164), "b42": (0.0848, 0.144),
+    "a32": (-19.127, 19.6402),
+    "a33": (-1.58, 1.58),
+    "a34": (-3.56, 3.56),
+    "a42": (-13.9637, 28.2362),
+    "a43": (-5.42, 5.42),
+    "a44": (-3.95, 3.95),
+    "b31": (0.0286, 0.0312),
+    "b32": (-0.0461, -0.0164),
+    "b41": (-0.0461, -0.0164),
+    "b42": (0.0848, 0.144),
 }
 
 
@@ -30,8 +37,11 @@ def mismatch(robot, v1, v2, refine=False):
     out = {}
     for name, (lo, hi) in PAPER.items():
         plo, phi = pldi.interval(name)
-        out[name] = {"polyrob": [round(plo, 5), round(phi, 5)], "paper": [lo, hi],
-                     "error_over_width": round(max(abs(plo - lo), abs(phi - hi)) / (hi - lo), 5)}
+        out[name] = {
+            "polyrob": [round(plo, 5), round(phi, 5)],
+            "paper": [lo, hi],
+            "error_over_width": round(max(abs(plo - lo), abs(phi - hi)) / (hi - lo), 5),
+        }
     return out
 
 
@@ -43,14 +53,23 @@ def main():
             return 1e9
         return max(e["error_over_width"] for k, e in mismatch(robot, *v).items() if k.startswith("a"))
 
-    best = optimize.minimize(cost, x0=[4.0, 10.0], method="Nelder-Mead",
-                             options={"xatol": 1e-4, "fatol": 1e-6, "maxiter": 200})
+    best = optimize.minimize(
+        cost, x0=[4.0, 10.0], method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-6, "maxiter": 200}
+    )
     v1, v2 = (float(x) for x in best.x)
     table = mismatch(robot, v1, v2, refine=True)
-    print(json.dumps({"qdot_max": [round(v1, 4), round(v2, 4)], "u": 0.0,
-                      "max_error_over_width": max(e["error_over_width"] for e in table.values()),
-                      "entries": table,
-                      "round_box_4_10": mismatch(robot, 4.0, 10.0, refine=True)}, indent=1))
+    print(
+        json.dumps(
+            {
+                "qdot_max": [round(v1, 4), round(v2, 4)],
+                "u": 0.0,
+                "max_error_over_width": max(e["error_over_width"] for e in table.values()),
+                "entries": table,
+                "round_box_4_10": mismatch(robot, 4.0, 10.0, refine=True),
+            },
+            indent=1,
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -9,13 +9,13 @@ import pytest
 from polyrob import load_robot
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def cached_robot(name: str):
     """Robots are immutable: load each once per test session."""
     return load_robot(name)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def paper_pldi():
     """The paper's problem: ``paper_2r`` on ``--domain paper`` (PLDIs are immutable)."""
     from polyrob import bound_pldi
@@ -62,9 +62,7 @@ def write_urdf(tmp_path):
 BAD_URDFS = {
     "malformed": '<?xml version="1.0"?><robot name="x"><link name="a"/><joint name="j" type="revolute">',
     "floating": urdf_text(["base", "body"], [("free", "floating", "base", "body")]),
-    "tree": urdf_text(
-        ["base", "l1", "l2"], [("j1", "revolute", "base", "l1"), ("j2", "revolute", "base", "l2")]
-    ),
+    "tree": urdf_text(["base", "l1", "l2"], [("j1", "revolute", "base", "l1"), ("j2", "revolute", "base", "l2")]),
     "no_joint": urdf_text(["base", "l1"], [("j1", "fixed", "base", "l1")]),
     "not_urdf": '<?xml version="1.0"?><sdf version="1.6"/>',
 }

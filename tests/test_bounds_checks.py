@@ -24,8 +24,16 @@ def no_coriolis(q, qdot):
 
 
 def test_a_mass_matrix_that_is_not_positive_definite_is_refused_naming_the_configuration():
-    robot = AnalyticRobot(name="bad", joint_names=("j",), M=cos_inertia, C=no_coriolis,
-                          position_lower=[-3.0], position_upper=[3.0], velocity_limit=[1.0], effort_limit=[1.0])
+    robot = AnalyticRobot(
+        name="bad",
+        joint_names=("j",),
+        M=cos_inertia,
+        C=no_coriolis,
+        position_lower=[-3.0],
+        position_upper=[3.0],
+        velocity_limit=[1.0],
+        effort_limit=[1.0],
+    )
     with pytest.raises(BoundsError, match=r"M\(q\) is not positive definite at q = \(j=(-?\d\.\d+)") as info:
         bound_pldi(robot, samples=16, screen=0, refine=False, coverage=0, progress=False, workers=1)
     q = float(info.value.args[0].split("j=")[1].split(")")[0])

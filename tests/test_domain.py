@@ -6,10 +6,9 @@ import json
 
 import numpy as np
 import pytest
+from conftest import cached_robot
 
 from polyrob import Domain, DomainError
-
-from conftest import cached_robot
 
 
 def test_defaults_come_from_the_urdf_limits():
@@ -29,7 +28,14 @@ def test_continuous_joints_default_to_a_full_turn():
 def test_overrides_and_scales():
     robot = cached_robot("planar_2r")
     d = Domain.from_robot(
-        robot, q_range={"joint2": [-1.0, 2.0]}, qdot_max=[3.0, 5.0, ][0], u_max={"joint1": 0.0}, qdot_scale=0.5
+        robot,
+        q_range={"joint2": [-1.0, 2.0]},
+        qdot_max=[
+            3.0,
+            5.0,
+        ][0],
+        u_max={"joint1": 0.0},
+        qdot_scale=0.5,
     )
     np.testing.assert_allclose(d.q_lower, [-np.pi, -1.0])
     np.testing.assert_allclose(d.qdot_upper, [1.5, 1.5])

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import cached_robot
 
 from polyrob import Domain
-
-from conftest import cached_robot
 
 USER_DOMAINS = {
     # double_pendulum's URDF has zero limits: the user gives the domain

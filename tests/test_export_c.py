@@ -43,10 +43,26 @@ def _run_c(sos, tmp_path):
     write_c(sos, tmp_path)
     (tmp_path / "main.c").write_text(HARNESS)
     exe = tmp_path / "harness"
-    subprocess.run([CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-o", str(exe),
-                    str(tmp_path / "main.c"), str(tmp_path / "controller.c")], check=True, capture_output=True)
-    out = np.array([float(x) for x in subprocess.run([str(exe)], check=True, capture_output=True,
-                                                     text=True).stdout.split()])
+    subprocess.run(
+        [
+            CC,
+            "-std=c99",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-pedantic",
+            "-O2",
+            "-o",
+            str(exe),
+            str(tmp_path / "main.c"),
+            str(tmp_path / "controller.c"),
+        ],
+        check=True,
+        capture_output=True,
+    )
+    out = np.array(
+        [float(x) for x in subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout.split()]
+    )
     m_in, m_out = sos.n_inputs, sos.n_outputs
     return out.reshape(m_in, N_STEPS, m_out).transpose(2, 0, 1)  # [i, j, k]
 
@@ -78,8 +94,11 @@ def test_c_step_response_matches_python(tmp_path, word_length):
 def test_c_float_compiles(tmp_path):
     sos = sos_realization(discretize(polyrob.paper_controller(), 500.0, method="zoh"))
     write_c(sos, tmp_path, real="float")
-    subprocess.run([CC, "-std=c99", "-Wall", "-Werror", "-c", "-o", str(tmp_path / "c.o"),
-                    str(tmp_path / "controller.c")], check=True, capture_output=True)
+    subprocess.run(
+        [CC, "-std=c99", "-Wall", "-Werror", "-c", "-o", str(tmp_path / "c.o"), str(tmp_path / "controller.c")],
+        check=True,
+        capture_output=True,
+    )
 
 
 def test_quantised_coefficients_are_fixed_point(tmp_path):

@@ -24,8 +24,11 @@ def test_face_enumeration_is_exact(m):
     grid = np.stack(np.meshgrid(*[np.linspace(-1, 1, 81)] * m), -1).reshape(-1, m)
     for n in range(3):
         for d in range(4):
-            brute = c[n, d] + np.abs(a[n, :, d]).sum() + grid @ b[n, :, d] + np.einsum(
-                "pi,ij,pj->p", grid, Q[n, :, :, d], grid
+            brute = (
+                c[n, d]
+                + np.abs(a[n, :, d]).sum()
+                + grid @ b[n, :, d]
+                + np.einsum("pi,ij,pj->p", grid, Q[n, :, :, d], grid)
             )
             # the exact maximum is at least the grid's and within its resolution
             assert brute.max() <= value[n, d] + 1e-12

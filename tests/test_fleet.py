@@ -40,8 +40,13 @@ PENDULUM = """<?xml version="1.0"?>
 """
 
 #: small settings: a few seconds per robot
-FAST = dict(bound_options={"samples": 64, "verify_rounds": 0, "starts_per_direction": 1}, synthesis={"max_iter": 1},
-            omega=(1e-2, 1e3, 8), mc=5, validate_time=2.0)
+FAST = dict(
+    bound_options={"samples": 64, "verify_rounds": 0, "starts_per_direction": 1},
+    synthesis={"max_iter": 1},
+    omega=(1e-2, 1e3, 8),
+    mc=5,
+    validate_time=2.0,
+)
 MISSING = "no_such_robot_urdf_xyz"
 
 
@@ -66,8 +71,13 @@ def _same(a, b):
     assert (a.name, a.ok, a.error, a.message) == (b.name, b.ok, b.error, b.message)
     if not a.ok:
         return
-    assert (a.joints, a.entries, a.parameters, a.order, a.certified) == (b.joints, b.entries, b.parameters,
-                                                                       b.order, b.certified)
+    assert (a.joints, a.entries, a.parameters, a.order, a.certified) == (
+        b.joints,
+        b.entries,
+        b.parameters,
+        b.order,
+        b.certified,
+    )
     assert a.mu_upper == pytest.approx(b.mu_upper, rel=1e-9)
     assert a.mu_lower == pytest.approx(b.mu_lower, rel=1e-9)
     for key in "ABCD":
@@ -95,8 +105,7 @@ def test_reference_batch_records_the_failure_and_finishes_the_others(reference):
 
 def test_dask_local_cluster_gives_the_local_results(pendulums, reference):
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, processes=False, threads_per_worker=1,
-                                   dashboard_address=None) as cl:
+    with distributed.LocalCluster(n_workers=2, processes=False, threads_per_worker=1, dashboard_address=None) as cl:
         res = run_batch([*pendulums, MISSING], scheduler=cl, progress=False, **FAST)
     assert res.executor.startswith("Dask")
     for a, b in zip(res.results, reference.results):
@@ -115,8 +124,27 @@ def test_cli_batch_writes_files_and_a_summary(pendulums, tmp_path, capsys):
     sub.add_parser = functools.partial(sub.add_parser, formatter_class=HelpFormatter)
     batch_cli.register(sub)
     out = tmp_path / "fleet"
-    args = parser.parse_args(["batch", pendulums[0], MISSING, "-j", "1", "-o", str(out), "--json", "--quiet",
-                              "--samples", "64", "--max-iter", "1", "--omega", "0.01:1000:8", "--mc", "5"])
+    args = parser.parse_args(
+        [
+            "batch",
+            pendulums[0],
+            MISSING,
+            "-j",
+            "1",
+            "-o",
+            str(out),
+            "--json",
+            "--quiet",
+            "--samples",
+            "64",
+            "--max-iter",
+            "1",
+            "--omega",
+            "0.01:1000:8",
+            "--mc",
+            "5",
+        ]
+    )
     status = args.func(args)
     assert status == 1  # one robot failed; the other ran
     doc = json.loads(capsys.readouterr().out)
@@ -218,15 +246,19 @@ def test_automatic_weights_shape_over_seven_joints_and_domain_level():
     # a domain twice as fast relative to its range (every joint) doubles both bandwidths
     from types import SimpleNamespace
 
-    paper = {"q": {"a": [-math.pi, math.pi], "b": [-math.pi, math.pi]},
-             "qdot": {"a": [-3.9564, 3.9564], "b": [-9.9561, 9.9561]}}
+    paper = {
+        "q": {"a": [-math.pi, math.pi], "b": [-math.pi, math.pi]},
+        "qdot": {"a": [-3.9564, 3.9564], "b": [-9.9561, 9.9561]},
+    }
     fast = {"q": paper["q"], "qdot": {k: [2 * lo, 2 * hi] for k, (lo, hi) in paper["qdot"].items()}}
     h2 = automatic_hyperparameters(2, SimpleNamespace(to_dict=lambda: fast))
     assert h2["omega_b"] == pytest.approx((1.0, 0.2)) and h2["omega_bt"] == pytest.approx((20.0, 24.0))
     assert h2["M_s"] == (2.0, 3.0)
     # overrides win, unlevelled
     assert automatic_hyperparameters(2, SimpleNamespace(to_dict=lambda: fast), {"omega_b": [0.3]})["omega_b"] == (
-        0.3, 0.3)
+        0.3,
+        0.3,
+    )
 
 
 def test_jobs_get_unique_names_and_bad_options_are_refused(pendulums):
@@ -253,8 +285,7 @@ def test_cli_jobs_from_all_serial_and_a_jobs_file(tmp_path):
     batch_cli.register(parser.add_subparsers(dest="command", required=True, parser_class=PolyrobParser))
     jobs_file = tmp_path / "jobs.json"
     jobs_file.write_text(json.dumps(["planar_2r", {"robot": "paper_2r", "domain": "paper", "label": "paper"}]))
-    args = parser.parse_args(["batch", "--all-serial", "--jobs", str(jobs_file), "--qdot-max", "2",
-                              "--paper-weights"])
+    args = parser.parse_args(["batch", "--all-serial", "--jobs", str(jobs_file), "--qdot-max", "2", "--paper-weights"])
     jobs = batch_cli.jobs_from_args(args)
     # every serial arm once (those installed), then the file's jobs; command-line domain options on each
     assert [j["robot"] for j in jobs] == [*serial_arms(), "planar_2r", "paper_2r"]

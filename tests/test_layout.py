@@ -67,7 +67,7 @@ def test_no_import_cycles_between_modules():
         state[node] = 1
         for nxt in edges.get(node, ()):
             if state.get(nxt) == 1:
-                cycles.append(stack[stack.index(nxt):] + [nxt] if nxt in stack else [node, nxt])
+                cycles.append(stack[stack.index(nxt) :] + [nxt] if nxt in stack else [node, nxt])
             elif nxt not in state:
                 visit(nxt, stack + [nxt])
         state[node] = 2
@@ -89,7 +89,6 @@ def test_no_private_name_imported_across_modules():
         tree = ast.parse(path.read_text())
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("polyrob"):
-                src_pkg = (node.module or "").rsplit(".", 1)[0]
                 for alias in node.names:
                     if alias.name.startswith("_") and not alias.name.startswith("__"):
                         offenders.append(f"{name}: from {node.module} import {alias.name}")

@@ -4,14 +4,13 @@ import dataclasses
 
 import numpy as np
 import pytest
+from conftest import cached_robot
 
 from polyrob.errors import ArgumentError
 from polyrob.plant.box import box_plant
 from polyrob.plant.coverage import coverage_fraction, det_b_range, model_contains
 from polyrob.plant.inertia_lft import NotApplicable, affine_inertia
 from polyrob.plant.uncertainty import uncertain_plant, upper_lft
-
-from conftest import cached_robot
 
 
 @pytest.fixture(scope="module")
@@ -102,8 +101,9 @@ def test_lft_torque_variant_and_repeated_scalar(pldi):
     d = np.zeros(tq.n_params)
     d[-1] = 1.0
     a1, a2, a3 = 48.125, 13.125, 6.25
-    np.testing.assert_allclose(tq.matrices_at(d)[1][2:], np.linalg.inv([[a1 + 2 * a3, a2 + a3], [a2 + a3, a2]]),
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        tq.matrices_at(d)[1][2:], np.linalg.inv([[a1 + 2 * a3, a2 + a3], [a2 + a3, a2]]), rtol=1e-12
+    )
 
 
 def test_lft_nominal_delta_gives_the_nominal(pldi, lft):
@@ -162,8 +162,14 @@ def test_lft_does_not_apply_to_a_non_affine_inertia_and_auto_falls_back():
         return out
 
     robot = AnalyticRobot(
-        name="sq", joint_names=("a", "b"), M=M, C=lambda q, qd: np.zeros(q.shape[:1] + (2, 2)),
-        position_lower=[-1, -1], position_upper=[1, 1], velocity_limit=[1, 1], effort_limit=[1, 1],
+        name="sq",
+        joint_names=("a", "b"),
+        M=M,
+        C=lambda q, qd: np.zeros(q.shape[:1] + (2, 2)),
+        position_lower=[-1, -1],
+        position_upper=[1, 1],
+        velocity_limit=[1, 1],
+        effort_limit=[1, 1],
     )
     from polyrob.bounds.domain import Domain
 

@@ -8,8 +8,8 @@ import pytest
 
 import polyrob.analysis.mu_upper as mu_upper
 from polyrob.analysis.blocks import BlockStructure, as_block_structure
-from polyrob.errors import PolyrobError
 from polyrob.analysis.mu import TimeLimitedCall, mu_bounds, mussv
+from polyrob.errors import PolyrobError
 
 
 # ------------------------------------------------------------------ data
@@ -59,12 +59,10 @@ def test_block_structure_matlab_encoding_and_ab13md_mapping():
     assert st2.delta_shape == (7, 8) and st2.has_repeated and st2.has_real
     assert str(st2) == "diag(R*I3, C*I2, C2x3)"
     with pytest.raises(PolyrobError):
-        st2.ab13md_args
+        _ = st2.ab13md_args
 
 
-@pytest.mark.parametrize(
-    "blk", [[[0, 0]], [[-2, 3]], [[1, -1]], [[1.5, 0]], [[1, 0, 0]], [], "abc", [[np.nan, 0]]]
-)
+@pytest.mark.parametrize("blk", [[[0, 0]], [[-2, 3]], [[1, -1]], [[1.5, 0]], [[1, 0, 0]], [], "abc", [[np.nan, 0]]])
 def test_block_structure_rejects_bad_encodings(blk):
     with pytest.raises(PolyrobError):
         as_block_structure(blk)
@@ -269,8 +267,12 @@ def test_mu_bounds_mimo_full_block_is_hinf_norm():
 
 def test_mu_bounds_mixed_structure_and_frd():
     rng = np.random.default_rng(0)
-    sys = control.ss(-np.diag([0.5, 1.0, 2.0, 4.0]) + 0.3 * rng.standard_normal((4, 4)),
-                     rng.standard_normal((4, 3)), rng.standard_normal((3, 4)), np.zeros((3, 3)))
+    sys = control.ss(
+        -np.diag([0.5, 1.0, 2.0, 4.0]) + 0.3 * rng.standard_normal((4, 4)),
+        rng.standard_normal((4, 3)),
+        rng.standard_normal((3, 4)),
+        np.zeros((3, 3)),
+    )
     blk = [[-1, 0], [1, 0], [1, 0]]
     r = mu_bounds(sys, blk)
     assert r.peak_lower <= r.peak_upper and r.peak_lower > 0.8 * r.peak_upper

@@ -4,7 +4,6 @@ import control
 import numpy as np
 import pytest
 
-
 from polyrob.errors import PolyrobError
 from polyrob.plant.generalized import (
     ClosedLoop,

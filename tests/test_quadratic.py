@@ -21,8 +21,9 @@ A2 = np.array([[-0.1, 10.0], [-1.0, -0.1]])
 
 
 def _switched_final_norm(law) -> float:
-    sol = solve_ivp(lambda t, x: (A1 if law(x) else A2) @ x, (0.0, 8.0), [1.0, 0.0],
-                    max_step=1e-2, rtol=1e-8, atol=1e-12)
+    sol = solve_ivp(
+        lambda t, x: (A1 if law(x) else A2) @ x, (0.0, 8.0), [1.0, 0.0], max_step=1e-2, rtol=1e-8, atol=1e-12
+    )
     return float(np.linalg.norm(sol.y[:, -1]))
 
 
@@ -61,8 +62,7 @@ def _mass_spring_vertices(gains):
 def _grid_peak(A, B, C, D) -> float:
     """A lower bound of the H∞ norm: the largest sampled singular value."""
     w = np.logspace(-3, 3, 4000)
-    return max(np.linalg.svd(C @ np.linalg.solve(1j * wi * np.eye(len(A)) - A, B) + D, compute_uv=False)[0]
-               for wi in w)
+    return max(np.linalg.svd(C @ np.linalg.solve(1j * wi * np.eye(len(A)) - A, B) + D, compute_uv=False)[0] for wi in w)
 
 
 def test_quadperf_gamma_bounds_every_vertex_and_is_exact_for_one():
@@ -134,11 +134,11 @@ def _switched_lft(spread: float):
 def test_scaled_small_gain_rejects_the_switched_counterexample_and_accepts_a_small_spread():
     from polyrob.analysis.quadratic_smallgain import scaled_small_gain
 
-    bad = scaled_small_gain(_switched_lft(1.0), [[-2, 0]])   # delta = +-1 are A1, A2: unstable switching
+    bad = scaled_small_gain(_switched_lft(1.0), [[-2, 0]])  # delta = +-1 are A1, A2: unstable switching
     assert not bad.holds and bad.gamma >= 1.0
     good = scaled_small_gain(_switched_lft(0.01), [[-2, 0]])
     assert good.holds and good.gamma < 1.0
-    assert good.scaled_norm <= good.gamma * (1 + 1e-6)       # independent H∞ norm of D N D^-1
+    assert good.scaled_norm <= good.gamma * (1 + 1e-6)  # independent H∞ norm of D N D^-1
 
 
 def test_scaled_small_gain_finds_the_optimal_diagonal_scaling():

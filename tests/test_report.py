@@ -57,10 +57,18 @@ def test_report_references_existing_valid_pngs(tmp_path):
     outside = simulate(robot, K, dom, step_reference([0.2, -0.1]), t_final=1.0)
     w = np.logspace(-2, 2, 5)
     files = write_report(
-        tmp_path, robot_name="paper_2r", pldi=pldi, unc=unc, controller=K,
-        controllers={"other": 0.5 * K}, monte_carlo=mc, simulations=[inside, outside],
-        certificates={"constant-parameter μ": {"peak_mu_upper": 2.43, "certified": False},
-                      "time-varying (quadratic)": {"feasible": False, "gamma": float("inf")}},
+        tmp_path,
+        robot_name="paper_2r",
+        pldi=pldi,
+        unc=unc,
+        controller=K,
+        controllers={"other": 0.5 * K},
+        monte_carlo=mc,
+        simulations=[inside, outside],
+        certificates={
+            "constant-parameter μ": {"peak_mu_upper": 2.43, "certified": False},
+            "time-varying (quadratic)": {"feasible": False, "gamma": float("inf")},
+        },
         discretization={"rate_hz": 1000.0, "min_word_length_bits": 24, "spectral_radius": 0.99999997},
         mu_curves={"robust performance": (w, 2 * np.ones(5), 1.9 * np.ones(5))},
     )
@@ -68,7 +76,8 @@ def test_report_references_existing_valid_pngs(tmp_path):
     refs = _check_links(tmp_path, page, r"<img src='([^']+)'")
     assert set(refs) == {f"figures/{p.name}" for p in files.figures}
     assert {"pldi_bode.png", "sensitivities.png", "controllers.png", "mu.png", "tracking.png"} <= {
-        Path(r).name for r in refs}
+        Path(r).name for r in refs
+    }
     _check_links(tmp_path, files.markdown.read_text(), r"!\[[^\]]*\]\(([^)]+)\)")
     # self-contained: no scripts, stylesheets or remote resources
     assert "<script" not in page and "http" not in page.replace("http-equiv", "")
@@ -88,16 +97,30 @@ def test_build_report_from_run_directory(tmp_path):
     pldi = polyrob.bound_pldi(robot, samples=256, coverage=200, progress=False)
     pldi.save(tmp_path / "pldi.json")
     doc = json.loads(FIXTURE.read_text())
-    save_controller(load_controller(FIXTURE), tmp_path / "K.json", certificate=doc["certificate"],
-                    info={"weights": {k: list(v) for k, v in
-                                      __import__("polyrob.plant.weights", fromlist=["x"]).PAPER_HYPERPARAMETERS.items()},
-                          "uncertainty": {"requested": "box", "merge_symmetric": False}})
+    save_controller(
+        load_controller(FIXTURE),
+        tmp_path / "K.json",
+        certificate=doc["certificate"],
+        info={
+            "weights": {
+                k: list(v) for k, v in __import__("polyrob.plant.weights", fromlist=["x"]).PAPER_HYPERPARAMETERS.items()
+            },
+            "uncertainty": {"requested": "box", "merge_symmetric": False},
+        },
+    )
     save_controller(polyrob.paper_controller(), tmp_path / "K_fixed.json")
     (tmp_path / "certificate.json").write_text(json.dumps({"time-varying": {"feasible": False}}))
     from polyrob.report.build import build_report
 
-    files = build_report(tmp_path, rate=100.0, mc=3, mu_omega=np.logspace(-2, 2, 8), search_rate=False,
-                         word_lengths=(30, 34), discrete_omega=np.logspace(-2, 2, 4))
+    files = build_report(
+        tmp_path,
+        rate=100.0,
+        mc=3,
+        mu_omega=np.logspace(-2, 2, 8),
+        search_rate=False,
+        word_lengths=(30, 34),
+        discrete_omega=np.logspace(-2, 2, 4),
+    )
     page = files.html.read_text()
     _check_links(tmp_path, page, r"<img src='([^']+)'")
     assert "time-varying" in page and "reduced:9" in page and "Discretisation and quantisation" in page

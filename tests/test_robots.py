@@ -159,7 +159,10 @@ def one_link(mass=1.0, ixx=0.1, iyy=0.1, izz=0.1):
         (one_link(mass=0.0, ixx=0.0, iyy=0.0, izz=0.0), r"joint 'j1' moves no inertia .* \(arm\)"),
         (one_link(izz=-10.0), r"link 'arm' has an inertia that is not positive semidefinite \(principal moments -10"),
         (one_link(mass=-2.0), r"link 'arm' has mass -2"),
-        (one_link(ixx=0.1, iyy=0.1, izz=0.5), r"link 'arm' has principal moments of inertia 0.1, 0.1, 0.5 that violate"),
+        (
+            one_link(ixx=0.1, iyy=0.1, izz=0.5),
+            r"link 'arm' has principal moments of inertia 0.1, 0.1, 0.5 that violate",
+        ),
         (one_link(mass=0.0), r"link 'arm' has mass 0 but a non-zero inertia"),
     ],
 )

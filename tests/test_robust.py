@@ -116,7 +116,9 @@ def test_monte_carlo_and_corners_find_unstable_plants(paper):
 
 
 def test_cli_analyze_json(capsys):
-    code = main(["analyze", "paper_2r", "--controller", "paper", "--mc", "20", "--json", "--quiet", "--omega", "0.1:100:25"])
+    code = main(
+        ["analyze", "paper_2r", "--controller", "paper", "--mc", "20", "--json", "--quiet", "--omega", "0.1:100:25"]
+    )
     out = capsys.readouterr().out
     assert code == 0
     rep = json.loads(out)

@@ -27,7 +27,9 @@ def _stable_loop():
     """A stable closed loop: a lightly damped MIMO plant with a static output feedback."""
     G = control.ss(
         [[0, 1, 0, 0], [-4, -0.4, 1, 0], [0, 0, 0, 1], [1, 0, -9, -0.6]],
-        [[0, 0], [1, 0], [0, 0], [0, 1]], [[1, 0, 0, 0], [0, 0, 1, 0]], np.zeros((2, 2)),
+        [[0, 0], [1, 0], [0, 0], [0, 1]],
+        [[1, 0, 0, 0], [0, 0, 1, 0]],
+        np.zeros((2, 2)),
     )
     return control.feedback(G, np.eye(2))
 
@@ -94,8 +96,15 @@ def test_dkpy_distillation_controller_double_precision_is_fooled():
 
 def test_dkpy_distillation_controller_mu_matches_independent_value():
     """Issue 14: stable, μ upper within 0.5 % of 1.036 (1.0360 / 1.0358 with independent tools)."""
-    r = loop_mu(distillation_plant(), _dkpy_controller(), DISTILLATION_BLK, np.logspace(-3, 3, 61),
-                n_u=2, n_y=2, refine_peak=True)
+    r = loop_mu(
+        distillation_plant(),
+        _dkpy_controller(),
+        DISTILLATION_BLK,
+        np.logspace(-3, 3, 61),
+        n_u=2,
+        n_y=2,
+        refine_peak=True,
+    )
     assert r.stability.stable
     assert r.mu_upper == pytest.approx(1.036, rel=5e-3)
     assert r.mu_lower <= r.mu_upper and r.mu_lower == pytest.approx(1.036, rel=5e-3)

@@ -6,7 +6,6 @@ import control
 import numpy as np
 import pytest
 
-
 from polyrob.errors import BoundsError, PolyrobError
 from polyrob.plant.uncertainty import UncertainPlant, uncertain_plant, upper_lft
 
@@ -136,7 +135,9 @@ def test_merge_symmetric_shares_one_repeated_parameter(pldi, unc_merged):
     assert u.block_structure.tolist() == [[-1, 0]] * 7 + [[-2, 0]] + [[-1, 0]]
     assert u.channel_names == PAPER_ENTRIES
     np.testing.assert_array_equal(u.channel_parameter, [0, 1, 2, 3, 4, 5, 6, 7, 7, 8])
-    np.testing.assert_array_equal(np.diag(u.delta_matrix(np.arange(9) / 10)), [0, .1, .2, .3, .4, .5, .6, .7, .7, .8])
+    np.testing.assert_array_equal(
+        np.diag(u.delta_matrix(np.arange(9) / 10)), [0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.7, 0.8]
+    )
     for d in u.delta_samples(10, seed=2):
         G = u.plant_at(d)
         assert G.B[2, 1] == G.B[3, 0]  # b32 = b41: B stays symmetric

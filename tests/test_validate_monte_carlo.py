@@ -24,8 +24,9 @@ def _problem():
 @functools.cache
 def _mc():
     unc, P, _ = _problem()
-    return monte_carlo(P, polyrob.paper_controller(), n=4, seed=3, omega=np.logspace(-2, 3, 50),
-                       t=np.linspace(0, 2, 201))
+    return monte_carlo(
+        P, polyrob.paper_controller(), n=4, seed=3, omega=np.logspace(-2, 3, 50), t=np.linspace(0, 2, 201)
+    )
 
 
 def test_loop_function_identities():

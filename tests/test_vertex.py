@@ -9,7 +9,7 @@ import pytest
 from polyrob.analysis.quadratic import quadperf
 from polyrob.synthesis.vertex import vertex_peak, vertex_synthesis
 
-W_S = control.tf([0.5, 0.2], [1.0, 0.002])   # |W_S| = 100 at DC, 0.5 at high frequency
+W_S = control.tf([0.5, 0.2], [1.0, 0.002])  # |W_S| = 100 at DC, 0.5 at high frequency
 W_T = control.tf([0.1, 0.5], [0.01, 1.0])
 
 
@@ -40,5 +40,4 @@ def test_no_stabilising_gain_is_an_error():
 
     # u = K e with K < 0 at every gain of the scan: positive feedback on every vertex
     with pytest.raises(SynthesisError):
-        vertex_synthesis(_vertices(), W_S, W_T, structure="tf1", initial=control.tf([-5.0], [0.1, 1.0]),
-                         certify=False)
+        vertex_synthesis(_vertices(), W_S, W_T, structure="tf1", initial=control.tf([-5.0], [0.1, 1.0]), certify=False)

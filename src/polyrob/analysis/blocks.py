@@ -126,9 +126,7 @@ class BlockStructure:
                 raise PolyrobError(f"block {i}: [{r}, {c}] has zero size")
             if r < 0:
                 if c != 0:
-                    raise PolyrobError(
-                        f"block {i}: [{r}, {c}] is invalid; real blocks are scalars [-r, 0]"
-                    )
+                    raise PolyrobError(f"block {i}: [{r}, {c}] is invalid; real blocks are scalars [-r, 0]")
                 blocks.append(Block("real", -r, -r))
             elif c == 0:
                 blocks.append(Block("complex", r, r))
@@ -187,9 +185,7 @@ class BlockStructure:
             full complex blocks.
         """
         if self.has_repeated:
-            raise PolyrobError(
-                "AB13MD does not support repeated scalar blocks; use method='lmi'"
-            )
+            raise PolyrobError("AB13MD does not support repeated scalar blocks; use method='lmi'")
         nblock = np.array([b.size for b in self.blocks], dtype=np.int64)
         itype = np.array([1 if b.kind == "real" else 2 for b in self.blocks], dtype=np.int64)
         return nblock, itype

@@ -73,15 +73,21 @@ def refine_peaks(omega, up, f, n_peaks=3, xtol=1e-7):
     """Bounded scalar maximisation (in log omega) around the best local maxima."""
     from scipy.optimize import minimize_scalar
 
-    inner = [i for i in range(omega.size) if (i == 0 or up[i] >= up[i - 1]) and (i == omega.size - 1 or up[i] >= up[i + 1])]
+    inner = [
+        i for i in range(omega.size) if (i == 0 or up[i] >= up[i - 1]) and (i == omega.size - 1 or up[i] >= up[i + 1])
+    ]
     inner = sorted(inner, key=lambda i: -up[i])[:n_peaks]
     out = []
     for i in inner:
         lo_i, hi_i = max(i - 1, 0), min(i + 1, omega.size - 1)
         if omega[lo_i] <= 0 or hi_i == lo_i:
             continue
-        r = minimize_scalar(lambda x: -f(np.exp(x)), bounds=(np.log(omega[lo_i]), np.log(omega[hi_i])),
-                            method="bounded", options={"xatol": xtol})
+        r = minimize_scalar(
+            lambda x: -f(np.exp(x)),
+            bounds=(np.log(omega[lo_i]), np.log(omega[hi_i])),
+            method="bounded",
+            options={"xatol": xtol},
+        )
         out.append(float(np.exp(r.x)))
     return out
 

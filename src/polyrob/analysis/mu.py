@@ -222,9 +222,7 @@ def mu_bounds(
     if not isinstance(sys, control.LTI):
         raise PolyrobError(f"mu_bounds needs a python-control LTI system, got {type(sys).__name__}")
     if (sys.noutputs, sys.ninputs) != st.m_shape:
-        raise PolyrobError(
-            f"system is {sys.noutputs}x{sys.ninputs} but block structure {st} needs {st.m_shape}"
-        )
+        raise PolyrobError(f"system is {sys.noutputs}x{sys.ninputs} but block structure {st} needs {st.m_shape}")
     is_frd = isinstance(sys, control.FrequencyResponseData)
     if omega is None:
         omega = np.asarray(sys.omega if is_frd else default_grid(sys), dtype=float)
@@ -236,8 +234,9 @@ def mu_bounds(
         raise PolyrobError("omega must be a non-empty array of finite non-negative frequencies")
     meth = _choose_method(st, method)
     with single_blas_thread():
-        return _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, progress, rtol, solver,
-                      response_bits)
+        return _sweep(
+            sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, progress, rtol, solver, response_bits
+        )
 
 
 def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, progress, rtol, solver, bits):
@@ -279,8 +278,9 @@ def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, 
     def lower_at(Ms, refine=False, target=np.inf, D=None):
         if not np.all(np.isfinite(Ms)):
             return np.inf, np.zeros((n, n), complex)
-        lo, dsq, pi = lower_bound(Ms, st, starts=1 if not refine else 4, refine=refine,
-                                   init=state["pi"], target=target, D=D)
+        lo, dsq, pi = lower_bound(
+            Ms, st, starts=1 if not refine else 4, refine=refine, init=state["pi"], target=target, D=D
+        )
         state["pi"] = pi if pi is not None else state["pi"]
         return lo, dsq
 
@@ -331,13 +331,24 @@ def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, 
     order = np.argsort(omega)
     iu, il = int(np.argmax(up)), int(np.argmax(lo))
     return MuBoundsResult(
-        omega=omega[order], upper=up[order], lower=lo[order], D=Ds[order], G=Gs[order],
-        peak_upper=float(up[iu]), peak_upper_frequency=float(omega[iu]),
-        peak_lower=float(lo[il]), critical_frequency=float(omega[il]),
-        worst_delta=st.unpad_delta(deltas[il]), structure=st, method=meth,
+        omega=omega[order],
+        upper=up[order],
+        lower=lo[order],
+        D=Ds[order],
+        G=Gs[order],
+        peak_upper=float(up[iu]),
+        peak_upper_frequency=float(omega[iu]),
+        peak_lower=float(lo[il]),
+        critical_frequency=float(omega[il]),
+        worst_delta=st.unpad_delta(deltas[il]),
+        structure=st,
+        method=meth,
         warm_start_fallbacks=fallbacks,
-        notes=tuple(notes + ([] if lmi is None else lmi.events)
-                    + ([] if bits is None else [f"frequency responses evaluated at {bits} bits"])),
+        notes=tuple(
+            notes
+            + ([] if lmi is None else lmi.events)
+            + ([] if bits is None else [f"frequency responses evaluated at {bits} bits"])
+        ),
     )
 
 

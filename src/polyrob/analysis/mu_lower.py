@@ -211,9 +211,11 @@ def _refine(Ms, st, delta0, x0):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = minimize(
-            lambda p: p[-1], p0, jac=lambda p: e_s, method="SLSQP",
-            constraints=[{"type": "eq", "fun": eq, "jac": eq_jac},
-                         {"type": "ineq", "fun": ineq, "jac": ineq_jac}],
+            lambda p: p[-1],
+            p0,
+            jac=lambda p: e_s,
+            method="SLSQP",
+            constraints=[{"type": "eq", "fun": eq, "jac": eq_jac}, {"type": "ineq", "fun": ineq, "jac": ineq_jac}],
             bounds=[(None, None)] * (nv - 1) + [(0.0, None)],
             options={"maxiter": 200, "ftol": 1e-12},
         )
@@ -238,8 +240,7 @@ def _refine(Ms, st, delta0, x0):
     return _candidate(Ms, st, delta / nd_) if nd_ > 0 else None
 
 
-def lower_bound(Ms, st, *, starts=4, refine=True, seed=0, init=None, real_starts=8,
-                 target=np.inf, D=None):
+def lower_bound(Ms, st, *, starts=4, refine=True, seed=0, init=None, real_starts=8, target=np.inf, D=None):
     """Lower bound of ``mu(Ms)`` with its verified perturbation.
 
     Parameters
@@ -278,8 +279,10 @@ def lower_bound(Ms, st, *, starts=4, refine=True, seed=0, init=None, real_starts
     search once reached.
     """
     n = Ms.shape[0]
-    meta = [("real" if b.kind == "real" else "full" if (b.kind == "full" or b.size == 1) else "complex",
-             b.repeated, sl) for b, sl in zip(st.blocks, st.padded_slices)]
+    meta = [
+        ("real" if b.kind == "real" else "full" if (b.kind == "full" or b.size == 1) else "complex", b.repeated, sl)
+        for b, sl in zip(st.blocks, st.padded_slices)
+    ]
     if not np.any(Ms):
         return 0.0, np.zeros((n, n), complex), None
     rng = np.random.default_rng(seed)

@@ -202,5 +202,3 @@ class LmiUpper:
         beta, P, G = best
         D = sla.sqrtm(P)
         return beta, (D + D.conj().T) / 2, G
-
-

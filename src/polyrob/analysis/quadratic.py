@@ -34,6 +34,7 @@ For LFT models too large for vertex enumeration see
 from __future__ import annotations
 
 import time
+
 import numpy as np
 
 from polyrob.analysis.quadratic_results import QuadPerfResult, QuadStabResult
@@ -96,9 +97,9 @@ def _rounding(n: int, *prods: float) -> float:
 
 
 def _solve(problem, what: str) -> str:
-    import cvxpy as cp
-
     import warnings
+
+    import cvxpy as cp
 
     try:
         with warnings.catch_warnings():  # "may be inaccurate": the status says so, the verification decides
@@ -119,7 +120,7 @@ def _active_set(n_v: int, solve_subset, violation, first: np.ndarray, *, add: in
     """
     active = np.unique(np.asarray(first, int))
     sol, status = None, "not run"
-    for k in range(rounds):
+    for _ in range(rounds):
         sol, status = solve_subset(active)
         if sol is None:
             return None, status, active.size
@@ -149,8 +150,12 @@ def _verify_stab(As: np.ndarray, P: np.ndarray) -> float:
         return -np.inf
     M = np.transpose(As, (0, 2, 1)) @ P + P @ As
     lam = np.linalg.eigvalsh(M)[:, -1]
-    err = np.array([_rounding(n, 2 * np.linalg.norm(np.abs(a), 2) * np.linalg.norm(np.abs(P), 2), np.linalg.norm(m, 2))
-                    for a, m in zip(As, M)])
+    err = np.array(
+        [
+            _rounding(n, 2 * np.linalg.norm(np.abs(a), 2) * np.linalg.norm(np.abs(P), 2), np.linalg.norm(m, 2))
+            for a, m in zip(As, M)
+        ]
+    )
     return float(np.min(-(lam + err)) / lamP[-1])
 
 
@@ -192,6 +197,7 @@ def quadstab(vertices, K, *, which: str = "auto", max_vertices: int = MAX_VERTIC
     if abscissa.max() >= 0:  # a frozen vertex is unstable: no common Lyapunov function exists
         Pv, status, used = None, f"vertex {int(np.argmax(abscissa))} unstable (frozen)", 0
     else:
+
         def solve_subset(idx):
             # always feasible (bounded P, free level s): interior-point methods are slow to prove
             # infeasibility; s < 0 is a candidate certificate, s >= 0 means none with cond(P) <= COND_MAX
@@ -213,12 +219,23 @@ def quadstab(vertices, K, *, which: str = "auto", max_vertices: int = MAX_VERTIC
     P_orig = None if Pv is None else Pv / s[:, None] / s[None, :]  # V = x'^T P x', x' = T^-1 x
     lam = np.linalg.eigvalsh(Pv) if Pv is not None else np.array([np.nan])
     return QuadStabResult(
-        holds=holds, margin=float(rate), n_vertices=vs.n_vertices, vertex_source=vs.source,
-        enclosure=vs.enclosure, P=P_orig, cond_P=float(lam[-1] / lam[0]) if lam[0] > 0 else np.inf,
-        solver_status=status, seconds=time.perf_counter() - t0,
+        holds=holds,
+        margin=float(rate),
+        n_vertices=vs.n_vertices,
+        vertex_source=vs.source,
+        enclosure=vs.enclosure,
+        P=P_orig,
+        cond_P=float(lam[-1] / lam[0]) if lam[0] > 0 else np.inf,
+        solver_status=status,
+        seconds=time.perf_counter() - t0,
         covers=covers_text(vs, "exponential stability (common Lyapunov function V = x^T P x)"),
-        info={"time_scale": c, "vertex_note": vs.note, "closed_loop_order": n, "lmi_vertices": used,
-              "frozen_abscissa": float(abscissa.max() * c)},
+        info={
+            "time_scale": c,
+            "vertex_note": vs.note,
+            "closed_loop_order": n,
+            "lmi_vertices": used,
+            "frozen_abscissa": float(abscissa.max() * c),
+        },
     )
 
 
@@ -232,9 +249,9 @@ def _brl(As, Bs, Cs, Ds, P, gamma):
     L = np.zeros((v, n + p + q, n + p + q))
     L[:, :n, :n] = np.transpose(As, (0, 2, 1)) @ P + P @ As
     PB = P @ Bs
-    L[:, :n, n:n + p], L[:, n:n + p, :n] = PB, np.transpose(PB, (0, 2, 1))
-    L[:, n + p:, :n], L[:, :n, n + p:] = Cs, np.transpose(Cs, (0, 2, 1))
-    L[:, n + p:, n:n + p], L[:, n:n + p, n + p:] = Ds, np.transpose(Ds, (0, 2, 1))
+    L[:, :n, n : n + p], L[:, n : n + p, :n] = PB, np.transpose(PB, (0, 2, 1))
+    L[:, n + p :, :n], L[:, :n, n + p :] = Cs, np.transpose(Cs, (0, 2, 1))
+    L[:, n + p :, n : n + p], L[:, n : n + p, n + p :] = Ds, np.transpose(Ds, (0, 2, 1))
     d = np.arange(n, n + p + q)
     L[:, d, d] -= gamma
     return L
@@ -268,8 +285,17 @@ def _verified_gamma(As, Bs, Cs, Ds, P, g0: float) -> float:
     return float(hi)
 
 
-def quadperf(vertices, K, W_S=None, W_T=None, W_KS=None, *, which: str = "auto",
-             max_vertices: int = MAX_VERTICES, vertex_norms: bool = True) -> QuadPerfResult:
+def quadperf(
+    vertices,
+    K,
+    W_S=None,
+    W_T=None,
+    W_KS=None,
+    *,
+    which: str = "auto",
+    max_vertices: int = MAX_VERTICES,
+    vertex_norms: bool = True,
+) -> QuadPerfResult:
     """Quadratic H∞ performance of the mixed-sensitivity loop over a PLDI (common-``P`` bounded-real lemma).
 
     Parameters
@@ -317,9 +343,10 @@ def quadperf(vertices, K, W_S=None, W_T=None, W_KS=None, *, which: str = "auto",
         cons = [P >> eps * np.eye(n), g <= GAMMA_MAX, t >= -eps]  # bounded by t >= -eps and g >= 0
         for i in idx:
             a, b, cc, d = Ab[i], Bb[i], Cb[i], Ds[i]
-            cons.append(cp.bmat([[a.T @ P + P @ a, P @ b, cc.T],
-                                 [b.T @ P, -g * np.eye(p), d.T],
-                                 [cc, d, -g * np.eye(q)]]) << t * np.eye(n + p + q))
+            cons.append(
+                cp.bmat([[a.T @ P + P @ a, P @ b, cc.T], [b.T @ P, -g * np.eye(p), d.T], [cc, d, -g * np.eye(q)]])
+                << t * np.eye(n + p + q)
+            )
         st = _solve(cp.Problem(cp.Minimize(g + GAMMA_MAX * t), cons), "quadperf")
         if P.value is None or g.value is None or t.value is None:
             return None, st
@@ -341,12 +368,22 @@ def quadperf(vertices, K, W_S=None, W_T=None, W_KS=None, *, which: str = "auto",
     if vertex_norms:
         worst = _worst_vertex_hinf(As, Bs, Cs, Ds)
     return QuadPerfResult(
-        holds=bool(gamma < 1.0), gamma=gamma, margin=1.0 - gamma, worst_vertex_hinf=worst,
-        n_vertices=vs.n_vertices, vertex_source=vs.source, enclosure=vs.enclosure,
+        holds=bool(gamma < 1.0),
+        gamma=gamma,
+        margin=1.0 - gamma,
+        worst_vertex_hinf=worst,
+        n_vertices=vs.n_vertices,
+        vertex_source=vs.source,
+        enclosure=vs.enclosure,
         P=None if Pv is None else Pv / s[:, None] / s[None, :] / c,
-        solver_gamma=g_solver, solver_status=status, seconds=time.perf_counter() - t0,
-        covers=covers_text(vs, f"an L2 gain below gamma = {gamma:.4g} from r to z = [W_S e; W_T y] "
-                               "(zero initial state) and exponential stability"),
+        solver_gamma=g_solver,
+        solver_status=status,
+        seconds=time.perf_counter() - t0,
+        covers=covers_text(
+            vs,
+            f"an L2 gain below gamma = {gamma:.4g} from r to z = [W_S e; W_T y] "
+            "(zero initial state) and exponential stability",
+        ),
         info={"time_scale": c, "vertex_note": vs.note, "closed_loop_order": n, "lmi_vertices": used},
     )
 

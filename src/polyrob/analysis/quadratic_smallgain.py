@@ -88,8 +88,12 @@ def _kyp(A, B, C, D, Y, Xr, Xc, g2):
 def _kyp_ok(A, B, C, D, Y, Xr, Xc, g2) -> bool:
     L = _kyp(A, B, C, D, Y, Xr, Xc, g2)
     N = L.shape[0]
-    scale = 2 * np.linalg.norm(np.abs(A), 2) * np.linalg.norm(np.abs(Y), 2) + np.linalg.norm(np.abs(np.hstack([C, D])), 2) ** 2 \
-        * np.linalg.norm(np.abs(Xc), 2) + g2 * np.linalg.norm(Xr, 2) + np.linalg.norm(L, 2)
+    scale = (
+        2 * np.linalg.norm(np.abs(A), 2) * np.linalg.norm(np.abs(Y), 2)
+        + np.linalg.norm(np.abs(np.hstack([C, D])), 2) ** 2 * np.linalg.norm(np.abs(Xc), 2)
+        + g2 * np.linalg.norm(Xr, 2)
+        + np.linalg.norm(L, 2)
+    )
     return bool(np.linalg.eigvalsh(L)[-1] + 8.0 * (N + 2) * _U * scale < 0)
 
 
@@ -132,8 +136,17 @@ def scaled_small_gain(N, blk, *, rtol: float = 1e-3, max_steps: int = 30) -> Sca
         raise PolyrobError(f"N is {C.shape[0]}x{B.shape[1]}; the structure needs {nc}x{nr} (outputs x inputs)")
     n = A.shape[0]
     if n and np.max(np.linalg.eigvals(A).real) >= 0:
-        return ScaledSmallGainResult(False, np.inf, np.inf, np.inf, None, None, time.perf_counter() - t0,
-                                     _covers(st), {"reason": "N is unstable"})
+        return ScaledSmallGainResult(
+            False,
+            np.inf,
+            np.inf,
+            np.inf,
+            None,
+            None,
+            time.perf_counter() - t0,
+            _covers(st),
+            {"reason": "N is unstable"},
+        )
     unscaled = float(control.linfnorm(control.ss(A, B, C, D))[0])
 
     def solve(g2):
@@ -172,15 +185,30 @@ def scaled_small_gain(N, blk, *, rtol: float = 1e-3, max_steps: int = 30) -> Sca
         lo, hi, best = (lo, mid, sol) if sol is not None else (mid, hi, best)
         steps += 1
     if best is None:  # not even D = I verified at the unscaled norm: report it unverified
-        return ScaledSmallGainResult(False, np.inf, unscaled, unscaled, None, None, time.perf_counter() - t0,
-                                     _covers(st), {"reason": "no verified scaling"})
+        return ScaledSmallGainResult(
+            False,
+            np.inf,
+            unscaled,
+            unscaled,
+            None,
+            None,
+            time.perf_counter() - t0,
+            _covers(st),
+            {"reason": "no verified scaling"},
+        )
     Y, Xr, Xc = best
     Dr, Dc = _sqrtm(Xr), _sqrtm(Xc)
     scaled = control.ss(A, B @ np.linalg.inv(Dr), Dc @ C, Dc @ D @ np.linalg.inv(Dr))
     scaled_norm = float(control.linfnorm(scaled)[0])
     return ScaledSmallGainResult(
-        holds=bool(hi < 1.0), gamma=float(hi), scaled_norm=scaled_norm, unscaled_norm=unscaled, X_r=Xr, X_c=Xc,
-        seconds=time.perf_counter() - t0, covers=_covers(st),
+        holds=bool(hi < 1.0),
+        gamma=float(hi),
+        scaled_norm=scaled_norm,
+        unscaled_norm=unscaled,
+        X_r=Xr,
+        X_c=Xc,
+        seconds=time.perf_counter() - t0,
+        covers=_covers(st),
         info={"bisection_steps": steps, "lower": lo, "lyapunov_min_eig": float(np.linalg.eigvalsh(Y)[0])},
     )
 

@@ -33,8 +33,16 @@ import numpy as np
 
 from polyrob.errors import PolyrobError
 
-__all__ = ["VertexSet", "vertex_set", "closed_loop_vertices", "augmented_vertices", "performance_vertices",
-           "controller_mats", "POLYTOPE_MAX_DIM", "MAX_VERTICES"]
+__all__ = [
+    "VertexSet",
+    "vertex_set",
+    "closed_loop_vertices",
+    "augmented_vertices",
+    "performance_vertices",
+    "controller_mats",
+    "POLYTOPE_MAX_DIM",
+    "MAX_VERTICES",
+]
 
 #: Reduced dimension up to which the polytope's vertices are enumerated here.
 POLYTOPE_MAX_DIM = 8
@@ -90,18 +98,19 @@ def _polytope_points(poly) -> np.ndarray | None:
     if r == 0 or r > POLYTOPE_MAX_DIM:
         return None
     from scipy import optimize
-    from scipy.spatial import HalfspaceIntersection
+    from scipy.spatial import HalfspaceIntersection, QhullError
 
     G = poly.normals @ poly.basis
     g = poly.offsets - poly.normals @ poly.centre
     norms = np.linalg.norm(G, axis=1)
-    res = optimize.linprog(np.r_[np.zeros(r), -1.0], A_ub=np.c_[G, norms], b_ub=g,
-                           bounds=[(None, None)] * r + [(0, None)], method="highs")
+    res = optimize.linprog(
+        np.r_[np.zeros(r), -1.0], A_ub=np.c_[G, norms], b_ub=g, bounds=[(None, None)] * r + [(0, None)], method="highs"
+    )
     if res.status != 0 or res.x[-1] <= 1e-12:
         return None
     try:
         hs = HalfspaceIntersection(np.c_[G, -g], res.x[:r])
-    except Exception:  # qhull refuses degenerate input: no vertex set then
+    except (QhullError, ValueError):  # qhull refuses degenerate input: no vertex set then
         return None
     z = hs.intersections
     # near-coincident intersections of degenerate vertices: merge them (relative
@@ -165,7 +174,9 @@ def vertex_set(source, *, which: str = "auto", max_vertices: int = MAX_VERTICES)
         raise PolyrobError("no vertices given")
     n, m = pairs[0][0].shape[0], pairs[0][1].shape[1]
     if n != 2 * m or any(a.shape != (n, n) or b.shape != (n, m) for a, b in pairs):
-        raise PolyrobError(f"every vertex must be (A: 2m x 2m, B: 2m x m); got A {pairs[0][0].shape}, B {pairs[0][1].shape}")
+        raise PolyrobError(
+            f"every vertex must be (A: 2m x 2m, B: 2m x m); got A {pairs[0][0].shape}, B {pairs[0][1].shape}"
+        )
     C = np.hstack([np.eye(m), np.zeros((m, m))])
     return VertexSet(np.stack([a for a, _ in pairs]), np.stack([b for _, b in pairs]), C, "given", "given")
 
@@ -264,8 +275,15 @@ def augmented_vertices(vs: VertexSet, W_S=None, W_T=None, W_KS=None):
     states ``[x, W_S, W_T, W_KS]``.
     """
     m, n = vs.m, vs.n_x
-    ws = [(w, lab) for w, lab in ((_weight_mats(W_S, m, "W_S"), "e"), (_weight_mats(W_T, m, "W_T"), "y"),
-                                  (_weight_mats(W_KS, m, "W_KS"), "u")) if w is not None]
+    ws = [
+        (w, lab)
+        for w, lab in (
+            (_weight_mats(W_S, m, "W_S"), "e"),
+            (_weight_mats(W_T, m, "W_T"), "y"),
+            (_weight_mats(W_KS, m, "W_KS"), "u"),
+        )
+        if w is not None
+    ]
     if not ws:
         raise PolyrobError("give at least one weight (W_S, W_T or W_KS)")
     C = vs.C
@@ -284,8 +302,8 @@ def augmented_vertices(vs: VertexSet, W_S=None, W_T=None, W_KS=None):
         sl = slice(s, s + Aw.shape[0])
         A[:, sl, sl], A[:, sl, :n] = Aw, Bw @ fx
         B[:, sl] = Bw @ np.hstack([fr, fu])
-        Cz[:, row:row + m, sl], Cz[:, row:row + m, :n] = Cw, Dw @ fx
-        D[:, row:row + m] = Dw @ np.hstack([fr, fu])
+        Cz[:, row : row + m, sl], Cz[:, row : row + m, :n] = Cw, Dw @ fx
+        D[:, row : row + m] = Dw @ np.hstack([fr, fu])
         s, row = s + Aw.shape[0], row + m
     Cz[:, nz:, :n], D[:, nz:, :m] = -C, I_m  # the measurement e = r - y
     return A, B, Cz, D

@@ -44,7 +44,15 @@ from polyrob.analysis.frequency import default_grid, response_error
 from polyrob.analysis.stability import StabilityVerdict, stability_verdict
 from polyrob.plant.generalized import GeneralizedPlant, closed_loop, lft, nominal_closed_loop
 
-__all__ = ["RobustnessResult", "StabilitySampling", "robstab", "robperf", "loop_mu", "sample_stability", "nominal_performance"]
+__all__ = [
+    "RobustnessResult",
+    "StabilitySampling",
+    "robstab",
+    "robperf",
+    "loop_mu",
+    "sample_stability",
+    "nominal_performance",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,21 +128,27 @@ class RobustnessResult:
     @property
     def covers(self) -> str:
         """What the certificate covers, one paragraph the CLI can print verbatim."""
-        what = "robust stability" if self.kind == "stability" else "robust performance (uncertainty + performance block)"
+        what = (
+            "robust stability" if self.kind == "stability" else "robust performance (uncertainty + performance block)"
+        )
         model = f" of the uncertainty model '{self.model}'" if self.model else ""
         st = getattr(self.mu, "structure", None)
-        params = ("Real parameters" + model + " are constant in time (every frozen plant in the box, "
-                  "not a time-varying one); complex blocks stand for stable LTI perturbations"
-                  if st is not None and st.has_real else
-                  "Complex blocks" + model + " stand for stable LTI perturbations (not time-varying ones)")
+        params = (
+            "Real parameters" + model + " are constant in time (every frozen plant of the set, "
+            "not a time-varying one); complex blocks stand for stable LTI perturbations"
+            if st is not None and st.has_real
+            else "Complex blocks" + model + " stand for stable LTI perturbations (not time-varying ones)"
+        )
         return (
             f"{what}: {self.mu.covers}. {params}; the loop at Delta = 0 is "
             f"{'not checked' if self.stability is None else self.stability.verdict}."
         )
 
     def __str__(self) -> str:
-        return (f"{self.kind}: peak mu on the grid in [{self.mu_lower:.4g}, {self.mu_upper:.4g}], "
-                f"{'certified' if self.robust else 'not certified: ' + '; '.join(self.failed)}")
+        return (
+            f"{self.kind}: peak mu on the grid in [{self.mu_lower:.4g}, {self.mu_upper:.4g}], "
+            f"{'certified' if self.robust else 'not certified: ' + '; '.join(self.failed)}"
+        )
 
     def summary(self) -> dict:
         return {
@@ -217,6 +231,9 @@ def _analyse(kind, N, M, blk, omega, *, unc=None, K=None, model="", **mu_options
 
 
 def _model_name(P: GeneralizedPlant) -> str:
+    model = getattr(P.uncertain, "model", "")
+    if model:
+        return str(model)
     info = getattr(P.uncertain, "info", None) or {}
     return str(info.get("model", "") or info.get("uncertainty_model", "") or "")
 
@@ -239,8 +256,17 @@ def robstab(P: GeneralizedPlant, K, omega=None, **mu_options) -> RobustnessResul
     """
     N = lft(P, K)
     s_v, s_d = P.output_slices["v"], P.input_slices["d"]
-    return _analyse("stability", N, N[s_v, s_d], P.block_structure_rs, omega, unc=P.uncertain, K=K,
-                    model=_model_name(P), **mu_options)
+    return _analyse(
+        "stability",
+        N,
+        N[s_v, s_d],
+        P.block_structure_rs,
+        omega,
+        unc=P.uncertain,
+        K=K,
+        model=_model_name(P),
+        **mu_options,
+    )
 
 
 def robperf(P: GeneralizedPlant, K, omega=None, **mu_options) -> RobustnessResult:
@@ -250,8 +276,9 @@ def robperf(P: GeneralizedPlant, K, omega=None, **mu_options) -> RobustnessResul
     peak μ upper bound on the grid is below 1 (main loop theorem).
     """
     N = lft(P, K)
-    return _analyse("performance", N, N, P.block_structure_rp, omega, unc=P.uncertain, K=K,
-                    model=_model_name(P), **mu_options)
+    return _analyse(
+        "performance", N, N, P.block_structure_rp, omega, unc=P.uncertain, K=K, model=_model_name(P), **mu_options
+    )
 
 
 def loop_mu(P, K, blk, omega=None, *, n_u: int, n_y: int, kind: str = "performance", **mu_options) -> RobustnessResult:

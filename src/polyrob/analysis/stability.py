@@ -96,20 +96,30 @@ class StabilityVerdict:
         return self.verdict == UNSTABLE
 
     def __str__(self) -> str:
-        return (f"{self.verdict}: largest real part {self.abscissa:.6g} +- {self.error_bound:.3g} "
-                f"({self.n_states} states, {self.precision_bits}-bit, balancing condition "
-                f"{self.transform_condition:.3g})")
+        return (
+            f"{self.verdict}: largest real part {self.abscissa:.6g} +- {self.error_bound:.3g} "
+            f"({self.n_states} states, {self.precision_bits}-bit, balancing condition "
+            f"{self.transform_condition:.3g})"
+        )
 
     def summary(self) -> dict:
         """Plain-JSON form."""
-        return {"verdict": self.verdict, "abscissa": float(self.abscissa), "error_bound": float(self.error_bound),
-                "n_states": int(self.n_states), "transform_condition": float(self.transform_condition),
-                "precision_bits": int(self.precision_bits), "tests": list(self.tests)}
+        return {
+            "verdict": self.verdict,
+            "abscissa": float(self.abscissa),
+            "error_bound": float(self.error_bound),
+            "n_states": int(self.n_states),
+            "transform_condition": float(self.transform_condition),
+            "precision_bits": int(self.precision_bits),
+            "tests": list(self.tests),
+        }
 
 
 def _decide(re, err):
     up, lo = float(np.max(re + err)), float(np.max(re - err))
-    return (STABLE if up < 0 else UNSTABLE if lo > 0 else UNDECIDED), float(np.max(err[np.argmax(re)]) if re.size else 0.0)
+    return (STABLE if up < 0 else UNSTABLE if lo > 0 else UNDECIDED), float(
+        np.max(err[np.argmax(re)]) if re.size else 0.0
+    )
 
 
 def _eig_double(A):

@@ -75,9 +75,7 @@ class TimeLimitedCall:
         import subprocess
         import threading
 
-        self._proc = subprocess.Popen(
-            [_sys.executable, "-c", _BOOT], stdin=subprocess.PIPE, stdout=subprocess.PIPE
-        )
+        self._proc = subprocess.Popen([_sys.executable, "-c", _BOOT], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
         self._queue = q = queue.Queue()
         stdout = self._proc.stdout
 

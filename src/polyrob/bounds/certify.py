@@ -113,8 +113,21 @@ def _as_vec(name, x, m):
     return a
 
 
-def certified_jacobian_bounds(model, damping, q_lo, q_hi, qdot_lo, qdot_hi, u_lo, u_hi, *,
-                              max_joints=3, rel_tol=1e-3, time_limit=120.0, progress=False):
+def certified_jacobian_bounds(
+    model,
+    damping,
+    q_lo,
+    q_hi,
+    qdot_lo,
+    qdot_hi,
+    u_lo,
+    u_hi,
+    *,
+    max_joints=3,
+    rel_tol=1e-3,
+    time_limit=120.0,
+    progress=False,
+):
     """Guaranteed entrywise bounds of ``A = df/dx`` and ``B = df/du`` over a box.
 
     For every ``q in [q_lo, q_hi]``, ``qdot in [qdot_lo, qdot_hi]`` and
@@ -169,11 +182,22 @@ def certified_jacobian_bounds(model, damping, q_lo, q_hi, qdot_lo, qdot_hi, u_lo
     m = model.nv
     name = getattr(model, "name", "") or "the robot"
     if m > max_joints:
-        raise CertificationError(f"certified bounds support robots of up to {max_joints} joints; {name} has {m}: "
-                                 "use sampled bounds (drop --certify)")
+        raise CertificationError(
+            f"certified bounds support robots of up to {max_joints} joints; {name} has {m}: "
+            "use sampled bounds (drop --certify)"
+        )
     d = _as_vec("damping", damping, m)
-    box = [_as_vec(n, x, m) for n, x in
-           (("q_lo", q_lo), ("q_hi", q_hi), ("qdot_lo", qdot_lo), ("qdot_hi", qdot_hi), ("u_lo", u_lo), ("u_hi", u_hi))]
+    box = [
+        _as_vec(n, x, m)
+        for n, x in (
+            ("q_lo", q_lo),
+            ("q_hi", q_hi),
+            ("qdot_lo", qdot_lo),
+            ("qdot_hi", qdot_hi),
+            ("u_lo", u_lo),
+            ("u_hi", u_hi),
+        )
+    ]
     qlo, qhi, vlo, vhi, ulo, uhi = box
     for n, (lo, hi) in zip(("q", "qdot", "u"), ((qlo, qhi), (vlo, vhi), (ulo, uhi))):
         if np.any(lo > hi):
@@ -202,6 +226,7 @@ def certified_jacobian_bounds(model, damping, q_lo, q_hi, qdot_lo, qdot_hi, u_lo
 
     try:
         from tqdm import tqdm
+
         bar = tqdm(total=1, disable=not progress, desc="certify", unit="box")
     except ImportError:  # pragma: no cover
         bar = None
@@ -215,7 +240,8 @@ def certified_jacobian_bounds(model, damping, q_lo, q_hi, qdot_lo, qdot_hi, u_lo
             raise CertificationError(
                 f"certified bounds: time limit of {time_limit:g} s reached after {n_boxes} boxes "
                 f"(depth {max_depth}) with {open_items} sub-problems still open in {len(heap)} boxes; "
-                "raise the time limit (--time-limit) or the tolerance (--rel-tol), or shrink the domain")
+                "raise the time limit (--time-limit) or the tolerance (--rel-tol), or shrink the domain"
+            )
         _, _, depth, lo, hi, items = heapq.heappop(heap)
         n_boxes += 1
         max_depth = max(max_depth, depth)

@@ -47,8 +47,7 @@ class BoxProblem:
 
     def monos(self, U, S):
         """Basis values ``[1, u, v, v_j v_l]`` with ``v`` in the balls ``S``."""
-        return [arb(1)] + [arb(x) for x in U] + list(S) + [
-            sq(S[j]) if j == l else S[j] * S[l] for j, l in self.pairs]
+        return [arb(1)] + [arb(x) for x in U] + list(S) + [sq(S[j]) if j == l else S[j] * S[l] for j, l in self.pairs]
 
     def fold(self, c, U):
         """Coefficients ``(a0, a, H)`` of ``a0 + a.v + v^T H v`` at the u-vertex ``U``."""
@@ -57,7 +56,7 @@ class BoxProblem:
         H = [[None] * m for _ in range(m)]
         for n, (j, l) in enumerate(self.pairs):
             H[j][l] = H[l][j] = c[1 + 2 * m + n] if j == l else c[1 + 2 * m + n] / 2
-        return a0, c[1 + m:1 + 2 * m], H
+        return a0, c[1 + m : 1 + 2 * m], H
 
     def remainder(self, e, c2, R, delta2, U, S):
         """Terms ``{(p, q): c2_pq(S) d_p d_q, "R": R(S)}`` of the Taylor model beyond
@@ -119,8 +118,11 @@ class BoxProblem:
             # and skip corners whose naive bound cannot beat the best so far.
             stop = None
             if rem is not None and not exact:
-                stop = (self.in_hi[e] + self.tol(e) - arb_upper(rem) if sgn > 0
-                        else -self.in_lo[e] + self.tol(e) + arb_lower(rem))
+                stop = (
+                    self.in_hi[e] + self.tol(e) - arb_upper(rem)
+                    if sgn > 0
+                    else -self.in_lo[e] + self.tol(e) + arb_lower(rem)
+                )
             best = -np.inf
             S = [ball(x, y) for x, y in zip(Slo, Shi)]
             for dv in sorted(verts, key=lambda dv: -sgn * sum(float((dv[p] * lin[p][0]).mid()) for p in lin)):
@@ -128,8 +130,10 @@ class BoxProblem:
                 if dv:
                     a0 = a0 + sum((dv[p] * lin[p][0] for p in lin), arb(0))
                     a = [a[j] + sum((dv[p] * lin[p][1][j] for p in lin), arb(0)) for j in range(self.m)]
-                    H = [[H[j][l] + sum((dv[p] * lin[p][2][j][l] for p in lin), arb(0)) for l in range(self.m)]
-                         for j in range(self.m)]
+                    H = [
+                        [H[j][l] + sum((dv[p] * lin[p][2][j][l] for p in lin), arb(0)) for l in range(self.m)]
+                        for j in range(self.m)
+                    ]
                 if sgn < 0:
                     a0, a, H = -a0, [-x for x in a], [[-x for x in r] for r in H]
                 if best > -np.inf and arb_upper(quad_naive(a0, a, H, S)) <= best:

@@ -260,8 +260,10 @@ class Domain:
             "name": self.name,
             "joints": list(self.joint_names),
             **{
-                g: {n: [float(lo), float(hi)] for n, lo, hi in zip(
-                    self.joint_names, getattr(self, f"{g}_lower"), getattr(self, f"{g}_upper"))}
+                g: {
+                    n: [float(lo), float(hi)]
+                    for n, lo, hi in zip(self.joint_names, getattr(self, f"{g}_lower"), getattr(self, f"{g}_upper"))
+                }
                 for g in _GROUPS
             },
         }
@@ -279,10 +281,7 @@ class Domain:
         """A plain-text table of the box, one row per joint."""
         rows = [f"{'joint':<24}{'q':>26}{'qdot':>24}{'u':>24}"]
         for j, n in enumerate(self.joint_names):
-            cells = [
-                f"[{getattr(self, g + '_lower')[j]:.4g}, {getattr(self, g + '_upper')[j]:.4g}]"
-                for g in _GROUPS
-            ]
+            cells = [f"[{getattr(self, g + '_lower')[j]:.4g}, {getattr(self, g + '_upper')[j]:.4g}]" for g in _GROUPS]
             rows.append(f"{n:<24}{cells[0]:>26}{cells[1]:>24}{cells[2]:>24}")
         return "\n".join(rows)
 

@@ -105,12 +105,7 @@ def polynomial_coefficients(entries_at, q, t_centre, t_scale, u_centre, u_scale)
 
 def evaluate_polynomial(c, a, b, Q, t, u):
     """Value of the polynomials at points ``t, u`` of shape (N, m): returns (N, k)."""
-    return (
-        c
-        + np.einsum("nmk,nm->nk", a, u)
-        + np.einsum("nmk,nm->nk", b, t)
-        + np.einsum("nijk,ni,nj->nk", Q, t, t)
-    )
+    return c + np.einsum("nmk,nm->nk", a, u) + np.einsum("nmk,nm->nk", b, t) + np.einsum("nijk,ni,nj->nk", Q, t, t)
 
 
 def _patterns(m: int, faces: bool) -> np.ndarray:
@@ -239,8 +234,10 @@ def box_maximum(c, a, b, Q, t_active, u_active, *, exact: bool | None = None, as
     best = np.sum(np.abs(b) * t_active[None, :, None], axis=1)
     best_t = np.moveaxis(t_arg, 2, 1).copy()
     scale = np.abs(c).max(axis=0) + np.abs(b).sum(axis=1).max(axis=0)
-    quad = np.flatnonzero(np.abs(Q * t_active[:, None, None] * t_active[None, :, None]).max(axis=(0, 1, 2))
-                          > 1e-12 * np.maximum(scale, 1e-300))
+    quad = np.flatnonzero(
+        np.abs(Q * t_active[:, None, None] * t_active[None, :, None]).max(axis=(0, 1, 2))
+        > 1e-12 * np.maximum(scale, 1e-300)
+    )
     if quad.size and t_active.any():
         best_q, t_q = _quadratic_maximum(b[..., quad], Q[..., quad], t_active, exact, ascents)
         best[:, quad], best_t[:, quad] = best_q, t_q

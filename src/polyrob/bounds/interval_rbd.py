@@ -17,8 +17,17 @@ from polyrob.bounds.balls import arb_lower, arb_upper
 from polyrob.bounds.symbolic_rbd import SymbolicDynamics, joint_axes
 from polyrob.bounds.taylor_models import TaylorContext, const_tm, interval_inverse, inverse_tm, poly_tm
 
-__all__ = ["SymbolicDynamics", "joint_axes", "interval_inverse", "arb_upper", "arb_lower", "box_coefficients",
-           "entry_list", "entry_terms", "entry_depends"]
+__all__ = [
+    "SymbolicDynamics",
+    "joint_axes",
+    "interval_inverse",
+    "arb_upper",
+    "arb_lower",
+    "box_coefficients",
+    "entry_list",
+    "entry_terms",
+    "entry_depends",
+]
 
 
 def entry_list(m: int) -> list[tuple[str, int, int]]:
@@ -27,9 +36,11 @@ def entry_list(m: int) -> list[tuple[str, int, int]]:
     ``("B", i, j)`` = ``Minv[i, j]`` (i <= j; ``Minv`` is symmetric),
     ``("Av", i, j)`` = ``d qdd_i / d qdot_j``, ``("Aq", i, k)`` = ``d qdd_i / d q_k``.
     """
-    return ([("B", i, j) for i in range(m) for j in range(i, m)]
-            + [("Av", i, j) for i in range(m) for j in range(m)]
-            + [("Aq", i, k) for i in range(m) for k in range(m)])
+    return (
+        [("B", i, j) for i in range(m) for j in range(i, m)]
+        + [("Av", i, j) for i in range(m) for j in range(m)]
+        + [("Aq", i, k) for i in range(m) for k in range(m)]
+    )
 
 
 def _coef_rows(sd, d, Minv, W, T, MG, cq):
@@ -149,8 +160,11 @@ def _centre_only(sd, d, get_c, ctx):
     def rows(f):
         return _coef_rows(sd, d, f(Minv), [f(x) for x in W], [f(x) for x in T], f(MG), [f(x) for x in cq])
 
-    return (rows(lambda t: t.c0), {p: rows(lambda t: t.c1[p]) for p in ctx.dims},
-            {k: rows(lambda t: t.c2[k]) for k in ctx.pairs})
+    return (
+        rows(lambda t: t.c0),
+        {p: rows(lambda t: t.c1[p]) for p in ctx.dims},
+        {k: rows(lambda t: t.c2[k]) for k in ctx.pairs},
+    )
 
 
 def entry_terms(sd: SymbolicDynamics, damping) -> list[set]:

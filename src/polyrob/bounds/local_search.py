@@ -17,8 +17,9 @@ from polyrob.bounds.search import Problem, exact_witnesses, inner_maxima
 __all__ = ["refine", "cross_seed"]
 
 
-def cross_seed(problem: Problem, directions, values, witnesses, index, dropped, depends, progress, pool,
-               rounds: int = 3):
+def cross_seed(
+    problem: Problem, directions, values, witnesses, index, dropped, depends, progress, pool, rounds: int = 3
+):
     """Search each direction again from the other directions' witnesses where those are higher.
 
     The entries share their sharp peaks (where the mass matrix is nearly
@@ -36,8 +37,9 @@ def cross_seed(problem: Problem, directions, values, witnesses, index, dropped, 
         if not better.size:
             break
         starts, start_vals = exact_witnesses(problem, q[best[better]][:, None], directions[better], index, pool)
-        v_ref, w_ref = refine(problem, directions[better], start_vals[:, 0], starts, index, dropped, progress,
-                              pool, depends[better])
+        v_ref, w_ref = refine(
+            problem, directions[better], start_vals[:, 0], starts, index, dropped, progress, pool, depends[better]
+        )
         up = v_ref > values[better]
         values[better[up]], witnesses[better[up]] = v_ref[up], w_ref[up]
     return values, witnesses
@@ -68,9 +70,14 @@ def _local_search(problem: Problem, d, value, index, x0, free, maxiter, coarse=F
         return -vals[0] / scale, -grad / scale
 
     res = optimize.minimize(
-        fun, x0[free], jac=True, method="L-BFGS-B", bounds=list(zip(lo[free], hi[free])),
+        fun,
+        x0[free],
+        jac=True,
+        method="L-BFGS-B",
+        bounds=list(zip(lo[free], hi[free])),
         # a coarse search only ranks its start; the best is then polished
-        options={"maxiter": maxiter, "ftol": 1e-9, "gtol": 1e-6} if coarse
+        options={"maxiter": maxiter, "ftol": 1e-9, "gtol": 1e-6}
+        if coarse
         else {"maxiter": maxiter, "ftol": 1e-14, "gtol": 1e-11},
     )
     x = x0.copy()
@@ -83,12 +90,17 @@ def _exact_inner(problem: Problem, d, index, x):
     m = problem.m
     c, a, b, Q = polynomial_coefficients(
         lambda qq, qd, uu: problem.entries_at(qq, qd, uu, index),
-        x[None, :m], problem.t_centre, problem.t_scale, problem.u_centre, problem.u_scale,
+        x[None, :m],
+        problem.t_centre,
+        problem.t_scale,
+        problem.u_centre,
+        problem.u_scale,
     )
     dd = d[:, None]
     _, t, u = box_maximum(c @ dd, a @ dd, b @ dd, Q @ dd, problem.t_scale > 0, problem.u_scale > 0, exact=True)
-    y = np.concatenate([x[:m], problem.t_centre + problem.t_scale * t[0, 0],
-                        problem.u_centre + problem.u_scale * u[0, 0]])
+    y = np.concatenate(
+        [x[:m], problem.t_centre + problem.t_scale * t[0, 0], problem.u_centre + problem.u_scale * u[0, 0]]
+    )
     return float(problem.entries_at(y[None, :m], y[None, m : 2 * m], y[None, 2 * m :], index)[0] @ d), y
 
 
@@ -118,8 +130,7 @@ def _refine_task(problem: Problem, item):
     return best_val, best_x
 
 
-def refine(problem: Problem, directions, values, starts, index, dropped, progress, pool, depends=None,
-           maxiter=200):
+def refine(problem: Problem, directions, values, starts, index, dropped, progress, pool, depends=None, maxiter=200):
     """Bounded local search (L-BFGS-B) from every start; never lowers a support value.
 
     Each search moves the positions that matter and only the velocities and

@@ -56,15 +56,23 @@ import time
 
 import numpy as np
 
-from polyrob.bounds import local_search, search
+from polyrob.bounds import search
 from polyrob.bounds.domain import Domain
 from polyrob.bounds.parallel import WorkerPool, available_cores
 from polyrob.bounds.pldi_result import PLDI, entry_name
 from polyrob.bounds.polytope import COVERAGE_RTOL, VERTEX_MAX_DIM, Polytope, build_polytope, principal_directions
+from polyrob.bounds.supports import support_values
 from polyrob.errors import ArgumentError, BoundsError, CertificationError
 
-__all__ = ["PLDI", "Polytope", "bound_pldi", "coverage_fraction", "entry_name", "VERTEX_MAX_DIM",
-           "PRINCIPAL_DIRECTIONS"]
+__all__ = [
+    "PLDI",
+    "Polytope",
+    "bound_pldi",
+    "coverage_fraction",
+    "entry_name",
+    "VERTEX_MAX_DIM",
+    "PRINCIPAL_DIRECTIONS",
+]
 
 #: Principal directions of the Jacobian cloud searched besides +-e_i.
 PRINCIPAL_DIRECTIONS = 12
@@ -163,8 +171,15 @@ def bound_pldi(
         With ``certify=True``, when no guaranteed enclosure can be produced.
     """
     t_start = time.perf_counter()
-    _check_counts(samples=samples, screen=screen, coverage=coverage, verify_rounds=verify_rounds,
-                  starts_per_direction=starts_per_direction, screen_starts=screen_starts, workers=workers)
+    _check_counts(
+        samples=samples,
+        screen=screen,
+        coverage=coverage,
+        verify_rounds=verify_rounds,
+        starts_per_direction=starts_per_direction,
+        screen_starts=screen_starts,
+        workers=workers,
+    )
     if domain is None:
         domain = Domain.from_robot(robot)
     if tuple(domain.joint_names) != tuple(robot.joint_names):
@@ -213,10 +228,21 @@ def bound_pldi(
     pcs = axes[:, :PRINCIPAL_DIRECTIONS].T
     directions = np.vstack([np.eye(k), -np.eye(k), pcs / scale, -pcs / scale]) if k else np.zeros((0, 0))
     with WorkerPool(problem, workers) as pool:
-        values, witnesses, sampled_width, stages, rounds, t_sample, t_refine = _supports(
-            problem, q, directions, index, dropped, pool, progress, refine=refine, samples=samples,
-            screen=screen, screen_starts=screen_starts, starts_per_direction=starts_per_direction,
-            verify_rounds=verify_rounds, seed=seed,
+        values, witnesses, sampled_width, stages, rounds, t_sample, t_refine = support_values(
+            problem,
+            q,
+            directions,
+            index,
+            dropped,
+            pool,
+            progress,
+            refine=refine,
+            samples=samples,
+            screen=screen,
+            screen_starts=screen_starts,
+            starts_per_direction=starts_per_direction,
+            verify_rounds=verify_rounds,
+            seed=seed,
         )
         fallback = pool.fallback
     upper, lower = values[:k], -values[k : 2 * k]
@@ -309,69 +335,6 @@ def _check_counts(**counts) -> None:
             raise ArgumentError(f"{name} must be {'>= 1' if name in positive else '>= 0'}, got {value}")
 
 
-def _supports(problem, q, directions, index, dropped, pool, progress, *, refine, samples, screen, screen_starts,
-              starts_per_direction, verify_rounds, seed):
-    """Support values (and witnesses) along every direction: design, screens, local search, verification."""
-    k = len(index)
-    m = problem.m
-    t0 = time.perf_counter()
-    stages = {}
-    if k:
-        # a dense uniform screen of the whole domain adds start positions
-        # near narrow peaks that the position design straddles
-        extra = search.screen(problem, directions, index, screen, screen_starts, seed, pool) if screen else None
-        stages["screen"] = time.perf_counter() - t0
-        values, starts, depends = search.support_pass(
-            problem, q, directions, index, progress, pool, starts_per_direction, extra
-        )
-        stages["design"] = time.perf_counter() - t0 - stages["screen"]
-    else:
-        values, starts, depends = np.zeros(0), np.zeros((0, 1, 3 * m)), np.zeros((0, 2 * m), bool)
-    witnesses = starts[:, 0].copy()
-    t_sample = time.perf_counter() - t0
-    sampled_width = values[:k] + values[k : 2 * k]
-    rounds = 0
-    if refine and k:
-        args = (index, dropped, depends, progress, pool)
-        t1 = time.perf_counter()
-        values, witnesses = local_search.refine(
-            problem, directions, values, starts, index, dropped, progress, pool, depends
-        )
-        stages["refine"] = time.perf_counter() - t1
-        values, witnesses = local_search.cross_seed(problem, directions, values, witnesses, *args)
-        stages["cross_seed"] = time.perf_counter() - t1 - stages["refine"]
-        t1 = time.perf_counter()
-        if screen:
-            # a second screen, around the witnesses of every direction
-            near = search.screen(problem, directions, index, screen, screen_starts, seed + 1, pool, witnesses)
-            starts, _ = search.exact_witnesses(problem, near, directions, index, pool)
-            starts = np.concatenate([witnesses[:, None], starts], axis=1)
-            values, witnesses = local_search.refine(
-                problem, directions, values, starts, index, dropped, progress, pool, depends
-            )
-            values, witnesses = local_search.cross_seed(problem, directions, values, witnesses, *args)
-        stages["screen_near_witnesses"] = time.perf_counter() - t1
-        t1 = time.perf_counter()
-        # Verification rounds: a fresh design (another scramble) must not beat
-        # any support value; where it does, refine again from its witness.
-        for rounds in range(1, verify_rounds + 1):
-            q_new = search.position_design(problem, samples, dropped, seed + 7919 * rounds)
-            v_new, _ = search.inner_maxima(problem, q_new, directions, index, progress, pool)
-            beaten = np.flatnonzero(v_new.max(axis=0) > values + 1e-9 * (1.0 + np.abs(values)))
-            if not beaten.size:
-                break
-            peaks = q_new[search.landscape_peaks(problem, q_new, v_new[:, beaten], starts_per_direction)]
-            s_new, v_start = search.exact_witnesses(problem, peaks, directions[beaten], index, pool)
-            v_ref, w_ref = local_search.refine(
-                problem, directions[beaten], v_start[:, 0], s_new, index, dropped, progress, pool, depends[beaten],
-            )
-            values[beaten], witnesses[beaten] = v_ref, w_ref
-            values, witnesses = local_search.cross_seed(problem, directions, values, witnesses, *args)
-        stages["verification"] = time.perf_counter() - t1
-    t_refine = time.perf_counter() - t0 - t_sample
-    return values, witnesses, sampled_width, stages, rounds, t_sample, t_refine
-
-
 def coverage_fraction(pldi: PLDI, robot, n: int, *, seed=None) -> float:
     """Fraction of ``n`` fresh uniform points whose Jacobians lie in the intervals and polytope."""
     q, qdot, u = pldi.domain.sample(n, method="uniform", seed=seed)
@@ -392,8 +355,16 @@ def _certified(robot, domain: Domain, options: dict, progress: bool):
             "dynamics); analytic models get sampled bounds only: drop --certify"
         )
     enc = certify_module.certified_jacobian_bounds(
-        model, robot.damping, domain.q_lower, domain.q_upper, domain.qdot_lower, domain.qdot_upper,
-        domain.u_lower, domain.u_upper, progress=progress, **options,
+        model,
+        robot.damping,
+        domain.q_lower,
+        domain.q_upper,
+        domain.qdot_lower,
+        domain.qdot_upper,
+        domain.u_lower,
+        domain.u_upper,
+        progress=progress,
+        **options,
     )
     info = {"boxes": int(enc.n_boxes), "seconds": round(float(enc.seconds), 3)}
     return enc.A_lo, enc.A_hi, enc.B_lo, enc.B_hi, info

@@ -30,8 +30,18 @@ __all__ = ["PLDI", "entry_name", "save_pldi", "load_pldi", "pldi_paths", "PLDI_F
 
 #: The ``format`` field of a PLDI file this version writes and reads.
 PLDI_FORMAT = "polyrob.pldi/1"
-_ARRAYS = ("A0", "B0", "A_lower", "A_upper", "B_lower", "B_upper", "entry_index",
-           "witness_lower", "witness_upper", "refinement")
+_ARRAYS = (
+    "A0",
+    "B0",
+    "A_lower",
+    "A_upper",
+    "B_lower",
+    "B_upper",
+    "entry_index",
+    "witness_lower",
+    "witness_upper",
+    "refinement",
+)
 _SUFFIXES = (".json", ".npz")
 
 

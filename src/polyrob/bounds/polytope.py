@@ -92,7 +92,6 @@ def principal_directions(vals: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return vt[:r].T
 
 
-
 def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200_000) -> Polytope:
     """Reduced coordinates, LP bounding box, interior point, vertices and volume ratio.
 
@@ -131,7 +130,10 @@ def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200
     # Interior point (Chebyshev centre) for the vertex enumeration.
     norms = np.linalg.norm(G, axis=1)
     res = optimize.linprog(
-        np.r_[np.zeros(r), -1.0], A_ub=np.c_[G, norms], b_ub=g, bounds=[(None, None)] * r + [(0, None)],
+        np.r_[np.zeros(r), -1.0],
+        A_ub=np.c_[G, norms],
+        b_ub=g,
+        bounds=[(None, None)] * r + [(0, None)],
         method="highs",
     )
     if r <= VERTEX_MAX_DIM and res.status == 0 and res.x[-1] > 1e-12:
@@ -145,9 +147,13 @@ def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200
     z = box_z[:, 0] + rng.random((n_mc, r)) * (box_z[:, 1] - box_z[:, 0])
     in_poly = np.all(z @ G.T <= g + 1e-12, axis=1)
     in_box = np.all(z @ G[box_rows].T <= g[box_rows] + 1e-12, axis=1)
-    note = "" if in_box.any() else (
-        f"volume ratio not computed: none of {n_mc} points drawn in the bounding box of the interval box's "
-        f"section ({r} reduced dimensions) landed in the section itself"
+    note = (
+        ""
+        if in_box.any()
+        else (
+            f"volume ratio not computed: none of {n_mc} points drawn in the bounding box of the interval box's "
+            f"section ({r} reduced dimensions) landed in the section itself"
+        )
     )
     return Polytope(normals, offsets, vertices, centre, basis, int(in_poly.sum()), int(in_box.sum()), note)
 

@@ -58,8 +58,7 @@ def quad_max(a0, a, H, lo, hi, stop=None):
     m = len(a)
     free = [j for j in range(m) if lo[j] < hi[j]]
     # definiteness depends only on the set of free coordinates of a face
-    status = {F: negative_definite(H, F) for r in range(1, len(free) + 1)
-              for F in itertools.combinations(free, r)}
+    status = {F: negative_definite(H, F) for r in range(1, len(free) + 1) for F in itertools.combinations(free, r)}
     best_ub, best_val, best_x = -np.inf, -np.inf, None
     ends = [(arb(lo[j]), arb(hi[j])) for j in range(m)]
     for choice in itertools.product((0, 1, 2), repeat=len(free)):

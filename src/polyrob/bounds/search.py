@@ -17,8 +17,17 @@ from polyrob.bounds.extremes import box_maximum, polynomial_coefficients
 from polyrob.errors import BoundsError
 
 __all__ = [
-    "Problem", "dropped_positions", "position_design", "pilot", "check_mass_matrices", "inner_maxima",
-    "screen", "support_pass", "landscape_peaks", "exact_witnesses", "DEPENDENCE_RTOL",
+    "Problem",
+    "dropped_positions",
+    "position_design",
+    "pilot",
+    "check_mass_matrices",
+    "inner_maxima",
+    "screen",
+    "support_pass",
+    "landscape_peaks",
+    "exact_witnesses",
+    "DEPENDENCE_RTOL",
 ]
 
 
@@ -147,8 +156,9 @@ def check_mass_matrices(robot, q, minv=None) -> None:
                 bad = i
                 break
         if bad is None:
-            raise BoundsError(f"{robot.name}: M(q)^-1 cannot be computed, though M(q) is positive definite at "
-                              "every sampled position")
+            raise BoundsError(
+                f"{robot.name}: M(q)^-1 cannot be computed, though M(q) is positive definite at every sampled position"
+            )
     M = robot.mass_matrix(q[bad])
     eig = np.linalg.eigvalsh(0.5 * (M + M.T)) if np.all(np.isfinite(M)) else np.array([np.nan])
     config = ", ".join(f"{n}={x:.4g}" for n, x in zip(robot.joint_names, q[bad]))
@@ -167,7 +177,11 @@ def _inner_task(problem: Problem, item):
     q, directions, index = item
     c, a, b, Q = polynomial_coefficients(
         lambda qq, qd, uu: problem.entries_at(qq, qd, uu, index),
-        q, problem.t_centre, problem.t_scale, problem.u_centre, problem.u_scale,
+        q,
+        problem.t_centre,
+        problem.t_scale,
+        problem.u_centre,
+        problem.u_scale,
     )
     Dt = directions.T  # (k, D)
     c, a, b, Q = c @ Dt, a @ Dt, b @ Dt, Q @ Dt
@@ -189,8 +203,7 @@ def inner_maxima(problem: Problem, q, directions, index, progress, pool):
         Which velocities and torques each direction depends on at all.
     """
     chunks = np.array_split(np.arange(len(q)), max(1, int(np.ceil(len(q) / 128))))
-    results = pool.map(_inner_task, [(q[c], directions, index) for c in chunks], progress=progress,
-                       label="bounding")
+    results = pool.map(_inner_task, [(q[c], directions, index) for c in chunks], progress=progress, label="bounding")
     vals = np.vstack([r[0] for r in results])
     size = np.max([r[2] for r in results], axis=0)
     dep = np.max([r[1] for r in results], axis=0)
@@ -323,12 +336,20 @@ def _witness_task(problem: Problem, item):
     qq, d, index = item  # one polynomial d . p per position
     c, a, b, Q = polynomial_coefficients(
         lambda x, y, z: problem.entries_at(x, y, z, index),
-        qq, problem.t_centre, problem.t_scale, problem.u_centre, problem.u_scale,
+        qq,
+        problem.t_centre,
+        problem.t_scale,
+        problem.u_centre,
+        problem.u_scale,
     )
     val, t, u = box_maximum(
-        np.einsum("nk,nk->n", c, d)[:, None], np.einsum("nmk,nk->nm", a, d)[..., None],
-        np.einsum("nmk,nk->nm", b, d)[..., None], np.einsum("nijk,nk->nij", Q, d)[..., None],
-        problem.t_scale > 0, problem.u_scale > 0, exact=True,
+        np.einsum("nk,nk->n", c, d)[:, None],
+        np.einsum("nmk,nk->nm", a, d)[..., None],
+        np.einsum("nmk,nk->nm", b, d)[..., None],
+        np.einsum("nijk,nk->nij", Q, d)[..., None],
+        problem.t_scale > 0,
+        problem.u_scale > 0,
+        exact=True,
     )
     x = np.hstack([qq, problem.t_centre + problem.t_scale * t[:, 0], problem.u_centre + problem.u_scale * u[:, 0]])
     return val[:, 0], x

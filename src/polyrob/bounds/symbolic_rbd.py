@@ -142,8 +142,10 @@ class SymbolicDynamics:
         return self._reduce(c * P.derivative(si) - s * P.derivative(ci))
 
     def _matmul(self, A, B):
-        return [[self._reduce(sum((A[i][k] * B[k][j] for k in range(3)), self.ctx.from_dict({})))
-                 for j in range(len(B[0]))] for i in range(len(A))]
+        return [
+            [self._reduce(sum((A[i][k] * B[k][j] for k in range(3)), self.ctx.from_dict({}))) for j in range(len(B[0]))]
+            for i in range(len(A))
+        ]
 
     def _const(self, x):
         return self.ctx.constant(_q(x))
@@ -167,8 +169,10 @@ class SymbolicDynamics:
                 cv, sv = gens[self.var_index[i][0]], gens[self.var_index[i][1]]
                 K = [[0, -aq[2], aq[1]], [aq[2], 0, -aq[0]], [-aq[1], aq[0], 0]]
                 # Rodrigues as Pinocchio: c I + s K + (1 - c) a a^T
-                Rj = [[cv * (1 if r == c else 0) + sv * K[r][c] + (1 - cv) * aq[r] * aq[c] for c in range(3)]
-                      for r in range(3)]
+                Rj = [
+                    [cv * (1 if r == c else 0) + sv * K[r][c] + (1 - cv) * aq[r] * aq[c] for c in range(3)]
+                    for r in range(3)
+                ]
                 pj = [zero, zero, zero]
             else:
                 pv = gens[self.var_index[i][0]]
@@ -220,7 +224,9 @@ class SymbolicDynamics:
                     tot += mass[b - 1] * self._reduce(sum((wj[r] * Rwk[r] for r in range(3)), zero))
                     if self.kinds[j - 1] == "R" and self.kinds[k - 1] == "R":
                         Rkb = T[k][b][0]
-                        Ib = self._matmul(self._matmul(Rkb, Ic[b - 1]), [[Rkb[c][r] for c in range(3)] for r in range(3)])
+                        Ib = self._matmul(
+                            self._matmul(Rkb, Ic[b - 1]), [[Rkb[c][r] for c in range(3)] for r in range(3)]
+                        )
                         Ia = [sum((Ib[r][c] * axes[k - 1][c] for c in range(3)), zero) for r in range(3)]
                         RIa = [sum((Rjk[r][c] * Ia[c] for c in range(3)), zero) for r in range(3)]
                         tot += self._reduce(sum((axes[j - 1][r] * RIa[r] for r in range(3)), zero))

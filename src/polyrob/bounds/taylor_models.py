@@ -78,16 +78,27 @@ class TaylorModel:
         return self.c0 + self._enc1() + self._enc2() + self.R
 
     def __add__(self, o):
-        return TaylorModel(self.c0 + o.c0, {p: x + o.c1[p] for p, x in self.c1.items()},
-                   {k: x + o.c2[k] for k, x in self.c2.items()}, self.R + o.R, self.ctx)
+        return TaylorModel(
+            self.c0 + o.c0,
+            {p: x + o.c1[p] for p, x in self.c1.items()},
+            {k: x + o.c2[k] for k, x in self.c2.items()},
+            self.R + o.R,
+            self.ctx,
+        )
 
     def __sub__(self, o):
-        return TaylorModel(self.c0 - o.c0, {p: x - o.c1[p] for p, x in self.c1.items()},
-                   {k: x - o.c2[k] for k, x in self.c2.items()}, self.R - o.R, self.ctx)
+        return TaylorModel(
+            self.c0 - o.c0,
+            {p: x - o.c1[p] for p, x in self.c1.items()},
+            {k: x - o.c2[k] for k, x in self.c2.items()},
+            self.R - o.R,
+            self.ctx,
+        )
 
     def __neg__(self):
-        return TaylorModel(-self.c0, {p: -x for p, x in self.c1.items()}, {k: -x for k, x in self.c2.items()},
-                   -self.R, self.ctx)
+        return TaylorModel(
+            -self.c0, {p: -x for p, x in self.c1.items()}, {k: -x for k, x in self.c2.items()}, -self.R, self.ctx
+        )
 
     def __mul__(self, o):
         A, B = self, o
@@ -134,7 +145,9 @@ def poly_tm(ctx, get_c, get_b, key_of, shape, shift=()):
 
 def const_tm(ctx, A):
     n, k = A.nrows(), A.ncols()
-    return TaylorModel(A, {p: arb_mat(n, k) for p in ctx.dims}, {pq: arb_mat(n, k) for pq in ctx.pairs}, arb_mat(n, k), ctx)
+    return TaylorModel(
+        A, {p: arb_mat(n, k) for p in ctx.dims}, {pq: arb_mat(n, k) for pq in ctx.pairs}, arb_mat(n, k), ctx
+    )
 
 
 def inverse_tm(Mt):
@@ -154,7 +167,7 @@ def inverse_tm(Mt):
     b = arb(max(arb_upper(sum(abs(Xe[i, j]) for j in range(n))) for i in range(n)))
     if not b < 1:
         return None
-    tail = arb_upper(b ** 3 / (1 - b))
+    tail = arb_upper(b**3 / (1 - b))
     I = arb_mat([[arb(1 if i == j else 0) for j in range(n)] for i in range(n)])
     Y = const_tm(ctx, I) - X + X * X
     Y.R += arb_mat([[arb(0, tail) for _ in range(n)] for _ in range(n)])

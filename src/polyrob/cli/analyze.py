@@ -42,6 +42,12 @@ def print_analysis(a, out) -> None:
     if s.corners_stable is not None:
         out.line(f"corners                {s.corners_stable:.1%} of {s.corners} corners stable")
     out.line(f"worst sampled          max Re(pole) = {s.worst_abscissa:.4g}")
+    tv = a.time_varying
+    if tv is not None:  # side by side with the mu verdict, which ends the report
+        from polyrob.pipeline.time_varying import covers_nonlinear
+
+        out.line(tv.verdict)
+        out.line(f"which covers the robot: {covers_nonlinear(tv.method)}")
     out.line(a.verdict)
 
 
@@ -63,7 +69,9 @@ def cmd_analyze(args) -> int:
     out.stage(
         f"analysis of {source}: mu sweeps (robust stability, robust performance), {args.mc} Monte Carlo parameter sets"
     )
-    a = analyze_controller(problem, K, omega=omega, mc=args.mc, seed=args.seed, progress=out.progress)
+    a = analyze_controller(
+        problem, K, omega=omega, mc=args.mc, seed=args.seed, progress=out.progress, time_varying=args.time_varying
+    )
     report = {
         "robot": robot.name,
         "controller": source,
@@ -99,5 +107,12 @@ def register(sub) -> None:
     p.add_argument("--mc", type=int_at_least(1), default=500, help="Monte Carlo parameter sets")
     p.add_argument("--omega", default=None, help="frequency grid LO:HI:N in rad/s (log spaced; default automatic)")
     p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo sets")
+    p.add_argument(
+        "--no-time-varying",
+        dest="time_varying",
+        action="store_false",
+        help="skip the time-varying certificate (quadratic stability/performance on the PLDI's vertices, "
+        "or the constant-D small gain), the one that covers the moving robot",
+    )
     add_output_flags(p)
     p.set_defaults(func=cmd_analyze)

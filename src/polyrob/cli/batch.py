@@ -70,9 +70,14 @@ def settings_from_args(args) -> dict:
         synthesis["max_iter"] = args.max_iter
     bound_options = {} if args.samples is None else {"samples": args.samples}
     return {
-        "bound_options": bound_options, "synthesis": synthesis, "omega": parse_frequencies(args.omega),
-        "search_bandwidth": args.max_bandwidth, "alphas": parse_list(args.alphas, "--alphas"),
-        "analyze": not args.no_analysis, "mc": args.mc, "validate": not args.no_validate,
+        "bound_options": bound_options,
+        "synthesis": synthesis,
+        "omega": parse_frequencies(args.omega),
+        "search_bandwidth": args.max_bandwidth,
+        "alphas": parse_list(args.alphas, "--alphas"),
+        "analyze": not args.no_analysis,
+        "mc": args.mc,
+        "validate": not args.no_validate,
     }
 
 
@@ -96,8 +101,9 @@ def cmd_batch(args) -> int:
         raise ArgumentError(f"-j must be >= 1, got {args.workers}")
     where = f"Dask scheduler {args.scheduler}" if args.scheduler else f"{args.workers} local worker(s)"
     out.stage(f"{len(jobs)} robot(s) on {where}")
-    res = run_batch(jobs, workers=args.workers, scheduler=args.scheduler, out_dir=args.output,
-                    progress=not out.quiet, **options)
+    res = run_batch(
+        jobs, workers=args.workers, scheduler=args.scheduler, out_dir=args.output, progress=not out.quiet, **options
+    )
     doc = res.summary()
     if args.output:
         doc["files"] = res.files
@@ -107,10 +113,14 @@ def cmd_batch(args) -> int:
         result = ("certified" if r.certified else "not certified") if r.ok else f"FAILED {r.error}: {r.message}"
         if r.ok and r.validation:
             result += f"; validation: {r.validation}"
-        out.line(f"{r.name:<22}{_fmt(r.joints, 'd'):>7}{_fmt(r.parameters, 'd'):>8}{_fmt(r.mu_upper):>10}"
-                 f"{_fmt(r.order, 'd'):>7}{_fmt(r.alpha):>8}{r.seconds:>9.1f}  {result}")
-    out.line(f"{len(res.certified)} of {len(res.results)} certified, {len(res.failed)} failed, "
-             f"{res.seconds:.1f} s on {res.executor}")
+        out.line(
+            f"{r.name:<22}{_fmt(r.joints, 'd'):>7}{_fmt(r.parameters, 'd'):>8}{_fmt(r.mu_upper):>10}"
+            f"{_fmt(r.order, 'd'):>7}{_fmt(r.alpha):>8}{r.seconds:>9.1f}  {result}"
+        )
+    out.line(
+        f"{len(res.certified)} of {len(res.results)} certified, {len(res.failed)} failed, "
+        f"{res.seconds:.1f} s on {res.executor}"
+    )
     if args.output:
         out.line(f"wrote {res.files['summary']['markdown']} and one folder per robot in {args.output}")
     return 1 if res.failed else 0
@@ -119,12 +129,20 @@ def cmd_batch(args) -> int:
 def register(sub) -> None:
     p = sub.add_parser("batch", help="bounds -> synthesis -> analysis for many robots, locally or on a Dask cluster")
     p.add_argument("robots", nargs="*", help="robot names or URDF paths")
-    p.add_argument("--all-serial", action="store_true", help="every serial arm polyrob knows (polyrob.fleet.SERIAL_ARMS)")
+    p.add_argument(
+        "--all-serial", action="store_true", help="every serial arm polyrob knows (polyrob.fleet.SERIAL_ARMS)"
+    )
     p.add_argument("--jobs", default=None, help="JSON list of jobs: robot names or objects of polyrob.fleet.Job fields")
     p.add_argument("-j", "--workers", type=int_at_least(1), default=1, help="local worker processes")
-    p.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://HOST:8786) instead of local workers")
-    p.add_argument("-o", "--output", default=None,
-                   help="folder: per robot a controller file and certificate, summary.json and summary.md")
+    p.add_argument(
+        "--scheduler", default=None, help="Dask scheduler address (tcp://HOST:8786) instead of local workers"
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        default=None,
+        help="folder: per robot a controller file and certificate, summary.json and summary.md",
+    )
     g = p.add_argument_group("domain (every robot)")
     g.add_argument("--domain", default=None, help="a named domain of the robots or a domain file")
     g.add_argument("--q-range", default=None, help="position range, e.g. -pi:pi")
@@ -133,11 +151,17 @@ def register(sub) -> None:
     g.add_argument("--qdot-scale", type=nonnegative_float, default=1.0, help="scale the velocity box")
     g.add_argument("--u-scale", type=nonnegative_float, default=1.0, help="scale the torque box")
     g = p.add_argument_group("weights and model")
-    g.add_argument("--paper-weights", action="store_true",
-                   help="the paper's weights (default: automatic, from the joint count and the domain)")
+    g.add_argument(
+        "--paper-weights",
+        action="store_true",
+        help="the paper's weights (default: automatic, from the joint count and the domain)",
+    )
     g.add_argument("--bandwidth-scale", type=positive_float, default=1.0, help="multiply both bandwidths")
-    g.add_argument("--max-bandwidth", action="store_true",
-                   help="search the largest bandwidth factor with certified mu < 1 (a synthesis per factor)")
+    g.add_argument(
+        "--max-bandwidth",
+        action="store_true",
+        help="search the largest bandwidth factor with certified mu < 1 (a synthesis per factor)",
+    )
     g.add_argument("--alphas", default=None, help="--max-bandwidth: comma-separated factors to scan")
     g.add_argument("--uncertainty", default="auto", choices=["auto", "box", "axes", "lft"], help="uncertainty model")
     g = p.add_argument_group("work per robot")

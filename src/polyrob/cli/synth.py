@@ -167,7 +167,7 @@ def cmd_run(args) -> int:
             run_dir,
             problem,
             design.controller,
-            certificates={"constant-parameter μ": dict(design.certificate, **extra)},
+            certificates=_report_certificates(design, a, extra),
         )
         doc["report"] = str(files.html)
         out.line(f"wrote {files.html}")
@@ -175,6 +175,15 @@ def cmd_run(args) -> int:
         doc["output"] = _save(design, problem, args, out, certificate_extra=extra)
     out.document(doc)
     return 0
+
+
+def _report_certificates(design, analysis, extra: dict) -> dict:
+    """The certificates a run report shows: mu (frozen robot) and, when computed, the time-varying one."""
+    certs = {"constant-parameter μ (frozen robot)": dict(design.certificate, **extra)}
+    tv = analysis.time_varying
+    if tv is not None:
+        certs[f"time-varying ({tv.method}; the moving robot)"] = tv.summary()
+    return certs
 
 
 def _add_synthesis_arguments(p) -> None:

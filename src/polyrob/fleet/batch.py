@@ -26,8 +26,20 @@ from polyrob.fleet.jobs import RobotResult, Settings, as_job, run_job, with_labe
 __all__ = ["BatchResult", "run_batch", "SERIAL_ARMS"]
 
 #: The serial arms ``polyrob batch --all-serial`` runs (bundled and example-robot-data names).
-SERIAL_ARMS = ("planar_2r", "double_pendulum", "TwoDofs", "finger_edu", "so101", "ur5", "ur10", "kinova", "z1",
-               "talos_left_arm", "panda", "xarm7")
+SERIAL_ARMS = (
+    "planar_2r",
+    "double_pendulum",
+    "TwoDofs",
+    "finger_edu",
+    "so101",
+    "ur5",
+    "ur10",
+    "kinova",
+    "z1",
+    "talos_left_arm",
+    "panda",
+    "xarm7",
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,9 +91,15 @@ class BatchResult:
 def _summary(results, total: int, settings: Settings, executor: str, seconds: float) -> dict:
     done = [r for r in results if r is not None]
     return {
-        "format": "polyrob.batch/1", "executor": executor, "total": total, "done": len(done),
-        "certified": sum(1 for r in done if r.ok and r.certified), "failed": sum(1 for r in done if not r.ok),
-        "seconds": round(seconds, 2), "settings": settings.to_dict(), "rows": [r.row() for r in done],
+        "format": "polyrob.batch/1",
+        "executor": executor,
+        "total": total,
+        "done": len(done),
+        "certified": sum(1 for r in done if r.ok and r.certified),
+        "failed": sum(1 for r in done if not r.ok),
+        "seconds": round(seconds, 2),
+        "settings": settings.to_dict(),
+        "rows": [r.row() for r in done],
     }
 
 
@@ -121,8 +139,13 @@ def _settings(settings, options) -> Settings:
 def _lost(job, exc: BaseException, where: str) -> RobotResult:
     """The failure row of a job whose worker did not return (it died, or the pool broke)."""
     text = " ".join(str(exc).split()) or "no message"
-    return RobotResult(name=job.name, robot=str(job.robot), ok=False, error=type(exc).__name__,
-                       message=f"the worker did not return ({where}): {text}")
+    return RobotResult(
+        name=job.name,
+        robot=str(job.robot),
+        ok=False,
+        error=type(exc).__name__,
+        message=f"the worker did not return ({where}): {text}",
+    )
 
 
 def _progress_printer(progress):
@@ -142,8 +165,9 @@ def _progress_printer(progress):
     return show
 
 
-def run_batch(jobs, *, workers: int = 1, scheduler=None, out_dir=None, progress=None, settings: Settings | None = None,
-              **options) -> BatchResult:
+def run_batch(
+    jobs, *, workers: int = 1, scheduler=None, out_dir=None, progress=None, settings: Settings | None = None, **options
+) -> BatchResult:
     """Run the pipeline for many robots (and domain / weight variants), side by side.
 
     Parameters
@@ -217,5 +241,3 @@ def serial_arms() -> tuple:
 
     names = {name for name, _ in available_robots()}
     return tuple(n for n in SERIAL_ARMS if n in names)
-
-

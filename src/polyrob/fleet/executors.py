@@ -67,8 +67,9 @@ class LocalExecutor:
         import multiprocessing as mp
         from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
-        pool = ProcessPoolExecutor(max_workers=min(self.workers, len(calls)), mp_context=mp.get_context("spawn"),
-                                   initializer=_worker_init)
+        pool = ProcessPoolExecutor(
+            max_workers=min(self.workers, len(calls)), mp_context=mp.get_context("spawn"), initializer=_worker_init
+        )
         clean = False
         try:
             futures = {pool.submit(fn, *args): i for i, args in enumerate(calls)}
@@ -125,8 +126,9 @@ class DaskExecutor:
         try:
             from distributed import Client
         except ImportError as exc:  # optional dependency
-            raise ArgumentError("a Dask scheduler needs the 'distributed' package: pip install 'dask[distributed]'") \
-                from exc
+            raise ArgumentError(
+                "a Dask scheduler needs the 'distributed' package: pip install 'dask[distributed]'"
+            ) from exc
         if isinstance(self.scheduler, Client):
             return self.scheduler, False
         try:
@@ -142,15 +144,22 @@ class DaskExecutor:
         futures = []
         clean = False
         try:
-            futures = [client.submit(fn, *args, pure=False, key=f"polyrob-fleet-{i}-{id(self)}")
-                       for i, args in enumerate(calls)]
+            futures = [
+                client.submit(fn, *args, pure=False, key=f"polyrob-fleet-{i}-{id(self)}")
+                for i, args in enumerate(calls)
+            ]
             index = {fut.key: i for i, fut in enumerate(futures)}
             for fut in as_completed(futures):
                 if fut.status == "finished":
                     yield index[fut.key], True, fut.result()
                 else:  # erred (e.g. KilledWorker) or cancelled by someone else
-                    yield index[fut.key], False, fut.exception() if fut.status == "error" else \
-                        RuntimeError(f"the cluster reports the call {fut.status}")
+                    yield (
+                        index[fut.key],
+                        False,
+                        fut.exception()
+                        if fut.status == "error"
+                        else RuntimeError(f"the cluster reports the call {fut.status}"),
+                    )
             clean = True
         finally:
             if not clean and futures:

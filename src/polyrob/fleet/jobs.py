@@ -85,8 +85,9 @@ def as_job(item) -> Job:
     if isinstance(item, dict):
         unknown = sorted(set(item) - set(Job.__dataclass_fields__))
         if unknown or "robot" not in item:
-            raise ArgumentError(f"a job needs 'robot' and takes only {sorted(Job.__dataclass_fields__)}; "
-                                f"got {sorted(item)}")
+            raise ArgumentError(
+                f"a job needs 'robot' and takes only {sorted(Job.__dataclass_fields__)}; got {sorted(item)}"
+            )
         item = dict(item)
         if item.get("lock") is not None:
             item["lock"] = tuple(item["lock"])
@@ -183,8 +184,25 @@ class RobotResult:
 
     def row(self) -> dict:
         """The summary table's row (JSON-ready)."""
-        keys = ("name", "robot", "ok", "error", "message", "joints", "entries", "parameters", "model",
-                "enclosure", "mu_upper", "mu_lower", "certified", "order", "alpha", "verdict", "validation")
+        keys = (
+            "name",
+            "robot",
+            "ok",
+            "error",
+            "message",
+            "joints",
+            "entries",
+            "parameters",
+            "model",
+            "enclosure",
+            "mu_upper",
+            "mu_lower",
+            "certified",
+            "order",
+            "alpha",
+            "verdict",
+            "validation",
+        )
         out = {k: getattr(self, k) for k in keys}
         out["seconds"] = round(float(self.seconds), 2)
         out["timings"] = {k: round(float(v), 2) for k, v in self.timings.items()}
@@ -197,9 +215,11 @@ def controller_data(K) -> dict:
     import numpy as np
 
     if isinstance(K, control.TransferFunction):
-        return {"type": "tf", "num": [[np.asarray(K.num[i][j], float) for j in range(K.ninputs)]
-                                      for i in range(K.noutputs)],
-                "den": [[np.asarray(K.den[i][j], float) for j in range(K.ninputs)] for i in range(K.noutputs)]}
+        return {
+            "type": "tf",
+            "num": [[np.asarray(K.num[i][j], float) for j in range(K.ninputs)] for i in range(K.noutputs)],
+            "den": [[np.asarray(K.den[i][j], float) for j in range(K.ninputs)] for i in range(K.noutputs)],
+        }
     K = control.ss(K)
     return {"type": "ss", **{k: np.asarray(getattr(K, k), float) for k in "ABCD"}}
 
@@ -224,8 +244,15 @@ def _problem(job: Job, settings: Settings, timings: dict):
     from polyrob.pipeline import build_problem, default_hyperparameters
 
     robot = polyrob.load_robot(job.robot, lock=None if job.lock is None else list(job.lock))
-    domain = Domain.from_robot(robot, job.domain, q_range=job.q_range, qdot_max=job.qdot_max, u_max=job.u_max,
-                               qdot_scale=job.qdot_scale, u_scale=job.u_scale)
+    domain = Domain.from_robot(
+        robot,
+        job.domain,
+        q_range=job.q_range,
+        qdot_max=job.qdot_max,
+        u_max=job.u_max,
+        qdot_scale=job.qdot_scale,
+        u_scale=job.u_scale,
+    )
     if job.auto_weights:
         h = automatic_hyperparameters(robot.m, domain, job.weights)
     else:
@@ -234,8 +261,9 @@ def _problem(job: Job, settings: Settings, timings: dict):
         h = default_hyperparameters(robot.m, h, bandwidth_scale=job.bandwidth_scale)
     t0 = time.perf_counter()
     options = {"workers": 1, **settings.bound_options}
-    problem = build_problem(robot, domain, hyperparameters=h, uncertainty=job.uncertainty, progress=False,
-                            bound_options=options)
+    problem = build_problem(
+        robot, domain, hyperparameters=h, uncertainty=job.uncertainty, progress=False, bound_options=options
+    )
     timings["bounds"] = time.perf_counter() - t0
     return problem
 
@@ -293,8 +321,15 @@ def run_job(job: Job, settings: Settings) -> RobotResult:
         try:
             return _run(job, settings, timings, t0)
         except Exception as exc:  # noqa: BLE001 - one robot's failure is data (recorded), not the batch's end
-            return RobotResult(name=job.name, robot=str(job.robot), ok=False, error=type(exc).__name__,
-                               message=_one_line(exc), seconds=time.perf_counter() - t0, timings=timings)
+            return RobotResult(
+                name=job.name,
+                robot=str(job.robot),
+                ok=False,
+                error=type(exc).__name__,
+                message=_one_line(exc),
+                seconds=time.perf_counter() - t0,
+                timings=timings,
+            )
 
 
 def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
@@ -306,8 +341,9 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         # the certificate is at the found bandwidth: the same PLDI (no new bounding) with the scaled weights
         from polyrob.pipeline import build_problem
 
-        problem = build_problem(problem.robot, hyperparameters=hyper, uncertainty=job.uncertainty,
-                                pldi=problem.pldi, progress=False)
+        problem = build_problem(
+            problem.robot, hyperparameters=hyper, uncertainty=job.uncertainty, pldi=problem.pldi, progress=False
+        )
     description = problem.description()
     description["job"] = job.to_dict()
     mu_upper, mu_lower, stable = design.peak_mu, design.peak_mu_lower, True
@@ -315,7 +351,9 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
     details = {"synthesis": design.summary()}
     if settings.analyze:
         t1 = time.perf_counter()
-        a = analyze_controller(problem, design.controller, omega=omega, mc=settings.mc, progress=False)
+        a = analyze_controller(
+            problem, design.controller, omega=omega, mc=settings.mc, progress=False, time_varying=False
+        )
         timings["analysis"] = time.perf_counter() - t1
         details["analysis"] = a.summary()
         rp = a.robust_performance
@@ -334,12 +372,27 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         timings["validation"] = time.perf_counter() - t1
     K = controller_data(design.controller)
     return RobotResult(
-        name=job.name, robot=problem.robot.name, ok=True, joints=int(problem.robot.m),
-        entries=len(problem.pldi.entries), parameters=int(problem.unc.n_params), model=problem.model,
-        enclosure=problem.pldi.enclosure, mu_upper=float(mu_upper), mu_lower=float(mu_lower),
-        certified=bool(stable and mu_upper < 1), order=int(design.certificate.get("order", design.result.order)),
-        alpha=alpha, verdict=line, validation=validation, seconds=time.perf_counter() - t0, timings=timings,
-        controller=K, certificate=dict(design.certificate), problem=description, details=details,
+        name=job.name,
+        robot=problem.robot.name,
+        ok=True,
+        joints=int(problem.robot.m),
+        entries=len(problem.pldi.entries),
+        parameters=int(problem.unc.n_params),
+        model=problem.model,
+        enclosure=problem.pldi.enclosure,
+        mu_upper=float(mu_upper),
+        mu_lower=float(mu_lower),
+        certified=bool(stable and mu_upper < 1),
+        order=int(design.certificate.get("order", design.result.order)),
+        alpha=alpha,
+        verdict=line,
+        validation=validation,
+        seconds=time.perf_counter() - t0,
+        timings=timings,
+        controller=K,
+        certificate=dict(design.certificate),
+        problem=description,
+        details=details,
     )
 
 

@@ -23,9 +23,18 @@ from pathlib import Path
 
 __all__ = ["robot_dir_name", "write_robot", "write_summary", "markdown_table", "plain"]
 
-COLUMNS = (("robot", "robot"), ("joints", "joints"), ("entries", "entries"), ("parameters", "parameters"),
-           ("mu_upper", "mu (upper)"), ("order", "order"), ("alpha", "bandwidth factor"),
-           ("seconds", "time (s)"), ("status", "status"), ("validation", "validation"))
+COLUMNS = (
+    ("robot", "robot"),
+    ("joints", "joints"),
+    ("entries", "entries"),
+    ("parameters", "parameters"),
+    ("mu_upper", "mu (upper)"),
+    ("order", "order"),
+    ("alpha", "bandwidth factor"),
+    ("seconds", "time (s)"),
+    ("status", "status"),
+    ("validation", "validation"),
+)
 
 
 def plain(obj):
@@ -61,10 +70,21 @@ def write_robot(out_dir, result) -> dict:
     if result.ok and result.controller is not None:
         from polyrob.io.controller import save_controller
 
-        paths["controller"] = str(save_controller(result.controller_system(), folder / "controller.json",
-                                                  certificate=plain(result.certificate), info=plain(result.problem)))
-    doc = {"row": result.row(), "certificate": result.certificate, "problem": result.problem,
-           "details": result.details, "files": paths}
+        paths["controller"] = str(
+            save_controller(
+                result.controller_system(),
+                folder / "controller.json",
+                certificate=plain(result.certificate),
+                info=plain(result.problem),
+            )
+        )
+    doc = {
+        "row": result.row(),
+        "certificate": result.certificate,
+        "problem": result.problem,
+        "details": result.details,
+        "files": paths,
+    }
     _dump(folder / "certificate.json", doc)
     return paths
 
@@ -85,8 +105,7 @@ def _cell(value) -> str:
 
 def markdown_table(rows) -> str:
     """The summary rows as a Markdown table (one line per robot)."""
-    lines = ["| " + " | ".join(title for _, title in COLUMNS) + " |",
-             "|" + "|".join("---" for _ in COLUMNS) + "|"]
+    lines = ["| " + " | ".join(title for _, title in COLUMNS) + " |", "|" + "|".join("---" for _ in COLUMNS) + "|"]
     for row in rows:
         row = dict(row, status=_status(row))
         lines.append("| " + " | ".join(_cell(row.get(key)) for key, _ in COLUMNS) + " |")
@@ -99,9 +118,11 @@ def write_summary(out_dir, doc: dict) -> dict:
 
     out = Path(out_dir)
     _dump(out / "summary.json", doc)
-    head = (f"# polyrob batch\n\n{doc.get('done', 0)} of {doc.get('total', 0)} robot(s) done on "
-            f"{doc.get('executor', '')}; {doc.get('certified', 0)} certified, {doc.get('failed', 0)} failed; "
-            f"{doc.get('seconds', 0):.1f} s.\n\n")
+    head = (
+        f"# polyrob batch\n\n{doc.get('done', 0)} of {doc.get('total', 0)} robot(s) done on "
+        f"{doc.get('executor', '')}; {doc.get('certified', 0)} certified, {doc.get('failed', 0)} failed; "
+        f"{doc.get('seconds', 0):.1f} s.\n\n"
+    )
     text = head + markdown_table(doc.get("rows", []))
     atomic_write(out / "summary.md", lambda f: f.write(text))
     return {"json": str(out / "summary.json"), "markdown": str(out / "summary.md")}

@@ -51,9 +51,7 @@ class Manipulator:
 
     @property
     def state_names(self) -> tuple[str, ...]:
-        return tuple(f"q_{n}" for n in self.joint_names) + tuple(
-            f"qdot_{n}" for n in self.joint_names
-        )
+        return tuple(f"q_{n}" for n in self.joint_names) + tuple(f"qdot_{n}" for n in self.joint_names)
 
     def mass_matrix(self, q) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -72,9 +70,7 @@ class Manipulator:
 
     def jacobians(self, q, qdot, u) -> tuple[np.ndarray, np.ndarray]:
         """``A = df/dx`` (2m x 2m) and ``B = df/du`` (2m x m) at one point."""
-        A, B = self.jacobians_batch(
-            np.atleast_2d(q), np.atleast_2d(qdot), np.atleast_2d(u)
-        )
+        A, B = self.jacobians_batch(np.atleast_2d(q), np.atleast_2d(qdot), np.atleast_2d(u))
         return A[0], B[0]
 
     def describe(self) -> dict:

@@ -156,9 +156,7 @@ def resolve_urdf(text: str) -> Path:
             return path
     if candidate.parent != Path("."):
         raise RobotError(f"{text}: no such URDF file")
-    raise RobotError(
-        f"unknown robot '{text}': give a URDF path or one of the names `polyrob robots` lists"
-    )
+    raise RobotError(f"unknown robot '{text}': give a URDF path or one of the names `polyrob robots` lists")
 
 
 # --------------------------------------------------------------------------- listing

@@ -269,7 +269,6 @@ def _joint_kind(path: Path, name: str, joint) -> str:
     kind = _KIND_BY_SHORTNAME.get(short)
     if kind is None:
         raise RobotError(
-            f"{path}: joint '{name}' ({short}) is not a one-degree-of-freedom "
-            "revolute, continuous or prismatic joint"
+            f"{path}: joint '{name}' ({short}) is not a one-degree-of-freedom revolute, continuous or prismatic joint"
         )
     return kind

@@ -100,6 +100,10 @@ class ControllerAnalysis:
     order : int
     covers : str
         What the μ verdict covers.
+    time_varying : TimeVaryingCertificate or None
+        The certificate for Jacobians varying in time (the moving robot),
+        :func:`polyrob.pipeline.time_varying.time_varying_certificate`;
+        ``None`` when not asked for.
     """
 
     robust_stability: object
@@ -108,6 +112,7 @@ class ControllerAnalysis:
     sampling: object
     order: int
     covers: str
+    time_varying: object = None
 
     @property
     def verdict(self) -> str:
@@ -147,11 +152,19 @@ class ControllerAnalysis:
             },
             "covers": self.covers,
             "verdict": self.verdict,
+            "time_varying": None if self.time_varying is None else self.time_varying.summary(),
         }
 
 
 def analyze_controller(
-    problem, K, *, omega=None, mc: int = 500, seed: int = 0, progress: bool | None = None
+    problem,
+    K,
+    *,
+    omega=None,
+    mc: int = 500,
+    seed: int = 0,
+    progress: bool | None = None,
+    time_varying: bool = True,
 ) -> ControllerAnalysis:
     """Nominal/robust stability and performance of ``K`` on ``problem``, and sampled stability.
 
@@ -167,6 +180,9 @@ def analyze_controller(
     seed : int
     progress : bool, optional
         Progress bars of the μ sweeps.
+    time_varying : bool
+        Also compute the time-varying certificate (quadratic stability and
+        performance on the PLDI's vertices, or the constant-D small gain).
     """
     from polyrob.analysis.robust import nominal_performance, robperf, robstab, sample_stability
 
@@ -181,6 +197,11 @@ def analyze_controller(
     covers = getattr(rp, "covers", None)  # the analysis' own wording when it provides one
     covers = covers() if callable(covers) else covers
     covers = covers or problem.covers()
+    tv = None
+    if time_varying:
+        from polyrob.pipeline.time_varying import time_varying_certificate
+
+        tv = time_varying_certificate(problem, K)
     return ControllerAnalysis(
         robust_stability=rs,
         robust_performance=rp,
@@ -188,4 +209,5 @@ def analyze_controller(
         sampling=sampling,
         order=controller_order(K),
         covers=str(covers),
+        time_varying=tv,
     )

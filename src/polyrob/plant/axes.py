@@ -83,8 +83,9 @@ def _full_block_gains(rho_mat):
     return rows, cols, a, b
 
 
-def axes_plant(pldi, *, n_directions: int | None = None, residual_tol: float = RESIDUAL_TOL,
-               nominal: str = "pldi") -> UncertainPlant:
+def axes_plant(
+    pldi, *, n_directions: int | None = None, residual_tol: float = RESIDUAL_TOL, nominal: str = "pldi"
+) -> UncertainPlant:
     """The ``axes`` model of a PLDI (see the module docstring).
 
     Parameters
@@ -187,16 +188,44 @@ def axes_plant(pldi, *, n_directions: int | None = None, residual_tol: float = R
     Bd_low = np.hstack(blocks_B) if blocks_B else np.zeros((m, 0))
     Cvu = np.vstack(blocks_C) if blocks_C else np.zeros((0, 3 * m))
     plant = UncertainPlant(
-        robot_name=pldi.robot_name, nominal_kind=nominal, A_nom=A_mid, B_nom=B_mid,
-        C=np.hstack([np.eye(m), np.zeros((m, m))]), A_mid=A_mid, B_mid=B_mid, B_d=low @ Bd_low,
-        C_v=Cvu[:, :n], D_vu=Cvu[:, n:], parameter_names=tuple(names), parameter_lower=z_lo + 0.0,
-        parameter_upper=z_hi + 0.0, channel_names=tuple(ch_names), channel_parameter=np.array(ch_param, int),
-        channel_index=None, channel_lower=None, channel_upper=None, nominal_delta=np.zeros(r),
-        offset=np.zeros(r), block_structure=np.array(blk, int).reshape(-1, 2),
-        info={"enclosure": pldi.enclosure, "n_directions": r, "searched_directions": n_pc,
-              "residual_gain": float(np.linalg.norm(rho / norm_unit)), "spread": float(spread),
-              "centre": centre, "basis": b_r, "W": W_r, "z_mid": z_mid, "z_rad": z_rad,
-              "residual_rows": rows, "residual_cols": cols, "W_l": a, "W_r": b, "layout": lay},
+        robot_name=pldi.robot_name,
+        nominal_kind=nominal,
+        A_nom=A_mid,
+        B_nom=B_mid,
+        C=np.hstack([np.eye(m), np.zeros((m, m))]),
+        A_mid=A_mid,
+        B_mid=B_mid,
+        B_d=low @ Bd_low,
+        C_v=Cvu[:, :n],
+        D_vu=Cvu[:, n:],
+        parameter_names=tuple(names),
+        parameter_lower=z_lo + 0.0,
+        parameter_upper=z_hi + 0.0,
+        channel_names=tuple(ch_names),
+        channel_parameter=np.array(ch_param, int),
+        channel_index=None,
+        channel_lower=None,
+        channel_upper=None,
+        nominal_delta=np.zeros(r),
+        offset=np.zeros(r),
+        block_structure=np.array(blk, int).reshape(-1, 2),
+        info={
+            "enclosure": pldi.enclosure,
+            "n_directions": r,
+            "searched_directions": n_pc,
+            "residual_gain": float(np.linalg.norm(rho / norm_unit)),
+            "spread": float(spread),
+            "centre": centre,
+            "basis": b_r,
+            "W": W_r,
+            "z_mid": z_mid,
+            "z_rad": z_rad,
+            "residual_rows": rows,
+            "residual_cols": cols,
+            "W_l": a,
+            "W_r": b,
+            "layout": lay,
+        },
         model="axes",
     )
     if nominal == "midpoint":
@@ -222,7 +251,7 @@ def axes_contains(unc: UncertainPlant, A, B, *, rtol: float = 1e-9) -> np.ndarra
     if A.ndim == 2:
         A, B = A[None], B[None]
     info = unc.info
-    m, n = unc.m, unc.n_x
+    m = unc.m
     lay = info["layout"]
     AB = np.concatenate([A[:, m:], B[:, m:]], axis=2)  # (N, m, 3m)
     AB_c = np.hstack([unc.A_mid[m:], unc.B_mid[m:]])

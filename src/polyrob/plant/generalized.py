@@ -55,6 +55,7 @@ Examples
 >>> N.ninputs, N.noutputs
 (12, 14)
 """
+
 from __future__ import annotations
 
 import math
@@ -284,15 +285,31 @@ def generalized_plant(
     z_names = [f"{tags[lab]}[{i}]" for lab in labels for i in range(m)]
     w_names = [f"xw[{i}]" for i in range(N - n)]
     system = control.ss(
-        A, B, C, D,
+        A,
+        B,
+        C,
+        D,
         inputs=d_lab + [f"r[{i}]" for i in range(m)] + [f"u[{i}]" for i in range(m)],
         outputs=v_lab + z_names + [f"e[{i}]" for i in range(m)],
-        states=x_lab + w_names, name="P", dt=0,
+        states=x_lab + w_names,
+        name="P",
+        dt=0,
     )
     blk_rs = np.asarray(unc.block_structure, dtype=int).reshape(-1, 2)
     blk_rp = np.vstack([blk_rs, [[m, n_z]]]).astype(int)
     return GeneralizedPlant(
-        system=system, uncertain=unc, W_S=WS, W_T=WT, W_KS=WKS, regularize=eps,
-        n_delta=nd, n_w=m, n_z=n_z, n_u=m, n_y=m, z_labels=tuple(labels),
-        block_structure_rs=blk_rs, block_structure_rp=blk_rp,
+        system=system,
+        uncertain=unc,
+        W_S=WS,
+        W_T=WT,
+        W_KS=WKS,
+        regularize=eps,
+        n_delta=nd,
+        n_w=m,
+        n_z=n_z,
+        n_u=m,
+        n_y=m,
+        z_labels=tuple(labels),
+        block_structure_rs=blk_rs,
+        block_structure_rp=blk_rp,
     )

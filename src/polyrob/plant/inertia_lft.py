@@ -142,8 +142,15 @@ def _factor(Mf: np.ndarray):
     return Q[:, keep] * lam[keep], Q[:, keep].T
 
 
-def inertia_lft_plant(pldi, *, robot=None, nominal: str = "pldi", repeated: bool = False,
-                      a_part: str = "entries", bound_options: dict | None = None) -> UncertainPlant:
+def inertia_lft_plant(
+    pldi,
+    *,
+    robot=None,
+    nominal: str = "pldi",
+    repeated: bool = False,
+    a_part: str = "entries",
+    bound_options: dict | None = None,
+) -> UncertainPlant:
     """The ``lft`` model of a PLDI (see the module docstring).
 
     Parameters
@@ -212,8 +219,9 @@ def inertia_lft_plant(pldi, *, robot=None, nominal: str = "pldi", repeated: bool
     Minv = np.linalg.inv(M_c)
     facs = [_factor(F) for F in Mf]
     if not repeated:  # one parameter per rank-one piece, over the feature's range
-        names = [f"{nm}#{i + 1}" if Uf.shape[1] > 1 else nm for nm, (Uf, _) in zip(names, facs)
-                 for i in range(Uf.shape[1])]
+        names = [
+            f"{nm}#{i + 1}" if Uf.shape[1] > 1 else nm for nm, (Uf, _) in zip(names, facs) for i in range(Uf.shape[1])
+        ]
         th_mid = np.repeat(th_mid, [Uf.shape[1] for Uf, _ in facs])
         th_rad = np.repeat(th_rad, [Uf.shape[1] for Uf, _ in facs])
         ranges = np.repeat(ranges, [Uf.shape[1] for Uf, _ in facs], axis=0)
@@ -250,15 +258,40 @@ def inertia_lft_plant(pldi, *, robot=None, nominal: str = "pldi", repeated: bool
     ch_names = n_names + tuple(f"{names[p - k]}@{i}" for i, p in enumerate(ch_param[k:]))
     blk = [[-1, 0]] * k + [[-Uf.shape[1], 0] for Uf, _ in facs]
     plant = UncertainPlant(
-        robot_name=pldi.robot_name, nominal_kind=nominal, A_nom=A_mid, B_nom=B_mid,
-        C=np.hstack([np.eye(m), np.zeros((m, m))]), A_mid=A_mid, B_mid=B_mid, B_d=B_d, C_v=C_v, D_vu=D_vu,
-        parameter_names=par_names, parameter_lower=np.r_[n_lo, ranges[:, 0]],
-        parameter_upper=np.r_[n_hi, ranges[:, 1]], channel_names=ch_names, channel_parameter=ch_param,
-        channel_index=None, channel_lower=None, channel_upper=None, nominal_delta=np.zeros(len(par_names)),
-        offset=np.zeros(len(par_names)), block_structure=np.array(blk, int).reshape(-1, 2),
-        info={"enclosure": pldi.enclosure, "N_enclosure": npldi.enclosure, "M0": M0, "Mf": Mf, "repeated": repeated, "a_part": a_part,
-              "N_centre": N_c, "N_index": nidx, "N_seconds": npldi.info.get("seconds_total") if torque else 0.0},
-        model="lft", D_vd=D_vd,
+        robot_name=pldi.robot_name,
+        nominal_kind=nominal,
+        A_nom=A_mid,
+        B_nom=B_mid,
+        C=np.hstack([np.eye(m), np.zeros((m, m))]),
+        A_mid=A_mid,
+        B_mid=B_mid,
+        B_d=B_d,
+        C_v=C_v,
+        D_vu=D_vu,
+        parameter_names=par_names,
+        parameter_lower=np.r_[n_lo, ranges[:, 0]],
+        parameter_upper=np.r_[n_hi, ranges[:, 1]],
+        channel_names=ch_names,
+        channel_parameter=ch_param,
+        channel_index=None,
+        channel_lower=None,
+        channel_upper=None,
+        nominal_delta=np.zeros(len(par_names)),
+        offset=np.zeros(len(par_names)),
+        block_structure=np.array(blk, int).reshape(-1, 2),
+        info={
+            "enclosure": pldi.enclosure,
+            "N_enclosure": npldi.enclosure,
+            "M0": M0,
+            "Mf": Mf,
+            "repeated": repeated,
+            "a_part": a_part,
+            "N_centre": N_c,
+            "N_index": nidx,
+            "N_seconds": npldi.info.get("seconds_total") if torque else 0.0,
+        },
+        model="lft",
+        D_vd=D_vd,
     )
     if nominal == "midpoint":
         return plant
@@ -270,7 +303,10 @@ def inertia_lft_plant(pldi, *, robot=None, nominal: str = "pldi", repeated: bool
     centre = np.r_[n_mid, th_mid]
     rad = np.r_[n_rad, th_rad]
     return plant.with_figures(
-        A_nom=A0, B_nom=B0, nominal_delta=nom_delta, offset=centre - (centre + rad * nom_delta),
+        A_nom=A0,
+        B_nom=B0,
+        nominal_delta=nom_delta,
+        offset=centre - (centre + rad * nom_delta),
     )
 
 

@@ -81,8 +81,14 @@ def upper_lft(M: control.StateSpace, Delta) -> control.StateSpace:
         raise PolyrobError("the upper LFT is ill posed: I - Δ D_vd is singular")
     Q = np.linalg.solve(lhs, Delta) if nd else np.zeros((0, nv))
     return control.ss(
-        A + B1 @ Q @ C1, B2 + B1 @ Q @ D12, C2 + D21 @ Q @ C1, D22 + D21 @ Q @ D12,
-        inputs=M.input_labels[nd:], outputs=M.output_labels[nv:], states=M.state_labels, dt=M.dt,
+        A + B1 @ Q @ C1,
+        B2 + B1 @ Q @ D12,
+        C2 + D21 @ Q @ C1,
+        D22 + D21 @ Q @ D12,
+        inputs=M.input_labels[nd:],
+        outputs=M.output_labels[nv:],
+        states=M.state_labels,
+        dt=M.dt,
     )
 
 
@@ -367,7 +373,7 @@ class UncertainPlant:
         systems = [self.plant_at(d) for d in deltas]
         return (systems, deltas) if return_delta else systems
 
-    def with_figures(self, **figures) -> "UncertainPlant":
+    def with_figures(self, **figures) -> UncertainPlant:
         """A copy with ``coverage``, ``coverage_points``, ``volume_ratio`` or ``info`` replaced."""
         from dataclasses import replace
 

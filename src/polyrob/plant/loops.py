@@ -11,11 +11,10 @@ plant, the loop functions and the synthesis stage
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import control
 import numpy as np
-
-from typing import TYPE_CHECKING
 
 from polyrob.errors import PolyrobError
 from polyrob.plant.realize import as_controller_ss, as_state_space, ss_matrices
@@ -56,7 +55,14 @@ def _lower_lft(P: control.StateSpace, K: control.StateSpace, n_u: int, n_y: int)
         raise PolyrobError("the lower LFT is ill posed: I - D_yu D_K is singular") from None
     states = list(P.state_labels) + [f"xK[{i}]" for i in range(K.nstates)]
     return control.ss(
-        Acl, Bcl, Ccl, Dcl, inputs=P.input_labels[:nw], outputs=P.output_labels[:nz], states=states, dt=0,
+        Acl,
+        Bcl,
+        Ccl,
+        Dcl,
+        inputs=P.input_labels[:nw],
+        outputs=P.output_labels[:nz],
+        states=states,
+        dt=0,
     )
 
 
@@ -155,24 +161,37 @@ def loop_functions(G: control.StateSpace, K, *, delta=None) -> ClosedLoop:
     # loop plant: inputs [r, u], outputs [e, y, u, e_meas]
     Bl = np.hstack([np.zeros((n, p)), B])
     Cl = np.vstack([-C, C, np.zeros((m, n)), -C])
-    Dl = np.block([
-        [np.eye(p), -D],
-        [np.zeros((p, p)), D],
-        [np.zeros((m, p)), np.eye(m)],
-        [np.eye(p), -D],
-    ])
+    Dl = np.block(
+        [
+            [np.eye(p), -D],
+            [np.zeros((p, p)), D],
+            [np.zeros((m, p)), np.eye(m)],
+            [np.eye(p), -D],
+        ]
+    )
     L = control.ss(
-        A, Bl, Cl, Dl,
+        A,
+        Bl,
+        Cl,
+        Dl,
         inputs=[f"r[{i}]" for i in range(p)] + [f"u[{i}]" for i in range(m)],
-        outputs=[f"e[{i}]" for i in range(p)] + [f"y[{i}]" for i in range(p)] + [f"u[{i}]" for i in range(m)]
+        outputs=[f"e[{i}]" for i in range(p)]
+        + [f"y[{i}]" for i in range(p)]
+        + [f"u[{i}]" for i in range(m)]
         + [f"em[{i}]" for i in range(p)],
-        states=list(G.state_labels), dt=0,
+        states=list(G.state_labels),
+        dt=0,
     )
     cl = _lower_lft(L, Ks, m, p)
     poles = np.linalg.eigvals(np.asarray(cl.A)) if cl.nstates else np.zeros(0)
     stable = bool(np.all(poles.real < 0))
     return ClosedLoop(
-        S=cl[:p, :], T=cl[p : 2 * p, :], KS=cl[2 * p :, :], system=cl, poles=poles, stable=stable,
+        S=cl[:p, :],
+        T=cl[p : 2 * p, :],
+        KS=cl[2 * p :, :],
+        system=cl,
+        poles=poles,
+        stable=stable,
         delta=None if delta is None else np.asarray(delta, float),
     )
 

@@ -38,6 +38,9 @@ def paper_controller() -> control.TransferFunction:
     44157
     """
     return control.tf(
-        PAPER_CONTROLLER["num"], PAPER_CONTROLLER["den"],
-        inputs=["e[0]", "e[1]"], outputs=["u[0]", "u[1]"], name="K*",
+        PAPER_CONTROLLER["num"],
+        PAPER_CONTROLLER["den"],
+        inputs=["e[0]", "e[1]"],
+        outputs=["u[0]", "u[1]"],
+        name="K*",
     )

@@ -16,9 +16,7 @@ __all__ = ["is_static", "as_state_space", "weight_ss", "ss_matrices", "as_contro
 
 
 def is_static(W) -> bool:
-    return isinstance(W, (int, float, np.integer, np.floating)) or (
-        isinstance(W, np.ndarray) and W.ndim <= 2
-    )
+    return isinstance(W, (int, float, np.integer, np.floating)) or (isinstance(W, np.ndarray) and W.ndim <= 2)
 
 
 def _siso_ss(num, den) -> control.StateSpace:
@@ -77,7 +75,7 @@ def as_state_space(sys, what: str) -> control.StateSpace:
     elif isinstance(sys, control.LTI):
         try:
             out = control.ss(sys)
-        except Exception as exc:
+        except (ValueError, TypeError, NotImplementedError, control.ControlMIMONotImplemented) as exc:
             raise PolyrobError(f"{what}: cannot convert {type(sys).__name__} to state space ({exc})") from None
     else:
         raise PolyrobError(f"{what} must be a python-control LTI system or a number, got {type(sys).__name__}")
@@ -134,8 +132,12 @@ def as_controller_ss(K, n_u: int, n_y: int) -> control.StateSpace:
 
     Raises :class:`~polyrob.errors.PolyrobError` on a size mismatch.
     """
-    Ks = as_state_space(K, "K") if not is_static(K) else control.ss(
-        np.zeros((0, 0)), np.zeros((0, n_y)), np.zeros((n_u, 0)), np.atleast_2d(np.asarray(K, float)), dt=0
+    Ks = (
+        as_state_space(K, "K")
+        if not is_static(K)
+        else control.ss(
+            np.zeros((0, 0)), np.zeros((0, n_y)), np.zeros((n_u, 0)), np.atleast_2d(np.asarray(K, float)), dt=0
+        )
     )
     if (Ks.noutputs, Ks.ninputs) != (n_u, n_y):
         raise PolyrobError(

@@ -12,7 +12,7 @@
 from __future__ import annotations
 
 import math
-from typing import Sequence, Union
+from collections.abc import Sequence
 
 import control
 import numpy as np
@@ -52,7 +52,7 @@ def _positive(name: str, value: float, allow_zero: bool = False) -> float:
 
 def makeweight(
     dcgain: float,
-    crossover: Union[float, Sequence[float]],
+    crossover: float | Sequence[float],
     hfgain: float,
     *,
     order: int = 1,
@@ -122,8 +122,7 @@ def makeweight(
     n = int(order)
     if not (dc < mag < hf or dc > mag > hf):
         raise PolyrobError(
-            f"makeweight needs mag strictly between dcgain and hfgain "
-            f"(got dcgain={dc}, mag={mag}, hfgain={hf})"
+            f"makeweight needs mag strictly between dcgain and hfgain (got dcgain={dc}, mag={mag}, hfgain={hf})"
         )
     wp = freq * ((hf**2 - mag**2) / (mag**2 - dc**2)) ** (1.0 / (2 * n))
     k = np.arange(1, n + 1)

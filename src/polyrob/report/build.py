@@ -73,9 +73,19 @@ def default_scenarios(robot, domain, q0, *, rate: float | None = None):
     return out
 
 
-def validate_controller(problem, K, *, rate: float | None = 1000.0, mc: int | str = 20, seed: int = 0,
-                        scenarios=None, word_lengths=(8, 40), search_rate: bool = True,
-                        mu_omega=None, discrete_omega=None) -> Validation:
+def validate_controller(
+    problem,
+    K,
+    *,
+    rate: float | None = 1000.0,
+    mc: int | str = 20,
+    seed: int = 0,
+    scenarios=None,
+    word_lengths=(8, 40),
+    search_rate: bool = True,
+    mu_omega=None,
+    discrete_omega=None,
+) -> Validation:
     """Monte Carlo, nonlinear simulations, discretisation/quantisation and μ of ``K`` on ``problem``.
 
     Parameters
@@ -110,16 +120,19 @@ def validate_controller(problem, K, *, rate: float | None = 1000.0, mc: int | st
     notes = []
     mc_res = monte_carlo(P, K, n=mc, seed=seed)
     point = pldi.nominal_point
-    q0 = np.asarray(point["q"], float) if point else np.clip(np.zeros(robot.m), pldi.domain.q_lower,
-                                                                 pldi.domain.q_upper)
+    q0 = (
+        np.asarray(point["q"], float) if point else np.clip(np.zeros(robot.m), pldi.domain.q_lower, pldi.domain.q_upper)
+    )
     scenarios = default_scenarios(robot, pldi.domain, q0, rate=rate) if scenarios is None else scenarios
     sims = tuple(simulate(robot, K, pldi, ref, q0=q0, **kw) for ref, kw in scenarios)
 
     w = np.logspace(-3, 4, 60) if mu_omega is None else np.asarray(mu_omega, float)
     mu = mu_bounds(lft(P, K), P.block_structure_rp, w, refine_peak=False, progress=False)
     curves = {"robust performance (continuous)": (mu.omega, mu.upper, mu.lower)}
-    notes.append("μ curves are bounds at the grid frequencies (peak on the grid); the certificate's own figure "
-                 "is in the table above.")
+    notes.append(
+        "μ curves are bounds at the grid frequencies (peak on the grid); the certificate's own figure "
+        "is in the table above."
+    )
 
     disc = None
     dgrid = DISCRETE_GRID if discrete_omega is None else np.asarray(discrete_omega, float)
@@ -127,13 +140,25 @@ def validate_controller(problem, K, *, rate: float | None = 1000.0, mc: int | st
         mu_c = continuous_mu(P, K, dgrid)
         sd = sampled_data_mu(P, K, rate, omega=dgrid)
         curves[f"discretised loop @ {rate:.4g} Hz"] = (sd.omega, sd.upper, sd.lower)
-        disc = {"rate_hz": rate, "method": sd.method, "prewarp_rad_s": sd.prewarp,
-                "discrete_loop_stable": sd.stable, "spectral_radius": sd.spectral_radius,
-                "mu_continuous_grid": mu_c, "mu_discrete_grid": sd.mu_upper,
-                "mu_threshold (continuous + 5 %)": 1.05 * mu_c}
+        disc = {
+            "rate_hz": rate,
+            "method": sd.method,
+            "prewarp_rad_s": sd.prewarp,
+            "discrete_loop_stable": sd.stable,
+            "spectral_radius": sd.spectral_radius,
+            "mu_continuous_grid": mu_c,
+            "mu_discrete_grid": sd.mu_upper,
+            "mu_threshold (continuous + 5 %)": 1.05 * mu_c,
+        }
         if search_rate:
-            mr = min_sample_rate(P, K, mu_continuous=mu_c, omega=dgrid, rel_tol=0.1,
-                                 rate_bounds=(max(1.0, rate / 1000.0), max(rate, 10.0) * 10.0))
+            mr = min_sample_rate(
+                P,
+                K,
+                mu_continuous=mu_c,
+                omega=dgrid,
+                rel_tol=0.1,
+                rate_bounds=(max(1.0, rate / 1000.0), max(rate, 10.0) * 10.0),
+            )
             disc["min_rate_hz"] = mr.rate
             disc["mu_at_min_rate"] = mr.mu
         sos = sos_realization(sd.controller)
@@ -144,12 +169,15 @@ def validate_controller(problem, K, *, rate: float | None = 1000.0, mc: int | st
         if wl.word_length is None:
             q = quantize(sos, word_lengths[1])
             rho = float(np.abs(np.linalg.eigvals(np.asarray(q.to_ss().A))).max()) if q.n_sections else 0.0
-            notes.append(f"no word length up to {word_lengths[1]} bits keeps the discretised loop stable with μ "
-                         f"within 5 % (controller spectral radius at {word_lengths[1]} bits: {rho:.12g})")
-        notes.append("μ of the discretised loop (plant by zero-order hold) checks the sample rate and the word "
-                     "length; it is not a certificate of the sampled-data system.")
-    return Validation(monte_carlo=mc_res, simulations=sims, discretization=disc, mu_curves=curves,
-                      notes=tuple(notes))
+            notes.append(
+                f"no word length up to {word_lengths[1]} bits keeps the discretised loop stable with μ "
+                f"within 5 % (controller spectral radius at {word_lengths[1]} bits: {rho:.12g})"
+            )
+        notes.append(
+            "μ of the discretised loop (plant by zero-order hold) checks the sample rate and the word "
+            "length; it is not a certificate of the sampled-data system."
+        )
+    return Validation(monte_carlo=mc_res, simulations=sims, discretization=disc, mu_curves=curves, notes=tuple(notes))
 
 
 def _paper_reference(robot):
@@ -161,8 +189,16 @@ def _paper_reference(robot):
     return {}
 
 
-def write_run_report(run_dir, problem, K, *, certificates: dict | None = None, controllers: dict | None = None,
-                     title: str | None = None, **options) -> ReportFiles:
+def write_run_report(
+    run_dir,
+    problem,
+    K,
+    *,
+    certificates: dict | None = None,
+    controllers: dict | None = None,
+    title: str | None = None,
+    **options,
+) -> ReportFiles:
     """The end of ``polyrob run ROBOT -o DIR``: validate ``K`` and write ``DIR/report.html``.
 
     Saves ``DIR/pldi.json`` (+ ``.npz``) when absent, so that
@@ -175,9 +211,19 @@ def write_run_report(run_dir, problem, K, *, certificates: dict | None = None, c
     val = validate_controller(problem, K, **options)
     comp = {**_paper_reference(problem.robot), **(controllers or {})}
     return write_report(
-        run, title=title, robot_name=problem.robot.name, pldi=problem.pldi, unc=problem.unc, controller=K,
-        controllers=comp, certificates=certificates, monte_carlo=val.monte_carlo, simulations=val.simulations,
-        discretization=val.discretization, mu_curves=val.mu_curves, notes=val.notes,
+        run,
+        title=title,
+        robot_name=problem.robot.name,
+        pldi=problem.pldi,
+        unc=problem.unc,
+        controller=K,
+        controllers=comp,
+        certificates=certificates,
+        monte_carlo=val.monte_carlo,
+        simulations=val.simulations,
+        discretization=val.discretization,
+        mu_curves=val.mu_curves,
+        notes=val.notes,
     )
 
 
@@ -214,18 +260,20 @@ def build_report(run_dir, *, controller: str = "K.json", pldi: str = "pldi.json"
         raise PolyrobError(f"{run}: no such run directory")
     for name in (controller, pldi):
         if not (run / name).exists():
-            raise PolyrobError(f"{run}: no {name} (a run directory holds K.json and pldi.json: "
-                               "`polyrob run ROBOT -o DIR` writes them)")
+            raise PolyrobError(
+                f"{run}: no {name} (a run directory holds K.json and pldi.json: `polyrob run ROBOT -o DIR` writes them)"
+            )
     doc = read_controller_file(run / controller)
     K = load_controller(run / controller)
     p = PLDI.load(run / pldi)
     info = doc.get("info") or {}
     unc_info = info.get("uncertainty") or {}
     problem = build_problem(
-        p.robot, pldi=p, hyperparameters={k: tuple(v) for k, v in info["weights"].items()} if info.get("weights")
-        else None, uncertainty=unc_info.get("requested", "box") if isinstance(unc_info, dict) else str(unc_info),
+        p.robot,
+        pldi=p,
+        hyperparameters={k: tuple(v) for k, v in info["weights"].items()} if info.get("weights") else None,
+        uncertainty=unc_info.get("requested", "box") if isinstance(unc_info, dict) else str(unc_info),
         merge_symmetric=bool(unc_info.get("merge_symmetric", False)) if isinstance(unc_info, dict) else False,
     )
     others = {f.stem[2:]: load_controller(f) for f in sorted(run.glob("K_*.json"))}
-    return write_run_report(run, problem, K, certificates=_load_certificates(run, doc), controllers=others,
-                            **options)
+    return write_run_report(run, problem, K, certificates=_load_certificates(run, doc), controllers=others, **options)

@@ -60,8 +60,10 @@ class _Doc:
     """HTML and Markdown built side by side."""
 
     def __init__(self, title):
-        self.h = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
-                  f"<style>{CSS}</style></head><body><h1>{html.escape(title)}</h1>"]
+        self.h = [
+            f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+            f"<style>{CSS}</style></head><body><h1>{html.escape(title)}</h1>"
+        ]
         self.md = [f"# {title}", ""]
 
     def heading(self, text):
@@ -77,17 +79,24 @@ class _Doc:
         self.h.append("<table><tr>" + "".join(f"<th class='l'>{html.escape(str(c))}</th>" for c in header) + "</tr>")
         for k, row in enumerate(rows):
             cls = " class='bad'" if k in bad_rows else ""
-            self.h.append(f"<tr{cls}>" + "".join(
-                f"<td class='l'>{html.escape(_fmt(c))}</td>" if i == 0 else f"<td>{html.escape(_fmt(c))}</td>"
-                for i, c in enumerate(row)) + "</tr>")
+            self.h.append(
+                f"<tr{cls}>"
+                + "".join(
+                    f"<td class='l'>{html.escape(_fmt(c))}</td>" if i == 0 else f"<td>{html.escape(_fmt(c))}</td>"
+                    for i, c in enumerate(row)
+                )
+                + "</tr>"
+            )
         self.h.append("</table>")
         self.md += ["| " + " | ".join(map(str, header)) + " |", "|" + "---|" * len(header)]
         self.md += ["| " + " | ".join(_fmt(c) for c in row) + " |" for row in rows]
         self.md.append("")
 
     def figure(self, rel, caption):
-        self.h.append(f"<figure><img src='{html.escape(rel)}' alt='{html.escape(caption)}'>"
-                      f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+        self.h.append(
+            f"<figure><img src='{html.escape(rel)}' alt='{html.escape(caption)}'>"
+            f"<figcaption>{html.escape(caption)}</figcaption></figure>"
+        )
         self.md += [f"![{caption}]({rel})", ""]
 
     def text(self):
@@ -187,8 +196,11 @@ def write_report(
         doc.heading("Nonlinear closed loop (the robot's own dynamics)")
         left = [s for s in sims if not s.certificate_applies]
         if left:
-            doc.para(f"{len(left)} of {len(sims)} simulations left the domain of the PLDI: the certificate does "
-                     "not apply to those trajectories.", bad=True)
+            doc.para(
+                f"{len(left)} of {len(sims)} simulations left the domain of the PLDI: the certificate does "
+                "not apply to those trajectories.",
+                bad=True,
+            )
         else:
             doc.para(f"All {len(sims)} simulations stayed in the domain of the PLDI.")
         rows, bad = [], []
@@ -196,44 +208,85 @@ def write_report(
             label = s.controller + (f" @ {s.rate:.4g} Hz" if s.rate else "")
             target = "" if s.reference.target is None else np.round(np.asarray(s.reference.target), 4).tolist()
             for mt in s.metrics:
-                rows.append((f"#{k + 1} {s.reference.kind} {target} ({label})", mt.joint, mt.rise_time,
-                             mt.overshoot, mt.settling_time, mt.steady_state_error, mt.peak_torque,
-                             mt.effort_limit, "no" if s.left_domain else "yes"))
+                rows.append(
+                    (
+                        f"#{k + 1} {s.reference.kind} {target} ({label})",
+                        mt.joint,
+                        mt.rise_time,
+                        mt.overshoot,
+                        mt.settling_time,
+                        mt.steady_state_error,
+                        mt.peak_torque,
+                        mt.effort_limit,
+                        "no" if s.left_domain else "yes",
+                    )
+                )
                 if s.left_domain:
                     bad.append(len(rows) - 1)
-        doc.table(["simulation", "joint", "rise time (s)", "overshoot (%)", "settling (s)", "steady-state error",
-                   "peak torque", "effort limit", "in domain"], rows, bad_rows=bad)
+        doc.table(
+            [
+                "simulation",
+                "joint",
+                "rise time (s)",
+                "overshoot (%)",
+                "settling (s)",
+                "steady-state error",
+                "peak torque",
+                "effort limit",
+                "in domain",
+            ],
+            rows,
+            bad_rows=bad,
+        )
         for k, s in enumerate(sims):
             doc.para(f"#{k + 1}: {s.verdict()}", bad=s.left_domain or not s.success)
-        fig("tracking.png", lambda p: plots.plot_tracking(sims, p, joint_names=[m.joint for m in sims[0].metrics]),
+        fig(
+            "tracking.png",
+            lambda p: plots.plot_tracking(sims, p, joint_names=[m.joint for m in sims[0].metrics]),
             "Nonlinear closed loop: positions and references, torques against the effort limits "
-            "(red: after leaving the domain)")
+            "(red: after leaving the domain)",
+        )
         validation["simulations"] = [s.summary() for s in sims]
 
     if discretization:
         doc.heading("Discretisation and quantisation")
-        doc.table(["figure", "value"], [(k, v) for k, v in discretization.items()
-                                       if not isinstance(v, (dict, list)) or len(v) <= 6])
+        doc.table(
+            ["figure", "value"],
+            [(k, v) for k, v in discretization.items() if not isinstance(v, (dict, list)) or len(v) <= 6],
+        )
         validation["discretization"] = discretization
 
     # ------------------------------------------------------------------ the problem
     if pldi is not None:
         doc.heading("PLDI: bounds of the Jacobians over the domain")
-        doc.para(f"Enclosure: {pldi.enclosure}; coverage {pldi.coverage:.4g} of {pldi.coverage_points} fresh points; "
-                 f"domain '{pldi.domain.name}'.")
-        doc.table(["entry", "lower", "upper", "nominal"],
-                  [(n, lo, hi, nm) for n, lo, hi, nm in zip(pldi.entries, pldi.lower, pldi.upper, pldi.nominal)])
+        doc.para(
+            f"Enclosure: {pldi.enclosure}; coverage {pldi.coverage:.4g} of {pldi.coverage_points} fresh points; "
+            f"domain '{pldi.domain.name}'."
+        )
+        doc.table(
+            ["entry", "lower", "upper", "nominal"],
+            [(n, lo, hi, nm) for n, lo, hi, nm in zip(pldi.entries, pldi.lower, pldi.upper, pldi.nominal)],
+        )
     if unc is not None:
-        fig("pldi_bode.png", lambda p: plots.plot_pldi_bode(unc, p), "Bode magnitude of sampled and corner plants "
-            "of the uncertain plant, and the nominal (paper Fig. 3)")
+        fig(
+            "pldi_bode.png",
+            lambda p: plots.plot_pldi_bode(unc, p),
+            "Bode magnitude of sampled and corner plants of the uncertain plant, and the nominal (paper Fig. 3)",
+        )
     if monte_carlo is not None:
         doc.heading("Monte Carlo over the uncertain plant")
         s = monte_carlo.summary()
-        doc.table(["figure", "value"], [(k, v) for k, v in s.items() if not isinstance(v, dict)]
-                  + [(f"max |{k}| · |W_{k}| over samples", v) for k, v in s["weight_ratio"].items()])
+        doc.table(
+            ["figure", "value"],
+            [(k, v) for k, v in s.items() if not isinstance(v, dict)]
+            + [(f"max |{k}| · |W_{k}| over samples", v) for k, v in s["weight_ratio"].items()],
+        )
         doc.para("Sampled plants illustrate; they certify nothing about the plants between them.")
-        fig("sensitivities.png", lambda p: plots.plot_sensitivities(monte_carlo, p),
-            "S and T of the sampled plants (grey), the nominal (black) and 1/|W_S|, 1/|W_T| (red) (paper Fig. 4)")
+        fig(
+            "sensitivities.png",
+            lambda p: plots.plot_sensitivities(monte_carlo, p),
+            "S and T of the sampled plants (grey), the nominal (black) and 1/|W_S|, 1/|W_T| (red) (paper Fig. 4)",
+        )
         fig("steps.png", lambda p: plots.plot_steps(monte_carlo, p), "Step responses of the sampled linear loops")
         validation["monte_carlo"] = s
     comp = dict(controllers or {})
@@ -241,8 +294,11 @@ def write_report(
         comp = {"this run": controller, **comp}
     if comp:
         doc.heading("Controllers")
-        fig("controllers.png", lambda p: plots.plot_controllers(comp, p),
-            "Magnitude of each controller entry (paper Fig. 5)")
+        fig(
+            "controllers.png",
+            lambda p: plots.plot_controllers(comp, p),
+            "Magnitude of each controller entry (paper Fig. 5)",
+        )
     if mu_curves:
         doc.heading("μ over frequency")
         fig("mu.png", lambda p: plots.plot_mu(mu_curves, p), "μ upper (solid) and lower (dashed) bounds")

@@ -78,8 +78,9 @@ def plot_sensitivities(mc, path) -> Path:
     m = mc.m
     fig = Figure(layout="tight", figsize=(3.4 * m, 5.2))
     axes = np.array(fig.subplots(2, m, squeeze=False))
-    for row, (name, H, Hn, inv) in enumerate((("S", mc.S, mc.S_nominal, mc.inv_W_S),
-                                              ("T", mc.T, mc.T_nominal, mc.inv_W_T))):
+    for row, (name, H, Hn, inv) in enumerate(
+        (("S", mc.S, mc.S_nominal, mc.inv_W_S), ("T", mc.T, mc.T_nominal, mc.inv_W_T))
+    ):
         for i in range(m):
             ax = axes[row, i]
             for k in range(mc.n):

@@ -93,13 +93,21 @@ class VertexSynthesisResult:
         """JSON-ready figures."""
         qs, qp = self.quadstab, self.quadperf
         return {
-            "structure": self.structure, "order": self.order, "n_vertices": self.n_vertices,
-            "vertex_source": self.vertex_source, "grid_peak": self.grid_peak,
-            "initial_grid_peak": self.initial_grid_peak, "warm_gain": self.warm_gain,
-            "quadstab": None if qs is None else {"holds": qs.holds, "decay_rate": qs.margin,
-                                                 "lmi_vertices": qs.info.get("lmi_vertices")},
-            "quadperf": ({"holds": False, "not_run": self.info.get("quadperf_skipped")} if qp is None else
-                         {"holds": qp.holds, "gamma": qp.gamma, "lmi_vertices": qp.info.get("lmi_vertices")}),
+            "structure": self.structure,
+            "order": self.order,
+            "n_vertices": self.n_vertices,
+            "vertex_source": self.vertex_source,
+            "grid_peak": self.grid_peak,
+            "initial_grid_peak": self.initial_grid_peak,
+            "warm_gain": self.warm_gain,
+            "quadstab": None
+            if qs is None
+            else {"holds": qs.holds, "decay_rate": qs.margin, "lmi_vertices": qs.info.get("lmi_vertices")},
+            "quadperf": (
+                {"holds": False, "not_run": self.info.get("quadperf_skipped")}
+                if qp is None
+                else {"holds": qp.holds, "gamma": qp.gamma, "lmi_vertices": qp.info.get("lmi_vertices")}
+            ),
             "seconds": round(self.seconds, 2),
         }
 
@@ -120,7 +128,7 @@ class _Grid:
         self.P21, self.P22 = H[:, :, nz:, :m], H[:, :, nz:, m:]
         self.m = m
 
-    def subset(self, idx) -> "_Grid":
+    def subset(self, idx) -> _Grid:
         out = object.__new__(_Grid)
         out.P11, out.P12, out.P21, out.P22 = (X[idx] for X in (self.P11, self.P12, self.P21, self.P22))
         out.m = self.m
@@ -129,7 +137,7 @@ class _Grid:
     def peaks(self, K, dK=None):
         """σ_max of the closed loop at every (vertex, frequency), and its gradient data."""
         I = np.eye(self.m)
-        R = np.linalg.inv(I - self.P22 @ K[None])            # (I - P22 K)^-1
+        R = np.linalg.inv(I - self.P22 @ K[None])  # (I - P22 K)^-1
         T = self.P11 + self.P12 @ K[None] @ R @ self.P21
         U, S, Vh = np.linalg.svd(T)
         sig = S[..., 0]
@@ -137,7 +145,7 @@ class _Grid:
             return sig, None
         # dT = P12 (I - K P22)^-1 dK (I - P22 K)^-1 P21 ; dσ = Re(u^H dT v)
         L = self.P12 @ np.linalg.inv(I - K[None] @ self.P22)
-        a = np.einsum("vfzi,vfz->vfi", L.conj(), U[..., :, 0])      # conj of (u^H L)
+        a = np.einsum("vfzi,vfz->vfi", L.conj(), U[..., :, 0])  # conj of (u^H L)
         b = R @ self.P21 @ Vh[..., 0, :].conj()[..., None]
         return sig, (a.conj(), b[..., 0])
 
@@ -319,5 +327,10 @@ def vertex_synthesis(
         n_vertices=vs.n_vertices,
         vertex_source=vs.source,
         seconds=time.perf_counter() - t0,
-        info={"quadperf_skipped": skipped, "bfgs_iterations": nit, "bfgs_message": msg, "omega": [omega[0], omega[-1], len(omega)]},
+        info={
+            "quadperf_skipped": skipped,
+            "bfgs_iterations": nit,
+            "bfgs_message": msg,
+            "omega": [omega[0], omega[-1], len(omega)],
+        },
     )

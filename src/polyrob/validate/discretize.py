@@ -134,8 +134,9 @@ def discretize(K, rate: float, *, method: str = "tustin", prewarp: float | None 
         if not (0 < prewarp < math.pi * rate):
             raise PolyrobError(f"the pre-warping frequency must lie in (0, π·rate) = (0, {math.pi * rate:.4g}) rad/s")
     if Ks.nstates == 0:
-        Kd = control.ss(np.zeros((0, 0)), np.zeros((0, Ks.ninputs)), np.zeros((Ks.noutputs, 0)),
-                        np.asarray(Ks.D, float), dt=h)
+        Kd = control.ss(
+            np.zeros((0, 0)), np.zeros((0, Ks.ninputs)), np.zeros((Ks.noutputs, 0)), np.asarray(Ks.D, float), dt=h
+        )
     elif method == "tustin":
         Kd = control.sample_system(Ks, h, method="bilinear", prewarp_frequency=prewarp)
     else:
@@ -190,9 +191,16 @@ class SampledDataResult:
     info: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
-        return {"rate_hz": self.rate, "method": self.method, "prewarp_rad_s": self.prewarp,
-                "stable": self.stable, "spectral_radius": self.spectral_radius,
-                "mu_upper": self.mu_upper, "mu_lower": self.mu_lower, "peak_frequency": self.peak_frequency}
+        return {
+            "rate_hz": self.rate,
+            "method": self.method,
+            "prewarp_rad_s": self.prewarp,
+            "stable": self.stable,
+            "spectral_radius": self.spectral_radius,
+            "mu_upper": self.mu_upper,
+            "mu_lower": self.mu_lower,
+            "peak_frequency": self.peak_frequency,
+        }
 
 
 def _mu_curve(sys, blk, w, upper_only, mu_options):
@@ -204,8 +212,7 @@ def _mu_curve(sys, blk, w, upper_only, mu_options):
         mu = mu_bounds(sys, blk, w, **{"refine_peak": False, "progress": False, **mu_options})
         return mu.omega, mu.upper, mu.lower
     H = frequency_response(sys, w)
-    up = np.array([mussv(H[k], blk, lower=False).upper if np.all(np.isfinite(H[k])) else np.inf
-                   for k in range(len(w))])
+    up = np.array([mussv(H[k], blk, lower=False).upper if np.all(np.isfinite(H[k])) else np.inf for k in range(len(w))])
     return np.asarray(w, float), up, np.full(len(w), np.nan)
 
 
@@ -292,9 +299,19 @@ def sampled_data_mu(
     else:  # an unstable loop has no finite μ certificate
         up, lo, pk, ww, uu, ll = np.inf, np.inf, float("nan"), w, np.full(w.size, np.inf), np.full(w.size, np.inf)
     return SampledDataResult(
-        rate=float(rate), method=dc.method, prewarp=dc.prewarp, stable=bool(stable), spectral_radius=rho,
-        mu_upper=float(up), mu_lower=float(lo), peak_frequency=float(pk), omega=ww, upper=uu, lower=ll,
-        controller=dc, info={"performance": performance, "plant_discretisation": "zoh"},
+        rate=float(rate),
+        method=dc.method,
+        prewarp=dc.prewarp,
+        stable=bool(stable),
+        spectral_radius=rho,
+        mu_upper=float(up),
+        mu_lower=float(lo),
+        peak_frequency=float(pk),
+        omega=ww,
+        upper=uu,
+        lower=ll,
+        controller=dc,
+        info={"performance": performance, "plant_discretisation": "zoh"},
     )
 
 
@@ -316,9 +333,14 @@ class MinRateResult:
     method: str
 
     def summary(self) -> dict:
-        return {"min_rate_hz": self.rate, "mu_at_min_rate": self.mu, "threshold": self.threshold,
-                "mu_continuous": self.mu_continuous, "method": self.method,
-                "history": [list(h) for h in self.history]}
+        return {
+            "min_rate_hz": self.rate,
+            "mu_at_min_rate": self.mu,
+            "threshold": self.threshold,
+            "mu_continuous": self.mu_continuous,
+            "method": self.method,
+            "history": [list(h) for h in self.history],
+        }
 
 
 def continuous_mu(P, K, omega=None, *, performance: bool = True, upper_only: bool = True, **mu_options) -> float:

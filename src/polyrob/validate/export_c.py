@@ -181,14 +181,30 @@ class ExportResult:
     discrete: object
 
     def summary(self) -> dict:
-        return {"header": str(self.header), "source": str(self.source), "json": str(self.json),
-                "rate_hz": self.sos.rate, "word_length": self.sos.word_length, "sections": self.sos.n_sections,
-                "method": self.discrete.method, "prewarp_rad_s": self.discrete.prewarp}
+        return {
+            "header": str(self.header),
+            "source": str(self.source),
+            "json": str(self.json),
+            "rate_hz": self.sos.rate,
+            "word_length": self.sos.word_length,
+            "sections": self.sos.n_sections,
+            "method": self.discrete.method,
+            "prewarp_rad_s": self.discrete.prewarp,
+        }
 
 
-def export_controller(K, rate: float, out_dir, *, word_length: int | None = None, method: str = "tustin",
-                      prewarp: float | None = None, real: str = "double", name: str = "controller",
-                      extra: dict | None = None) -> ExportResult:
+def export_controller(
+    K,
+    rate: float,
+    out_dir,
+    *,
+    word_length: int | None = None,
+    method: str = "tustin",
+    prewarp: float | None = None,
+    real: str = "double",
+    name: str = "controller",
+    extra: dict | None = None,
+) -> ExportResult:
     """``polyrob export``: discretise ``K`` at ``rate`` Hz, biquads per entry, optional quantisation, C + JSON.
 
     Writes ``out_dir/<name>.h``, ``out_dir/<name>.c`` and ``out_dir/<name>.json``.

@@ -195,8 +195,9 @@ def _structural_entry(sys, i, j) -> control.StateSpace:
             break
         reach, obs = new_r, new_o
     k = np.flatnonzero(reach & obs)
-    return control.ss(A[np.ix_(k, k)], B[k, j : j + 1], C[i : i + 1, k], np.asarray(sys.D)[i : i + 1, j : j + 1],
-                      dt=sys.dt)
+    return control.ss(
+        A[np.ix_(k, k)], B[k, j : j + 1], C[i : i + 1, k], np.asarray(sys.D)[i : i + 1, j : j + 1], dt=sys.dt
+    )
 
 
 def sos_realization(controller, *, tol: float = 1e-9) -> SOSController:
@@ -306,12 +307,17 @@ class WordLengthResult:
     controller: SOSController | None
 
     def summary(self) -> dict:
-        return {"min_word_length": self.word_length, "mu": self.mu, "threshold": self.threshold,
-                "history": [list(h) for h in self.history]}
+        return {
+            "min_word_length": self.word_length,
+            "mu": self.mu,
+            "threshold": self.threshold,
+            "history": [list(h) for h in self.history],
+        }
 
 
-def min_word_length(P, sos: SOSController, *, threshold: float, lengths=(4, 40), omega=None,
-                    **mu_options) -> WordLengthResult:
+def min_word_length(
+    P, sos: SOSController, *, threshold: float, lengths=(4, 40), omega=None, **mu_options
+) -> WordLengthResult:
     """Shortest coefficient word length keeping the discretised loop stable with μ <= ``threshold``.
 
     Bisection over ``lengths = (shortest, longest)`` bits, assuming longer
@@ -323,8 +329,9 @@ def min_word_length(P, sos: SOSController, *, threshold: float, lengths=(4, 40),
 
     def check(W):
         q = quantize(sos, W)
-        res = sampled_data_mu(P, None, sos.rate, controller=q.to_ss(), omega=omega,
-                              **{"upper_only": True, **mu_options})
+        res = sampled_data_mu(
+            P, None, sos.rate, controller=q.to_ss(), omega=omega, **{"upper_only": True, **mu_options}
+        )
         ok = res.stable and res.mu_upper <= threshold
         history.append((int(W), float(res.mu_upper), bool(res.stable), bool(ok)))
         return ok, res.mu_upper, q

@@ -61,5 +61,9 @@ def smooth_reference(target, duration: float, start=None) -> Reference:
     """A minimum-jerk move from ``start`` (default: the initial ``q``) to ``target`` in ``duration`` s."""
     if not duration > 0:
         raise PolyrobError(f"a smooth reference needs a positive duration, got {duration}")
-    return Reference("smooth", target=np.asarray(target, float),
-                     start=None if start is None else np.asarray(start, float), duration=float(duration))
+    return Reference(
+        "smooth",
+        target=np.asarray(target, float),
+        start=None if start is None else np.asarray(start, float),
+        duration=float(duration),
+    )

@@ -155,17 +155,18 @@ class SimulationResult:
         of the largest step (coupling moves it too).
         """
         largest = max((abs(mt.step) for mt in self.metrics), default=0.0)
-        return all(
-            mt.steady_state_error <= tolerance * max(abs(mt.step), 0.1 * largest, 1e-9) for mt in self.metrics
-        )
+        return all(mt.steady_state_error <= tolerance * max(abs(mt.step), 0.1 * largest, 1e-9) for mt in self.metrics)
 
     def verdict(self) -> str:
         """One line: whether the certificate applies to this trajectory."""
         if not self.success:
             return "integration failed: " + str(self.info.get("message", ""))
         if self.left_domain:
-            return ("LEFT THE DOMAIN (" + "; ".join(self.domain_exits)
-                    + "): the certificate does not apply to this trajectory")
+            return (
+                "LEFT THE DOMAIN ("
+                + "; ".join(self.domain_exits)
+                + "): the certificate does not apply to this trajectory"
+            )
         return "stayed in the domain: the PLDI (and its certificate) covers this trajectory"
 
     def summary(self) -> dict:
@@ -181,8 +182,10 @@ class SimulationResult:
             "torque_within_limits": self.torque_within_limits,
             "success": bool(self.success),
             "verdict": self.verdict(),
-            "joints": [{k: (float(v) if isinstance(v, (float, np.floating)) else v)
-                        for k, v in mt.__dict__.items()} for mt in self.metrics],
+            "joints": [
+                {k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in mt.__dict__.items()}
+                for mt in self.metrics
+            ],
         }
 
 
@@ -210,11 +213,19 @@ def _metrics(robot, t, q, r, u, q0) -> tuple:
                 settle = 0.0
             elif outside[-1] < len(t) - 1:
                 settle = float(t[outside[-1] + 1])
-        out.append(JointMetrics(
-            joint=name, step=step, rise_time=rise, overshoot=overshoot, settling_time=settle,
-            steady_state_error=sse, max_tracking_error=float(err.max()),
-            peak_torque=float(np.abs(u[j]).max()), effort_limit=float(robot.effort_limit[j]),
-        ))
+        out.append(
+            JointMetrics(
+                joint=name,
+                step=step,
+                rise_time=rise,
+                overshoot=overshoot,
+                settling_time=settle,
+                steady_state_error=sse,
+                max_tracking_error=float(err.max()),
+                peak_torque=float(np.abs(u[j]).max()),
+                effort_limit=float(robot.effort_limit[j]),
+            )
+        )
     return tuple(out)
 
 
@@ -343,8 +354,15 @@ def simulate(
         u = u_eq + Ck @ xk + Dk @ e
         return np.concatenate([qd, robot.acceleration(q, qd, u), Ak @ xk + Bk @ e])
 
-    sol = solve_ivp(rhs, (0.0, t_final), np.concatenate([q0, qdot0, np.zeros(nk)]), method="LSODA",
-                    dense_output=True, rtol=rtol, atol=atol)
+    sol = solve_ivp(
+        rhs,
+        (0.0, t_final),
+        np.concatenate([q0, qdot0, np.zeros(nk)]),
+        method="LSODA",
+        dense_output=True,
+        rtol=rtol,
+        atol=atol,
+    )
     # the output grid plus every accepted step: fast transients (torque peaks,
     # domain exits) fall on the solver's own short steps
     t = np.union1d(np.linspace(0.0, sol.t[-1], n_points), sol.t)
@@ -386,15 +404,33 @@ def _simulate_discrete(robot, Kd, dom, reference, r_of_t, t_final, q0, qdot0, u_
     U = np.array(us + us[-1:]).T if us else np.tile(u_eq[:, None], (1, 1))
     R = np.array(rs + [r_of_t(ts[-1])]).T if rs else np.asarray(r_of_t(0.0))[:, None]
     t = np.array(ts)
-    info = {"solver": "solve_ivp RK45 per hold interval", "nfev": int(nfev), "message": message,
-            "u_eq_source": u_source, "period": h}
+    info = {
+        "solver": "solve_ivp RK45 per hold interval",
+        "nfev": int(nfev),
+        "message": message,
+        "u_eq_source": u_source,
+        "period": h,
+    }
     return _result(robot, dom, t, X[:m], X[m:], U, R, "discrete", 1.0 / h, reference, q0, u_eq, ok, info)
 
 
 def _result(robot, dom, t, q, qd, u, r, kind, rate, reference, q0, u_eq, success, info) -> SimulationResult:
     exits, first, outside = _domain_check(dom, robot, t, q, qd, u)
     return SimulationResult(
-        t=t, q=q, qdot=qd, u=u, r=r, controller=kind, rate=rate, reference=reference,
-        metrics=_metrics(robot, t, q, r, u, q0), left_domain=bool(exits), domain_exits=exits,
-        first_exit_time=first, time_outside=outside, u_eq=np.asarray(u_eq, float), success=success, info=info,
+        t=t,
+        q=q,
+        qdot=qd,
+        u=u,
+        r=r,
+        controller=kind,
+        rate=rate,
+        reference=reference,
+        metrics=_metrics(robot, t, q, r, u, q0),
+        left_domain=bool(exits),
+        domain_exits=exits,
+        first_exit_time=first,
+        time_outside=outside,
+        u_eq=np.asarray(u_eq, float),
+        success=success,
+        info=info,
     )

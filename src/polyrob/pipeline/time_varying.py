@@ -1,0 +1,209 @@
+"""The time-varying certificate of a controller on a problem: the robot in motion.
+
+μ with constant parameters (:mod:`polyrob.pipeline.analysis`) certifies each
+*frozen* plant of the uncertainty set.  :func:`time_varying_certificate` adds
+the test that holds for Jacobians varying arbitrarily fast inside the PLDI,
+and so for the moving nonlinear robot while it stays in the domain
+(docs/certificates.md):
+
+* on the PLDI's vertices when they can be enumerated (polytope or box
+  corners, at most :data:`~polyrob.analysis.quadratic_vertices.MAX_VERTICES`):
+  quadratic stability (:func:`~polyrob.analysis.quadratic.quadstab`) and,
+  when it holds, quadratic H∞ performance
+  (:func:`~polyrob.analysis.quadratic.quadperf`), one Lyapunov matrix for all
+  vertices;
+* otherwise (6-7 joints) the constant-D scaled small gain on the LFT model
+  (:func:`~polyrob.analysis.quadratic_smallgain.scaled_small_gain`), which
+  covers the Jacobians as far as the uncertainty model covers them.
+
+Every figure is a verified bound (the LMI solutions are checked a posteriori);
+a test that was not run says why in ``notes``.
+
+Examples
+--------
+>>> from polyrob import load_robot, paper_controller
+>>> from polyrob.pipeline import build_problem
+>>> problem = build_problem(load_robot("paper_2r"), bound_options={"samples": 256}, progress=False)
+>>> tv = time_varying_certificate(problem, paper_controller())
+>>> tv.method, tv.stability_holds          # K* has frozen vertices that are unstable
+('vertices', False)
+>>> tv.verdict.startswith("time-varying verdict: robust stability NOT certified")
+True
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from polyrob.errors import PolyrobError
+
+__all__ = ["TimeVaryingCertificate", "time_varying_certificate", "covers_nonlinear"]
+
+
+def covers_nonlinear(method: str) -> str:
+    """The one sentence saying which verdict covers the moving nonlinear robot."""
+    if method == "scaled small gain":
+        return (
+            "Only the time-varying certificate (constant-D scaled small gain on the LFT model) covers the moving "
+            "nonlinear robot, as far as the model covers its Jacobians and only while its state and torque stay "
+            "inside the domain the PLDI was bounded on; mu with constant parameters certifies each frozen robot "
+            "of the set, not the robot in motion."
+        )
+    from polyrob.analysis.quadratic import COVERS_NONLINEAR
+
+    return COVERS_NONLINEAR
+
+
+@dataclass(frozen=True, eq=False)
+class TimeVaryingCertificate:
+    """Robust stability and performance for time-varying Jacobians.
+
+    Attributes
+    ----------
+    method : str
+        ``"vertices"`` (common Lyapunov matrix on the PLDI's vertices) or
+        ``"scaled small gain"`` (constant ``D`` on the LFT model).
+    stability_holds, performance_holds : bool
+        Verified: stability / ``L2 gain r -> z < 1`` for every variation.
+    gamma : float
+        Verified bound of the ``r -> z`` L2 gain (``inf`` when none was verified
+        or the performance test did not run).
+    stability, performance : result objects or None
+        :class:`~polyrob.analysis.quadratic_results.QuadStabResult` /
+        :class:`~polyrob.analysis.quadratic_results.QuadPerfResult`, or
+        :class:`~polyrob.analysis.quadratic_smallgain.ScaledSmallGainResult`.
+    covers : str
+        What the certificate covers, precisely.
+    notes : tuple of str
+        Why a test did not run or did not hold.
+    seconds : float
+    """
+
+    method: str
+    stability_holds: bool
+    performance_holds: bool
+    gamma: float
+    stability: object
+    performance: object
+    covers: str
+    notes: tuple
+    seconds: float
+
+    @property
+    def verdict(self) -> str:
+        """One line: what holds for the moving robot, and on which set."""
+        where = self.stability.covers if self.stability is not None else self.covers
+        if self.performance_holds:
+            what = f"robust performance CERTIFIED (L2 gain r -> z <= {self.gamma:.4g} < 1, and stability)"
+        elif self.stability_holds:
+            why = f" ({self.notes[-1]})" if self.notes else ""
+            what = f"robust stability CERTIFIED, robust performance NOT certified{why}"
+        else:
+            why = f" ({self.notes[-1]})" if self.notes else ""
+            what = f"robust stability NOT certified{why}"
+        return f"time-varying verdict: {what} [{self.method}]: {where}"
+
+    def summary(self) -> dict:
+        """JSON-ready figures."""
+
+        def margin(r):
+            return None if r is None else float(getattr(r, "margin", np.nan))
+
+        s = self.stability
+        return {
+            "method": self.method,
+            "stability_holds": bool(self.stability_holds),
+            "performance_holds": bool(self.performance_holds),
+            "gamma": float(self.gamma),
+            "stability_margin": margin(s) if self.method == "vertices" else None,
+            "vertices": getattr(s, "n_vertices", None),
+            "vertex_source": getattr(s, "vertex_source", None),
+            "enclosure": getattr(s, "enclosure", None),
+            "covers": self.covers,
+            "covers_nonlinear": covers_nonlinear(self.method),
+            "notes": list(self.notes),
+            "seconds": round(float(self.seconds), 3),
+            "verdict": self.verdict,
+        }
+
+
+def time_varying_certificate(problem, K, *, performance: bool = True, max_vertices: int | None = None):
+    """Quadratic (or constant-D small-gain) stability and performance of ``K`` on ``problem``.
+
+    Parameters
+    ----------
+    problem : polyrob.pipeline.Problem
+        Its PLDI gives the vertices, its generalized plant the weights and the LFT.
+    K : LTI
+        ``m x m`` controller ``u = K (r - q)``.
+    performance : bool
+        Also test performance (run only when stability holds: it implies it).
+    max_vertices : int, optional
+        Largest vertex set tried before the small-gain test (default
+        :data:`~polyrob.analysis.quadratic_vertices.MAX_VERTICES`).
+
+    Returns
+    -------
+    TimeVaryingCertificate
+    """
+    from polyrob.analysis.quadratic import quadperf, quadstab
+    from polyrob.analysis.quadratic_vertices import MAX_VERTICES, vertex_set
+
+    t0 = time.perf_counter()
+    P = problem.P
+    try:
+        vs = vertex_set(problem.pldi, max_vertices=MAX_VERTICES if max_vertices is None else int(max_vertices))
+    except PolyrobError as exc:
+        return _small_gain(P, K, performance, t0, f"no vertex test: {exc}")
+    qs = quadstab(vs, K)
+    notes, qp = [], None
+    if not qs.holds:
+        notes.append(f"no common Lyapunov matrix: {qs.solver_status}")
+    elif performance:
+        qp = quadperf(vs, K, P.W_S, P.W_T, P.W_KS, vertex_norms=False)
+        if not qp.holds:
+            notes.append(f"performance: {qp.solver_status}")
+    else:
+        notes.append("performance not tested")
+    return TimeVaryingCertificate(
+        method="vertices",
+        stability_holds=bool(qs.holds),
+        performance_holds=bool(qp is not None and qp.holds),
+        gamma=float(qp.gamma) if qp is not None else np.inf,
+        stability=qs,
+        performance=qp,
+        covers=qs.covers,
+        notes=tuple(notes),
+        seconds=time.perf_counter() - t0,
+    )
+
+
+def _small_gain(P, K, performance: bool, t0: float, why: str) -> TimeVaryingCertificate:
+    """Constant-D scaled small gain on the LFT model (too many vertices to enumerate)."""
+    from polyrob.analysis.quadratic_smallgain import scaled_small_gain
+    from polyrob.plant.generalized import lft
+
+    N = lft(P, K)
+    s_v, s_d = P.output_slices["v"], P.input_slices["d"]
+    rs = scaled_small_gain(N[s_v, s_d], P.block_structure_rs)
+    notes, rp = [why], None
+    if not rs.holds:
+        notes.append(f"scaled small gain {rs.gamma:.4g} >= 1 ({rs.info.get('reason', 'no D brings it below 1')})")
+    elif performance:
+        rp = scaled_small_gain(N, P.block_structure_rp)
+        if not rp.holds:
+            notes.append(f"performance: scaled small gain {rp.gamma:.4g} >= 1")
+    return TimeVaryingCertificate(
+        method="scaled small gain",
+        stability_holds=bool(rs.holds),
+        performance_holds=bool(rp is not None and rp.holds),
+        gamma=float(rp.gamma) if rp is not None else np.inf,
+        stability=rs,
+        performance=rp,
+        covers=rs.covers,
+        notes=tuple(notes),
+        seconds=time.perf_counter() - t0,
+    )

@@ -1,0 +1,85 @@
+"""The time-varying verdict of the pipeline (what `polyrob analyze` prints beside mu)."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import control
+import numpy as np
+import pytest
+from conftest import paper_pldi
+
+import polyrob
+from polyrob.analysis.robust import robstab
+from polyrob.cli import main
+from polyrob.pipeline import build_problem
+from polyrob.pipeline.time_varying import covers_nonlinear, time_varying_certificate
+
+B1 = np.array([[0.0], [1.0]])
+
+
+def _toy_problem(stiffness, W_S=None):
+    """A one-joint PLDI given by its vertices ``q'' = a q - q' + u``, ``a`` in ``stiffness``."""
+    verts = [(np.array([[0.0, 1.0], [a, -1.0]]), B1) for a in stiffness]
+    return SimpleNamespace(pldi=verts, P=SimpleNamespace(W_S=W_S, W_T=None, W_KS=None))
+
+
+@pytest.fixture(scope="module")
+def paper_problem():
+    return build_problem(polyrob.load_robot("paper_2r"), pldi=paper_pldi(), progress=False)
+
+
+def test_stability_and_performance_hold_on_a_quadratically_stable_toy():
+    # u = 4 (r - q): closed-loop stiffness 3..5, damping 1, every vertex and every switch stable
+    W_S = control.ss([], [], [], [[0.2]])  # |W_S S| <= 0.2 |S|: below 1 when |S| < 5
+    tv = time_varying_certificate(_toy_problem((-1.0, 1.0), W_S), np.array([[4.0]]))
+    assert tv.method == "vertices" and tv.stability_holds and tv.performance_holds
+    assert tv.stability.margin > 0 and 0 < tv.gamma < 1
+    # independent: gamma bounds each frozen vertex's ||W_S S||_inf (dense grid, from below)
+    w = np.logspace(-2, 3, 4000)
+    for a in (-1.0, 1.0):
+        S = control.tf([1, 1, -a], [1, 1, 4 - a])  # 1 / (1 + K G), G = 1 / (s^2 + s - a)
+        assert 0.2 * np.max(np.abs(S(1j * w))) <= tv.gamma * (1 + 1e-9)
+    assert "robust performance CERTIFIED" in tv.verdict
+
+
+def test_frozen_unstable_vertex_ends_the_test_and_says_why():
+    # u = 0.5 (r - q) cannot stabilise stiffness +1: that vertex is unstable frozen
+    tv = time_varying_certificate(_toy_problem((-1.0, 1.0)), np.array([[0.5]]))
+    assert not tv.stability_holds and not tv.performance_holds and tv.performance is None
+    assert "unstable (frozen)" in tv.notes[0] and tv.gamma == np.inf
+    assert tv.verdict.startswith("time-varying verdict: robust stability NOT certified")
+
+
+def test_paper_controller_fails_the_vertex_test(paper_problem):
+    tv = time_varying_certificate(paper_problem, polyrob.paper_controller())
+    s = tv.summary()
+    assert s["method"] == "vertices" and s["vertex_source"] == "polytope" and s["vertices"] > 1024
+    assert not s["stability_holds"] and "unstable (frozen)" in s["notes"][0]
+    assert s["covers_nonlinear"] == covers_nonlinear("vertices") and "moving nonlinear robot" in s["covers_nonlinear"]
+    json.dumps(s)  # JSON-ready
+
+
+def test_small_gain_when_the_vertices_are_too_many_bounds_mu_from_above(paper_problem):
+    K = polyrob.paper_controller()
+    tv = time_varying_certificate(paper_problem, K, max_vertices=1)
+    assert tv.method == "scaled small gain" and "no vertex test" in tv.notes[0]
+    # constant D covers time-varying parameters, so it can never be below constant-parameter mu
+    rs = robstab(paper_problem.P, K, omega=np.logspace(-1, 2, 25))
+    assert tv.stability.gamma >= rs.mu_lower
+    assert tv.stability_holds == (tv.stability.gamma < 1)
+
+
+def test_cli_analyze_prints_both_verdicts_and_which_covers_the_robot(capsys):
+    argv = ["analyze", "paper_2r", "--controller", "paper", "--mc", "5", "--quiet", "--omega", "0.1:100:25"]
+    assert main(argv) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[-3].startswith("time-varying verdict: robust stability NOT certified")
+    assert lines[-2] == "which covers the robot: " + covers_nonlinear("vertices")
+    assert lines[-1].startswith("verdict: robust performance VIOLATED") and "frozen" in lines[-1]
+    assert main([*argv, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["time_varying"]["stability_holds"] is False
+    assert main([*argv, "--no-time-varying", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["time_varying"] is None
