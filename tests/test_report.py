@@ -135,3 +135,25 @@ def test_build_report_needs_the_run_files(tmp_path):
 
     with pytest.raises(polyrob.PolyrobError, match="K.json"):
         build_report(tmp_path)
+
+
+def test_cli_report_json_is_one_document(tmp_path, monkeypatch, capsys):
+    """`polyrob report RUN_DIR --json` prints one JSON document naming the files it wrote."""
+    from types import SimpleNamespace
+
+    import polyrob.report.build as build
+    from polyrob.cli import main
+
+    def fake_build_report(run_dir, **_):  # the report itself is tested above; here the CLI's output
+        run_dir = Path(run_dir)
+        return SimpleNamespace(
+            html=run_dir / "report.html",
+            markdown=run_dir / "report.md",
+            validation=run_dir / "validation.json",
+            figures=[run_dir / "figures" / "mu.png"],
+        )
+
+    monkeypatch.setattr(build, "build_report", fake_build_report)
+    assert main(["report", str(tmp_path), "--json", "--quiet"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["html"] == str(tmp_path / "report.html") and doc["figures"] == [str(tmp_path / "figures" / "mu.png")]
