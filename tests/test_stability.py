@@ -72,7 +72,8 @@ def test_undecided_when_the_margin_is_inside_the_bound():
     a = -1e-9
     v = stability_verdict(np.array([[a, 1.0, 0.0], [0.0, a, 1.0], [0.0, 0.0, a]]))
     assert v.verdict == "undecided at double precision"
-    assert v.error_bound > 1e-5 and len(v.tests) == 3
+    assert v.error_bound > 1e-5 and len(v.tests) == 4
+    assert v.tests[2].startswith("106-bit") and v.tests[3].startswith("212-bit")  # both precisions tried
 
 
 def test_extended_precision_decides_what_double_precision_cannot():
@@ -81,7 +82,7 @@ def test_extended_precision_decides_what_double_precision_cannot():
     assert stability_verdict(A, extended_bits=0).verdict == "undecided at double precision"
     v = stability_verdict(A)
     # triangular: the eigenvalues are the diagonal entries, exactly
-    assert v.verdict == "stable" and v.abscissa == -1e-14 and v.precision_bits == 212
+    assert v.verdict == "stable" and v.abscissa == -1e-14 and v.precision_bits == 106  # double-double decides
 
 
 def test_dkpy_distillation_controller_double_precision_is_fooled():

@@ -115,6 +115,10 @@ class StabilityVerdict:
         }
 
 
+#: Precision of the first extended-precision attempt (double-double).
+DOUBLE_DOUBLE_BITS = 106
+
+
 def _decide(re, err):
     up, lo = float(np.max(re + err)), float(np.max(re - err))
     return (STABLE if up < 0 else UNSTABLE if lo > 0 else UNDECIDED), float(
@@ -242,10 +246,13 @@ def stability_verdict(system, *, extended_bits: int = 212) -> StabilityVerdict:
         tests.append("double-precision tests disagree")
     # an eigenvalue bound alone is first order: it needs a second opinion
     if extended_bits:
-        v_ext, absc_x, err_x = _eig_extended(Ab, int(extended_bits))
-        tests.append(f"{extended_bits}-bit eigenvalues: {v_ext}, largest real part {absc_x:.6g} +- {err_x:.3g}")
-        if v_ext != UNDECIDED:
-            return StabilityVerdict(v_ext, absc_x, err_x, n, cond, int(extended_bits), tuple(tests))
+        # double-double precision first (about 4x cheaper); the full precision
+        # only when it cannot decide
+        for bits in sorted({min(DOUBLE_DOUBLE_BITS, int(extended_bits)), int(extended_bits)}):
+            v_ext, absc_x, err_x = _eig_extended(Ab, bits)
+            tests.append(f"{bits}-bit eigenvalues: {v_ext}, largest real part {absc_x:.6g} +- {err_x:.3g}")
+            if v_ext != UNDECIDED:
+                return StabilityVerdict(v_ext, absc_x, err_x, n, cond, bits, tuple(tests))
         return StabilityVerdict(UNDECIDED, absc_x, err_x, n, cond, int(extended_bits), tuple(tests))
     if v_eig != UNDECIDED and v_lyap == UNDECIDED:
         tests.append("no second test available: the double-precision eigenvalue bound decides alone")
