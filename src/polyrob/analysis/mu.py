@@ -168,6 +168,7 @@ def mu_bounds(
     refine_peak: bool = True,
     warm_start: bool = False,
     warm_timeout: float = 2.0,
+    ab13md_timeout: float | None = 0.25,
     progress: bool | None = None,
     rtol: float = 1e-4,
     solver: str | None = None,
@@ -193,6 +194,11 @@ def mu_bounds(
         Warm-start AB13MD from the previous frequency.  Such calls run in a
         worker process killed after ``warm_timeout`` s (AB13MD warm starts can
         hang); then the sweep falls back to cold calls.
+    ab13md_timeout : float or None
+        Seconds a cold AB13MD call may take on a structure with real blocks
+        (it can take seconds per frequency there); past it, that frequency's
+        upper bound comes from the D-G LMI, counted in the result's notes.
+        ``None``: no limit (calls run in-process).
     progress : bool, optional
         tqdm progress bar; default: shown on a terminal for long sweeps.
     rtol, solver
@@ -235,14 +241,29 @@ def mu_bounds(
     meth = _choose_method(st, method)
     with single_blas_thread():
         return _sweep(
-            sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, progress, rtol, solver, response_bits
+            sys,
+            st,
+            omega,
+            is_frd,
+            meth,
+            refine_peak,
+            warm_start,
+            warm_timeout,
+            progress,
+            rtol,
+            solver,
+            response_bits,
+            ab13md_timeout,
         )
 
 
-def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, progress, rtol, solver, bits):
+def _sweep(
+    sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, progress, rtol, solver, bits, cold_timeout
+):
     from tqdm import tqdm
 
     lmi = LmiUpper(st, solver) if meth == "lmi" else None
+    cold = mu_upper.TimedAb13md(st, cold_timeout, solver, rtol) if meth == "ab13md" else None
     guard = None
     if warm_start and meth == "ab13md":
         import slycot
@@ -271,7 +292,7 @@ def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, 
                 notes.append(f"AB13MD warm start failed or exceeded {warm_timeout} s ({val}); cold calls from then on")
                 guard.close()
                 guard = None
-        up, D, G, x = mu_upper.upper_ab13md(Ms, st, res)
+        up, D, G, x = mu_upper.upper_ab13md(Ms, st, res) if res is not None else cold(Ms, lo)
         state["x"] = x if x is not None else state["x"]
         return up, D, G
 
@@ -327,6 +348,8 @@ def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, 
     finally:
         if guard is not None:
             guard.close()
+        if cold is not None:
+            cold.close()
     up = np.maximum(up, lo)
     order = np.argsort(omega)
     iu, il = int(np.argmax(up)), int(np.argmax(lo))
@@ -347,6 +370,12 @@ def _sweep(sys, st, omega, is_frd, meth, refine_peak, warm_start, warm_timeout, 
         notes=tuple(
             notes
             + ([] if lmi is None else lmi.events)
+            + (
+                [f"AB13MD exceeded {cold_timeout} s at {cold.fallbacks} frequencies: D-G LMI bound used there"]
+                if cold is not None and cold.fallbacks
+                else []
+            )
+            + ([] if cold is None else cold.events)
             + ([] if bits is None else [f"frequency responses evaluated at {bits} bits"])
         ),
     )
