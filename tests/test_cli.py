@@ -189,7 +189,13 @@ def test_bounds_json_and_stage_line(tmp_path, capsys):
         str(tmp_path / "q.npz"),
     )
     doc = json.loads(out)
-    assert code == 0 and err.startswith("[1/1] bounds: paper_2r")
+    assert code == 0 and err.startswith("[1/2] bounds: paper_2r")
+    assert "[2/2] uncertainty models" in err
+    # each model states its size and its coverage on fresh samples (1.0)
+    models = doc["uncertainty_models"]
+    assert set(models) == {"box", "lft"} and models["box"]["parameters"] == 10
+    assert models["box"]["coverage"] == 1.0 and models["lft"]["coverage"] == 1.0
+    assert models["lft"]["volume_over_polytope"] < 1 < models["box"]["volume_over_polytope"]
     names = [e["name"] for e in doc["entries"]]
     assert len(names) == 10 and doc["dropped_positions"] == ["joint1"]
     # -o q.npz: the JSON beside the arrays, not over them

@@ -36,14 +36,14 @@ def save_pair(pldi, output) -> tuple[Path, Path]:
 def cmd_bounds(args) -> int:
     from polyrob.bounds.pldi import bound_pldi
     from polyrob.io.paths import check_output_path, pair_paths
-    from polyrob.pipeline.reports import pldi_report
+    from polyrob.pipeline.reports import model_report, pldi_report
 
     if args.output:  # before any work: a refused path leaves nothing behind
         for path in (args.output, *pair_paths(args.output)):
             check_output_path(path, "-o")
     if not args.certify and (args.time_limit is not None or args.rel_tol is not None):
         raise ArgumentError("--time-limit and --rel-tol set the interval-arithmetic proof: use them with --certify")
-    out = Output(args, stages=1)
+    out = Output(args, stages=2 if args.models else 1)
     robot = robot_from_args(args)
     domain = domain_from_args(robot, args)
     certify_options = {k: v for k, v in (("time_limit", args.time_limit), ("rel_tol", args.rel_tol)) if v is not None}
@@ -67,6 +67,9 @@ def cmd_bounds(args) -> int:
         text = str(exc).replace("time_limit", "--time-limit").replace("rel_tol", "--rel-tol")
         raise CertificationError(text) from None
     report = pldi_report(pldi, robot.joint_names)
+    if args.models:
+        out.stage("uncertainty models: size and coverage on fresh samples")
+        report["uncertainty_models"] = model_report(pldi, robot)
     if args.output:
         json_path, npz_path = save_pair(pldi, args.output)
         report["files"] = [str(json_path), str(npz_path)]
@@ -97,6 +100,15 @@ def cmd_bounds(args) -> int:
         print(f"coverage: {report['coverage']:.4f} of {report['coverage_points']} fresh points")
     if report["dropped_positions"]:
         print("positions the dynamics do not depend on: " + ", ".join(report["dropped_positions"]))
+    for name, m in report.get("uncertainty_models", {}).items():
+        if "error" in m:
+            print(f"uncertainty model {name}: not built ({m['error']})")
+            continue
+        print(
+            f"uncertainty model {name}: {m['parameters']} real parameters, Delta {m['delta_shape'][0]}x"
+            f"{m['delta_shape'][1]}, coverage {m['coverage']:.4f} of {m['coverage_points']} fresh points, "
+            f"volume / polytope ~ {m['volume_over_polytope']:.3g}"
+        )
     print(f"time: {report['seconds']:.2f} s")
     if args.output:
         print(f"wrote {report['files'][0]} and {report['files'][1]}")
@@ -130,6 +142,12 @@ def register(sub) -> None:
         "--coverage", type=int_at_least(0), default=10_000, help="fresh points for the coverage check (0 skips)"
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the designs")
+    p.add_argument(
+        "--no-models",
+        dest="models",
+        action="store_false",
+        help="skip the uncertainty models' size and coverage (box and the default tight model)",
+    )
     add_output_flags(p)
     p.add_argument(
         "-o",

@@ -11,7 +11,7 @@ Examples
 
 from __future__ import annotations
 
-__all__ = ["robot_report", "pldi_report", "format_matrix"]
+__all__ = ["robot_report", "pldi_report", "model_report", "format_matrix"]
 
 
 def format_matrix(rows, precision: int = 5) -> str:
@@ -69,4 +69,37 @@ def pldi_report(pldi, joint_names=None) -> dict:
             "entry": pldi.entries[worst],
             "verification_rounds": int(pldi.info.get("verification_rounds", 0)),
         }
+    return out
+
+
+def model_report(pldi, robot, models=("box", "auto"), *, coverage: int = 2000) -> dict:
+    """Size and coverage of each uncertainty model built on ``pldi`` (what ``polyrob bounds`` prints).
+
+    For every model: its real parameters and Δ channels, the fraction of
+    ``coverage`` fresh domain samples whose Jacobians it contains (must be
+    1.0), and its volume over the PLDI's polytope (reduced coordinates; near 0
+    for a model whose ``B`` lies on a curve or sheet).  ``"auto"`` is reported
+    under the model it resolves to.
+    """
+    from polyrob.analysis.blocks import as_block_structure
+    from polyrob.errors import PolyrobError
+    from polyrob.plant.uncertainty import uncertain_plant
+
+    out = {}
+    for requested in models:
+        try:
+            unc = uncertain_plant(pldi, model=requested, robot=robot, coverage=coverage)
+        except PolyrobError as exc:  # e.g. lft on an arm whose inertia is not affine in single angles
+            out[requested] = {"error": str(exc)}
+            continue
+        out.setdefault(
+            unc.model,
+            {
+                "parameters": int(unc.n_params),
+                "delta_shape": [int(x) for x in as_block_structure(unc.block_structure).delta_shape],
+                "coverage": float(unc.coverage),
+                "coverage_points": int(unc.coverage_points),
+                "volume_over_polytope": float(unc.volume_ratio),
+            },
+        )
     return out
