@@ -68,6 +68,7 @@ def cmd_analyze(args) -> int:
     omega = frequency_grid(*omega_spec) if omega_spec else None
     out.stage(
         f"analysis of {source}: mu sweeps (robust stability, robust performance), {args.mc} Monte Carlo parameter sets"
+        + (", time-varying certificate" if args.time_varying else "")
     )
     a = analyze_controller(
         problem, K, omega=omega, mc=args.mc, seed=args.seed, progress=out.progress, time_varying=args.time_varying

@@ -144,9 +144,20 @@ def cmd_run(args) -> int:
     out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
     design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
     print_design(design, out)
-    out.stage(f"analysis: mu sweeps (robust stability, robust performance), {args.mc} Monte Carlo parameter sets")
+    out.stage(
+        f"analysis: mu sweeps (robust stability, robust performance), {args.mc} Monte Carlo parameter sets"
+        + (", time-varying certificate" if args.time_varying else "")
+    )
     omega = frequency_grid(*omega_spec) if omega_spec else None
-    a = analyze_controller(problem, design.controller, omega=omega, mc=args.mc, seed=0, progress=out.progress)
+    a = analyze_controller(
+        problem,
+        design.controller,
+        omega=omega,
+        mc=args.mc,
+        seed=0,
+        progress=out.progress,
+        time_varying=args.time_varying,
+    )
     print_analysis(a, out)
     doc = {
         "robot": robot.name,
@@ -235,6 +246,12 @@ def register(sub) -> None:
     p = sub.add_parser("run", help="bounds -> synthesis -> analysis in one go")
     _add_synthesis_arguments(p)
     p.add_argument("--mc", type=int_at_least(1), default=200, help="Monte Carlo parameter sets in the analysis")
+    p.add_argument(
+        "--no-time-varying",
+        dest="time_varying",
+        action="store_false",
+        help="skip the time-varying certificate of the analysis (the one that covers the moving robot)",
+    )
     p.add_argument("--omega", default=None, help="analysis frequency grid LO:HI:N in rad/s (default automatic)")
     for a in p._actions:
         if a.dest == "output":  # run: a directory unless the name ends in .json
