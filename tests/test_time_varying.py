@@ -83,3 +83,18 @@ def test_cli_analyze_prints_both_verdicts_and_which_covers_the_robot(capsys):
     assert doc["time_varying"]["stability_holds"] is False
     assert main([*argv, "--no-time-varying", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["time_varying"] is None
+
+
+def test_a_loop_too_large_for_the_lmis_is_not_run_and_says_what_to_do(paper_problem):
+    """A 92-state loop once took 24 GiB in the vertex LMIs; now it is routed, then refused, with a reason."""
+    from polyrob.analysis.quadratic import MAX_STATES, quadstab
+
+    K = polyrob.paper_controller()
+    for _ in range(8):  # 12 + 8 x 8 = 76 controller states, same transfer function
+        K = control.ss(K) + control.ss(-1e-3 * np.eye(8), np.zeros((8, 2)), np.zeros((2, 8)), np.zeros((2, 2)))
+    tv = time_varying_certificate(paper_problem, K)
+    assert tv.method == "not run" and not tv.stability_holds
+    assert "the closed loop has 80 states" in tv.notes[0] and "--reduce" in tv.notes[1]
+    assert tv.verdict.startswith("time-varying verdict: NOT computed")
+    with pytest.raises(polyrob.PolyrobError, match=f"at most {MAX_STATES}"):
+        quadstab(paper_problem.pldi, K)

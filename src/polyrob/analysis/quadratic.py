@@ -45,6 +45,7 @@ from polyrob.analysis.quadratic_vertices import (
     performance_vertices,
     vertex_set,
 )
+from polyrob.errors import PolyrobError
 
 __all__ = ["QuadStabResult", "QuadPerfResult", "quadstab", "quadperf", "COVERS_NONLINEAR", "covers_text"]
 
@@ -60,6 +61,18 @@ _U = np.finfo(float).eps
 COND_MAX = 1e6
 #: Largest L2-gain level quadperf searches over.
 GAMMA_MAX = 1e4
+#: Largest closed loop (states) the vertex LMIs are built for: cvxpy's
+#: canonicalisation of k vertex LMIs grows like k n^3 (measured: 24 GiB and
+#: an out-of-memory kill for a 92-state loop at its first 48 vertices).
+MAX_STATES = 40
+
+
+def _check_size(n: int, what: str) -> None:
+    if n > MAX_STATES:
+        raise PolyrobError(
+            f"{what}: the closed loop has {n} states; the vertex LMIs are built for at most {MAX_STATES} "
+            "(memory grows like n^3 per vertex): reduce the controller (--reduce) or use a fixed structure"
+        )
 
 
 def covers_text(vs: VertexSet, what: str) -> str:
@@ -190,6 +203,7 @@ def quadstab(vertices, K, *, which: str = "auto", max_vertices: int = MAX_VERTIC
     vs = vertex_set(vertices, which=which, max_vertices=max_vertices)
     As = closed_loop_vertices(vs, K)
     n = As.shape[1]
+    _check_size(n, "quadstab")
     s, c = _scaling(As)
     Ab = As / s[None, :, None] * s[None, None, :] / c  # exact: powers of two
     first, abscissa = _first_vertices(Ab)
@@ -327,6 +341,7 @@ def quadperf(
     vs = vertex_set(vertices, which=which, max_vertices=max_vertices)
     As, Bs, Cs, Ds = performance_vertices(vs, K, W_S, W_T, W_KS)
     v, n, p = Bs.shape
+    _check_size(n, "quadperf")
     q = Cs.shape[1]
     s, c = _scaling(As)
     # similarity T = diag(s) and time scale c: (A, B, C) -> (T^-1 A T / c, T^-1 B / c, C T): same H∞ norm

@@ -40,7 +40,11 @@ import numpy as np
 
 from polyrob.errors import PolyrobError
 
-__all__ = ["TimeVaryingCertificate", "time_varying_certificate", "covers_nonlinear"]
+__all__ = ["TimeVaryingCertificate", "time_varying_certificate", "covers_nonlinear", "MAX_SMALL_GAIN_STATES"]
+
+#: Largest LFT loop (states) the constant-D small-gain LMI is built for (one
+#: KYP LMI whose size and build time grow like n^3).
+MAX_SMALL_GAIN_STATES = 60
 
 
 def covers_nonlinear(method: str) -> str:
@@ -64,8 +68,9 @@ class TimeVaryingCertificate:
     Attributes
     ----------
     method : str
-        ``"vertices"`` (common Lyapunov matrix on the PLDI's vertices) or
-        ``"scaled small gain"`` (constant ``D`` on the LFT model).
+        ``"vertices"`` (common Lyapunov matrix on the PLDI's vertices),
+        ``"scaled small gain"`` (constant ``D`` on the LFT model), or
+        ``"not run"`` (the loop is too large for both; ``notes`` say why).
     stability_holds, performance_holds : bool
         Verified: stability / ``L2 gain r -> z < 1`` for every variation.
     gamma : float
@@ -95,6 +100,8 @@ class TimeVaryingCertificate:
     @property
     def verdict(self) -> str:
         """One line: what holds for the moving robot, and on which set."""
+        if self.method == "not run":
+            return f"time-varying verdict: NOT computed ({'; '.join(self.notes)})"
         where = self.stability.covers if self.stability is not None else self.covers
         if self.performance_holds:
             what = f"robust performance CERTIFIED (L2 gain r -> z <= {self.gamma:.4g} < 1, and stability)"
@@ -149,8 +156,9 @@ def time_varying_certificate(problem, K, *, performance: bool = True, max_vertic
     -------
     TimeVaryingCertificate
     """
-    from polyrob.analysis.quadratic import quadperf, quadstab
-    from polyrob.analysis.quadratic_vertices import MAX_VERTICES, vertex_set
+
+    from polyrob.analysis.quadratic import MAX_STATES, quadperf, quadstab
+    from polyrob.analysis.quadratic_vertices import MAX_VERTICES, controller_mats, vertex_set
 
     t0 = time.perf_counter()
     P = problem.P
@@ -158,6 +166,10 @@ def time_varying_certificate(problem, K, *, performance: bool = True, max_vertic
         vs = vertex_set(problem.pldi, max_vertices=MAX_VERTICES if max_vertices is None else int(max_vertices))
     except PolyrobError as exc:
         return _small_gain(P, K, performance, t0, f"no vertex test: {exc}")
+    n_loop = int(vs.A.shape[1]) + int(controller_mats(K, vs.B.shape[2])[0].shape[0])
+    if n_loop > MAX_STATES:
+        why = f"no vertex test: the closed loop has {n_loop} states (the vertex LMIs take {MAX_STATES})"
+        return _small_gain(P, K, performance, t0, why)
     qs = quadstab(vs, K)
     notes, qp = [], None
     if not qs.holds:
@@ -187,6 +199,22 @@ def _small_gain(P, K, performance: bool, t0: float, why: str) -> TimeVaryingCert
     from polyrob.plant.generalized import lft
 
     N = lft(P, K)
+    if N.nstates > MAX_SMALL_GAIN_STATES:
+        note = (
+            f"no small-gain test either: the LFT loop has {N.nstates} states (it takes {MAX_SMALL_GAIN_STATES}); "
+            "reduce the controller (--reduce) or use a fixed structure (--structure tf3)"
+        )
+        return TimeVaryingCertificate(
+            method="not run",
+            stability_holds=False,
+            performance_holds=False,
+            gamma=np.inf,
+            stability=None,
+            performance=None,
+            covers="nothing (no time-varying test was run)",
+            notes=(why, note),
+            seconds=time.perf_counter() - t0,
+        )
     s_v, s_d = P.output_slices["v"], P.input_slices["d"]
     rs = scaled_small_gain(N[s_v, s_d], P.block_structure_rs)
     notes, rp = [why], None
