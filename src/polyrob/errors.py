@@ -16,6 +16,7 @@ __all__ = [
     "SynthesisError",
     "ArgumentError",
     "ControllerFileError",
+    "NotApplicable",
 ]
 
 
@@ -53,3 +54,7 @@ class ArgumentError(PolyrobError, ValueError):
 
 class ControllerFileError(PolyrobError):
     """A controller file is missing, malformed, of another format, or made for another problem."""
+
+
+class NotApplicable(PolyrobError):
+    """An uncertainty model does not apply to this robot (e.g. ``lft``: inertia not affine in single-angle terms)."""

@@ -29,17 +29,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import NotApplicable, PolyrobError
 from polyrob.plant.lftplant import UncertainPlant
 
 __all__ = ["inertia_lft_plant", "inertia_lft_contains", "affine_inertia", "NotApplicable", "AFFINE_RTOL"]
 
 #: Largest relative residual of the affine fit of ``M(q)`` that counts as exact.
 AFFINE_RTOL = 1e-9
-
-
-class NotApplicable(PolyrobError):
-    """The robot's inertia is not affine in single-angle cos/sin terms: no ``lft`` model."""
 
 
 def _trig_range(fn: str, lo: float, hi: float) -> tuple[float, float]:
