@@ -168,7 +168,7 @@ def mu_bounds(
     refine_peak: bool = True,
     warm_start: bool = False,
     warm_timeout: float = 2.0,
-    ab13md_timeout: float | None = 0.25,
+    ab13md_timeout: float | None = 1.0,
     progress: bool | None = None,
     rtol: float = 1e-4,
     solver: str | None = None,
