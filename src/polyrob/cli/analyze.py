@@ -38,8 +38,11 @@ def print_analysis(a, out) -> None:
             f"{title:<22} mu in [{r.mu_lower:.4g}, {r.mu_upper:.4g}] (peak on the frequency grid) "
             f"at {r.critical_frequency:.4g} rad/s: {a.status(r)}"
         )
-        for note in getattr(r.mu, "notes", ()):  # fallbacks of the sweep are shown, not hidden
+        notes = list(getattr(r.mu, "notes", ()))  # fallbacks of the sweep are shown, not hidden
+        for note in notes[:2]:
             out.line(f"{'':<23}note: {note}")
+        if len(notes) > 2:
+            out.line(f"{'':<23}note: {len(notes) - 2} more solver notes (all of them with --json)")
     out.line(f"monte carlo            {s.random_stable:.1%} of {s.random} random parameter sets stable")
     if s.corners_stable is not None:
         out.line(f"corners                {s.corners_stable:.1%} of {s.corners} corners stable")
