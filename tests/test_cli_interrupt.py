@@ -36,7 +36,7 @@ def test_sigint_during_bounds_ends_workers_and_leaves_no_file(tmp_path):
     out = tmp_path / "out"
     proc = _start(["bounds", "panda", "--coverage", "0", "-o", str(out / "p.json")])
     first = proc.stdout.readline()  # the stage line: the command runs
-    assert first.startswith("[1/1] bounds: panda"), first + proc.stderr.read()
+    assert first.startswith("[1/2] bounds: panda"), first + proc.stderr.read()
     workers = []
     deadline = time.monotonic() + 60
     while not workers and time.monotonic() < deadline and proc.poll() is None:
