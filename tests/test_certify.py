@@ -212,7 +212,6 @@ def test_finger_edu_small_domain_contains_samples():
     _check_finger(0.05, 1e-2, 5_000)
 
 
-@pytest.mark.slow
 def test_finger_edu_moderate_domain_contains_samples():
     _check_finger(0.3, 1e-3, 100_000)
 

@@ -113,6 +113,7 @@ def test_paper_domain_reproduces_the_papers_intervals():
     assert pldi.coverage == 1.0
 
 
+@pytest.mark.slow  # 45-210 s on 2 cores (the screen near the witnesses varies): `pytest -m slow`
 def test_ur5_coverage_is_complete_on_10000_fresh_points():
     robot = cached_robot("ur5")
     # a 512-point design: the local search and the screens, not the design, must find the extremes
