@@ -63,7 +63,7 @@ def _children(pid: int) -> set[int]:
 
 
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="reads child processes from /proc (Linux)")
-def test_one_sigint_ends_a_bound_and_its_workers_within_seconds():
+def test_one_sigint_ends_a_bound_and_its_workers_within_seconds(tmp_path):
     script = textwrap.dedent(
         """
         from polyrob import Domain, bound_pldi, load_robot
@@ -72,7 +72,9 @@ def test_one_sigint_ends_a_bound_and_its_workers_within_seconds():
         bound_pldi(robot, Domain.from_robot(robot), workers=2, screen=2**24, coverage=0, progress=False)
         """
     )
-    proc = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True)
+    # stderr to a file, not a pipe nobody reads before the end: a full pipe would block the writers
+    err_file = (tmp_path / "stderr.txt").open("w")
+    proc = subprocess.Popen([sys.executable, "-c", script], stderr=err_file, text=True)
     try:
         deadline = time.monotonic() + 120
         workers: set[int] = set()
@@ -89,7 +91,8 @@ def test_one_sigint_ends_a_bound_and_its_workers_within_seconds():
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    err = proc.stderr.read()
+        err_file.close()
+    err = (tmp_path / "stderr.txt").read_text()
     assert proc.returncode != 0 and "KeyboardInterrupt" in err
     assert elapsed < 10
     time.sleep(0.5)
