@@ -180,14 +180,19 @@ def time_varying_certificate(problem, K, *, performance: bool = True, max_vertic
             notes.append(f"performance: {qp.solver_status}")
     else:
         notes.append("performance not tested")
+    return _certificate("vertices", qs, qp, notes, t0)
+
+
+def _certificate(method: str, stability, performance, notes, t0: float) -> TimeVaryingCertificate:
+    """The certificate from its tests' results (``None``: not run); verdicts and scope follow from them."""
     return TimeVaryingCertificate(
-        method="vertices",
-        stability_holds=bool(qs.holds),
-        performance_holds=bool(qp is not None and qp.holds),
-        gamma=float(qp.gamma) if qp is not None else np.inf,
-        stability=qs,
-        performance=qp,
-        covers=qs.covers,
+        method=method,
+        stability_holds=bool(stability is not None and stability.holds),
+        performance_holds=bool(performance is not None and performance.holds),
+        gamma=float(performance.gamma) if performance is not None else np.inf,
+        stability=stability,
+        performance=performance,
+        covers=stability.covers if stability is not None else "nothing (no time-varying test was run)",
         notes=tuple(notes),
         seconds=time.perf_counter() - t0,
     )
@@ -204,17 +209,7 @@ def _small_gain(P, K, performance: bool, t0: float, why: str) -> TimeVaryingCert
             f"no small-gain test either: the LFT loop has {N.nstates} states (it takes {MAX_SMALL_GAIN_STATES}); "
             "reduce the controller (--reduce) or use a fixed structure (--structure tf3)"
         )
-        return TimeVaryingCertificate(
-            method="not run",
-            stability_holds=False,
-            performance_holds=False,
-            gamma=np.inf,
-            stability=None,
-            performance=None,
-            covers="nothing (no time-varying test was run)",
-            notes=(why, note),
-            seconds=time.perf_counter() - t0,
-        )
+        return _certificate("not run", None, None, (why, note), t0)
     s_v, s_d = P.output_slices["v"], P.input_slices["d"]
     rs = scaled_small_gain(N[s_v, s_d], P.block_structure_rs)
     notes, rp = [why], None
@@ -224,14 +219,4 @@ def _small_gain(P, K, performance: bool, t0: float, why: str) -> TimeVaryingCert
         rp = scaled_small_gain(N, P.block_structure_rp)
         if not rp.holds:
             notes.append(f"performance: scaled small gain {rp.gamma:.4g} >= 1")
-    return TimeVaryingCertificate(
-        method="scaled small gain",
-        stability_holds=bool(rs.holds),
-        performance_holds=bool(rp is not None and rp.holds),
-        gamma=float(rp.gamma) if rp is not None else np.inf,
-        stability=rs,
-        performance=rp,
-        covers=rs.covers,
-        notes=tuple(notes),
-        seconds=time.perf_counter() - t0,
-    )
+    return _certificate("scaled small gain", rs, rp, notes, t0)
