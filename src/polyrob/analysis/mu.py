@@ -266,12 +266,7 @@ def _sweep(
     cold = mu_upper.TimedAb13md(st, cold_timeout, solver, rtol) if meth == "ab13md" else None
     guard = None
     if warm_start and meth == "ab13md":
-        import slycot
-
-        # slycot's own function when not substituted: the worker then never
-        # imports polyrob (and its heavy dependencies)
-        fn = slycot.ab13md if mu_upper.ab13md_call is mu_upper.AB13MD_DEFAULT else mu_upper.ab13md_call
-        guard = TimeLimitedCall(fn, warm_timeout)
+        guard = TimeLimitedCall(mu_upper.worker_function(), warm_timeout)
     fallbacks, notes = 0, []
     state = {"x": None, "pi": None}
     n = st.padded_size

@@ -22,7 +22,15 @@ import scipy.linalg as sla
 from polyrob.analysis.blocks import BlockStructure, perron_upper
 from polyrob.errors import SolverError
 
-__all__ = ["ab13md_call", "upper_ab13md", "certified_beta", "LmiUpper", "TimedAb13md", "AB13MD_DEFAULT"]
+__all__ = [
+    "ab13md_call",
+    "upper_ab13md",
+    "certified_beta",
+    "LmiUpper",
+    "TimedAb13md",
+    "AB13MD_DEFAULT",
+    "worker_function",
+]
 
 
 def ab13md_call(Z, nblock, itype, x=None):
@@ -205,6 +213,17 @@ class LmiUpper:
         return beta, (D + D.conj().T) / 2, G
 
 
+def worker_function():
+    """What a worker process calls: slycot's own AB13MD, or the substitute a test put in :func:`ab13md_call`.
+
+    slycot's function pickles by reference to slycot, so the worker never
+    imports polyrob (and its heavy dependencies).
+    """
+    import slycot
+
+    return slycot.ab13md if ab13md_call is AB13MD_DEFAULT else ab13md_call
+
+
 class TimedAb13md:
     """Cold AB13MD calls under a time limit, the D-G LMI where the limit runs out.
 
@@ -223,13 +242,7 @@ class TimedAb13md:
 
         self.st, self.timeout, self.solver, self.rtol = st, timeout, solver, rtol
         guarded = bool(timeout) and st.has_real
-        if guarded:
-            import slycot
-
-            # slycot's own function unless a test substituted ab13md_call (the
-            # worker then never imports polyrob)
-            fn = slycot.ab13md if ab13md_call is AB13MD_DEFAULT else ab13md_call
-        self._call = TimeLimitedCall(fn, float(timeout)) if guarded else None
+        self._call = TimeLimitedCall(worker_function(), float(timeout)) if guarded else None
         self._lmi = None
         self.fallbacks = 0
 
