@@ -93,6 +93,9 @@ def test_synth_json_is_one_document(files):
     doc = json.loads((d / "synth.out").read_text())
     assert doc["synthesis"]["structure"].startswith("reduced:") and doc["output"] == str(K)
     assert doc["problem"]["uncertainty"]["model"] == "box" and doc["verdict"].startswith("verdict: ")
+    # the floor no controller beats at these weights: the arm's unstable pole near 7.5 rad/s
+    limit = doc["performance_limit"]
+    assert 0.6 < limit["bound"] < 1 and not limit["excludes_mu_below_one"] and limit["pole"][0] > 7
 
 
 def test_analyze_reproduces_the_reduced_certificate(files, capsys):
@@ -153,6 +156,7 @@ def test_run_json_announces_stages_when_they_start_and_matches_synth(files, caps
     assert "[3/3] analysis" in seen["analyze"]
     assert doc["verdict"] == doc["analysis"]["verdict"] and "CERTIFIED" not in doc["verdict"]
     assert doc["output"] == str(out_file) and len(doc["bounds"]["entries"]) == 10
+    assert doc["performance_limit"]["bound"] == pytest.approx(0.65, abs=0.01)
     saved = json.loads(out_file.read_text())
     cert_full = json.loads(K.read_text())["certificate"]["full_peak_mu_upper"]
     # run's analysis of its (deterministic) synthesis = synth's certificate of the same synthesis

@@ -70,6 +70,13 @@ def print_design(design, out) -> None:
         out.line(f"note: {note}")
 
 
+def _print_limit(problem, out) -> dict:
+    """Print what no controller can beat at these weights (the robot's unstable poles)."""
+    limit = problem.performance_limit()
+    out.line(limit.summary())
+    return limit.to_dict()
+
+
 def _save(design, problem, args, out, info_extra=None, certificate_extra=None, path=None):
     from polyrob.io.controller import save_controller
 
@@ -102,6 +109,8 @@ def cmd_synth(args) -> int:
         out.line(f"{'alpha':>10}  {'peak mu (upper)':>18}")
         for alpha, mu in res.history:
             out.line(f"{alpha:>10.4g}  {mu:>18.5g}")
+        for alpha, bound in res.excluded:
+            out.line(f"{alpha:>10.4g}  {'>= ' + format(bound, '.5g'):>18}  (performance limit: not synthesised)")
         out.line(
             f"largest alpha with mu < 1: {res.alpha:.4g} (mu {res.peak_mu:.4g}; alpha {res.bracket[1]:.4g} "
             f"does not reach it), controller order {res.result.order}"
@@ -111,6 +120,7 @@ def cmd_synth(args) -> int:
         doc["problem"].update(extra)
         doc["bandwidth_scaling"] = res.summary()
     else:
+        doc["performance_limit"] = _print_limit(problem, out)
         out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
         design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
         print_design(design, out)
@@ -141,6 +151,7 @@ def cmd_run(args) -> int:
         f"({problem.model} model)"
     )
     out.line(pldi.table())
+    limit = _print_limit(problem, out)
     out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
     design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
     print_design(design, out)
@@ -163,6 +174,7 @@ def cmd_run(args) -> int:
         "robot": robot.name,
         "problem": problem.description(),
         "bounds": pldi_report(pldi, robot.joint_names),
+        "performance_limit": limit,
         "synthesis": design.summary(),
         "analysis": a.summary(),
         "covers": a.covers,

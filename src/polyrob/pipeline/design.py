@@ -123,8 +123,12 @@ def design_controller(problem, *, reduce: bool = False, reduce_max_order: int = 
     return Design(controller=K, result=result, reduced=reduced, certificate=cert, notes=notes)
 
 
-def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None, **options):
-    """The largest bandwidth factor with certified μ < 1; returns ``(Design, BandwidthScalingResult)``."""
+def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None, limit=True, **options):
+    """The largest bandwidth factor with certified μ < 1; returns ``(Design, BandwidthScalingResult)``.
+
+    With ``limit`` (default) a factor at which the robot's performance limit
+    already proves μ >= 1 for every controller is not synthesised.
+    """
     from polyrob.plant.generalized import paper_controller
     from polyrob.synthesis import max_bandwidth_scaling
 
@@ -137,6 +141,9 @@ def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None,
         if not alphas or any(not (a > 0 and a < float("inf")) for a in alphas):
             raise ArgumentError(f"bandwidth factors must be finite and > 0, got {alphas}")
         options["alphas"] = alphas
+    if limit:
+        # a factor whose performance limit is >= 1 cannot certify: skip its synthesis
+        options["floor"] = lambda alpha, h: problem.performance_limit(h).bound
     res = max_bandwidth_scaling(problem.unc, problem.hyperparameters, scale=tuple(scale), **options)
     cert = res.result.summary()
     cert.update(bandwidth_scaling=res.summary())

@@ -130,6 +130,18 @@ class Problem:
     def domain(self):
         return self.pldi.domain
 
+    def performance_limit(self, hyperparameters: dict | None = None, **options):
+        """The floor under every controller's robust-performance μ at these weights.
+
+        :func:`polyrob.analysis.limits.performance_limit` of the robot over the
+        domain with this problem's ``W_T`` (or that of ``hyperparameters``).
+        """
+        from polyrob.analysis.limits import performance_limit
+        from polyrob.plant.weights import paper_weights
+
+        h = self.hyperparameters if hyperparameters is None else hyperparameters
+        return performance_limit(self.robot, self.domain, paper_weights(h)[1], **options)
+
     def description(self) -> dict:
         """What a controller file records about the problem it was made for."""
         return {

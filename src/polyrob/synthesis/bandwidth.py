@@ -59,6 +59,9 @@ class BandwidthScalingResult:
         ``alpha`` and the smallest larger α tried that did not reach the
         target (``inf`` if none did not).
     seconds : float
+    excluded : list of (alpha, bound)
+        Factors not synthesised because ``floor`` proved ``μ >= bound >= target``
+        for every controller (see :mod:`polyrob.analysis.limits`).
     """
 
     alpha: float
@@ -69,6 +72,7 @@ class BandwidthScalingResult:
     scale: tuple = ("omega_b", "omega_bt")
     bracket: tuple = (math.nan, math.nan)
     seconds: float = 0.0
+    excluded: list = ()
 
     def summary(self) -> dict:
         """JSON-ready figures (the controller itself is in ``result``)."""
@@ -81,6 +85,7 @@ class BandwidthScalingResult:
             "hyperparameters": {k: list(v) for k, v in self.hyperparameters.items()},
             "history": [list(h) for h in self.history],
             "seconds": round(self.seconds, 2),
+            "excluded_by_performance_limit": [list(e) for e in self.excluded],
         }
 
 
@@ -127,6 +132,7 @@ def max_bandwidth_scaling(
     scale: Sequence[str] = ("omega_b", "omega_bt"),
     synthesize: Callable | None = None,
     plant: Callable | None = None,
+    floor: Callable | None = None,
     progress: bool | None = None,
     **musyn_options,
 ) -> BandwidthScalingResult:
@@ -153,6 +159,11 @@ def max_bandwidth_scaling(
     plant : callable ``(alpha, hyperparameters) -> GeneralizedPlant``, optional
         Default: :func:`~polyrob.plant.generalized_plant` of ``unc`` with
         :func:`~polyrob.plant.weights.paper_weights` of the scaled hyperparameters.
+    floor : callable ``(alpha, hyperparameters) -> float``, optional
+        A lower bound on every controller's μ at α (e.g. the performance limit
+        of :meth:`polyrob.pipeline.Problem.performance_limit`); an α whose
+        floor is at least ``target`` is not synthesised (it cannot succeed)
+        and counts as a failure, listed in ``excluded``.
     progress : bool, optional
         One line per α on stderr; default: only on a terminal.
 
@@ -195,9 +206,17 @@ def max_bandwidth_scaling(
     t0 = time.perf_counter()
     history: list = []
     solved: dict = {}
+    excluded: list = []
 
     def run(alpha):
         h = scaled_hyperparameters(alpha, hyperparameters, scale)
+        if floor is not None:
+            bound = float(floor(alpha, h))
+            if bound >= target:  # proved out of reach: no synthesis can certify it
+                excluded.append((float(alpha), bound))
+                if show:
+                    print(f"bandwidth alpha = {alpha:.4g}: every controller has mu >= {bound:.4f}", file=sys.stderr)
+                return math.inf
         near = min(solved, key=lambda a: abs(math.log(a / alpha)), default=None)
         K0 = solved[near][0].controller if near is not None and solved[near][0] is not None else None
         try:
@@ -222,6 +241,7 @@ def max_bandwidth_scaling(
         fail = alpha
     if ok is None:
         tried = ", ".join(f"{a:g}: {m:.3f}" for a, m in history)
+        tried += "".join(f", {a:g}: >= {b:.3f} (performance limit)" for a, b in excluded)
         raise SynthesisError(
             f"no bandwidth factor alpha in [{grid[0]:g}, {grid[-1]:g}] (scaling {', '.join(scale)}) reaches a "
             f"certified mu < {target:g}; alpha: mu = {tried}"
@@ -245,4 +265,5 @@ def max_bandwidth_scaling(
         scale=tuple(scale),
         bracket=(float(ok), math.inf if fail is None else float(fail)),
         seconds=time.perf_counter() - t0,
+        excluded=excluded,
     )
