@@ -63,9 +63,6 @@ def _children(pid: int) -> set[int]:
 
 
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="reads child processes from /proc (Linux)")
-# hangs in a full-suite run from a fresh clone under /tmp (cause not found yet; passes from the
-# project's own checkout and alone): out of the default run until understood, `pytest -m slow`
-@pytest.mark.slow
 def test_one_sigint_ends_a_bound_and_its_workers_within_seconds(tmp_path):
     script = textwrap.dedent(
         """
@@ -88,7 +85,10 @@ def test_one_sigint_ends_a_bound_and_its_workers_within_seconds(tmp_path):
         time.sleep(3.0)  # let the workers load the robot and compute
         t0 = time.monotonic()
         proc.send_signal(signal.SIGINT)
-        proc.wait(timeout=10)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"one SIGINT did not end the bound within 10 s ({_describe(proc.pid)})")
         elapsed = time.monotonic() - t0
     finally:
         if proc.poll() is None:
@@ -110,3 +110,18 @@ def _state(pid: int) -> str:
         return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
     except OSError:
         return "Z"
+
+
+def _describe(pid: int) -> str:
+    """State and kernel wait channel of a process and its children (what a hang looks like)."""
+    rows = []
+    for p in [pid, *sorted(_children(pid))]:
+        try:
+            state = open(f"/proc/{p}/stat").read().split(")")[-1].split()[0]
+            wchan = open(f"/proc/{p}/wchan").read()
+            cmd = open(f"/proc/{p}/cmdline").read().replace("\0", " ")[:80]
+        except OSError:
+            rows.append(f"{p}: gone")
+            continue
+        rows.append(f"{p}: state {state}, waiting in {wchan or '-'}: {cmd}")
+    return "; ".join(rows)
