@@ -150,3 +150,21 @@ def test_scaled_small_gain_finds_the_optimal_diagonal_scaling():
     r = scaled_small_gain(N, [[-1, 0], [-1, 0]])
     assert abs(r.unscaled_norm - 5.0) < 1e-6
     assert r.holds and abs(r.gamma - np.sqrt(0.5)) < 2e-3 * np.sqrt(0.5)
+
+
+def test_scaled_small_gain_on_a_loop_whose_poles_span_seven_decades():
+    """Before: 'no verified scaling' (the KYP LMI fails on such loops, e.g. a tf3 controller's)."""
+    from polyrob.analysis.quadratic_smallgain import scaled_small_gain
+
+    # N = [[0, 5 / (s/1e-3 + 1)], [0.1 / (s/1e4 + 1), 0]], realised with a state similarity of 1e8:
+    # the same transfer function, so the same optimal constant-D bound sqrt(5 * 0.1)
+    A = np.diag([-1e-3, -1e4])
+    B = np.array([[0.0, 1e-3], [1e4, 0.0]])
+    C = np.array([[5.0, 0.0], [0.0, 0.1]])
+    T = np.diag([1e-4, 1e4])
+    Ti = np.linalg.inv(T)
+    N = control.ss(Ti @ A @ T, Ti @ B, C @ T, np.zeros((2, 2)))
+    r = scaled_small_gain(N, [[-1, 0], [-1, 0]])
+    assert abs(r.unscaled_norm - 5.0) < 1e-4
+    assert r.holds and abs(r.gamma - np.sqrt(0.5)) < 2e-3 * np.sqrt(0.5)
+    assert r.scaled_norm <= r.gamma
