@@ -165,8 +165,8 @@ def time_varying_certificate(problem, K, *, performance: bool = True, max_vertic
     """
 
     from polyrob.analysis.quadratic import MAX_STATES, quadperf, quadstab
-    from polyrob.plant.generalized import GeneralizedPlant
     from polyrob.analysis.quadratic_vertices import MAX_VERTICES, controller_mats, vertex_set
+    from polyrob.plant.generalized import GeneralizedPlant
 
     t0 = time.perf_counter()
     P = problem.P
