@@ -8,9 +8,16 @@ paper's K*, then a D-G-K controller synthesised on that model (μ, order,
 time) and, for every controller, its μ on every model (so the tight model's
 μ of K* and of the D-K controllers stands beside the box's).
 
+``--bandwidth-scale α`` multiplies both weights' bandwidths (``ω_B``,
+``ω_BT``); the robot's performance limit at those weights (the floor no
+controller beats, :mod:`polyrob.analysis.limits`) and, for every controller
+on every model, the time-varying certificate
+(:func:`polyrob.pipeline.time_varying.time_varying_certificate`) are printed
+beside μ.
+
 Usage::
 
-    python benchmarks/uncertainty.py [--models box,lft] [--no-synthesis] [--tf3]
+    python benchmarks/uncertainty.py [--models box,lft] [--no-synthesis] [--tf3] [--bandwidth-scale 4]
 """
 
 from __future__ import annotations
@@ -27,7 +34,10 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "src"))
 
 import polyrob  # noqa: E402
+import polyrob.analysis.limits  # noqa: E402
 from polyrob.analysis.robust import robperf  # noqa: E402
+from polyrob.pipeline import Problem, default_hyperparameters  # noqa: E402
+from polyrob.pipeline.time_varying import time_varying_certificate  # noqa: E402
 from polyrob.plant.coverage import det_b_range  # noqa: E402
 from polyrob.plant.generalized import generalized_plant, paper_controller  # noqa: E402
 from polyrob.plant.uncertainty import uncertain_plant  # noqa: E402
@@ -44,19 +54,38 @@ def _mu(P, K):
     }
 
 
+def _time_varying(problem, K):
+    t = time.perf_counter()
+    tv = time_varying_certificate(problem, K)
+    return {
+        "method": tv.method,
+        "stability_holds": tv.stability_holds,
+        "performance_holds": tv.performance_holds,
+        "stability_gamma": (
+            round(float(tv.stability.gamma), 4) if getattr(tv.stability, "gamma", None) is not None else None
+        ),
+        "performance_gamma": None if tv.performance is None else round(float(tv.performance.gamma), 4),
+        "notes": list(tv.notes),
+        "seconds": round(time.perf_counter() - t, 1),
+    }
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--models", default="box,lft")
     ap.add_argument("--no-synthesis", action="store_true")
     ap.add_argument("--tf3", action="store_true", help="also tf3 from K* on the tight model (slow)")
     ap.add_argument("--samples", type=int, default=256, help="PLDI design size (the tests' 256)")
+    ap.add_argument("--bandwidth-scale", type=float, default=1.0, help="multiply omega_b and omega_bt")
+    ap.add_argument("--no-time-varying", action="store_true")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     robot = polyrob.load_robot("paper_2r")
     pldi = polyrob.bound_pldi(robot, samples=args.samples, progress=False)
-    W_S, W_T = paper_weights()
+    h = default_hyperparameters(2, bandwidth_scale=args.bandwidth_scale)
+    W_S, W_T = paper_weights(h)
     out = {
-        "problem": "paper_2r --domain paper, paper's weights",
+        "problem": f"paper_2r --domain paper, paper's weights with bandwidths x {args.bandwidth_scale:g}",
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}",
         "pldi": {
             "samples": args.samples,
@@ -66,13 +95,17 @@ def main(argv=None):
         },
         "models": {},
     }
-    plants, controllers = {}, {"K*": paper_controller()}
+    t = time.perf_counter()
+    limit = polyrob.analysis.limits.performance_limit(robot, pldi.domain, W_T)
+    out["performance_limit"] = dict(limit.to_dict(), seconds=round(time.perf_counter() - t, 1))
+    plants, problems, controllers = {}, {}, {"K*": paper_controller()}
     for name in args.models.split(","):
         t = time.perf_counter()
         unc = uncertain_plant(pldi, model=name, coverage=10_000)
         secs = time.perf_counter() - t
         P = generalized_plant(unc, W_S, W_T)
         plants[name] = P
+        problems[name] = Problem(robot, pldi, unc, P, h, name, unc.model)
         lo, hi = det_b_range(unc, 2000)
         out["models"][name] = {
             "model": unc.model,
@@ -111,6 +144,10 @@ def main(argv=None):
             "seconds": round(time.perf_counter() - t, 1),
         }
     out["mu_of_each_controller"] = {k: {name: _mu(P, K) for name, P in plants.items()} for k, K in controllers.items()}
+    if not args.no_time_varying:
+        out["time_varying_of_each_controller"] = {
+            k: {name: _time_varying(prob, K) for name, prob in problems.items()} for k, K in controllers.items()
+        }
     out["seconds_total"] = round(time.perf_counter() - t0, 1)
     print(json.dumps(out, indent=2))
 
