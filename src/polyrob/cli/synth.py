@@ -111,9 +111,14 @@ def cmd_synth(args) -> int:
             out.line(f"{alpha:>10.4g}  {mu:>18.5g}")
         for alpha, bound in res.excluded:
             out.line(f"{alpha:>10.4g}  {'>= ' + format(bound, '.5g'):>18}  (performance limit: not synthesised)")
+        beyond = (
+            f"alpha {res.bracket[1]:.4g} does not reach it"
+            if res.bracket[1] < float("inf")
+            else "the largest factor scanned: larger ones were not tried, see --alphas"
+        )
         out.line(
-            f"largest alpha with mu < 1: {res.alpha:.4g} (mu {res.peak_mu:.4g}; alpha {res.bracket[1]:.4g} "
-            f"does not reach it), controller order {res.result.order}"
+            f"largest alpha with mu < 1: {res.alpha:.4g} (mu {res.peak_mu:.4g}; {beyond}), "
+            f"controller order {res.result.order}"
         )
         out.line("weights: " + ", ".join(f"{k} = {list(v)}" for k, v in res.hyperparameters.items()))
         extra = {"weights": {k: list(v) for k, v in res.hyperparameters.items()}}

@@ -108,7 +108,7 @@ def scaled_hyperparameters(
     for key in scale:
         if key not in h:
             raise PolyrobError(f"unknown weight hyperparameter {key!r}; known: {sorted(h)}")
-        h[key] = tuple(alpha * x for x in h[key])
+        h[key] = tuple(float(alpha * x) for x in h[key])
     return h
 
 
