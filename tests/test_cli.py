@@ -75,6 +75,8 @@ def test_bad_urdf_gives_one_line_and_exit_2(capsys, write_urdf, kind):
         (["info", "--q-range", "joint9=0:1"], "unknown joint"),
         (["info", "robotron"], "unknown robot"),
         (["info", "panda", "--lock", "nope"], "cannot lock"),
+        (["synth", "--init", "no_such_K.json"], "no such controller file"),
+        (["synth", "--init", "paper"], "--init paper starts a fixed structure"),
     ],
 )
 def test_user_errors_are_one_line(capsys, argv, needle):

@@ -41,6 +41,26 @@ def test_wrong_weights_are_argument_errors_not_domain_errors():
         default_hyperparameters(2, {"Ms": [1]})
 
 
+def test_init_starts_from_the_papers_controller_or_a_controller_file(tmp_path):
+    """--init FILE: a synthesis warm-started from a controller designed elsewhere (e.g. another bandwidth)."""
+    import numpy as np
+
+    from polyrob.io.controller import save_controller
+    from polyrob.pipeline import synthesis_options
+    from polyrob.plant.generalized import paper_controller
+
+    assert synthesis_options(structure="tf3", init="paper")["init"] == "paper"
+    with pytest.raises(ArgumentError, match="fixed structure"):
+        synthesis_options(structure="full", init="paper")
+    path = save_controller(paper_controller(), tmp_path / "K0.json")
+    for structure in ("full", "tf3"):
+        K0 = synthesis_options(structure=structure, init=str(path))["initial_controller"]
+        w = 1j * np.logspace(-2, 2, 7)
+        assert np.allclose(K0(w[3]), paper_controller()(w[3]))
+    with pytest.raises(ControllerFileError, match="no such controller file"):
+        synthesis_options(structure="tf3", init=str(tmp_path / "missing.json"))
+
+
 def test_build_problem_matches_the_stage_functions(problem):
     """The pipeline gives the same generalized plant as the three calls it replaces."""
     import numpy as np

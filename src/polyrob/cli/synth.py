@@ -232,7 +232,11 @@ def _add_synthesis_arguments(p) -> None:
     )
     g.add_argument("--starts", type=int_at_least(1), default=5, help="fixed structure: optimisation starts")
     g.add_argument(
-        "--init", default=None, choices=["paper"], help="fixed structure: 'paper' starts from the paper's K*"
+        "--init",
+        default=None,
+        metavar="paper|FILE",
+        help="start from the paper's K* ('paper', fixed structures) or from a controller file (K.json, K.mat), "
+        "e.g. one designed at a nearby bandwidth",
     )
     g.add_argument("--reduce", action="store_true", help="reduce the full-order controller (balanced truncation)")
     g.add_argument(

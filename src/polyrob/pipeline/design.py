@@ -23,7 +23,12 @@ def synthesis_options(
     init: str | None = None,
     progress: bool | None = None,
 ) -> dict:
-    """``musyn`` keyword arguments from the plain synthesis choices."""
+    """``musyn`` keyword arguments from the plain synthesis choices.
+
+    ``init`` is ``"paper"`` (a fixed structure starts from the paper's K*) or
+    the path of a controller file (``K.json``, ``K.mat``) that starts the
+    synthesis, full order or fixed structure.
+    """
     if max_iter is not None and max_iter < 1:
         raise ArgumentError(f"max_iter must be >= 1, got {max_iter}")
     if starts is not None and starts < 1:
@@ -33,11 +38,17 @@ def synthesis_options(
         options["max_iter"] = int(max_iter)
     if structure == "full":
         options["mixed"] = not complex_blocks
-    else:
-        if starts is not None:
-            options["starts"] = int(starts)
-        if init:
-            options["init"] = init
+    elif starts is not None:
+        options["starts"] = int(starts)
+    if init == "paper":
+        if structure == "full":
+            raise ArgumentError("--init paper starts a fixed structure (e.g. --structure tf3) from K*")
+        options["init"] = "paper"
+    elif init:
+        # a controller file: a warm start (continuation from a nearby problem, MATLAB's musyn(P, K0))
+        from polyrob.io.controller import controller_from_mapping, read_controller_file
+
+        options["initial_controller"] = controller_from_mapping(read_controller_file(init), init)
     return options
 
 
