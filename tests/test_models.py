@@ -23,12 +23,17 @@ def axes(pldi):
     return uncertain_plant(pldi, model="axes")
 
 
+@pytest.fixture(scope="module")
+def torque(pldi):
+    return uncertain_plant(pldi, model="lft-torque")
+
+
 def _shrunk(unc, factor):
     """The same model with every parameter range (and residual gain) scaled by ``factor``."""
     if unc.model == "box":
         mid, rad = 0.5 * (unc.channel_lower + unc.channel_upper), 0.5 * (unc.channel_upper - unc.channel_lower)
         return dataclasses.replace(unc, channel_lower=mid - factor * rad, channel_upper=mid + factor * rad)
-    if unc.model == "lft":
+    if unc.model in ("lft", "lft-torque"):
         lo, hi = unc.parameter_lower, unc.parameter_upper
         mid, rad = 0.5 * (lo + hi), 0.5 * (hi - lo)
         return dataclasses.replace(unc, parameter_lower=mid - factor * rad, parameter_upper=mid + factor * rad)
@@ -57,17 +62,18 @@ def test_inertia_of_a_2r_is_affine_in_cos_q2():
     np.testing.assert_allclose(ranges, [[-1.0, 1.0]])
 
 
-@pytest.mark.parametrize("name", ["box", "lft", "axes"])
-def test_coverage_on_fresh_samples_is_one_and_a_shrunk_model_fails(pldi, unc, lft, axes, name):
-    model = {"box": unc, "lft": lft, "axes": axes}[name]
+@pytest.mark.parametrize("name", ["box", "lft", "axes", "lft-torque"])
+def test_coverage_on_fresh_samples_is_one_and_a_shrunk_model_fails(pldi, unc, lft, axes, torque, name):
+    model = {"box": unc, "lft": lft, "axes": axes, "lft-torque": torque}[name]
     robot = cached_robot("paper_2r")
     assert coverage_fraction(model, robot, pldi.domain, 3000, seed=777) == 1.0
     # the check can fail: 0.9x the ranges leaves Jacobians of the real arm outside
     assert coverage_fraction(_shrunk(model, 0.9), robot, pldi.domain, 3000, seed=777) < 0.99
 
 
-def test_coverage_fields(lft, axes):
-    for model in (lft, axes):
+def test_coverage_fields(lft, axes, torque):
+    assert torque.model == "lft-torque" and torque.n_params == 6
+    for model in (lft, axes, torque):
         assert model.coverage == 1.0 and model.coverage_points == 2000
 
 

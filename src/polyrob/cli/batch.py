@@ -163,7 +163,9 @@ def register(sub) -> None:
         help="search the largest bandwidth factor with certified mu < 1 (a synthesis per factor)",
     )
     g.add_argument("--alphas", default=None, help="--max-bandwidth: comma-separated factors to scan")
-    g.add_argument("--uncertainty", default="auto", choices=["auto", "box", "axes", "lft"], help="uncertainty model")
+    g.add_argument(
+        "--uncertainty", default="auto", choices=["auto", "box", "axes", "lft", "lft-torque"], help="uncertainty model"
+    )
     g = p.add_argument_group("work per robot")
     g.add_argument("--samples", type=int_at_least(2), default=None, help="bounds: Sobol' positions")
     g.add_argument("--structure", default="full", help="controller structure (full, tfN, pid, ss:N)")

@@ -17,7 +17,7 @@ def add_plant_arguments(p) -> None:
     p.add_argument(
         "--uncertainty",
         default="auto",
-        choices=["auto", "box", "axes", "lft"],
+        choices=["auto", "box", "axes", "lft", "lft-torque"],
         help="uncertainty model of the PLDI (box: one independent real parameter per entry, the paper's)",
     )
     p.add_argument("--merge-symmetric", action="store_true", help="one repeated parameter for b_ij = b_ji")

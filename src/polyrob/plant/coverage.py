@@ -29,7 +29,7 @@ def model_contains(unc: UncertainPlant, A, B) -> np.ndarray:
         from polyrob.plant.box import box_contains
 
         return box_contains(unc, A, B)
-    if unc.model == "lft":
+    if unc.model in ("lft", "lft-torque"):
         from polyrob.plant.inertia_lft import inertia_lft_contains
 
         return inertia_lft_contains(unc, A, B)

@@ -286,7 +286,7 @@ def inertia_lft_plant(
             "N_index": nidx,
             "N_seconds": npldi.info.get("seconds_total") if torque else 0.0,
         },
-        model="lft",
+        model="lft-torque" if torque else "lft",
         D_vd=D_vd,
     )
     if nominal == "midpoint":

@@ -104,7 +104,7 @@ class UncertainPlant:
     Attributes
     ----------
     robot_name : str
-    model : {"box", "axes", "lft"}
+    model : {"box", "axes", "lft", "lft-torque"}
         The uncertainty model (:func:`~polyrob.plant.uncertainty.uncertain_plant`).
     nominal_kind : {"pldi", "midpoint"}
     A_nom, B_nom, C : ndarray

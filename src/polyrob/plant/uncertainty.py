@@ -16,6 +16,12 @@ these models of the set of Jacobians (docs/uncertainty.md):
     it depends on, times a box on the torque-side Jacobian
     (:mod:`polyrob.plant.inertia_lft`); robots whose inertia is affine in
     single-angle cos/sin terms (planar 2R arms, analytic or URDF).
+``"lft-torque"``
+    The same inverse inertia times a box on the torque-side Jacobian
+    ``N = M(q) A_low`` instead of the entries of ``A_low``
+    (``[A_low B_low] = M(q)^{-1} [N I]``, ``a_part="torque"``): fewer
+    parameters and ``A`` moves with the inertia, but the product can leave
+    the entries' intervals.
 ``"auto"`` (default)
     ``lft`` where it applies, else ``axes``; the choice and its reason are
     in ``info["auto"]``.
@@ -56,7 +62,7 @@ __all__ = [
 ]
 
 #: The uncertainty models :func:`uncertain_plant` builds.
-MODELS = ("auto", "box", "axes", "lft")
+MODELS = ("auto", "box", "axes", "lft", "lft-torque")
 
 
 def uncertain_plant(
@@ -79,7 +85,7 @@ def uncertain_plant(
     ----------
     pldi : PLDI
         From :func:`polyrob.bound_pldi`.
-    model : {"auto", "box", "axes", "lft"}
+    model : {"auto", "box", "axes", "lft", "lft-torque"}
         See the module docstring.  ``"box"`` is the paper's model, unchanged.
     nominal : {"pldi", "midpoint"}
         ``G_n`` is the PLDI's nominal ``(A0, B0)`` or the model's centre.
@@ -122,18 +128,19 @@ def uncertain_plant(
         raise ArgumentError("merge_symmetric applies to model='box' only")
     if (n_directions is not None or residual_tol is not None) and model not in ("axes", "auto"):
         raise ArgumentError("n_directions and residual_tol apply to model='axes' only")
-    need_robot = model in ("auto", "lft") or coverage
+    need_robot = model in ("auto", "lft", "lft-torque") or coverage
     if robot is None and need_robot:
         robot = pldi.robot
     note = None
     if model == "box":
         unc = box_plant(pldi, nominal=nominal, merge_symmetric=merge_symmetric)
-    elif model in ("lft", "auto"):
+    elif model in ("lft", "lft-torque", "auto"):
+        a_part = "torque" if model == "lft-torque" else "entries"
         try:
-            unc = inertia_lft_plant(pldi, robot=robot, nominal=nominal, repeated=repeated)
+            unc = inertia_lft_plant(pldi, robot=robot, nominal=nominal, repeated=repeated, a_part=a_part)
             note = "lft: the inertia is affine in single-angle cos/sin terms" if model == "auto" else None
         except NotApplicable as exc:
-            if model == "lft":
+            if model != "auto":
                 raise
             note = f"axes: {exc}"
             unc = None
