@@ -22,9 +22,10 @@ __all__ = ["ControllerAnalysis", "analyze_controller", "verdict", "frequency_gri
 
 #: What to try when robust performance is not certified.
 NEXT_STEPS = (
-    "try: lower performance targets (`polyrob synth --max-bandwidth` finds the largest bandwidth "
-    "factor with mu < 1, or --bandwidth-scale < 1), a smaller domain (--qdot-max, --u-max, --q-range), "
-    "or a tighter uncertainty model (--uncertainty)"
+    "try: other performance targets (--bandwidth-scale; `polyrob synth --max-bandwidth` finds the largest "
+    "bandwidth factor with mu < 1, and the performance limit that synth prints says below which no controller "
+    "can reach it), a smaller domain (--qdot-max, --u-max, --q-range), or a tighter uncertainty model "
+    "(--uncertainty)"
 )
 
 
