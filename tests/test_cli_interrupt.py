@@ -130,3 +130,20 @@ def _describe(pid: int) -> str:
             continue
         rows.append(f"{p}: state {state}, waiting in {wchan or '-'}: {cmd}")
     return "; ".join(rows)
+
+
+def test_an_error_a_ctrl_c_turned_into_is_the_interrupt(monkeypatch, capsys):
+    """Seen under load: SIGINT inside matplotlib's C extension import became 'ImportError: initialization
+    failed' (caused by KeyboardInterrupt) and escaped as a traceback with status 1."""
+    import polyrob.cli.listing as listing
+    from polyrob.cli import main
+
+    def interrupted_import(args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise ImportError("initialization failed") from exc
+
+    monkeypatch.setattr(listing, "cmd_info", interrupted_import)
+    assert main(["info", "paper_2r"]) == 130
+    assert capsys.readouterr().err.strip() == "polyrob: interrupted"

@@ -58,6 +58,17 @@ def _run(args, guard) -> int:
         return 0
 
 
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    """Whether a KeyboardInterrupt is in the exception's cause/context chain."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
 def main(argv=None) -> int:
     """Run the ``polyrob`` command with ``argv`` (default ``sys.argv[1:]``); returns the exit status."""
     from polyrob.cli.interrupt import EXIT_INTERRUPTED, InterruptGuard
@@ -69,10 +80,12 @@ def main(argv=None) -> int:
             return _run(args, guard)
     except KeyboardInterrupt:
         pass
-    except Exception:
-        if not guard.interrupted.is_set():
+    except Exception as exc:
+        # an error raised while the interrupt tore down workers is part of the interrupt, and so
+        # is one a KeyboardInterrupt turned into (a C extension's import: "initialization failed"),
+        # which may reach here before the watchdog thread has flagged the interrupt
+        if not (guard.interrupted.is_set() or _caused_by_interrupt(exc)):
             raise
-        # an error raised while the interrupt tore down workers is part of the interrupt
     print("polyrob: interrupted", file=sys.stderr, flush=True)
     return EXIT_INTERRUPTED
 
