@@ -66,3 +66,27 @@ BAD_URDFS = {
     "no_joint": urdf_text(["base", "l1"], [("j1", "fixed", "base", "l1")]),
     "not_urdf": '<?xml version="1.0"?><sdf version="1.6"/>',
 }
+
+
+def child_pids(pid: int) -> list[int]:
+    """The direct children of a process (Linux /proc), [] when it is gone."""
+    try:
+        with open(f"/proc/{pid}/task/{pid}/children") as f:
+            return [int(x) for x in f.read().split()]
+    except OSError:
+        return []
+
+
+def describe_processes(pid: int) -> str:
+    """State and kernel wait channel of a process and its children (what a hang looks like)."""
+    rows = []
+    for p in [pid, *sorted(child_pids(pid))]:
+        try:
+            state = open(f"/proc/{p}/stat").read().split(")")[-1].split()[0]
+            wchan = open(f"/proc/{p}/wchan").read()
+            cmd = open(f"/proc/{p}/cmdline").read().replace("\0", " ")[:80]
+        except OSError:
+            rows.append(f"{p}: gone")
+            continue
+        rows.append(f"{p}: state {state}, waiting in {wchan or '-'}: {cmd}")
+    return "; ".join(rows)

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import describe_processes
 
 from polyrob.bounds.parallel import WorkerPool
 from polyrob.errors import BoundsError
@@ -88,7 +89,7 @@ def test_one_sigint_ends_a_bound_and_its_workers_within_seconds(tmp_path):
         try:
             proc.wait(timeout=10)
         except subprocess.TimeoutExpired:
-            pytest.fail(f"one SIGINT did not end the bound within 10 s ({_describe(proc.pid)})")
+            pytest.fail(f"one SIGINT did not end the bound within 10 s ({describe_processes(proc.pid)})")
         elapsed = time.monotonic() - t0
     finally:
         if proc.poll() is None:
@@ -110,18 +111,3 @@ def _state(pid: int) -> str:
         return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
     except OSError:
         return "Z"
-
-
-def _describe(pid: int) -> str:
-    """State and kernel wait channel of a process and its children (what a hang looks like)."""
-    rows = []
-    for p in [pid, *sorted(_children(pid))]:
-        try:
-            state = open(f"/proc/{p}/stat").read().split(")")[-1].split()[0]
-            wchan = open(f"/proc/{p}/wchan").read()
-            cmd = open(f"/proc/{p}/cmdline").read().replace("\0", " ")[:80]
-        except OSError:
-            rows.append(f"{p}: gone")
-            continue
-        rows.append(f"{p}: state {state}, waiting in {wchan or '-'}: {cmd}")
-    return "; ".join(rows)

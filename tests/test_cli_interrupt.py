@@ -8,18 +8,11 @@ import sys
 import time
 
 import pytest
+from conftest import child_pids, describe_processes
 
 
 def _start(argv, **kwargs):
     return subprocess.Popen(["polyrob", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
-
-
-def _children(pid: int) -> list[int]:
-    try:
-        with open(f"/proc/{pid}/task/{pid}/children") as f:
-            return [int(x) for x in f.read().split()]
-    except OSError:
-        return []
 
 
 def _alive(pid: int) -> bool:
@@ -41,13 +34,13 @@ def test_sigint_during_bounds_ends_workers_and_leaves_no_file(tmp_path):
     deadline = time.monotonic() + 60
     while not workers and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.2)  # wait until the process pool is up, the hard case
-        workers = _children(proc.pid)
+        workers = child_pids(proc.pid)
     proc.send_signal(signal.SIGINT)
     t0 = time.monotonic()
     try:
         rc = proc.wait(timeout=15)
     except subprocess.TimeoutExpired:
-        state = _describe(proc.pid)
+        state = describe_processes(proc.pid)
         proc.kill()
         pytest.fail(f"one SIGINT did not end `polyrob bounds` within 15 s ({state})")
     elapsed = time.monotonic() - t0
@@ -115,21 +108,6 @@ def test_top_level_api_in_matlabs_vocabulary():
     assert "HinfStep" not in polyrob.__all__ and "_lft_mats" not in dir(polyrob)
     with pytest.raises(AttributeError):
         polyrob.no_such_name  # noqa: B018
-
-
-def _describe(pid: int) -> str:
-    """State and kernel wait channel of a process and its children (what a hang looks like)."""
-    rows = []
-    for p in [pid, *sorted(_children(pid))]:
-        try:
-            state = open(f"/proc/{p}/stat").read().split(")")[-1].split()[0]
-            wchan = open(f"/proc/{p}/wchan").read()
-            cmd = open(f"/proc/{p}/cmdline").read().replace("\0", " ")[:80]
-        except OSError:
-            rows.append(f"{p}: gone")
-            continue
-        rows.append(f"{p}: state {state}, waiting in {wchan or '-'}: {cmd}")
-    return "; ".join(rows)
 
 
 def test_an_error_a_ctrl_c_turned_into_is_the_interrupt(monkeypatch, capsys):
