@@ -108,20 +108,31 @@ class PerformanceLimit:
         }
 
 
-def _weight_at(W_T, s: complex, m: int) -> np.ndarray:
-    """``W_T(s)`` as an ``m x m`` complex matrix (a SISO weight acts on every channel)."""
-    import control
+class _WeightAt:
+    """``W_T(s)`` as an ``m x m`` complex matrix, from state-space matrices computed once.
 
-    W = control.ss(W_T) if not isinstance(W_T, (int, float, np.ndarray)) else None
-    if W is None:
-        val = np.atleast_2d(np.asarray(W_T, dtype=complex))
-    else:
-        val = np.atleast_2d(np.asarray(W(s), dtype=complex))
-    if val.shape == (1, 1):
-        return val[0, 0] * np.eye(m)
-    if val.shape != (m, m):
-        raise ArgumentError(f"W_T must be SISO or {m}x{m}, got {val.shape}")
-    return val
+    (A SISO weight acts on every channel.)  Converting a MIMO transfer
+    function to state space costs milliseconds: it must not happen per pole.
+    """
+
+    def __init__(self, W_T, m: int):
+        import control
+
+        self.m = m
+        if isinstance(W_T, (int, float, complex, np.ndarray)):
+            D = np.atleast_2d(np.asarray(W_T, dtype=complex))
+            self.mats = (np.zeros((0, 0)), np.zeros((0, D.shape[1])), np.zeros((D.shape[0], 0)), D)
+        else:
+            W = control.ss(W_T)
+            self.mats = tuple(np.asarray(X, dtype=complex) for X in (W.A, W.B, W.C, W.D))
+        shape = self.mats[3].shape
+        if shape not in ((1, 1), (m, m)):
+            raise ArgumentError(f"W_T must be SISO or {m}x{m}, got {shape}")
+
+    def __call__(self, s: complex) -> np.ndarray:
+        A, B, C, D = self.mats
+        val = D + (C @ np.linalg.solve(s * np.eye(A.shape[0]) - A, B) if A.shape[0] else 0)
+        return val[0, 0] * np.eye(self.m) if val.shape == (1, 1) else val
 
 
 def pole_bound(A: np.ndarray, W_T, m: int) -> tuple[float, complex | None, np.ndarray | None]:
@@ -135,6 +146,7 @@ def pole_bound(A: np.ndarray, W_T, m: int) -> tuple[float, complex | None, np.nd
     >>> pole_bound(np.array([[0.0, 1.0], [1.0, 0.0]]), 2.0, 1)[:2]
     (2.0, (1+0j))
     """
+    weight = W_T if isinstance(W_T, _WeightAt) else _WeightAt(W_T, m)
     ev, V = np.linalg.eig(A)
     best, pole, direction = 0.0, None, None
     for j in np.flatnonzero(ev.real > 1e-9 * max(1.0, np.abs(ev).max())):
@@ -143,7 +155,7 @@ def pole_bound(A: np.ndarray, W_T, m: int) -> tuple[float, complex | None, np.nd
         if ny == 0:  # a pole not seen at the output cannot constrain T
             continue
         y = y / ny
-        b = float(np.linalg.norm(_weight_at(W_T, complex(ev[j]), m) @ y))
+        b = float(np.linalg.norm(weight(complex(ev[j])) @ y))
         if b > best:
             best, pole, direction = b, complex(ev[j]), y
     return best, pole, direction
@@ -173,6 +185,7 @@ def performance_limit(robot, domain, W_T, *, samples: int = 4096, starts: int = 
     if samples < 1 or starts < 0:
         raise ArgumentError(f"samples must be >= 1 and starts >= 0, got {samples}, {starts}")
     m = robot.m
+    W_T = _WeightAt(W_T, m)
     q, qd, u = domain.sample(samples, seed=seed)
     A, _ = robot.jacobians_batch(q, qd, u)
     # screen on the largest real part first: only the unstable points matter
