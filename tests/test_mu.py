@@ -372,3 +372,23 @@ def test_skogestad_distillation_column_robust_performance():
     res = mu_bounds(N, [[1, 1], [1, 1], [2, 2]], progress=False)
     assert res.peak_upper == pytest.approx(5.77, abs=0.01)
     assert res.peak_lower == pytest.approx(res.peak_upper, rel=1e-3)
+
+
+def test_relaxed_repeated_scalars_bound_mu_from_above_and_auto_uses_them_on_large_structures():
+    """Repeated scalars split into independent ones (a superset) give an upper bound by AB13MD."""
+    import numpy as np
+
+    from polyrob.analysis.blocks import as_block_structure
+    from polyrob.analysis.mu import RELAX_REPEATED_ABOVE, _choose_method, mussv
+
+    rng = np.random.default_rng(5)
+    M = rng.normal(size=(4, 4)) + 1j * rng.normal(size=(4, 4))
+    blk = [[-2, 0], [2, 0]]  # a repeated real and a repeated complex scalar
+    exact = mussv(M, blk, method="lmi")
+    relaxed = mussv(M, blk, method="relaxed")
+    assert relaxed.upper >= exact.upper * (1 - 1e-6)  # a superset can only raise the bound
+    assert relaxed.upper >= exact.lower and "relaxed structure" in relaxed.notes[0]
+    # and it is a true bound of that superset: no larger than its unstructured norm
+    assert relaxed.upper <= np.linalg.norm(M, 2) * (1 + 1e-9)
+    big = as_block_structure([[-3, 0]] * (RELAX_REPEATED_ABOVE // 3 + 1))
+    assert _choose_method(big, "auto") == "relaxed" and _choose_method(as_block_structure(blk), "auto") == "lmi"

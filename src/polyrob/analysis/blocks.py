@@ -174,6 +174,31 @@ class BlockStructure:
         """True when no block is real (the classic complex :math:`\\mu`)."""
         return not self.has_real
 
+    def relaxed(self) -> BlockStructure:
+        """The structure with every repeated scalar block made AB13MD-able, a superset of this one.
+
+        A repeated real ``δ I_r`` becomes ``r`` independent real scalars, a
+        repeated complex ``δ I_r`` a full complex ``r x r`` block; both
+        contain the original block, and the padded problem keeps its size
+        and order.  So μ of the relaxed structure is an upper bound of μ of
+        this one, and its ``D``, ``G`` scalings are admissible for it (a
+        diagonal ``D`` commutes with ``δ I_r``).
+
+        Examples
+        --------
+        >>> as_block_structure([[-3, 0], [2, 0], [1, 2]]).relaxed().matlab.tolist()
+        [[-1, 0], [-1, 0], [-1, 0], [2, 2], [1, 2]]
+        """
+        blocks = []
+        for b in self.blocks:
+            if b.kind == "real" and b.rows > 1:
+                blocks.extend([Block("real", 1, 1)] * b.rows)
+            elif b.kind == "complex" and b.rows > 1:
+                blocks.append(Block("full", b.rows, b.rows))
+            else:
+                blocks.append(b)
+        return BlockStructure(tuple(blocks))
+
     @property
     def ab13md_args(self) -> tuple[np.ndarray, np.ndarray]:
         """``(nblock, itype)`` for SLICOT AB13MD on the padded problem.

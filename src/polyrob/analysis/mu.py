@@ -52,18 +52,32 @@ __all__ = [
     "TimeLimitedCall",
 ]
 
-Method = Literal["auto", "ab13md", "lmi"]
+Method = Literal["auto", "ab13md", "lmi", "relaxed"]
 
 
 # ================================================================ mussv
+#: ``method="auto"`` relaxes repeated scalar blocks (AB13MD on a superset) above this padded size:
+#: the D-G LMI of an 89-channel structure (ur5's axes model) takes minutes per frequency.
+RELAX_REPEATED_ABOVE = 24
+
+
 def _choose_method(st: BlockStructure, method: str) -> str:
     if method == "auto":
-        return "lmi" if st.has_repeated else "ab13md"
-    if method not in ("ab13md", "lmi"):
-        raise PolyrobError(f"method must be 'auto', 'ab13md' or 'lmi', got {method!r}")
+        if not st.has_repeated:
+            return "ab13md"
+        return "relaxed" if st.padded_size > RELAX_REPEATED_ABOVE else "lmi"
+    if method not in ("ab13md", "lmi", "relaxed"):
+        raise PolyrobError(f"method must be 'auto', 'ab13md', 'lmi' or 'relaxed', got {method!r}")
     if method == "ab13md" and st.has_repeated:
-        raise PolyrobError("AB13MD cannot handle repeated scalar blocks; use method='lmi'")
+        raise PolyrobError("AB13MD cannot handle repeated scalar blocks; use method='lmi' or 'relaxed'")
     return method
+
+
+def _relaxation_note(st: BlockStructure) -> str:
+    return (
+        f"upper bound on the relaxed structure {st.relaxed()} (each repeated scalar as independent scalars or a "
+        "full block, a superset: conservative, still an upper bound); lower bound on the structure itself"
+    )
 
 
 def mussv(
@@ -137,8 +151,9 @@ def _mussv(M, st, meth, lower, refine, starts, seed, rtol, solver) -> MussvResul
     Ms = st.pad(M)
     n = Ms.shape[0]
     lo, dsq, notes = 0.0, np.zeros((n, n), complex), ()
-    if meth == "ab13md":
-        up, D, G, _ = mu_upper.upper_ab13md(Ms, st)
+    if meth in ("ab13md", "relaxed"):
+        up, D, G, _ = mu_upper.upper_ab13md(Ms, st.relaxed())
+        notes = (_relaxation_note(st),) if meth == "relaxed" else ()
     else:
         # a verified lower bound narrows the bisection bracket for free
         lo, dsq, _ = lower_bound(Ms, st, starts=1, refine=False, seed=seed)
@@ -262,12 +277,14 @@ def _sweep(
 ):
     from tqdm import tqdm
 
+    # "relaxed": AB13MD on a superset structure (repeated scalars split); the lower bound stays on st
+    st_up = st.relaxed()
     lmi = LmiUpper(st, solver) if meth == "lmi" else None
-    cold = mu_upper.TimedAb13md(st, cold_timeout, solver, rtol) if meth == "ab13md" else None
+    cold = mu_upper.TimedAb13md(st_up, cold_timeout, solver, rtol) if meth in ("ab13md", "relaxed") else None
     guard = None
-    if warm_start and meth == "ab13md":
+    if warm_start and meth in ("ab13md", "relaxed"):
         guard = TimeLimitedCall(mu_upper.worker_function(), warm_timeout)
-    fallbacks, notes = 0, []
+    fallbacks, notes = 0, ([_relaxation_note(st)] if meth == "relaxed" else [])
     state = {"x": None, "pi": None}
     n = st.padded_size
 
@@ -279,7 +296,7 @@ def _sweep(
             return lmi(Ms, lo=lo, rtol=rtol)
         res = None
         if guard is not None and state["x"] is not None and np.any(Ms):
-            ok, val = guard(Ms, *st.ab13md_args, state["x"])
+            ok, val = guard(Ms, *st_up.ab13md_args, state["x"])
             if ok:
                 res = val
             else:  # hung or failed once: stop warm-starting for this sweep
@@ -287,7 +304,7 @@ def _sweep(
                 notes.append(f"AB13MD warm start failed or exceeded {warm_timeout} s ({val}); cold calls from then on")
                 guard.close()
                 guard = None
-        up, D, G, x = mu_upper.upper_ab13md(Ms, st, res) if res is not None else cold(Ms, lo)
+        up, D, G, x = mu_upper.upper_ab13md(Ms, st_up, res) if res is not None else cold(Ms, lo)
         state["x"] = x if x is not None else state["x"]
         return up, D, G
 
