@@ -75,3 +75,13 @@ def test_bandwidth_scan_skips_factors_the_limit_excludes():
     assert all(a <= 3 for a in calls)  # nothing synthesised where the floor is >= 1
     assert [a for a, _ in res.excluded] == [32.0, 16.0, 8.0, 4.0]
     assert res.alpha == pytest.approx(2.484, abs=0.01)
+
+
+def test_a_coordinate_the_domain_fixes_stays_fixed_in_the_search():
+    import numpy as np
+
+    robot = polyrob.load_robot("paper_2r")
+    dom = Domain.from_robot(robot, "paper")
+    fixed = dom.with_bounds(u_lower=np.full(2, 3.0), u_upper=np.full(2, 3.0))
+    lim = performance_limit(robot, fixed, paper_weights()[1], samples=256, starts=1)
+    assert np.all(lim.u == 3.0) and lim.bound > 0

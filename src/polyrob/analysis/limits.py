@@ -195,11 +195,17 @@ def performance_limit(robot, domain, W_T, *, samples: int = 4096, starts: int = 
         scores[k] = pole_bound(A[k], W_T, m)[0]
     evaluated = samples
     lo, hi = domain.lower, domain.upper
+    free = hi > lo  # the local search moves only the coordinates the domain lets vary
 
-    def negative(z):
+    def point(z_free, z0):
+        z = z0.copy()
+        z[free] = np.clip(z_free, lo[free], hi[free])
+        return z
+
+    def negative(z_free, z0):
         nonlocal evaluated
         evaluated += 1
-        qq, vv, uu = domain.split(np.clip(z, lo, hi))
+        qq, vv, uu = domain.split(point(z_free, z0))
         Ak, _ = robot.jacobians(qq[0], vv[0], uu[0])
         return -pole_bound(Ak, W_T, m)[0]
 
@@ -208,15 +214,14 @@ def performance_limit(robot, domain, W_T, *, samples: int = 4096, starts: int = 
     order = np.argsort(-scores)
     if scores[order[0]] > 0:
         best_z, best = np.concatenate([q[order[0]], qd[order[0]], u[order[0]]]), scores[order[0]]
-        fixed = hi <= lo
-        for k in order[: min(starts, len(unstable))]:
+        bounds = list(zip(lo[free], hi[free]))
+        for k in order[: min(starts, len(unstable))] if free.any() else []:
             z0 = np.concatenate([q[k], qd[k], u[k]])
-            bounds = [(a, b) if b > a else (a, a + 1e-300) for a, b in zip(lo, hi)]
-            res = minimize(negative, z0, method="Powell", bounds=bounds, options={"xtol": 1e-6, "maxfev": 400})
-            z = np.clip(res.x, lo, hi)
-            z[fixed] = lo[fixed]
+            res = minimize(
+                negative, z0[free], args=(z0,), method="Powell", bounds=bounds, options={"xtol": 1e-6, "maxfev": 400}
+            )
             if -res.fun > best:
-                best, best_z = -res.fun, z
+                best, best_z = -res.fun, point(res.x, z0)
     qq, vv, uu = domain.split(best_z)
     Ak, _ = robot.jacobians(qq[0], vv[0], uu[0])
     bound, pole, direction = pole_bound(Ak, W_T, m)  # recomputed at the clipped point: what is reported is its own
