@@ -90,3 +90,17 @@ def describe_processes(pid: int) -> str:
             continue
         rows.append(f"{p}: state {state}, waiting in {wchan or '-'}: {cmd}")
     return "; ".join(rows)
+
+
+def process_running(pid: int) -> bool:
+    """The OS's view (Linux /proc): the process exists and is not a zombie.
+
+    ``multiprocessing.Process.is_alive`` can say True for a child that
+    another thread of the parent has just reaped (``Popen.poll`` is not
+    thread-safe); /proc cannot.
+    """
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False

@@ -8,19 +8,11 @@ import sys
 import time
 
 import pytest
-from conftest import child_pids, describe_processes
+from conftest import child_pids, describe_processes, process_running
 
 
 def _start(argv, **kwargs):
     return subprocess.Popen(["polyrob", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().split(")")[-1].split()[0] != "Z"
-    except OSError:
-        return False
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc for the worker processes")
@@ -48,7 +40,7 @@ def test_sigint_during_bounds_ends_workers_and_leaves_no_file(tmp_path):
     assert rc == 130 and elapsed < 10, (rc, elapsed, err)
     assert "Traceback" not in err and err.strip().splitlines()[-1] == "polyrob: interrupted"
     time.sleep(0.5)
-    assert not [w for w in workers if _alive(w)], "worker processes survived the interrupt"
+    assert not [w for w in workers if process_running(w)], "worker processes survived the interrupt"
     assert not out.exists() or list(out.iterdir()) == []
 
 

@@ -92,10 +92,16 @@ def _terminate(pool) -> None:
     # The executor keeps its processes in ``_processes`` (pid -> Process); there is
     # no public way to stop a running call, and waiting would make Ctrl-C take minutes.
     procs = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)
     pool.shutdown(wait=False, cancel_futures=True)
     for proc in procs:
         if proc.is_alive():
             proc.terminate()
+    # The executor's own thread notices the dead workers and joins them too; a
+    # process's Popen.poll is not thread-safe, so a join here can return while
+    # that thread holds the exit status.  Let the thread finish first.
+    if manager is not None:
+        manager.join(2.0)
     for proc in procs:
         proc.join(2.0)
         if proc.is_alive():
