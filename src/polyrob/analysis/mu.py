@@ -59,6 +59,9 @@ Method = Literal["auto", "ab13md", "lmi", "relaxed"]
 #: ``method="auto"`` relaxes repeated scalar blocks (AB13MD on a superset) above this padded size:
 #: the D-G LMI of an 89-channel structure (ur5's axes model) takes minutes per frequency.
 RELAX_REPEATED_ABOVE = 24
+#: The least AB13MD time limit on such large structures (measured on ur5: AB13MD 26-37 s per
+#: frequency, the D-G LMI fallback not done after 6 minutes).
+LARGE_AB13MD_TIMEOUT = 120.0
 
 
 def _choose_method(st: BlockStructure, method: str) -> str:
@@ -213,7 +216,9 @@ def mu_bounds(
         Seconds a cold AB13MD call may take on a structure with real blocks
         (it can take seconds per frequency there); past it, that frequency's
         upper bound comes from the D-G LMI, counted in the result's notes.
-        ``None``: no limit (calls run in-process).
+        ``None``: no limit (calls run in-process).  On structures above
+        :data:`RELAX_REPEATED_ABOVE` padded channels the limit is at least
+        :data:`LARGE_AB13MD_TIMEOUT`: there the LMI is the slower of the two.
     progress : bool, optional
         tqdm progress bar; default: shown on a terminal for long sweeps.
     rtol, solver
@@ -280,6 +285,8 @@ def _sweep(
     # "relaxed": AB13MD on a superset structure (repeated scalars split); the lower bound stays on st
     st_up = st.relaxed()
     lmi = LmiUpper(st, solver) if meth == "lmi" else None
+    if cold_timeout and st.padded_size > RELAX_REPEATED_ABOVE:
+        cold_timeout = max(cold_timeout, LARGE_AB13MD_TIMEOUT)
     cold = mu_upper.TimedAb13md(st_up, cold_timeout, solver, rtol) if meth in ("ab13md", "relaxed") else None
     guard = None
     if warm_start and meth in ("ab13md", "relaxed"):
