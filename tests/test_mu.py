@@ -378,8 +378,7 @@ def test_relaxed_repeated_scalars_bound_mu_from_above_and_auto_uses_them_on_larg
     """Repeated scalars split into independent ones (a superset) give an upper bound by AB13MD."""
     import numpy as np
 
-    from polyrob.analysis.blocks import as_block_structure
-    from polyrob.analysis.mu import RELAX_REPEATED_ABOVE, _choose_method, mussv
+    from polyrob.analysis.mu import RELAX_REPEATED_ABOVE, mussv
 
     rng = np.random.default_rng(5)
     M = rng.normal(size=(4, 4)) + 1j * rng.normal(size=(4, 4))
@@ -390,5 +389,8 @@ def test_relaxed_repeated_scalars_bound_mu_from_above_and_auto_uses_them_on_larg
     assert relaxed.upper >= exact.lower and "relaxed structure" in relaxed.notes[0]
     # and it is a true bound of that superset: no larger than its unstructured norm
     assert relaxed.upper <= np.linalg.norm(M, 2) * (1 + 1e-9)
-    big = as_block_structure([[-3, 0]] * (RELAX_REPEATED_ABOVE // 3 + 1))
-    assert _choose_method(big, "auto") == "relaxed" and _choose_method(as_block_structure(blk), "auto") == "lmi"
+    # method="auto": the exact LMI on a small structure, the relaxation above RELAX_REPEATED_ABOVE channels
+    assert mussv(M, blk, lower=False).method == "lmi"
+    n_big = RELAX_REPEATED_ABOVE // 3 + 1
+    big = mussv(rng.normal(size=(3 * n_big, 3 * n_big)), [[-3, 0]] * n_big, lower=False)
+    assert big.method == "relaxed" and "relaxed structure" in big.notes[0]

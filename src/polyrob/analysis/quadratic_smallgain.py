@@ -245,14 +245,15 @@ def _frequency_route(A, B, C, D, st, unscaled: float, t0: float) -> ScaledSmallG
     import control
     from scipy.optimize import minimize
 
+    from polyrob.analysis.frequency import freqresp
+
     nr, nc = st.delta_shape
     n = A.shape[0]
     poles = np.abs(np.linalg.eigvals(A)) if n else np.array([1.0])
     lo_w = max(min(poles[poles > 0].min() if np.any(poles > 0) else 1.0, 1.0) * 1e-2, 1e-8)
     hi_w = max(poles.max(), 1.0) * 1e2
     omega = np.unique(np.concatenate([np.logspace(np.log10(lo_w), np.log10(hi_w), 500), poles[poles > 0]]))
-    eye = np.eye(n)
-    H = np.array([C @ np.linalg.solve(1j * w * eye - A, B) + D for w in omega]) if n else np.array([D] * len(omega))
+    H = freqresp(control.ss(A, B, C, D), omega)
     nb = len(st.blocks)
     sel_r = np.zeros((nb, nr))
     sel_c = np.zeros((nb, nc))
