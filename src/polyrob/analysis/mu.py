@@ -16,8 +16,9 @@ model.  Every bound comes with its certificate:
 What is written by hand here and why: no Python library computes mixed
 :math:`\\mu`.  SLICOT AB13MD (through ``slycot``) gives the upper bound for real
 scalars + full complex blocks and is used whenever it applies; repeated
-scalar blocks need the D-G LMI (solved with cvxpy); the lower bound (power
-iteration + a local search) exists in no library at all.
+scalar blocks need the D-G LMI (solved with cvxpy) or, on large structures,
+descent on the same scalings (:mod:`polyrob.analysis.mu_gradient`); the lower
+bound (power iteration + a local search) exists in no library at all.
 
 What the sweep's figures are: :func:`mu_bounds` evaluates the bounds at the
 points of a frequency grid (plus a local refinement around the largest
@@ -38,6 +39,7 @@ from polyrob._threads import single_blas_thread
 from polyrob.analysis import mu_upper
 from polyrob.analysis.blocks import BlkLike, BlockStructure, as_block_structure
 from polyrob.analysis.frequency import default_grid, freqresp, refine_peaks
+from polyrob.analysis.mu_gradient import GradientUpper
 from polyrob.analysis.mu_lower import lower_bound
 from polyrob.analysis.mu_results import MuBoundsResult, MussvResult
 from polyrob.analysis.mu_upper import LmiUpper
@@ -52,12 +54,12 @@ __all__ = [
     "TimeLimitedCall",
 ]
 
-Method = Literal["auto", "ab13md", "lmi", "relaxed"]
+Method = Literal["auto", "ab13md", "lmi", "gradient", "relaxed"]
 
 
 # ================================================================ mussv
-#: ``method="auto"`` relaxes repeated scalar blocks (AB13MD on a superset) above this padded size:
-#: the D-G LMI of an 89-channel structure (ur5's axes model) takes minutes per frequency.
+#: ``method="auto"`` bounds repeated scalar blocks by descent on the D-G scalings above this padded
+#: size: the D-G LMI of an 89-channel structure (ur5's axes model) takes minutes per frequency.
 RELAX_REPEATED_ABOVE = 24
 #: The least AB13MD time limit on such large structures (measured on ur5: AB13MD 26-37 s per
 #: frequency, the D-G LMI fallback not done after 6 minutes).
@@ -68,11 +70,11 @@ def _choose_method(st: BlockStructure, method: str) -> str:
     if method == "auto":
         if not st.has_repeated:
             return "ab13md"
-        return "relaxed" if st.padded_size > RELAX_REPEATED_ABOVE else "lmi"
-    if method not in ("ab13md", "lmi", "relaxed"):
-        raise PolyrobError(f"method must be 'auto', 'ab13md', 'lmi' or 'relaxed', got {method!r}")
+        return "gradient" if st.padded_size > RELAX_REPEATED_ABOVE else "lmi"
+    if method not in ("ab13md", "lmi", "gradient", "relaxed"):
+        raise PolyrobError(f"method must be 'auto', 'ab13md', 'lmi', 'gradient' or 'relaxed', got {method!r}")
     if method == "ab13md" and st.has_repeated:
-        raise PolyrobError("AB13MD cannot handle repeated scalar blocks; use method='lmi' or 'relaxed'")
+        raise PolyrobError("AB13MD cannot handle repeated scalar blocks; use method='lmi', 'gradient' or 'relaxed'")
     return method
 
 
@@ -103,10 +105,14 @@ def mussv(
         Matrix closing the loop with :math:`\\Delta` (``nr x nc``).
     blk : BlockStructure or array_like
         MATLAB ``blk`` encoding, see :mod:`polyrob.analysis.blocks`.
-    method : {"auto", "ab13md", "lmi"}
-        Upper bound: SLICOT AB13MD (real scalars, full complex blocks) or
-        the D-G LMI solved by bisection with cvxpy (also repeated scalars).
-        ``"auto"`` picks AB13MD whenever it applies.
+    method : {"auto", "ab13md", "lmi", "gradient", "relaxed"}
+        Upper bound: SLICOT AB13MD (real scalars, full complex blocks), the
+        D-G LMI solved by bisection with cvxpy (also repeated scalars), the
+        same scalings found by descent (:class:`~polyrob.analysis.mu_gradient.GradientUpper`,
+        fast on large repeated structures, re-certified exactly) or AB13MD on
+        a superset structure (``"relaxed"``).  ``"auto"`` picks AB13MD
+        whenever it applies, else the LMI up to :data:`RELAX_REPEATED_ABOVE`
+        padded channels and the descent above.
     lower : bool
         Compute the lower bound and its worst perturbation.
     refine : bool
@@ -157,6 +163,8 @@ def _mussv(M, st, meth, lower, refine, starts, seed, rtol, solver) -> MussvResul
     if meth in ("ab13md", "relaxed"):
         up, D, G, _ = mu_upper.upper_ab13md(Ms, st.relaxed())
         notes = (_relaxation_note(st),) if meth == "relaxed" else ()
+    elif meth == "gradient":
+        up, D, G, _ = GradientUpper(st)(Ms)
     else:
         # a verified lower bound narrows the bisection bracket for free
         lo, dsq, _ = lower_bound(Ms, st, starts=1, refine=False, seed=seed)
@@ -203,8 +211,9 @@ def mu_bounds(
     omega : array_like, optional
         Frequencies in rad/s.  Default: a log grid over the system's poles and
         zeros (FRD: its own frequencies).
-    method : {"auto", "ab13md", "lmi"}
-        Upper-bound method, see :func:`mussv`.
+    method : {"auto", "ab13md", "lmi", "gradient", "relaxed"}
+        Upper-bound method, see :func:`mussv`; ``"gradient"`` warm-starts
+        each frequency from the previous one's scalings.
     refine_peak : bool
         Golden-section search of the upper-bound peak between the grid points
         around the best local maxima, so a sharp resonance is not missed.
@@ -285,6 +294,7 @@ def _sweep(
     # "relaxed": AB13MD on a superset structure (repeated scalars split); the lower bound stays on st
     st_up = st.relaxed()
     lmi = LmiUpper(st, solver) if meth == "lmi" else None
+    descent = GradientUpper(st) if meth == "gradient" else None
     if cold_timeout and st.padded_size > RELAX_REPEATED_ABOVE:
         cold_timeout = max(cold_timeout, LARGE_AB13MD_TIMEOUT)
     cold = mu_upper.TimedAb13md(st_up, cold_timeout, solver, rtol) if meth in ("ab13md", "relaxed") else None
@@ -292,7 +302,7 @@ def _sweep(
     if warm_start and meth in ("ab13md", "relaxed"):
         guard = TimeLimitedCall(mu_upper.worker_function(), warm_timeout)
     fallbacks, notes = 0, ([_relaxation_note(st)] if meth == "relaxed" else [])
-    state = {"x": None, "pi": None}
+    state = {"x": None, "pi": None, "xg": None}
     n = st.padded_size
 
     def upper_at(Ms, lo=0.0):
@@ -301,6 +311,9 @@ def _sweep(
             return np.inf, np.eye(n), np.zeros((n, n))
         if lmi is not None:
             return lmi(Ms, lo=lo, rtol=rtol)
+        if descent is not None:
+            up, D, G, state["xg"] = descent(Ms, state["xg"])
+            return up, D, G
         res = None
         if guard is not None and state["x"] is not None and np.any(Ms):
             ok, val = guard(Ms, *st_up.ab13md_args, state["x"])
