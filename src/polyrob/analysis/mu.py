@@ -51,6 +51,7 @@ __all__ = [
     "MuBoundsResult",
     "mussv",
     "mu_bounds",
+    "resolve_method",
     "TimeLimitedCall",
 ]
 
@@ -66,7 +67,8 @@ RELAX_REPEATED_ABOVE = 24
 LARGE_AB13MD_TIMEOUT = 120.0
 
 
-def _choose_method(st: BlockStructure, method: str) -> str:
+def resolve_method(st: BlockStructure, method: str) -> str:
+    """The upper-bound method ``method`` stands for on ``st`` (``"auto"`` resolved; checked)."""
     if method == "auto":
         if not st.has_repeated:
             return "ab13md"
@@ -151,7 +153,7 @@ def mussv(
     """
     st = as_block_structure(blk)
     M = st.check_m(M)
-    meth = _choose_method(st, method)
+    meth = resolve_method(st, method)
     with single_blas_thread():
         return _mussv(M, st, meth, lower, refine, starts, seed, rtol, solver)
 
@@ -267,7 +269,7 @@ def mu_bounds(
     omega = omega[np.r_[True, np.diff(omega) > 1e-9 * np.abs(omega[1:])]] if omega.size else omega
     if omega.size == 0 or np.any(omega < 0) or not np.all(np.isfinite(omega)):
         raise PolyrobError("omega must be a non-empty array of finite non-negative frequencies")
-    meth = _choose_method(st, method)
+    meth = resolve_method(st, method)
     with single_blas_thread():
         return _sweep(
             sys,

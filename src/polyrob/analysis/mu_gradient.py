@@ -77,6 +77,11 @@ class GradientUpper:
             k += nt + ng
         self.size = k
         self._iu = {}
+        # scalar scalings stay within e^+-30 of each other (beyond, products overflow)
+        self._bounds = [(None, None)] * k
+        for _, _, full_t, st_t, _ in self._layout:
+            if not full_t:
+                self._bounds[st_t.start] = (-30.0, 30.0)
 
     # ------------------------------------------------------------ parameters
     def _triu(self, n):
@@ -94,7 +99,7 @@ class GradientUpper:
                 T = np.eye(n) * d[sl.start]
                 x[st_t] = np.concatenate([T.ravel(), np.zeros(n * n)])
             else:
-                x[st_t] = np.log(d[sl.start])
+                x[st_t] = np.clip(np.log(max(d[sl.start], 1e-300)), -30.0, 30.0)
         return x
 
     def _unpack(self, x):
@@ -153,6 +158,19 @@ class GradientUpper:
             k *= 2
 
     def _objective(self, x, Ms, temp):
+        # A block that barely couples to the rest drives its scaling to infinity (the bound's
+        # infimum is not attained): where the numbers overflow, report +inf so the line search
+        # steps back, instead of warnings and NaN.
+        with np.errstate(all="ignore"):
+            try:
+                f, g = self._objective_raw(x, Ms, temp)
+            except (np.linalg.LinAlgError, ValueError):
+                return np.inf, np.zeros_like(x)
+        if not (np.isfinite(f) and np.all(np.isfinite(g))):
+            return np.inf, np.zeros_like(x)
+        return f, g
+
+    def _objective_raw(self, x, Ms, temp):
         H, Mt, T, Ti, Gt = self._hermitian(Ms, x)
         lam, V = self._top(H, temp)
         top = lam[-1]
@@ -234,6 +252,7 @@ class GradientUpper:
                 args=(Ms, rel * lam_top),
                 jac=True,
                 method="L-BFGS-B",
+                bounds=self._bounds,
                 options={"maxiter": self.maxiter, "ftol": 1e-12, "gtol": 1e-10},
             )
             if np.all(np.isfinite(res.x)):

@@ -1,7 +1,8 @@
 """μ upper bound and scalings of a stack of matrices (the D-step's sweep), on one or two cores.
 
 :class:`MuSweep` runs :func:`polyrob.analysis.mu.mussv` (SLICOT AB13MD) over
-the frequencies; :func:`complex_dscales` is the complex-μ D-step the fits of
+the frequencies (descent on the scalings, warm-started, for large repeated
+structures); :func:`complex_dscales` is the complex-μ D-step the fits of
 :mod:`polyrob.synthesis.dfit` run on the transformed loop.
 """
 
@@ -50,7 +51,7 @@ class MuSweep:
         return max(1, int(self.n_jobs or 1))
 
     def __call__(self, H: np.ndarray, st: BlockStructure):
-        from polyrob.analysis.mu import mussv, upper_bound_ab13md
+        from polyrob.analysis.mu import mussv, resolve_method, upper_bound_ab13md
 
         st = as_block_structure(st)
         n = st.padded_size
@@ -58,6 +59,9 @@ class MuSweep:
         mu = np.zeros(N)
         D = np.zeros((N, n, n), complex)
         G = np.zeros((N, n, n), complex)
+
+        if resolve_method(st, self.method) == "gradient":
+            return self._descent(H, st, mu, D, G)
 
         def local(k):
             if not np.all(np.isfinite(H[k])):
@@ -114,6 +118,22 @@ class MuSweep:
         if todo and len(failed) == len(todo):
             self._dead = True  # the workers do not work here: stay serial
             self.notes.append("the worker processes do not work here: the sweep continues serially")
+        return mu, D, G
+
+    @staticmethod
+    def _descent(H, st, mu, D, G):
+        """Large repeated structures: descent on the scalings, each frequency warm-started from the last."""
+        from polyrob._threads import single_blas_thread
+        from polyrob.analysis.mu_gradient import GradientUpper
+
+        n, x = st.padded_size, None
+        upper = GradientUpper(st)
+        with single_blas_thread():
+            for k in range(H.shape[0]):
+                if not np.all(np.isfinite(H[k])):
+                    mu[k], D[k], G[k] = np.inf, np.eye(n), 0.0
+                    continue
+                mu[k], D[k], G[k], x = upper(st.pad(H[k]), x)
         return mu, D, G
 
     def close(self):

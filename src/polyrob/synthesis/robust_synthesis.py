@@ -31,6 +31,12 @@ from polyrob.synthesis.result import MusynResult
 
 __all__ = ["musyn"]
 
+#: Above this many padded channels (:data:`polyrob.analysis.mu.RELAX_REPEATED_ABOVE`, a 6-7 joint
+#: arm's axes model) the D and G scalings default to constants: a fitted order ``o`` on a block
+#: repeated ``r`` times adds ``o * r`` states on each side of the plant, and on ur5 (twelve blocks
+#: of six) the fits and K-steps of order 1-4 took most of a 15-minute budget per iteration.
+LARGE_STRUCTURE_ORDERS = {"d_order": (0,), "g_order": (0,)}
+
 #: defaults of the full-order iteration for the options left at ``None``
 FULL_ORDER_DEFAULTS = {
     "max_iter": 20,
@@ -124,7 +130,8 @@ def musyn(
         Stopping rules, see :class:`DKIteration` (full order: 20, 1e-3, 2).
     d_order, g_order : sequence of int, optional
         Candidate orders of the D and G fits (the lowest that fits is used;
-        default ``0..4`` and ``0..2``).
+        default ``0..4`` and ``0..2``; constant scalings, :data:`LARGE_STRUCTURE_ORDERS`,
+        on structures above :data:`~polyrob.analysis.mu.RELAX_REPEATED_ABOVE` padded channels).
     fit_tol : float, optional
         Relative tolerance of the fitted bound (default 0.01), see
         :class:`~polyrob.synthesis.dfit.LogMagnitudeFit`.
@@ -235,6 +242,13 @@ def musyn(
         }.items()
     }
     Psys, st, n_u, n_y = _parse_plant(P, blk, n_u, n_y)
+    from polyrob.analysis.mu import RELAX_REPEATED_ABOVE
+
+    large = st.padded_size > RELAX_REPEATED_ABOVE
+    if large:
+        for key, value in LARGE_STRUCTURE_ORDERS.items():
+            if {"d_order": d_order, "g_order": g_order}[key] is None:
+                opt[key] = value
     if check_weights:
         lb, wlb = performance_lower_bound(P)
         if lb >= 1.0:
@@ -310,6 +324,7 @@ def musyn(
         "best_iteration": i_best + 1,
         "grid_peak_mu": float(rec.mu_peak),
         "orders": [h.orders for h in hist],
+        "scaling_orders": {"d_order": list(opt["d_order"]), "g_order": list(opt["g_order"])},
         "regularization": list(rec.notes),
         # K-steps rejected, G steps replaced by D steps: what the iteration did instead
         "fallbacks": list(loop.failures) + list(getattr(getattr(loop.mu_bound, "sweep", None), "notes", [])),
