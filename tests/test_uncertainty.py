@@ -187,3 +187,19 @@ def test_bad_inputs_raise_clear_errors(pldi, unc):
         uncertain_plant(dataclasses.replace(pldi, A_lower=A_lower), model="box")
     with pytest.raises(PolyrobError, match="ill posed"):
         upper_lft(control.ss([], [], [], [[1.0]]), [[1.0]])
+
+
+def test_input_definiteness_holds_on_the_paper_models_and_fails_on_a_widened_box(pldi, unc):
+    """Every member of the 2R's box keeps M^-1 positive definite; widen its b12/b21 channels and it does not."""
+    from polyrob.plant.coverage import input_definiteness
+
+    ok = input_definiteness(unc, 400)
+    assert ok["fraction"] == 0.0 and ok["least"] > 0.0 and ok["centre"] > ok["least"]
+    idx = np.asarray(unc.channel_index)
+    lo, hi = np.asarray(unc.channel_lower, float).copy(), np.asarray(unc.channel_upper, float).copy()
+    off = [k for k, (mat, r, c) in enumerate(idx) if mat == 1 and r - unc.m != c]
+    assert off  # the 2R's b12 = b21 entries vary
+    lo[off], hi[off] = lo[off] - 10.0, hi[off] + 10.0
+    wide = dataclasses.replace(unc, channel_lower=lo, channel_upper=hi)
+    bad = input_definiteness(wide, 400)
+    assert bad["fraction"] > 0.5 and bad["least"] < 0.0

@@ -77,6 +77,21 @@ def _print_limit(problem, out) -> dict:
     return limit.to_dict()
 
 
+def _print_input_check(problem, out) -> dict:
+    """Say when the model's input matrices lose the definiteness of the robot's ``M(q)^-1``."""
+    from polyrob.plant.coverage import input_definiteness
+
+    check = input_definiteness(problem.unc)
+    if check["fraction"] > 0:
+        out.line(
+            f"model check: {100 * check['fraction']:.0f} % of the {problem.model} model's members "
+            f"({check['samples']} uniform samples) have an input matrix B = M(q)^-1 that is not positive "
+            f"definite (least eigenvalue {check['least']:.3g}; the robot's never is): a robust controller "
+            "must also stabilise inputs that act in reverse, so expect mu >> 1 on this model"
+        )
+    return check
+
+
 def _save(design, problem, args, out, info_extra=None, certificate_extra=None, path=None):
     from polyrob.io.controller import save_controller
 
@@ -126,6 +141,7 @@ def cmd_synth(args) -> int:
         doc["bandwidth_scaling"] = res.summary()
     else:
         doc["performance_limit"] = _print_limit(problem, out)
+        doc["input_definiteness"] = _print_input_check(problem, out)
         out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
         design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
         print_design(design, out)
@@ -157,6 +173,7 @@ def cmd_run(args) -> int:
     )
     out.line(pldi.table())
     limit = _print_limit(problem, out)
+    input_check = _print_input_check(problem, out)
     out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
     design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
     print_design(design, out)
@@ -180,6 +197,7 @@ def cmd_run(args) -> int:
         "problem": problem.description(),
         "bounds": pldi_report(pldi, robot.joint_names),
         "performance_limit": limit,
+        "input_definiteness": input_check,
         "synthesis": design.summary(),
         "analysis": a.summary(),
         "covers": a.covers,

@@ -10,7 +10,10 @@
   and the box model lie inside the box; for the other models the part
   outside the box is not counted, see docs/uncertainty.md).  A model that is
   lower-dimensional (the ``lft`` model's ``B`` block is a curve) has ratio 0
-  by this measure; :func:`det_b_range` gives a number that separates them.
+  by this measure; :func:`det_b_range` gives a number that separates them;
+* :func:`input_definiteness` — how many of the model's members have an input
+  matrix ``B_low`` that is not positive definite, which the robot's
+  ``M(q)^{-1}`` always is.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ import numpy as np
 from polyrob.errors import PolyrobError
 from polyrob.plant.lftplant import UncertainPlant
 
-__all__ = ["model_contains", "coverage_fraction", "volume_ratio", "det_b_range"]
+__all__ = ["model_contains", "coverage_fraction", "volume_ratio", "det_b_range", "input_definiteness"]
 
 
 def model_contains(unc: UncertainPlant, A, B) -> np.ndarray:
@@ -118,3 +121,48 @@ def det_b_range(unc: UncertainPlant, n: int = 4000, *, seed: int = 0) -> tuple[f
         vals.append(np.linalg.det(unc.matrices_at(d, residual=r if r else None)[1][m:]))
     vals = np.real(np.array(vals)) / d0
     return float(vals.min()), float(vals.max())
+
+
+def input_definiteness(unc: UncertainPlant, n: int = 1000, *, seed: int = 0) -> dict:
+    """How often the model's input matrix ``B_low`` loses the definiteness of the robot's ``M(q)^{-1}``.
+
+    The robot's ``B_low = M(q)^{-1}`` is symmetric positive definite at every
+    configuration.  A model that contains members whose ``B_low`` (its
+    symmetric part) has a zero or negative eigenvalue asks a robust
+    controller to cope with an input direction that does nothing or acts in
+    reverse: on such a model μ is large whatever the controller (ur5's
+    ``axes`` model: two thirds of its members, see docs/uncertainty.md).
+    Members are sampled uniformly in the real parameters, with the full
+    blocks at zero (the residual only adds to the spread).
+
+    Returns
+    -------
+    dict
+        ``fraction`` of members not positive definite, ``least`` eigenvalue
+        seen over them, ``centre`` least eigenvalue of the model's centre,
+        ``samples``.
+
+    Examples
+    --------
+    >>> import polyrob
+    >>> from polyrob.plant.coverage import input_definiteness
+    >>> from polyrob.plant.uncertainty import uncertain_plant
+    >>> robot = polyrob.load_robot("paper_2r")
+    >>> pldi = polyrob.bound_pldi(robot, polyrob.Domain.from_robot(robot, "paper"), samples=256, progress=False)
+    >>> input_definiteness(uncertain_plant(pldi, model="lft"), 200)["fraction"]
+    0.0
+    """
+    m = unc.m
+    deltas = unc.delta_samples(n, kind="uniform", seed=seed)
+    least = []
+    for d in deltas:
+        B = unc.matrices_at(d)[1][m:]
+        least.append(np.linalg.eigvalsh(0.5 * (B + B.T)).min())
+    least = np.array(least)
+    centre = np.linalg.eigvalsh(0.5 * (unc.B_mid[m:] + unc.B_mid[m:].T)).min()
+    return {
+        "fraction": float(np.mean(least <= 0.0)),
+        "least": float(least.min()),
+        "centre": float(centre),
+        "samples": int(n),
+    }

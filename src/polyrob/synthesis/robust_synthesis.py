@@ -29,7 +29,7 @@ from polyrob.synthesis.fixed import fixed_structure_musyn
 from polyrob.synthesis.hinf_checks import check_stabilizable
 from polyrob.synthesis.result import MusynResult
 
-__all__ = ["musyn"]
+__all__ = ["musyn", "scaling_order_defaults", "LARGE_STRUCTURE_ORDERS"]
 
 #: Above this many padded channels (:data:`polyrob.analysis.mu.RELAX_REPEATED_ABOVE`, a 6-7 joint
 #: arm's axes model) the D and G scalings default to constants: a fitted order ``o`` on a block
@@ -46,6 +46,24 @@ FULL_ORDER_DEFAULTS = {
     "g_order": (0, 1, 2),
     "fit_tol": 0.01,
 }
+
+
+def scaling_order_defaults(st) -> dict:
+    """Candidate D and G fit orders of a D-K iteration on ``st`` (constant above 24 padded channels).
+
+    Examples
+    --------
+    >>> from polyrob.analysis.blocks import as_block_structure
+    >>> scaling_order_defaults(as_block_structure([[-2, 0], [2, 2]]))
+    {'d_order': (0, 1, 2, 3, 4), 'g_order': (0, 1, 2)}
+    >>> scaling_order_defaults(as_block_structure([[-6, 0]] * 5))
+    {'d_order': (0,), 'g_order': (0,)}
+    """
+    from polyrob.analysis.mu import RELAX_REPEATED_ABOVE
+
+    if st.padded_size > RELAX_REPEATED_ABOVE:
+        return dict(LARGE_STRUCTURE_ORDERS)
+    return {k: FULL_ORDER_DEFAULTS[k] for k in ("d_order", "g_order")}
 
 
 def _parse_plant(P, blk, n_u, n_y):
@@ -242,13 +260,9 @@ def musyn(
         }.items()
     }
     Psys, st, n_u, n_y = _parse_plant(P, blk, n_u, n_y)
-    from polyrob.analysis.mu import RELAX_REPEATED_ABOVE
-
-    large = st.padded_size > RELAX_REPEATED_ABOVE
-    if large:
-        for key, value in LARGE_STRUCTURE_ORDERS.items():
-            if {"d_order": d_order, "g_order": g_order}[key] is None:
-                opt[key] = value
+    defaults = scaling_order_defaults(st)
+    opt["d_order"] = d_order if d_order is not None else defaults["d_order"]
+    opt["g_order"] = g_order if g_order is not None else defaults["g_order"]
     if check_weights:
         lb, wlb = performance_lower_bound(P)
         if lb >= 1.0:
