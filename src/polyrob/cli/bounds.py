@@ -107,7 +107,8 @@ def cmd_bounds(args) -> int:
         print(
             f"uncertainty model {name}: {m['parameters']} real parameters, Delta {m['delta_shape'][0]}x"
             f"{m['delta_shape'][1]}, coverage {m['coverage']:.4f} of {m['coverage_points']} fresh points, "
-            f"volume / polytope ~ {m['volume_over_polytope']:.3g}"
+            f"volume / polytope ~ {m['volume_over_polytope']:.3g}, "
+            f"B = M^-1 not positive definite in {100 * m['input_not_positive_definite']:.3g} % of its members"
         )
     print(f"time: {report['seconds']:.2f} s")
     if args.output:

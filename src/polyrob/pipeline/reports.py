@@ -77,12 +77,15 @@ def model_report(pldi, robot, models=("box", "auto"), *, coverage: int = 2000) -
 
     For every model: its real parameters and Δ channels, the fraction of
     ``coverage`` fresh domain samples whose Jacobians it contains (must be
-    1.0), and its volume over the PLDI's polytope (reduced coordinates; near 0
-    for a model whose ``B`` lies on a curve or sheet).  ``"auto"`` is reported
-    under the model it resolves to.
+    1.0), its volume over the PLDI's polytope (reduced coordinates; near 0
+    for a model whose ``B`` lies on a curve or sheet) and the fraction of its
+    members whose ``B = M(q)^-1`` is not positive definite
+    (:func:`~polyrob.plant.coverage.input_definiteness`; the robot's always
+    is).  ``"auto"`` is reported under the model it resolves to.
     """
     from polyrob.analysis.blocks import as_block_structure
     from polyrob.errors import PolyrobError
+    from polyrob.plant.coverage import input_definiteness
     from polyrob.plant.uncertainty import uncertain_plant
 
     out = {}
@@ -100,6 +103,7 @@ def model_report(pldi, robot, models=("box", "auto"), *, coverage: int = 2000) -
                 "coverage": float(unc.coverage),
                 "coverage_points": int(unc.coverage_points),
                 "volume_over_polytope": float(unc.volume_ratio),
+                "input_not_positive_definite": input_definiteness(unc)["fraction"],
             },
         )
     return out
