@@ -97,6 +97,8 @@ def test_reference_batch_records_the_failure_and_finishes_the_others(reference):
         assert r.certified == (r.mu_upper < 1)
         assert set(r.timings) >= {"bounds", "synthesis", "analysis", "validation"}
         assert r.validation  # the nonlinear step ran and said something
+        # a robot left without a certificate says why, one that has one does not
+        assert (r.reason is None) == r.certified and (r.certified or "\n" not in r.reason)
     assert reference.failed == (bad,)
     # what a worker process sends back must survive pickling (python-control systems do not)
     back = pickle.loads(pickle.dumps(reference.results))
@@ -302,3 +304,27 @@ def test_cli_jobs_from_all_serial_and_a_jobs_file(tmp_path):
     jobs_file.write_text("{}")
     with pytest.raises(ArgumentError):
         batch_cli.jobs_from_args(parser.parse_args(["batch", "--jobs", str(jobs_file)]))
+
+
+def test_the_reason_why_not_names_the_performance_limit_when_it_excludes_mu_below_one():
+    """paper_2r at a quarter of the paper's bandwidths: its 7.5 rad/s pole puts the floor above 1."""
+    import polyrob
+    from polyrob.fleet.jobs import _why_not
+    from polyrob.pipeline import build_problem, default_hyperparameters
+
+    robot = polyrob.load_robot("paper_2r")
+    domain = polyrob.Domain.from_robot(robot, "paper")
+    slow = build_problem(
+        robot,
+        domain,
+        hyperparameters=default_hyperparameters(2, bandwidth_scale=0.25),
+        progress=False,
+        bound_options={"samples": 256, "coverage": 0},
+    )
+    details = {}
+    reason = _why_not(slow, details)
+    assert reason.startswith("performance limit") and details["performance_limit"]["bound"] >= 1
+    assert details["input_definiteness"]["fraction"] == 0.0 and "not positive definite" not in reason
+    # at the paper's bandwidths the floor (0.65) excludes nothing and the tight model keeps M^-1 definite
+    paper = build_problem(robot, domain, progress=False, bound_options={"samples": 256, "coverage": 0})
+    assert _why_not(paper, {}).startswith("mu >= 1 is the synthesis' best")

@@ -113,6 +113,8 @@ def cmd_batch(args) -> int:
         result = ("certified" if r.certified else "not certified") if r.ok else f"FAILED {r.error}: {r.message}"
         if r.ok and r.validation:
             result += f"; validation: {r.validation}"
+        if r.ok and r.reason:
+            result += f"; why: {r.reason}"
         out.line(
             f"{r.name:<22}{_fmt(r.joints, 'd'):>7}{_fmt(r.parameters, 'd'):>8}{_fmt(r.mu_upper):>10}"
             f"{_fmt(r.order, 'd'):>7}{_fmt(r.alpha):>8}{r.seconds:>9.1f}  {result}"

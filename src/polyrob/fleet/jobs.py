@@ -151,7 +151,12 @@ class RobotResult:
     ``mu_upper`` / ``mu_lower`` are the synthesis certificate's peak bounds
     (the analysis' when it ran); ``certified`` is ``mu_upper < 1`` with a
     nominally stable loop.  ``validation`` is the nonlinear simulation's
-    verdict line when it ran (``None`` otherwise).
+    verdict line when it ran (``None`` otherwise).  ``reason`` says, for a
+    robot left without a certificate, what stands in the way: the
+    performance limit of its unstable poles at the weights used
+    (:mod:`polyrob.analysis.limits`), a model whose ``B = M^-1`` is not
+    positive definite (:func:`polyrob.plant.coverage.input_definiteness`),
+    or neither found (then μ ≥ 1 is the synthesis' best).
     """
 
     name: str
@@ -171,6 +176,7 @@ class RobotResult:
     alpha: float | None = None
     verdict: str | None = None
     validation: str | None = None
+    reason: str | None = None
     seconds: float = 0.0
     timings: dict = field(default_factory=dict)
     controller: dict | None = None
@@ -202,6 +208,7 @@ class RobotResult:
             "alpha",
             "verdict",
             "validation",
+            "reason",
         )
         out = {k: getattr(self, k) for k in keys}
         out["seconds"] = round(float(self.seconds), 2)
@@ -370,6 +377,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         except Exception as exc:  # noqa: BLE001 - recorded: a failed simulation is a finding about this robot
             validation = f"simulation failed: {type(exc).__name__}: {_one_line(exc)}"
         timings["validation"] = time.perf_counter() - t1
+    reason = None if (stable and mu_upper < 1) else _why_not(problem, details)
     K = controller_data(design.controller)
     return RobotResult(
         name=job.name,
@@ -387,6 +395,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         alpha=alpha,
         verdict=line,
         validation=validation,
+        reason=reason,
         seconds=time.perf_counter() - t0,
         timings=timings,
         controller=K,
@@ -394,6 +403,30 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         problem=description,
         details=details,
     )
+
+
+def _why_not(problem, details: dict) -> str:
+    """What stands between this robot and μ < 1 (see :class:`RobotResult`), in one line."""
+    from polyrob.plant.coverage import input_definiteness
+
+    parts = []
+    limit = problem.performance_limit(samples=1024, starts=2)
+    details["performance_limit"] = limit.to_dict()
+    if limit.excludes_mu_below_one:
+        parts.append(
+            f"performance limit {limit.bound:.3g} >= 1 at these weights (unstable pole {abs(limit.pole):.3g} rad/s): "
+            "no controller reaches mu < 1 without higher bandwidths"
+        )
+    check = input_definiteness(problem.unc)
+    details["input_definiteness"] = check
+    if check["fraction"] > 0:
+        parts.append(
+            f"{100 * check['fraction']:.0f} % of the {problem.model} model's members have B = M^-1 not positive "
+            "definite (the robot's always is): robust stability on this model asks for inputs acting in reverse"
+        )
+    if not parts:
+        parts.append("mu >= 1 is the synthesis' best at these weights (no structural obstacle found)")
+    return "; ".join(parts)
 
 
 def with_label(job: Job, label: str) -> Job:
