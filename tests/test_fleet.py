@@ -328,3 +328,21 @@ def test_the_reason_why_not_names_the_performance_limit_when_it_excludes_mu_belo
     # at the paper's bandwidths the floor (0.65) excludes nothing and the tight model keeps M^-1 definite
     paper = build_problem(robot, domain, progress=False, bound_options={"samples": 256, "coverage": 0})
     assert _why_not(paper, {}).startswith("mu >= 1 is the synthesis' best")
+
+
+def test_the_bandwidth_search_is_skipped_when_the_model_reverses_inputs(pendulums, monkeypatch):
+    """No bandwidth can certify a model whose B = M^-1 loses definiteness: one synthesis, and the row says so."""
+    import polyrob.plant.coverage as coverage
+
+    monkeypatch.setattr(
+        coverage,
+        "input_definiteness",
+        lambda unc, *a, **k: {"fraction": 0.5, "least": -1.0, "centre": 1.0, "samples": 2},
+    )
+    settings = Settings(**dict(FAST, synthesis={"max_iter": 2}), search_bandwidth=True, alphas=(1.0, 2.0))
+    r = run_job(Job(robot=pendulums[0]), settings)
+    assert r.ok, r.message
+    assert r.alpha is None and "bandwidth_scaling" not in r.certificate
+    assert r.details["bandwidth_search"].startswith("bandwidth search skipped: 50 %")
+    # the pendulum certifies at its base weights (mu < 1): no reason then; otherwise the reason names the skip
+    assert (r.reason is None) if r.certified else ("(bandwidth search skipped)" in r.reason)

@@ -303,14 +303,25 @@ def _design(problem, settings: Settings, timings: dict):
         lo, hi, n = settings.omega
         options["omega"] = np.logspace(np.log10(lo), np.log10(hi), int(n))
     t0 = time.perf_counter()
+    skipped = None
     if settings.search_bandwidth:
+        from polyrob.plant.coverage import input_definiteness
+
+        check = input_definiteness(problem.unc)
+        if check["fraction"] > 0:
+            # every factor would meet the same reversed inputs: one synthesis says how far off it is
+            skipped = (
+                f"bandwidth search skipped: {100 * check['fraction']:.0f} % of the model's members have "
+                "B = M^-1 not positive definite, so no bandwidth gives mu < 1 on it"
+            )
+    if settings.search_bandwidth and skipped is None:
         design, res = design_max_bandwidth(problem, alphas=settings.alphas, **options)
         alpha, hyper = float(res.alpha), res.hyperparameters
     else:
         design = design_controller(problem, **options)
         alpha, hyper = None, problem.hyperparameters
     timings["synthesis"] = time.perf_counter() - t0
-    return design, alpha, hyper, options.get("omega")
+    return design, alpha, hyper, options.get("omega"), skipped
 
 
 def run_job(job: Job, settings: Settings) -> RobotResult:
@@ -343,7 +354,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
     from polyrob.pipeline import analyze_controller, verdict
 
     problem = _problem(job, settings, timings)
-    design, alpha, hyper, omega = _design(problem, settings, timings)
+    design, alpha, hyper, omega, skipped = _design(problem, settings, timings)
     if alpha is not None:
         # the certificate is at the found bandwidth: the same PLDI (no new bounding) with the scaled weights
         from polyrob.pipeline import build_problem
@@ -356,6 +367,8 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
     mu_upper, mu_lower, stable = design.peak_mu, design.peak_mu_lower, True
     line = verdict(mu_upper, mu_lower, covers=problem.covers())
     details = {"synthesis": design.summary()}
+    if skipped:
+        details["bandwidth_search"] = skipped
     if settings.analyze:
         t1 = time.perf_counter()
         a = analyze_controller(
@@ -378,6 +391,8 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
             validation = f"simulation failed: {type(exc).__name__}: {_one_line(exc)}"
         timings["validation"] = time.perf_counter() - t1
     reason = None if (stable and mu_upper < 1) else _why_not(problem, details)
+    if reason and skipped:
+        reason = f"{reason} ({skipped.split(':')[0]})"
     K = controller_data(design.controller)
     return RobotResult(
         name=job.name,
