@@ -47,6 +47,10 @@ class GradientUpper:
         Any structure (repeated real or complex scalars, full blocks).
     maxiter : int
         L-BFGS iterations per temperature.
+    temperatures : sequence of float
+        Smoothing of the largest eigenvalue, relative to the current bound,
+        one L-BFGS run each (a D-K iteration's D-step needs less than a
+        certificate: fewer and coarser steps there).
 
     Examples
     --------
@@ -62,8 +66,8 @@ class GradientUpper:
     1.500
     """
 
-    def __init__(self, st: BlockStructure, maxiter: int = 150):
-        self.st, self.maxiter = st, maxiter
+    def __init__(self, st: BlockStructure, maxiter: int = 150, temperatures=_TEMPERATURES):
+        self.st, self.maxiter, self.temperatures = st, maxiter, tuple(temperatures)
         #: eigenpairs computed per step (doubled while they all weigh in the smoothed maximum)
         self.top = 16
         self._layout = []
@@ -244,7 +248,7 @@ class GradientUpper:
             if f0 < best_f:
                 best_x, best_f = xs, f0
         x = best_x
-        for rel in _TEMPERATURES:
+        for rel in self.temperatures:
             lam_top = max(np.linalg.eigvalsh(self._hermitian(Ms, x)[0])[-1], 1e-300)
             res = optimize.minimize(
                 self._objective,

@@ -13,7 +13,10 @@ import numpy as np
 from polyrob.analysis.blocks import BlockStructure, as_block_structure
 from polyrob.synthesis.dscale_data import complexified, scaling_data
 
-__all__ = ["MuSweep", "complex_dscales", "SingleThreadAB13MD"]
+__all__ = ["MuSweep", "complex_dscales", "SingleThreadAB13MD", "D_STEP_DESCENT"]
+
+#: Effort of the descent bound in a D-step (the certificate, ``mu_bounds``, uses the defaults).
+D_STEP_DESCENT = {"maxiter": 60, "temperatures": (1e-2,)}
 
 
 class MuSweep:
@@ -127,7 +130,8 @@ class MuSweep:
         from polyrob.analysis.mu_gradient import GradientUpper
 
         n, x = st.padded_size, None
-        upper = GradientUpper(st)
+        # the D-step only feeds the scaling fit: a coarser descent than the certificate's
+        upper = GradientUpper(st, **D_STEP_DESCENT)
         with single_blas_thread():
             for k in range(H.shape[0]):
                 if not np.all(np.isfinite(H[k])):
