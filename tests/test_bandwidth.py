@@ -50,6 +50,11 @@ def test_no_alpha_reaches_the_target_lists_the_evidence():
         _search(lambda a: 1.5, alphas=(0.25, 1, 4))
 
 
+def test_a_floor_above_the_target_everywhere_runs_no_synthesis_and_says_so():
+    with pytest.raises(SynthesisError, match=r"excludes every factor \(no synthesis ran\); alpha: mu = 4: >= 2\.000"):
+        _search(lambda a: pytest.fail("no synthesis may run"), alphas=(1, 4), floor=lambda a, h: 2.0)
+
+
 def test_failed_syntheses_count_as_not_certified():
     def mu(a):
         if a > 2:

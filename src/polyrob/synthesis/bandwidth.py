@@ -240,11 +240,16 @@ def max_bandwidth_scaling(
             break
         fail = alpha
     if ok is None:
-        tried = ", ".join(f"{a:g}: {m:.3f}" for a, m in history)
-        tried += "".join(f", {a:g}: >= {b:.3f} (performance limit)" for a, b in excluded)
+        tried = [f"{a:g}: {m:.3f}" for a, m in history]
+        tried += [f"{a:g}: >= {b:.3f} (performance limit)" for a, b in excluded]
+        why = (
+            "the performance limit of the robot's unstable poles excludes every factor (no synthesis ran)"
+            if excluded and not history
+            else "none certifies"
+        )
         raise SynthesisError(
             f"no bandwidth factor alpha in [{grid[0]:g}, {grid[-1]:g}] (scaling {', '.join(scale)}) reaches a "
-            f"certified mu < {target:g}; alpha: mu = {tried}"
+            f"certified mu < {target:g}: {why}; alpha: mu = {', '.join(tried)}"
         )
     if fail is not None:
         lo, hi = ok, fail
