@@ -18,9 +18,9 @@ conservative, never wrong.
 
 Why by hand: SLICOT AB13MD, the only maintained μ code python reaches, takes
 no repeated scalar blocks, and the D-G LMI (cvxpy) of an 89-channel
-structure takes minutes per frequency.  MATLAB's ``mussv`` computes its
-default upper bound the same way, by descent on the scalings (Young, Newlin
-& Doyle, 1995), keeping the LMI for its ``'a'`` option.
+structure takes minutes per frequency.  MATLAB's ``mussv`` offers the same
+two routes: a gradient method on the scalings (its ``'G'`` option; Young,
+Newlin & Doyle, 1995) and the LMI for the greatest accuracy (``'a'``).
 """
 
 from __future__ import annotations
