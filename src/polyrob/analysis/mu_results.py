@@ -32,7 +32,8 @@ class MussvResult:
         :math:`\\bar\\sigma(D_l M D_r^{-1}) \\le` ``upper``.
     structure : BlockStructure
     method : str
-        Upper-bound method used (``"ab13md"``, ``"lmi"`` or ``"relaxed"``: AB13MD on a superset structure).
+        Upper-bound method used (``"ab13md"``, ``"lmi"``, ``"gradient"``: descent on the D-G scalings, or
+        ``"relaxed"``: AB13MD on a superset structure).
     notes : tuple of str
         LMI solver fallbacks and failed bisection steps (empty when none).
     """
