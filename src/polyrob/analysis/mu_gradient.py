@@ -96,14 +96,14 @@ class GradientUpper:
     def initial(self, Ms: np.ndarray) -> np.ndarray:
         """Start at the Perron scaling ``D = diag(d_i I)``, ``G = 0``."""
         _, Dp = perron_upper(Ms, self.st)
-        d = np.diag(Dp).real
+        d = np.clip(np.diag(Dp).real, np.exp(-30.0), np.exp(30.0))
         x = np.zeros(self.size)
         for sl, n, full_t, st_t, _ in self._layout:
             if full_t:
                 T = np.eye(n) * d[sl.start]
                 x[st_t] = np.concatenate([T.ravel(), np.zeros(n * n)])
             else:
-                x[st_t] = np.clip(np.log(max(d[sl.start], 1e-300)), -30.0, 30.0)
+                x[st_t] = np.log(d[sl.start])
         return x
 
     def _unpack(self, x):
