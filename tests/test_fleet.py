@@ -344,5 +344,7 @@ def test_the_bandwidth_search_is_skipped_when_the_model_reverses_inputs(pendulum
     assert r.ok, r.message
     assert r.alpha is None and "bandwidth_scaling" not in r.certificate
     assert r.details["bandwidth_search"].startswith("bandwidth search skipped: 50 %")
+    # nor do the analysis sweeps run: the synthesis certificate is the row's figure
+    assert "analysis" not in r.timings and r.details["analysis"].startswith("skipped: 50 %")
     # the pendulum certifies at its base weights (mu < 1): no reason then; otherwise the reason names the skip
     assert (r.reason is None) if r.certified else ("(bandwidth search skipped)" in r.reason)
