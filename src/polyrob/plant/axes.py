@@ -54,16 +54,36 @@ def _residual_bounds(pldi, centre, basis_r, W_r):
         row = Pi[i]
         if np.abs(row).max() < 1e-12 * (1.0 + np.abs(poly.basis[i]).max()):
             continue
+        scale = np.abs(row).max()
         for sgn in (1.0, -1.0):
-            res = optimize.linprog(-sgn * row, A_ub=G, b_ub=g, bounds=[(None, None)] * r_all, method="highs")
+            res = _solve_lp(-sgn * row / scale, G, g, r_all)
             if res.status != 0:
-                raise BoundsError(f"the residual LP failed ({res.message})")
+                raise BoundsError(
+                    f"the axes model's residual LP failed with every HiGHS method ({res.message}): the PLDI's "
+                    "polytope is badly conditioned; give a smaller domain (--qdot-max, --u-max, --q-range) or "
+                    "take another model (--uncertainty box)"
+                )
             val = row @ res.x
             if sgn > 0:
                 hi[i] = val
             else:
                 lo[i] = val
     return lo, hi
+
+
+def _solve_lp(c, G, g, n):
+    """``min c x`` over ``G x <= g``, trying HiGHS' dual simplex, then its interior point and primal simplex.
+
+    On badly scaled polytopes (support values of 1e6 next to 1e-3) the default
+    choice can stop with status "Not Set"; another method of the same solver
+    usually finishes (seen on z1's PLDI).
+    """
+    res = None
+    for method in ("highs", "highs-ipm", "highs-ds"):
+        res = optimize.linprog(c, A_ub=G, b_ub=g, bounds=[(None, None)] * n, method=method)
+        if res.status == 0:
+            return res
+    return res
 
 
 def _layout(pldi):
