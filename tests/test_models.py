@@ -198,3 +198,26 @@ def test_tight_model_mu_of_k_star_is_below_the_box(unc, lft):
     # (full sweeps: box 2.43, lft 2.12, see docs/uncertainty.md)
     assert mus["lft"] < 0.95 * mus["box"]
     assert mus["box"] > 2.0
+
+
+def test_the_residual_lps_fall_back_on_another_highs_method(pldi, axes, monkeypatch):
+    """A HiGHS method that stops with "Not Set" (seen on z1) is retried with the next; the bounds are the same."""
+    from scipy import optimize
+
+    import polyrob.plant.axes as axes_module
+
+    real, tried = optimize.linprog, []
+
+    def flaky(c, *args, method="highs", **kwargs):
+        tried.append(method)
+        if method == "highs":
+            return optimize.OptimizeResult(status=4, message="HiGHS Status 0: Not Set", x=None)
+        return real(c, *args, method=method, **kwargs)
+
+    from types import SimpleNamespace
+
+    monkeypatch.setattr(axes_module, "optimize", SimpleNamespace(linprog=flaky))  # this module's LPs only
+    again = uncertain_plant(pldi, model="axes")
+    assert "highs-ipm" in tried
+    np.testing.assert_allclose(again.D_vd, axes.D_vd, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(again.B_d, axes.B_d, rtol=1e-6, atol=1e-9)
