@@ -309,7 +309,7 @@ def test_cli_jobs_from_all_serial_and_a_jobs_file(tmp_path):
 def test_the_reason_why_not_names_the_performance_limit_when_it_excludes_mu_below_one():
     """paper_2r at a quarter of the paper's bandwidths: its 7.5 rad/s pole puts the floor above 1."""
     import polyrob
-    from polyrob.fleet.jobs import _why_not
+    from polyrob.fleet.diagnosis import why_not_certified
     from polyrob.pipeline import build_problem, default_hyperparameters
 
     robot = polyrob.load_robot("paper_2r")
@@ -322,12 +322,12 @@ def test_the_reason_why_not_names_the_performance_limit_when_it_excludes_mu_belo
         bound_options={"samples": 256, "coverage": 0},
     )
     details = {}
-    reason = _why_not(slow, details)
+    reason = why_not_certified(slow, details)
     assert reason.startswith("performance limit") and details["performance_limit"]["bound"] >= 1
     assert details["input_definiteness"]["fraction"] == 0.0 and "not positive definite" not in reason
     # at the paper's bandwidths the floor (0.65) excludes nothing and the tight model keeps M^-1 definite
     paper = build_problem(robot, domain, progress=False, bound_options={"samples": 256, "coverage": 0})
-    assert _why_not(paper, {}).startswith("mu >= 1 is the synthesis' best")
+    assert why_not_certified(paper, {}).startswith("mu >= 1 is the synthesis' best")
 
 
 def test_the_bandwidth_search_is_skipped_when_the_model_reverses_inputs(pendulums, monkeypatch):

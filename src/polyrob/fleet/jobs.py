@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import PurePath
 
 from polyrob.errors import ArgumentError
+from polyrob.fleet.diagnosis import search_skipped, why_not_certified
 
 __all__ = ["Job", "Settings", "RobotResult", "run_job", "as_job"]
 
@@ -303,17 +304,7 @@ def _design(problem, settings: Settings, timings: dict):
         lo, hi, n = settings.omega
         options["omega"] = np.logspace(np.log10(lo), np.log10(hi), int(n))
     t0 = time.perf_counter()
-    skipped = None
-    if settings.search_bandwidth:
-        from polyrob.plant.coverage import input_definiteness
-
-        check = input_definiteness(problem.unc)
-        if check["fraction"] > 0:
-            # every factor would meet the same reversed inputs: one synthesis says how far off it is
-            skipped = (
-                f"bandwidth search skipped: {100 * check['fraction']:.0f} % of the model's members have "
-                "B = M^-1 not positive definite, so no bandwidth gives mu < 1 on it"
-            )
+    skipped = search_skipped(problem) if settings.search_bandwidth else None
     if settings.search_bandwidth and skipped is None:
         design, res = design_max_bandwidth(problem, alphas=settings.alphas, **options)
         alpha, hyper = float(res.alpha), res.hyperparameters
@@ -394,7 +385,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         except Exception as exc:  # noqa: BLE001 - recorded: a failed simulation is a finding about this robot
             validation = f"simulation failed: {type(exc).__name__}: {_one_line(exc)}"
         timings["validation"] = time.perf_counter() - t1
-    reason = None if (stable and mu_upper < 1) else _why_not(problem, details)
+    reason = None if (stable and mu_upper < 1) else why_not_certified(problem, details)
     if reason and skipped:
         reason = f"{reason} ({skipped.split(':')[0]})"
     K = controller_data(design.controller)
@@ -422,30 +413,6 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         problem=description,
         details=details,
     )
-
-
-def _why_not(problem, details: dict) -> str:
-    """What stands between this robot and μ < 1 (see :class:`RobotResult`), in one line."""
-    from polyrob.plant.coverage import input_definiteness
-
-    parts = []
-    limit = problem.performance_limit(samples=1024, starts=2)
-    details["performance_limit"] = limit.to_dict()
-    if limit.excludes_mu_below_one:
-        parts.append(
-            f"performance limit {limit.bound:.3g} >= 1 at these weights (unstable pole {abs(limit.pole):.3g} rad/s): "
-            "no controller reaches mu < 1 without higher bandwidths"
-        )
-    check = input_definiteness(problem.unc)
-    details["input_definiteness"] = check
-    if check["fraction"] > 0:
-        parts.append(
-            f"{100 * check['fraction']:.0f} % of the {problem.model} model's members have B = M^-1 not positive "
-            "definite (the robot's always is): robust stability on this model asks for inputs acting in reverse"
-        )
-    if not parts:
-        parts.append("mu >= 1 is the synthesis' best at these weights (no structural obstacle found)")
-    return "; ".join(parts)
 
 
 def with_label(job: Job, label: str) -> Job:

@@ -1,0 +1,58 @@
+"""Why a robot of a batch is left without a certificate, in one line.
+
+Two obstacles are structural, and no synthesis effort removes them:
+
+* the **performance limit** of the robot's unstable open-loop poles at the
+  weights used (:mod:`polyrob.analysis.limits`): at least 1 means no
+  controller reaches μ < 1 at these bandwidths;
+* a model whose members include input matrices ``B = M(q)^-1`` that are not
+  positive definite (:func:`polyrob.plant.coverage.input_definiteness`;
+  the robot's always is): robust stability on it asks for inputs that act in
+  reverse, at every bandwidth.
+
+:func:`search_skipped` says when the second makes a bandwidth search
+pointless; :func:`why_not_certified` names whichever holds for a robot left
+with μ ≥ 1, or says that neither was found.
+"""
+
+from __future__ import annotations
+
+__all__ = ["search_skipped", "why_not_certified"]
+
+
+def search_skipped(problem) -> str | None:
+    """Why the bandwidth search would be pointless on ``problem``'s model, or ``None``."""
+    from polyrob.plant.coverage import input_definiteness
+
+    check = input_definiteness(problem.unc)
+    if check["fraction"] <= 0:
+        return None
+    # every factor would meet the same reversed inputs: one synthesis says how far off it is
+    return (
+        f"bandwidth search skipped: {100 * check['fraction']:.0f} % of the model's members have "
+        "B = M^-1 not positive definite, so no bandwidth gives mu < 1 on it"
+    )
+
+
+def why_not_certified(problem, details: dict) -> str:
+    """What stands between this robot and μ < 1, in one line; the evidence goes into ``details``."""
+    from polyrob.plant.coverage import input_definiteness
+
+    parts = []
+    limit = problem.performance_limit(samples=1024, starts=2)
+    details["performance_limit"] = limit.to_dict()
+    if limit.excludes_mu_below_one:
+        parts.append(
+            f"performance limit {limit.bound:.3g} >= 1 at these weights (unstable pole {abs(limit.pole):.3g} rad/s): "
+            "no controller reaches mu < 1 without higher bandwidths"
+        )
+    check = input_definiteness(problem.unc)
+    details["input_definiteness"] = check
+    if check["fraction"] > 0:
+        parts.append(
+            f"{100 * check['fraction']:.0f} % of the {problem.model} model's members have B = M^-1 not positive "
+            "definite (the robot's always is): robust stability on this model asks for inputs acting in reverse"
+        )
+    if not parts:
+        parts.append("mu >= 1 is the synthesis' best at these weights (no structural obstacle found)")
+    return "; ".join(parts)
