@@ -130,8 +130,8 @@ def input_definiteness(unc: UncertainPlant, n: int = 1000, *, seed: int = 0) -> 
     configuration.  A model that contains members whose ``B_low`` (its
     symmetric part) has a zero or negative eigenvalue asks a robust
     controller to cope with an input direction that does nothing or acts in
-    reverse: on such a model μ is large whatever the controller (ur5's
-    ``axes`` model: two thirds of its members, see docs/uncertainty.md).
+    reverse (ur5's ``axes`` model: two thirds of its members, and μ in the
+    hundreds for every controller polyrob found on it, see docs/uncertainty.md).
     Members are sampled uniformly in the real parameters, with the full
     blocks at zero (the residual only adds to the spread).
 
