@@ -20,16 +20,20 @@ from __future__ import annotations
 __all__ = ["search_skipped", "why_not_certified"]
 
 
-def search_skipped(problem) -> str | None:
-    """Why the bandwidth search would be pointless on ``problem``'s model, or ``None``."""
+def search_skipped(problem, details: dict) -> str | None:
+    """Why the bandwidth search would be pointless on ``problem``'s model, or ``None``.
+
+    The input check goes into ``details`` (``"input_definiteness"``), where
+    :func:`why_not_certified` finds it instead of sampling the model again.
+    """
     from polyrob.plant.coverage import input_definiteness
 
-    check = input_definiteness(problem.unc)
+    check = details["input_definiteness"] = input_definiteness(problem.unc)
     if check["fraction"] <= 0:
         return None
     # every factor would meet the same reversed inputs: one synthesis says how far off it is
     return (
-        f"bandwidth search skipped: {100 * check['fraction']:.0f} % of the model's members have "
+        f"{100 * check['fraction']:.0f} % of the model's members have "
         "B = M^-1 not positive definite, so no bandwidth gives mu < 1 on it"
     )
 
@@ -46,8 +50,9 @@ def why_not_certified(problem, details: dict) -> str:
             f"performance limit {limit.bound:.3g} >= 1 at these weights (unstable pole {abs(limit.pole):.3g} rad/s): "
             "no controller reaches mu < 1 without higher bandwidths"
         )
-    check = input_definiteness(problem.unc)
-    details["input_definiteness"] = check
+    if "input_definiteness" not in details:
+        details["input_definiteness"] = input_definiteness(problem.unc)
+    check = details["input_definiteness"]
     if check["fraction"] > 0:
         parts.append(
             f"{100 * check['fraction']:.0f} % of the {problem.model} model's members have B = M^-1 not positive "

@@ -294,7 +294,7 @@ def _validate(problem, K, settings: Settings) -> dict:
     return out
 
 
-def _design(problem, settings: Settings, timings: dict):
+def _design(problem, settings: Settings, timings: dict, details: dict):
     import numpy as np
 
     from polyrob.pipeline import design_controller, design_max_bandwidth, synthesis_options
@@ -304,7 +304,7 @@ def _design(problem, settings: Settings, timings: dict):
         lo, hi, n = settings.omega
         options["omega"] = np.logspace(np.log10(lo), np.log10(hi), int(n))
     t0 = time.perf_counter()
-    skipped = search_skipped(problem) if settings.search_bandwidth else None
+    skipped = search_skipped(problem, details) if settings.search_bandwidth else None
     if settings.search_bandwidth and skipped is None:
         design, res = design_max_bandwidth(problem, alphas=settings.alphas, **options)
         alpha, hyper = float(res.alpha), res.hyperparameters
@@ -345,7 +345,8 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
     from polyrob.pipeline import analyze_controller, verdict
 
     problem = _problem(job, settings, timings)
-    design, alpha, hyper, omega, skipped = _design(problem, settings, timings)
+    details = {}
+    design, alpha, hyper, omega, skipped = _design(problem, settings, timings, details)
     if alpha is not None:
         # the certificate is at the found bandwidth: the same PLDI (no new bounding) with the scaled weights
         from polyrob.pipeline import build_problem
@@ -357,13 +358,13 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
     description["job"] = job.to_dict()
     mu_upper, mu_lower, stable = design.peak_mu, design.peak_mu_lower, True
     line = verdict(mu_upper, mu_lower, covers=problem.covers())
-    details = {"synthesis": design.summary()}
+    details["synthesis"] = design.summary()
     if skipped:
-        details["bandwidth_search"] = skipped
+        details["bandwidth_search"] = "bandwidth search skipped: " + skipped
     if settings.analyze and skipped:
         # the model cannot certify (its inputs reverse): the sweeps would only restate the synthesis'
         # certificate, at the cost of several minutes on a 6-7 joint arm
-        details["analysis"] = "skipped: " + skipped.split(": ", 1)[1]
+        details["analysis"] = "skipped: " + skipped
     elif settings.analyze:
         t1 = time.perf_counter()
         a = analyze_controller(
@@ -387,7 +388,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         timings["validation"] = time.perf_counter() - t1
     reason = None if (stable and mu_upper < 1) else why_not_certified(problem, details)
     if reason and skipped:
-        reason = f"{reason} ({skipped.split(':')[0]})"
+        reason = f"{reason} (bandwidth search skipped)"
     K = controller_data(design.controller)
     return RobotResult(
         name=job.name,
