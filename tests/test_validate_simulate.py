@@ -115,3 +115,30 @@ def test_equilibrium_torque_is_gravity():
     q = np.array([0.1, -0.7, 0.5, 0.0, 0.2, 0.0])
     u = equilibrium_torque(robot, q)
     assert np.allclose(robot.acceleration(q, np.zeros(6), u), 0.0, atol=1e-9)
+
+
+def test_time_budget_keeps_the_result_of_a_run_that_finishes():
+    """Integrated in pieces under a budget, the trajectory is the one-piece one."""
+    robot, dom, K = _setup()
+    ref = step_reference([0.01, -0.005])
+    whole = simulate(robot, K, dom, ref, t_final=5.0)
+    pieces = simulate(robot, K, dom, ref, t_final=5.0, time_budget=600.0)
+    assert pieces.success and pieces.certificate_applies
+    assert np.allclose(pieces.q[:, -1], whole.q[:, -1], atol=1e-7)
+    q_w = np.array([np.interp(pieces.t, whole.t, whole.q[j]) for j in range(2)])
+    assert np.max(np.abs(pieces.q - q_w)) < 1e-6
+
+
+@pytest.mark.parametrize("rate", [None, 1000.0])
+def test_time_budget_stops_a_simulation_and_says_so(rate):
+    robot, dom, K = _setup()
+    sim = simulate(robot, K, dom, step_reference([0.01, -0.005]), t_final=50.0, rate=rate, time_budget=0.05)
+    assert not sim.success and not sim.certificate_applies
+    assert "time budget" in sim.verdict()
+    assert sim.t[-1] < 50.0 and sim.q.shape[1] == len(sim.t)
+
+
+def test_time_budget_must_be_positive():
+    robot, dom, K = _setup()
+    with pytest.raises(polyrob.PolyrobError, match="time_budget"):
+        simulate(robot, K, dom, step_reference([0.01, 0.0]), t_final=1.0, time_budget=0.0)

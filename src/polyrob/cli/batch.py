@@ -78,6 +78,7 @@ def settings_from_args(args) -> dict:
         "analyze": not args.no_analysis,
         "mc": args.mc,
         "validate": not args.no_validate,
+        "validate_budget": args.validate_budget,
     }
 
 
@@ -176,5 +177,11 @@ def register(sub) -> None:
     g.add_argument("--mc", type=int_at_least(1), default=200, help="Monte Carlo parameter sets in the analysis")
     g.add_argument("--no-analysis", action="store_true", help="skip the mu analysis after the synthesis")
     g.add_argument("--no-validate", action="store_true", help="skip the nonlinear closed-loop step")
+    g.add_argument(
+        "--validate-budget",
+        type=positive_float,
+        default=120.0,
+        help="wall-clock seconds the closed-loop simulation may take (default 120)",
+    )
     add_output_flags(p)
     p.set_defaults(func=cmd_batch)

@@ -126,6 +126,9 @@ class Settings:
         The step, as a fraction of each joint's half position range.
     validate_time : float
         Simulated seconds.
+    validate_budget : float
+        Wall-clock seconds the simulation may take; a stiff closed loop that
+        has not finished by then is reported as such (``None``: no limit).
     """
 
     bound_options: dict = field(default_factory=dict)
@@ -138,6 +141,7 @@ class Settings:
     validate: bool = True
     validate_step: float = 0.02
     validate_time: float = 20.0
+    validate_budget: float | None = 120.0
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
@@ -288,7 +292,14 @@ def _validate(problem, K, settings: Settings) -> dict:
     step = settings.validate_step * 0.5 * (hi - lo)
     # step towards the farther end of each joint's range, so the target stays in the domain
     target = np.where(hi - start >= start - lo, start + step, start - step)
-    sim = simulate(problem.robot, K, problem.pldi, step_reference(target), t_final=settings.validate_time)
+    sim = simulate(
+        problem.robot,
+        K,
+        problem.pldi,
+        step_reference(target),
+        t_final=settings.validate_time,
+        time_budget=settings.validate_budget,
+    )
     out = sim.summary()
     out.pop("joints", None)
     return out

@@ -52,12 +52,18 @@ class Validation:
     info: dict = field(default_factory=dict)
 
 
+#: Wall-clock seconds each default simulation of the report may take.
+SIMULATION_BUDGET = 300.0
+
+
 def default_scenarios(robot, domain, q0, *, rate: float | None = None):
     """References inside the domain: a small step (continuous and sampled) and a smooth move.
 
     Steps are 0.2 % of each joint's position range, alternating in sign; the
     smooth move is 5 % of the range in 3 s (minimum jerk), clipped to the box.
-    Returns ``[(reference, kwargs), ...]`` for :func:`polyrob.validate.simulate.simulate`.
+    Returns ``[(reference, kwargs), ...]`` for :func:`polyrob.validate.simulate.simulate`;
+    each simulation may take :data:`SIMULATION_BUDGET` seconds of wall clock
+    (a stiff loop that has not finished by then is reported as such).
     """
     from polyrob.validate.simulate import smooth_reference, step_reference
 
@@ -66,10 +72,11 @@ def default_scenarios(robot, domain, q0, *, rate: float | None = None):
     q0 = np.asarray(q0, float)
     step = np.clip(q0 + 0.002 * span * sign, domain.q_lower, domain.q_upper)
     move = np.clip(q0 + 0.05 * span * sign, domain.q_lower, domain.q_upper)
-    out = [(step_reference(step), {"t_final": 10.0})]
+    budget = {"time_budget": SIMULATION_BUDGET}
+    out = [(step_reference(step), {"t_final": 10.0, **budget})]
     if rate:
-        out.append((step_reference(step), {"t_final": 10.0, "rate": float(rate)}))
-    out.append((smooth_reference(move, 3.0), {"t_final": 8.0}))
+        out.append((step_reference(step), {"t_final": 10.0, "rate": float(rate), **budget}))
+    out.append((smooth_reference(move, 3.0), {"t_final": 8.0, **budget}))
     return out
 
 

@@ -35,6 +35,7 @@ Examples
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import control
@@ -44,6 +45,7 @@ from scipy.integrate import solve_ivp
 from polyrob.errors import PolyrobError
 from polyrob.plant.generalized import as_controller_ss
 from polyrob.validate.reference import Reference, smooth_reference, step_reference
+from polyrob.validate.step_metrics import SETTLING_BAND, JointMetrics, domain_check, step_metrics
 
 __all__ = [
     "Reference",
@@ -55,11 +57,6 @@ __all__ = [
     "equilibrium_torque",
 ]
 
-#: Band of the settling time (fraction of the step).
-SETTLING_BAND = 0.02
-#: Relative tolerance of the domain check (a point on the boundary is inside).
-DOMAIN_RTOL = 1e-9
-
 
 def equilibrium_torque(robot, q) -> np.ndarray:
     """The torque that holds the robot still at ``q``: ``g(q) = -M(q) qddot(q, 0, 0)``."""
@@ -68,31 +65,6 @@ def equilibrium_torque(robot, q) -> np.ndarray:
     u = -robot.mass_matrix(q) @ robot.acceleration(q, np.zeros(m), np.zeros(m))
     u[np.abs(u) < 1e-12] = 0.0
     return u
-
-
-@dataclass(frozen=True)
-class JointMetrics:
-    """Step-response figures of one joint (NaN where they do not apply).
-
-    ``rise_time`` 10-90 % of the step, ``overshoot`` in % of the step,
-    ``settling_time`` into a 2 % band that is not left again,
-    ``steady_state_error`` ``|r - q|`` at the end, ``peak_torque`` ``max |u|``,
-    ``effort_limit`` from the robot (NaN if none), ``max_tracking_error``.
-    """
-
-    joint: str
-    step: float
-    rise_time: float
-    overshoot: float
-    settling_time: float
-    steady_state_error: float
-    max_tracking_error: float
-    peak_torque: float
-    effort_limit: float
-
-    @property
-    def torque_within_limit(self) -> bool:
-        return bool(not np.isfinite(self.effort_limit) or self.peak_torque <= self.effort_limit)
 
 
 @dataclass(frozen=True, eq=False)
@@ -189,63 +161,6 @@ class SimulationResult:
         }
 
 
-# --------------------------------------------------------------------------- figures
-
-
-def _metrics(robot, t, q, r, u, q0) -> tuple:
-    out = []
-    tail = max(1, len(t) // 50)
-    for j, name in enumerate(robot.joint_names):
-        target = r[j, -1]
-        step = float(target - q0[j])
-        err = np.abs(r[j] - q[j])
-        sse = float(np.mean(err[-tail:]))
-        rise = overshoot = settle = float("nan")
-        if abs(step) > 1e-12:
-            frac = (q[j] - q0[j]) / step
-            i10 = np.flatnonzero(frac >= 0.1)
-            i90 = np.flatnonzero(frac >= 0.9)
-            if i10.size and i90.size:
-                rise = float(t[i90[0]] - t[i10[0]])
-            overshoot = float(max(0.0, 100.0 * (frac.max() - 1.0)))
-            outside = np.flatnonzero(np.abs(q[j] - target) > SETTLING_BAND * abs(step))
-            if not outside.size:
-                settle = 0.0
-            elif outside[-1] < len(t) - 1:
-                settle = float(t[outside[-1] + 1])
-        out.append(
-            JointMetrics(
-                joint=name,
-                step=step,
-                rise_time=rise,
-                overshoot=overshoot,
-                settling_time=settle,
-                steady_state_error=sse,
-                max_tracking_error=float(err.max()),
-                peak_torque=float(np.abs(u[j]).max()),
-                effort_limit=float(robot.effort_limit[j]),
-            )
-        )
-    return tuple(out)
-
-
-def _domain_check(domain, robot, t, q, qdot, u):
-    z = {"q": q, "qdot": qdot, "u": u}
-    exits, bad_any, first = [], np.zeros(len(t), bool), None
-    for group in ("q", "qdot", "u"):
-        lo, hi = getattr(domain, f"{group}_lower"), getattr(domain, f"{group}_upper")
-        for j, name in enumerate(robot.joint_names):
-            tol = DOMAIN_RTOL * (1.0 + max(abs(lo[j]), abs(hi[j])))
-            bad = (z[group][j] < lo[j] - tol) | (z[group][j] > hi[j] + tol)
-            if bad.any():
-                k = int(np.argmax(bad))
-                peak = float(z[group][j][bad][np.argmax(np.abs(z[group][j][bad]))])
-                exits.append(f"{group}[{name}] = {peak:.4g} outside [{lo[j]:.4g}, {hi[j]:.4g}] from t = {t[k]:.4g} s")
-                first = float(t[k]) if first is None else min(first, float(t[k]))
-                bad_any |= bad
-    return tuple(exits), first, float(bad_any.mean())
-
-
 # --------------------------------------------------------------------------- simulation
 
 
@@ -283,6 +198,7 @@ def simulate(
     n_points: int = 1001,
     rtol: float = 1e-7,
     atol: float = 1e-9,
+    time_budget: float | None = None,
 ) -> SimulationResult:
     """Simulate the robot's nonlinear dynamics in closed loop with ``K``.
 
@@ -314,6 +230,12 @@ def simulate(
         torque, else the gravity torque at the clipped ``q = 0``).
     n_points : int
         Output samples of the continuous simulation.
+    time_budget : float, optional
+        Wall-clock seconds the integration may take.  A stiff closed loop
+        (a fast controller on a light robot) can keep an implicit solver on
+        tiny steps for many minutes; past the budget the simulation stops,
+        keeps what it integrated and reports ``success=False`` with a message
+        saying how far it got.  ``None``: no limit.
 
     Returns
     -------
@@ -342,39 +264,88 @@ def simulate(
         discrete = True
     if discrete:
         Kd = K.system if isinstance(K, DiscreteController) else control.ss(K)
-        return _simulate_discrete(robot, Kd, dom, reference, r_of_t, t_final, q0, qdot0, u_eq, u_source, rtol, atol)
+        return _simulate_discrete(
+            robot, Kd, dom, reference, r_of_t, t_final, q0, qdot0, u_eq, u_source, rtol, atol, _deadline(time_budget)
+        )
 
     Ks = as_controller_ss(K, m, m)
     Ak, Bk, Ck, Dk = (np.asarray(X, float) for X in (Ks.A, Ks.B, Ks.C, Ks.D))
     nk = Ak.shape[0]
+    deadline = _deadline(time_budget)
 
     def rhs(t, z):
+        if deadline is not None and time.monotonic() > deadline:
+            raise _OutOfTime
         q, qd, xk = z[:m], z[m : 2 * m], z[2 * m :]
         e = r_of_t(t) - q
         u = u_eq + Ck @ xk + Dk @ e
         return np.concatenate([qd, robot.acceleration(q, qd, u), Ak @ xk + Bk @ e])
 
-    sol = solve_ivp(
-        rhs,
-        (0.0, t_final),
-        np.concatenate([q0, qdot0, np.zeros(nk)]),
-        method="LSODA",
-        dense_output=True,
-        rtol=rtol,
-        atol=atol,
-    )
+    # Without a budget one solve_ivp call; with one, CHUNKS calls, so that
+    # what was integrated before the budget ran out is kept.
+    edges = np.linspace(0.0, t_final, (1 if deadline is None else CHUNKS) + 1)
+    z = np.concatenate([q0, qdot0, np.zeros(nk)])
+    pieces, step_times, nfev, ok, message = [], [np.zeros(1)], 0, True, ""
+    for a, b in zip(edges[:-1], edges[1:]):
+        try:
+            sol = solve_ivp(rhs, (a, b), z, method="LSODA", dense_output=True, rtol=rtol, atol=atol)
+        except _OutOfTime:
+            ok = False
+            message = (
+                f"not finished within the time budget of {time_budget:g} s "
+                f"(integrated to t = {a:.4g} s of {t_final:.4g} s)"
+            )
+            break
+        nfev += int(sol.nfev)
+        pieces.append((float(sol.t[-1]), sol.sol))
+        step_times.append(sol.t)
+        ok, message = bool(sol.success), sol.message
+        if not ok:
+            break
+        z = sol.y[:, -1]
+    t_end = pieces[-1][0] if pieces else 0.0
     # the output grid plus every accepted step: fast transients (torque peaks,
     # domain exits) fall on the solver's own short steps
-    t = np.union1d(np.linspace(0.0, sol.t[-1], n_points), sol.t)
-    y = sol.sol(t)
+    t = np.union1d(np.linspace(0.0, t_end, n_points), np.concatenate(step_times))
+    y = _evaluate(pieces, t, np.concatenate([q0, qdot0, np.zeros(nk)]))
     q, qd, xk = y[:m], y[m : 2 * m], y[2 * m :]
     r = np.array([r_of_t(ti) for ti in t]).T.reshape(m, len(t))
     u = u_eq[:, None] + Ck @ xk + Dk @ (r - q)
-    info = {"solver": "solve_ivp LSODA", "nfev": int(sol.nfev), "message": sol.message, "u_eq_source": u_source}
-    return _result(robot, dom, t, q, qd, u, r, "continuous", None, reference, q0, u_eq, bool(sol.success), info)
+    info = {"solver": "solve_ivp LSODA", "nfev": nfev, "message": message, "u_eq_source": u_source}
+    return _result(robot, dom, t, q, qd, u, r, "continuous", None, reference, q0, u_eq, ok, info)
 
 
-def _simulate_discrete(robot, Kd, dom, reference, r_of_t, t_final, q0, qdot0, u_eq, u_source, rtol, atol):
+#: Pieces of a continuous simulation run under a time budget.
+CHUNKS = 20
+
+
+class _OutOfTime(Exception):
+    """The simulation's wall-clock budget ran out (raised from the ODE's right-hand side)."""
+
+
+def _deadline(time_budget):
+    if time_budget is None:
+        return None
+    if not time_budget > 0:
+        raise PolyrobError(f"time_budget must be positive seconds, got {time_budget}")
+    return time.monotonic() + float(time_budget)
+
+
+def _evaluate(pieces, t, z0):
+    """The state at times ``t`` from the dense outputs of consecutive pieces."""
+    y = np.empty((len(z0), len(t)))
+    if not pieces:
+        y[:] = z0[:, None]
+        return y
+    start = 0.0
+    for end, dense in pieces:
+        sel = (t >= start) & (t <= end)
+        y[:, sel] = dense(t[sel])
+        start = end
+    return y
+
+
+def _simulate_discrete(robot, Kd, dom, reference, r_of_t, t_final, q0, qdot0, u_eq, u_source, rtol, atol, deadline):
     m = robot.m
     h = float(Kd.dt)
     Ad, Bd, Cd, Dd = (np.asarray(X, float) for X in (Kd.A, Kd.B, Kd.C, Kd.D))
@@ -385,6 +356,9 @@ def _simulate_discrete(robot, Kd, dom, reference, r_of_t, t_final, q0, qdot0, u_
     ok, message, nfev = True, "reached t_final", 0
     for k in range(n_steps):
         tk = k * h
+        if deadline is not None and time.monotonic() > deadline:
+            ok, message = False, f"not finished within the time budget (stopped at t = {tk:.4g} s of {t_final:.4g} s)"
+            break
         rk = r_of_t(tk)
         e = rk - x[:m]
         uk = u_eq + Cd @ xk + Dd @ e
@@ -415,7 +389,7 @@ def _simulate_discrete(robot, Kd, dom, reference, r_of_t, t_final, q0, qdot0, u_
 
 
 def _result(robot, dom, t, q, qd, u, r, kind, rate, reference, q0, u_eq, success, info) -> SimulationResult:
-    exits, first, outside = _domain_check(dom, robot, t, q, qd, u)
+    exits, first, outside = domain_check(dom, robot, t, q, qd, u)
     return SimulationResult(
         t=t,
         q=q,
@@ -425,7 +399,7 @@ def _result(robot, dom, t, q, qd, u, r, kind, rate, reference, q0, u_eq, success
         controller=kind,
         rate=rate,
         reference=reference,
-        metrics=_metrics(robot, t, q, r, u, q0),
+        metrics=step_metrics(robot, t, q, r, u, q0),
         left_domain=bool(exits),
         domain_exits=exits,
         first_exit_time=first,
