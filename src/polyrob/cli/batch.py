@@ -79,6 +79,7 @@ def settings_from_args(args) -> dict:
         "mc": args.mc,
         "validate": not args.no_validate,
         "validate_budget": args.validate_budget,
+        "validate_move": args.validate_move,
     }
 
 
@@ -177,6 +178,12 @@ def register(sub) -> None:
     g.add_argument("--mc", type=int_at_least(1), default=200, help="Monte Carlo parameter sets in the analysis")
     g.add_argument("--no-analysis", action="store_true", help="skip the mu analysis after the synthesis")
     g.add_argument("--no-validate", action="store_true", help="skip the nonlinear closed-loop step")
+    g.add_argument(
+        "--validate-move",
+        type=nonnegative_float,
+        default=2.0,
+        help="seconds of the minimum-jerk move the closed-loop check follows (0: a step; default 2)",
+    )
     g.add_argument(
         "--validate-budget",
         type=positive_float,

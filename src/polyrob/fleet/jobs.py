@@ -120,10 +120,15 @@ class Settings:
     mc : int
         Monte Carlo parameter sets of the analysis.
     validate : bool
-        Nonlinear closed-loop simulation of a small step
+        Nonlinear closed-loop simulation of a small move
         (:func:`polyrob.validate.simulate.simulate`).
     validate_step : float
-        The step, as a fraction of each joint's half position range.
+        The move, as a fraction of each joint's half position range.
+    validate_move : float
+        Seconds of the minimum-jerk move to the target (``0``: a step).  A
+        step through a controller with a large feedthrough ``D_K`` asks for
+        a torque spike of ``D_K`` times the step at ``t = 0+`` (1e5 N m on
+        planar_2r's factor-32 controller), which no robot's reference does.
     validate_time : float
         Simulated seconds.
     validate_budget : float
@@ -140,6 +145,7 @@ class Settings:
     mc: int = 200
     validate: bool = True
     validate_step: float = 0.02
+    validate_move: float = 2.0
     validate_time: float = 20.0
     validate_budget: float | None = 120.0
 
@@ -281,10 +287,10 @@ def _problem(job: Job, settings: Settings, timings: dict):
 
 
 def _validate(problem, K, settings: Settings) -> dict:
-    """A small step on the robot's own nonlinear dynamics, from the PLDI's nominal position."""
+    """A small move on the robot's own nonlinear dynamics, from the PLDI's nominal position."""
     import numpy as np
 
-    from polyrob.validate.simulate import simulate, step_reference
+    from polyrob.validate.simulate import simulate, smooth_reference, step_reference
 
     dom = problem.domain
     lo, hi = np.asarray(dom.q_lower, float), np.asarray(dom.q_upper, float)
@@ -292,11 +298,12 @@ def _validate(problem, K, settings: Settings) -> dict:
     step = settings.validate_step * 0.5 * (hi - lo)
     # step towards the farther end of each joint's range, so the target stays in the domain
     target = np.where(hi - start >= start - lo, start + step, start - step)
+    move = smooth_reference(target, settings.validate_move) if settings.validate_move > 0 else step_reference(target)
     sim = simulate(
         problem.robot,
         K,
         problem.pldi,
-        step_reference(target),
+        move,
         t_final=settings.validate_time,
         time_budget=settings.validate_budget,
     )
