@@ -7,7 +7,7 @@ Prints one JSON document::
                  reduction: one per varying Jacobian entry, the paper's box),
                  "parameters" (after: the model "auto" resolves to), "model",
                  "bound_s", "synthesis_s", "analysis_s", "mu_upper",
-                 "certified", "order", "alpha", "validation", "error"}, ...],
+                 "certified", "order", "alpha", "validation", "reason", "error"}, ...],
      "batch_seconds": ...,
      "speedup": {"robots": [...], "seconds_1_worker", "seconds_2_workers", "speedup"}}
 
@@ -15,6 +15,12 @@ Usage (the figures in docs/fleet.md)::
 
     python benchmarks/fleet.py --robots planar_2r,paper_2r:paper,TwoDofs,so101 \\
         --speedup-robots planar_2r,TwoDofs --max-iter 2 --samples 256
+
+``--all-serial`` runs ``polyrob batch --all-serial`` instead: the robots of
+``polyrob.fleet.serial_arms()`` (those this installation loads) with the command's own defaults for every
+option not given here (the figures of "All serial arms" in docs/fleet.md)::
+
+    python benchmarks/fleet.py --all-serial --max-bandwidth --speedup-robots ""
 
 A robot is ``NAME`` or ``NAME:DOMAIN`` (a named domain, e.g. ``paper_2r:paper``).
 The robots of ``--robots`` run in one batch with ``-j`` workers; the speed-up
@@ -61,6 +67,7 @@ def _row(r) -> dict:
         "order": r.order,
         "alpha": r.alpha,
         "validation": r.validation,
+        "reason": r.reason,
         "error": None if r.ok else f"{r.error}: {r.message}",
     }
 
@@ -70,27 +77,39 @@ def main(argv=None) -> int:
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--robots", default="planar_2r,paper_2r:paper,TwoDofs,so101")
+    p.add_argument("--all-serial", action="store_true", help="polyrob.fleet.SERIAL_ARMS with the batch's defaults")
     p.add_argument("--speedup-robots", default="planar_2r,TwoDofs")
     p.add_argument("-j", "--workers", type=int, default=2, help="workers of the main batch")
-    p.add_argument("--samples", type=int, default=256, help="bounds: Sobol' positions")
-    p.add_argument("--max-iter", type=int, default=2, help="D-K iterations")
-    p.add_argument("--omega", default="0.01:1000:30", help="frequency grid LO:HI:N")
-    p.add_argument("--mc", type=int, default=50)
+    p.add_argument("--samples", type=int, default=None, help="bounds: Sobol' positions (default 256)")
+    p.add_argument("--max-iter", type=int, default=None, help="D-K iterations (default 2)")
+    p.add_argument("--omega", default=None, help="frequency grid LO:HI:N (default 0.01:1000:30)")
+    p.add_argument("--mc", type=int, default=None, help="Monte Carlo sets of the analysis (default 50)")
     p.add_argument("--max-bandwidth", action="store_true", help="search the largest bandwidth factor")
     p.add_argument("--alphas", default=None, help="factors of the bandwidth search (comma-separated)")
     p.add_argument("--uncertainty", default="auto")
     p.add_argument("--no-validate", action="store_true")
     args = p.parse_args(argv)
-    lo, hi, n = args.omega.split(":")
+    if args.all_serial:
+        from polyrob.fleet import serial_arms
+
+        args.robots = ",".join(serial_arms())
+    else:  # the settings of the first figures of docs/fleet.md
+        defaults = {"samples": 256, "max_iter": 2, "omega": "0.01:1000:30", "mc": 50}
+        for key, value in defaults.items():
+            if getattr(args, key) is None:
+                setattr(args, key, value)
     options = dict(
-        bound_options={"samples": args.samples},
-        synthesis={"max_iter": args.max_iter},
-        omega=(float(lo), float(hi), int(n)),
-        mc=args.mc,
+        bound_options={} if args.samples is None else {"samples": args.samples},
+        synthesis={} if args.max_iter is None else {"max_iter": args.max_iter},
         validate=not args.no_validate,
         search_bandwidth=args.max_bandwidth,
         alphas=None if args.alphas is None else tuple(float(a) for a in args.alphas.split(",")),
     )
+    if args.omega is not None:
+        lo, hi, n = args.omega.split(":")
+        options["omega"] = (float(lo), float(hi), int(n))
+    if args.mc is not None:
+        options["mc"] = args.mc
 
     def jobs(text):
         return [dict(j, uncertainty=args.uncertainty) for j in _jobs(text)]
