@@ -378,7 +378,7 @@ def test_relaxed_repeated_scalars_bound_mu_from_above():
     """Repeated scalars split into independent ones (a superset) give an upper bound by AB13MD."""
     import numpy as np
 
-    from polyrob.analysis.mu import RELAX_REPEATED_ABOVE, mussv
+    from polyrob.analysis.mu import DESCENT_ABOVE, mussv
 
     rng = np.random.default_rng(5)
     M = rng.normal(size=(4, 4)) + 1j * rng.normal(size=(4, 4))
@@ -390,8 +390,8 @@ def test_relaxed_repeated_scalars_bound_mu_from_above():
     # and it is a true bound of that superset: no larger than its unstructured norm
     assert relaxed.upper <= np.linalg.norm(M, 2) * (1 + 1e-9)
     # method="auto": the exact LMI on a small structure, descent on the scalings above
-    # RELAX_REPEATED_ABOVE channels (tests/test_mu_gradient.py checks its values)
+    # DESCENT_ABOVE channels (tests/test_mu_gradient.py checks its values)
     assert mussv(M, blk, lower=False).method == "lmi"
-    n_big = RELAX_REPEATED_ABOVE // 3 + 1
+    n_big = DESCENT_ABOVE // 3 + 1
     big = mussv(rng.normal(size=(3 * n_big, 3 * n_big)), [[-3, 0]] * n_big, lower=False)
     assert big.method == "gradient" and not big.notes

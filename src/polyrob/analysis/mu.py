@@ -61,7 +61,7 @@ Method = Literal["auto", "ab13md", "lmi", "gradient", "relaxed"]
 # ================================================================ mussv
 #: ``method="auto"`` bounds repeated scalar blocks by descent on the D-G scalings above this padded
 #: size: the D-G LMI of an 89-channel structure (ur5's axes model) takes minutes per frequency.
-RELAX_REPEATED_ABOVE = 24
+DESCENT_ABOVE = 24
 #: The least AB13MD time limit on such large structures (measured on ur5: AB13MD 26-37 s per
 #: frequency, the D-G LMI fallback not done after 6 minutes).
 LARGE_AB13MD_TIMEOUT = 120.0
@@ -72,7 +72,7 @@ def resolve_method(st: BlockStructure, method: str) -> str:
     if method == "auto":
         if not st.has_repeated:
             return "ab13md"
-        return "gradient" if st.padded_size > RELAX_REPEATED_ABOVE else "lmi"
+        return "gradient" if st.padded_size > DESCENT_ABOVE else "lmi"
     if method not in ("ab13md", "lmi", "gradient", "relaxed"):
         raise PolyrobError(f"method must be 'auto', 'ab13md', 'lmi', 'gradient' or 'relaxed', got {method!r}")
     if method == "ab13md" and st.has_repeated:
@@ -113,7 +113,7 @@ def mussv(
         same scalings found by descent (:class:`~polyrob.analysis.mu_gradient.GradientUpper`,
         fast on large repeated structures, re-certified exactly) or AB13MD on
         a superset structure (``"relaxed"``).  ``"auto"`` picks AB13MD
-        whenever it applies, else the LMI up to :data:`RELAX_REPEATED_ABOVE`
+        whenever it applies, else the LMI up to :data:`DESCENT_ABOVE`
         padded channels and the descent above.
     lower : bool
         Compute the lower bound and its worst perturbation.
@@ -228,7 +228,7 @@ def mu_bounds(
         (it can take seconds per frequency there); past it, that frequency's
         upper bound comes from the D-G LMI, counted in the result's notes.
         ``None``: no limit (calls run in-process).  On structures above
-        :data:`RELAX_REPEATED_ABOVE` padded channels the limit is at least
+        :data:`DESCENT_ABOVE` padded channels the limit is at least
         :data:`LARGE_AB13MD_TIMEOUT`: there the LMI is the slower of the two.
     progress : bool, optional
         tqdm progress bar; default: shown on a terminal for long sweeps.
@@ -297,7 +297,7 @@ def _sweep(
     st_up = st.relaxed()
     lmi = LmiUpper(st, solver) if meth == "lmi" else None
     descent = GradientUpper(st) if meth == "gradient" else None
-    if cold_timeout and st.padded_size > RELAX_REPEATED_ABOVE:
+    if cold_timeout and st.padded_size > DESCENT_ABOVE:
         cold_timeout = max(cold_timeout, LARGE_AB13MD_TIMEOUT)
     cold = mu_upper.TimedAb13md(st_up, cold_timeout, solver, rtol) if meth in ("ab13md", "relaxed") else None
     guard = None

@@ -31,7 +31,7 @@ from polyrob.synthesis.result import MusynResult
 
 __all__ = ["musyn", "scaling_order_defaults", "LARGE_STRUCTURE_ORDERS"]
 
-#: Above this many padded channels (:data:`polyrob.analysis.mu.RELAX_REPEATED_ABOVE`, a 6-7 joint
+#: Above this many padded channels (:data:`polyrob.analysis.mu.DESCENT_ABOVE`, a 6-7 joint
 #: arm's axes model) the D and G scalings default to constants: a fitted order ``o`` on a block
 #: repeated ``r`` times adds ``o * r`` states on each side of the plant, and on ur5 (twelve blocks
 #: of six) the fits and K-steps of order 1-4 took most of a 15-minute budget per iteration.
@@ -59,9 +59,9 @@ def scaling_order_defaults(st) -> dict:
     >>> scaling_order_defaults(as_block_structure([[-6, 0]] * 5))
     {'d_order': (0,), 'g_order': (0,)}
     """
-    from polyrob.analysis.mu import RELAX_REPEATED_ABOVE
+    from polyrob.analysis.mu import DESCENT_ABOVE
 
-    if st.padded_size > RELAX_REPEATED_ABOVE:
+    if st.padded_size > DESCENT_ABOVE:
         return dict(LARGE_STRUCTURE_ORDERS)
     return {k: FULL_ORDER_DEFAULTS[k] for k in ("d_order", "g_order")}
 
@@ -149,7 +149,7 @@ def musyn(
     d_order, g_order : sequence of int, optional
         Candidate orders of the D and G fits (the lowest that fits is used;
         default ``0..4`` and ``0..2``; constant scalings, :data:`LARGE_STRUCTURE_ORDERS`,
-        on structures above :data:`~polyrob.analysis.mu.RELAX_REPEATED_ABOVE` padded channels).
+        on structures above :data:`~polyrob.analysis.mu.DESCENT_ABOVE` padded channels).
     fit_tol : float, optional
         Relative tolerance of the fitted bound (default 0.01), see
         :class:`~polyrob.synthesis.dfit.LogMagnitudeFit`.
