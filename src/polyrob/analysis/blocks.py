@@ -249,6 +249,10 @@ class BlockStructure:
         """Slices of each block in the padded square problem."""
         return self._offsets("size")
 
+    def embeddings(self) -> tuple[np.ndarray, np.ndarray]:
+        """Index arrays placing the c-space (rows of ``M``) and r-space (its columns) into the padded space."""
+        return self._embeddings()
+
     def _embeddings(self) -> tuple[np.ndarray, np.ndarray]:
         """Index arrays placing the c-space and r-space into the padded space."""
         ec, er = [], []

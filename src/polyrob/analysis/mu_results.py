@@ -89,6 +89,10 @@ class MuBoundsResult:
     notes : tuple of str
         What went wrong on the way and what was done instead (LMI solver
         fallbacks, warm-start timeouts); empty when nothing did.
+    between : BetweenGridResult or None
+        With ``mu_bounds(..., verify=True)``: the bound between the grid
+        points (:func:`polyrob.analysis.mu_between.verify_between`); when it
+        holds, ``between.level`` bounds μ at every frequency.
     """
 
     omega: np.ndarray
@@ -105,12 +109,23 @@ class MuBoundsResult:
     method: str
     warm_start_fallbacks: int = 0
     notes: tuple = ()
+    between: object = None
+
+    @property
+    def upper_everywhere(self) -> float | None:
+        """A bound of μ at every frequency (``between.level``), or ``None`` if not verified."""
+        b = self.between
+        return float(b.level) if b is not None and b.holds else None
 
     @property
     def covers(self) -> str:
         """One sentence on what the peak figures cover, printable verbatim."""
         w = self.omega
-        return (
-            f"peak mu on a grid of {w.size} frequencies in [{w.min():.3g}, {w.max():.3g}] rad/s "
-            f"(upper bound at each grid point, not between them); structure {self.structure}"
-        )
+        grid = f"a grid of {w.size} frequencies in [{w.min():.3g}, {w.max():.3g}] rad/s"
+        if self.between is None:
+            scope = f"peak mu on {grid} (upper bound at each grid point, not between them)"
+        elif self.between.holds:
+            scope = f"peak mu on {grid}; {self.between.sentence()}"
+        else:
+            scope = f"peak mu on {grid} (upper bound at each grid point; {self.between.sentence()})"
+        return f"{scope}; structure {self.structure}"

@@ -118,7 +118,14 @@ class RobustnessResult:
             out.append(f"lft(P, K) at Delta = 0 not proved stable ({v})")
         if not self.mu_upper < 1.0:
             out.append(f"peak mu upper bound on the grid {self.mu_upper:.4g} >= 1")
+        elif (self.everywhere or 0.0) >= 1.0:
+            out.append(f"mu reaches {self.everywhere:.4g} >= 1 between the grid points")
         return tuple(out)
+
+    @property
+    def everywhere(self) -> float | None:
+        """A μ bound verified at every frequency (see :func:`polyrob.analysis.mu_between.verify_between`), or ``None``."""
+        return getattr(self.mu, "upper_everywhere", None)
 
     @property
     def robust(self) -> bool:
@@ -156,6 +163,8 @@ class RobustnessResult:
             "mu_upper": float(self.mu_upper),
             "mu_lower": float(self.mu_lower),
             "mu_scope": "peak on the frequency grid",
+            "mu_upper_every_frequency": self.everywhere,
+            "between_grid_points": None if self.mu.between is None else self.mu.between.summary(),
             "margin_lower": float(self.margin_lower),
             "margin_upper": float(self.margin_upper),
             "critical_frequency": float(self.critical_frequency),
@@ -185,6 +194,7 @@ def _inv(x) -> float:
 def _analyse(kind, N, M, blk, omega, *, unc=None, K=None, model="", **mu_options) -> RobustnessResult:
     """μ of ``M`` (a sub-block of the closed loop ``N``) with the verdicts μ needs."""
     from polyrob.analysis.mu import mu_bounds
+    from polyrob.analysis.mu_between import with_between
 
     centre = stability_verdict(N)
     # Double-precision responses of a badly conditioned realisation can be wrong
@@ -201,7 +211,7 @@ def _analyse(kind, N, M, blk, omega, *, unc=None, K=None, model="", **mu_options
     err = response_error(M, w_check, RESPONSE_BITS)
     if err > RESPONSE_TOL and "response_bits" not in mu_options:
         mu_options["response_bits"] = RESPONSE_BITS
-    mu = mu_bounds(M, blk, omega, **mu_options)
+    mu = with_between(M, mu_bounds(M, blk, omega, **mu_options), response_bits=mu_options.get("response_bits"))
     worst = np.asarray(mu.worst_delta)
     nominal = centre
     delta = np.real(np.diag(worst)) if worst.size else np.zeros(0)

@@ -38,6 +38,9 @@ def print_analysis(a, out) -> None:
             f"{title:<22} mu in [{r.mu_lower:.4g}, {r.mu_upper:.4g}] (peak on the frequency grid) "
             f"at {r.critical_frequency:.4g} rad/s: {a.status(r)}"
         )
+        between = getattr(r.mu, "between", None)
+        if between is not None:
+            out.line(f"{'':<23}{between.sentence()}")
         notes = list(getattr(r.mu, "notes", ()))  # fallbacks of the sweep are shown, not hidden
         for note in notes[:2]:
             out.line(f"{'':<23}note: {note}")

@@ -60,6 +60,9 @@ def print_design(design, out) -> None:
         f"controller: {r.structure}, order {r.order}; peak mu in [{r.peak_mu_lower:.4g}, {r.peak_mu:.4g}] "
         f"(bounds on the frequency grid) at {r.peak_frequency:.4g} rad/s ({r.iterations} iterations, {r.seconds:.1f} s)"
     )
+    between = getattr(getattr(r, "certificate", None), "between", None)
+    if between is not None:
+        out.line("certificate between the grid points: " + between.sentence())
     if design.reduced is not None:
         red = design.reduced
         out.line("order reduction (order: peak mu upper bound):")
@@ -150,7 +153,12 @@ def cmd_synth(args) -> int:
     if args.output:
         doc["output"] = _save(design, problem, args, out, info_extra=extra)
     doc["covers"] = problem.covers()
-    doc["verdict"] = verdict(design.peak_mu, design.peak_mu_lower, covers=doc["covers"])
+    doc["verdict"] = verdict(
+        design.peak_mu,
+        design.peak_mu_lower,
+        covers=doc["covers"],
+        everywhere=getattr(design, "peak_mu_everywhere", None),
+    )
     out.line(doc["verdict"])
     out.document(doc)
     return 0

@@ -160,7 +160,8 @@ class RobotResult:
     ``ok`` is False when the job raised; then ``error`` is the exception
     class name and ``message`` its one line, and the figures are ``None``.
     ``mu_upper`` / ``mu_lower`` are the synthesis certificate's peak bounds
-    (the analysis' when it ran); ``certified`` is ``mu_upper < 1`` with a
+    (the analysis' when it ran); ``certified`` is ``mu_upper < 1`` (and the
+    bound verified between the grid points below 1 when it was checked) with a
     nominally stable loop.  ``validation`` is the nonlinear simulation's
     verdict line when it ran (``None`` otherwise).  ``reason`` says, for a
     robot left without a certificate, what stands in the way: the
@@ -375,7 +376,8 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
     description = problem.description()
     description["job"] = job.to_dict()
     mu_upper, mu_lower, stable = design.peak_mu, design.peak_mu_lower, True
-    line = verdict(mu_upper, mu_lower, covers=problem.covers())
+    everywhere = getattr(design, "peak_mu_everywhere", None)  # verified between the grid points
+    line = verdict(mu_upper, mu_lower, covers=problem.covers(), everywhere=everywhere)
     details["synthesis"] = design.summary()
     if skipped:
         details["bandwidth_search"] = "bandwidth search skipped: " + skipped
@@ -392,7 +394,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         details["analysis"] = a.summary()
         rp = a.robust_performance
         mu_upper, mu_lower, stable = float(rp.mu_upper), float(rp.mu_lower), bool(a.robust_stability.nominally_stable)
-        line = a.verdict
+        everywhere, line = rp.everywhere, a.verdict
     validation = None
     if settings.validate:
         t1 = time.perf_counter()
@@ -404,7 +406,8 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         except Exception as exc:  # noqa: BLE001 - recorded: a failed simulation is a finding about this robot
             validation = f"simulation failed: {type(exc).__name__}: {_one_line(exc)}"
         timings["validation"] = time.perf_counter() - t1
-    reason = None if (stable and mu_upper < 1) else why_not_certified(problem, details)
+    certified = bool(stable and mu_upper < 1 and (everywhere is None or everywhere < 1))
+    reason = None if certified else why_not_certified(problem, details)
     if reason and skipped:
         reason = f"{reason} (bandwidth search skipped)"
     K = controller_data(design.controller)
@@ -419,7 +422,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         enclosure=problem.pldi.enclosure,
         mu_upper=float(mu_upper),
         mu_lower=float(mu_lower),
-        certified=bool(stable and mu_upper < 1),
+        certified=certified,
         order=int(design.certificate.get("order", design.result.order)),
         alpha=alpha,
         verdict=line,

@@ -29,11 +29,21 @@ NEXT_STEPS = (
 )
 
 
-def verdict(mu_upper: float, mu_lower: float, *, nominally_stable: bool = True, covers: str = "", failed=()) -> str:
+def verdict(
+    mu_upper: float,
+    mu_lower: float,
+    *,
+    nominally_stable: bool = True,
+    covers: str = "",
+    failed=(),
+    everywhere: float | None = None,
+) -> str:
     """One plain line: the robust-performance verdict, what it covers, what to try next when it fails.
 
     ``failed`` are the analysis' own reasons not to certify (e.g. the loop at
     ``Δ = 0`` not proved stable); with any, μ < 1 certifies nothing.
+    ``everywhere`` is a μ bound verified at every frequency
+    (:attr:`polyrob.analysis.mu_results.MuBoundsResult.upper_everywhere`), if any.
     """
     where = f" for {covers}" if covers else ""
     if not nominally_stable:
@@ -46,6 +56,16 @@ def verdict(mu_upper: float, mu_lower: float, *, nominally_stable: bool = True, 
         return (
             f"verdict: robust performance NOT certified although mu < 1 ({'; '.join(blocking)}){where}; "
             "try another controller (e.g. `polyrob synth`)"
+        )
+    if everywhere is not None and mu_upper < 1 <= everywhere:
+        return (
+            f"verdict: robust performance NOT certified: mu < 1 on the frequency grid ({mu_upper:.4g}) but up to "
+            f"{everywhere:.4g} between its points{where}; {NEXT_STEPS}"
+        )
+    if everywhere is not None and everywhere < 1:
+        return (
+            f"verdict: robust performance CERTIFIED (mu upper bound {everywhere:.4g} < 1 at every frequency; "
+            f"peak {mu_upper:.4g} on the grid){where}"
         )
     if mu_upper < 1:
         return f"verdict: robust performance CERTIFIED (peak mu upper bound {mu_upper:.4g} < 1 on the frequency grid){where}"
@@ -124,6 +144,7 @@ class ControllerAnalysis:
             nominally_stable=self.robust_stability.nominally_stable,
             covers=self.covers,
             failed=tuple(getattr(rp, "failed", ())),
+            everywhere=getattr(rp.mu, "upper_everywhere", None),
         )
 
     @staticmethod

@@ -127,6 +127,7 @@ def certify(P, K, blk, omega=None, *, n_u=None, n_y=None):
     (μ certifies nothing without nominal stability).
     """
     from polyrob.analysis.mu import mu_bounds
+    from polyrob.analysis.mu_between import with_between
     from polyrob.plant.generalized import lft
 
     N = lft(P, K, n_u=n_u, n_y=n_y)
@@ -137,7 +138,7 @@ def certify(P, K, blk, omega=None, *, n_u=None, n_y=None):
         omega = frequency_grid(P.system if hasattr(P, "system") else P, per_decade=15)
     omega = np.asarray(omega, float)
     w = np.union1d(omega, resonances(A, omega.min(), omega.max()))
-    r = mu_bounds(N, blk, omega=w, refine_peak=True, progress=False)
+    r = with_between(N, mu_bounds(N, blk, omega=w, refine_peak=True, progress=False))
     return float(r.peak_upper), float(r.peak_lower), float(r.peak_upper_frequency), N, r
 
 

@@ -79,6 +79,7 @@ from slycot.exceptions import SlycotError
 from polyrob._threads import single_blas_thread
 from polyrob.analysis.blocks import as_block_structure
 from polyrob.analysis.mu import mu_bounds
+from polyrob.analysis.mu_between import with_between
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import lft, paper_controller
 from polyrob.synthesis.fixed_iteration import (
@@ -307,6 +308,7 @@ def fixed_structure_musyn(
             )
             screen = np.union1d(screen, cert.omega[cert.omega > 0])
             optimise_start(loop, best, st, opts, max(3, int(max_iter) // 4), screen, report, "certify", target)
+        cert = with_between(N, cert)  # the bound between the certificate's grid points
 
     poles = np.linalg.eigvals(np.asarray(N.A)) if N.nstates else np.zeros(0)
     if poles.size and np.max(poles.real) >= 0:  # pragma: no cover - guarded by every accepted step

@@ -61,12 +61,18 @@ class MusynResult:
     seconds: float
     info: dict = field(default_factory=dict)
 
+    @property
+    def peak_mu_everywhere(self) -> float | None:
+        """A μ bound verified at every frequency (the certificate's check between its grid points), or ``None``."""
+        return getattr(self.certificate, "upper_everywhere", None)
+
     def summary(self) -> dict:
         """Plain figures for reports and JSON."""
         return {
             "structure": self.structure,
             "order": int(self.order),
             "peak_mu_upper": float(self.peak_mu),
+            "mu_upper_every_frequency": self.peak_mu_everywhere,
             "peak_mu_lower": float(self.peak_mu_lower),
             "peak_frequency": float(self.peak_frequency),
             "iterations": int(self.iterations),

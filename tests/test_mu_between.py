@@ -1,0 +1,72 @@
+"""The μ upper bound between grid points (polyrob.analysis.mu_between)."""
+
+from __future__ import annotations
+
+import control
+import numpy as np
+import pytest
+
+from polyrob.analysis.mu import mu_bounds
+from polyrob.analysis.mu_between import crossing_frequencies, verify_between
+
+
+def test_crossing_of_a_gain_level_is_where_the_magnitude_meets_it():
+    """Complex 1x1 block, P = 1, G = 0: Φ(ω) = |M(jω)|² - β², zero at |1/(jω + 1)| = 1/2, ω = √3."""
+    A, B, C, D = np.array([[-1.0]]), np.array([[1.0]]), np.array([[1.0]]), np.array([[0.0]])
+    # Φ(∞) = -β² P is non-singular; the crossing is exact
+    w = crossing_frequencies(A, B, C, D, np.eye(1), np.zeros((1, 1)), 0.5)
+    assert w is not None and np.allclose(w, [np.sqrt(3.0)], rtol=1e-9)
+    assert crossing_frequencies(A, B, C, D, np.eye(1), np.zeros((1, 1)), 1.5).size == 0
+
+
+def test_a_resonance_the_grid_misses_is_found_and_a_fine_grid_is_verified():
+    G = control.tf([1], [1, 0.02, 1])  # peak 1 / (2 ζ sqrt(1 - ζ²)) = 50.0025 at ω ≈ 1
+    coarse = mu_bounds(G, [[1, 1]], [0.1, 0.5, 2.0, 10.0], refine_peak=False, progress=False)
+    miss = verify_between(G, coarse, level=1.4)
+    assert not miss.holds and miss.peak_upper > 1.4 and miss.failed_at is not None
+    assert "rad/s" in miss.reason and "not verified" in miss.sentence()
+    # without a level, the level rises to what lies between the points: the true peak
+    found = verify_between(G, coarse)
+    assert found.holds and 50.0025 <= found.level <= 50.0025 * (1 + 1.5e-2)
+    assert found.points_added > 0
+    fine = mu_bounds(G, [[1, 1]], progress=False)
+    ok = verify_between(G, fine)
+    assert ok.holds, ok.reason
+    assert ok.level >= 50.0025 > 0.985 * ok.level  # the level is the true peak, 1 % above it
+    assert "every frequency" in ok.sentence()
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_mixed_structure_level_bounds_a_dense_sweep(seed):
+    """A random stable 4x4 system, blocks [real, real, complex 2x2]: a verified level bounds μ on a dense grid."""
+    rng = np.random.default_rng(seed)
+    sys = control.rss(6, 4, 4, strictly_proper=False)
+    while np.max(np.linalg.eigvals(sys.A).real) > -0.05:
+        sys = control.rss(6, 4, 4, strictly_proper=False)
+    sys = control.ss(sys.A, sys.B, sys.C, 0.3 * rng.standard_normal((4, 4)))
+    blk = [[-1, 0], [-1, 0], [2, 2]]
+    sweep = mu_bounds(sys, blk, np.logspace(-2, 2, 12), refine_peak=False, progress=False)
+    res = verify_between(sys, sweep, level=1.05 * sweep.peak_upper, max_points=400)
+    dense = mu_bounds(sys, blk, np.logspace(-2.5, 2.5, 400), refine_peak=False, progress=False)
+    if res.holds:
+        assert dense.peak_upper <= res.level * (1 + 1e-6)
+    else:  # the only way to fail: a point between the grid's with a larger bound
+        assert res.failed_at is not None and res.peak_upper >= res.level
+    assert res.peak_upper >= sweep.peak_upper
+
+
+def test_unstable_system_is_not_verified():
+    G = control.ss(control.tf([1], [1, -1]))
+    sweep = mu_bounds(G, [[1, 1]], [0.1, 1.0, 10.0], refine_peak=False, progress=False)
+    assert not verify_between(G, sweep).holds
+
+
+def test_a_hamiltonian_that_misses_a_crossing_is_caught(monkeypatch):
+    """If the eigenvalues hide a crossing (rounding on a badly scaled loop), the spot checks refuse the result."""
+    import polyrob.analysis.mu_between as mb
+
+    G = control.tf([1], [1, 0.02, 1])
+    coarse = mu_bounds(G, [[1, 1]], [0.1, 0.5, 2.0, 10.0], refine_peak=False, progress=False)
+    monkeypatch.setattr(mb, "crossing_frequencies", lambda *a, **k: np.zeros(0))
+    res = mb.verify_between(G, coarse, level=1.4)
+    assert not res.holds and "not reliable" in res.reason
