@@ -348,3 +348,19 @@ def test_the_bandwidth_search_is_skipped_when_the_model_reverses_inputs(pendulum
     assert "analysis" not in r.timings and r.details["analysis"].startswith("skipped: 50 %")
     # the pendulum certifies at its base weights (mu < 1): no reason then; otherwise the reason names the skip
     assert (r.reason is None) if r.certified else ("(bandwidth search skipped)" in r.reason)
+
+
+def test_a_certified_controller_is_reduced_while_mu_stays_below_one(pendulums):
+    def job(order):
+        settings = Settings(
+            **dict(FAST, synthesis={"max_iter": 2}), search_bandwidth=True, alphas=(4.0, 8.0), reduce_max_order=order
+        )
+        return run_job(Job(robot=pendulums[0]), settings)
+
+    r = job(4)  # the full-order controller has 8 states; 4 keep mu < 1
+    assert r.ok and r.certified and "reduction" in r.timings, (r.message, r.mu_upper)
+    assert r.certificate["structure"] == f"reduced:{r.order}" and r.order <= 4 < r.certificate["full_order"]
+    assert r.mu_upper < 1 and r.certificate["full_peak_mu_upper"] < 1
+    kept = job(1)  # one state is not enough: the full-order controller stays, and the row says why
+    assert kept.certified and kept.order == kept.certificate["order"] == 8
+    assert kept.details["reduction"].startswith("kept order 8: ")

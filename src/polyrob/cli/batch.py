@@ -80,6 +80,7 @@ def settings_from_args(args) -> dict:
         "validate": not args.no_validate,
         "validate_budget": args.validate_budget,
         "validate_move": args.validate_move,
+        "reduce_max_order": args.reduce_max_order or None,
     }
 
 
@@ -178,6 +179,12 @@ def register(sub) -> None:
     g.add_argument("--mc", type=int_at_least(1), default=200, help="Monte Carlo parameter sets in the analysis")
     g.add_argument("--no-analysis", action="store_true", help="skip the mu analysis after the synthesis")
     g.add_argument("--no-validate", action="store_true", help="skip the nonlinear closed-loop step")
+    g.add_argument(
+        "--reduce-max-order",
+        type=int_at_least(0),
+        default=20,
+        help="reduce a certified full-order controller to at most this order while mu < 1 (0: no reduction)",
+    )
     g.add_argument(
         "--validate-move",
         type=nonnegative_float,

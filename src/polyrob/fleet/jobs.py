@@ -17,7 +17,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import PurePath
 
 from polyrob.errors import ArgumentError
-from polyrob.fleet.diagnosis import search_skipped, why_not_certified
+from polyrob.fleet.diagnosis import why_not_certified
+from polyrob.fleet.stages import design_stage, one_line, reduce_stage, validate_stage
 
 __all__ = ["Job", "Settings", "RobotResult", "run_job", "as_job"]
 
@@ -134,6 +135,10 @@ class Settings:
     validate_budget : float
         Wall-clock seconds the simulation may take; a stiff closed loop that
         has not finished by then is reported as such (``None``: no limit).
+    reduce_max_order : int or None
+        A certified full-order controller is reduced to the smallest order up
+        to this one that keeps μ < 1 (:func:`polyrob.pipeline.reduce_design`);
+        ``None``: kept as synthesised.
     """
 
     bound_options: dict = field(default_factory=dict)
@@ -148,6 +153,7 @@ class Settings:
     validate_move: float = 2.0
     validate_time: float = 20.0
     validate_budget: float | None = 120.0
+    reduce_max_order: int | None = 20
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
@@ -252,10 +258,6 @@ def controller_system(data: dict):
     return control.ss(data["A"], data["B"], data["C"], data["D"])
 
 
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
-
-
 def _problem(job: Job, settings: Settings, timings: dict):
     import polyrob
     from polyrob.bounds.domain import Domain
@@ -287,53 +289,6 @@ def _problem(job: Job, settings: Settings, timings: dict):
     return problem
 
 
-def _validate(problem, K, settings: Settings) -> dict:
-    """A small move on the robot's own nonlinear dynamics, from the PLDI's nominal position."""
-    import numpy as np
-
-    from polyrob.validate.simulate import simulate, smooth_reference, step_reference
-
-    dom = problem.domain
-    lo, hi = np.asarray(dom.q_lower, float), np.asarray(dom.q_upper, float)
-    start = np.clip(np.asarray(problem.pldi.nominal_point["q"], float), lo, hi)  # simulate's own q0
-    step = settings.validate_step * 0.5 * (hi - lo)
-    # step towards the farther end of each joint's range, so the target stays in the domain
-    target = np.where(hi - start >= start - lo, start + step, start - step)
-    move = smooth_reference(target, settings.validate_move) if settings.validate_move > 0 else step_reference(target)
-    sim = simulate(
-        problem.robot,
-        K,
-        problem.pldi,
-        move,
-        t_final=settings.validate_time,
-        time_budget=settings.validate_budget,
-    )
-    out = sim.summary()
-    out.pop("joints", None)
-    return out
-
-
-def _design(problem, settings: Settings, timings: dict, details: dict):
-    import numpy as np
-
-    from polyrob.pipeline import design_controller, design_max_bandwidth, synthesis_options
-
-    options = synthesis_options(progress=False, **settings.synthesis)
-    if settings.omega is not None:
-        lo, hi, n = settings.omega
-        options["omega"] = np.logspace(np.log10(lo), np.log10(hi), int(n))
-    t0 = time.perf_counter()
-    skipped = search_skipped(problem, details) if settings.search_bandwidth else None
-    if settings.search_bandwidth and skipped is None:
-        design, res = design_max_bandwidth(problem, alphas=settings.alphas, **options)
-        alpha, hyper = float(res.alpha), res.hyperparameters
-    else:
-        design = design_controller(problem, **options)
-        alpha, hyper = None, problem.hyperparameters
-    timings["synthesis"] = time.perf_counter() - t0
-    return design, alpha, hyper, options.get("omega"), skipped
-
-
 def run_job(job: Job, settings: Settings) -> RobotResult:
     """Bounds, weights, synthesis (or bandwidth search), analysis and validation of one robot.
 
@@ -354,7 +309,7 @@ def run_job(job: Job, settings: Settings) -> RobotResult:
                 robot=str(job.robot),
                 ok=False,
                 error=type(exc).__name__,
-                message=_one_line(exc),
+                message=one_line(exc),
                 seconds=time.perf_counter() - t0,
                 timings=timings,
             )
@@ -365,7 +320,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
 
     problem = _problem(job, settings, timings)
     details = {}
-    design, alpha, hyper, omega, skipped = _design(problem, settings, timings, details)
+    design, alpha, hyper, omega, skipped = design_stage(problem, settings, timings, details)
     if alpha is not None:
         # the certificate is at the found bandwidth: the same PLDI (no new bounding) with the scaled weights
         from polyrob.pipeline import build_problem
@@ -373,6 +328,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         problem = build_problem(
             problem.robot, hyperparameters=hyper, uncertainty=job.uncertainty, pldi=problem.pldi, progress=False
         )
+    design = reduce_stage(problem, design, settings, timings, details)
     description = problem.description()
     description["job"] = job.to_dict()
     mu_upper, mu_lower, stable = design.peak_mu, design.peak_mu_lower, True
@@ -399,12 +355,12 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
     if settings.validate:
         t1 = time.perf_counter()
         try:
-            sim = _validate(problem, design.controller, settings)
+            sim = validate_stage(problem, design.controller, settings)
             details["validation"] = sim
             settled = "settled" if sim["settled"] else "NOT settled"
             validation = f"{settled}; {sim['verdict']}"
         except Exception as exc:  # noqa: BLE001 - recorded: a failed simulation is a finding about this robot
-            validation = f"simulation failed: {type(exc).__name__}: {_one_line(exc)}"
+            validation = f"simulation failed: {type(exc).__name__}: {one_line(exc)}"
         timings["validation"] = time.perf_counter() - t1
     certified = bool(stable and mu_upper < 1 and (everywhere is None or everywhere < 1))
     reason = None if certified else why_not_certified(problem, details)

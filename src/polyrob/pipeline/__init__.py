@@ -7,7 +7,7 @@ generalized plant), :func:`design_controller` (μ-synthesis, reduction),
 """
 
 from polyrob.pipeline.analysis import ControllerAnalysis, analyze_controller, controller_order, frequency_grid, verdict
-from polyrob.pipeline.design import Design, design_controller, design_max_bandwidth, synthesis_options
+from polyrob.pipeline.design import Design, design_controller, design_max_bandwidth, reduce_design, synthesis_options
 from polyrob.pipeline.matching import check_controller_problem, controller_differences
 from polyrob.pipeline.problem import (
     UNCERTAINTY_MODELS,
@@ -33,6 +33,7 @@ __all__ = [
     "verdict",
     "Design",
     "design_controller",
+    "reduce_design",
     "design_max_bandwidth",
     "synthesis_options",
     "check_controller_problem",

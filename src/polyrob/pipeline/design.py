@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from polyrob.errors import ArgumentError
 
-__all__ = ["Design", "design_controller", "design_max_bandwidth", "synthesis_options"]
+__all__ = ["Design", "design_controller", "design_max_bandwidth", "reduce_design", "synthesis_options"]
 
 
 def synthesis_options(
@@ -90,6 +90,12 @@ class Design:
     def peak_mu_lower(self) -> float:
         return float(self.certificate["peak_mu_lower"])
 
+    @property
+    def peak_mu_everywhere(self) -> float | None:
+        """The μ bound verified at every frequency for :attr:`controller` (``None`` if not verified)."""
+        source = self.reduced if self.reduced is not None else self.result
+        return getattr(getattr(source, "certificate", None), "upper_everywhere", None)
+
     def summary(self) -> dict:
         out = dict(self.certificate)
         out["gamma_history"] = [float(g) for g in self.result.gamma_history]
@@ -112,26 +118,39 @@ def design_controller(problem, *, reduce: bool = False, reduce_max_order: int = 
     **options
         Passed to :func:`polyrob.synthesis.musyn`.
     """
-    from polyrob.synthesis import musyn, reduce_controller
+    from polyrob.synthesis import musyn
 
     if reduce and reduce_max_order < 1:
         raise ArgumentError(f"reduce_max_order must be >= 1, got {reduce_max_order}")
     result = musyn(problem.P, **options)
     cert = _certificate(result, problem.P)
     notes = tuple(result.info.get("notes", [])) if isinstance(result.info, dict) else ()
-    reduced, K = None, result.controller
+    design = Design(controller=result.controller, result=result, reduced=None, certificate=cert, notes=notes)
     if reduce and options.get("structure", "full") == "full":
-        reduced = reduce_controller(problem.P, result, max_order=reduce_max_order)
-        K = reduced.controller
-        cert.update(
-            structure=f"reduced:{reduced.order}",
-            order=int(reduced.order),
-            peak_mu_upper=float(reduced.peak_mu),
-            peak_mu_lower=float(reduced.peak_mu_lower),
-            full_order=int(result.order),
-            full_peak_mu_upper=float(result.peak_mu),
-        )
-    return Design(controller=K, result=result, reduced=reduced, certificate=cert, notes=notes)
+        design = reduce_design(problem, design, reduce_max_order)
+    return design
+
+
+def reduce_design(problem, design: Design, max_order: int = 20, *, target: float | None = None) -> Design:
+    """The design with its full-order controller reduced (balanced truncation, certified per order).
+
+    ``target``: the largest certified μ accepted (default the full order's
+    × 1.05, :func:`polyrob.synthesis.reduce_controller`).
+    """
+    from polyrob.synthesis import reduce_controller
+
+    result = design.result
+    reduced = reduce_controller(problem.P, result, max_order=max_order, target=target)
+    cert = dict(design.certificate)
+    cert.update(
+        structure=f"reduced:{reduced.order}",
+        order=int(reduced.order),
+        peak_mu_upper=float(reduced.peak_mu),
+        peak_mu_lower=float(reduced.peak_mu_lower),
+        full_order=int(result.order),
+        full_peak_mu_upper=float(result.peak_mu),
+    )
+    return Design(controller=reduced.controller, result=result, reduced=reduced, certificate=cert, notes=design.notes)
 
 
 def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None, limit=True, **options):

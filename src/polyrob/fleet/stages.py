@@ -1,0 +1,88 @@
+"""The synthesis, reduction and validation stages of one robot's job (:func:`polyrob.fleet.jobs.run_job`).
+
+Each takes the job's :class:`~polyrob.fleet.jobs.Settings` and records its
+time in ``timings`` (and what it skipped in ``details``).
+"""
+
+from __future__ import annotations
+
+import time
+
+from polyrob.errors import SynthesisError
+from polyrob.fleet.diagnosis import search_skipped
+
+__all__ = ["design_stage", "reduce_stage", "validate_stage", "one_line"]
+
+
+def validate_stage(problem, K, settings) -> dict:
+    """A small move on the robot's own nonlinear dynamics, from the PLDI's nominal position."""
+    import numpy as np
+
+    from polyrob.validate.simulate import simulate, smooth_reference, step_reference
+
+    dom = problem.domain
+    lo, hi = np.asarray(dom.q_lower, float), np.asarray(dom.q_upper, float)
+    start = np.clip(np.asarray(problem.pldi.nominal_point["q"], float), lo, hi)  # simulate's own q0
+    step = settings.validate_step * 0.5 * (hi - lo)
+    # step towards the farther end of each joint's range, so the target stays in the domain
+    target = np.where(hi - start >= start - lo, start + step, start - step)
+    move = smooth_reference(target, settings.validate_move) if settings.validate_move > 0 else step_reference(target)
+    sim = simulate(
+        problem.robot,
+        K,
+        problem.pldi,
+        move,
+        t_final=settings.validate_time,
+        time_budget=settings.validate_budget,
+    )
+    out = sim.summary()
+    out.pop("joints", None)
+    return out
+
+
+def design_stage(problem, settings, timings: dict, details: dict):
+    import numpy as np
+
+    from polyrob.pipeline import design_controller, design_max_bandwidth, synthesis_options
+
+    options = synthesis_options(progress=False, **settings.synthesis)
+    if settings.omega is not None:
+        lo, hi, n = settings.omega
+        options["omega"] = np.logspace(np.log10(lo), np.log10(hi), int(n))
+    t0 = time.perf_counter()
+    skipped = search_skipped(problem, details) if settings.search_bandwidth else None
+    if settings.search_bandwidth and skipped is None:
+        design, res = design_max_bandwidth(problem, alphas=settings.alphas, **options)
+        alpha, hyper = float(res.alpha), res.hyperparameters
+    else:
+        design = design_controller(problem, **options)
+        alpha, hyper = None, problem.hyperparameters
+    timings["synthesis"] = time.perf_counter() - t0
+    return design, alpha, hyper, options.get("omega"), skipped
+
+
+def reduce_stage(problem, design, settings, timings: dict, details: dict):
+    """A certified full-order controller, reduced while μ stays below 1 (else the design as it is)."""
+    from polyrob.pipeline import reduce_design
+
+    full = design.reduced is None and str(design.certificate.get("structure", "full")) == "full"
+    if not (settings.reduce_max_order and full and design.peak_mu < 1):
+        return design
+    t0 = time.perf_counter()
+    target = min(0.999, 1.05 * design.peak_mu)
+    try:
+        reduced = reduce_design(problem, design, settings.reduce_max_order, target=target)
+    except SynthesisError as exc:  # e.g. more unstable controller poles than the order allowed
+        reduced, why = None, one_line(exc)
+    else:
+        why = f"no order up to {settings.reduce_max_order} keeps mu < 1"
+    timings["reduction"] = time.perf_counter() - t0
+    if reduced is not None and reduced.reduced.meets_target and (reduced.peak_mu_everywhere or 0.0) < 1:
+        return reduced
+    details["reduction"] = f"kept order {design.result.order}: {why}"
+    return design
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception's message on one line (its class name if empty)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
