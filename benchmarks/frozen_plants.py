@@ -4,10 +4,10 @@ For each controller file: the worst, over Jacobians of the robot sampled in its
 domain (uniform points plus the corners of the velocity and torque box on a
 grid of positions), of the sampled peak of ``σ_max([W_S S; W_T T](jω))``
 (:func:`polyrob.synthesis.vertex.vertex_peak`).  Every frozen plant is a
-member of any uncertainty model that covers the robot, so this figure is a
-lower bound of the controller's robust-performance μ on every such model:
-when it is as large as the μ upper bound on a tight model, the model is not
-what keeps μ above 1.  ``--tune STRUCTURE`` then minimises that worst peak
+member of any uncertainty model that covers the robot, and μ < 1 on a model
+means that every member meets the performance: so when this figure is at
+least 1, no covering model can certify the controller (μ ≥ 1 on all of
+them), however tight it is.  ``--tune STRUCTURE`` then minimises that worst peak
 over the same plants (:func:`polyrob.synthesis.vertex.vertex_synthesis`, a
 multi-model fixed-structure synthesis, started from the controller) and
 prints what it reached.
