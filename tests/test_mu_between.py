@@ -70,3 +70,16 @@ def test_a_hamiltonian_that_misses_a_crossing_is_caught(monkeypatch):
     monkeypatch.setattr(mb, "crossing_frequencies", lambda *a, **k: np.zeros(0))
     res = mb.verify_between(G, coarse, level=1.4)
     assert not res.holds and "not reliable" in res.reason
+
+
+def test_with_between_extends_a_certificate_and_skips_a_peak_above_one():
+    from polyrob.analysis.mu_between import with_between
+
+    below = control.tf([0.5], [1, 1])  # |M| <= 0.5
+    sweep = with_between(below, mu_bounds(below, [[1, 1]], [0.1, 1.0, 10.0], refine_peak=False, progress=False))
+    # the grid misses the peak 0.5 at ω = 0; the level (1 % above the grid peak 0.4975) still covers it
+    assert sweep.between.holds and 0.5 <= sweep.upper_everywhere <= 0.5 * 1.011
+    assert "every frequency" in sweep.covers
+    above = control.tf([2.0], [1, 1])
+    sweep = with_between(above, mu_bounds(above, [[1, 1]], [0.1, 1.0, 10.0], refine_peak=False, progress=False))
+    assert not sweep.between.holds and "not below 1" in sweep.between.reason and sweep.upper_everywhere is None

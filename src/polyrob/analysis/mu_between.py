@@ -313,14 +313,19 @@ class _Unreliable(Exception):
 def with_between(sys, mu, *, response_bits: int | None = None):
     """The sweep ``mu`` with its check between the grid points (``mu.between``), or why none was made.
 
-    The test needs a state space evaluated in double precision: a
-    frequency-response model, or a loop whose response needed extended
-    precision (``response_bits``), is left unverified, and ``between.reason`` says so.
+    It is made for a sweep whose peak is below 1 (a certificate to extend to
+    every frequency; above 1 the verdict is "not certified" whatever lies
+    between the points).  The test needs a state space evaluated in double
+    precision: a frequency-response model, or a loop whose response needed
+    extended precision (``response_bits``), is left unverified, and
+    ``between.reason`` says so.
     """
     import control
 
     why = None
-    if isinstance(sys, control.FrequencyResponseData):
+    if not float(mu.peak_upper) < 1.0:
+        why = f"the grid's peak {float(mu.peak_upper):.4g} is not below 1: there is no certificate to extend"
+    elif isinstance(sys, control.FrequencyResponseData):
         why = "a frequency-response model has no state space"
     elif response_bits:
         why = "the loop's realisation needs extended precision; the Hamiltonian test runs in double"
