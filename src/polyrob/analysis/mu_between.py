@@ -22,8 +22,11 @@ This is the frequency-interval idea of MATLAB's ``robstab``/``robgain``
 because neither SLICOT nor python-control offers it.
 
 :func:`verify_between` returns whether ``β`` bounds μ at **every**
-frequency ``ω ≥ 0`` (up to the eigenvalue solver's accuracy, which is
-accounted for by treating near-imaginary eigenvalues as crossings).
+frequency ``ω ≥ 0``, up to the eigenvalue solver's accuracy: near-imaginary
+eigenvalues are all candidate crossings, a candidate is dropped only where
+``Φ`` is clearly negative definite, and ``Φ`` is also evaluated inside every
+interval the test passes; a failure there refuses the whole check (the
+Hamiltonian is then not reliable on that realisation).
 """
 
 from __future__ import annotations
