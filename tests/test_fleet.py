@@ -364,3 +364,21 @@ def test_a_certified_controller_is_reduced_while_mu_stays_below_one(pendulums):
     kept = job(1)  # one state is not enough: the full-order controller stays, and the row says why
     assert kept.certified and kept.order == kept.certificate["order"] == 8
     assert kept.details["reduction"].startswith("kept order 8: ")
+
+
+def test_cli_validation_and_reduction_options_reach_the_settings():
+    from polyrob.cli import PolyrobParser
+    from polyrob.cli import batch as batch_cli
+
+    parser = PolyrobParser(prog="polyrob")
+    batch_cli.register(parser.add_subparsers(dest="command", required=True, parser_class=PolyrobParser))
+    defaults = batch_cli.settings_from_args(parser.parse_args(["batch", "planar_2r"]))
+    assert {k: defaults[k] for k in ("validate_move", "validate_budget", "reduce_max_order")} == {
+        "validate_move": Settings().validate_move,
+        "validate_budget": Settings().validate_budget,
+        "reduce_max_order": Settings().reduce_max_order,
+    }
+    args = ["batch", "planar_2r", "--validate-move", "0", "--validate-budget", "30", "--reduce-max-order", "0"]
+    given = batch_cli.settings_from_args(parser.parse_args(args))
+    assert (given["validate_move"], given["validate_budget"], given["reduce_max_order"]) == (0.0, 30.0, None)
+    Settings(**given)  # every key is a field
