@@ -231,23 +231,29 @@ def verify_between(
             beta, holds, peak, intervals, added, failed_at, reason, round(time.perf_counter() - t0, 3)
         )
 
+    memo = {}  # (frequency of the scalings, level) -> (normalised loop, crossings): each end serves two intervals
+
+    def crossings_of(scaling, at):
+        key = (at, beta)
+        if key not in memo:
+            # Φ ≺ 0 iff D^-1 Φ D^-1 ≺ 0: the test runs on D M D^-1 with P = I and G~ = D^-1 G D^-1,
+            # whose terms are of one size (P itself can span 16 decades)
+            Dh, G = scaling
+            Di = np.linalg.inv(Dh)
+            Gt = Di @ G @ Di
+            scaled = (A, B @ Di, Dh @ C, Dh @ D @ Di, np.eye(len(Dh)), (Gt + Gt.conj().T) / 2, beta)
+            cross = crossing_frequencies(*scaled) if _negative_at(*scaled, at) else None
+            memo[key] = (scaled, cross)
+        return memo[key]
+
     def covers(scaling, at, lo, hi) -> bool:
         """The scalings found at ``at`` keep ``Φ`` negative definite on ``[lo, hi]``."""
-        # Φ ≺ 0 iff D^-1 Φ D^-1 ≺ 0: the test runs on D M D^-1 with P = I and G~ = D^-1 G D^-1,
-        # whose terms are of one size (P itself can span 16 decades)
-        Dh, G = scaling
-        Di = np.linalg.inv(Dh)
-        Gt = Di @ G @ Di
-        sys_t = (A, B @ Di, Dh @ C, Dh @ D @ Di)
-        eye, Gt = np.eye(len(Dh)), (Gt + Gt.conj().T) / 2
-        if not _negative_at(*sys_t, eye, Gt, beta, at):
-            return False
-        cross = crossing_frequencies(*sys_t, eye, Gt, beta)
+        scaled, cross = crossings_of(scaling, at)
         if cross is None or np.any((cross >= lo * (1 - 1e-12)) & (cross <= hi * (1 + 1e-12))):
             return False
         top = hi if np.isfinite(hi) else 1e3 * max(lo, 1.0)
         inside = np.geomspace(max(lo, 1e-3 * top), top, SPOT_CHECKS + 2)[1:-1]
-        if not all(_negative_at(*sys_t, eye, Gt, beta, x) for x in inside):
+        if not all(_negative_at(*scaled, x) for x in inside):
             raise _Unreliable(lo, hi)
         return True
 
