@@ -41,6 +41,12 @@ def validate_stage(problem, K, settings) -> dict:
 
 
 def design_stage(problem, settings, timings: dict, details: dict):
+    """One synthesis, or the bandwidth search when asked and the model can certify.
+
+    Returns ``(design, alpha, hyperparameters, omega, skipped)``: ``alpha`` is
+    the factor found (``None`` without a search), ``skipped`` why the search
+    was skipped (``None`` when it ran or was not asked for).
+    """
     import numpy as np
 
     from polyrob.pipeline import design_controller, design_max_bandwidth, synthesis_options
