@@ -124,3 +124,12 @@ def test_verdict_certifies_only_below_one_on_a_stable_loop(upper, lower, stable,
 def test_verdict_does_not_certify_when_the_analysis_says_why_not():
     line = verdict(0.8, 0.7, covers="the box", failed=("lft(P, K) at Delta = 0 not proved stable (unstable)",))
     assert "NOT certified" in line and "CERTIFIED" not in line and "Delta = 0" in line
+
+
+def test_verdict_names_the_bound_between_grid_points():
+    """mu < 1 on the grid certifies only if the bound checked between the points stays below 1 too."""
+    everywhere = verdict(0.9, 0.85, covers="the box", everywhere=0.91)
+    assert "CERTIFIED" in everywhere and "0.91 < 1 at every frequency" in everywhere
+    between = verdict(0.9, 0.85, covers="the box", everywhere=1.2)
+    assert "NOT certified" in between and "CERTIFIED" not in between and "up to 1.2 between its points" in between
+    assert "on the frequency grid" in verdict(0.9, 0.85, covers="the box")  # not checked: says so

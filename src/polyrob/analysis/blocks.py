@@ -251,10 +251,6 @@ class BlockStructure:
 
     def embeddings(self) -> tuple[np.ndarray, np.ndarray]:
         """Index arrays placing the c-space (rows of ``M``) and r-space (its columns) into the padded space."""
-        return self._embeddings()
-
-    def _embeddings(self) -> tuple[np.ndarray, np.ndarray]:
-        """Index arrays placing the c-space and r-space into the padded space."""
         ec, er = [], []
         for b, sl in zip(self.blocks, self.padded_slices):
             ec.extend(range(sl.start, sl.start + b.cols))
@@ -278,19 +274,19 @@ class BlockStructure:
         """Embed ``M`` (or a stack ``(..., nc, nr)``) in the padded square problem."""
         M = np.asarray(M, dtype=complex)
         n = self.padded_size
-        ec, er = self._embeddings()
+        ec, er = self.embeddings()
         out = np.zeros(M.shape[:-2] + (n, n), dtype=complex)
         out[..., ec[:, None], er[None, :]] = M
         return out
 
     def unpad_delta(self, delta_sq: np.ndarray) -> np.ndarray:
         """Compress a padded square :math:`\\Delta'` to the original shape."""
-        ec, er = self._embeddings()
+        ec, er = self.embeddings()
         return np.asarray(delta_sq)[..., er[:, None], ec[None, :]]
 
     def pad_delta(self, delta: np.ndarray) -> np.ndarray:
         """Embed a :math:`\\Delta` in the padded square problem (zero padding)."""
-        ec, er = self._embeddings()
+        ec, er = self.embeddings()
         n = self.padded_size
         out = np.zeros(np.shape(delta)[:-2] + (n, n), dtype=complex)
         out[..., er[:, None], ec[None, :]] = delta
@@ -298,7 +294,7 @@ class BlockStructure:
 
     def restrict_scaling(self, D_sq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Split a padded scaling into ``(D_left, D_right)`` on M's rows / columns."""
-        ec, er = self._embeddings()
+        ec, er = self.embeddings()
         return D_sq[..., ec[:, None], ec[None, :]], D_sq[..., er[:, None], er[None, :]]
 
     # --------------------------------------------------------- perturbations

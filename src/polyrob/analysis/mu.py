@@ -271,7 +271,7 @@ def mu_bounds(
         raise PolyrobError("omega must be a non-empty array of finite non-negative frequencies")
     meth = resolve_method(st, method)
     with single_blas_thread():
-        result = _sweep(
+        return _sweep(
             sys,
             st,
             omega,
@@ -286,7 +286,6 @@ def mu_bounds(
             response_bits,
             ab13md_timeout,
         )
-    return result
 
 
 def _sweep(

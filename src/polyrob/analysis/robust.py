@@ -129,7 +129,8 @@ class RobustnessResult:
 
     @property
     def robust(self) -> bool:
-        """Certified on the grid: ``lft(P, K)`` stable at ``Δ = 0`` and peak ``mu_upper < 1``."""
+        """Certified: ``lft(P, K)`` stable at ``Δ = 0``, peak ``mu_upper < 1`` on the grid, and not ``>= 1``
+        between its points where that was checked (:attr:`everywhere`)."""
         return not self.failed
 
     @property
