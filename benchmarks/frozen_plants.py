@@ -3,12 +3,12 @@
 For each controller file: the worst, over Jacobians of the robot sampled in its
 domain (uniform points plus the corners of the velocity and torque box on a
 grid of positions), of the sampled peak of ``σ_max([W_S S; W_T T](jω))``
-(:func:`polyrob.synthesis.vertex.vertex_peak`).  Every frozen plant is a
+(:func:`polyrob.synthesis.fixed.vertex.vertex_peak`).  Every frozen plant is a
 member of any uncertainty model that covers the robot, and μ < 1 on a model
 means that every member meets the performance: so when this figure is at
 least 1, no covering model can certify the controller (μ ≥ 1 on all of
 them), however tight it is.  ``--tune STRUCTURE`` then minimises that worst peak
-over the same plants (:func:`polyrob.synthesis.vertex.vertex_synthesis`, a
+over the same plants (:func:`polyrob.synthesis.fixed.vertex.vertex_synthesis`, a
 multi-model fixed-structure synthesis, started from the controller) and
 prints what it reached.
 
@@ -48,7 +48,7 @@ def main(argv=None) -> int:
     import polyrob
     from polyrob.io.controller import load_controller
     from polyrob.pipeline.problem import build_problem
-    from polyrob.synthesis.vertex import vertex_peak, vertex_synthesis
+    from polyrob.synthesis.fixed.vertex import vertex_peak, vertex_synthesis
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("robot")

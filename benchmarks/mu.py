@@ -13,10 +13,10 @@ Problems
 
 Methods
 -------
-* ``polyrob_ab13md``: :func:`polyrob.analysis.mu.mussv` upper bound only (SLICOT AB13MD).
-* ``polyrob_mu_bounds``: full :func:`polyrob.analysis.mu.mu_bounds` sweep (upper +
+* ``polyrob_ab13md``: :func:`polyrob.analysis.mu.bounds.mussv` upper bound only (SLICOT AB13MD).
+* ``polyrob_mu_bounds``: full :func:`polyrob.analysis.mu.bounds.mu_bounds` sweep (upper +
   lower bound + peak refinement), time per grid point.
-* ``polyrob_lmi``: :func:`polyrob.analysis.mu.mussv` with ``method="lmi"`` (DPP-compiled
+* ``polyrob_lmi``: :func:`polyrob.analysis.mu.bounds.mussv` with ``method="lmi"`` (DPP-compiled
   D-G LMI, certified bisection).
 * ``cvxpy_lmi_bisection``: a plain per-frequency D-G LMI feasibility
   bisection, rebuilt for every frequency, as dkpy does it.
@@ -40,8 +40,8 @@ import control
 import cvxpy as cp
 import numpy as np
 
-from polyrob.analysis.blocks import as_block_structure
-from polyrob.analysis.mu import mu_bounds, mussv
+from polyrob.analysis.mu.blocks import as_block_structure
+from polyrob.analysis.mu.bounds import mu_bounds, mussv
 from polyrob.examples import DISTILLATION_BLK, distillation_rp_response
 
 

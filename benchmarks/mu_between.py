@@ -1,7 +1,7 @@
 """The μ certificate of a controller, with its check between the grid points.
 
-Runs the certificate of the syntheses (:func:`polyrob.synthesis.dk_frequency.certify`:
-a peak-refined sweep, then :func:`polyrob.analysis.mu_between.with_between`)
+Runs the certificate of the syntheses (:func:`polyrob.synthesis.dk.frequency.certify`:
+a peak-refined sweep, then :func:`polyrob.analysis.mu.between.with_between`)
 and prints, as JSON, the grid peak, the level verified at every frequency
 (or why none), the points added and the times.  Usage (docs/mu.md)::
 
@@ -23,7 +23,7 @@ def main(argv=None) -> int:
     import polyrob
     from polyrob.io.controller import load_controller
     from polyrob.pipeline.problem import build_problem, default_hyperparameters
-    from polyrob.synthesis.dk_frequency import certify
+    from polyrob.synthesis.dk.frequency import certify
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("robot", nargs="?")

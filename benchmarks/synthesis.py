@@ -8,10 +8,10 @@ Problems
 * ``distillation``: Skogestad & Postlethwaite's distillation column (Table
   8.1, p. 325; dkpy's ``example_skogestad2006_p325``): diagonal complex input
   uncertainty and a full 2x2 performance block.  polyrob's full-order D-K
-  (:func:`polyrob.synthesis.musyn`, automatic D orders) against dkpy's
+  (:func:`polyrob.synthesis.mu_synthesis`, automatic D orders) against dkpy's
   ``DkIterAutoOrder`` (HinfSynSlicot, SsvLmiBisection, DScaleFitSlicot,
   3 iterations, orders up to 4: dkpy's documented example).  Both
-  controllers are also certified with the same :func:`polyrob.analysis.mu.mu_bounds`
+  controllers are also certified with the same :func:`polyrob.analysis.mu.bounds.mu_bounds`
   sweep (peak-refined), since each tool reports μ on its own grid.
 * ``paper_2r``: the paper's 2R robot (ten independent real parameters,
   paper weights): the paper's K* analysed, full-order D-K (reals treated as
@@ -23,7 +23,7 @@ Problems
   scan ``BANDWIDTH_ALPHAS``).
 
 Every μ reported for polyrob is the certified upper bound of ``lft(P, K)``
-from :func:`polyrob.analysis.mu.mu_bounds` against the true structure.
+from :func:`polyrob.analysis.mu.bounds.mu_bounds` against the true structure.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ warnings.simplefilter("ignore")
 
 import polyrob  # noqa: E402
 import polyrob.plant.weights  # noqa: E402
-from polyrob.analysis.mu import mu_bounds  # noqa: E402
+from polyrob.analysis.mu.bounds import mu_bounds  # noqa: E402
 from polyrob.examples import DISTILLATION_BLK as DIST_BLK  # noqa: E402
 from polyrob.examples import distillation_plant  # noqa: E402
 from polyrob.synthesis import certify, max_bandwidth_scaling, musyn, reduce_controller  # noqa: E402

@@ -4,7 +4,7 @@ On ``paper_2r --domain paper`` (the PLDI of tests/conftest.py), for each bandwid
 factor alpha of the paper's weights (``scaled_hyperparameters(alpha)``: omega_b and
 omega_bt times alpha), in decreasing order, a tf3 controller is tuned on the worst
 vertex of the PLDI (warm-started from K* or from the previous alpha's controller,
-:func:`polyrob.synthesis.vertex.vertex_synthesis`) and certified with quadstab /
+:func:`polyrob.synthesis.fixed.vertex.vertex_synthesis`) and certified with quadstab /
 quadperf (common Lyapunov matrix at every vertex, verified a posteriori).  The
 scan stops at the first alpha whose quadratic performance holds (gamma < 1).
 Also reports K* itself.  Prints one JSON document.
@@ -29,11 +29,11 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from polyrob import bound_pldi, load_robot
-    from polyrob.analysis.quadratic import quadperf, quadstab
+    from polyrob.analysis.time_varying.quadratic import quadperf, quadstab
     from polyrob.plant.generalized import paper_controller
     from polyrob.plant.weights import paper_weights
     from polyrob.synthesis.bandwidth import scaled_hyperparameters
-    from polyrob.synthesis.vertex import vertex_synthesis
+    from polyrob.synthesis.fixed.vertex import vertex_synthesis
 
     t0 = time.perf_counter()
     pldi = bound_pldi(load_robot("paper_2r"), samples=256, coverage=0, progress=False)

@@ -131,7 +131,7 @@ def main(argv=None):
                 "seconds": round(time.perf_counter() - t, 1),
             }
     if args.tf3:
-        from polyrob.synthesis.fixed import fixed_structure_musyn
+        from polyrob.synthesis.fixed.synthesis import fixed_structure_musyn
 
         tight = [n for n in plants if n != "box"][0]
         t = time.perf_counter()

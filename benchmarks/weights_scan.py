@@ -4,12 +4,12 @@ Run ``python benchmarks/weights_scan.py`` (about 35 min on two cores; the
 syntheses run two at a time; ``--cases tf3`` runs the fixed-structure rows
 only); prints one JSON document.  ``docs/synthesis.md`` quotes its figures.
 
-Every row is a full-order complex D-K synthesis (:func:`polyrob.synthesis.musyn`,
+Every row is a full-order complex D-K synthesis (:func:`polyrob.synthesis.mu_synthesis`,
 ``mixed=False``, 25 iterations at most), or for the ``tf3`` rows the
 third-order fixed structure started from K* (one start, mixed μ), on
 ``paper_2r --domain paper`` (ten independent real parameters) with the
 paper's weights modified as named,
-certified by :func:`polyrob.analysis.mu.mu_bounds` against the real structure, plus
+certified by :func:`polyrob.analysis.mu.bounds.mu_bounds` against the real structure, plus
 the robust-stability μ of the same controller.  A last row adds a lag
 ``(s + 1)/(s + 1e-4)`` per channel to the paper-weights controller to show
 what its low-frequency plateau hides.
@@ -31,7 +31,7 @@ import numpy as np
 warnings.simplefilter("ignore")
 
 import polyrob  # noqa: E402
-from polyrob.analysis.mu import mu_bounds  # noqa: E402
+from polyrob.analysis.mu.bounds import mu_bounds  # noqa: E402
 from polyrob.analysis.robust import robstab  # noqa: E402
 from polyrob.plant.weights import paper_weights  # noqa: E402
 from polyrob.synthesis import musyn, scaled_hyperparameters  # noqa: E402

@@ -15,7 +15,7 @@ import pinocchio as pin
 import pytest
 from scipy.optimize import minimize
 
-from polyrob.bounds.certify import CertifiedEnclosure, certified_jacobian_bounds, reference_jacobians
+from polyrob.bounds.certified.enclosure import CertifiedEnclosure, certified_jacobian_bounds, reference_jacobians
 from polyrob.errors import CertificationError, DomainError
 
 PI = np.pi

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from test_synthesis_checks import closed_loop, dscaled_mu, loop_stable, response
 
-from polyrob.analysis.blocks import as_block_structure
-from polyrob.analysis.mu import mussv
+from polyrob.analysis.mu.blocks import as_block_structure
+from polyrob.analysis.mu.bounds import mussv
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.examples import DISTILLATION_BLK, distillation_plant
 from polyrob.synthesis import musyn
-from polyrob.synthesis.dk import frequency_grid, performance_lower_bound
-from polyrob.synthesis.dscale import (
+from polyrob.synthesis.dk.iteration import frequency_grid, performance_lower_bound
+from polyrob.synthesis.scalings.dscale import (
     BlockScaling,
     GFit,
     MagnitudeFit,
@@ -241,8 +241,8 @@ def test_unknown_structure():
 
 
 def test_fixed_structure_is_dispatched_with_options_passed_through(monkeypatch):
-    import polyrob.synthesis.robust_synthesis as musyn_module
-    from polyrob.synthesis.fixed_options import FixedStructureOptions
+    import polyrob.synthesis.mu_synthesis as musyn_module
+    from polyrob.synthesis.fixed.options import FixedStructureOptions
 
     calls = {}
 

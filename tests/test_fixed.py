@@ -1,4 +1,4 @@
-"""Fixed-structure μ-synthesis (polyrob.synthesis.fixed) and its parametrisations (structures).
+"""Fixed-structure μ-synthesis (polyrob.synthesis.fixed.synthesis) and its parametrisations (structures).
 
 The paper-2R tests share one short synthesis (tf3 from K*, two D-G-K
 iterations, a 36-point certification grid) so the file stays well under a
@@ -13,13 +13,13 @@ import pytest
 from test_synthesis_checks import closed_loop, dg_mixed_upper, loop_stable, response
 
 import polyrob
-from polyrob.analysis.blocks import as_block_structure
-from polyrob.analysis.mu import mu_bounds
+from polyrob.analysis.mu.blocks import as_block_structure
+from polyrob.analysis.mu.bounds import mu_bounds
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import PAPER_CONTROLLER, generalized_plant, lft, paper_controller
 from polyrob.plant.weights import paper_weights
-from polyrob.synthesis.fixed import closed_loop_response, fixed_structure_musyn
-from polyrob.synthesis.structures import controller_structure
+from polyrob.synthesis.fixed.synthesis import closed_loop_response, fixed_structure_musyn
+from polyrob.synthesis.fixed.structures import controller_structure
 
 #: certification grid shared by K* and the synthesised controller (coarse: fast)
 OMEGA = np.logspace(-3, 4, 36)
@@ -244,7 +244,7 @@ def test_same_seed_same_result():
 
 
 def test_failed_h2_start_is_recorded(monkeypatch):
-    import polyrob.synthesis.fixed as fixed_module
+    import polyrob.synthesis.fixed.synthesis as fixed_module
 
     def fail(*args, **kwargs):
         raise np.linalg.LinAlgError("forced failure")

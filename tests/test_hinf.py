@@ -8,7 +8,7 @@ import pytest
 from test_synthesis_checks import closed_loop, dense_peak, hamiltonian_below, response
 
 from polyrob.errors import PolyrobError, SynthesisError
-from polyrob.synthesis.hinf import check_stabilizable, hinf_norm, hinf_norm_estimate, hinfsyn
+from polyrob.synthesis.hinf.synthesis import check_stabilizable, hinf_norm, hinf_norm_estimate, hinfsyn
 
 # control.augw builds its plants with the deprecated control.connect
 pytestmark = pytest.mark.filterwarnings("ignore:connect\\(\\) is deprecated:FutureWarning")
@@ -169,8 +169,8 @@ def test_unstable_system_has_infinite_norm():
 
 def test_controller_accepted_only_below_gamma():
     """The accept check is the Hamiltonian test, so a resonance between grid points cannot pass."""
-    from polyrob.synthesis.hinf_problem import SynthesisProblem
-    from polyrob.synthesis.hinf_riccati import verify_controller
+    from polyrob.synthesis.hinf.problem import SynthesisProblem
+    from polyrob.synthesis.hinf.riccati import verify_controller
 
     G, peak = _resonance()
     A, B, C = (np.asarray(X, float) for X in (G.A, G.B, G.C))

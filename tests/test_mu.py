@@ -1,4 +1,4 @@
-"""Tests of polyrob.analysis.mu / polyrob.analysis.blocks against published and exact values."""
+"""Tests of polyrob.analysis.mu.bounds / polyrob.analysis.mu.blocks against published and exact values."""
 
 import time
 
@@ -6,9 +6,9 @@ import control
 import numpy as np
 import pytest
 
-import polyrob.analysis.mu_upper as mu_upper
-from polyrob.analysis.blocks import BlockStructure, as_block_structure
-from polyrob.analysis.mu import TimeLimitedCall, mu_bounds, mussv
+import polyrob.analysis.mu.upper as mu_upper
+from polyrob.analysis.mu.blocks import BlockStructure, as_block_structure
+from polyrob.analysis.mu.bounds import TimeLimitedCall, mu_bounds, mussv
 from polyrob.errors import PolyrobError
 
 
@@ -378,7 +378,7 @@ def test_relaxed_repeated_scalars_bound_mu_from_above():
     """Repeated scalars split into independent ones (a superset) give an upper bound by AB13MD."""
     import numpy as np
 
-    from polyrob.analysis.mu import DESCENT_ABOVE, mussv
+    from polyrob.analysis.mu.bounds import DESCENT_ABOVE, mussv
 
     rng = np.random.default_rng(5)
     M = rng.normal(size=(4, 4)) + 1j * rng.normal(size=(4, 4))

@@ -1,4 +1,4 @@
-"""The μ upper bound between grid points (polyrob.analysis.mu_between)."""
+"""The μ upper bound between grid points (polyrob.analysis.mu.between)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import control
 import numpy as np
 import pytest
 
-from polyrob.analysis.mu import mu_bounds
-from polyrob.analysis.mu_between import crossing_frequencies, verify_between
+from polyrob.analysis.mu.bounds import mu_bounds
+from polyrob.analysis.mu.between import crossing_frequencies, verify_between
 
 
 def test_crossing_of_a_gain_level_is_where_the_magnitude_meets_it():
@@ -63,7 +63,7 @@ def test_unstable_system_is_not_verified():
 
 def test_a_hamiltonian_that_misses_a_crossing_is_caught(monkeypatch):
     """If the eigenvalues hide a crossing (rounding on a badly scaled loop), the spot checks refuse the result."""
-    import polyrob.analysis.mu_between as mb
+    import polyrob.analysis.mu.between as mb
 
     G = control.tf([1], [1, 0.02, 1])
     coarse = mu_bounds(G, [[1, 1]], [0.1, 0.5, 2.0, 10.0], refine_peak=False, progress=False)
@@ -73,7 +73,7 @@ def test_a_hamiltonian_that_misses_a_crossing_is_caught(monkeypatch):
 
 
 def test_with_between_extends_a_certificate_and_skips_a_peak_above_one():
-    from polyrob.analysis.mu_between import with_between
+    from polyrob.analysis.mu.between import with_between
 
     below = control.tf([0.5], [1, 1])  # |M| <= 0.5
     sweep = with_between(below, mu_bounds(below, [[1, 1]], [0.1, 1.0, 10.0], refine_peak=False, progress=False))

@@ -1,13 +1,13 @@
-"""The D-G upper bound of μ by descent on the scalings (polyrob.analysis.mu_gradient)."""
+"""The D-G upper bound of μ by descent on the scalings (polyrob.analysis.mu.gradient)."""
 
 import numpy as np
 import pytest
 from scipy import optimize
 
-from polyrob.analysis.blocks import as_block_structure
-from polyrob.analysis.mu import mu_bounds, mussv
-from polyrob.analysis.mu_gradient import GradientUpper
-from polyrob.analysis.mu_upper import certified_beta
+from polyrob.analysis.mu.blocks import as_block_structure
+from polyrob.analysis.mu.bounds import mu_bounds, mussv
+from polyrob.analysis.mu.gradient import GradientUpper
+from polyrob.analysis.mu.upper import certified_beta
 
 MIXED = [[-3, 0], [2, 0], [-1, 0], [1, 2], [-2, 0]]
 
@@ -54,7 +54,7 @@ def test_a_large_sweep_uses_descent_warm_started_and_stays_above_the_lower_bound
     """An 8-block structure of 41 padded channels: method="auto" takes the descent route."""
     import control
 
-    from polyrob.analysis.frequency import freqresp
+    from polyrob.analysis.mu.frequency import freqresp
 
     blk = [[-4, 0]] * 8 + [[3, 6]]
     st = as_block_structure(blk)

@@ -98,7 +98,7 @@ def test_block_structures(P, unc, pldi):
 
 
 def test_rp_block_fits_the_closed_loop(P, K):
-    blocks = pytest.importorskip("polyrob.analysis.blocks")
+    blocks = pytest.importorskip("polyrob.analysis.mu.blocks")
     N = lft(P, K)
     st = blocks.BlockStructure.from_matlab(P.block_structure_rp)
     assert st.m_shape == (N.noutputs, N.ninputs) == (14, 12)

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from polyrob.analysis.quadratic import COVERS_NONLINEAR, quadperf, quadstab
-from polyrob.analysis.quadratic_vertices import performance_vertices, vertex_set
+from polyrob.analysis.time_varying.quadratic import COVERS_NONLINEAR, quadperf, quadstab
+from polyrob.analysis.time_varying.vertices import performance_vertices, vertex_set
 
 ZERO_K = np.zeros((1, 1))
 NO_B = np.zeros((2, 1))
@@ -132,7 +132,7 @@ def _switched_lft(spread: float):
 
 
 def test_scaled_small_gain_rejects_the_switched_counterexample_and_accepts_a_small_spread():
-    from polyrob.analysis.quadratic_smallgain import scaled_small_gain
+    from polyrob.analysis.time_varying.smallgain import scaled_small_gain
 
     bad = scaled_small_gain(_switched_lft(1.0), [[-2, 0]])  # delta = +-1 are A1, A2: unstable switching
     assert not bad.holds and bad.gamma >= 1.0
@@ -142,7 +142,7 @@ def test_scaled_small_gain_rejects_the_switched_counterexample_and_accepts_a_sma
 
 
 def test_scaled_small_gain_finds_the_optimal_diagonal_scaling():
-    from polyrob.analysis.quadratic_smallgain import scaled_small_gain
+    from polyrob.analysis.time_varying.smallgain import scaled_small_gain
 
     # N = [[0, 5], [0.1, 0]] / (s + 1): ||N|| = 5, but with D = diag(1, d) the off-diagonal gains
     # become 5/d and 0.1 d, balanced at sqrt(5 * 0.1) = 0.707 (the scaled bound of two real scalars)
@@ -154,7 +154,7 @@ def test_scaled_small_gain_finds_the_optimal_diagonal_scaling():
 
 def test_scaled_small_gain_on_a_loop_whose_poles_span_seven_decades():
     """Before: 'no verified scaling' (the KYP LMI fails on such loops, e.g. a tf3 controller's)."""
-    from polyrob.analysis.quadratic_smallgain import scaled_small_gain
+    from polyrob.analysis.time_varying.smallgain import scaled_small_gain
 
     # N = [[0, 5 / (s/1e-3 + 1)], [0.1 / (s/1e4 + 1), 0]], realised with a state similarity of 1e8:
     # the same transfer function, so the same optimal constant-D bound sqrt(5 * 0.1)

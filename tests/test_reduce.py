@@ -10,7 +10,7 @@ from test_synthesis_checks import closed_loop, dscaled_mu, response
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.examples import DISTILLATION_BLK, distillation_plant
 from polyrob.synthesis import musyn, reduce_controller
-from polyrob.synthesis.reduce import balanced_reduction, stable_unstable_split
+from polyrob.synthesis.reduction import balanced_reduction, stable_unstable_split
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ import control
 import numpy as np
 import pytest
 
-from polyrob.analysis.frequency import freqresp_extended, response_error
+from polyrob.analysis.mu.frequency import freqresp_extended, response_error
 from polyrob.analysis.robust import loop_mu
 from polyrob.analysis.stability import stability_verdict
 from polyrob.examples import DISTILLATION_BLK, distillation_plant

@@ -87,7 +87,7 @@ def test_cli_analyze_prints_both_verdicts_and_which_covers_the_robot(capsys):
 
 def test_a_loop_too_large_for_the_lmis_is_not_run_and_says_what_to_do(paper_problem):
     """A 92-state loop once took 24 GiB in the vertex LMIs; now it is routed, then refused, with a reason."""
-    from polyrob.analysis.quadratic import MAX_STATES, quadstab
+    from polyrob.analysis.time_varying.quadratic import MAX_STATES, quadstab
 
     K = polyrob.paper_controller()
     for _ in range(8):  # 12 + 8 x 8 = 76 controller states, same transfer function

@@ -157,7 +157,7 @@ def test_merge_requires_identical_bounds(pldi):
 
 
 def test_block_structure_is_a_valid_matlab_blk(unc, unc_merged):
-    blocks = pytest.importorskip("polyrob.analysis.blocks")
+    blocks = pytest.importorskip("polyrob.analysis.mu.blocks")
     st = blocks.BlockStructure.from_matlab(unc.block_structure)
     assert st.delta_shape == (10, 10) and st.m_shape == (10, 10)
     st = blocks.BlockStructure.from_matlab(unc_merged.block_structure)

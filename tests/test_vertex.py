@@ -6,8 +6,8 @@ import control
 import numpy as np
 import pytest
 
-from polyrob.analysis.quadratic import quadperf
-from polyrob.synthesis.vertex import vertex_peak, vertex_synthesis
+from polyrob.analysis.time_varying.quadratic import quadperf
+from polyrob.synthesis.fixed.vertex import vertex_peak, vertex_synthesis
 
 W_S = control.tf([0.5, 0.2], [1.0, 0.002])  # |W_S| = 100 at DC, 0.5 at high frequency
 W_T = control.tf([0.1, 0.5], [0.01, 1.0])

@@ -12,7 +12,7 @@ controller with its structured-singular-value certificate,
 
 The names are imported on first use (PEP 562), so ``import polyrob`` and the
 ``polyrob`` command start fast; every name also stays importable from its
-module (``polyrob.synthesis.dk.HinfStep``, ...).
+module (``polyrob.synthesis.dk.iteration.HinfStep``, ...).
 
 Examples
 --------
@@ -59,8 +59,8 @@ _LAZY = {
     "paper_controller": "polyrob.plant.generalized",
     "makeweight": "polyrob.plant.weights",
     "paper_weights": "polyrob.plant.weights",
-    "mussv": "polyrob.analysis.mu",
-    "mu_bounds": "polyrob.analysis.mu",
+    "mussv": "polyrob.analysis.mu.bounds",
+    "mu_bounds": "polyrob.analysis.mu.bounds",
     "robstab": "polyrob.analysis.robust",
     "robperf": "polyrob.analysis.robust",
     "musyn": "polyrob.synthesis",

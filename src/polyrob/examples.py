@@ -61,7 +61,7 @@ def distillation_rp_response(omega) -> control.FrequencyResponseData:
     --------
     >>> import numpy as np
     >>> from polyrob.examples import DISTILLATION_BLK, distillation_rp_response
-    >>> from polyrob.analysis.mu import mu_bounds
+    >>> from polyrob.analysis.mu.bounds import mu_bounds
     >>> r = mu_bounds(distillation_rp_response(np.logspace(-3, 3, 61)), DISTILLATION_BLK, progress=False)
     >>> round(r.peak_upper, 2)
     5.77

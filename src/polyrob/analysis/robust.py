@@ -39,8 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyrob.analysis.blocks import as_block_structure
-from polyrob.analysis.frequency import default_grid, response_error
+from polyrob.analysis.mu.blocks import as_block_structure
+from polyrob.analysis.mu.frequency import default_grid, response_error
 from polyrob.analysis.stability import StabilityVerdict, stability_verdict
 from polyrob.plant.generalized import GeneralizedPlant, closed_loop, lft, nominal_closed_loop
 
@@ -124,7 +124,7 @@ class RobustnessResult:
 
     @property
     def everywhere(self) -> float | None:
-        """A μ bound verified at every frequency (see :func:`polyrob.analysis.mu_between.verify_between`), or ``None``."""
+        """A μ bound verified at every frequency (see :func:`polyrob.analysis.mu.between.verify_between`), or ``None``."""
         return getattr(self.mu, "upper_everywhere", None)
 
     @property
@@ -194,8 +194,8 @@ def _inv(x) -> float:
 
 def _analyse(kind, N, M, blk, omega, *, unc=None, K=None, model="", **mu_options) -> RobustnessResult:
     """μ of ``M`` (a sub-block of the closed loop ``N``) with the verdicts μ needs."""
-    from polyrob.analysis.mu import mu_bounds
-    from polyrob.analysis.mu_between import with_between
+    from polyrob.analysis.mu.bounds import mu_bounds
+    from polyrob.analysis.mu.between import with_between
 
     centre = stability_verdict(N)
     # Double-precision responses of a badly conditioned realisation can be wrong
@@ -263,7 +263,7 @@ def robstab(P: GeneralizedPlant, K, omega=None, **mu_options) -> RobustnessResul
     omega : array_like, optional
         Frequencies; default: automatic grid refined around the peak.
     **mu_options
-        Passed to :func:`polyrob.analysis.mu.mu_bounds` (``method``, ``refine_peak``, ...).
+        Passed to :func:`polyrob.analysis.mu.bounds.mu_bounds` (``method``, ``refine_peak``, ...).
     """
     N = lft(P, K)
     s_v, s_d = P.output_slices["v"], P.input_slices["d"]

@@ -39,7 +39,7 @@ by a factor 45, i.e. the truncation is itself ill-conditioned there.  States
 are never dropped; hidden modes count for internal stability anyway.  The
 balancing is used for the eigenvalues only: for frequency responses it made
 that controller's double-precision response wrong by a factor 500 (see
-:func:`polyrob.analysis.frequency.response_error`, which :mod:`robust
+:func:`polyrob.analysis.mu.frequency.response_error`, which :mod:`robust
 <polyrob.analysis.robust>` uses to switch to extended precision instead).
 """
 

@@ -3,7 +3,7 @@
 SLICOT AB13MD warm-started from the previous frequency's scalings can hang
 (seen at the 52nd point of a sweep); a C routine stuck in a loop cannot be
 interrupted from Python, so such calls run in a worker that is killed after
-the limit.  :func:`polyrob.analysis.mu.mu_bounds` uses it for ``warm_start=True``.
+the limit.  :func:`polyrob.analysis.mu.bounds.mu_bounds` uses it for ``warm_start=True``.
 """
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ class TimeLimitedCall:
 
     Examples
     --------
-    >>> from polyrob.analysis.mu import TimeLimitedCall
+    >>> from polyrob.analysis.mu.bounds import TimeLimitedCall
     >>> with TimeLimitedCall(abs, timeout=5.0) as call:
     ...     call(-3)
     (True, 3)

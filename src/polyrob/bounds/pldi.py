@@ -29,7 +29,7 @@ How the bounds are found (``enclosure = "sampled"``):
 6. fresh random points of the domain check the coverage (it must be 1.0).
 
 With ``certify=True`` the intervals are replaced by a guaranteed enclosure
-computed by interval arithmetic (:mod:`polyrob.bounds.certify`); ``enclosure`` is
+computed by interval arithmetic (:mod:`polyrob.bounds.certified.enclosure`); ``enclosure`` is
 then ``"certified"``, and every entry whose certified interval has a non-zero
 width is a varying entry (whatever the samples say), so that the uncertain
 plant built from the PLDI covers the whole proved box.
@@ -150,7 +150,7 @@ def bound_pldi(
         Replace the intervals by a guaranteed enclosure (interval arithmetic).
     certify_options : dict, optional
         Keyword arguments of
-        :func:`~polyrob.bounds.certify.certified_jacobian_bounds`:
+        :func:`~polyrob.bounds.certified.enclosure.certified_jacobian_bounds`:
         ``rel_tol`` (default here 1e-5), ``time_limit`` (s, default 120),
         ``max_joints`` (default 3).
     workers : int, optional
@@ -346,7 +346,7 @@ def coverage_fraction(pldi: PLDI, robot, n: int, *, seed=None) -> float:
 
 
 def _certified(robot, domain: Domain, options: dict, progress: bool):
-    from polyrob.bounds import certify as certify_module
+    from polyrob.bounds.certified import enclosure as certify_module
 
     model = getattr(robot, "model", None)
     if model is None:

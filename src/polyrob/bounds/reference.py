@@ -1,6 +1,6 @@
 """Floating-point reference Jacobians from Pinocchio, in the certified bounds' conventions.
 
-The branch and bound of :mod:`polyrob.bounds.certify` steers its search by
+The branch and bound of :mod:`polyrob.bounds.certified.enclosure` steers its search by
 values attained at evaluated points (they never enter the enclosure).
 """
 

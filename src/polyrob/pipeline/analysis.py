@@ -43,7 +43,7 @@ def verdict(
     ``failed`` are the analysis' own reasons not to certify (e.g. the loop at
     ``Δ = 0`` not proved stable); with any, μ < 1 certifies nothing.
     ``everywhere`` is a μ bound verified at every frequency
-    (:attr:`polyrob.analysis.mu_results.MuBoundsResult.upper_everywhere`), if any.
+    (:attr:`polyrob.analysis.mu.results.MuBoundsResult.upper_everywhere`), if any.
     """
     where = f" for {covers}" if covers else ""
     if not nominally_stable:

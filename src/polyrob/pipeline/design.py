@@ -116,7 +116,7 @@ def design_controller(problem, *, reduce: bool = False, reduce_max_order: int = 
     reduce_max_order : int
         Largest order accepted by the reduction (>= 1).
     **options
-        Passed to :func:`polyrob.synthesis.musyn`.
+        Passed to :func:`polyrob.synthesis.mu_synthesis.musyn`.
     """
     from polyrob.synthesis import musyn
 

@@ -83,7 +83,7 @@ def model_report(pldi, robot, models=("box", "auto"), *, coverage: int = 2000) -
     (:func:`~polyrob.plant.coverage.input_definiteness`; the robot's always
     is).  ``"auto"`` is reported under the model it resolves to.
     """
-    from polyrob.analysis.blocks import as_block_structure
+    from polyrob.analysis.mu.blocks import as_block_structure
     from polyrob.errors import PolyrobError
     from polyrob.plant.coverage import input_definiteness
     from polyrob.plant.uncertainty import uncertain_plant

@@ -7,13 +7,13 @@ and so for the moving nonlinear robot while it stays in the domain
 (docs/certificates.md):
 
 * on the PLDI's vertices when they can be enumerated (polytope or box
-  corners, at most :data:`~polyrob.analysis.quadratic_vertices.MAX_VERTICES`):
-  quadratic stability (:func:`~polyrob.analysis.quadratic.quadstab`) and,
+  corners, at most :data:`~polyrob.analysis.time_varying.vertices.MAX_VERTICES`):
+  quadratic stability (:func:`~polyrob.analysis.time_varying.quadratic.quadstab`) and,
   when it holds, quadratic H∞ performance
-  (:func:`~polyrob.analysis.quadratic.quadperf`), one Lyapunov matrix for all
+  (:func:`~polyrob.analysis.time_varying.quadratic.quadperf`), one Lyapunov matrix for all
   vertices;
 * otherwise (6-7 joints) the constant-D scaled small gain on the LFT model
-  (:func:`~polyrob.analysis.quadratic_smallgain.scaled_small_gain`), which
+  (:func:`~polyrob.analysis.time_varying.smallgain.scaled_small_gain`), which
   covers the Jacobians as far as the uncertainty model covers them.
 
 Every figure is a verified bound (the LMI solutions are checked a posteriori);
@@ -56,7 +56,7 @@ def covers_nonlinear(method: str) -> str:
             "inside the domain the PLDI was bounded on; mu with constant parameters certifies each frozen robot "
             "of the set, not the robot in motion."
         )
-    from polyrob.analysis.quadratic import COVERS_NONLINEAR
+    from polyrob.analysis.time_varying.quadratic import COVERS_NONLINEAR
 
     return COVERS_NONLINEAR
 
@@ -77,9 +77,9 @@ class TimeVaryingCertificate:
         Verified bound of the ``r -> z`` L2 gain (``inf`` when none was verified
         or the performance test did not run).
     stability, performance : result objects or None
-        :class:`~polyrob.analysis.quadratic_results.QuadStabResult` /
-        :class:`~polyrob.analysis.quadratic_results.QuadPerfResult`, or
-        :class:`~polyrob.analysis.quadratic_smallgain.ScaledSmallGainResult`.
+        :class:`~polyrob.analysis.time_varying.results.QuadStabResult` /
+        :class:`~polyrob.analysis.time_varying.results.QuadPerfResult`, or
+        :class:`~polyrob.analysis.time_varying.smallgain.ScaledSmallGainResult`.
     covers : str
         What the certificate covers, precisely.
     notes : tuple of str
@@ -157,15 +157,15 @@ def time_varying_certificate(problem, K, *, performance: bool = True, max_vertic
         Also test performance (run only when stability holds: it implies it).
     max_vertices : int, optional
         Largest vertex set tried before the small-gain test (default
-        :data:`~polyrob.analysis.quadratic_vertices.MAX_VERTICES`).
+        :data:`~polyrob.analysis.time_varying.vertices.MAX_VERTICES`).
 
     Returns
     -------
     TimeVaryingCertificate
     """
 
-    from polyrob.analysis.quadratic import MAX_STATES, quadperf, quadstab
-    from polyrob.analysis.quadratic_vertices import MAX_VERTICES, controller_mats, vertex_set
+    from polyrob.analysis.time_varying.quadratic import MAX_STATES, quadperf, quadstab
+    from polyrob.analysis.time_varying.vertices import MAX_VERTICES, controller_mats, vertex_set
     from polyrob.plant.generalized import GeneralizedPlant
 
     t0 = time.perf_counter()
@@ -220,7 +220,7 @@ def _certificate(method: str, stability, performance, notes, t0: float) -> TimeV
 
 def _small_gain(P, K, performance: bool, t0: float, why: str) -> TimeVaryingCertificate:
     """Constant-D scaled small gain on the LFT model (too many vertices to enumerate)."""
-    from polyrob.analysis.quadratic_smallgain import scaled_small_gain
+    from polyrob.analysis.time_varying.smallgain import scaled_small_gain
     from polyrob.plant.generalized import lft
 
     N = lft(P, K)

@@ -116,7 +116,7 @@ def validate_controller(
     discrete_omega : array_like, optional
         Grid of the discretisation checks (default :data:`DISCRETE_GRID`).
     """
-    from polyrob.analysis.mu import mu_bounds
+    from polyrob.analysis.mu.bounds import mu_bounds
     from polyrob.plant.generalized import lft
     from polyrob.validate.discretize import continuous_mu, min_sample_rate, sampled_data_mu
     from polyrob.validate.monte_carlo import monte_carlo

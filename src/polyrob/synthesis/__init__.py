@@ -4,7 +4,7 @@
   own γ bisection around SLICOT SB10FD and an LMI fallback.
 * :func:`musyn` - μ-synthesis (D-K for complex, D-G-K for mixed real/complex
   uncertainty) returning a :class:`MusynResult` with a certified μ; other
-  controller structures are delegated to :mod:`polyrob.synthesis.fixed`.
+  controller structures are delegated to :mod:`polyrob.synthesis.fixed.synthesis`.
 * :func:`max_bandwidth_scaling` - the largest scaling of the weights'
   bandwidths that still certifies μ < 1.
 * :func:`reduce_controller` - smallest balanced-truncation order whose
@@ -12,18 +12,18 @@
 """
 
 from polyrob.synthesis.bandwidth import BandwidthScalingResult, max_bandwidth_scaling, scaled_hyperparameters
-from polyrob.synthesis.dfit import LogMagnitudeFit, SlicotMagnitudeFit
-from polyrob.synthesis.dk import DKIteration
-from polyrob.synthesis.dk_frequency import certify, frequency_grid, performance_lower_bound
-from polyrob.synthesis.dk_strategies import HinfStep, MuUpperBound
-from polyrob.synthesis.fixed import fixed_structure_musyn
-from polyrob.synthesis.fixed_options import FixedStructureOptions
-from polyrob.synthesis.hinf import HinfResult, hinfsyn
-from polyrob.synthesis.norms import hinf_norm
-from polyrob.synthesis.reduce import ReductionResult, reduce_controller
+from polyrob.synthesis.scalings.dfit import LogMagnitudeFit, SlicotMagnitudeFit
+from polyrob.synthesis.dk.iteration import DKIteration
+from polyrob.synthesis.dk.frequency import certify, frequency_grid, performance_lower_bound
+from polyrob.synthesis.dk.strategies import HinfStep, MuUpperBound
+from polyrob.synthesis.fixed.synthesis import fixed_structure_musyn
+from polyrob.synthesis.fixed.options import FixedStructureOptions
+from polyrob.synthesis.hinf.synthesis import HinfResult, hinfsyn
+from polyrob.analysis.norms import hinf_norm
+from polyrob.synthesis.reduction import ReductionResult, reduce_controller
 from polyrob.synthesis.result import MusynResult
-from polyrob.synthesis.robust_synthesis import musyn
-from polyrob.synthesis.structures import controller_structure
+from polyrob.synthesis.mu_synthesis import musyn
+from polyrob.synthesis.fixed.structures import controller_structure
 
 __all__ = [
     "MusynResult",

@@ -23,7 +23,7 @@ def balanced_realization(A, B, C, D):
     Examples
     --------
     >>> import numpy as np
-    >>> from polyrob.synthesis.dscale import balanced_realization
+    >>> from polyrob.synthesis.scalings.dscale import balanced_realization
     >>> A, B, C, D = balanced_realization(np.array([[-1.0, 0], [0, -100.0]]), np.array([[1.0], [1e3]]),
     ...                                   np.array([[1.0, 1e-3]]), np.array([[1.0]]))
     >>> bool(np.abs(B).max() < 10)

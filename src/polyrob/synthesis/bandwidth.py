@@ -114,7 +114,7 @@ def scaled_hyperparameters(
 
 def _default_synthesis(initial_controller=None, **musyn_options) -> Callable:
     """:func:`musyn` warm-started from the nearest solved α (else ``initial_controller``)."""
-    from polyrob.synthesis.robust_synthesis import musyn
+    from polyrob.synthesis.mu_synthesis import musyn
 
     def synthesize(P, K0):
         return musyn(P, initial_controller=initial_controller if K0 is None else K0, **musyn_options)

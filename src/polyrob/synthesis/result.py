@@ -39,7 +39,7 @@ class MusynResult:
     closed_loop : control.StateSpace
         ``lft(P, K)``: ``[d; w] -> [v; z]``.
     certificate : object
-        The :class:`~polyrob.analysis.mu.MuBoundsResult` behind ``peak_mu``.
+        The :class:`~polyrob.analysis.mu.bounds.MuBoundsResult` behind ``peak_mu``.
     iterations : int
     seconds : float
     info : dict

@@ -9,7 +9,7 @@ or zero-order hold; both through ``control.sample_system``.
 generalized plant discretised by zero-order hold (the plant sees a held
 ``u``; ``d`` and ``w`` are held too, which is the approximation of this
 check) and computes closed-loop stability (poles inside the unit circle)
-and μ bounds over the unit circle (:func:`polyrob.analysis.mu.mu_bounds`
+and μ bounds over the unit circle (:func:`polyrob.analysis.mu.bounds.mu_bounds`
 with ``z = e^{jωh}``, ``ω`` up to the Nyquist frequency).  This is a design
 check of the sample rate, not a certificate of the sampled-data system:
 inter-sample behaviour is not covered (see docs/method.md).
@@ -205,7 +205,7 @@ class SampledDataResult:
 
 def _mu_curve(sys, blk, w, upper_only, mu_options):
     """μ bounds on the grid: both (mu_bounds) or the upper bound alone (mussv per point, no lower-bound search)."""
-    from polyrob.analysis.mu import mu_bounds, mussv
+    from polyrob.analysis.mu.bounds import mu_bounds, mussv
     from polyrob.validate.monte_carlo import frequency_response
 
     if not upper_only:
@@ -262,7 +262,7 @@ def sampled_data_mu(
         Only the upper bound (``mussv`` per frequency, no lower-bound
         search; ``lower`` is NaN): what the rate and word-length searches need.
     **mu_options
-        Passed to :func:`~polyrob.analysis.mu.mu_bounds` (default ``refine_peak=False``).
+        Passed to :func:`~polyrob.analysis.mu.bounds.mu_bounds` (default ``refine_peak=False``).
     """
     if not (hasattr(P, "system") and hasattr(P, "block_structure_rp")):
         raise PolyrobError(f"sampled_data_mu needs a GeneralizedPlant, got {type(P).__name__}")
