@@ -39,8 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyrob.analysis.mu.blocks import as_block_structure
-from polyrob.analysis.mu.frequency import default_grid, response_error
+from polyrob.analysis.certificate import certify_loop
 from polyrob.analysis.stability import StabilityVerdict, stability_verdict
 from polyrob.plant.generalized import GeneralizedPlant, closed_loop, lft, nominal_closed_loop
 
@@ -85,11 +84,9 @@ class RobustnessResult:
         certifies when this is ``"stable"``.
     nominal_stability : StabilityVerdict or None
         The verdict behind ``nominally_stable``.
-    response_error : float
-        Error of the double-precision frequency response of the loop at a
-        few grid frequencies, relative to its peak (against 212-bit
-        arithmetic); above ``1e-6`` the whole sweep was evaluated at 212 bits
-        (then ``mu.notes`` says so).
+    certificate : Certificate
+        The decision (:mod:`polyrob.analysis.certificate`): ``robust`` is its
+        status CERTIFIED.
     model : str
         Uncertainty model the block structure stands for (``""`` if unknown).
     """
@@ -106,21 +103,14 @@ class RobustnessResult:
     mu: object
     stability: StabilityVerdict | None = None
     nominal_stability: StabilityVerdict | None = None
-    response_error: float = 0.0
     model: str = ""
+
+    certificate: object = None
 
     @property
     def failed(self) -> tuple[str, ...]:
-        """Why the loop is not certified (empty when it is)."""
-        out = []
-        if self.stability is None or not self.stability.stable:
-            v = "not checked" if self.stability is None else str(self.stability)
-            out.append(f"lft(P, K) at Delta = 0 not proved stable ({v})")
-        if not self.mu_upper < 1.0:
-            out.append(f"peak mu upper bound on the grid {self.mu_upper:.4g} >= 1")
-        elif (self.everywhere or 0.0) >= 1.0:
-            out.append(f"mu reaches {self.everywhere:.4g} >= 1 between the grid points")
-        return tuple(out)
+        """Why the loop is not certified (empty when it is): the certificate's reasons."""
+        return tuple(self.certificate.reasons)
 
     @property
     def everywhere(self) -> float | None:
@@ -129,34 +119,16 @@ class RobustnessResult:
 
     @property
     def robust(self) -> bool:
-        """Certified: ``lft(P, K)`` stable at ``Δ = 0``, peak ``mu_upper < 1`` on the grid, and not ``>= 1``
-        between its points where that was checked (:attr:`everywhere`)."""
-        return not self.failed
+        """``certificate.status`` is CERTIFIED (:mod:`polyrob.analysis.certificate` decides)."""
+        return self.certificate.certified
 
     @property
     def covers(self) -> str:
-        """What the certificate covers, one paragraph the CLI can print verbatim."""
-        what = (
-            "robust stability" if self.kind == "stability" else "robust performance (uncertainty + performance block)"
-        )
-        model = f" of the uncertainty model '{self.model}'" if self.model else ""
-        st = getattr(self.mu, "structure", None)
-        params = (
-            "Real parameters" + model + " are constant in time (every frozen plant of the set, "
-            "not a time-varying one); complex blocks stand for stable LTI perturbations"
-            if st is not None and st.has_real
-            else "Complex blocks" + model + " stand for stable LTI perturbations (not time-varying ones)"
-        )
-        return (
-            f"{what}: {self.mu.covers}. {params}; the loop at Delta = 0 is "
-            f"{'not checked' if self.stability is None else self.stability.verdict}."
-        )
+        """What the certificate covers, one sentence."""
+        return self.certificate.scope.sentence()
 
     def __str__(self) -> str:
-        return (
-            f"{self.kind}: peak mu on the grid in [{self.mu_lower:.4g}, {self.mu_upper:.4g}], "
-            f"{'certified' if self.robust else 'not certified: ' + '; '.join(self.failed)}"
-        )
+        return f"{self.kind}: peak mu on the grid in [{self.mu_lower:.4g}, {self.mu_upper:.4g}]; {self.certificate.verdict}"
 
     def summary(self) -> dict:
         return {
@@ -171,50 +143,22 @@ class RobustnessResult:
             "critical_frequency": float(self.critical_frequency),
             "nominally_stable": bool(self.nominally_stable),
             "stable_at_delta0": None if self.stability is None else self.stability.summary(),
-            "certified_robust": self.robust,
-            "failed": list(self.failed),
+            "certificate": self.certificate.summary(),
             "covers": self.covers,
             "notes": list(getattr(self.mu, "notes", ())),
         }
-
-
-RESPONSE_BITS, RESPONSE_TOL = 212, 1e-6
-
-
-def _check_frequencies(M, omega, k: int = 9) -> np.ndarray:
-    """A few frequencies spread over the grid (log-spaced) for the response check."""
-    w = np.asarray(default_grid(M) if omega is None else omega, dtype=float).ravel()
-    w = w[w > 0] if np.any(w > 0) else w
-    return np.unique(np.quantile(w, np.linspace(0, 1, k))) if w.size else np.array([1.0])
 
 
 def _inv(x) -> float:
     return float(np.inf) if x == 0 else 1.0 / float(x)
 
 
-def _analyse(kind, N, M, blk, omega, *, unc=None, K=None, model="", **mu_options) -> RobustnessResult:
-    """μ of ``M`` (a sub-block of the closed loop ``N``) with the verdicts μ needs."""
-    from polyrob.analysis.mu.bounds import mu_bounds
-    from polyrob.analysis.mu.between import with_between
-
-    centre = stability_verdict(N)
-    # Double-precision responses of a badly conditioned realisation can be wrong
-    # in every digit (and diagonal balancing made dkpy's controller worse, not
-    # better): check a few frequencies against 212-bit arithmetic and switch the
-    # whole sweep to it when double precision is off by more than 1e-6.
-    st = as_block_structure(blk)
-    if st.has_real:
-        # real parameters move real poles through s = 0: real mu is discontinuous
-        # there and a grid of positive frequencies can miss it entirely
-        w = default_grid(M) if omega is None else np.asarray(omega, dtype=float).ravel()
-        omega = np.union1d(w, [0.0])
-    w_check = _check_frequencies(M, omega)
-    err = response_error(M, w_check, RESPONSE_BITS)
-    if err > RESPONSE_TOL and "response_bits" not in mu_options:
-        mu_options["response_bits"] = RESPONSE_BITS
-    mu = with_between(M, mu_bounds(M, blk, omega, **mu_options), response_bits=mu_options.get("response_bits"))
+def _analyse(kind, P, K, blk, omega, *, unc=None, scope=None, n_u=None, n_y=None, **mu_options) -> RobustnessResult:
+    """The certificate of ``lft(P, K)`` (:func:`~polyrob.analysis.certificate.certify_loop`) with the figures of a robustness result."""
+    cert = certify_loop(P, K, blk, omega, kind=kind, scope=scope, n_u=n_u, n_y=n_y, **mu_options)
+    mu = cert.mu
     worst = np.asarray(mu.worst_delta)
-    nominal = centre
+    nominal = cert.stable_at_delta0
     delta = np.real(np.diag(worst)) if worst.size else np.zeros(0)
     if unc is not None:
         diag = delta[: unc.n_delta] if delta.size else np.zeros(unc.n_delta)
@@ -234,10 +178,10 @@ def _analyse(kind, N, M, blk, omega, *, unc=None, K=None, model="", **mu_options
         worst_perturbation=worst,
         nominally_stable=nominal.stable,
         mu=mu,
-        stability=centre,
+        stability=cert.stable_at_delta0,
         nominal_stability=nominal,
-        response_error=err,
-        model=model,
+        model=_model_name(P) if hasattr(P, "uncertain") else "",
+        certificate=cert,
     )
 
 
@@ -265,19 +209,7 @@ def robstab(P: GeneralizedPlant, K, omega=None, **mu_options) -> RobustnessResul
     **mu_options
         Passed to :func:`polyrob.analysis.mu.bounds.mu_bounds` (``method``, ``refine_peak``, ...).
     """
-    N = lft(P, K)
-    s_v, s_d = P.output_slices["v"], P.input_slices["d"]
-    return _analyse(
-        "stability",
-        N,
-        N[s_v, s_d],
-        P.block_structure_rs,
-        omega,
-        unc=P.uncertain,
-        K=K,
-        model=_model_name(P),
-        **mu_options,
-    )
+    return _analyse("stability", P, K, P.block_structure_rs, omega, unc=P.uncertain, **mu_options)
 
 
 def robperf(P: GeneralizedPlant, K, omega=None, **mu_options) -> RobustnessResult:
@@ -286,10 +218,7 @@ def robperf(P: GeneralizedPlant, K, omega=None, **mu_options) -> RobustnessResul
     Certified only when ``lft(P, K)`` is proved stable at ``Δ = 0`` and the
     peak μ upper bound on the grid is below 1 (main loop theorem).
     """
-    N = lft(P, K)
-    return _analyse(
-        "performance", N, N, P.block_structure_rp, omega, unc=P.uncertain, K=K, model=_model_name(P), **mu_options
-    )
+    return _analyse("performance", P, K, P.block_structure_rp, omega, unc=P.uncertain, **mu_options)
 
 
 def loop_mu(P, K, blk, omega=None, *, n_u: int, n_y: int, kind: str = "performance", **mu_options) -> RobustnessResult:
@@ -310,8 +239,7 @@ def loop_mu(P, K, blk, omega=None, *, n_u: int, n_y: int, kind: str = "performan
     >>> r.stability.verdict, round(r.mu_upper, 4)          # N = 1/(s + 2)
     ('stable', 0.5)
     """
-    N = lft(P, K, n_u=n_u, n_y=n_y)
-    return _analyse(kind, N, N, blk, omega, **mu_options)
+    return _analyse(kind, P, K, blk, omega, n_u=n_u, n_y=n_y, **mu_options)
 
 
 def nominal_performance(P: GeneralizedPlant, K) -> float:

@@ -1,0 +1,380 @@
+"""THE certificate: one decision of what a closed loop is proved to do, and what that covers.
+
+Every verdict polyrob prints -- ``synth``, ``analyze``, ``run``, ``reduce``,
+``--max-bandwidth``, the fleet, the report, the JSON, the exit status --
+reads :attr:`Certificate.status`, decided here and nowhere else:
+
+``CERTIFIED``
+    The loop at ``Δ = 0`` is proved stable (extended-precision verdict) and
+    the bound is proved below 1: for μ, the upper bound holds **at every
+    frequency** (the grid's D-G scalings checked between its points,
+    :func:`polyrob.analysis.mu.between.verify_between`); for an L2 gain,
+    the LMI solution re-checked a posteriori.
+``GRID_ONLY``
+    μ < 1 at every point of the frequency grid, but not proved between the
+    points (the check gave up, or was not possible): the grid peak is an
+    estimate of sup μ from below, not a bound.
+``NOT_CERTIFIED``
+    Neither proved nor disproved (μ straddles 1, the loop's stability
+    undecided, the model misses Jacobians of the robot, ...).
+``VIOLATED``
+    Disproved: the loop at ``Δ = 0`` (a member of the set) is proved
+    unstable, or the μ lower bound is ``>= 1`` (a member of the set breaks it).
+
+A certificate also says what it covers (:class:`Scope`): which property, for
+which variation of the parameters, on which frequencies, for which model and
+how well that model covers the robot, over which domain and how the PLDI was
+enclosed (sampled, or proved by interval arithmetic: the weakest input wins).
+
+Examples
+--------
+>>> import control
+>>> P = control.ss([[-1.0]], [[1.0, 1.0]], [[1.0], [1.0]], [[0.0, 0.0], [0.0, 0.0]])
+>>> c = certify_loop(P, -1.0, [[1, 1]], n_u=1, n_y=1)     # N = 1/(s + 2), mu = 0.5
+>>> c.status.value, round(c.mu_upper, 3)
+('CERTIFIED', 0.504)
+>>> c.verdict
+'robust performance CERTIFIED: mu <= 0.504 at every frequency'
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+__all__ = ["Status", "Scope", "Certificate", "certify_loop", "decide_mu", "decide_gain", "weakest_enclosure"]
+
+
+class Status(str, enum.Enum):
+    """The four outcomes of a certificate (module docstring)."""
+
+    CERTIFIED = "CERTIFIED"
+    GRID_ONLY = "GRID_ONLY"
+    NOT_CERTIFIED = "NOT_CERTIFIED"
+    VIOLATED = "VIOLATED"
+
+    def __str__(self) -> str:
+        return self.value
+
+
+#: How the words of a verdict read for each status (GRID_ONLY says exactly what holds).
+_WORDS = {
+    Status.CERTIFIED: "CERTIFIED",
+    Status.GRID_ONLY: "GRID_ONLY (mu < 1 on the frequency grid only, not proved between its points)",
+    Status.NOT_CERTIFIED: "NOT certified",
+    Status.VIOLATED: "VIOLATED",
+}
+
+#: The variations of the parameters a certificate can cover.
+FROZEN = "constant parameters (every frozen robot of the set)"
+ARBITRARY = "parameters varying arbitrarily fast inside the set"
+
+
+def weakest_enclosure(*enclosures) -> str:
+    """``"certified"`` only when every input was proved; ``"sampled"`` when any was sampled; else ``"unknown"``.
+
+    >>> weakest_enclosure("certified", "sampled"), weakest_enclosure("certified"), weakest_enclosure(None)
+    ('sampled', 'certified', 'unknown')
+    """
+    given = [e for e in enclosures if e]
+    if not given or len(given) < len(enclosures):
+        return "sampled" if "sampled" in given else "unknown"
+    if all(e == "certified" for e in given):
+        return "certified"
+    return "sampled" if "sampled" in given else "unknown"
+
+
+@dataclass(frozen=True)
+class Scope:
+    """What a certificate covers.
+
+    Attributes
+    ----------
+    kind : {"robust performance", "robust stability"}
+    variation : str
+        :data:`FROZEN`, :data:`ARBITRARY`, or a rate bound.
+    model : str
+        The uncertainty model (``""`` for a bare loop).
+    coverage : float or None
+        Fraction of fresh domain samples whose Jacobians the model contains;
+        ``None`` when it was not checked.
+    coverage_points : int
+    enclosure : {"sampled", "certified", "unknown"}
+        How the inputs were bounded (the PLDI, and the model's own ranges);
+        the weakest input wins (:func:`weakest_enclosure`).
+    domain : str
+        The domain's name and what it bounds.
+    robot : str
+    frequencies : str
+        Set by the decision: "every frequency" or the grid it rests on.
+    vertices_from : str
+        For a vertex (time-varying) certificate: the set the vertices came from.
+    """
+
+    kind: str = "robust performance"
+    variation: str = FROZEN
+    model: str = ""
+    coverage: float | None = None
+    coverage_points: int = 0
+    enclosure: str = "unknown"
+    domain: str = ""
+    robot: str = ""
+    frequencies: str = ""
+    vertices_from: str = ""
+
+    def sentence(self) -> str:
+        """The scope in one sentence (what the verdict line leaves out)."""
+        parts = [f"for {self.variation}"]
+        if self.frequencies:
+            parts.append(f"on {self.frequencies}")
+        if self.model:
+            cov = (
+                "coverage not checked"
+                if self.coverage is None
+                else f"coverage {self.coverage:.4g} of {self.coverage_points} fresh domain points"
+            )
+            parts.append(f"of the '{self.model}' uncertainty model ({cov})")
+        if self.vertices_from:
+            parts.append(f"with vertices from {self.vertices_from}")
+        if self.robot or self.domain:
+            encl = {"certified": "proved (interval arithmetic)", "sampled": "sampled and searched, not proved"}.get(
+                self.enclosure, "of unknown enclosure"
+            )
+            parts.append(f"around the PLDI of {self.robot or 'the robot'} over domain {self.domain!r}, {encl}")
+        return ", ".join(parts)
+
+    def summary(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass(frozen=True, eq=False)
+class Certificate:
+    """One decided certificate.
+
+    Attributes
+    ----------
+    status : Status
+    bound : float
+        The figure the status rests on: for μ the bound at every frequency
+        when it was proved, else the grid peak; for an L2 gain the verified γ.
+    mu_upper_grid, mu_lower : float
+        Peak μ upper bound on the grid and the peak lower bound (NaN for a gain).
+    stable_at_delta0 : StabilityVerdict or None
+    scope : Scope
+    reasons : tuple of str
+        Why the status is not CERTIFIED (empty when it is).
+    mu : MuBoundsResult or None
+        The sweep (with ``mu.between``, the check between its points).
+    closed_loop : control.StateSpace or None
+    """
+
+    status: Status
+    bound: float
+    mu_upper_grid: float
+    mu_lower: float
+    stable_at_delta0: object
+    scope: Scope
+    reasons: tuple = ()
+    mu: object = None
+    closed_loop: object = field(default=None, repr=False)
+
+    @property
+    def certified(self) -> bool:
+        """``status is CERTIFIED``: the one test every caller uses."""
+        return self.status is Status.CERTIFIED
+
+    @property
+    def mu_upper(self) -> float:
+        """The μ bound the status rests on (see :attr:`bound`)."""
+        return self.bound
+
+    @property
+    def verdict(self) -> str:
+        """The one short verdict line (no scope: :meth:`details` has it)."""
+        what = f"{self.scope.kind} {_WORDS[self.status]}"
+        if self.status is Status.CERTIFIED:
+            if self.mu is None:
+                return f"{what}: L2 gain <= {self.bound:.4g} < 1"
+            return f"{what}: mu <= {self.bound:.4g} at every frequency"
+        if self.status is Status.GRID_ONLY:
+            return f"{what}: peak {self.mu_upper_grid:.4g}"
+        return f"{what}: {self.reasons[0]}" if self.reasons else what
+
+    def details(self) -> str:
+        """The lines below the verdict: what it covers, and why it is not more."""
+        lines = [f"covers: {self.scope.sentence()}"]
+        lines += [f"why: {r}" for r in self.reasons[1:] if self.status is not Status.CERTIFIED]
+        if self.stable_at_delta0 is not None:
+            lines.append(f"loop at Delta = 0: {self.stable_at_delta0.verdict}")
+        return "\n".join(lines)
+
+    def summary(self) -> dict:
+        """JSON: ``certified`` is true only for status CERTIFIED."""
+        between = getattr(self.mu, "between", None)
+        return {
+            "status": self.status.value,
+            "certified": self.certified,
+            "bound": _num(self.bound),
+            "mu_upper_grid": _num(self.mu_upper_grid),
+            "mu_lower": _num(self.mu_lower),
+            "stable_at_delta0": None if self.stable_at_delta0 is None else self.stable_at_delta0.verdict,
+            "between_grid_points": None if between is None else between.summary(),
+            "reasons": list(self.reasons),
+            "scope": self.scope.summary(),
+            "verdict": self.verdict,
+        }
+
+    def with_scope(self, scope: Scope) -> Certificate:
+        """The same decision with the caller's scope (the frequency clause kept)."""
+        return replace(self, scope=replace(scope, frequencies=self.scope.frequencies))
+
+
+def _num(x):
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+def decide_mu(stability, mu_upper_grid: float, mu_lower: float, between) -> tuple[Status, tuple[str, ...]]:
+    """The μ decision: status and reasons from the loop's stability, the grid peaks and the check between points.
+
+    >>> from types import SimpleNamespace as NS
+    >>> stable = NS(stable=True, unstable=False, verdict="stable")
+    >>> decide_mu(stable, 0.8, 0.79, NS(holds=True, level=0.81, peak_upper=0.8, failed_at=None, reason=""))[0].value
+    'CERTIFIED'
+    >>> decide_mu(stable, 0.8, 0.79, NS(holds=False, level=float("nan"), peak_upper=0.8, failed_at=None, reason="gave up"))
+    (<Status.GRID_ONLY: 'GRID_ONLY'>, ('not proved between the grid points: gave up',))
+    """
+    if stability is not None and stability.unstable:
+        return Status.VIOLATED, ("the loop at Delta = 0 (a member of the set) is proved unstable",)
+    reasons = []
+    if stability is None or not stability.stable:
+        reasons.append(f"the loop at Delta = 0 is not proved stable ({'not checked' if stability is None else stability.verdict})")
+    if np.isfinite(mu_lower) and mu_lower >= 1.0 and not reasons:
+        return Status.VIOLATED, (f"mu lower bound {mu_lower:.4g} >= 1: some parameters in the set break it",)
+    if not mu_upper_grid < 1.0:
+        reasons.append(f"mu in [{mu_lower:.4g}, {mu_upper_grid:.4g}] on the grid: not below 1")
+        return Status.NOT_CERTIFIED, tuple(reasons)
+    if reasons:
+        return Status.NOT_CERTIFIED, tuple(reasons)
+    if between is not None and between.holds and between.level < 1.0:
+        return Status.CERTIFIED, ()
+    if between is not None and (between.failed_at is not None or between.peak_upper >= 1.0 or between.level >= 1.0):
+        reached = max(float(between.peak_upper), float(between.level) if between.holds else 0.0)
+        return Status.NOT_CERTIFIED, (
+            f"mu < 1 on the grid ({mu_upper_grid:.4g}) but its upper bound reaches {reached:.4g} between the points",
+        )
+    why = "not checked" if between is None else between.reason
+    return Status.GRID_ONLY, (f"not proved between the grid points: {why}",)
+
+
+def decide_gain(stable: bool, gamma: float, checked: bool, why: str = "") -> tuple[Status, tuple[str, ...]]:
+    """The decision for a verified L2-gain (or stability-only) bound: CERTIFIED when a re-checked ``gamma < 1``.
+
+    >>> decide_gain(True, 0.5, True)[0].value, decide_gain(True, 0.5, False, "not re-checked")[0].value
+    ('CERTIFIED', 'NOT_CERTIFIED')
+    """
+    if stable and checked and gamma < 1.0:
+        return Status.CERTIFIED, ()
+    return Status.NOT_CERTIFIED, (why or (f"verified bound {gamma:.4g} is not below 1" if checked else "no verified bound"),)
+
+
+def _grid_words(omega) -> str:
+    w = np.asarray(omega, float)
+    pos = w[w > 0]
+    zero = " and at 0" if np.any(w == 0) else ""
+    return f"a grid of {w.size} frequencies from {pos.min():.3g} to {pos.max():.3g} rad/s{zero}" if pos.size else "the grid"
+
+
+def certify_loop(
+    P,
+    K,
+    blk=None,
+    omega=None,
+    *,
+    kind: str = "performance",
+    scope: Scope | None = None,
+    n_u: int | None = None,
+    n_y: int | None = None,
+    sweep_unstable: bool = True,
+    **mu_options,
+) -> Certificate:
+    """Close the loop, decide its stability at ``Δ = 0``, sweep μ, check between the grid points, decide.
+
+    Parameters
+    ----------
+    P : GeneralizedPlant or control.StateSpace
+        A bare state space needs ``blk``, ``n_u`` and ``n_y`` (controls and
+        measurements are its last inputs and outputs).
+    K : controller (``n_u x n_y``)
+    blk : block structure, optional
+        Default: ``P.block_structure_rp`` (``kind="performance"``) or
+        ``P.block_structure_rs`` (``"stability"``).
+    omega : array_like, optional
+        Frequencies; default the loop's own grid
+        (:func:`polyrob.analysis.mu.frequency.default_grid`), so that every
+        caller certifies one controller on the same grid.  ω = 0 is added for
+        real blocks (real μ is discontinuous there).
+    kind : {"performance", "stability"}
+        Stability takes μ of ``d -> v`` only.
+    scope : Scope, optional
+        What the inputs cover (model, coverage, domain, enclosure); the
+        frequency clause is set here.
+    sweep_unstable : bool
+        Sweep μ also when the loop is proved unstable (for the report's
+        figures); the status is VIOLATED either way.
+    **mu_options
+        Passed to :func:`polyrob.analysis.mu.bounds.mu_bounds`.
+    """
+    from polyrob.analysis.mu.between import with_between
+    from polyrob.analysis.mu.blocks import as_block_structure
+    from polyrob.analysis.mu.bounds import mu_bounds
+    from polyrob.analysis.mu.frequency import default_grid, response_error
+    from polyrob.analysis.stability import stability_verdict
+    from polyrob.plant.loops import lft
+
+    N = lft(P, K, n_u=n_u, n_y=n_y)
+    M = N
+    if kind == "stability" and n_u is None:
+        M = N[P.output_slices["v"], P.input_slices["d"]]
+    if blk is None:
+        blk = P.block_structure_rs if kind == "stability" else P.block_structure_rp
+    base = replace(scope or Scope(), kind="robust performance" if kind == "performance" else "robust stability")
+    stability = stability_verdict(N)
+    if stability.unstable and not sweep_unstable:
+        status, reasons = decide_mu(stability, np.inf, np.nan, None)
+        return Certificate(status, np.inf, np.inf, np.nan, stability, base, reasons, None, N)
+    st = as_block_structure(blk)
+    w = default_grid(M) if omega is None else np.asarray(omega, dtype=float).ravel()
+    if st.has_real:
+        w = np.union1d(w, [0.0])
+    # double-precision responses of a badly conditioned realisation can be wrong in
+    # every digit: a few frequencies are checked in 212-bit arithmetic, and the whole
+    # sweep is evaluated there when double precision is off by more than 1e-6
+    pos = w[w > 0]
+    check = np.unique(np.quantile(pos, np.linspace(0, 1, 9))) if pos.size else np.array([1.0])
+    if "response_bits" not in mu_options and response_error(M, check, RESPONSE_BITS) > RESPONSE_TOL:
+        mu_options["response_bits"] = RESPONSE_BITS
+    mu_options.setdefault("progress", False)
+    mu = with_between(M, mu_bounds(M, st, w, **mu_options), response_bits=mu_options.get("response_bits"))
+    between = mu.between
+    status, reasons = decide_mu(stability, float(mu.peak_upper), float(mu.peak_lower), between)
+    everywhere = status is Status.CERTIFIED
+    frequencies = "every frequency" if everywhere else _grid_words(mu.omega)
+    bound = float(between.level) if everywhere else float(mu.peak_upper)
+    return Certificate(
+        status=status,
+        bound=bound,
+        mu_upper_grid=float(mu.peak_upper),
+        mu_lower=float(mu.peak_lower),
+        stable_at_delta0=stability,
+        scope=replace(base, frequencies=frequencies),
+        reasons=reasons,
+        mu=mu,
+        closed_loop=N,
+    )
+
+
+#: Extended precision of the response check, and the relative error above which it is used for the whole sweep.
+RESPONSE_BITS, RESPONSE_TOL = 212, 1e-6
