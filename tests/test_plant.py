@@ -4,6 +4,7 @@ import control
 import numpy as np
 import pytest
 
+from polyrob.analysis.mu.blocks import BlockStructure
 from polyrob.errors import PolyrobError
 from polyrob.plant.generalized import (
     ClosedLoop,
@@ -16,6 +17,7 @@ from polyrob.plant.generalized import (
     paper_controller,
 )
 from polyrob.plant.uncertainty import uncertain_plant, upper_lft
+from polyrob.plant.weights import paper_weights
 
 FREQS = (0.1, 0.7, 3.0, 20.0, 150.0)
 
@@ -98,12 +100,11 @@ def test_block_structures(P, unc, pldi):
 
 
 def test_rp_block_fits_the_closed_loop(P, K):
-    blocks = pytest.importorskip("polyrob.analysis.mu.blocks")
     N = lft(P, K)
-    st = blocks.BlockStructure.from_matlab(P.block_structure_rp)
+    st = BlockStructure.from_matlab(P.block_structure_rp)
     assert st.m_shape == (N.noutputs, N.ninputs) == (14, 12)
     assert st.delta_shape == (12, 14)
-    assert blocks.BlockStructure.from_matlab(P.block_structure_rs).m_shape == (10, 10)
+    assert BlockStructure.from_matlab(P.block_structure_rs).m_shape == (10, 10)
 
 
 @pytest.mark.parametrize("merge", [False, True])
@@ -221,8 +222,7 @@ def test_lft_rejects_mismatched_controllers(P):
 
 
 def test_paper_weights_from_the_weights_module_agree():
-    weights = pytest.importorskip("polyrob.plant.weights")
-    WS, WT = weights.paper_weights()
+    WS, WT = paper_weights()
     for w in FREQS:
         np.testing.assert_allclose(WS(1j * w), W_S(1j * w), rtol=1e-3)  # 0.3333 vs 1/3
         np.testing.assert_allclose(WT(1j * w), W_T(1j * w), rtol=1e-12)

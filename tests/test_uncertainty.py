@@ -6,6 +6,7 @@ import control
 import numpy as np
 import pytest
 
+from polyrob.analysis.mu.blocks import BlockStructure
 from polyrob.errors import BoundsError, PolyrobError
 from polyrob.plant.uncertainty import UncertainPlant, uncertain_plant, upper_lft
 
@@ -157,10 +158,9 @@ def test_merge_requires_identical_bounds(pldi):
 
 
 def test_block_structure_is_a_valid_matlab_blk(unc, unc_merged):
-    blocks = pytest.importorskip("polyrob.analysis.mu.blocks")
-    st = blocks.BlockStructure.from_matlab(unc.block_structure)
+    st = BlockStructure.from_matlab(unc.block_structure)
     assert st.delta_shape == (10, 10) and st.m_shape == (10, 10)
-    st = blocks.BlockStructure.from_matlab(unc_merged.block_structure)
+    st = BlockStructure.from_matlab(unc_merged.block_structure)
     assert st.delta_shape == (10, 10) and [b.kind for b in st.blocks] == ["real"] * 9
     assert st.blocks[7].rows == 2
 
