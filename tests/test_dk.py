@@ -87,11 +87,12 @@ def test_result_bookkeeping(distillation_result):
 def test_balanced_filters_are_moderate(distillation_result):
     _, res = distillation_result
     sc = res.scalings[0]
-    if sc is None:
-        pytest.skip("best controller was the unscaled one")
-    for b in sc.blocks[:-1]:
-        if b.d is None or b.d.order == 0:
-            continue
+    # deterministic: on this example D-K improves on the unscaled H-inf controller at
+    # every step (best iteration 8 of 8), so the best controller carries fitted D filters
+    assert sc is not None
+    dynamic = [b for b in sc.blocks[:-1] if b.d is not None and b.d.order > 0]
+    assert dynamic  # the filters checked below exist
+    for b in dynamic:
         for inv in (False, True):
             A, B, C, D = b.d.ss(inverse=inv)
             assert np.all(np.linalg.eigvals(A).real < 0)
