@@ -64,6 +64,7 @@ def _children(pid: int) -> set[int]:
 
 
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="reads child processes from /proc (Linux)")
+@pytest.mark.timeout(180)  # 120 s for the workers to start, then 10 s for one SIGINT to end them
 def test_one_sigint_ends_a_bound_and_its_workers_within_seconds(tmp_path):
     script = textwrap.dedent(
         """
@@ -84,13 +85,11 @@ def test_one_sigint_ends_a_bound_and_its_workers_within_seconds(tmp_path):
             workers = _children(proc.pid)
         assert len(workers) >= 2, "the bound never started its workers"
         time.sleep(3.0)  # let the workers load the robot and compute
-        t0 = time.monotonic()
         proc.send_signal(signal.SIGINT)
         try:
             proc.wait(timeout=10)
         except subprocess.TimeoutExpired:
             pytest.fail(f"one SIGINT did not end the bound within 10 s ({describe_processes(proc.pid)})")
-        elapsed = time.monotonic() - t0
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -98,7 +97,6 @@ def test_one_sigint_ends_a_bound_and_its_workers_within_seconds(tmp_path):
         err_file.close()
     err = (tmp_path / "stderr.txt").read_text()
     assert proc.returncode != 0 and "KeyboardInterrupt" in err
-    assert elapsed < 10
     time.sleep(0.5)
     alive = [pid for pid in workers if Path(f"/proc/{pid}").exists() and "Z" not in _state(pid)]
     assert not alive, f"workers still running after Ctrl-C: {alive}"

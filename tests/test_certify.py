@@ -169,12 +169,11 @@ def test_seven_joint_robot_refused_at_once():
         )
 
 
+@pytest.mark.timeout(30)  # the limit ends the work (an unguarded run takes minutes)
 def test_time_limit_respected():
     d, *box = DOMAINS["double_pendulum"]
-    t0 = time.perf_counter()
     with pytest.raises(CertificationError, match="time limit of 0.2 s reached after"):
         certified_jacobian_bounds(load("double_pendulum"), d, *box, time_limit=0.2)
-    assert time.perf_counter() - t0 < 30  # the limit ends the work (an unguarded run takes minutes)
 
 
 def test_bad_domain_refused():

@@ -316,18 +316,18 @@ def _hang_on_warm_start(Z, nblock, itype, x=None):
     return slycot.ab13md(Z, nblock, itype)
 
 
+@pytest.mark.timeout(30)  # the call sleeps 600 s unless the guard kills it
 def test_time_limited_call_kills_a_hanging_call():
     call = TimeLimitedCall(time.sleep, timeout=0.3)
     try:
-        t0 = time.perf_counter()
         ok, why = call(600)
         assert not ok and why == "timeout"
-        assert time.perf_counter() - t0 < 30
         assert call._proc is None  # the hung worker was killed
     finally:
         call.close()
 
 
+@pytest.mark.timeout(60)  # a hung warm start sleeps 600 s unless the guard falls back
 def test_warm_start_guard_falls_back_to_cold_calls(monkeypatch):
     G = control.tf([[[1.0], [2.0]], [[0.5], [1.0, 1.0]]], [[[1, 0.3, 1], [1, 2]], [[1, 5], [1, 1, 4]]])
     blk = [[-1, 0], [1, 0]]
@@ -340,9 +340,7 @@ def test_warm_start_guard_falls_back_to_cold_calls(monkeypatch):
         assert ok and bound == pytest.approx(1.0)
         assert call(Z, *nb_it, x) == (False, "timeout")
     monkeypatch.setattr(mu_upper, "ab13md_call", _hang_on_warm_start)
-    t0 = time.perf_counter()
     warm = mu_bounds(G, blk, omega, refine_peak=False, warm_start=True, warm_timeout=0.5)
-    assert time.perf_counter() - t0 < 60
     assert warm.warm_start_fallbacks == 1  # hung once, then cold for the rest
     assert len(warm.notes) == 1 and "timeout" in warm.notes[0] and cold.notes == ()  # recorded, not silent
     np.testing.assert_allclose(warm.upper, cold.upper, rtol=1e-9)
