@@ -1,6 +1,6 @@
 """The μ certificate of a controller, with its check between the grid points.
 
-Runs the certificate of the syntheses (:func:`polyrob.synthesis.dk.frequency.certify`:
+Runs the certificate of the syntheses (:func:`polyrob.analysis.certificate.certify_loop`:
 a peak-refined sweep, then :func:`polyrob.analysis.mu.between.with_between`)
 and prints, as JSON, the grid peak, the level verified at every frequency
 (or why none), the points added and the times.  Usage (docs/mu.md)::
@@ -23,7 +23,7 @@ def main(argv=None) -> int:
     import polyrob
     from polyrob.io.controller import load_controller
     from polyrob.pipeline.problem import build_problem, default_hyperparameters
-    from polyrob.synthesis.dk.frequency import certify
+    from polyrob.analysis.certificate import certify_loop
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("robot", nargs="?")
@@ -52,7 +52,8 @@ def main(argv=None) -> int:
     t_bounds = time.perf_counter() - t0
     K = load_controller(path)
     t0 = time.perf_counter()
-    peak, lower, where, N, cert = certify(problem.P, K, problem.P.block_structure_rp)
+    c = certify_loop(problem.P, K, problem.P.block_structure_rp)
+    peak, lower, N, cert = c.mu_upper_grid, c.mu_lower, c.closed_loop, c.mu
     between = cert.between
     out = {
         "machine": {"platform": platform.platform(), "cores": len(os.sched_getaffinity(0))},

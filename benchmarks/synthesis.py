@@ -46,7 +46,8 @@ import polyrob.plant.weights  # noqa: E402
 from polyrob.analysis.mu.bounds import mu_bounds  # noqa: E402
 from polyrob.examples import DISTILLATION_BLK as DIST_BLK  # noqa: E402
 from polyrob.examples import distillation_plant  # noqa: E402
-from polyrob.synthesis import certify, max_bandwidth_scaling, musyn, reduce_controller  # noqa: E402
+from polyrob.analysis.certificate import certify_loop  # noqa: E402
+from polyrob.synthesis import max_bandwidth_scaling, musyn, reduce_controller  # noqa: E402
 
 
 def log(msg: str) -> None:
@@ -74,7 +75,7 @@ def bench_distillation() -> dict:
         "mu_history": [round(float(x), 4) for x in res.mu_history],
         "seconds": round(time.perf_counter() - t0, 2),
     }
-    mu_same = certify(P, res.controller, DIST_BLK, CERT_OMEGA, n_u=2, n_y=2)[0]
+    mu_same = certify_loop(P, res.controller, DIST_BLK, CERT_OMEGA, n_u=2, n_y=2).mu_upper_grid
     out["polyrob"]["peak_mu_certified_common_grid"] = mu_same
     try:
         import dkpy
@@ -101,7 +102,7 @@ def bench_distillation() -> dict:
         "peak_mu_grid": float(mu),
         "order": int(Kss.nstates),
         "seconds": round(secs, 2),
-        "peak_mu_certified_common_grid": certify(P, Kss, DIST_BLK, CERT_OMEGA, n_u=2, n_y=2)[0],
+        "peak_mu_certified_common_grid": certify_loop(P, Kss, DIST_BLK, CERT_OMEGA, n_u=2, n_y=2).mu_upper_grid,
     }
     return out
 

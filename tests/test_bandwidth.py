@@ -15,12 +15,19 @@ from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.synthesis.bandwidth import max_bandwidth_scaling, scaled_hyperparameters
 
 
+def _result(mu, K, status=None):
+    """A stand-in synthesis result: its certificate is CERTIFIED exactly when mu < 1 (unless told otherwise)."""
+    status = status or ("CERTIFIED" if mu < 1 else "NOT_CERTIFIED")
+    cert = SimpleNamespace(certified=status == "CERTIFIED", bound=mu, status=status)
+    return SimpleNamespace(certificate=cert, peak_mu=mu, controller=K, order=3)
+
+
 def _search(mu_of_alpha, **options):
     calls = []
 
     def synthesize(P, K0):
         calls.append((P.alpha, K0))
-        return SimpleNamespace(peak_mu=mu_of_alpha(P.alpha), controller=f"K({P.alpha:g})", order=3)
+        return _result(mu_of_alpha(P.alpha), f"K({P.alpha:g})")
 
     res = max_bandwidth_scaling(
         None, synthesize=synthesize, plant=lambda a, h: SimpleNamespace(alpha=a, h=h), progress=False, **options
@@ -46,7 +53,7 @@ def test_largest_grid_point_already_certified():
 
 
 def test_no_alpha_reaches_the_target_lists_the_evidence():
-    with pytest.raises(SynthesisError, match=r"no bandwidth factor alpha .* 0.25: 1\.500"):
+    with pytest.raises(SynthesisError, match=r"no bandwidth factor alpha .* 0.25: NOT_CERTIFIED 1\.500"):
         _search(lambda a: 1.5, alphas=(0.25, 1, 4))
 
 
@@ -70,3 +77,17 @@ def test_bad_arguments():
         _search(lambda a: 0.5, alphas=(0, 1))
     with pytest.raises(PolyrobError, match="unknown weight hyperparameter"):
         scaled_hyperparameters(2.0, scale=("omega_x",))
+
+
+def test_a_grid_only_certificate_does_not_count():
+    """mu < 1 on the grid but not proved between its points (GRID_ONLY) is not a certified factor."""
+
+    def synthesize(P, K0):
+        # every factor has a grid peak 0.9; only alpha <= 2 is proved at every frequency
+        return _result(0.9, f"K({P.alpha:g})", "CERTIFIED" if P.alpha <= 2 else "GRID_ONLY")
+
+    res = max_bandwidth_scaling(
+        None, synthesize=synthesize, plant=lambda a, h: SimpleNamespace(alpha=a), progress=False, rtol=0.01
+    )
+    assert 2 <= res.alpha < 2.02 and res.result.certificate.certified
+    assert all(math.isinf(mu) for a, mu in res.history if a > 2)

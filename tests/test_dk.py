@@ -46,7 +46,7 @@ def test_distillation_mu_below_1_05(distillation_result):
     P, res = distillation_result
     assert res.peak_mu <= 1.05  # dkpy reports 1.03-1.04 on this example
     assert res.peak_mu_lower <= res.peak_mu + 1e-9
-    assert res.certificate.omega.min() < 1e-3  # a decade beyond the D-step grid
+    assert res.certificate.mu.omega.min() < 1e-3  # a decade beyond the D-step grid
 
 
 def test_distillation_certificate_checked_independently(distillation_result):
@@ -212,7 +212,7 @@ def test_mixed_dgk_runs_and_certifies_with_real_block():
     P = _mixed_toy()
     res = musyn(P, [[-1, 0], [1, 1]], n_u=1, n_y=1, max_iter=4, progress=False)
     assert res.info["mixed"] is True
-    assert res.certificate.structure.has_real
+    assert res.certificate.mu.structure.has_real
     cplx = musyn(P, [[-1, 0], [1, 1]], n_u=1, n_y=1, max_iter=4, mixed=False, progress=False)
     assert cplx.info["method"] == "D-K"
     # both certified against the real structure; D-G-K is not worse
@@ -231,7 +231,7 @@ def test_paper_plant_smoke():
     )
     assert np.isfinite(res.peak_mu)
     assert res.mu_history[-1] < res.mu_history[0]
-    assert res.certificate.structure.has_real  # certified with the real parameters
+    assert res.certificate.mu.structure.has_real  # certified with the real parameters
 
 
 # ------------------------------------------------------------ dispatch, errors

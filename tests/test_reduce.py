@@ -82,7 +82,7 @@ def test_reduce_distillation_controller(distillation):
     # (three complex blocks: μ = the D-scaled bound), and robustly stabilising
     N = closed_loop(P, red.controller, 2, 2)
     assert np.max(np.linalg.eigvals(np.asarray(N.A)).real) < 0
-    mu_pk, _ = dscaled_mu(response(N, [red.certificate.peak_upper_frequency])[0], [1, 1, 2])
+    mu_pk, _ = dscaled_mu(response(N, [red.certificate.mu.peak_upper_frequency])[0], [1, 1, 2])
     assert mu_pk == pytest.approx(red.peak_mu, rel=2e-3)
 
 

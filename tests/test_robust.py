@@ -34,7 +34,9 @@ def test_paper_controller_robust_stability_is_not_certified(paper):
     assert rs.mu_lower <= rs.mu_upper + 1e-9
     # the lower bound exceeds 1: a destabilising perturbation inside the box
     assert 1.4 < rs.mu_lower and rs.mu_upper < 1.9
-    assert not rs.robust and len(rs.failed) == 1 and "mu upper bound" in rs.failed[0]
+    # a lower bound >= 1 disproves robust stability: VIOLATED, not merely "not certified"
+    assert not rs.robust and rs.certificate.status.value == "VIOLATED"
+    assert rs.failed == (f"mu lower bound {rs.mu_lower:.4g} >= 1: some parameters in the set break it",)
     # the perturbation the lower bound returns has size 1/mu_lower and puts a
     # closed-loop pole on the jw axis, checked on the plant G(delta) itself
     assert np.max(np.abs(rs.worst_delta)) == pytest.approx(1 / rs.mu_lower, rel=1e-6)
@@ -100,8 +102,10 @@ def test_loop_unstable_at_delta0_with_small_mu_is_not_robust(paper):
     assert rs.mu_upper < 0.5 and rs.nominally_stable
     assert rs.stability.verdict == "unstable" and rs.stability.abscissa > 0.1
     assert not rs.robust
-    assert rs.failed == (f"lft(P, K) at Delta = 0 not proved stable ({rs.stability})",)
-    assert "unstable" in rs.covers and "peak mu on a grid of" in rs.covers
+    # Delta = 0 is a member of the set: a loop proved unstable there violates robust stability
+    assert rs.certificate.status.value == "VIOLATED"
+    assert rs.failed == ("the loop at Delta = 0 (a member of the set) is proved unstable",)
+    assert "a grid of" in rs.covers
 
 
 def test_monte_carlo_and_corners_find_unstable_plants(paper):
@@ -138,7 +142,10 @@ def test_real_parameter_crossing_at_zero_frequency_is_on_the_grid():
     r = loop_mu(P, -1.0, [[-1, 0]], np.logspace(-2, 2, 41), n_u=1, n_y=1, kind="stability")
     # every positive frequency gives a complex N(jw): real mu is 0 there
     assert r.mu_upper == pytest.approx(0.5, rel=1e-9) and r.mu_lower == pytest.approx(0.5, rel=1e-9)
-    assert r.critical_frequency == 0.0 and "in [0, 100] rad/s" in r.covers
+    assert r.critical_frequency == 0.0 and 0.0 in r.mu.omega
+    # proved at every frequency: the grid's scalings hold between its points too
+    assert r.certificate.status.value == "CERTIFIED" and "every frequency" in r.covers
+    assert r.certificate.bound == pytest.approx(0.505, rel=1e-9)
     # independent check: delta = 1/mu closes the loop x' = -2x + delta x on a pole at 0,
     # 1 % more puts it in the right half-plane
     delta = float(np.real(r.worst_perturbation[0, 0]))

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-__all__ = ["Status", "Scope", "Certificate", "certify_loop", "decide_mu", "decide_gain", "weakest_enclosure"]
+__all__ = ["Status", "Scope", "Certificate", "certify_loop", "certificate_of_sweep", "decide_mu", "decide_gain", "weakest_enclosure"]
 
 
 class Status(str, enum.Enum):
@@ -327,7 +327,6 @@ def certify_loop(
     **mu_options
         Passed to :func:`polyrob.analysis.mu.bounds.mu_bounds`.
     """
-    from polyrob.analysis.mu.between import with_between
     from polyrob.analysis.mu.blocks import as_block_structure
     from polyrob.analysis.mu.bounds import mu_bounds
     from polyrob.analysis.mu.frequency import default_grid, response_error
@@ -357,7 +356,23 @@ def certify_loop(
     if "response_bits" not in mu_options and response_error(M, check, RESPONSE_BITS) > RESPONSE_TOL:
         mu_options["response_bits"] = RESPONSE_BITS
     mu_options.setdefault("progress", False)
-    mu = with_between(M, mu_bounds(M, st, w, **mu_options), response_bits=mu_options.get("response_bits"))
+    mu = mu_bounds(M, st, w, **mu_options)
+    return certificate_of_sweep(N, mu, M=M, stability=stability, scope=base, response_bits=mu_options.get("response_bits"))
+
+
+def certificate_of_sweep(N, mu, *, M=None, stability=None, scope: Scope | None = None, response_bits=None) -> Certificate:
+    """Decide a sweep already made (a synthesis' own certificate grid): stability, the check between points, status.
+
+    ``N`` is the closed loop, ``M`` the system the sweep ``mu`` is of (default
+    ``N``).  ``mu.between`` is computed when missing.
+    """
+    from polyrob.analysis.mu.between import with_between
+    from polyrob.analysis.stability import stability_verdict
+
+    M = N if M is None else M
+    stability = stability_verdict(N) if stability is None else stability
+    if getattr(mu, "between", None) is None:
+        mu = with_between(M, mu, response_bits=response_bits)
     between = mu.between
     status, reasons = decide_mu(stability, float(mu.peak_upper), float(mu.peak_lower), between)
     everywhere = status is Status.CERTIFIED
@@ -369,7 +384,7 @@ def certify_loop(
         mu_upper_grid=float(mu.peak_upper),
         mu_lower=float(mu.peak_lower),
         stable_at_delta0=stability,
-        scope=replace(base, frequencies=frequencies),
+        scope=replace(scope or Scope(), frequencies=frequencies),
         reasons=reasons,
         mu=mu,
         closed_loop=N,

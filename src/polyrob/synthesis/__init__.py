@@ -14,7 +14,7 @@
 from polyrob.synthesis.bandwidth import BandwidthScalingResult, max_bandwidth_scaling, scaled_hyperparameters
 from polyrob.synthesis.scalings.dfit import LogMagnitudeFit, SlicotMagnitudeFit
 from polyrob.synthesis.dk.iteration import DKIteration
-from polyrob.synthesis.dk.frequency import certify, frequency_grid, performance_lower_bound
+from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound
 from polyrob.synthesis.dk.strategies import HinfStep, MuUpperBound
 from polyrob.synthesis.fixed.synthesis import fixed_structure_musyn
 from polyrob.synthesis.fixed.options import FixedStructureOptions
@@ -36,7 +36,6 @@ __all__ = [
     "HinfStep",
     "LogMagnitudeFit",
     "SlicotMagnitudeFit",
-    "certify",
     "frequency_grid",
     "performance_lower_bound",
     "BandwidthScalingResult",

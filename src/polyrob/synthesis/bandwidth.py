@@ -50,6 +50,7 @@ class BandwidthScalingResult:
     result : MusynResult
         The synthesis at ``alpha``.
     history : list of (alpha, peak_mu)
+        ``peak_mu`` is the certificate's bound when its status is CERTIFIED, else ``inf``.
         Every α tried, in order (``inf`` when the synthesis failed).
     hyperparameters : dict
         The weight hyperparameters at ``alpha``.
@@ -184,7 +185,9 @@ def max_bandwidth_scaling(
 
     >>> from types import SimpleNamespace
     >>> from polyrob.synthesis.bandwidth import max_bandwidth_scaling
-    >>> fake = lambda P, K0: SimpleNamespace(peak_mu=P.alpha ** 2 / 8 + 0.5 / P.alpha, controller=None, order=0)
+    >>> def fake(P, K0):
+    ...     mu = P.alpha ** 2 / 8 + 0.5 / P.alpha
+    ...     return SimpleNamespace(certificate=SimpleNamespace(certified=mu < 1, bound=mu, status="..."), controller=None)
     >>> r = max_bandwidth_scaling(None, synthesize=fake, plant=lambda a, h: SimpleNamespace(alpha=a), progress=False)
     >>> print(f"alpha = {r.alpha:.3f}, mu = {r.peak_mu:.3f}, first fail {r.bracket[1]:.3f}")
     alpha = 2.484, mu = 0.972, first fail 2.594
@@ -207,6 +210,7 @@ def max_bandwidth_scaling(
     history: list = []
     solved: dict = {}
     excluded: list = []
+    evidence: list = []
 
     def run(alpha):
         h = scaled_hyperparameters(alpha, hyperparameters, scale)
@@ -221,15 +225,20 @@ def max_bandwidth_scaling(
         K0 = solved[near][0].controller if near is not None and solved[near][0] is not None else None
         try:
             res = synthesize(plant(alpha, h), K0)
-            mu = float(res.peak_mu)
+            # the factor counts only when its certificate's status is CERTIFIED (mu < 1 at every
+            # frequency, loop stable), never on a grid peak
+            cert = res.certificate
+            mu = float(cert.bound) if cert.certified else math.inf
+            status = cert.status
+            evidence.append(f"{alpha:g}: {status} {float(cert.bound):.3f}")
         except SynthesisError as exc:
-            res, mu = None, math.inf
-            if show:
-                print(f"bandwidth alpha = {alpha:.4g}: synthesis failed ({exc})", file=sys.stderr)
+            res, mu, status = None, math.inf, f"synthesis failed ({exc})"
+            evidence.append(f"{alpha:g}: synthesis failed")
         history.append((float(alpha), mu))
         solved[alpha] = (res, mu, h)
         if show:
-            print(f"bandwidth alpha = {alpha:.4g}: certified mu = {mu:.4f}", file=sys.stderr)
+            figure = f", mu <= {mu:.4f} at every frequency" if math.isfinite(mu) else ""
+            print(f"bandwidth alpha = {alpha:.4g}: {status}{figure}", file=sys.stderr)
         return mu
 
     # scan from the largest α down: the first success is the largest on the grid
@@ -240,7 +249,7 @@ def max_bandwidth_scaling(
             break
         fail = alpha
     if ok is None:
-        tried = [f"{a:g}: {m:.3f}" for a, m in history]
+        tried = list(evidence)
         tried += [f"{a:g}: >= {b:.3f} (performance limit)" for a, b in excluded]
         why = (
             "the performance limit of the robot's unstable poles excludes every factor (no synthesis ran)"

@@ -24,7 +24,8 @@ from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import as_controller_ss
 from polyrob.synthesis.scalings.dfit import LogMagnitudeFit
 from polyrob.synthesis.dk.iteration import DKIteration
-from polyrob.synthesis.dk.frequency import certify, frequency_grid, performance_lower_bound
+from polyrob.analysis.certificate import certify_loop
+from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound
 from polyrob.synthesis.fixed.synthesis import fixed_structure_musyn
 from polyrob.synthesis.hinf.checks import check_stabilizable
 from polyrob.synthesis.result import MusynResult
@@ -93,6 +94,16 @@ def _parse_plant(P, blk, n_u, n_y):
     if Psys.dt not in (0, None):
         raise PolyrobError("musyn: the plant must be continuous-time")
     return Psys, st, int(n_u), int(n_y)
+
+
+def _with_resonances(omega, K, P, kw):
+    """The certificate grid with the closed loop's lightly damped natural frequencies (peaks hide there)."""
+    from polyrob.plant.loops import lft
+    from polyrob.synthesis.dk.frequency import resonances
+
+    omega = np.asarray(omega, float)
+    A = np.asarray(lft(P, K, **kw).A, float)
+    return np.union1d(omega, resonances(A, omega.min(), omega.max()))
 
 
 def musyn(
@@ -324,12 +335,14 @@ def musyn(
             rec = hist[i]
             if not np.isfinite(rec.mu_peak):
                 break
-            cert = certify(Pc, rec.K, st, cw, **kw)
-            if best is None or cert[0] < best[1][0]:
+            cert = certify_loop(Pc, rec.K, st, _with_resonances(cw, rec.K, Pc, kw), sweep_unstable=False, **kw)
+            if best is None or cert.mu_upper_grid < best[1].mu_upper_grid:
                 best = (i, cert)
-            if cert[0] <= rec.mu_peak * 1.02:
+            if cert.mu_upper_grid <= rec.mu_peak * 1.02:
                 break  # the grid saw the peak: no need to look further
-    i_best, (peak_mu, peak_lo, peak_w, N, cert) = best
+    i_best, cert = best
+    peak_mu, peak_lo, N = cert.mu_upper_grid, cert.mu_lower, cert.closed_loop
+    peak_w = float(cert.mu.peak_upper_frequency) if cert.mu is not None else float("nan")
     rec = hist[i_best]
     seconds = time.perf_counter() - t_start
     info = {

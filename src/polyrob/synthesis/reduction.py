@@ -36,7 +36,8 @@ from polyrob._threads import single_blas_thread
 from polyrob.analysis.mu.blocks import as_block_structure
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import as_controller_ss
-from polyrob.synthesis.dk.frequency import certify, frequency_grid
+from polyrob.analysis.certificate import certify_loop
+from polyrob.synthesis.dk.frequency import frequency_grid
 from polyrob.synthesis.result import MusynResult
 
 __all__ = ["ReductionResult", "reduce_controller", "stable_unstable_split", "balanced_reduction"]
@@ -258,7 +259,7 @@ def reduce_controller(
         K = result_or_K.controller
         full_mu = float(result_or_K.peak_mu)
         if blk is None and result_or_K.certificate is not None:
-            blk = result_or_K.certificate.structure
+            blk = result_or_K.certificate.mu.structure
         if omega is None and "omega" in result_or_K.info:
             w = np.asarray(result_or_K.info["omega"], float)
             omega = np.logspace(np.log10(w.min()) - 1, np.log10(w.max()) + 1, int(8 * np.log10(w.max() / w.min())) + 17)
@@ -289,8 +290,9 @@ def reduce_controller(
             return cache[order]
         if Kr is None:
             Kr = balanced_reduction(K, order, method)
-        mu, lo, wpk, N, cert = certify(P, Kr, st, omega, **kw)
-        cache[order] = (mu, lo, wpk, N, cert, Kr)
+        cert = certify_loop(P, Kr, st, omega, sweep_unstable=False, **kw)
+        wpk = float(cert.mu.peak_upper_frequency) if cert.mu is not None else float("nan")
+        cache[order] = (cert.mu_upper_grid, cert.mu_lower, wpk, cert.closed_loop, cert, Kr)
         return cache[order]
 
     with single_blas_thread():

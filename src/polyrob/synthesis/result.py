@@ -24,8 +24,9 @@ class MusynResult:
     order : int
         Number of states of ``controller``.
     peak_mu : float
-        Certified peak of the μ upper bound of the closed loop ``lft(P, K)``
-        over a peak-refined frequency grid (the number to quote).
+        Peak of the μ upper bound of the closed loop ``lft(P, K)`` on the
+        certificate's peak-refined grid (``certificate.bound`` is the figure
+        its status rests on).
     peak_mu_lower : float
         Peak of the μ lower bound on the same grid.
     peak_frequency : float
@@ -38,8 +39,9 @@ class MusynResult:
         The D (and G) scalings of the last iteration (filters or per-frequency data).
     closed_loop : control.StateSpace
         ``lft(P, K)``: ``[d; w] -> [v; z]``.
-    certificate : object
-        The :class:`~polyrob.analysis.mu.bounds.MuBoundsResult` behind ``peak_mu``.
+    certificate : Certificate
+        The decision (:mod:`polyrob.analysis.certificate`) on the synthesis'
+        own certificate grid; ``certificate.mu`` is the sweep behind ``peak_mu``.
     iterations : int
     seconds : float
     info : dict
@@ -64,7 +66,12 @@ class MusynResult:
     @property
     def peak_mu_everywhere(self) -> float | None:
         """A μ bound verified at every frequency (the certificate's check between its grid points), or ``None``."""
-        return getattr(self.certificate, "upper_everywhere", None)
+        return getattr(getattr(self.certificate, "mu", None), "upper_everywhere", None)
+
+    @property
+    def status(self):
+        """The certificate's :class:`~polyrob.analysis.certificate.Status`."""
+        return self.certificate.status
 
     def summary(self) -> dict:
         """Plain figures for reports and JSON."""
@@ -73,6 +80,7 @@ class MusynResult:
             "order": int(self.order),
             "peak_mu_upper": float(self.peak_mu),
             "mu_upper_every_frequency": self.peak_mu_everywhere,
+            "certificate": self.certificate.summary(),
             "peak_mu_lower": float(self.peak_mu_lower),
             "peak_frequency": float(self.peak_frequency),
             "iterations": int(self.iterations),

@@ -1,9 +1,10 @@
-"""Frequency tools of μ-synthesis: the D-step grid, closed-loop responses, the certificate.
+"""Frequency tools of μ-synthesis: the D-step grid, closed-loop responses, the performance floor.
 
 * :func:`frequency_grid` - the default D-K grid from the plant's poles;
 * :func:`performance_lower_bound` - what ``W_S`` and ``W_T`` alone force on μ;
-* :func:`certify` - the certified μ upper bound of ``Fl(P, K)`` (with its
-  nominal-stability check) that every synthesis result quotes.
+
+The certificate every synthesis result carries is
+:func:`polyrob.analysis.certificate.certify_loop`'s.
 """
 
 from __future__ import annotations
@@ -12,9 +13,8 @@ import math
 
 import numpy as np
 
-from polyrob.analysis.norms import is_stable
 
-__all__ = ["frequency_grid", "resonances", "frequency_response_matrices", "performance_lower_bound", "certify"]
+__all__ = ["frequency_grid", "resonances", "frequency_response_matrices", "performance_lower_bound"]
 
 
 def frequency_grid(sys, per_decade: int = 8) -> np.ndarray:
@@ -117,29 +117,6 @@ def performance_lower_bound(P) -> tuple[float, float]:
         if b[i] > best:
             best, where = float(b[i]), float(w[i])
     return best, where
-
-
-def certify(P, K, blk, omega=None, *, n_u=None, n_y=None):
-    """Certified μ upper bound of ``Fl(P, K)`` on a peak-refined grid.
-
-    Returns ``(peak_mu, peak_lower, peak_frequency, closed_loop, certificate)``;
-    an unstable closed loop gives ``peak_mu = inf`` and ``certificate = None``
-    (μ certifies nothing without nominal stability).
-    """
-    from polyrob.analysis.mu.bounds import mu_bounds
-    from polyrob.analysis.mu.between import with_between
-    from polyrob.plant.generalized import lft
-
-    N = lft(P, K, n_u=n_u, n_y=n_y)
-    A = np.asarray(N.A, float)
-    if not is_stable(A):
-        return float("inf"), float("nan"), float("nan"), N, None
-    if omega is None:
-        omega = frequency_grid(P.system if hasattr(P, "system") else P, per_decade=15)
-    omega = np.asarray(omega, float)
-    w = np.union1d(omega, resonances(A, omega.min(), omega.max()))
-    r = with_between(N, mu_bounds(N, blk, omega=w, refine_peak=True, progress=False))
-    return float(r.peak_upper), float(r.peak_lower), float(r.peak_upper_frequency), N, r
 
 
 def _response(sys, w) -> np.ndarray:

@@ -52,7 +52,6 @@ from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import lower_lft_matrices
 from polyrob.synthesis.scalings.dfit import LogMagnitudeFit
 from polyrob.synthesis.dk.frequency import (
-    certify,
     frequency_grid,
     frequency_response_matrices,
     performance_lower_bound,
@@ -68,7 +67,6 @@ __all__ = [
     "IterationRecord",
     "MuUpperBound",
     "HinfStep",
-    "certify",
     "frequency_grid",
     "performance_lower_bound",
 ]
@@ -347,7 +345,7 @@ def _scaled_norm(Ps, K, n_u, n_y) -> float:
 
     An estimate from below, used only to reject a K-step much worse than the
     old controller (a heuristic safeguard, never a certificate: μ is
-    certified by :func:`certify`).
+    certified by :func:`polyrob.analysis.certificate.certify_loop`).
     """
 
     A, B, C, D = (np.asarray(X, float) for X in (Ps.A, Ps.B, Ps.C, Ps.D))

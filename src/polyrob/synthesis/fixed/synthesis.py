@@ -79,7 +79,7 @@ from slycot.exceptions import SlycotError
 from polyrob._threads import single_blas_thread
 from polyrob.analysis.mu.blocks import as_block_structure
 from polyrob.analysis.mu.bounds import mu_bounds
-from polyrob.analysis.mu.between import with_between
+from polyrob.analysis.certificate import certificate_of_sweep
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import lft, paper_controller
 from polyrob.synthesis.fixed.iteration import (
@@ -308,7 +308,8 @@ def fixed_structure_musyn(
             )
             screen = np.union1d(screen, cert.omega[cert.omega > 0])
             optimise_start(loop, best, st, opts, max(3, int(max_iter) // 4), screen, report, "certify", target)
-        cert = with_between(N, cert)  # the bound between the certificate's grid points
+        sweep = cert
+        cert = certificate_of_sweep(N, sweep)  # stability at Delta = 0, the check between its points, the status
 
     poles = np.linalg.eigvals(np.asarray(N.A)) if N.nstates else np.zeros(0)
     if poles.size and np.max(poles.real) >= 0:  # pragma: no cover - guarded by every accepted step
@@ -337,10 +338,10 @@ def fixed_structure_musyn(
         controller=K,
         structure=strc.name,
         order=int(K.nstates),
-        peak_mu=float(cert.peak_upper),
-        peak_mu_lower=float(cert.peak_lower),
-        peak_frequency=float(cert.peak_upper_frequency),
-        mu_history=np.array(best.history + [cert.peak_upper], float),
+        peak_mu=float(sweep.peak_upper),
+        peak_mu_lower=float(sweep.peak_lower),
+        peak_frequency=float(sweep.peak_upper_frequency),
+        mu_history=np.array(best.history + [sweep.peak_upper], float),
         gamma_history=np.array(best.gammas, float),
         scalings=(best.sc.omega.copy(), best.sc.Dm.copy(), best.sc.G.copy()),
         closed_loop=N,
