@@ -23,6 +23,29 @@ def paper_pldi():
     return bound_pldi(cached_robot("paper_2r"), samples=256, coverage=0, progress=False)
 
 
+class _DoctestNamespace:
+    """The doctests' shared objects, in pytest's ``doctest_namespace``.
+
+    Registered as a plugin (below), not defined as a fixture of this file: a
+    conftest's fixtures reach only the tests under its folder, and the
+    doctests are in src/polyrob. It reaches them when tests/ is among the
+    paths pytest was given (the default run, CI); ``pytest src/polyrob/x.py``
+    alone does not load this file.
+    """
+
+    @pytest.fixture(autouse=True)
+    def _doctest_objects(self, request, doctest_namespace):
+        dtest = getattr(request.node, "dtest", None)  # a doctest item
+        if dtest is not None and any("paper_pldi" in ex.source for ex in dtest.examples):
+            # ``paper_pldi``: bound_pldi(load_robot("paper_2r"), samples=256, coverage=0, progress=False),
+            # built once per session (and per xdist worker) for the doctests that use it
+            doctest_namespace["paper_pldi"] = paper_pldi()
+
+
+def pytest_configure(config):
+    config.pluginmanager.register(_DoctestNamespace(), "polyrob-doctest-namespace")
+
+
 @pytest.fixture(scope="session")
 def pldi():
     """The paper's problem as a PLDI (shared by the plant and uncertainty tests)."""
