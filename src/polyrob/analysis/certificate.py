@@ -58,6 +58,11 @@ class Status(str, enum.Enum):
     def __str__(self) -> str:
         return self.value
 
+    @property
+    def certified(self) -> bool:
+        """Only CERTIFIED certifies."""
+        return self is Status.CERTIFIED
+
 
 #: How the words of a verdict read for each status (GRID_ONLY says exactly what holds).
 _WORDS = {
@@ -183,7 +188,7 @@ class Certificate:
     @property
     def certified(self) -> bool:
         """``status is CERTIFIED``: the one test every caller uses."""
-        return self.status is Status.CERTIFIED
+        return self.status.certified
 
     @property
     def mu_upper(self) -> float:
@@ -375,7 +380,13 @@ def certificate_of_sweep(N, mu, *, M=None, stability=None, scope: Scope | None =
         mu = with_between(M, mu, response_bits=response_bits)
     between = mu.between
     status, reasons = decide_mu(stability, float(mu.peak_upper), float(mu.peak_lower), between)
-    everywhere = status is Status.CERTIFIED
+    scope = scope or Scope()
+    if status is Status.CERTIFIED and scope.coverage is not None and scope.coverage < 1.0:
+        # mu < 1 on a model that misses some of the robot's Jacobians certifies the model, not the robot
+        status, reasons = Status.NOT_CERTIFIED, (
+            f"the '{scope.model}' model contains only {scope.coverage:.4g} of {scope.coverage_points} fresh Jacobians",
+        )
+    everywhere = status is Status.CERTIFIED or (between is not None and between.holds and between.level < 1.0)
     frequencies = "every frequency" if everywhere else _grid_words(mu.omega)
     bound = float(between.level) if everywhere else float(mu.peak_upper)
     return Certificate(
@@ -384,7 +395,7 @@ def certificate_of_sweep(N, mu, *, M=None, stability=None, scope: Scope | None =
         mu_upper_grid=float(mu.peak_upper),
         mu_lower=float(mu.peak_lower),
         stable_at_delta0=stability,
-        scope=replace(scope or Scope(), frequencies=frequencies),
+        scope=replace(scope, frequencies=frequencies),
         reasons=reasons,
         mu=mu,
         closed_loop=N,

@@ -36,7 +36,7 @@ def print_analysis(a, out) -> None:
     for title, r in (("robust stability", rs), ("robust performance", rp)):
         out.line(
             f"{title:<22} mu in [{r.mu_lower:.4g}, {r.mu_upper:.4g}] (peak on the frequency grid) "
-            f"at {r.critical_frequency:.4g} rad/s: {a.status(r)}"
+            f"at {r.critical_frequency:.4g} rad/s: {r.certificate.status}"
         )
         between = getattr(r.mu, "between", None)
         if between is not None:
@@ -57,6 +57,7 @@ def print_analysis(a, out) -> None:
         out.line(tv.verdict)
         out.line(f"which covers the robot: {covers_nonlinear(tv.method)}")
     out.line(a.verdict)
+    out.line(a.certificate.details())
 
 
 def cmd_analyze(args) -> int:
@@ -98,7 +99,7 @@ def cmd_analyze(args) -> int:
     if not info and source != "the paper's K*":
         out.line(f"note: {source} does not record the problem it was made for: not compared")
     print_analysis(a, out)
-    return 0
+    return exit_status(a.certificate)
 
 
 def register(sub) -> None:

@@ -113,7 +113,7 @@ def cmd_batch(args) -> int:
     out.document(doc)
     out.line(f"{'robot':<22}{'joints':>7}{'params':>8}{'mu':>10}{'order':>7}{'alpha':>8}{'time s':>9}  result")
     for r in res.results:
-        result = ("certified" if r.certified else "not certified") if r.ok else f"FAILED {r.error}: {r.message}"
+        result = str(r.status) if r.ok else f"FAILED {r.error}: {r.message}"
         if r.ok and r.validation:
             result += f"; validation: {r.validation}"
         if r.ok and r.reason:

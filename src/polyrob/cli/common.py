@@ -100,6 +100,11 @@ class Output:
             print(to_json(doc), flush=True)
 
 
+def exit_status(certificate) -> int:
+    """The exit status of a command that ends with a certificate: 0 CERTIFIED, 1 any other status (2 is bad input)."""
+    return 0 if certificate.certified else 1
+
+
 def add_output_flags(parser: argparse.ArgumentParser, *, quiet: bool = True) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON document instead of the text report")
     if quiet:

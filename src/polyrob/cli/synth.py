@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from polyrob.cli.analyze import print_analysis
 from polyrob.cli.common import (
+    exit_status,
     Output,
     add_domain_arguments,
     add_output_flags,
@@ -60,9 +61,9 @@ def print_design(design, out) -> None:
         f"controller: {r.structure}, order {r.order}; peak mu in [{r.peak_mu_lower:.4g}, {r.peak_mu:.4g}] "
         f"(bounds on the frequency grid) at {r.peak_frequency:.4g} rad/s ({r.iterations} iterations, {r.seconds:.1f} s)"
     )
-    between = getattr(getattr(r, "certificate", None), "between", None)
+    between = getattr(getattr(getattr(r, "certificate", None), "mu", None), "between", None)
     if between is not None:
-        out.line("certificate between the grid points: " + between.sentence())
+        out.line("synthesis grid, between its points: " + between.sentence())
     if design.reduced is not None:
         red = design.reduced
         out.line("order reduction (order: peak mu upper bound):")
@@ -100,14 +101,14 @@ def _save(design, problem, args, out, info_extra=None, certificate_extra=None, p
 
     info = problem.description()
     info.update(info_extra or {})
-    cert = dict(design.certificate, **(certificate_extra or {}))
+    cert = dict(design.record, **(certificate_extra or {}))
     path = save_controller(design.controller, path or args.output, certificate=cert, info=info)
     out.line(f"wrote {path}")
     return str(path)
 
 
 def cmd_synth(args) -> int:
-    from polyrob.pipeline import design_controller, design_max_bandwidth, verdict
+    from polyrob.pipeline import design_controller, design_max_bandwidth
 
     _check_output(args)
     scale = scale_names(args.scale_only) if args.max_bandwidth else None
@@ -124,7 +125,7 @@ def cmd_synth(args) -> int:
     if args.max_bandwidth:
         out.stage(f"largest bandwidth factor with mu < 1 (scaling {', '.join(scale)}; a synthesis per factor)")
         design, res = design_max_bandwidth(problem, scale=scale, alphas=alphas, **options)
-        out.line(f"{'alpha':>10}  {'peak mu (upper)':>18}")
+        out.line(f"{'alpha':>10}  {'mu at every frequency (inf: not certified)':>18}")
         for alpha, mu in res.history:
             out.line(f"{alpha:>10.4g}  {mu:>18.5g}")
         for alpha, bound in res.excluded:
@@ -135,7 +136,7 @@ def cmd_synth(args) -> int:
             else "the largest factor scanned: larger ones were not tried, see --alphas"
         )
         out.line(
-            f"largest alpha with mu < 1: {res.alpha:.4g} (mu {res.peak_mu:.4g}; {beyond}), "
+            f"largest certified alpha: {res.alpha:.4g} (mu <= {res.peak_mu:.4g} at every frequency; {beyond}), "
             f"controller order {res.result.order}"
         )
         out.line("weights: " + ", ".join(f"{k} = {list(v)}" for k, v in res.hyperparameters.items()))
@@ -152,16 +153,14 @@ def cmd_synth(args) -> int:
     doc["synthesis"] = design.summary()
     if args.output:
         doc["output"] = _save(design, problem, args, out, info_extra=extra)
-    doc["covers"] = problem.covers()
-    doc["verdict"] = verdict(
-        design.peak_mu,
-        design.peak_mu_lower,
-        covers=doc["covers"],
-        everywhere=getattr(design, "peak_mu_everywhere", None),
-    )
+    cert = design.certificate
+    doc["covers"] = cert.scope.sentence()
+    doc["certificate"] = cert.summary()
+    doc["verdict"] = "verdict: " + cert.verdict
     out.line(doc["verdict"])
+    out.line(cert.details())
     out.document(doc)
-    return 0
+    return exit_status(cert)
 
 
 def cmd_run(args) -> int:
@@ -183,7 +182,9 @@ def cmd_run(args) -> int:
     limit = _print_limit(problem, out)
     input_check = _print_input_check(problem, out)
     out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
-    design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
+    design = design_controller(
+        problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, certify=False, **options
+    )
     print_design(design, out)
     out.stage(
         f"analysis: mu sweeps (robust stability, robust performance), {args.mc} Monte Carlo parameter sets"
@@ -200,6 +201,7 @@ def cmd_run(args) -> int:
         time_varying=args.time_varying,
     )
     print_analysis(a, out)
+    design = design.certified_by(a.certificate)  # the analysis' certificate is the design's: one call, one verdict
     doc = {
         "robot": robot.name,
         "problem": problem.description(),
@@ -228,15 +230,15 @@ def cmd_run(args) -> int:
     elif args.output:
         doc["output"] = _save(design, problem, args, out, certificate_extra=extra)
     out.document(doc)
-    return 0
+    return exit_status(a.certificate)
 
 
 def _report_certificates(design, analysis, extra: dict) -> dict:
     """The certificates a run report shows: mu (frozen robot) and, when computed, the time-varying one."""
-    certs = {"constant-parameter μ (frozen robot)": dict(design.certificate, **extra)}
+    certs = {"frozen robot (constant-parameter mu)": dict(design.record, **extra)}
     tv = analysis.time_varying
     if tv is not None:
-        certs[f"time-varying ({tv.method}; the moving robot)"] = tv.summary()
+        certs[f"arbitrarily fast variation ({tv.method})"] = tv.summary()
     return certs
 
 

@@ -157,7 +157,7 @@ def _progress_printer(progress):
 
     def show(result: RobotResult, done: int, total: int) -> None:
         if result.ok:
-            what = f"mu {result.mu_upper:.4g}, order {result.order}" + (" (certified)" if result.certified else "")
+            what = f"{result.status}, mu {result.mu_upper:.4g}, order {result.order}"
         else:
             what = f"FAILED: {result.error}: {result.message}"
         print(f"[{done}/{total}] {result.name}: {what} ({result.seconds:.1f} s)", file=sys.stderr, flush=True)

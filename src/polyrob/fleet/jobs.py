@@ -165,10 +165,10 @@ class RobotResult:
 
     ``ok`` is False when the job raised; then ``error`` is the exception
     class name and ``message`` its one line, and the figures are ``None``.
-    ``mu_upper`` / ``mu_lower`` are the synthesis certificate's peak bounds
-    (the analysis' when it ran); ``certified`` is ``mu_upper < 1`` (and the
-    bound verified between the grid points below 1 when it was checked) with a
-    nominally stable loop.  ``validation`` is the nonlinear simulation's
+    ``status`` is the controller's :class:`~polyrob.analysis.certificate.Certificate`
+    status on the robot's problem (the analysis' certificate when it ran, the
+    design's otherwise: the same call), ``verdict`` its line; ``mu_upper`` is
+    the bound that status rests on, ``mu_lower`` the lower bound.  ``validation`` is the nonlinear simulation's
     verdict line when it ran (``None`` otherwise).  ``reason`` says, for a
     robot left without a certificate, what stands in the way: the
     performance limit of its unstable poles at the weights used
@@ -189,7 +189,7 @@ class RobotResult:
     enclosure: str | None = None
     mu_upper: float | None = None
     mu_lower: float | None = None
-    certified: bool | None = None
+    status: str | None = None
     order: int | None = None
     alpha: float | None = None
     verdict: str | None = None
@@ -201,6 +201,13 @@ class RobotResult:
     certificate: dict = field(default_factory=dict)
     problem: dict = field(default_factory=dict)
     details: dict = field(default_factory=dict)
+
+    @property
+    def certified(self) -> bool:
+        """The status is CERTIFIED (read, not decided, here)."""
+        from polyrob.analysis.certificate import Status
+
+        return self.status is not None and Status(self.status).certified
 
     def controller_system(self):
         """The controller as a python-control system (``None`` for a failed job)."""
@@ -221,7 +228,7 @@ class RobotResult:
             "enclosure",
             "mu_upper",
             "mu_lower",
-            "certified",
+            "status",
             "order",
             "alpha",
             "verdict",
@@ -229,6 +236,7 @@ class RobotResult:
             "reason",
         )
         out = {k: getattr(self, k) for k in keys}
+        out["certified"] = self.certified
         out["seconds"] = round(float(self.seconds), 2)
         out["timings"] = {k: round(float(v), 2) for k, v in self.timings.items()}
         return out
@@ -316,7 +324,7 @@ def run_job(job: Job, settings: Settings) -> RobotResult:
 
 
 def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
-    from polyrob.pipeline import analyze_controller, verdict
+    from polyrob.pipeline import analyze_controller
 
     problem = _problem(job, settings, timings)
     details = {}
@@ -331,9 +339,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
     design = reduce_stage(problem, design, settings, timings, details)
     description = problem.description()
     description["job"] = job.to_dict()
-    mu_upper, mu_lower, stable = design.peak_mu, design.peak_mu_lower, True
-    everywhere = getattr(design, "peak_mu_everywhere", None)  # verified between the grid points
-    line = verdict(mu_upper, mu_lower, covers=problem.covers(), everywhere=everywhere)
+    cert = design.certificate
     details["synthesis"] = design.summary()
     if skipped:
         details["bandwidth_search"] = "bandwidth search skipped: " + skipped
@@ -348,9 +354,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         )
         timings["analysis"] = time.perf_counter() - t1
         details["analysis"] = a.summary()
-        rp = a.robust_performance
-        mu_upper, mu_lower, stable = float(rp.mu_upper), float(rp.mu_lower), bool(a.robust_stability.nominally_stable)
-        everywhere, line = rp.everywhere, a.verdict
+        cert = a.certificate  # the same call as the design's certificate, with the analysis' grid option
     validation = None
     if settings.validate:
         t1 = time.perf_counter()
@@ -362,8 +366,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         except Exception as exc:  # noqa: BLE001 - recorded: a failed simulation is a finding about this robot
             validation = f"simulation failed: {type(exc).__name__}: {one_line(exc)}"
         timings["validation"] = time.perf_counter() - t1
-    certified = bool(stable and mu_upper < 1 and (everywhere is None or everywhere < 1))
-    reason = None if certified else why_not_certified(problem, details)
+    reason = None if cert.certified else why_not_certified(problem, details)
     if reason and skipped:
         reason = f"{reason} (bandwidth search skipped)"
     K = controller_data(design.controller)
@@ -376,18 +379,18 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         parameters=int(problem.unc.n_params),
         model=problem.model,
         enclosure=problem.pldi.enclosure,
-        mu_upper=float(mu_upper),
-        mu_lower=float(mu_lower),
-        certified=certified,
-        order=int(design.certificate.get("order", design.result.order)),
+        mu_upper=float(cert.bound),
+        mu_lower=float(cert.mu_lower),
+        status=cert.status.value,
+        order=int(design.record.get("order", design.result.order)),
         alpha=alpha,
-        verdict=line,
+        verdict="verdict: " + cert.verdict,
         validation=validation,
         reason=reason,
         seconds=time.perf_counter() - t0,
         timings=timings,
         controller=K,
-        certificate=dict(design.certificate),
+        certificate=dict(design.record, certificate=cert.summary()),
         problem=description,
         details=details,
     )

@@ -92,7 +92,7 @@ def write_robot(out_dir, result) -> dict:
 def _status(row: dict) -> str:
     if not row["ok"]:
         return f"FAILED: {row['error']}: {row['message']}"
-    return "certified (mu < 1)" if row.get("certified") else "not certified"
+    return str(row.get("status") or "-")
 
 
 def _cell(value) -> str:

@@ -68,14 +68,14 @@ def design_stage(problem, settings, timings: dict, details: dict):
 
 
 def reduce_stage(problem, design, settings, timings: dict, details: dict):
-    """A certified full-order controller, reduced while μ stays below 1 (else the design as it is)."""
+    """A certified full-order controller, reduced while its certificate stays CERTIFIED (else the design as it is)."""
     from polyrob.pipeline import reduce_design
 
-    full = design.reduced is None and str(design.certificate.get("structure", "full")) == "full"
-    if not (settings.reduce_max_order and full and design.peak_mu < 1):
+    full = design.reduced is None and str(design.record.get("structure", "full")) == "full"
+    if not (settings.reduce_max_order and full and design.certificate.certified):
         return design
     t0 = time.perf_counter()
-    target = min(0.999, 1.05 * design.peak_mu)
+    target = min(0.999, 1.05 * design.certificate.bound)
     try:
         reduced = reduce_design(problem, design, settings.reduce_max_order, target=target)
     except SynthesisError as exc:  # e.g. more unstable controller poles than the order allowed
@@ -83,7 +83,7 @@ def reduce_stage(problem, design, settings, timings: dict, details: dict):
     else:
         why = f"no order up to {settings.reduce_max_order} keeps mu < 1"
     timings["reduction"] = time.perf_counter() - t0
-    if reduced is not None and reduced.reduced.meets_target and (reduced.peak_mu_everywhere or 0.0) < 1:
+    if reduced is not None and reduced.reduced.meets_target and reduced.certificate.certified:
         return reduced
     details["reduction"] = f"kept order {design.result.order}: {why}"
     return design

@@ -2,11 +2,11 @@
 
 :func:`build_problem` (robot, domain, weights -> PLDI -> uncertain plant ->
 generalized plant), :func:`design_controller` (μ-synthesis, reduction),
-:func:`analyze_controller` (μ analysis and one :func:`verdict`), and
+:func:`analyze_controller` (μ analysis and the certificate's verdict), and
 :func:`check_controller_problem` (is a controller file made for this problem?).
 """
 
-from polyrob.pipeline.analysis import ControllerAnalysis, analyze_controller, controller_order, frequency_grid, verdict
+from polyrob.pipeline.analysis import ControllerAnalysis, analyze_controller, controller_order, frequency_grid
 from polyrob.pipeline.design import Design, design_controller, design_max_bandwidth, reduce_design, synthesis_options
 from polyrob.pipeline.matching import check_controller_problem, controller_differences
 from polyrob.pipeline.problem import (
@@ -30,7 +30,6 @@ __all__ = [
     "analyze_controller",
     "controller_order",
     "frequency_grid",
-    "verdict",
     "Design",
     "design_controller",
     "reduce_design",

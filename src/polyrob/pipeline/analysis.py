@@ -1,15 +1,8 @@
 """A controller judged on a problem: nominal and robust stability/performance, sampling, one verdict.
 
-``polyrob analyze`` and ``polyrob run`` call :func:`analyze_controller` and
-print the same :func:`verdict` line; ``polyrob synth`` prints the verdict of
-the synthesis certificate with the same words.
-
-Examples
---------
->>> verdict(0.8, 0.79, covers="the box")
-'verdict: robust performance CERTIFIED (peak mu upper bound 0.8 < 1 on the frequency grid) for the box'
->>> verdict(2.23, 2.22, covers="the box").split(";")[0]
-'verdict: robust performance VIOLATED (mu lower bound 2.22 >= 1: some parameters in the set break it) for the box'
+``polyrob analyze`` and ``polyrob run`` call :func:`analyze_controller`; its
+verdict is the robust-performance :class:`~polyrob.analysis.certificate.Certificate`'s
+(status decided in :mod:`polyrob.analysis.certificate`, nowhere else).
 """
 
 from __future__ import annotations
@@ -18,66 +11,14 @@ from dataclasses import dataclass
 
 from polyrob.errors import ArgumentError
 
-__all__ = ["ControllerAnalysis", "analyze_controller", "verdict", "frequency_grid", "controller_order", "NEXT_STEPS"]
+__all__ = ["ControllerAnalysis", "analyze_controller", "frequency_grid", "controller_order", "NEXT_STEPS"]
 
 #: What to try when robust performance is not certified.
 NEXT_STEPS = (
     "try: other performance targets (--bandwidth-scale; `polyrob synth --max-bandwidth` finds the largest "
-    "bandwidth factor with mu < 1, and the performance limit that synth prints says below which no controller "
-    "can reach it), a smaller domain (--qdot-max, --u-max, --q-range), or a tighter uncertainty model "
-    "(--uncertainty)"
+    "bandwidth factor with a certificate), a smaller domain (--qdot-max, --u-max, --q-range), or a tighter "
+    "uncertainty model (--uncertainty)"
 )
-
-
-def verdict(
-    mu_upper: float,
-    mu_lower: float,
-    *,
-    nominally_stable: bool = True,
-    covers: str = "",
-    failed=(),
-    everywhere: float | None = None,
-) -> str:
-    """One plain line: the robust-performance verdict, what it covers, what to try next when it fails.
-
-    ``failed`` are the analysis' own reasons not to certify (e.g. the loop at
-    ``Δ = 0`` not proved stable); with any, μ < 1 certifies nothing.
-    ``everywhere`` is a μ bound verified at every frequency
-    (:attr:`polyrob.analysis.mu.results.MuBoundsResult.upper_everywhere`), if any.
-    """
-    where = f" for {covers}" if covers else ""
-    if not nominally_stable:
-        return (
-            "verdict: NOT certified: the nominal closed loop is unstable, so mu certifies nothing; "
-            "try another controller (e.g. `polyrob synth`)"
-        )
-    blocking = [f for f in failed if "mu upper bound" not in f]
-    if mu_upper < 1 and blocking:
-        return (
-            f"verdict: robust performance NOT certified although mu < 1 ({'; '.join(blocking)}){where}; "
-            "try another controller (e.g. `polyrob synth`)"
-        )
-    if everywhere is not None and mu_upper < 1 <= everywhere:
-        return (
-            f"verdict: robust performance NOT certified: mu < 1 on the frequency grid ({mu_upper:.4g}) but up to "
-            f"{everywhere:.4g} between its points{where}; {NEXT_STEPS}"
-        )
-    if everywhere is not None and everywhere < 1:
-        return (
-            f"verdict: robust performance CERTIFIED (mu upper bound {everywhere:.4g} < 1 at every frequency; "
-            f"peak {mu_upper:.4g} on the grid){where}"
-        )
-    if mu_upper < 1:
-        return f"verdict: robust performance CERTIFIED (peak mu upper bound {mu_upper:.4g} < 1 on the frequency grid){where}"
-    if mu_lower >= 1:
-        return (
-            f"verdict: robust performance VIOLATED (mu lower bound {mu_lower:.4g} >= 1: some parameters "
-            f"in the set break it){where}; {NEXT_STEPS}"
-        )
-    return (
-        f"verdict: robust performance NOT certified (mu in [{mu_lower:.4g}, {mu_upper:.4g}] straddles 1){where}; "
-        f"{NEXT_STEPS}"
-    )
 
 
 def frequency_grid(lo: float, hi: float, n: int):
@@ -136,30 +77,18 @@ class ControllerAnalysis:
     time_varying: object = None
 
     @property
-    def verdict(self) -> str:
-        rp = self.robust_performance
-        return verdict(
-            rp.mu_upper,
-            rp.mu_lower,
-            nominally_stable=self.robust_stability.nominally_stable,
-            covers=self.covers,
-            failed=tuple(getattr(rp, "failed", ())),
-            everywhere=getattr(rp.mu, "upper_everywhere", None),
-        )
+    def certificate(self):
+        """The robust-performance certificate: the verdict of the analysis."""
+        return self.robust_performance.certificate
 
-    @staticmethod
-    def status(r) -> str:
-        """``certified`` / ``violated`` / ``not certified`` for one robustness result."""
-        if not r.nominally_stable:
-            return "not certified (nominally unstable)"
-        if r.mu_lower >= 1:
-            return "violated"
-        return "certified" if getattr(r, "robust", r.mu_upper < 1) and r.mu_upper < 1 else "not certified"
+    @property
+    def verdict(self) -> str:
+        """The one verdict line (the certificate's)."""
+        return "verdict: " + self.certificate.verdict
 
     def summary(self) -> dict:
         s = self.sampling
         rs, rp = self.robust_stability.summary(), self.robust_performance.summary()
-        rs["status"], rp["status"] = self.status(self.robust_stability), self.status(self.robust_performance)
         return {
             "controller_order": self.order,
             "nominal_stability": bool(self.robust_stability.nominally_stable),
@@ -173,6 +102,8 @@ class ControllerAnalysis:
                 "max_pole_real_part": float(s.worst_abscissa),
             },
             "covers": self.covers,
+            "status": self.certificate.status.value,
+            "certified": self.certificate.certified,
             "verdict": self.verdict,
             "time_varying": None if self.time_varying is None else self.time_varying.summary(),
         }
@@ -211,14 +142,12 @@ def analyze_controller(
     if int(mc) < 1:
         raise ArgumentError(f"Monte Carlo samples must be >= 1, got {mc}")
     _check_sizes(problem, K)
-    options = {"progress": progress}
+    options = {"progress": progress, "scope": problem.scope()}
     rs = robstab(problem.P, K, omega, **options)
     rp = robperf(problem.P, K, omega, **options)
     npf = nominal_performance(problem.P, K)
     sampling = sample_stability(problem.unc, K, n=int(mc), seed=seed)
-    covers = getattr(rp, "covers", None)  # the analysis' own wording when it provides one
-    covers = covers() if callable(covers) else covers
-    covers = covers or problem.covers()
+    covers = rp.certificate.scope.sentence()
     tv = None
     if time_varying:
         from polyrob.pipeline.time_varying import time_varying_certificate

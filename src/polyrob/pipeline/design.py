@@ -7,11 +7,11 @@ the controller with the certificate a controller file stores.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from polyrob.errors import ArgumentError
 
-__all__ = ["Design", "design_controller", "design_max_bandwidth", "reduce_design", "synthesis_options"]
+__all__ = ["Design", "certify_design", "scaled_problem", "design_controller", "design_max_bandwidth", "reduce_design", "synthesis_options"]
 
 
 def synthesis_options(
@@ -52,7 +52,7 @@ def synthesis_options(
     return options
 
 
-def _certificate(result, P) -> dict:
+def _record(result, P) -> dict:
     import numpy as np
 
     cert = result.summary()
@@ -71,33 +71,44 @@ class Design:
     result : MusynResult
         The synthesis.
     reduced : ReductionResult or None
-    certificate : dict
-        What the controller file stores (peak μ bounds, structure, order...).
+    record : dict
+        What the controller file stores (peak μ bounds, structure, order,
+        and the certificate's summary).
+    certificate : Certificate or None
+        The certificate of :attr:`controller` on the problem, on the loop's
+        own grid (:func:`polyrob.analysis.certificate.certify_loop`, the
+        same call as ``polyrob analyze``); ``None`` when the caller certifies
+        it itself (``run``'s analysis).
     notes : tuple of str
     """
 
     controller: object
     result: object
     reduced: object
-    certificate: dict
+    record: dict
+    certificate: object = None
     notes: tuple = ()
 
     @property
     def peak_mu(self) -> float:
-        return float(self.certificate["peak_mu_upper"])
+        return float(self.record["peak_mu_upper"])
 
     @property
     def peak_mu_lower(self) -> float:
-        return float(self.certificate["peak_mu_lower"])
+        return float(self.record["peak_mu_lower"])
 
     @property
     def peak_mu_everywhere(self) -> float | None:
         """The μ bound verified at every frequency for :attr:`controller` (``None`` if not verified)."""
-        source = self.reduced if self.reduced is not None else self.result
-        return getattr(getattr(source, "certificate", None), "upper_everywhere", None)
+        return getattr(getattr(self.certificate, "mu", None), "upper_everywhere", None)
+
+    def certified_by(self, certificate) -> Design:
+        """The design with ``certificate`` (of :attr:`controller` on the problem) as its verdict."""
+        record = dict(self.record, certificate=certificate.summary(), status=certificate.status.value)
+        return replace(self, certificate=certificate, record=record)
 
     def summary(self) -> dict:
-        out = dict(self.certificate)
+        out = dict(self.record)
         out["gamma_history"] = [float(g) for g in self.result.gamma_history]
         if self.reduced is not None:
             out["reduction"] = self.reduced.summary()
@@ -105,7 +116,16 @@ class Design:
         return out
 
 
-def design_controller(problem, *, reduce: bool = False, reduce_max_order: int = 20, **options) -> Design:
+def certify_design(problem, design: Design) -> Design:
+    """The design with the certificate of its controller on ``problem`` (the analysis' own call)."""
+    from polyrob.analysis.certificate import certify_loop
+
+    return design.certified_by(certify_loop(problem.P, design.controller, scope=problem.scope()))
+
+
+def design_controller(
+    problem, *, reduce: bool = False, reduce_max_order: int = 20, certify: bool = True, **options
+) -> Design:
     """μ-synthesis on ``problem.P`` (``options`` as from :func:`synthesis_options`), then reduction.
 
     Parameters
@@ -115,6 +135,9 @@ def design_controller(problem, *, reduce: bool = False, reduce_max_order: int = 
         Balanced reduction of a full-order controller (ignored for fixed structures).
     reduce_max_order : int
         Largest order accepted by the reduction (>= 1).
+    certify : bool
+        Certify the final controller (:func:`certify_design`); ``run`` leaves it
+        to its analysis, which makes the same call.
     **options
         Passed to :func:`polyrob.synthesis.mu_synthesis.musyn`.
     """
@@ -123,15 +146,16 @@ def design_controller(problem, *, reduce: bool = False, reduce_max_order: int = 
     if reduce and reduce_max_order < 1:
         raise ArgumentError(f"reduce_max_order must be >= 1, got {reduce_max_order}")
     result = musyn(problem.P, **options)
-    cert = _certificate(result, problem.P)
     notes = tuple(result.info.get("notes", [])) if isinstance(result.info, dict) else ()
-    design = Design(controller=result.controller, result=result, reduced=None, certificate=cert, notes=notes)
+    design = Design(controller=result.controller, result=result, reduced=None, record=_record(result, problem.P), notes=notes)
     if reduce and options.get("structure", "full") == "full":
-        design = reduce_design(problem, design, reduce_max_order)
-    return design
+        design = reduce_design(problem, design, reduce_max_order, certify=False)
+    return certify_design(problem, design) if certify else design
 
 
-def reduce_design(problem, design: Design, max_order: int = 20, *, target: float | None = None) -> Design:
+def reduce_design(
+    problem, design: Design, max_order: int = 20, *, target: float | None = None, certify: bool = True
+) -> Design:
     """The design with its full-order controller reduced (balanced truncation, certified per order).
 
     ``target``: the largest certified μ accepted (default the full order's
@@ -141,7 +165,7 @@ def reduce_design(problem, design: Design, max_order: int = 20, *, target: float
 
     result = design.result
     reduced = reduce_controller(problem.P, result, max_order=max_order, target=target)
-    cert = dict(design.certificate)
+    cert = dict(design.record)
     cert.update(
         structure=f"reduced:{reduced.order}",
         order=int(reduced.order),
@@ -150,7 +174,8 @@ def reduce_design(problem, design: Design, max_order: int = 20, *, target: float
         full_order=int(result.order),
         full_peak_mu_upper=float(result.peak_mu),
     )
-    return Design(controller=reduced.controller, result=result, reduced=reduced, certificate=cert, notes=design.notes)
+    design = Design(controller=reduced.controller, result=result, reduced=reduced, record=cert, notes=design.notes)
+    return certify_design(problem, design) if certify else design
 
 
 def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None, limit=True, **options):
@@ -178,4 +203,14 @@ def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None,
     cert = res.result.summary()
     cert.update(bandwidth_scaling=res.summary())
     notes = tuple(res.result.info.get("notes", [])) if isinstance(res.result.info, dict) else ()
-    return Design(controller=res.result.controller, result=res.result, reduced=None, certificate=cert, notes=notes), res
+    design = Design(controller=res.result.controller, result=res.result, reduced=None, record=cert, notes=notes)
+    return certify_design(scaled_problem(problem, res.hyperparameters), design), res
+
+
+def scaled_problem(problem, hyperparameters: dict):
+    """``problem`` with other weight hyperparameters (same PLDI and model): where a bandwidth factor's controller is certified."""
+    from polyrob.plant.generalized import generalized_plant
+    from polyrob.plant.weights import paper_weights
+
+    h = {k: tuple(v) for k, v in hyperparameters.items()}
+    return replace(problem, P=generalized_plant(problem.unc, *paper_weights(h)), hyperparameters=h)

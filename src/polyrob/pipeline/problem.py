@@ -158,6 +158,36 @@ class Problem:
             "parameters": int(self.unc.n_params),
         }
 
+    def scope(self, variation: str | None = None):
+        """What a certificate on this problem covers (:class:`~polyrob.analysis.certificate.Scope`).
+
+        The enclosure is the weakest of the PLDI's and the uncertainty
+        model's own inputs (an ``axes`` model's ranges are sampled, whatever
+        the PLDI); the model's coverage is the one measured when it was built
+        (``None``: not checked).
+        """
+        import math
+
+        from polyrob.analysis.certificate import FROZEN, Scope, weakest_enclosure
+
+        info = getattr(self.unc, "info", None) or {}
+        model_enclosure = info.get("enclosure", self.pldi.enclosure)
+        if self.model == "axes":
+            model_enclosure = "sampled"  # its directional ranges come from a sampled extreme search
+        enclosure = weakest_enclosure(self.pldi.enclosure, model_enclosure, info.get("N_enclosure", model_enclosure))
+        coverage = getattr(self.unc, "coverage", float("nan"))
+        points = int(getattr(self.unc, "coverage_points", 0) or 0)
+        checked = coverage is not None and not math.isnan(float(coverage)) and points > 0
+        return Scope(
+            variation=variation or FROZEN,
+            model=self.model,
+            coverage=float(coverage) if checked else None,
+            coverage_points=points if checked else 0,
+            enclosure=enclosure,
+            domain=str(self.domain.name),
+            robot=str(self.robot.name),
+        )
+
     def covers(self) -> str:
         """Plain words for what a μ verdict on this problem covers."""
         enclosure = (
