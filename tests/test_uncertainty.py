@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 
 from polyrob.analysis.mu.blocks import BlockStructure
-from polyrob.errors import BoundsError, PolyrobError
-from polyrob.plant.uncertainty import UncertainPlant, uncertain_plant, upper_lft
+from polyrob.errors import ArgumentError, BoundsError, PolyrobError
+from polyrob.plant.coverage import model_contains
+from polyrob.plant.models import MODELS, UncertaintyModel, model_of
+from polyrob.plant.uncertainty import CHOICES, UncertainPlant, uncertain_plant, upper_lft
 
 PAPER_ENTRIES = ("a32", "a33", "a34", "a42", "a43", "a44", "b31", "b32", "b41", "b42")
 
@@ -203,3 +205,85 @@ def test_input_definiteness_holds_on_the_paper_models_and_fails_on_a_widened_box
     wide = dataclasses.replace(unc, channel_lower=lo, channel_upper=hi)
     bad = input_definiteness(wide, 400)
     assert bad["fraction"] > 0.5 and bad["least"] < 0.0
+
+
+# ---------------------------------------------------------------- the models' interface
+@pytest.fixture(scope="module")
+def built(pldi):
+    """Every registered model built on the paper_2r PLDI through its own ``build``."""
+    return {name: model.build(pldi) for name, model in MODELS.items()}
+
+
+def _building_jacobians(pldi, n=300):
+    """The Jacobians the PLDI was built from: the nominal pair, each bound's witness, and fresh domain points."""
+    robot = pldi.robot
+    m = pldi.m
+    pts = np.vstack([pldi.witness_lower, pldi.witness_upper])
+    A, B = robot.jacobians_batch(pts[:, :m], pts[:, m : 2 * m], pts[:, 2 * m :])
+    q, qd, u = pldi.domain.sample(n, method="uniform", seed=11)
+    A2, B2 = robot.jacobians_batch(q, qd, u)
+    return np.concatenate([[pldi.A0], A, A2]), np.concatenate([[pldi.B0], B, B2])
+
+
+def test_every_model_contains_the_jacobians_it_was_built_from(pldi, built):
+    assert list(MODELS) == ["box", "axes", "lft", "lft-torque"]
+    A, B = _building_jacobians(pldi)
+    for name, unc in built.items():
+        model = model_of(unc)
+        assert isinstance(model, UncertaintyModel) and model is MODELS[name] and model.name == unc.model == name
+        inside = model.contains(unc, A, B)
+        assert inside.shape == (len(A),) and inside.dtype == bool and inside.all(), name
+        np.testing.assert_array_equal(model_contains(unc, A, B), inside)
+        # and not everything: a B far outside the robot's is refused by every model
+        assert not model.contains(unc, A[:1], 3.0 * B[:1]).any(), name
+
+
+def test_each_model_describes_its_set_in_one_sentence(built):
+    for name, unc in built.items():
+        text = model_of(unc).describe(unc)
+        assert text.startswith(f"{name}: ") and text.endswith(".") and "\n" not in text
+        assert "sampled enclosure" in text
+    assert "interval box" in model_of(built["box"]).describe(built["box"])
+    assert "N = M(q) A_low" in model_of(built["lft-torque"]).describe(built["lft-torque"])
+
+
+def test_enclosure_is_the_weakest_of_the_inputs(pldi, built):
+    """axes is sampled even on a certified PLDI (its ranges are sampled supports); lft-torque as weak as N's PLDI."""
+    assert pldi.enclosure == "sampled"
+    for unc in built.values():
+        assert model_of(unc).enclosure(unc) == unc.info["enclosure"] == "sampled"
+    assert built["axes"].info["enclosure_inputs"] == {"PLDI": "sampled", "directions": "sampled"}
+    assert built["lft-torque"].info["enclosure_inputs"] == {"PLDI": "sampled", "N PLDI": "sampled"}
+    # the same bounds labelled certified: only the models built on nothing else follow
+    proved = dataclasses.replace(pldi, enclosure="certified")
+    expected = {"box": "certified", "lft": "certified", "axes": "sampled", "lft-torque": "sampled"}
+    for name, model in MODELS.items():
+        unc = model.build(proved)
+        assert model.enclosure(unc) == unc.info["enclosure"] == expected[name], name
+
+
+def test_unknown_models_give_clear_errors(pldi, unc):
+    assert CHOICES == ("auto", "box", "axes", "lft", "lft-torque")
+    msg = "unknown uncertainty model 'cube': use one of auto, box, axes, lft, lft-torque"
+    with pytest.raises(ArgumentError, match=msg):
+        uncertain_plant(pldi, model="cube")
+    cube = dataclasses.replace(unc, model="cube")
+    with pytest.raises(PolyrobError, match="unknown uncertainty model 'cube' of the plant"):
+        model_of(cube)
+    with pytest.raises(PolyrobError, match="no membership test for the model 'cube'"):
+        model_contains(cube, np.zeros((1, 4, 4)), np.zeros((1, 4, 2)))
+    with pytest.raises(ArgumentError, match="merge_symmetric applies to model='box' only"):
+        uncertain_plant(pldi, model="axes", merge_symmetric=True)
+    with pytest.raises(ArgumentError, match="n_directions and residual_tol apply to model='axes' only"):
+        uncertain_plant(pldi, model="lft", residual_tol=0.2)
+
+
+def test_uncertain_plant_builds_through_the_registry(pldi, built):
+    """uncertain_plant = the model's build plus the coverage figures; auto resolves to one registered model."""
+    for name in ("box", "axes"):
+        unc = uncertain_plant(pldi, model=name, coverage=200, volume_samples=0)
+        assert unc.coverage == 1.0 and model_of(unc).name == name
+        np.testing.assert_array_equal(unc.B_d, built[name].B_d)
+    auto = uncertain_plant(pldi, coverage=0, volume_samples=0)
+    assert auto.model == "lft" and auto.info["auto"].startswith("lft: ")
+    np.testing.assert_array_equal(auto.B_d, built["lft"].B_d)

@@ -20,6 +20,10 @@ Each retained direction moves a rank-``rank(b_j)`` matrix (both lower rows of
 entries it couples move together, as the real arm's do.  ``n_directions``
 is chosen as the smallest ``r`` whose residual gain falls below
 ``residual_tol`` of the total spread, or given by hand.
+
+The directions' ranges are sampled support values even when the PLDI's
+intervals are certified, so the model's ``info["enclosure"]`` is
+``"sampled"`` always (``info["enclosure_inputs"]`` keeps the PLDI's).
 """
 
 from __future__ import annotations
@@ -229,8 +233,11 @@ def axes_plant(
         nominal_delta=np.zeros(r),
         offset=np.zeros(r),
         block_structure=np.array(blk, int).reshape(-1, 2),
+        # the directions' ranges are the PLDI's sampled support values (and the residual's
+        # LPs run over its polytope of sampled half-spaces), certified intervals or not
         info={
-            "enclosure": pldi.enclosure,
+            "enclosure": "sampled",
+            "enclosure_inputs": {"PLDI": pldi.enclosure, "directions": "sampled"},
             "n_directions": r,
             "searched_directions": n_pc,
             "residual_gain": float(np.linalg.norm(rho / norm_unit)),

@@ -63,7 +63,7 @@ from __future__ import annotations
 import numpy as np
 
 from polyrob.errors import BoundsError, PolyrobError
-from polyrob.plant.lftplant import UncertainPlant
+from polyrob.plant.lftplant import UncertainPlant, weakest_enclosure
 
 __all__ = ["box_plant", "box_contains", "SYMMETRY_RTOL"]
 
@@ -229,7 +229,11 @@ def box_plant(pldi, *, nominal: str = "pldi", merge_symmetric: bool = False) -> 
         offset=mid[first] - nom[first],
         block_structure=blk,
         merged=tuple((names[k1], names[k2]) for k1, k2 in pairs),
-        info={"enclosure": getattr(pldi, "enclosure", None)},
+        # the box is the PLDI's intervals: exactly as proved as they are
+        info={
+            "enclosure": weakest_enclosure(getattr(pldi, "enclosure", None)),
+            "enclosure_inputs": {"PLDI": getattr(pldi, "enclosure", None)},
+        },
         model="box",
     )
 

@@ -22,25 +22,19 @@ import numpy as np
 
 from polyrob.errors import PolyrobError
 from polyrob.plant.lftplant import UncertainPlant
+from polyrob.plant.models import MODELS
 
 __all__ = ["model_contains", "coverage_fraction", "volume_ratio", "det_b_range", "input_definiteness"]
 
 
 def model_contains(unc: UncertainPlant, A, B) -> np.ndarray:
-    """Whether Jacobians ``A`` (n, 2m, 2m), ``B`` (n, 2m, m) lie in the model's set (n,) bool."""
-    if unc.model == "box":
-        from polyrob.plant.box import box_contains
+    """Whether Jacobians ``A`` (n, 2m, 2m), ``B`` (n, 2m, m) lie in the model's set (n,) bool.
 
-        return box_contains(unc, A, B)
-    if unc.model in ("lft", "lft-torque"):
-        from polyrob.plant.inertia_lft import inertia_lft_contains
-
-        return inertia_lft_contains(unc, A, B)
-    if unc.model == "axes":
-        from polyrob.plant.axes import axes_contains
-
-        return axes_contains(unc, A, B)
-    raise PolyrobError(f"no membership test for the model '{unc.model}'")
+    The test of the model that built ``unc`` (:func:`polyrob.plant.models.model_of`).
+    """
+    if unc.model not in MODELS:
+        raise PolyrobError(f"no membership test for the model '{unc.model}'")
+    return MODELS[unc.model].contains(unc, A, B)
 
 
 def coverage_fraction(unc: UncertainPlant, robot, domain, n: int = 2000, *, seed: int = 12345) -> float:

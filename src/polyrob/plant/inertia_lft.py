@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from polyrob.errors import NotApplicable, PolyrobError
-from polyrob.plant.lftplant import UncertainPlant
+from polyrob.plant.lftplant import UncertainPlant, weakest_enclosure
 
 __all__ = ["inertia_lft_plant", "inertia_lft_contains", "affine_inertia", "NotApplicable", "AFFINE_RTOL"]
 
@@ -253,6 +253,7 @@ def inertia_lft_plant(
     ch_param = np.concatenate([np.arange(k), np.repeat(k + np.arange(len(facs)), [Uf.shape[1] for Uf, _ in facs])])
     ch_names = n_names + tuple(f"{names[p - k]}@{i}" for i, p in enumerate(ch_param[k:]))
     blk = [[-1, 0]] * k + [[-Uf.shape[1], 0] for Uf, _ in facs]
+    inputs = {"PLDI": pldi.enclosure, **({"N PLDI": npldi.enclosure} if torque else {})}
     plant = UncertainPlant(
         robot_name=pldi.robot_name,
         nominal_kind=nominal,
@@ -276,7 +277,8 @@ def inertia_lft_plant(
         offset=np.zeros(len(par_names)),
         block_structure=np.array(blk, int).reshape(-1, 2),
         info={
-            "enclosure": pldi.enclosure,
+            "enclosure": weakest_enclosure(*inputs.values()),
+            "enclosure_inputs": inputs,
             "N_enclosure": npldi.enclosure,
             "M0": M0,
             "Mf": Mf,

@@ -24,10 +24,15 @@ import numpy as np
 
 from polyrob.errors import PolyrobError
 
-__all__ = ["UncertainPlant", "upper_lft", "MAX_CORNERS", "static_upper_lft"]
+__all__ = ["UncertainPlant", "upper_lft", "MAX_CORNERS", "static_upper_lft", "weakest_enclosure"]
 
 #: Default cap on the number of corners :meth:`UncertainPlant.corners` enumerates.
 MAX_CORNERS = 1024
+
+
+def weakest_enclosure(*levels) -> str:
+    """``"certified"`` if every level is ``"certified"``, else ``"sampled"`` (a missing level is sampled)."""
+    return "certified" if levels and all(level == "certified" for level in levels) else "sampled"
 
 
 def static_upper_lft(A, B1, B2, C1, D11, D12, Delta):

@@ -23,8 +23,16 @@ these models of the set of Jacobians (docs/uncertainty.md):
     parameters and ``A`` moves with the inertia, but the product can leave
     the entries' intervals.
 ``"auto"`` (default)
-    ``lft`` where it applies, else ``axes``; the choice and its reason are
-    in ``info["auto"]``.
+    ``lft`` where it applies, else ``axes`` (:data:`AUTO`); the choice and
+    its reason are in ``info["auto"]``.
+
+Each model is one class of :mod:`polyrob.plant.models`, registered in
+:data:`MODELS` (name to instance; ``"auto"`` is a choice of
+:func:`uncertain_plant`, not a model).  ``model_of(unc)`` is the model that
+built a plant: ``model_of(unc).contains(unc, A, B)``,
+``model_of(unc).describe(unc)`` (what set it is) and
+``model_of(unc).enclosure(unc)`` (``"sampled"`` or ``"certified"``, the
+weakest of its inputs: ``axes`` is sampled even on a certified PLDI).
 
 Every result carries its ``coverage`` (fraction of fresh domain samples whose
 Jacobians it contains; must be 1.0) and ``volume_ratio`` (its size over the
@@ -33,7 +41,7 @@ PLDI polytope's, :func:`polyrob.plant.coverage.volume_ratio`).
 Examples
 --------
 >>> import polyrob
->>> from polyrob.plant.uncertainty import uncertain_plant
+>>> from polyrob.plant.uncertainty import model_of, uncertain_plant
 >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
 >>> box = uncertain_plant(pldi, model="box")
 >>> box.n_params, box.coverage
@@ -41,28 +49,53 @@ Examples
 >>> tight = uncertain_plant(pldi)
 >>> tight.model, tight.parameter_names[-2:], tight.coverage
 ('lft', ('cos(q2)#1', 'cos(q2)#2'), 1.0)
+>>> model_of(tight).enclosure(tight), model_of(box).name
+('sampled', 'box')
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from polyrob.errors import ArgumentError
-from polyrob.plant.box import SYMMETRY_RTOL, box_plant
+from polyrob.errors import ArgumentError, NotApplicable
+from polyrob.plant.box import SYMMETRY_RTOL
 from polyrob.plant.lftplant import MAX_CORNERS, UncertainPlant, upper_lft
+from polyrob.plant.models import MODELS, UncertaintyModel, model_of
 
 __all__ = [
     "UncertainPlant",
     "uncertain_plant",
     "upper_lft",
     "MODELS",
+    "CHOICES",
+    "AUTO",
+    "model_of",
     "describe",
     "MAX_CORNERS",
     "SYMMETRY_RTOL",
 ]
 
-#: The uncertainty models :func:`uncertain_plant` builds.
-MODELS = ("auto", "box", "axes", "lft", "lft-torque")
+#: ``model="auto"`` builds the first of these models that applies (the last always does).
+AUTO = ("lft", "axes")
+
+#: The choices of :func:`uncertain_plant`: ``"auto"`` and every registered model.
+CHOICES = ("auto", *MODELS)
+
+
+def _build(chosen: UncertaintyModel, pldi, options: dict) -> UncertainPlant:
+    """``chosen.build`` with the options it takes."""
+    return chosen.build(pldi, **{key: v for key, v in options.items() if key in chosen.options})
+
+
+def _auto(pldi, options: dict) -> tuple[UncertainPlant, str]:
+    """The first model of :data:`AUTO` that applies, and why it was taken."""
+    reasons = []
+    for name in AUTO[:-1]:
+        try:
+            return _build(MODELS[name], pldi, options), f"{name}: {MODELS[name].applies}"
+        except NotApplicable as exc:
+            reasons.append(str(exc))
+    return _build(MODELS[AUTO[-1]], pldi, options), f"{AUTO[-1]}: {'; '.join(reasons)}"
 
 
 def uncertain_plant(
@@ -110,6 +143,8 @@ def uncertain_plant(
     Returns
     -------
     UncertainPlant
+        ``model_of(unc)`` (:func:`polyrob.plant.models.model_of`) is the model
+        that built it: its ``describe(unc)`` and ``enclosure(unc)``.
 
     Raises
     ------
@@ -118,38 +153,30 @@ def uncertain_plant(
     BoundsError
         Inverted or non-finite intervals.
     """
-    from polyrob.plant.axes import RESIDUAL_TOL, axes_plant
     from polyrob.plant.coverage import coverage_fraction, volume_ratio
-    from polyrob.plant.inertia_lft import NotApplicable, inertia_lft_plant
 
-    if model not in MODELS:
-        raise ArgumentError(f"unknown uncertainty model '{model}': use one of {', '.join(MODELS)}")
-    if merge_symmetric and model != "box":
-        raise ArgumentError("merge_symmetric applies to model='box' only")
-    if (n_directions is not None or residual_tol is not None) and model not in ("axes", "auto"):
-        raise ArgumentError("n_directions and residual_tol apply to model='axes' only")
-    need_robot = model in ("auto", "lft", "lft-torque") or coverage
-    if robot is None and need_robot:
-        robot = pldi.robot
-    note = None
-    if model == "box":
-        unc = box_plant(pldi, nominal=nominal, merge_symmetric=merge_symmetric)
-    elif model in ("lft", "lft-torque", "auto"):
-        a_part = "torque" if model == "lft-torque" else "entries"
-        try:
-            unc = inertia_lft_plant(pldi, robot=robot, nominal=nominal, repeated=repeated, a_part=a_part)
-            note = "lft: the inertia is affine in single-angle cos/sin terms" if model == "auto" else None
-        except NotApplicable as exc:
-            if model != "auto":
-                raise
-            note = f"axes: {exc}"
-            unc = None
-        if unc is None:
-            tol = RESIDUAL_TOL if residual_tol is None else residual_tol
-            unc = axes_plant(pldi, n_directions=n_directions, residual_tol=tol, nominal=nominal)
+    if model not in CHOICES:
+        raise ArgumentError(f"unknown uncertainty model '{model}': use one of {', '.join(CHOICES)}")
+    candidates = [MODELS[name] for name in (AUTO if model == "auto" else (model,))]
+    options = {
+        "nominal": nominal,
+        "merge_symmetric": merge_symmetric,
+        "n_directions": n_directions,
+        "residual_tol": residual_tol,
+        "repeated": repeated,
+        "robot": robot,
+    }
+    taken = {key for c in candidates for key in c.options}
+    for owner in MODELS.values():
+        if any(options[key] != default and key not in taken for key, default in owner.exclusive.items()):
+            verb = "applies" if len(owner.exclusive) == 1 else "apply"
+            raise ArgumentError(f"{' and '.join(owner.exclusive)} {verb} to model='{owner.name}' only")
+    if robot is None and (coverage or any(c.needs_robot for c in candidates)):
+        options["robot"] = robot = pldi.robot
+    if model == "auto":
+        unc, note = _auto(pldi, options)
     else:
-        tol = RESIDUAL_TOL if residual_tol is None else residual_tol
-        unc = axes_plant(pldi, n_directions=n_directions, residual_tol=tol, nominal=nominal)
+        unc, note = _build(candidates[0], pldi, options), None
     figures = {}
     if coverage:
         figures["coverage"] = coverage_fraction(unc, robot, pldi.domain, coverage, seed=seed)

@@ -1,0 +1,230 @@
+"""The uncertainty models: one class each, behind one interface.
+
+Every model of the set of Jacobians is an :class:`UncertaintyModel`:
+
+``name``
+    What :func:`~polyrob.plant.uncertainty.uncertain_plant` calls it and what
+    the plants it builds record in ``unc.model``.
+``build(pldi, **options)``
+    The model's :class:`~polyrob.plant.lftplant.UncertainPlant` (without the
+    coverage and volume figures, which :func:`uncertain_plant` adds).
+``contains(unc, A, B)``
+    Whether Jacobians lie in the plant's set, ``(n,)`` bool.
+``describe(unc)``
+    One sentence: what set the plant is.
+``enclosure(unc)``
+    ``"sampled"`` or ``"certified"``: the weakest of every input the plant
+    was built from (``unc.info["enclosure_inputs"]``).  ``"certified"`` only
+    when the PLDI was certified *and* the model's own ranges were proved:
+    ``axes`` takes its directional ranges from the PLDI's sampled support
+    values, so it is ``"sampled"`` even on a certified PLDI; ``lft-torque``
+    is also as weak as its second PLDI, the one of ``N = M(q) A_low``.
+
+:data:`MODELS` maps each name to its instance and :func:`model_of` finds the
+instance of a built plant.
+
+Examples
+--------
+>>> import polyrob
+>>> from polyrob.plant.models import MODELS, model_of
+>>> list(MODELS)
+['box', 'axes', 'lft', 'lft-torque']
+>>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
+>>> unc = MODELS["axes"].build(pldi)
+>>> model_of(unc).name, model_of(unc).enclosure(unc), unc.info["enclosure_inputs"]
+('axes', 'sampled', {'PLDI': 'sampled', 'directions': 'sampled'})
+>>> print(model_of(unc).describe(unc))  # doctest: +NORMALIZE_WHITESPACE
+axes: an oriented box along 6 principal directions of the Jacobian cloud, with ranges from the PLDI's sampled
+support values, plus a norm-bounded residual block of size 5 (sampled enclosure).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+from polyrob.errors import PolyrobError
+from polyrob.plant.lftplant import UncertainPlant, weakest_enclosure
+
+__all__ = ["UncertaintyModel", "BoxModel", "AxesModel", "InertiaLFTModel", "MODELS", "model_of", "enclosure_inputs"]
+
+
+def enclosure_inputs(unc: UncertainPlant) -> dict[str, str]:
+    """``{input: "sampled" | "certified"}`` of everything the plant was built from.
+
+    Plants built before the inputs were recorded fall back on their
+    ``info["enclosure"]`` (and ``info["N_enclosure"]`` for ``lft-torque``);
+    a missing level counts as ``"sampled"``.
+    """
+    info = unc.info or {}
+    if "enclosure_inputs" in info:
+        return dict(info["enclosure_inputs"])
+    found = {"PLDI": info.get("enclosure") or "sampled"}
+    if "N_enclosure" in info:
+        found["N PLDI"] = info["N_enclosure"] or "sampled"
+    return found
+
+
+class UncertaintyModel(ABC):
+    """One uncertainty model: how a PLDI becomes an uncertain plant, and what set that plant is.
+
+    Attributes
+    ----------
+    name : str
+    options : tuple of str
+        Keywords :meth:`build` takes besides the PLDI.
+    exclusive : dict
+        Options that only this model takes, with their defaults:
+        :func:`~polyrob.plant.uncertainty.uncertain_plant` refuses them, when
+        set, for any other model.
+    needs_robot : bool
+        :meth:`build` evaluates the robot (not only the PLDI).
+    """
+
+    name: str = ""
+    options: tuple[str, ...] = ("nominal",)
+    exclusive: dict = {}
+    needs_robot: bool = False
+
+    @abstractmethod
+    def build(self, pldi, **options) -> UncertainPlant:
+        """The model's uncertain plant of ``pldi`` (no coverage or volume figures)."""
+
+    @abstractmethod
+    def contains(self, unc: UncertainPlant, A, B) -> np.ndarray:
+        """Whether Jacobians ``A`` (n, 2m, 2m), ``B`` (n, 2m, m) lie in the plant's set, (n,) bool."""
+
+    @abstractmethod
+    def describe(self, unc: UncertainPlant) -> str:
+        """One sentence: what set the plant is."""
+
+    def enclosure(self, unc: UncertainPlant) -> str:
+        """``"certified"`` if every input of the plant was proved, else ``"sampled"``."""
+        return weakest_enclosure(*enclosure_inputs(unc).values())
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.name!r})"
+
+
+class BoxModel(UncertaintyModel):
+    """The paper's model: one independent real parameter per varying entry (:mod:`polyrob.plant.box`)."""
+
+    name = "box"
+    options = ("nominal", "merge_symmetric")
+    exclusive = {"merge_symmetric": False}
+
+    def build(self, pldi, *, nominal: str = "pldi", merge_symmetric: bool = False) -> UncertainPlant:
+        from polyrob.plant.box import box_plant
+
+        return box_plant(pldi, nominal=nominal, merge_symmetric=merge_symmetric)
+
+    def contains(self, unc, A, B):
+        from polyrob.plant.box import box_contains
+
+        return box_contains(unc, A, B)
+
+    def describe(self, unc):
+        merged = "; ".join("=".join(pair) for pair in unc.merged)
+        shared = f", {merged} sharing one" if merged else ""
+        return (
+            f"box: the interval box of the PLDI's {len(unc.channel_names)} varying Jacobian entries, "
+            f"one independent real parameter per entry{shared} ({self.enclosure(unc)} enclosure)."
+        )
+
+
+class AxesModel(UncertaintyModel):
+    """An oriented box in the principal directions plus a residual block (:mod:`polyrob.plant.axes`)."""
+
+    name = "axes"
+    options = ("nominal", "n_directions", "residual_tol")
+    exclusive = {"n_directions": None, "residual_tol": None}
+
+    def build(
+        self, pldi, *, nominal: str = "pldi", n_directions: int | None = None, residual_tol: float | None = None
+    ) -> UncertainPlant:
+        from polyrob.plant.axes import RESIDUAL_TOL, axes_plant
+
+        tol = RESIDUAL_TOL if residual_tol is None else residual_tol
+        return axes_plant(pldi, n_directions=n_directions, residual_tol=tol, nominal=nominal)
+
+    def contains(self, unc, A, B):
+        from polyrob.plant.axes import axes_contains
+
+        return axes_contains(unc, A, B)
+
+    def describe(self, unc):
+        size = sum(unc.full_blocks)
+        residual = f"a norm-bounded residual block of size {size}" if size else "no residual block"
+        return (
+            f"axes: an oriented box along {unc.n_params} principal directions of the Jacobian cloud, with ranges "
+            f"from the PLDI's sampled support values, plus {residual} ({self.enclosure(unc)} enclosure)."
+        )
+
+
+class InertiaLFTModel(UncertaintyModel):
+    """The inverse inertia as an exact LFT times a box on ``A`` (``lft``) or on ``N`` (``lft-torque``).
+
+    See :mod:`polyrob.plant.inertia_lft`; ``a_part`` is ``"entries"`` or ``"torque"``.
+    """
+
+    options = ("nominal", "repeated", "robot")
+    needs_robot = True
+    #: Why ``model="auto"`` takes this model when it applies.
+    applies = "the inertia is affine in single-angle cos/sin terms"
+
+    def __init__(self, name: str, a_part: str):
+        self.name, self.a_part = name, a_part
+
+    def build(
+        self, pldi, *, nominal: str = "pldi", repeated: bool = False, robot=None, bound_options: dict | None = None
+    ) -> UncertainPlant:
+        from polyrob.plant.inertia_lft import inertia_lft_plant
+
+        return inertia_lft_plant(
+            pldi, robot=robot, nominal=nominal, repeated=repeated, a_part=self.a_part, bound_options=bound_options
+        )
+
+    def contains(self, unc, A, B):
+        from polyrob.plant.inertia_lft import inertia_lft_contains
+
+        return inertia_lft_contains(unc, A, B)
+
+    def describe(self, unc):
+        n_a = len(unc.info.get("N_index", ()))
+        features = sorted({name.split("#")[0] for name in unc.parameter_names[n_a:]})
+        how = "one repeated scalar each" if unc.info.get("repeated") else "independent rank-one pieces"
+        if self.a_part == "torque":
+            a_part = (
+                f"times a box on the {n_a} varying entries of the torque-side Jacobian N = M(q) A_low "
+                "from a second PLDI"
+            )
+        else:
+            a_part = f"with the PLDI's interval on each of the {n_a} varying entries of A"
+        return (
+            f"{self.name}: the inverse inertia M(q)^-1 as an exact LFT in {', '.join(features) or 'no terms'} "
+            f"over the exact range of each ({how}), {a_part} ({self.enclosure(unc)} enclosure)."
+        )
+
+
+#: The uncertainty models by name (``unc.model``).
+MODELS: dict[str, UncertaintyModel] = {
+    model.name: model
+    for model in (BoxModel(), AxesModel(), InertiaLFTModel("lft", "entries"), InertiaLFTModel("lft-torque", "torque"))
+}
+
+
+def model_of(unc: UncertainPlant) -> UncertaintyModel:
+    """The model that built ``unc`` (by ``unc.model``).
+
+    Raises
+    ------
+    PolyrobError
+        ``unc.model`` is not a registered model.
+    """
+    try:
+        return MODELS[unc.model]
+    except KeyError:
+        raise PolyrobError(
+            f"unknown uncertainty model '{unc.model}' of the plant: registered are {', '.join(MODELS)}"
+        ) from None
