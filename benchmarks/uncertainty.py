@@ -12,7 +12,7 @@ time) and, for every controller, its μ on every model (so the tight model's
 ``ω_BT``); the robot's performance limit at those weights (the floor no
 controller beats, :mod:`polyrob.analysis.limits`) and, for every controller
 on every model, the time-varying certificate
-(:func:`polyrob.pipeline.time_varying.time_varying_certificate`) are printed
+(:func:`polyrob.analysis.time_varying.certificate.time_varying_certificate`) are printed
 beside μ.
 
 Usage::
@@ -37,7 +37,7 @@ import polyrob  # noqa: E402
 import polyrob.analysis.limits  # noqa: E402
 from polyrob.analysis.robust import robperf  # noqa: E402
 from polyrob.pipeline import Problem, default_hyperparameters  # noqa: E402
-from polyrob.pipeline.time_varying import time_varying_certificate  # noqa: E402
+from polyrob.analysis.time_varying.certificate import time_varying_certificate  # noqa: E402
 from polyrob.plant.coverage import det_b_range  # noqa: E402
 from polyrob.plant.generalized import generalized_plant, paper_controller  # noqa: E402
 from polyrob.plant.uncertainty import uncertain_plant  # noqa: E402

@@ -14,7 +14,7 @@ import polyrob
 from polyrob.analysis.robust import robstab
 from polyrob.cli import main
 from polyrob.pipeline import build_problem
-from polyrob.pipeline.time_varying import covers_nonlinear, time_varying_certificate
+from polyrob.analysis.time_varying.certificate import covers_nonlinear, time_varying_certificate
 
 B1 = np.array([[0.0], [1.0]])
 
@@ -41,7 +41,7 @@ def test_stability_and_performance_hold_on_a_quadratically_stable_toy():
     for a in (-1.0, 1.0):
         S = control.tf([1, 1, -a], [1, 1, 4 - a])  # 1 / (1 + K G), G = 1 / (s^2 + s - a)
         assert 0.2 * np.max(np.abs(S(1j * w))) <= tv.gamma * (1 + 1e-9)
-    assert "robust performance CERTIFIED" in tv.verdict
+    assert "robust performance CERTIFIED" in tv.verdict and tv.certificate.status.value == "CERTIFIED"
 
 
 def test_frozen_unstable_vertex_ends_the_test_and_says_why():
@@ -49,7 +49,8 @@ def test_frozen_unstable_vertex_ends_the_test_and_says_why():
     tv = time_varying_certificate(_toy_problem((-1.0, 1.0)), np.array([[0.5]]))
     assert not tv.stability_holds and not tv.performance_holds and tv.performance is None
     assert "unstable (frozen)" in tv.notes[0] and tv.gamma == np.inf
-    assert tv.verdict.startswith("time-varying verdict: robust stability NOT certified")
+    assert tv.verdict.startswith("time-varying verdict [vertices]: robust performance NOT certified: ")
+    assert tv.certificate.status.value == tv.stability_certificate.status.value == "NOT_CERTIFIED"
 
 
 def test_paper_controller_fails_the_vertex_test(paper_problem):
@@ -73,15 +74,18 @@ def test_small_gain_when_the_vertices_are_too_many_bounds_mu_from_above(paper_pr
 
 def test_cli_analyze_prints_both_verdicts_and_which_covers_the_robot(capsys):
     argv = ["analyze", "paper_2r", "--controller", "paper", "--mc", "5", "--quiet", "--omega", "0.1:100:25"]
-    assert main(argv) == 0
-    lines = capsys.readouterr().out.strip().splitlines()
-    assert lines[-3].startswith("time-varying verdict: robust stability NOT certified")
-    assert lines[-2] == "which covers the robot: " + covers_nonlinear("vertices")
-    assert lines[-1].startswith("verdict: robust performance VIOLATED") and "frozen" in lines[-1]
-    assert main([*argv, "--json"]) == 0
+    assert main(argv) == 1  # ran; K* is not certified
+    out = capsys.readouterr().out
+    lines = out.strip().splitlines()
+    tv_line = next(i for i, line in enumerate(lines) if line.startswith("time-varying verdict"))
+    assert lines[tv_line].startswith("time-varying verdict [vertices]: robust performance NOT certified")
+    assert lines[tv_line + 1] == "which covers the robot: " + covers_nonlinear("vertices")
+    assert lines[tv_line + 2].startswith("verdict: robust performance VIOLATED: mu lower bound")
+    assert "covers: for constant parameters (every frozen robot of the set)" in out
+    assert main([*argv, "--json"]) == 1
     doc = json.loads(capsys.readouterr().out)
     assert doc["time_varying"]["stability_holds"] is False
-    assert main([*argv, "--no-time-varying", "--json"]) == 0
+    assert main([*argv, "--no-time-varying", "--json"]) == 1
     assert json.loads(capsys.readouterr().out)["time_varying"] is None
 
 
@@ -95,7 +99,8 @@ def test_a_loop_too_large_for_the_lmis_is_not_run_and_says_what_to_do(paper_prob
     tv = time_varying_certificate(paper_problem, K)
     assert tv.method == "not run" and not tv.stability_holds
     assert "the closed loop has 80 states" in tv.notes[0] and "--reduce" in tv.notes[1]
-    assert tv.verdict.startswith("time-varying verdict: NOT computed")
+    assert tv.verdict.startswith("time-varying verdict [not run]: robust performance NOT certified: ")
+    assert "--reduce" in tv.verdict
     with pytest.raises(polyrob.PolyrobError, match=f"at most {MAX_STATES}"):
         quadstab(paper_problem.pldi, K)
 

@@ -201,7 +201,7 @@ class Certificate:
         what = f"{self.scope.kind} {_WORDS[self.status]}"
         if self.status is Status.CERTIFIED:
             if self.mu is None:
-                return f"{what}: L2 gain <= {self.bound:.4g} < 1"
+                return f"{what}: L2 gain <= {self.bound:.4g} < 1" if "performance" in self.scope.kind else what
             return f"{what}: mu <= {self.bound:.4g} at every frequency"
         if self.status is Status.GRID_ONLY:
             return f"{what}: peak {self.mu_upper_grid:.4g}"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from polyrob.cli.common import (
     Output,
+    exit_status,
     add_domain_arguments,
     add_output_flags,
     add_robot_arguments,
@@ -52,7 +53,7 @@ def print_analysis(a, out) -> None:
     out.line(f"worst sampled          max Re(pole) = {s.worst_abscissa:.4g}")
     tv = a.time_varying
     if tv is not None:  # side by side with the mu verdict, which ends the report
-        from polyrob.pipeline.time_varying import covers_nonlinear
+        from polyrob.analysis.time_varying.certificate import covers_nonlinear
 
         out.line(tv.verdict)
         out.line(f"which covers the robot: {covers_nonlinear(tv.method)}")

@@ -64,7 +64,7 @@ class ControllerAnalysis:
         What the μ verdict covers.
     time_varying : TimeVaryingCertificate or None
         The certificate for Jacobians varying in time (the moving robot),
-        :func:`polyrob.pipeline.time_varying.time_varying_certificate`;
+        :func:`polyrob.analysis.time_varying.certificate.time_varying_certificate`;
         ``None`` when not asked for.
     """
 
@@ -150,7 +150,7 @@ def analyze_controller(
     covers = rp.certificate.scope.sentence()
     tv = None
     if time_varying:
-        from polyrob.pipeline.time_varying import time_varying_certificate
+        from polyrob.analysis.time_varying.certificate import time_varying_certificate
 
         tv = time_varying_certificate(problem, K)
     return ControllerAnalysis(

@@ -170,11 +170,10 @@ class Problem:
 
         from polyrob.analysis.certificate import FROZEN, Scope, weakest_enclosure
 
-        info = getattr(self.unc, "info", None) or {}
-        model_enclosure = info.get("enclosure", self.pldi.enclosure)
-        if self.model == "axes":
-            model_enclosure = "sampled"  # its directional ranges come from a sampled extreme search
-        enclosure = weakest_enclosure(self.pldi.enclosure, model_enclosure, info.get("N_enclosure", model_enclosure))
+        from polyrob.plant.models import model_of
+
+        # the weakest of every input: the PLDI, and the model's own ranges (an axes model's are sampled)
+        enclosure = weakest_enclosure(self.pldi.enclosure, model_of(self.unc).enclosure(self.unc))
         coverage = getattr(self.unc, "coverage", float("nan"))
         points = int(getattr(self.unc, "coverage_points", 0) or 0)
         checked = coverage is not None and not math.isnan(float(coverage)) and points > 0

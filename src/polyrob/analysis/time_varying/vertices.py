@@ -210,7 +210,10 @@ def _from_pldi(pldi, which: str, max_vertices: int) -> VertexSet:
     A, B = _matrices(pldi, pts)
     m = B.shape[2]
     C = np.hstack([np.eye(m), np.zeros((m, m))])
-    return VertexSet(A, B, C, src, str(pldi.enclosure), note)
+    # the box corners are as proved as the intervals; the polytope's other half-spaces are
+    # sampled supports even when the intervals are certified (bound_pldi's note says so)
+    enclosure = str(pldi.enclosure) if src == "box" else "sampled"
+    return VertexSet(A, B, C, src, enclosure, note)
 
 
 # --------------------------------------------------------------------------- closed loops

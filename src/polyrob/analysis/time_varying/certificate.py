@@ -27,14 +27,14 @@ Examples
 >>> tv = time_varying_certificate(problem, paper_controller())
 >>> tv.method, tv.stability_holds          # K* has frozen vertices that are unstable
 ('vertices', False)
->>> tv.verdict.startswith("time-varying verdict: robust stability NOT certified")
-True
+>>> tv.certificate.status.value, tv.verdict.startswith("time-varying verdict [vertices]: robust performance NOT")
+('NOT_CERTIFIED', True)
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -96,22 +96,40 @@ class TimeVaryingCertificate:
     covers: str
     notes: tuple
     seconds: float
+    scope: object = None
+
+    def _decided(self, kind: str):
+        from polyrob.analysis.certificate import ARBITRARY, Certificate, Scope, decide_gain
+
+        scope = replace(self.scope or Scope(), kind=kind, variation=ARBITRARY, frequencies="")
+        why = self.notes[-1] if self.notes else ""
+        if kind == "robust stability":
+            status, reasons = decide_gain(self.stability_holds, 0.0, self.stability is not None, why)
+            bound = float("nan")
+        else:
+            ran = self.performance is not None and self.stability_holds
+            status, reasons = decide_gain(self.stability_holds, self.gamma, ran, why)
+            bound = float(self.gamma)
+        reasons = reasons + tuple(n for n in self.notes if n not in reasons) if reasons else ()
+        return Certificate(status, bound, float("nan"), float("nan"), None, scope, reasons)
+
+    @property
+    def certificate(self):
+        """Robust performance for arbitrarily fast variation, decided by :mod:`polyrob.analysis.certificate`."""
+        return self._decided("robust performance")
+
+    @property
+    def stability_certificate(self):
+        """Robust stability for arbitrarily fast variation."""
+        return self._decided("robust stability")
 
     @property
     def verdict(self) -> str:
-        """One line: what holds for the moving robot, and on which set."""
-        if self.method == "not run":
-            return f"time-varying verdict: NOT computed ({'; '.join(self.notes)})"
-        where = self.stability.covers if self.stability is not None else self.covers
-        if self.performance_holds:
-            what = f"robust performance CERTIFIED (L2 gain r -> z <= {self.gamma:.4g} < 1, and stability)"
-        elif self.stability_holds:
-            why = f" ({self.notes[-1]})" if self.notes else ""
-            what = f"robust stability CERTIFIED, robust performance NOT certified{why}"
-        else:
-            why = f" ({self.notes[-1]})" if self.notes else ""
-            what = f"robust stability NOT certified{why}"
-        return f"time-varying verdict: {what} [{self.method}]: {where}"
+        """One line: the performance certificate's verdict, and the stability one's when it differs."""
+        perf, stab = self.certificate, self.stability_certificate
+        if perf.certified or not stab.certified:
+            return f"time-varying verdict [{self.method}]: {perf.verdict}"
+        return f"time-varying verdict [{self.method}]: {stab.verdict}; {perf.verdict}"
 
     def summary(self) -> dict:
         """JSON-ready figures."""
@@ -130,6 +148,10 @@ class TimeVaryingCertificate:
             "vertex_source": getattr(s, "vertex_source", None),
             "enclosure": getattr(s, "enclosure", None),
             "covers": self.covers,
+            "status": self.certificate.status.value,
+            "certified": self.certificate.certified,
+            "stability_status": self.stability_certificate.status.value,
+            "scope": None if self.scope is None else self.scope.summary(),
             "covers_nonlinear": covers_nonlinear(self.method),
             "notes": list(self.notes),
             "seconds": round(float(self.seconds), 3),
@@ -138,6 +160,25 @@ class TimeVaryingCertificate:
 
 
 def time_varying_certificate(problem, K, *, performance: bool = True, max_vertices: int | None = None):
+    """Quadratic (or constant-D small-gain) stability and performance of ``K`` on ``problem``, with its scope.
+
+    See :func:`_time_varying_tests` for the tests; the scope names the set
+    the certificate rests on: the PLDI's vertices (the polytope's half-spaces
+    are sampled supports, the box corners as proved as the intervals) or the
+    LFT model.
+    """
+    from polyrob.analysis.certificate import Scope
+
+    tv = _time_varying_tests(problem, K, performance=performance, max_vertices=max_vertices)
+    scope = problem.scope() if hasattr(problem, "scope") else Scope()  # a bare (pldi, P) pair: no model
+    s = tv.stability
+    if tv.method == "vertices" and s is not None:
+        source = "the polytope's vertices" if s.vertex_source == "polytope" else "the interval box's corners"
+        scope = replace(scope, enclosure=s.enclosure, vertices_from=f"{source} of the PLDI ({s.enclosure})", model="")
+    return replace(tv, scope=scope)
+
+
+def _time_varying_tests(problem, K, *, performance: bool = True, max_vertices: int | None = None):
     """Quadratic (or constant-D small-gain) stability and performance of ``K`` on ``problem``.
 
     The vertex LMIs (one common Lyapunov matrix on the PLDI's vertices) run
