@@ -37,7 +37,7 @@ def test_synthesised_controller_settles_inside_domain(q0, step):
     target = np.add(q0, step)
     sim = simulate(robot, K, dom, step_reference(target), q0=q0, t_final=15.0)
     assert sim.success
-    assert sim.certificate_applies, sim.verdict()
+    assert sim.stayed_in_domain, sim.verdict()
     assert sim.settled(0.02), [m.steady_state_error for m in sim.metrics]
     assert np.allclose(sim.q[:, -1], target, atol=2e-4)
     assert sim.torque_within_limits
@@ -52,11 +52,11 @@ def test_synthesised_controller_settles_inside_domain(q0, step):
 def test_large_step_is_reported_as_leaving_the_domain():
     robot, dom, K = _setup()
     sim = simulate(robot, K, dom, step_reference([0.3, 0.0]), t_final=3.0)
-    assert sim.left_domain and not sim.certificate_applies
+    assert sim.left_domain and not sim.stayed_in_domain
     assert any(x.startswith("u[joint1]") for x in sim.domain_exits)
     assert "does not apply" in sim.verdict()
     assert not sim.torque_within_limits
-    assert sim.summary()["certificate_applies"] is False
+    assert sim.summary()["stayed_in_domain"] is False
 
 
 def test_reference_outside_the_position_range_leaves_the_domain():
@@ -76,7 +76,7 @@ def test_sampled_and_held_controller_tracks_like_the_continuous_one():
     cont = simulate(robot, K, dom, ref, t_final=4.0)
     disc = simulate(robot, K, dom, ref, t_final=4.0, rate=1000.0)
     assert disc.controller == "discrete" and disc.rate == 1000.0
-    assert disc.certificate_applies
+    assert disc.stayed_in_domain
     q_c = np.array([np.interp(disc.t, cont.t, cont.q[j]) for j in range(2)])
     assert np.max(np.abs(disc.q - q_c)) < 0.05 * 0.01  # within 5 % of the step
 
@@ -123,7 +123,7 @@ def test_time_budget_keeps_the_result_of_a_run_that_finishes():
     ref = step_reference([0.01, -0.005])
     whole = simulate(robot, K, dom, ref, t_final=5.0)
     pieces = simulate(robot, K, dom, ref, t_final=5.0, time_budget=600.0)
-    assert pieces.success and pieces.certificate_applies
+    assert pieces.success and pieces.stayed_in_domain
     assert np.allclose(pieces.q[:, -1], whole.q[:, -1], atol=1e-7)
     q_w = np.array([np.interp(pieces.t, whole.t, whole.q[j]) for j in range(2)])
     assert np.max(np.abs(pieces.q - q_w)) < 1e-6
@@ -133,7 +133,7 @@ def test_time_budget_keeps_the_result_of_a_run_that_finishes():
 def test_time_budget_stops_a_simulation_and_says_so(rate):
     robot, dom, K = _setup()
     sim = simulate(robot, K, dom, step_reference([0.01, -0.005]), t_final=50.0, rate=rate, time_budget=0.05)
-    assert not sim.success and not sim.certificate_applies
+    assert not sim.success and not sim.stayed_in_domain
     assert "time budget" in sim.verdict()
     assert sim.t[-1] < 50.0 and sim.q.shape[1] == len(sim.t)
 

@@ -119,7 +119,7 @@ class RobustnessResult:
 
     @property
     def robust(self) -> bool:
-        """``certificate.status`` is CERTIFIED (:mod:`polyrob.analysis.certificate` decides)."""
+        """Reads ``certificate.certified`` (:mod:`polyrob.analysis.certificate` decides)."""
         return self.certificate.certified
 
     @property

@@ -187,20 +187,20 @@ def bound_pldi(
     if progress is None:
         progress = sys.stderr.isatty()
     rng = np.random.default_rng(seed)
-    certified = None
+    proved = None
     if certify:  # first: it gives up at once where it cannot work
         # 1e-5 of each width: tight enough for the paper's printed digits, ~1 s on a 2R
         options = {"rel_tol": 1e-5, **(certify_options or {})}
-        certified = _certified(robot, domain, options, progress)
+        proved = _certified(robot, domain, options, progress)
     problem = search.Problem(robot, domain)
     m = robot.m
 
     pilot_vals, varying = search.pilot(problem, seed)
-    if certified is not None:
+    if proved is not None:
         # every entry the proof lets vary is a parameter of the plant, even
         # when the 4096 pilot samples saw it constant
-        c_lo = problem.entries_from(certified[0][None], certified[2][None])[0]
-        c_hi = problem.entries_from(certified[1][None], certified[3][None])[0]
+        c_lo = problem.entries_from(proved[0][None], proved[2][None])[0]
+        c_hi = problem.entries_from(proved[1][None], proved[3][None])[0]
         varying = varying | (c_hi > c_lo)
     index = problem.all_index[varying]
     k = len(index)
@@ -262,7 +262,7 @@ def bound_pldi(
     notes = [] if fallback is None else [fallback]
     cert_info = None
     if certify:
-        A_lower, A_upper, B_lower, B_upper, cert_info = certified
+        A_lower, A_upper, B_lower, B_upper, cert_info = proved
         enclosure = "certified"
         notes.append("the polytope's half-spaces are sampled supports; the intervals are certified")
         lower_c = problem.entries_from(A_lower[None], B_lower[None], index)[0]

@@ -101,7 +101,7 @@ class Output:
 
 
 def exit_status(certificate) -> int:
-    """The exit status of a command that ends with a certificate: 0 CERTIFIED, 1 any other status (2 is bad input)."""
+    """The exit status of a command that ends with a certificate: 0 certified, 1 any other status (2 is bad input)."""
     return 0 if certificate.certified else 1
 
 

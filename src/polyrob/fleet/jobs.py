@@ -204,7 +204,7 @@ class RobotResult:
 
     @property
     def certified(self) -> bool:
-        """The status is CERTIFIED (read, not decided, here)."""
+        """Reads the status (decided in polyrob.analysis.certificate)."""
         from polyrob.analysis.certificate import Status
 
         return self.status is not None and Status(self.status).certified

@@ -68,7 +68,7 @@ def design_stage(problem, settings, timings: dict, details: dict):
 
 
 def reduce_stage(problem, design, settings, timings: dict, details: dict):
-    """A certified full-order controller, reduced while its certificate stays CERTIFIED (else the design as it is)."""
+    """A certified full-order controller, reduced while its certificate stays certified (else the design as it is)."""
     from polyrob.pipeline import reduce_design
 
     full = design.reduced is None and str(design.record.get("structure", "full")) == "full"

@@ -194,7 +194,7 @@ def write_report(
     sims = list(simulations)
     if sims:
         doc.heading("Nonlinear closed loop (the robot's own dynamics)")
-        left = [s for s in sims if not s.certificate_applies]
+        left = [s for s in sims if not s.stayed_in_domain]
         if left:
             doc.para(
                 f"{len(left)} of {len(sims)} simulations left the domain of the PLDI: the certificate does "

@@ -185,9 +185,11 @@ def max_bandwidth_scaling(
 
     >>> from types import SimpleNamespace
     >>> from polyrob.synthesis.bandwidth import max_bandwidth_scaling
+    >>> from polyrob.analysis.certificate import decide_gain
     >>> def fake(P, K0):
     ...     mu = P.alpha ** 2 / 8 + 0.5 / P.alpha
-    ...     return SimpleNamespace(certificate=SimpleNamespace(certified=mu < 1, bound=mu, status="..."), controller=None)
+    ...     status = decide_gain(True, mu, True)[0]
+    ...     return SimpleNamespace(certificate=SimpleNamespace(certified=status.certified, bound=mu, status=status), controller=None)
     >>> r = max_bandwidth_scaling(None, synthesize=fake, plant=lambda a, h: SimpleNamespace(alpha=a), progress=False)
     >>> print(f"alpha = {r.alpha:.3f}, mu = {r.peak_mu:.3f}, first fail {r.bracket[1]:.3f}")
     alpha = 2.484, mu = 0.972, first fail 2.594

@@ -16,8 +16,12 @@ controller's output is the deviation the linear design assumes.
 The result reports per joint the rise time, overshoot, settling time and
 steady-state error of a step, the peak torque against the effort limit and
 whether the trajectory ``(q, qdot, u)`` ever left the domain over which the
-PLDI was computed: outside it the Jacobians are not bounded and **the
-certificate does not apply** (:attr:`SimulationResult.certificate_applies`).
+PLDI was computed: outside it the Jacobians are not bounded and **no
+certificate applies** (:attr:`SimulationResult.stayed_in_domain`).  Staying
+inside is necessary, not sufficient: the frozen-robot μ certificate does not
+cover a moving robot at all, the time-varying (arbitrarily fast) one does
+only when its own status is CERTIFIED, and a sampled-and-held loop
+(``rate``) is covered by neither.
 
 Examples
 --------
@@ -26,10 +30,10 @@ Examples
 >>> robot = polyrob.load_robot("planar_2r")
 >>> dom = polyrob.Domain.from_robot(robot)
 >>> sim = simulate(robot, polyrob.paper_controller(), dom, step_reference([0.005, -0.002]), t_final=10.0)
->>> sim.certificate_applies, sim.settled(), bool(abs(sim.q[0, -1] - 0.005) < 1e-4)
+>>> sim.stayed_in_domain, sim.settled(), bool(abs(sim.q[0, -1] - 0.005) < 1e-4)
 (True, True, True)
 >>> big = simulate(robot, polyrob.paper_controller(), dom, step_reference([0.2, -0.1]), t_final=2.0)
->>> big.certificate_applies, big.domain_exits[0][:9]
+>>> big.stayed_in_domain, big.domain_exits[0][:9]
 (False, 'u[joint1]')
 """
 
@@ -112,8 +116,8 @@ class SimulationResult:
     info: dict = field(default_factory=dict)
 
     @property
-    def certificate_applies(self) -> bool:
-        """The trajectory stayed in the domain (and the integration finished)."""
+    def stayed_in_domain(self) -> bool:
+        """The trajectory stayed in the domain (and the integration finished): necessary for a certificate to apply."""
         return bool(self.success and not self.left_domain)
 
     @property
@@ -130,16 +134,24 @@ class SimulationResult:
         return all(mt.steady_state_error <= tolerance * max(abs(mt.step), 0.1 * largest, 1e-9) for mt in self.metrics)
 
     def verdict(self) -> str:
-        """One line: whether the certificate applies to this trajectory."""
+        """One line: whether the run stayed where a certificate can apply, and which one could."""
         if not self.success:
             return "integration failed: " + str(self.info.get("message", ""))
         if self.left_domain:
             return (
                 "LEFT THE DOMAIN ("
                 + "; ".join(self.domain_exits)
-                + "): the certificate does not apply to this trajectory"
+                + "): no certificate applies to this trajectory"
             )
-        return "stayed in the domain: the PLDI (and its certificate) covers this trajectory"
+        if self.rate:
+            return (
+                "inside the domain; a sampled-and-held loop: no certificate covers it (they are "
+                "for the continuous-time loop)"
+            )
+        return (
+            "inside the domain (necessary for the time-varying certificate to apply; it covers this "
+            "run only if its status says certified; the frozen-robot mu does not cover a moving robot)"
+        )
 
     def summary(self) -> dict:
         return {
@@ -149,7 +161,7 @@ class SimulationResult:
             "target": None if self.reference.target is None else np.asarray(self.reference.target).tolist(),
             "left_domain": bool(self.left_domain),
             "domain_exits": list(self.domain_exits),
-            "certificate_applies": self.certificate_applies,
+            "stayed_in_domain": self.stayed_in_domain,
             "settled": self.settled(),
             "torque_within_limits": self.torque_within_limits,
             "success": bool(self.success),
