@@ -85,7 +85,7 @@ def test_report_references_existing_valid_pngs(tmp_path):
     assert "class='bad'" in page and "LEFT THE DOMAIN" in page
     assert "time-varying (quadratic)" in page and "b42" in page and "0.99999997" in page
     val = json.loads(files.validation.read_text())
-    assert [s["certificate_applies"] for s in val["simulations"]] == [True, False]
+    assert [s["stayed_in_domain"] for s in val["simulations"]] == [True, False]
     # rewriting replaces the files atomically: no temporary files left
     write_report(tmp_path, robot_name="paper_2r", simulations=[inside])
     assert not list(tmp_path.rglob("*.tmp"))

@@ -3,7 +3,13 @@
 SLICOT AB13MD warm-started from the previous frequency's scalings can hang
 (seen at the 52nd point of a sweep); a C routine stuck in a loop cannot be
 interrupted from Python, so such calls run in a worker that is killed after
-the limit.  :func:`polyrob.analysis.mu.bounds.mu_bounds` uses it for ``warm_start=True``.
+the limit.  :func:`polyrob.analysis.mu.bounds.mu_bounds` uses it for
+``warm_start=True`` and for cold calls on structures with real blocks.
+
+The limit is a safety net against a call that never returns, not a way to
+choose between algorithms: it measures wall clock, so whether it fires
+depends on the machine's load.  Callers set it far above the slowest call
+they expect and report in their results when it fired.
 """
 
 from __future__ import annotations

@@ -185,11 +185,11 @@ def max_bandwidth_scaling(
 
     >>> from types import SimpleNamespace
     >>> from polyrob.synthesis.bandwidth import max_bandwidth_scaling
-    >>> from polyrob.analysis.certificate import decide_gain
+    >>> from polyrob.analysis.certificate import Certificate, Scope, decide_gain
     >>> def fake(P, K0):
     ...     mu = P.alpha ** 2 / 8 + 0.5 / P.alpha
-    ...     status = decide_gain(True, mu, True)[0]
-    ...     return SimpleNamespace(certificate=SimpleNamespace(certified=status.certified, bound=mu, status=status), controller=None)
+    ...     cert = Certificate(decide_gain(True, mu, True)[0], mu, mu, float("nan"), None, Scope())
+    ...     return SimpleNamespace(certificate=cert, controller=None)
     >>> r = max_bandwidth_scaling(None, synthesize=fake, plant=lambda a, h: SimpleNamespace(alpha=a), progress=False)
     >>> print(f"alpha = {r.alpha:.3f}, mu = {r.peak_mu:.3f}, first fail {r.bracket[1]:.3f}")
     alpha = 2.484, mu = 0.972, first fail 2.594

@@ -62,13 +62,29 @@ Method = Literal["auto", "ab13md", "lmi", "gradient", "relaxed"]
 #: ``method="auto"`` bounds repeated scalar blocks by descent on the D-G scalings above this padded
 #: size: the D-G LMI of an 89-channel structure (ur5's axes model) takes minutes per frequency.
 DESCENT_ABOVE = 24
-#: The least AB13MD time limit on such large structures (measured on ur5: AB13MD 26-37 s per
-#: frequency, the D-G LMI fallback not done after 6 minutes).
-LARGE_AB13MD_TIMEOUT = 120.0
+#: Wall-clock seconds a cold AB13MD call of a sweep may take before it is taken for hung (default
+#: of :func:`mu_bounds`' ``ab13md_timeout`` and ``warm_timeout``).  A safety net, not a choice of
+#: method: it must never fire on a call that is merely slow or on a busy machine.  Slow calls do
+#: happen on structures with real blocks: measured 49 s of CPU time for one cold call (eight real
+#: scalars, the robust-stability loop of ``tests/fixtures/validate_planar_2r_K.json`` on
+#: ``paper_2r``'s LFT model, near 1.6e3 rad/s).
+AB13MD_SAFETY_TIMEOUT = 300.0
+#: The least AB13MD safety limit on structures above :data:`DESCENT_ABOVE` padded channels
+#: (measured: AB13MD on ur5's relaxed structure 26-37 s per frequency; on a random matrix against
+#: a 114-channel structure 196 s on a busy machine).
+LARGE_AB13MD_TIMEOUT = 1200.0
 
 
 def resolve_method(st: BlockStructure, method: str) -> str:
-    """The upper-bound method ``method`` stands for on ``st`` (``"auto"`` resolved; checked)."""
+    """The upper-bound method ``method`` stands for on ``st`` (``"auto"`` resolved; checked).
+
+    The choice depends on the structure alone, never on the matrix, the
+    machine or the clock, so the same sweep gives the same figures anywhere:
+    ``"auto"`` is AB13MD when the structure has no repeated scalar block
+    (real scalars and full complex blocks, AB13MD's domain), else the D-G LMI
+    up to :data:`DESCENT_ABOVE` padded channels and descent on the D-G
+    scalings above.
+    """
     if method == "auto":
         if not st.has_repeated:
             return "ab13md"
@@ -195,8 +211,8 @@ def mu_bounds(
     method: Method = "auto",
     refine_peak: bool = True,
     warm_start: bool = False,
-    warm_timeout: float = 2.0,
-    ab13md_timeout: float | None = 1.0,
+    warm_timeout: float = AB13MD_SAFETY_TIMEOUT,
+    ab13md_timeout: float | None = AB13MD_SAFETY_TIMEOUT,
     progress: bool | None = None,
     rtol: float = 1e-4,
     solver: str | None = None,
@@ -215,21 +231,29 @@ def mu_bounds(
         zeros (FRD: its own frequencies).
     method : {"auto", "ab13md", "lmi", "gradient", "relaxed"}
         Upper-bound method, see :func:`mussv`; ``"gradient"`` warm-starts
-        each frequency from the previous one's scalings.
+        each frequency from the previous one's scalings.  ``"auto"`` is
+        resolved from the structure alone (:func:`resolve_method`), and the
+        method it names computes every frequency, however long it takes.
     refine_peak : bool
         Golden-section search of the upper-bound peak between the grid points
         around the best local maxima, so a sharp resonance is not missed.
     warm_start : bool
         Warm-start AB13MD from the previous frequency.  Such calls run in a
-        worker process killed after ``warm_timeout`` s (AB13MD warm starts can
-        hang); then the sweep falls back to cold calls.
+        worker process killed after ``warm_timeout`` s of wall clock (AB13MD
+        warm starts can hang; default :data:`AB13MD_SAFETY_TIMEOUT`); then
+        the sweep falls back to cold calls, said in the result's notes.
     ab13md_timeout : float or None
-        Seconds a cold AB13MD call may take on a structure with real blocks
-        (it can take seconds per frequency there); past it, that frequency's
-        upper bound comes from the D-G LMI, counted in the result's notes.
-        ``None``: no limit (calls run in-process).  On structures above
+        Safety net against a hung cold AB13MD call on a structure with real
+        blocks: wall-clock seconds after which the call is killed and that
+        frequency's upper bound comes from the D-G LMI (descent on the D-G
+        scalings above :data:`DESCENT_ABOVE` padded channels) instead, said
+        in the result's notes, since such figures depend on the machine.
+        The default, :data:`AB13MD_SAFETY_TIMEOUT`, is far above the slowest
+        call measured, so a slow AB13MD (or a busy machine) still gives
+        AB13MD's value; a small limit trades that for speed.  ``None``: no
+        limit (calls run in-process).  On structures above
         :data:`DESCENT_ABOVE` padded channels the limit is at least
-        :data:`LARGE_AB13MD_TIMEOUT`: there the LMI is the slower of the two.
+        :data:`LARGE_AB13MD_TIMEOUT`.
     progress : bool, optional
         tqdm progress bar; default: shown on a terminal for long sweeps.
     rtol, solver
@@ -297,9 +321,13 @@ def _sweep(
     st_up = st.relaxed()
     lmi = LmiUpper(st, solver) if meth == "lmi" else None
     descent = GradientUpper(st) if meth == "gradient" else None
-    if cold_timeout and st.padded_size > DESCENT_ABOVE:
+    large = st.padded_size > DESCENT_ABOVE
+    if cold_timeout and large:
         cold_timeout = max(cold_timeout, LARGE_AB13MD_TIMEOUT)
-    cold = mu_upper.TimedAb13md(st_up, cold_timeout, solver, rtol) if meth in ("ab13md", "relaxed") else None
+    cold = None
+    if meth in ("ab13md", "relaxed"):
+        # the safety net's fallback is fixed by the structure too: the LMI takes minutes on large ones
+        cold = mu_upper.TimedAb13md(st_up, cold_timeout, solver, rtol, fallback="gradient" if large else "lmi")
     guard = None
     if warm_start and meth in ("ab13md", "relaxed"):
         guard = TimeLimitedCall(mu_upper.worker_function(), warm_timeout)
@@ -323,7 +351,10 @@ def _sweep(
                 res = val
             else:  # hung or failed once: stop warm-starting for this sweep
                 fallbacks += 1
-                notes.append(f"AB13MD warm start failed or exceeded {warm_timeout} s ({val}); cold calls from then on")
+                notes.append(
+                    f"AB13MD warm start failed or exceeded its {warm_timeout:g} s wall-clock safety limit ({val}); "
+                    "cold calls from then on"
+                )
                 guard.close()
                 guard = None
         up, D, G, x = mu_upper.upper_ab13md(Ms, st_up, res) if res is not None else cold(Ms, lo)
@@ -405,7 +436,11 @@ def _sweep(
             notes
             + ([] if lmi is None else lmi.events)
             + (
-                [f"AB13MD exceeded {cold_timeout} s at {cold.fallbacks} frequencies: D-G LMI bound used there"]
+                [
+                    f"AB13MD exceeded its {cold_timeout:g} s wall-clock safety limit at {cold.fallbacks} "
+                    f"frequencies (taken for hung): {cold.fallback_name} upper bound used there, a true bound "
+                    "but not AB13MD's figure, so these points depend on the machine's speed"
+                ]
                 if cold is not None and cold.fallbacks
                 else []
             )

@@ -4,7 +4,8 @@
   for real scalars and full complex blocks;
 * :class:`LmiUpper`: the D-G LMI solved by bisection with cvxpy, which also
   takes repeated scalar blocks;
-* :class:`TimedAb13md`: AB13MD under a time limit, the LMI where it runs out;
+* :class:`TimedAb13md`: AB13MD with a wall-clock safety net against a hung
+  call (reported by the caller; never a choice of method);
 * :func:`certified_beta`: the smallest ``beta`` that given scalings
   ``(P = D^2, G)`` certify, a generalized eigenvalue, so the bound is exact
   whatever the accuracy of the SDP solver.
@@ -225,26 +226,61 @@ def worker_function():
 
 
 class TimedAb13md:
-    """Cold AB13MD calls under a time limit, the D-G LMI where the limit runs out.
+    """Cold AB13MD calls with a wall-clock safety net against a hung call.
 
-    On structures with real blocks AB13MD's iteration can take seconds per
-    frequency (measured: 8-11 s at each point of a band of a D-K loop's
-    robust-stability sweep, where the D-G LMI takes 0.1-0.3 s and gives a
-    lower bound).  A Fortran loop cannot be interrupted from Python, so the
-    calls run in a :class:`~polyrob.analysis.timelimit.TimeLimitedCall` worker;
-    a call that exceeds ``timeout`` is answered by :class:`LmiUpper` instead
-    (also a true upper bound) and counted in :attr:`fallbacks`.  Complex-only
-    structures (a convex problem for AB13MD) are called in-process.
+    The method is chosen by the structure (:func:`polyrob.analysis.mu.bounds.resolve_method`),
+    never by the clock: whatever AB13MD takes, its value is the one returned.
+    The limit only guards against a call that never returns.  A Fortran loop
+    cannot be interrupted from Python, so on structures with real blocks (where
+    AB13MD's iteration can take tens of seconds at one frequency) the calls run
+    in a :class:`~polyrob.analysis.timelimit.TimeLimitedCall` worker; a call
+    that exceeds ``timeout`` is killed and answered by the deterministic
+    ``fallback`` instead (:class:`LmiUpper`, or
+    :class:`~polyrob.analysis.mu.gradient.GradientUpper` with
+    ``fallback="gradient"``; either is a true upper bound, but not AB13MD's
+    figure), counted in :attr:`fallbacks` so the caller can report it.  The
+    limit must therefore be far above any call that merely runs slowly on a
+    busy machine.  Complex-only structures (a convex problem for AB13MD) are
+    called in-process, without a limit.
+
+    Parameters
+    ----------
+    st : BlockStructure
+        Without repeated scalar blocks.
+    timeout : float or None
+        Wall-clock seconds per cold call; ``None`` or 0: no limit (in-process).
+    solver : str, optional
+        cvxpy solver of the LMI fallback.
+    rtol : float
+        Bisection tolerance of the LMI fallback.
+    fallback : {"lmi", "gradient"}
+        What answers a call that exceeded the limit.
     """
 
-    def __init__(self, st: BlockStructure, timeout: float | None, solver: str | None = None, rtol: float = 1e-4):
+    def __init__(
+        self,
+        st: BlockStructure,
+        timeout: float | None,
+        solver: str | None = None,
+        rtol: float = 1e-4,
+        fallback: str = "lmi",
+    ):
         from polyrob.analysis.timelimit import TimeLimitedCall
 
-        self.st, self.timeout, self.solver, self.rtol = st, timeout, solver, rtol
+        if fallback not in ("lmi", "gradient"):
+            raise ValueError(f"fallback must be 'lmi' or 'gradient', got {fallback!r}")
+        self.st, self.timeout, self.solver, self.rtol, self.fallback = st, timeout, solver, rtol, fallback
         guarded = bool(timeout) and st.has_real
         self._call = TimeLimitedCall(worker_function(), float(timeout)) if guarded else None
         self._lmi = None
+        self._descent = None
+        #: how many calls exceeded the limit (answered by the fallback)
         self.fallbacks = 0
+
+    @property
+    def fallback_name(self) -> str:
+        """The fallback in words, for the notes of a result."""
+        return "D-G LMI" if self.fallback == "lmi" else "D-G descent"
 
     @property
     def events(self) -> list[str]:
@@ -261,11 +297,19 @@ class TimedAb13md:
         if not str(value).startswith("timeout"):  # AB13MD's own error, relayed by the worker
             raise SolverError(f"SLICOT AB13MD failed: {value}")
         self.fallbacks += 1
+        if self.fallback == "gradient":
+            if self._descent is None:
+                from polyrob.analysis.mu.gradient import GradientUpper  # imports this module
+
+                self._descent = GradientUpper(self.st)
+            bound, D, G, _ = self._descent(Ms)
+            return bound, D, G, None
         if self._lmi is None:
             self._lmi = LmiUpper(self.st, self.solver)
         bound, D, G = self._lmi(Ms, lo=lo, rtol=self.rtol)
         return bound, D, G, None
 
     def close(self) -> None:
+        """Stop the worker process, if any."""
         if self._call is not None:
             self._call.close()
