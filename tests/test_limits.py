@@ -8,6 +8,7 @@ import control
 import numpy as np
 import pytest
 
+from polyrob.analysis.certificate import Certificate, Scope, decide_gain
 import polyrob
 from polyrob import Domain
 from polyrob.analysis.limits import performance_limit, pole_bound
@@ -63,7 +64,9 @@ def test_bandwidth_scan_skips_factors_the_limit_excludes():
 
     def fake(P, K0):
         calls.append(P.alpha)
-        return SimpleNamespace(peak_mu=P.alpha**2 / 8 + 0.5 / P.alpha, controller=None, order=0)
+        mu = P.alpha**2 / 8 + 0.5 / P.alpha
+        cert = Certificate(decide_gain(True, mu, True)[0], mu, mu, float("nan"), None, Scope())
+        return SimpleNamespace(certificate=cert, controller=None, order=0)
 
     res = max_bandwidth_scaling(
         None,
