@@ -66,8 +66,8 @@ DESCENT_ABOVE = 24
 #: of :func:`mu_bounds`' ``ab13md_timeout`` and ``warm_timeout``).  A safety net, not a choice of
 #: method: it must never fire on a call that is merely slow or on a busy machine.  Slow calls do
 #: happen on structures with real blocks: measured 49 s of CPU time for one cold call (eight real
-#: scalars, the robust-stability loop of ``tests/fixtures/validate_planar_2r_K.json`` on
-#: ``paper_2r``'s LFT model, near 1.6e3 rad/s).
+#: scalars, the robust-stability loop of ``tests/fixtures/validate_planar_2r_K.json`` on the
+#: ``paper_2r`` plant of ``tests/test_report.py``, at 10**3.2 rad/s).
 AB13MD_SAFETY_TIMEOUT = 300.0
 #: The least AB13MD safety limit on structures above :data:`DESCENT_ABOVE` padded channels
 #: (measured: AB13MD on ur5's relaxed structure 26-37 s per frequency; on a random matrix against

@@ -1,0 +1,121 @@
+"""The μ upper-bound method is chosen by the structure, never by the clock.
+
+A slow AB13MD (a busy machine) must give the same figures as a fast one; the
+wall-clock limit of :func:`polyrob.analysis.mu.bounds.mu_bounds` is only a
+safety net against a hung call, and says so in the notes when it fires.
+"""
+
+from __future__ import annotations
+
+import inspect
+import time
+
+import control
+import numpy as np
+import pytest
+
+from polyrob.analysis.mu import upper as mu_upper
+from polyrob.analysis.mu.blocks import as_block_structure
+from polyrob.analysis.mu.bounds import (
+    AB13MD_SAFETY_TIMEOUT,
+    DESCENT_ABOVE,
+    LARGE_AB13MD_TIMEOUT,
+    mu_bounds,
+    mussv,
+    resolve_method,
+)
+
+#: seconds the stand-in below sleeps before each AB13MD call: above the old 1 s limit
+SLOW = 1.5
+OMEGA = np.array([0.3, 1.0, 3.0])
+
+
+def _slow_ab13md(Z, nblock, itype, x=None):
+    """AB13MD on a busy machine: the real routine, late (module level, so a worker process can unpickle it)."""
+    time.sleep(SLOW)
+    import slycot
+
+    return slycot.ab13md(Z, nblock, itype) if x is None else slycot.ab13md(Z, nblock, itype, x)
+
+
+def _loop(seed: int = 3, scale: float = 1.0) -> control.StateSpace:
+    """A fixed stable 2x2 system with 4 states (lightly damped, so mu varies over OMEGA)."""
+    rng = np.random.default_rng(seed)
+    A = np.array([[-0.2, 1.0, 0, 0], [-1.0, -0.2, 0, 0], [0, 0, -0.5, 2.0], [0, 0, -2.0, -0.5]])
+    B, C = rng.normal(size=(4, 2)), rng.normal(size=(2, 4))
+    return control.ss(A, scale * B, C, 0.1 * rng.normal(size=(2, 2)))
+
+
+@pytest.mark.parametrize(
+    "blk",
+    [
+        pytest.param([[-1, 0], [1, 0]], id="real+complex scalar (AB13MD in a worker)"),
+        pytest.param([[1, 1], [1, 1]], id="two complex scalars (AB13MD in-process)"),
+    ],
+)
+def test_slow_ab13md_gives_the_same_bounds(monkeypatch, blk):
+    idle = mu_bounds(_loop(), blk, OMEGA, refine_peak=False, progress=False)
+    monkeypatch.setattr(mu_upper, "ab13md_call", _slow_ab13md)
+    t0 = time.perf_counter()
+    busy = mu_bounds(_loop(), blk, OMEGA, refine_peak=False, progress=False)
+    # the stand-in really ran at every frequency (the old 1 s limit would have replaced it by the LMI)
+    assert time.perf_counter() - t0 >= OMEGA.size * SLOW
+    assert idle.method == busy.method == "ab13md"
+    assert idle.notes == busy.notes == ()  # no fallback, nothing to report
+    np.testing.assert_allclose(busy.upper, idle.upper, rtol=1e-9)
+    np.testing.assert_allclose(busy.lower, idle.lower, rtol=1e-9)
+    assert busy.peak_upper == pytest.approx(idle.peak_upper, rel=1e-9)
+    assert idle.peak_upper > 0
+
+
+def test_safety_net_fires_only_on_a_hung_call_and_says_so(monkeypatch):
+    """A limit below the call's time (here set on purpose) replaces AB13MD, and the notes say where and why."""
+    blk = [[-1, 0], [1, 0]]
+    omega = OMEGA[:2]
+    idle = mu_bounds(_loop(), blk, omega, refine_peak=False, progress=False)
+    monkeypatch.setattr(mu_upper, "ab13md_call", _slow_ab13md)
+    hung = mu_bounds(_loop(), blk, omega, refine_peak=False, progress=False, ab13md_timeout=0.3)
+    assert hung.method == "ab13md"  # the method chosen; the notes say it did not answer
+    assert len(hung.notes) >= 1
+    note = hung.notes[0]
+    assert "safety limit" in note and f"at {omega.size} frequencies" in note and "D-G LMI" in note
+    # the LMI's is a true upper bound too, but another number (here up to about 1 % below AB13MD's):
+    # the reason the limit must never fire on a merely slow call
+    assert np.all(hung.upper >= idle.lower * (1 - 1e-9)) and np.all(hung.upper >= hung.lower * (1 - 1e-9))
+    np.testing.assert_allclose(hung.upper, idle.upper, rtol=0.05)
+
+
+def test_default_limits_are_safety_nets_not_method_switches():
+    params = inspect.signature(mu_bounds).parameters
+    assert params["ab13md_timeout"].default == AB13MD_SAFETY_TIMEOUT >= 30
+    assert params["warm_timeout"].default == AB13MD_SAFETY_TIMEOUT
+    assert LARGE_AB13MD_TIMEOUT >= AB13MD_SAFETY_TIMEOUT
+
+
+@pytest.mark.parametrize(
+    "blk, expected",
+    [
+        ([[1, 1], [1, 1]], "ab13md"),
+        ([[-1, 0], [1, 0]], "ab13md"),
+        ([[-1, 0]] * 8, "ab13md"),  # all real: AB13MD however slow it is at some frequencies
+        ([[-1, 0]] * 10 + [[2, 4]], "ab13md"),
+        ([[-1, 0]] * (DESCENT_ABOVE + 1), "ab13md"),  # large, but no repeated block
+        ([[-2, 0], [1, 0]], "lmi"),
+        ([[2, 0], [1, 1]], "lmi"),
+        ([[-3, 0]] * (DESCENT_ABOVE // 3 + 1), "gradient"),
+    ],
+)
+def test_method_is_a_function_of_the_structure(blk, expected):
+    assert resolve_method(as_block_structure(blk), "auto") == expected
+    # nothing else goes in: no matrix, no time limit
+    assert list(inspect.signature(resolve_method).parameters) == ["st", "method"]
+
+
+def test_sweeps_of_different_loops_on_one_structure_use_one_method():
+    blk = [[-1, 0], [1, 0]]
+    expected = resolve_method(as_block_structure(blk), "auto")
+    loops = [_loop(1, 1.0), _loop(2, 1e3), _loop(3, 1e-3)]
+    methods = {mu_bounds(G, blk, OMEGA, refine_peak=False, progress=False).method for G in loops}
+    rng = np.random.default_rng(0)
+    methods.add(mussv(rng.normal(size=(2, 2)) + 1j * rng.normal(size=(2, 2)), blk, lower=False).method)
+    assert methods == {expected}
