@@ -41,6 +41,11 @@ balancing is used for the eigenvalues only: for frequency responses it made
 that controller's double-precision response wrong by a factor 500 (see
 :func:`polyrob.analysis.mu.frequency.response_error`, which :mod:`robust
 <polyrob.analysis.robust>` uses to switch to extended precision instead).
+
+:func:`stability_screen` is *not* a verdict: the sign of double-precision
+eigenvalues, for the inner loops of the synthesis (a γ bisection, a D-K
+step, a norm estimate) where a candidate is screened thousands of times and
+whatever is kept is later decided by :func:`stability_verdict`.
 """
 
 from __future__ import annotations
@@ -50,7 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-__all__ = ["StabilityVerdict", "stability_verdict", "STABLE", "UNSTABLE", "UNDECIDED"]
+__all__ = ["StabilityVerdict", "stability_verdict", "stability_screen", "STABLE", "UNSTABLE", "UNDECIDED"]
 
 STABLE, UNSTABLE, UNDECIDED = "stable", "unstable", "undecided at double precision"
 _EPS = float(np.finfo(float).eps)
@@ -113,6 +118,29 @@ class StabilityVerdict:
             "precision_bits": int(self.precision_bits),
             "tests": list(self.tests),
         }
+
+
+def stability_screen(A, margin: float = 1e-9) -> bool:
+    """A screen, not a verdict: every double-precision eigenvalue has ``Re λ < -margin max(1, |λ|)``.
+
+    The one cheap test of the synthesis' inner loops (an empty ``A`` passes, a
+    non-finite one fails).  It can be wrong for a badly conditioned matrix;
+    what is reported or certified is decided by :func:`stability_verdict`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from polyrob.analysis.stability import stability_screen
+    >>> stability_screen(np.diag([-1.0, -2.0])), stability_screen(np.diag([-1.0, 1e-3]))
+    (True, False)
+    """
+    A = np.asarray(A, float)
+    if A.size == 0:
+        return True
+    if not np.all(np.isfinite(A)):
+        return False
+    ev = np.linalg.eigvals(A)
+    return bool(np.all(ev.real < -margin * np.maximum(1.0, np.abs(ev))))
 
 
 #: Precision of the first extended-precision attempt (double-double).

@@ -59,7 +59,8 @@ from polyrob.synthesis.dk.frequency import (
 )
 from polyrob.synthesis.dk.strategies import HinfStep, MuUpperBound
 from polyrob.synthesis.scalings.data import ScalingData, Scalings, complexified, scaling_data
-from polyrob.analysis.norms import hinf_norm_estimate, is_stable
+from polyrob.analysis.norms import hinf_norm_estimate
+from polyrob.analysis.stability import stability_screen
 from polyrob.synthesis.scalings.scaled_plant import scaled_plant
 
 __all__ = [
@@ -154,7 +155,7 @@ class DKIteration:
             Acl, *_ = lower_lft_matrices(A, B, C, D, Ak, Bk, Ck, Dk, n_u, n_y)
         except np.linalg.LinAlgError:
             Acl = None
-        if Acl is None or not is_stable(Acl):
+        if Acl is None or not stability_screen(Acl):
             self.failures.append(f"iteration {it + 1}: the K-step controller does not stabilise P")
             return None
         if np.isfinite(level_old) and hres.gamma > level_old * self.reject_ratio:
@@ -225,7 +226,7 @@ class DKIteration:
                 Ak, Bk, Ck, Dk = (np.asarray(X, float) for X in (K.A, K.B, K.C, K.D))
                 try:
                     Acl, Bcl, Ccl, Dcl = lower_lft_matrices(A, B, C, D, Ak, Bk, Ck, Dk, n_u, n_y)
-                    stable = is_stable(Acl)
+                    stable = stability_screen(Acl)
                 except np.linalg.LinAlgError:
                     stable = False
                 if not stable:
@@ -354,7 +355,7 @@ def _scaled_norm(Ps, K, n_u, n_y) -> float:
         Acl, Bcl, Ccl, Dcl = lower_lft_matrices(A, B, C, D, Ak, Bk, Ck, Dk, n_u, n_y)
     except np.linalg.LinAlgError:
         return float("inf")
-    if not is_stable(Acl, 0.0):
+    if not stability_screen(Acl, 0.0):
         return float("inf")
     return hinf_norm_estimate(Acl, Bcl, Ccl, Dcl)
 

@@ -18,7 +18,8 @@ import numpy as np
 
 from polyrob.plant.generalized import lower_lft_matrices
 from polyrob.synthesis.hinf.problem import SynthesisProblem
-from polyrob.analysis.norms import hinf_norm_below, is_stable
+from polyrob.analysis.norms import hinf_norm_below
+from polyrob.analysis.stability import stability_screen
 
 __all__ = ["sb10fd_controller", "bisect_gamma", "verify_controller", "riccati_controller", "RANK_FAIL"]
 
@@ -47,7 +48,7 @@ def sb10fd_controller(prob: SynthesisProblem, gamma: float):
         Acl, *_ = lower_lft_matrices(A, B, C, D, *mats, prob.n_u, prob.n_y)
     except np.linalg.LinAlgError:
         return None, 9
-    if not is_stable(Acl):
+    if not stability_screen(Acl):
         return None, 6  # formulas gave a controller but the loop is not stable
     return mats, 0
 

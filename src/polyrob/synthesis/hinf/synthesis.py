@@ -70,7 +70,8 @@ from polyrob.synthesis.hinf.checks import check_stabilizable
 from polyrob.synthesis.hinf.lmi import lmi_controller
 from polyrob.synthesis.hinf.problem import SynthesisProblem
 from polyrob.synthesis.hinf.riccati import riccati_controller
-from polyrob.analysis.norms import hinf_norm, hinf_norm_estimate, is_stable, state_matrices
+from polyrob.analysis.norms import hinf_norm, hinf_norm_estimate, state_matrices
+from polyrob.analysis.stability import stability_screen
 
 __all__ = ["HinfResult", "hinfsyn", "hinf_norm", "hinf_norm_estimate", "check_stabilizable"]
 
@@ -261,7 +262,7 @@ def _hinfsyn(A, B, C, D, n_y, n_u, gamma_range, tol, method, epsilon, rank_tol, 
             Acl, Bcl, Ccl, Dcl = lower_lft_matrices(A, B, C, D, Ak, Bk, Ck, Dk, n_u, n_y)
         except np.linalg.LinAlgError:
             return None
-        if not is_stable(Acl):
+        if not stability_screen(Acl):
             return None
         K = _ss(Ak, Bk, Ck, Dk)
         cl = _ss(Acl, Bcl, Ccl, Dcl)
