@@ -12,6 +12,10 @@
 * :func:`hinf_norm_estimate` - a fast grid value, an estimate *from below*;
   used only to rank candidate controllers, never as γ or a certificate.
 
+Stability is screened by :func:`polyrob.analysis.stability.stability_screen`
+and responses evaluated by :func:`polyrob.analysis.mu.frequency.matrix_response`
+(both written once, there).
+
 Examples
 --------
 >>> import control
@@ -27,6 +31,7 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.optimize import minimize_scalar
 
+from polyrob.analysis.mu.frequency import matrix_response
 from polyrob.analysis.stability import stability_screen
 from polyrob.errors import SynthesisError
 
@@ -38,16 +43,6 @@ def state_matrices(sys) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
     if isinstance(sys, tuple):
         return tuple(np.asarray(X, float) for X in sys)
     return tuple(np.array(X, dtype=float) for X in (sys.A, sys.B, sys.C, sys.D))
-
-
-def _sigma(A, B, C, D, w: float) -> float:
-    """``σ̄(G(jω))``; ``inf`` when ``jω`` is (numerically) a pole: the response is unbounded there."""
-    n = A.shape[0]
-    try:
-        H = C @ np.linalg.solve(1j * w * np.eye(n) - A, B) + D if n else D
-    except np.linalg.LinAlgError:
-        return np.inf
-    return _norm2(H)
 
 
 def _norm2(H) -> float:
@@ -130,17 +125,9 @@ def _local_peak(A, B, C, D, w: float) -> float:
 
 
 def _sigma_function(A, B, C, D):
-    """``ω -> σ̄(G(jω))``, through the eigen-decomposition of ``A`` when it is well conditioned."""
-    lam, V = np.linalg.eig(A)
-    try:
-        cond = np.linalg.cond(V)
-    except np.linalg.LinAlgError:
-        cond = np.inf
-    if cond < 1e8:
-        Vb = np.linalg.solve(V, B)
-        CV = C @ V
-        return lambda x: _norm2((CV / (1j * x - lam)[None, :]) @ Vb + D)
-    return lambda x: _sigma(A, B, C, D, x)
+    """``ω -> σ̄(G(jω))`` (``inf`` at a pole on the axis)."""
+    response = matrix_response(A, B, C, D)
+    return lambda x: _norm2(response(x)[0])
 
 
 def hinf_norm_upper(sys, *, rtol: float = 1e-6, lower: float = 0.0) -> float:

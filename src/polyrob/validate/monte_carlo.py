@@ -28,21 +28,11 @@ from dataclasses import dataclass, field
 import control
 import numpy as np
 
+from polyrob.analysis.mu.frequency import freqresp as frequency_response  # the one evaluation, kept by this name
 from polyrob.errors import PolyrobError
 from polyrob.plant.generalized import loop_functions
 
 __all__ = ["MonteCarloResult", "monte_carlo", "frequency_response", "weight_shape"]
-
-
-def frequency_response(sys, omega) -> np.ndarray:
-    """Complex frequency response of an LTI system as an array ``(N, p, m)``."""
-    omega = np.asarray(omega, float)
-    if getattr(sys, "dt", 0) not in (0, None):
-        pts = np.exp(1j * omega * float(sys.dt))
-    else:
-        pts = 1j * omega
-    H = np.asarray(sys(pts, squeeze=False, warn_infinite=False), dtype=complex)
-    return np.moveaxis(H.reshape(sys.noutputs, sys.ninputs, -1), -1, 0)
 
 
 def weight_shape(W, omega, m: int) -> np.ndarray | None:

@@ -1,17 +1,33 @@
-"""Frequency grids and vectorised frequency responses for the μ sweep.
+"""Frequency grids and the frequency responses of polyrob (each evaluation written once, here).
 
 :func:`default_grid` places a log grid over a system's poles and zeros (and
 inserts their natural frequencies, so a resonance is bracketed);
-:func:`freqresp` evaluates ``M(jω)`` for all ω at once (python-control's
-``__call__`` / ``FrequencyResponseData.eval``); :func:`refine_peaks` searches
-the upper bound's largest local maxima between grid points.
+:func:`refine_peaks` searches the upper bound's largest local maxima between
+grid points.  Two evaluations of ``C (jωI - A)^{-1} B + D``, for two uses:
+
+* :func:`freqresp` - of an LTI object (python-control's ``__call__``, SLICOT
+  TB05AD; ``FrequencyResponseData.eval``; discrete time on ``e^{jωT}``),
+  or in extended precision (:func:`freqresp_extended`): what the μ sweep,
+  the Monte Carlo plots and every reported response use;
+* :func:`matrix_response` - of raw double matrices, for the synthesis'
+  inner loops (the D-K grid, the H∞ estimate and its peak search, the
+  fixed-structure optimiser): ``A`` is diagonalised once when its
+  eigenvectors are well conditioned, else one direct solve per ω.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["is_discrete", "default_grid", "freqresp", "freqresp_extended", "response_error", "refine_peaks"]
+__all__ = [
+    "is_discrete",
+    "default_grid",
+    "freqresp",
+    "freqresp_extended",
+    "matrix_response",
+    "response_error",
+    "refine_peaks",
+]
 
 
 def is_discrete(sys) -> bool:
@@ -50,13 +66,15 @@ def default_grid(sys, per_decade: int = 40) -> np.ndarray:
 
 
 def freqresp(sys, omega: np.ndarray, *, bits: int | None = None) -> np.ndarray:
-    """Frequency response as an ``(N, p, m)`` array, vectorised over omega.
+    """Frequency response of an LTI system as an ``(N, p, m)`` array, vectorised over omega.
 
     ``bits`` evaluates a continuous-time state-space system in extended
-    precision instead (:func:`freqresp_extended`).
+    precision instead (:func:`freqresp_extended`).  A pole on the grid gives
+    an infinite entry, without a warning.
     """
     import control
 
+    omega = np.asarray(omega, dtype=float)
     if bits is not None and isinstance(sys, control.StateSpace) and not is_discrete(sys):
         return freqresp_extended(sys, omega, bits)
 
@@ -67,6 +85,65 @@ def freqresp(sys, omega: np.ndarray, *, bits: int | None = None) -> np.ndarray:
             pts = np.exp(1j * omega * float(sys.dt)) if is_discrete(sys) else 1j * omega
             H = sys(pts, squeeze=False, warn_infinite=False)
     return np.moveaxis(np.asarray(H, dtype=complex).reshape(sys.noutputs, sys.ninputs, -1), -1, 0)
+
+
+def matrix_response(A, B, C, D, *, modal: bool = True):
+    """``ω -> C (jωI - A)^{-1} B + D`` as ``(N, p, m)`` for raw double matrices (the inner loops' evaluation).
+
+    With ``modal`` (the default), ``A = V Λ V^{-1}`` is decomposed once and
+    each ω costs a diagonal scaling, when ``cond(V) < 1e8``; otherwise (or
+    ``modal=False``) one direct solve per ω.  A singular ``jωI - A`` gives
+    infinite entries.  Not for reported figures: :func:`freqresp` is.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from polyrob.analysis.mu.frequency import matrix_response
+    >>> f = matrix_response(np.array([[-2.0]]), np.ones((1, 1)), np.ones((1, 1)), np.zeros((1, 1)))
+    >>> complex(np.round(f([1.0])[0, 0, 0], 6))    # 1/(j + 2)
+    (0.4-0.2j)
+    """
+    A, B, C, D = (np.asarray(X, dtype=float) for X in (A, B, C, D))
+    n = A.shape[0]
+    shape = (C.shape[0], B.shape[1])
+    if n == 0:
+        return lambda omega: np.broadcast_to(D, (np.size(omega),) + shape).astype(complex)
+    if modal:
+        lam, V = np.linalg.eig(A)
+        try:
+            well = np.linalg.cond(V) < 1e8
+        except np.linalg.LinAlgError:
+            well = False
+        if well:
+            Vi_B, CV = np.linalg.solve(V, B), C @ V
+
+            def modal_eval(omega):
+                omega = np.atleast_1d(np.asarray(omega, dtype=float))
+                out = np.empty((omega.size,) + shape, complex)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    for k, w in enumerate(omega):
+                        out[k] = (CV / (1j * w - lam)[None, :]) @ Vi_B + D
+                return out
+
+            return modal_eval
+    eye = np.eye(n)
+
+    def solve_eval(omega):
+        omega = np.atleast_1d(np.asarray(omega, dtype=float))
+        s = 1j * omega
+        try:  # one batched LAPACK call: the same numbers as a solve per ω
+            return C @ np.linalg.solve(s[:, None, None] * eye - A, np.broadcast_to(B, (s.size,) + B.shape)) + D
+        except np.linalg.LinAlgError:
+            pass
+        out = np.empty((omega.size,) + shape, complex)
+        for k, w in enumerate(omega):
+            try:
+                out[k] = C @ np.linalg.solve(1j * w * eye - A, B) + D
+            except np.linalg.LinAlgError:  # jω is an eigenvalue: the response is unbounded
+                out[k] = np.inf
+        return out
+
+    return solve_eval
 
 
 def refine_peaks(omega, up, f, n_peaks=3, xtol=1e-7):

@@ -1,7 +1,11 @@
-"""Frequency tools of μ-synthesis: the D-step grid, closed-loop responses, the performance floor.
+"""Frequency tools of μ-synthesis: the D-step grid and the performance floor.
 
 * :func:`frequency_grid` - the default D-K grid from the plant's poles;
-* :func:`performance_lower_bound` - what ``W_S`` and ``W_T`` alone force on μ;
+* :func:`resonances` - lightly damped natural frequencies the grid must hold;
+* :func:`performance_lower_bound` - what ``W_S`` and ``W_T`` alone force on μ.
+
+Responses are evaluated by :mod:`polyrob.analysis.mu.frequency` (``freqresp``
+for systems, ``matrix_response`` for the closed-loop matrices of the loop).
 
 The certificate every synthesis result carries is
 :func:`polyrob.analysis.certificate.certify_loop`'s.
@@ -13,8 +17,9 @@ import math
 
 import numpy as np
 
+from polyrob.analysis.mu.frequency import freqresp
 
-__all__ = ["frequency_grid", "resonances", "frequency_response_matrices", "performance_lower_bound"]
+__all__ = ["frequency_grid", "resonances", "performance_lower_bound"]
 
 
 def frequency_grid(sys, per_decade: int = 8) -> np.ndarray:
@@ -56,27 +61,6 @@ def resonances(A: np.ndarray, lo: float, hi: float, zeta: float = 0.5) -> np.nda
     return np.unique(np.round(wn[ok], 12))
 
 
-def frequency_response_matrices(A, B, C, D, omega) -> np.ndarray:
-    """``C (jωI - A)^{-1} B + D`` as ``(n, p, m)`` via a Hessenberg-free direct solve."""
-    n = A.shape[0]
-    out = np.empty((omega.size, C.shape[0], B.shape[1]), complex)
-    if n == 0:
-        out[:] = D
-        return out
-    # eigen-decomposition when well conditioned (fast for many frequencies)
-    lam, V = np.linalg.eig(A)
-    if np.linalg.cond(V) < 1e8:
-        Vi_B = np.linalg.solve(V, B)
-        CV = C @ V
-        for k, w in enumerate(omega):
-            out[k] = (CV / (1j * w - lam)[None, :]) @ Vi_B + D
-        return out
-    I = np.eye(n)
-    for k, w in enumerate(omega):
-        out[k] = C @ np.linalg.solve(1j * w * I - A, B) + D
-    return out
-
-
 def performance_lower_bound(P) -> tuple[float, float]:
     """A priori lower bound on robust-performance μ from ``W_S`` and ``W_T`` alone.
 
@@ -105,8 +89,8 @@ def performance_lower_bound(P) -> tuple[float, float]:
     if not isinstance(P, GeneralizedPlant) or P.W_S is None or P.W_T is None:
         return 0.0, float("nan")
     w = np.logspace(-6, 8, 1401)
-    HS = _response(P.W_S, w)
-    HT = _response(P.W_T, w)
+    HS = freqresp(P.W_S, w)
+    HT = freqresp(P.W_T, w)
     best, where = 0.0, float("nan")
     for k in range(HS.shape[1]):
         if np.any(HS[:, k, np.arange(HS.shape[2]) != k]) or np.any(HT[:, k, np.arange(HT.shape[2]) != k]):
@@ -117,9 +101,3 @@ def performance_lower_bound(P) -> tuple[float, float]:
         if b[i] > best:
             best, where = float(b[i]), float(w[i])
     return best, where
-
-
-def _response(sys, w) -> np.ndarray:
-    """``sys(jω)`` as ``(n, p, m)`` (python-control's evaluation)."""
-    H = np.asarray(sys(1j * np.asarray(w), squeeze=False))
-    return np.moveaxis(H.reshape(sys.noutputs, sys.ninputs, -1), -1, 0)

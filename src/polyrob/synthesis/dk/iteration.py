@@ -51,12 +51,8 @@ from polyrob.analysis.mu.blocks import as_block_structure
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import lower_lft_matrices
 from polyrob.synthesis.scalings.dfit import LogMagnitudeFit
-from polyrob.synthesis.dk.frequency import (
-    frequency_grid,
-    frequency_response_matrices,
-    performance_lower_bound,
-    resonances,
-)
+from polyrob.analysis.mu.frequency import matrix_response
+from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound, resonances
 from polyrob.synthesis.dk.strategies import HinfStep, MuUpperBound
 from polyrob.synthesis.scalings.data import ScalingData, Scalings, complexified, scaling_data
 from polyrob.analysis.norms import hinf_norm_estimate
@@ -238,7 +234,7 @@ class DKIteration:
                         bar.write(f"musyn iter {it + 1}: closed loop unstable, stopping")
                     break
                 w = np.union1d(omega, resonances(Acl, omega.min(), omega.max()))
-                H = frequency_response_matrices(Acl, Bcl, Ccl, Dcl, w)
+                H = matrix_response(Acl, Bcl, Ccl, Dcl)(w)
                 mu, Dw, Gw = self.mu_bound(H, st_c if phase == "D" else st)
                 peak = float(np.max(mu))
                 improvement = (prev - peak) / prev if np.isfinite(prev) else 1.0
