@@ -340,9 +340,11 @@ class DKIteration:
 def _scaled_norm(Ps, K, n_u, n_y) -> float:
     """Grid value of the scaled loop's H∞ norm with ``K`` (``inf`` if unstable or ill posed).
 
-    An estimate from below, used only to reject a K-step much worse than the
-    old controller (a heuristic safeguard, never a certificate: μ is
-    certified by :func:`polyrob.analysis.certificate.certify_loop`).
+    The lower LFT closed, then :func:`~polyrob.analysis.norms.hinf_norm_estimate`
+    (which screens stability itself): an estimate from below, used only to
+    reject a K-step much worse than the old controller (a heuristic
+    safeguard, never a certificate: μ is certified by
+    :func:`polyrob.analysis.certificate.certify_loop`).
     """
 
     A, B, C, D = (np.asarray(X, float) for X in (Ps.A, Ps.B, Ps.C, Ps.D))
@@ -350,8 +352,6 @@ def _scaled_norm(Ps, K, n_u, n_y) -> float:
     try:
         Acl, Bcl, Ccl, Dcl = lower_lft_matrices(A, B, C, D, Ak, Bk, Ck, Dk, n_u, n_y)
     except np.linalg.LinAlgError:
-        return float("inf")
-    if not stability_screen(Acl, 0.0):
         return float("inf")
     return hinf_norm_estimate(Acl, Bcl, Ccl, Dcl)
 
