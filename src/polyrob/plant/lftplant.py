@@ -24,7 +24,7 @@ import numpy as np
 
 from polyrob.errors import PolyrobError
 
-__all__ = ["UncertainPlant", "upper_lft", "MAX_CORNERS", "static_upper_lft", "weakest_enclosure"]
+__all__ = ["UncertainPlant", "upper_lft", "upper_lft_matrices", "MAX_CORNERS", "weakest_enclosure"]
 
 #: Default cap on the number of corners :meth:`UncertainPlant.corners` enumerates.
 MAX_CORNERS = 1024
@@ -35,30 +35,34 @@ def weakest_enclosure(*levels) -> str:
     return "certified" if levels and all(level == "certified" for level in levels) else "sampled"
 
 
-def static_upper_lft(A, B1, B2, C1, D11, D12, Delta):
-    """``(A + B1 Q C1, B2 + B1 Q D12)`` with ``Q = Δ (I - D11 Δ)^{-1}``: the plant rows of ``Fu``.
+def upper_lft_matrices(A, B, C, D, Delta):
+    """Matrices of ``Fu(M, Δ)`` for a constant ``Δ`` closing ``d = Δ v`` on the first inputs and outputs.
 
-    Raises :class:`~polyrob.errors.PolyrobError` when ``I - D11 Δ`` is singular.
+    With ``Q = (I - Δ D11)^{-1} Δ``: ``(A + B1 Q C1, B2 + B1 Q D12, C2 + D21 Q C1,
+    D22 + D21 Q D12)``.  python-control's ``StateSpace.lft`` is the lower LFT
+    with a system; the upper one with a constant is these three products,
+    written once here.  Raises :class:`~polyrob.errors.PolyrobError` when
+    ``I - Δ D11`` is singular.
     """
-    nd = Delta.shape[0]
+    nd, nv = Delta.shape
+    B1, B2 = B[:, :nd], B[:, nd:]
+    C1, C2 = C[:nv], C[nv:]
+    D11, D12, D21, D22 = D[:nv, :nd], D[:nv, nd:], D[nv:, :nd], D[nv:, nd:]
     if nd == 0:
-        return A.copy(), B2.copy()
-    lhs = np.eye(Delta.shape[1]) - D11 @ Delta
+        return A.copy(), B2.copy(), C2.copy(), D22.copy()
+    lhs = np.eye(nd) - Delta @ D11
     if np.linalg.cond(lhs) > 1e12:
-        raise PolyrobError("the upper LFT is ill posed: I - D_vd Δ is singular")
-    Q = Delta @ np.linalg.inv(lhs)
-    return A + B1 @ Q @ C1, B2 + B1 @ Q @ D12
+        raise PolyrobError("the upper LFT is ill posed: I - Δ D_vd is singular")
+    Q = np.linalg.solve(lhs, Delta)
+    return A + B1 @ Q @ C1, B2 + B1 @ Q @ D12, C2 + D21 @ Q @ C1, D22 + D21 @ Q @ D12
 
 
 def upper_lft(M: control.StateSpace, Delta) -> control.StateSpace:
-    """Upper LFT ``Fu(M, Δ)`` with a constant (real or complex) ``Δ``.
+    """Upper LFT ``Fu(M, Δ)`` with a constant (real or complex) ``Δ`` (:func:`upper_lft_matrices`).
 
     The first ``Δ.shape[0]`` inputs of ``M`` are ``d`` and its first
     ``Δ.shape[1]`` outputs are ``v``; ``d = Δ v`` closes them (MATLAB's
-    ``lft(Delta, M)``).  python-control's ``StateSpace.lft`` is the lower LFT
-    with a system; the upper one with a constant is three matrix products:
-    with ``Q = (I - Δ D11)^{-1} Δ`` the result is
-    ``(A + B1 Q C1, B2 + B1 Q D12, C2 + D21 Q C1, D22 + D21 Q D12)``.
+    ``lft(Delta, M)``).
 
     Raises
     ------
@@ -77,19 +81,8 @@ def upper_lft(M: control.StateSpace, Delta) -> control.StateSpace:
     nd, nv = Delta.shape
     if nd > M.ninputs or nv > M.noutputs:
         raise PolyrobError(f"Δ is {nd}x{nv} but M has only {M.ninputs} inputs and {M.noutputs} outputs")
-    A, B, C, D = (np.asarray(X) for X in (M.A, M.B, M.C, M.D))
-    B1, B2 = B[:, :nd], B[:, nd:]
-    C1, C2 = C[:nv], C[nv:]
-    D11, D12, D21, D22 = D[:nv, :nd], D[:nv, nd:], D[nv:, :nd], D[nv:, nd:]
-    lhs = np.eye(nd) - Delta @ D11
-    if nd and np.linalg.cond(lhs) > 1e12:
-        raise PolyrobError("the upper LFT is ill posed: I - Δ D_vd is singular")
-    Q = np.linalg.solve(lhs, Delta) if nd else np.zeros((0, nv))
     return control.ss(
-        A + B1 @ Q @ C1,
-        B2 + B1 @ Q @ D12,
-        C2 + D21 @ Q @ C1,
-        D22 + D21 @ Q @ D12,
+        *upper_lft_matrices(*(np.asarray(X) for X in (M.A, M.B, M.C, M.D)), Delta),
         inputs=M.input_labels[nd:],
         outputs=M.output_labels[nv:],
         states=M.state_labels,
@@ -305,8 +298,12 @@ class UncertainPlant:
             for (mat, r, c), val in zip(self.channel_index, vals):
                 (A if mat == 0 else B)[r, c] = val
             return A, B
-        A, B = static_upper_lft(
-            self.A_mid, self.B_d, self.B_mid, self.C_v, self.D_vd, self.D_vu, self.delta_matrix(delta, residual)
+        A, B, _, _ = upper_lft_matrices(  # the plant rows of Fu: no output rows below v
+            self.A_mid,
+            np.hstack([self.B_d, self.B_mid]),
+            self.C_v,
+            np.hstack([self.D_vd, self.D_vu]),
+            self.delta_matrix(delta, residual),
         )
         return np.real_if_close(A), np.real_if_close(B)
 

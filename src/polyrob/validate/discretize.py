@@ -37,7 +37,9 @@ import control
 import numpy as np
 
 from polyrob.errors import PolyrobError
-from polyrob.plant.generalized import as_controller_ss, lower_lft_matrices
+from polyrob.analysis.mu.frequency import freqresp
+from polyrob.plant.generalized import as_controller_ss
+from polyrob.plant.loops import lft, lower_lft
 
 __all__ = [
     "DiscreteController",
@@ -134,9 +136,7 @@ def discretize(K, rate: float, *, method: str = "tustin", prewarp: float | None 
         if not (0 < prewarp < math.pi * rate):
             raise PolyrobError(f"the pre-warping frequency must lie in (0, π·rate) = (0, {math.pi * rate:.4g}) rad/s")
     if Ks.nstates == 0:
-        Kd = control.ss(
-            np.zeros((0, 0)), np.zeros((0, Ks.ninputs)), np.zeros((Ks.noutputs, 0)), np.asarray(Ks.D, float), dt=h
-        )
+        Kd = control.ss(np.zeros((0, 0)), np.zeros((0, Ks.ninputs)), np.zeros((Ks.noutputs, 0)), Ks.D, dt=h)
     elif method == "tustin":
         Kd = control.sample_system(Ks, h, method="bilinear", prewarp_frequency=prewarp)
     else:
@@ -145,23 +145,16 @@ def discretize(K, rate: float, *, method: str = "tustin", prewarp: float | None 
 
 
 def discrete_lft(Pd: control.StateSpace, Kd: control.StateSpace, n_u: int, n_y: int) -> control.StateSpace:
-    """Lower LFT of a discrete plant and a discrete controller of the same ``dt``."""
+    """Lower LFT of a discrete plant and controller of the same ``dt`` (:func:`~polyrob.plant.loops.lower_lft`)."""
     if not np.isclose(float(Pd.dt), float(Kd.dt)):
         raise PolyrobError(f"plant dt = {Pd.dt} and controller dt = {Kd.dt} differ")
-    mats = [np.asarray(X, float) for X in (Pd.A, Pd.B, Pd.C, Pd.D, Kd.A, Kd.B, Kd.C, Kd.D)]
-    try:
-        A, B, C, D = lower_lft_matrices(*mats, n_u, n_y)
-    except np.linalg.LinAlgError:
-        raise PolyrobError("the discrete loop is ill posed: I - D_yu D_K is singular") from None
-    return control.ss(A, B, C, D, dt=Pd.dt)
+    return lower_lft(Pd, Kd, n_u, n_y)
 
 
 def crossover_frequency(G, K, omega=None) -> float:
     """Where ``σ_max(G K)`` of the loop first falls below 1 (rad/s)."""
-    from polyrob.validate.monte_carlo import frequency_response
-
     omega = np.logspace(-4, 5, 900) if omega is None else np.asarray(omega, float)
-    L = frequency_response(G, omega) @ frequency_response(as_controller_ss(K, G.ninputs, G.noutputs), omega)
+    L = freqresp(G, omega) @ freqresp(as_controller_ss(K, G.ninputs, G.noutputs), omega)
     sv = np.linalg.svd(L, compute_uv=False)[:, 0]
     below = np.flatnonzero((sv < 1.0) & (np.r_[True, sv[:-1] >= 1.0]))
     return float(omega[below[-1]] if below.size else omega[np.argmin(np.abs(np.log(sv)))])
@@ -206,21 +199,13 @@ class SampledDataResult:
 def _mu_curve(sys, blk, w, upper_only, mu_options):
     """μ bounds on the grid: both (mu_bounds) or the upper bound alone (mussv per point, no lower-bound search)."""
     from polyrob.analysis.mu.bounds import mu_bounds, mussv
-    from polyrob.validate.monte_carlo import frequency_response
 
     if not upper_only:
         mu = mu_bounds(sys, blk, w, **{"refine_peak": False, "progress": False, **mu_options})
         return mu.omega, mu.upper, mu.lower
-    H = frequency_response(sys, w)
+    H = freqresp(sys, w)
     up = np.array([mussv(H[k], blk, lower=False).upper if np.all(np.isfinite(H[k])) else np.inf for k in range(len(w))])
     return np.asarray(w, float), up, np.full(len(w), np.nan)
-
-
-def _grid(omega, rate):
-    nyq = math.pi * rate
-    w = np.asarray(omega, float)
-    w = w[(w > 0) & (w < 0.999 * nyq)]
-    return w if w.size else np.array([0.5 * nyq])
 
 
 def sampled_data_mu(
@@ -284,9 +269,11 @@ def sampled_data_mu(
         raise PolyrobError(f"the discrete controller runs at {1 / float(Kd.dt):.6g} Hz, not {rate:.6g} Hz")
     Pd = control.sample_system(P.system, h, method="zoh")
     N = discrete_lft(Pd, Kd, P.n_u, P.n_y)
-    poles = np.linalg.eigvals(np.asarray(N.A)) if N.nstates else np.zeros(0)
-    rho = float(np.abs(poles).max()) if poles.size else 0.0
-    w = _grid(np.logspace(-3, math.log10(math.pi * rate), 60) if omega is None else omega, rate)
+    rho = float(np.abs(np.linalg.eigvals(np.asarray(N.A))).max()) if N.nstates else 0.0  # discrete time: |z| < 1
+    nyq = math.pi * rate
+    w = np.logspace(-3, math.log10(nyq), 60) if omega is None else np.asarray(omega, float)
+    w = w[(w > 0) & (w < 0.999 * nyq)]
+    w = w if w.size else np.array([0.5 * nyq])
     if performance:
         sys, blk = N, P.block_structure_rp
     else:
@@ -345,8 +332,6 @@ class MinRateResult:
 
 def continuous_mu(P, K, omega=None, *, performance: bool = True, upper_only: bool = True, **mu_options) -> float:
     """Peak μ upper bound of the continuous loop on ``omega`` (same options as the discrete check)."""
-    from polyrob.plant.generalized import lft
-
     N = lft(P, K)
     w = np.logspace(-3, 4, 60) if omega is None else np.asarray(omega, float)
     if performance:

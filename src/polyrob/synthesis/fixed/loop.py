@@ -4,7 +4,10 @@
 parametrised controller (:mod:`polyrob.synthesis.fixed.structures`), the
 closed-loop matrix and spectral abscissa; :func:`closed_loop_response` is
 the same algebra for a given controller, a cross-check against
-:func:`polyrob.plant.lft`.
+:func:`polyrob.plant.lft`.  ``P(jω)`` comes from
+:func:`~polyrob.analysis.mu.frequency.matrix_response` (a direct solve per ω,
+cached per grid), the closed-loop matrix from
+:func:`~polyrob.plant.loops.lower_lft_matrices`.
 """
 
 from __future__ import annotations
@@ -15,7 +18,9 @@ import control
 import numpy as np
 from slycot.exceptions import SlycotArithmeticError, SlycotError
 
+from polyrob.analysis.mu.frequency import freqresp, matrix_response
 from polyrob.errors import PolyrobError
+from polyrob.plant.loops import lower_lft_matrices
 from polyrob.synthesis.fixed.structures import ControllerStructure
 
 __all__ = ["FixedLoop", "closed_loop_response", "plant_parts", "diagonal_blocks"]
@@ -39,6 +44,8 @@ class FixedLoop:
         )
         self.npad = st.padded_size
         self._cache = {}
+        # direct solves (modal=False): accurate whatever A's eigenvector conditioning
+        self._response = matrix_response(self.A, self.B, self.C, self.D, modal=False)
         self.diag = diagonal_blocks(st)
         # Stability is decided by the loop of the *minimal* u -> y channel: the
         # other modes of P (e.g. the weights' states, unobservable from y)
@@ -72,12 +79,7 @@ class FixedLoop:
         if key not in self._cache:
             if len(self._cache) > 8:
                 self._cache.clear()
-            n = self.A.shape[0]
-            s = 1j * omega
-            X = np.linalg.solve(
-                s[:, None, None] * np.eye(n) - self.A, np.broadcast_to(self.B, (s.size,) + self.B.shape)
-            )
-            H = self.C @ X + self.D
+            H = self._response(omega)
             nz, nw = self.nz, self.nw
             self._cache[key] = (H[:, :nz, :nw], H[:, :nz, nw:], H[:, nz:, :nw], H[:, nz:, nw:])
         return self._cache[key]
@@ -99,19 +101,17 @@ class FixedLoop:
         return N, L, R, dK
 
     # ---------------------------------------------------------------- A_cl
-    @staticmethod
-    def _close(A, B2, C2, D22, Ak, Bk, Ck, Dk):
-        R = np.eye(C2.shape[0]) - D22 @ Dk
-        Yx, Yk = np.linalg.solve(R, C2), np.linalg.solve(R, D22 @ Ck)
-        return np.block([[A + B2 @ Dk @ Yx, B2 @ (Ck + Dk @ Yk)], [Bk @ Yx, Ak + Bk @ Yk]])
+    def _close(self, A, B2, C2, D22, K):
+        """``A`` of the loop ``u = K y`` around ``(A, B2, C2, D22)`` (no other channels)."""
+        return lower_lft_matrices(A, B2, C2, D22, *K, self.n_u, self.n_y)[0]
 
     def closed_loop_matrix(self, theta, *, full=False) -> np.ndarray:
         """``A`` of ``lft(P, K(θ))`` (``full``) or of the loop of the minimal ``u -> y`` channel."""
         K = self.structure.realization(theta)
         if full:
             nw, nz = self.nw, self.nz
-            return self._close(self.A, self.B[:, nw:], self.C[nz:], self.D[nz:, nw:], *K)
-        return self._close(*self.G22, *K)
+            return self._close(self.A, self.B[:, nw:], self.C[nz:], self.D[nz:, nw:], K)
+        return self._close(*self.G22, K)
 
     def abscissa(self, theta, *, full=False) -> float:
         """Largest real part of the closed-loop poles (``inf`` if not computable)."""
@@ -148,9 +148,9 @@ def closed_loop_response(P, K, omega, *, n_u: int | None = None, n_y: int | None
     """
     sysP, n_u, n_y = plant_parts(P, n_u, n_y)
     omega = np.asarray(omega, float).ravel()
-    Hp = np.moveaxis(np.asarray(sysP(1j * omega, squeeze=False)).reshape(sysP.noutputs, sysP.ninputs, -1), -1, 0)
+    Hp = freqresp(sysP, omega)
     if isinstance(K, control.LTI):
-        Kw = np.moveaxis(np.asarray(K(1j * omega, squeeze=False)).reshape(n_u, n_y, -1), -1, 0)
+        Kw = freqresp(K, omega)
     else:
         Kw = np.broadcast_to(np.atleast_2d(np.asarray(K, float)), (omega.size, n_u, n_y)).astype(complex)
     nz, nw = sysP.noutputs - n_y, sysP.ninputs - n_u
