@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 import control
 import numpy as np
 
+from polyrob.analysis.stability import stability_verdict
 from polyrob.errors import PolyrobError
 from polyrob.plant.realize import as_controller_ss, as_state_space, ss_matrices
 
@@ -165,7 +166,8 @@ class ClosedLoop:
     poles : ndarray
         Closed-loop poles.
     stable : bool
-        All poles in the open left half-plane.
+        Proved stable by :func:`~polyrob.analysis.stability.stability_verdict`
+        (all poles in the open left half-plane, beyond their error bound).
     delta : ndarray or None
         The ``δ`` of the plant (``None`` for the nominal or a given plant).
     """
@@ -221,7 +223,7 @@ def loop_functions(G: control.StateSpace, K, *, delta=None) -> ClosedLoop:
     )
     cl = lower_lft(L, Ks, m, p)
     poles = np.linalg.eigvals(np.asarray(cl.A)) if cl.nstates else np.zeros(0)
-    stable = bool(np.all(poles.real < 0))
+    stable = stability_verdict(cl).stable
     return ClosedLoop(
         S=cl[:p, :],
         T=cl[p : 2 * p, :],
