@@ -69,7 +69,8 @@ def test_small_gain_when_the_vertices_are_too_many_bounds_mu_from_above(paper_pr
     # constant D covers time-varying parameters, so it can never be below constant-parameter mu
     rs = robstab(paper_problem.P, K, omega=np.logspace(-1, 2, 25))
     assert tv.stability.gamma >= rs.mu_lower
-    assert tv.stability_holds == (tv.stability.gamma < 1)
+    # the constant-D bound of K* on the paper's box (1.687, docs/certificates.md): no certificate
+    assert tv.stability.gamma == pytest.approx(1.687, rel=2e-3) and not tv.stability_holds
 
 
 def test_cli_analyze_prints_both_verdicts_and_which_covers_the_robot(capsys):
@@ -127,3 +128,19 @@ def test_constant_d_small_gain_certifies_what_one_common_p_does_not():
     assert tv.stability.gamma >= rs.mu_lower
     # robust performance for arbitrarily fast variation is not proved at these weights
     assert not tv.performance_holds and tv.performance.gamma > 1
+
+
+def test_a_certified_pldi_s_vertex_certificate_says_its_polytope_was_sampled():
+    """With --certify the intervals are proved, the polytope's other half-spaces are sampled supports:
+    the vertex certificate's scope says so (it once read 'certified')."""
+    from polyrob.pipeline import build_problem
+
+    problem = build_problem(
+        polyrob.load_robot("planar_2r"), bound_options={"samples": 256, "certify": True}, progress=False
+    )
+    assert problem.pldi.enclosure == "certified"
+    tv = time_varying_certificate(problem, polyrob.paper_controller())
+    assert tv.method == "vertices" and tv.stability.vertex_source == "polytope"
+    assert tv.certificate.scope.enclosure == "sampled"
+    assert "polytope's vertices of the PLDI (sampled)" in tv.certificate.details()
+    assert tv.summary()["scope"]["enclosure"] == "sampled"
