@@ -109,3 +109,42 @@ def _state(pid: int) -> str:
         return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
     except OSError:
         return "Z"
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="reads child processes from /proc (Linux)")
+@pytest.mark.timeout(120)  # a worker that outlived its parent would sleep 60 s, then print a traceback
+@pytest.mark.parametrize("how", [signal.SIGTERM, signal.SIGKILL])
+def test_workers_whose_parent_died_exit_at_once_and_quietly(tmp_path, how):
+    """Before: a parent killed by SIGTERM ran no clean-up; each worker finished its task and printed a
+    BrokenPipeError traceback when it sent the result."""
+    (tmp_path / "slow_tasks.py").write_text("import time\n\ndef slow(state, item):\n    time.sleep(60)\n")
+    script = textwrap.dedent(
+        f"""
+        import sys
+        sys.path.insert(0, {str(tmp_path)!r})
+        from slow_tasks import slow
+        from polyrob.bounds.parallel import WorkerPool
+        with WorkerPool(0, workers=2) as pool:
+            pool.map(slow, [1, 2, 3, 4])
+        """
+    )
+    proc = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        workers: set[int] = set()
+        while len(workers) < 2 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            workers = _children(proc.pid)
+        assert len(workers) >= 2, "the pool never started its workers"
+        time.sleep(2.0)  # the workers are in their tasks
+        proc.send_signal(how)
+        assert proc.wait(timeout=10) == -how
+        err = proc.stderr.read()  # returns once every holder of the pipe, the workers too, has exited
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert "Traceback" not in err, err
+    time.sleep(0.5)  # a process that closed its files may still be exiting
+    alive = [pid for pid in workers if Path(f"/proc/{pid}").exists() and "Z" not in _state(pid)]
+    assert not alive, f"workers still running after their parent died: {alive}"

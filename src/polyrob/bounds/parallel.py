@@ -10,10 +10,11 @@ module globals, no ``os.environ``.
 
 Each worker talks to the parent over its own pipe, so the parent waits on
 the pipes and on the workers' process sentinels together: a worker that dies
-is an error at once, not a hang.  Workers ignore SIGINT (a terminal sends it
-to the whole process group); on KeyboardInterrupt, or any other exception,
-the parent terminates them and re-raises, so one Ctrl-C ends a bound within
-a second or so.
+is an error at once, not a hang.  Workers are set up by
+:func:`polyrob.workers.init_worker` (SIGINT ignored: a terminal sends it to
+the whole process group; one BLAS thread; a quiet exit when the parent is
+gone); on KeyboardInterrupt, or any other exception, the parent terminates
+them and re-raises, so one Ctrl-C ends a bound within a second or so.
 
 With one worker, or a state that cannot be pickled (an analytic robot built
 from closures), the tasks run in the calling process; :attr:`WorkerPool.fallback`
@@ -30,36 +31,18 @@ Examples
 
 from __future__ import annotations
 
-import os
 import pickle
-import signal
 from collections import deque
 
 from polyrob.errors import ArgumentError, BoundsError
+from polyrob.workers import TERMINATE_GRACE, available_cores, init_worker, spawn_context, stop_processes
 
 __all__ = ["WorkerPool", "available_cores"]
-
-#: Seconds a terminated worker gets to exit before it is killed.
-TERMINATE_GRACE = 2.0
-
-
-def available_cores() -> int:
-    """Cores this process may run on (its CPU affinity), at least 1."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not on Linux
-        return max(1, os.cpu_count() or 1)
 
 
 def _worker_main(conn, payload: bytes) -> None:
     """A worker: load the shared state once, then run tasks until told to stop."""
-    from threadpoolctl import threadpool_limits
-
-    # The parent handles Ctrl-C and terminates the workers; a terminal's
-    # SIGINT reaches the whole process group and must not print tracebacks here.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # Many small problems: a multi-threaded BLAS only spin-waits on them.
-    threadpool_limits(limits=1, user_api="blas")
+    init_worker()
     state = pickle.loads(payload)
     while True:
         try:
@@ -77,6 +60,8 @@ def _worker_main(conn, payload: bytes) -> None:
             conn.send(reply)
         except (pickle.PicklingError, TypeError, AttributeError) as exc:
             conn.send((index, False, BoundsError(f"a worker's result cannot be sent back ({exc})")))
+        except OSError:  # BrokenPipeError included: the parent is gone, nobody to tell
+            return
 
 
 def _died(proc) -> None:
@@ -200,9 +185,7 @@ class WorkerPool:
         except (pickle.PicklingError, TypeError, AttributeError) as exc:
             self.fallback = f"ran in one process: the robot cannot be sent to worker processes ({exc})"
             return False
-        import multiprocessing as mp
-
-        ctx = mp.get_context("spawn")
+        ctx = spawn_context()
         try:
             for _ in range(self.workers):
                 parent, child = ctx.Pipe()
@@ -229,12 +212,6 @@ class WorkerPool:
     def terminate(self) -> None:
         """Stop every worker now (SIGTERM, then SIGKILL after a grace period)."""
         procs, self._procs = self._procs, []
-        for proc, _ in procs:
-            if proc.is_alive():
-                proc.terminate()
-        for proc, conn in procs:
-            proc.join(TERMINATE_GRACE)
-            if proc.is_alive():
-                proc.kill()
-                proc.join()
+        stop_processes([proc for proc, _ in procs], TERMINATE_GRACE)
+        for _, conn in procs:
             conn.close()

@@ -8,11 +8,12 @@ function (it is pickled by name), here :func:`polyrob.fleet.jobs.run_job`.
 
 * :class:`LocalExecutor`: one :class:`concurrent.futures.ProcessPoolExecutor`
   with the ``spawn`` start method (fresh interpreters: nothing inherited, no
-  forked locks).  Each worker ignores SIGINT (the parent handles Ctrl-C, a
-  terminal sends it to the whole process group) and limits BLAS to one
-  thread (threadpoolctl, in the worker; nothing in ``os.environ``).  On
-  KeyboardInterrupt or any error the queued calls are cancelled and the
-  workers terminated before the exception goes on.  With one worker the
+  forked locks).  Each worker is set up by :func:`polyrob.workers.init_worker`:
+  it ignores SIGINT (the parent handles Ctrl-C, a terminal sends it to the
+  whole process group), limits BLAS to one thread (threadpoolctl, in the
+  worker; nothing in ``os.environ``) and exits quietly when the parent is
+  gone.  On KeyboardInterrupt or any error the queued calls are cancelled and
+  the workers terminated before the exception goes on.  With one worker the
   calls run in the calling process.
 * :class:`DaskExecutor`: :class:`distributed.Client` on a scheduler address
   (or a given client / cluster object); the calls are cancelled on the
@@ -22,17 +23,9 @@ function (it is pickled by name), here :func:`polyrob.fleet.jobs.run_job`.
 from __future__ import annotations
 
 from polyrob.errors import ArgumentError
+from polyrob.workers import init_worker, spawn_context, stop_processes
 
 __all__ = ["LocalExecutor", "DaskExecutor", "make_executor"]
-
-
-def _worker_init() -> None:
-    import signal
-
-    from threadpoolctl import threadpool_limits
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    threadpool_limits(limits=1, user_api="blas")  # many small problems: threads only spin-wait
 
 
 class LocalExecutor:
@@ -64,11 +57,10 @@ class LocalExecutor:
         yield from self._run_pool(fn, calls)
 
     def _run_pool(self, fn, calls):
-        import multiprocessing as mp
         from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
         pool = ProcessPoolExecutor(
-            max_workers=min(self.workers, len(calls)), mp_context=mp.get_context("spawn"), initializer=_worker_init
+            max_workers=min(self.workers, len(calls)), mp_context=spawn_context(), initializer=init_worker
         )
         clean = False
         try:
@@ -94,19 +86,10 @@ def _terminate(pool) -> None:
     procs = list((getattr(pool, "_processes", None) or {}).values())
     manager = getattr(pool, "_executor_manager_thread", None)
     pool.shutdown(wait=False, cancel_futures=True)
-    for proc in procs:
-        if proc.is_alive():
-            proc.terminate()
     # The executor's own thread notices the dead workers and joins them too; a
     # process's Popen.poll is not thread-safe, so a join here can return while
     # that thread holds the exit status.  Let the thread finish first.
-    if manager is not None:
-        manager.join(2.0)
-    for proc in procs:
-        proc.join(2.0)
-        if proc.is_alive():
-            proc.kill()
-            proc.join()
+    stop_processes(procs, 2.0, settle=None if manager is None else lambda: manager.join(2.0))
 
 
 class DaskExecutor:
