@@ -16,8 +16,11 @@ def _start(argv, **kwargs):
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc for the worker processes")
-def test_sigint_during_bounds_ends_workers_and_leaves_no_file(tmp_path):
-    """Before: 'interrupted' and then a hang (forked workers blocked), or tracebacks and three Ctrl-C."""
+@pytest.mark.parametrize("presses", [1, 2])
+def test_sigint_during_bounds_ends_workers_and_leaves_no_file(tmp_path, presses):
+    """Before: 'interrupted' and then a hang (forked workers blocked), or tracebacks and three Ctrl-C;
+    then, with a second Ctrl-C, 'Exception ignored when trying to write to the signal wakeup fd' or
+    an exit by SIGINT instead of status 130."""
     out = tmp_path / "out"
     proc = _start(["bounds", "panda", "--coverage", "0", "-o", str(out / "p.json")])
     first = proc.stdout.readline()  # the stage line: the command runs
@@ -29,6 +32,10 @@ def test_sigint_during_bounds_ends_workers_and_leaves_no_file(tmp_path):
         workers = child_pids(proc.pid)
     proc.send_signal(signal.SIGINT)
     t0 = time.monotonic()
+    if presses == 2:  # a second Ctrl-C while the first one is handled
+        time.sleep(0.1)
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
     try:
         rc = proc.wait(timeout=15)
     except subprocess.TimeoutExpired:
@@ -38,10 +45,54 @@ def test_sigint_during_bounds_ends_workers_and_leaves_no_file(tmp_path):
     elapsed = time.monotonic() - t0
     err = proc.stderr.read()
     assert rc == 130 and elapsed < 10, (rc, elapsed, err)
-    assert "Traceback" not in err and err.strip().splitlines()[-1] == "polyrob: interrupted"
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    assert err.strip().splitlines()[-1] == "polyrob: interrupted"
     time.sleep(0.5)
     assert not [w for w in workers if process_running(w)], "worker processes survived the interrupt"
     assert not out.exists() or list(out.iterdir()) == []
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc for the worker processes")
+@pytest.mark.timeout(120)
+def test_sigterm_to_bounds_ends_its_workers_quietly(tmp_path):
+    """Before: the parent died by SIGTERM (right), and each orphaned worker finished its task and
+    printed a BrokenPipeError traceback when it sent the result to nobody."""
+    proc = _start(["bounds", "panda", "--coverage", "0", "-o", str(tmp_path / "p.json")])
+    first = proc.stdout.readline()
+    assert first.startswith("[1/2] bounds: panda"), first + proc.stderr.read()
+    workers = []
+    deadline = time.monotonic() + 60
+    while not workers and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.2)
+        workers = child_pids(proc.pid)
+    time.sleep(2.0)  # the workers are computing
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=15) == -signal.SIGTERM
+    err = proc.stderr.read()  # returns once every holder of the pipe, the workers too, has exited
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    time.sleep(0.5)  # a process that closed its files may still be exiting
+    assert not [w for w in workers if process_running(w)], "worker processes survived their parent"
+
+
+def test_a_second_signal_after_an_interrupt_writes_to_an_open_wakeup_pipe():
+    """Before: the watchdog closed its end of the wake-up pipe as soon as it saw the first SIGINT; a
+    signal before the main thread left the guard printed "Exception ignored when trying to write to
+    the signal wakeup fd" and a BrokenPipeError traceback."""
+    code = (
+        "import os, signal, sys, time\n"
+        "from polyrob.cli.interrupt import InterruptGuard\n"
+        "guard = InterruptGuard(grace=5.0)\n"
+        "with guard:\n"
+        "    signal.signal(signal.SIGINT, lambda *a: None)  # the main thread carries on, as in a long C call\n"
+        "    os.kill(os.getpid(), signal.SIGINT)\n"
+        "    assert guard.interrupted.wait(10)\n"
+        "    time.sleep(0.2)\n"
+        "    os.kill(os.getpid(), signal.SIGINT)  # a second Ctrl-C, still inside the guard\n"
+        "    time.sleep(0.2)\n"
+        "print('left the guard', file=sys.stderr)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stderr == "left the guard\n", done.stderr
 
 
 def test_sigint_during_imports_is_one_line():

@@ -27,13 +27,9 @@ def stop_children(timeout: float = 1.0) -> None:
     """Terminate (then kill) the multiprocessing children of this process."""
     import multiprocessing
 
-    children = multiprocessing.active_children()
-    for child in children:
-        child.terminate()
-    for child in children:
-        child.join(timeout)
-        if child.is_alive():
-            child.kill()
+    from polyrob.workers import stop_processes
+
+    stop_processes(multiprocessing.active_children(), timeout)
 
 
 class InterruptGuard:
@@ -77,13 +73,18 @@ class InterruptGuard:
         return self
 
     def _watch(self, r: int) -> None:
-        with os.fdopen(r, "rb", buffering=0) as pipe:  # closed here, never under a running read
-            while True:
-                data = pipe.read(64)
-                if not data:  # the write end was closed: the command is over
-                    return
-                if signal.SIGINT in data:
-                    break
+        pipe = os.fdopen(r, "rb", buffering=0)  # closed here, never under a running read
+        while True:
+            data = pipe.read(64)
+            if not data:  # the write end was closed: the command is over
+                pipe.close()
+                return
+            if signal.SIGINT in data:
+                break
+        # The read end stays open until the process ends: the write end is the wake-up fd
+        # until the main thread leaves the guard, and a signal written to a pipe without a
+        # reader is "Exception ignored when trying to write to the signal wakeup fd:
+        # BrokenPipeError" with a traceback (a second Ctrl-C, seen in 1-2 of 10 runs).
         self.interrupted.set()
         stop_children()
         time.sleep(self.grace)
@@ -94,7 +95,12 @@ class InterruptGuard:
             sys.unraisablehook = self._previous_hook
         if self._fds is None:
             return False
+        if self.interrupted.is_set():
+            # the command is ending: a second Ctrl-C must not raise KeyboardInterrupt in the
+            # clean-up or in the interpreter's exit handlers (a traceback "ignored in atexit")
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.set_wakeup_fd(self._previous_fd)
-        if not self.interrupted.is_set():
-            os.close(self._fds[1])  # the watchdog reads EOF, closes its end and returns
+        # no signal writes to the pipe any more: close the write end (after an interrupt too);
+        # the watchdog reads EOF, closes its end and returns, or is busy ending the process
+        os.close(self._fds[1])
         return False
