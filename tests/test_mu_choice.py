@@ -16,14 +16,8 @@ import pytest
 
 from polyrob.analysis.mu import upper as mu_upper
 from polyrob.analysis.mu.blocks import as_block_structure
-from polyrob.analysis.mu.bounds import (
-    AB13MD_SAFETY_TIMEOUT,
-    DESCENT_ABOVE,
-    LARGE_AB13MD_TIMEOUT,
-    mu_bounds,
-    mussv,
-    resolve_method,
-)
+from polyrob.analysis.mu.bounds import mu_bounds, mussv, resolve_method
+from polyrob.analysis.mu.sweep import AB13MD_SAFETY_TIMEOUT, DESCENT_ABOVE, LARGE_AB13MD_TIMEOUT
 
 #: seconds the stand-in below sleeps before each AB13MD call: above the old 1 s limit
 SLOW = 1.5

@@ -24,6 +24,7 @@ True
 from __future__ import annotations
 
 import importlib
+import logging
 
 from polyrob.errors import (
     ArgumentError,
@@ -38,6 +39,9 @@ from polyrob.errors import (
 )
 
 __version__ = "0.1.0"
+
+# the library reports progress on the "polyrob" logger; the CLI shows it on stderr
+logging.getLogger("polyrob").addHandler(logging.NullHandler())
 
 #: public name -> module that defines it
 _LAZY = {
@@ -61,6 +65,9 @@ _LAZY = {
     "paper_weights": "polyrob.plant.weights",
     "mussv": "polyrob.analysis.mu.bounds",
     "mu_bounds": "polyrob.analysis.mu.bounds",
+    "certify_loop": "polyrob.analysis.certificate",
+    "Certificate": "polyrob.analysis.certificate",
+    "Status": "polyrob.analysis.certificate",
     "robstab": "polyrob.analysis.robust",
     "robperf": "polyrob.analysis.robust",
     "musyn": "polyrob.synthesis",
@@ -84,6 +91,9 @@ __all__ = [
     "generalized_plant",
     "mussv",
     "mu_bounds",
+    "certify_loop",
+    "Certificate",
+    "Status",
     "robstab",
     "robperf",
     "musyn",

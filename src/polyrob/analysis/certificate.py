@@ -44,7 +44,16 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-__all__ = ["Status", "Scope", "Certificate", "certify_loop", "certificate_of_sweep", "decide_mu", "decide_gain", "weakest_enclosure"]
+__all__ = [
+    "Status",
+    "Scope",
+    "Certificate",
+    "certify_loop",
+    "certificate_of_sweep",
+    "decide_mu",
+    "decide_gain",
+    "weakest_enclosure",
+]
 
 
 class Status(str, enum.Enum):
@@ -255,7 +264,9 @@ def decide_mu(stability, mu_upper_grid: float, mu_lower: float, between) -> tupl
         return Status.VIOLATED, ("the loop at Delta = 0 (a member of the set) is proved unstable",)
     reasons = []
     if stability is None or not stability.stable:
-        reasons.append(f"the loop at Delta = 0 is not proved stable ({'not checked' if stability is None else stability.verdict})")
+        reasons.append(
+            f"the loop at Delta = 0 is not proved stable ({'not checked' if stability is None else stability.verdict})"
+        )
     if np.isfinite(mu_lower) and mu_lower >= 1.0 and not reasons:
         return Status.VIOLATED, (f"mu lower bound {mu_lower:.4g} >= 1: some parameters in the set break it",)
     if not mu_upper_grid < 1.0:
@@ -282,14 +293,20 @@ def decide_gain(stable: bool, gamma: float, checked: bool, why: str = "") -> tup
     """
     if stable and checked and gamma < 1.0:
         return Status.CERTIFIED, ()
-    return Status.NOT_CERTIFIED, (why or (f"verified bound {gamma:.4g} is not below 1" if checked else "no verified bound"),)
+    return Status.NOT_CERTIFIED, (
+        why or (f"verified bound {gamma:.4g} is not below 1" if checked else "no verified bound"),
+    )
 
 
 def _grid_words(omega) -> str:
     w = np.asarray(omega, float)
     pos = w[w > 0]
     zero = " and at 0" if np.any(w == 0) else ""
-    return f"a grid of {w.size} frequencies from {pos.min():.3g} to {pos.max():.3g} rad/s{zero}" if pos.size else "the grid"
+    return (
+        f"a grid of {w.size} frequencies from {pos.min():.3g} to {pos.max():.3g} rad/s{zero}"
+        if pos.size
+        else "the grid"
+    )
 
 
 def certify_loop(
@@ -321,6 +338,9 @@ def certify_loop(
         (:func:`polyrob.analysis.mu.frequency.default_grid`), so that every
         caller certifies one controller on the same grid.  ω = 0 is added for
         real blocks (real μ is discontinuous there).
+    n_u, n_y : int, optional
+        Controls and measurements of a bare state-space ``P`` (its last
+        inputs and outputs); not with a GeneralizedPlant.
     kind : {"performance", "stability"}
         Stability takes μ of ``d -> v`` only.
     scope : Scope, optional
@@ -331,6 +351,10 @@ def certify_loop(
         figures); the status is VIOLATED either way.
     **mu_options
         Passed to :func:`polyrob.analysis.mu.bounds.mu_bounds`.
+
+    Returns
+    -------
+    Certificate
     """
     from polyrob.analysis.mu.blocks import as_block_structure
     from polyrob.analysis.mu.bounds import mu_bounds
@@ -362,10 +386,14 @@ def certify_loop(
         mu_options["response_bits"] = RESPONSE_BITS
     mu_options.setdefault("progress", False)
     mu = mu_bounds(M, st, w, **mu_options)
-    return certificate_of_sweep(N, mu, M=M, stability=stability, scope=base, response_bits=mu_options.get("response_bits"))
+    return certificate_of_sweep(
+        N, mu, M=M, stability=stability, scope=base, response_bits=mu_options.get("response_bits")
+    )
 
 
-def certificate_of_sweep(N, mu, *, M=None, stability=None, scope: Scope | None = None, response_bits=None) -> Certificate:
+def certificate_of_sweep(
+    N, mu, *, M=None, stability=None, scope: Scope | None = None, response_bits=None
+) -> Certificate:
     """Decide a sweep already made (a synthesis' own certificate grid): stability, the check between points, status.
 
     ``N`` is the closed loop, ``M`` the system the sweep ``mu`` is of (default
@@ -383,8 +411,11 @@ def certificate_of_sweep(N, mu, *, M=None, stability=None, scope: Scope | None =
     scope = scope or Scope()
     if status is Status.CERTIFIED and scope.coverage is not None and scope.coverage < 1.0:
         # mu < 1 on a model that misses some of the robot's Jacobians certifies the model, not the robot
-        status, reasons = Status.NOT_CERTIFIED, (
-            f"the '{scope.model}' model contains only {scope.coverage:.4g} of {scope.coverage_points} fresh Jacobians",
+        status, reasons = (
+            Status.NOT_CERTIFIED,
+            (
+                f"the '{scope.model}' model contains only {scope.coverage:.4g} of {scope.coverage_points} fresh Jacobians",
+            ),
         )
     everywhere = status is Status.CERTIFIED or (between is not None and between.holds and between.level < 1.0)
     frequencies = "every frequency" if everywhere else _grid_words(mu.omega)

@@ -64,6 +64,24 @@ def to_json(doc) -> str:
     return json.dumps(_plain(doc), indent=2, allow_nan=False)
 
 
+_LOG_HANDLER = None
+
+
+def show_library_log(on: bool) -> None:
+    """The library's progress lines (``polyrob`` logger, INFO) on stderr, terminal or not; none when ``on`` is False."""
+    import logging
+
+    global _LOG_HANDLER
+    log = logging.getLogger("polyrob")
+    if _LOG_HANDLER is not None:
+        log.removeHandler(_LOG_HANDLER)
+    _LOG_HANDLER = logging.StreamHandler(sys.stderr)  # the current stderr (tests swap it)
+    _LOG_HANDLER.setFormatter(logging.Formatter("%(message)s"))
+    log.addHandler(_LOG_HANDLER)
+    log.setLevel(logging.INFO if on else logging.WARNING)
+    log.propagate = False
+
+
 class Output:
     """Where a command's lines go.
 
@@ -78,6 +96,7 @@ class Output:
         self.quiet = bool(getattr(args, "quiet", False))
         self.stages = stages
         self._stage = 0
+        show_library_log(not self.quiet)
 
     @property
     def progress(self) -> bool:

@@ -153,14 +153,16 @@ def _progress_printer(progress):
         return progress
     if not progress:
         return None
-    import sys
+    import logging
+
+    log = logging.getLogger(__name__)
 
     def show(result: RobotResult, done: int, total: int) -> None:
         if result.ok:
             what = f"{result.status}, mu {result.mu_upper:.4g}, order {result.order}"
         else:
             what = f"FAILED: {result.error}: {result.message}"
-        print(f"[{done}/{total}] {result.name}: {what} ({result.seconds:.1f} s)", file=sys.stderr, flush=True)
+        log.info(f"[{done}/{total}] {result.name}: {what} ({result.seconds:.1f} s)")
 
     return show
 

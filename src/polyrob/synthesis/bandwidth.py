@@ -19,8 +19,8 @@ and the next one, which does not.
 
 from __future__ import annotations
 
+import logging
 import math
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -34,6 +34,9 @@ __all__ = ["BandwidthScalingResult", "scaled_hyperparameters", "max_bandwidth_sc
 
 #: Default scan of the bandwidth factor α (geometric, factor 2).
 DEFAULT_ALPHAS = tuple(2.0**k for k in range(-3, 6))
+
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, eq=False)
@@ -166,7 +169,8 @@ def max_bandwidth_scaling(
         floor is at least ``target`` is not synthesised (it cannot succeed)
         and counts as a failure, listed in ``excluded``.
     progress : bool, optional
-        One line per α on stderr; default: only on a terminal.
+        Progress bars of each synthesis (default: only on a terminal); one
+        line per α goes to the ``polyrob`` logger whatever this says.
 
     Returns
     -------
@@ -207,7 +211,6 @@ def max_bandwidth_scaling(
         raise PolyrobError(f"alphas must be positive finite numbers, got {alphas!r}")
     if not (rtol > 0):
         raise PolyrobError(f"rtol must be positive, got {rtol!r}")
-    show = sys.stderr.isatty() if progress is None else bool(progress)
     t0 = time.perf_counter()
     history: list = []
     solved: dict = {}
@@ -220,8 +223,7 @@ def max_bandwidth_scaling(
             bound = float(floor(alpha, h))
             if bound >= target:  # proved out of reach: no synthesis can certify it
                 excluded.append((float(alpha), bound))
-                if show:
-                    print(f"bandwidth alpha = {alpha:.4g}: every controller has mu >= {bound:.4f}", file=sys.stderr)
+                log.info(f"bandwidth alpha = {alpha:.4g}: every controller has mu >= {bound:.4f}")
                 return math.inf
         near = min(solved, key=lambda a: abs(math.log(a / alpha)), default=None)
         K0 = solved[near][0].controller if near is not None and solved[near][0] is not None else None
@@ -238,9 +240,8 @@ def max_bandwidth_scaling(
             evidence.append(f"{alpha:g}: synthesis failed")
         history.append((float(alpha), mu))
         solved[alpha] = (res, mu, h)
-        if show:
-            figure = f", mu <= {mu:.4f} at every frequency" if math.isfinite(mu) else ""
-            print(f"bandwidth alpha = {alpha:.4g}: {status}{figure}", file=sys.stderr)
+        figure = f", mu <= {mu:.4f} at every frequency" if math.isfinite(mu) else ""
+        log.info(f"bandwidth alpha = {alpha:.4g}: {status}{figure} ({time.perf_counter() - t0:.0f} s)")
         return mu
 
     # scan from the largest α down: the first success is the largest on the grid

@@ -235,10 +235,9 @@ class TimedAb13md:
     AB13MD's iteration can take tens of seconds at one frequency) the calls run
     in a :class:`~polyrob.analysis.timelimit.TimeLimitedCall` worker; a call
     that exceeds ``timeout`` is killed and answered by the deterministic
-    ``fallback`` instead (:class:`LmiUpper`, or
-    :class:`~polyrob.analysis.mu.gradient.GradientUpper` with
-    ``fallback="gradient"``; either is a true upper bound, but not AB13MD's
-    figure), counted in :attr:`fallbacks` so the caller can report it.  The
+    ``fallback`` instead (a strategy: :class:`LmiUpper` by default, or
+    :class:`~polyrob.analysis.mu.gradient.GradientUpper` given by the caller;
+    either is a true upper bound, but not AB13MD's figure), counted in :attr:`fallbacks` so the caller can report it.  The
     limit must therefore be far above any call that merely runs slowly on a
     busy machine.  Complex-only structures (a convex problem for AB13MD) are
     called in-process, without a limit.
@@ -253,8 +252,10 @@ class TimedAb13md:
         cvxpy solver of the LMI fallback.
     rtol : float
         Bisection tolerance of the LMI fallback.
-    fallback : {"lmi", "gradient"}
-        What answers a call that exceeded the limit.
+    fallback : callable ``Ms -> (bound, D, G, ...)``, optional
+        What answers a call that exceeded the limit (default :class:`LmiUpper`).
+    fallback_name : str
+        The fallback in words, for the notes of a result.
     """
 
     def __init__(
@@ -263,24 +264,18 @@ class TimedAb13md:
         timeout: float | None,
         solver: str | None = None,
         rtol: float = 1e-4,
-        fallback: str = "lmi",
+        fallback=None,
+        fallback_name: str = "D-G LMI",
     ):
         from polyrob.analysis.timelimit import TimeLimitedCall
 
-        if fallback not in ("lmi", "gradient"):
-            raise ValueError(f"fallback must be 'lmi' or 'gradient', got {fallback!r}")
-        self.st, self.timeout, self.solver, self.rtol, self.fallback = st, timeout, solver, rtol, fallback
+        self.st, self.timeout, self.solver, self.rtol = st, timeout, solver, rtol
+        self.fallback, self.fallback_name = fallback, fallback_name
         guarded = bool(timeout) and st.has_real
         self._call = TimeLimitedCall(worker_function(), float(timeout)) if guarded else None
         self._lmi = None
-        self._descent = None
         #: how many calls exceeded the limit (answered by the fallback)
         self.fallbacks = 0
-
-    @property
-    def fallback_name(self) -> str:
-        """The fallback in words, for the notes of a result."""
-        return "D-G LMI" if self.fallback == "lmi" else "D-G descent"
 
     @property
     def events(self) -> list[str]:
@@ -297,12 +292,8 @@ class TimedAb13md:
         if not str(value).startswith("timeout"):  # AB13MD's own error, relayed by the worker
             raise SolverError(f"SLICOT AB13MD failed: {value}")
         self.fallbacks += 1
-        if self.fallback == "gradient":
-            if self._descent is None:
-                from polyrob.analysis.mu.gradient import GradientUpper  # imports this module
-
-                self._descent = GradientUpper(self.st)
-            bound, D, G, _ = self._descent(Ms)
+        if self.fallback is not None:
+            bound, D, G = self.fallback(Ms)[:3]
             return bound, D, G, None
         if self._lmi is None:
             self._lmi = LmiUpper(self.st, self.solver)

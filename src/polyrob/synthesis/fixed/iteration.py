@@ -9,8 +9,8 @@ around the peaks (:func:`refine_points`, :func:`screen_grid`).
 
 from __future__ import annotations
 
+import logging
 import math
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -61,6 +61,9 @@ def grid_span(loop: FixedLoop, theta, omega) -> tuple[float, float]:
 def log_grid(lo, hi, density):
     k = max(int(round(density * math.log10(hi / lo))), 2) + 1
     return np.logspace(math.log10(lo), math.log10(hi), k)
+
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -258,17 +261,14 @@ def optimise_start(
 
 
 def reporter(progress) -> Callable[[dict], None]:
+    """A line per iteration on the ``polyrob`` logger (the CLI shows it on stderr, terminal or not)."""
     if callable(progress):
         return progress
-    if progress:
 
-        def out(d):
-            print(
-                f"[fixed {d['start']}] it {d['iteration']:3d}  peak mu {d['peak_mu']:.5f}  grid {d['grid']}"
-                f"  (+{d['screen_added']})  {d['seconds']:.2f}s  r {d['radius']:.3g}  {d['kstep']}",
-                file=sys.stderr,
-                flush=True,
-            )
+    def out(d):
+        log.info(
+            f"[fixed {d['start']}] it {d['iteration']:3d}  peak mu {d['peak_mu']:.5f}  grid {d['grid']}"
+            f"  (+{d['screen_added']})  {d['seconds']:.2f}s  r {d['radius']:.3g}  {d['kstep']}"
+        )
 
-        return out
-    return lambda d: None
+    return out
