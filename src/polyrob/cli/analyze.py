@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from polyrob.cli.common import (
     Output,
-    exit_status,
     add_domain_arguments,
     add_output_flags,
     add_robot_arguments,
     add_weight_arguments,
+    exit_status,
     robot_from_args,
 )
 from polyrob.cli.options import int_at_least, parse_frequencies

@@ -169,7 +169,6 @@ class Problem:
         import math
 
         from polyrob.analysis.certificate import FROZEN, Scope, weakest_enclosure
-
         from polyrob.plant.models import model_of
 
         # the weakest of every input: the PLDI, and the model's own ranges (an axes model's are sampled)
