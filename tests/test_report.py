@@ -1,4 +1,9 @@
-"""The report: every file the HTML references exists, every PNG is a valid image, verdicts are shown."""
+"""The report: every file the HTML references exists, every PNG is a valid image, the certificates are shown as decided.
+
+The run report opens with the frozen-robot certificate's status and one table
+of the certificates (status, bound, what it covers); ``polyrob report DIR``
+rebuilds it from the run's files with the same rows.
+"""
 
 from __future__ import annotations
 
@@ -11,7 +16,9 @@ import numpy as np
 import pytest
 
 import polyrob
+from polyrob.analysis.certificate import Certificate, Scope, Status
 from polyrob.io.controller import load_controller, save_controller
+from polyrob.report.certificates import FROZEN_ROW, TIME_VARYING_ROW
 from polyrob.report.html import write_report
 from polyrob.validate.monte_carlo import monte_carlo
 from polyrob.validate.simulate import simulate, step_reference
@@ -47,6 +54,32 @@ def _check_links(run: Path, page: str, pattern: str):
     return refs
 
 
+def _verdict(page: str) -> str:
+    """The verdict at the top: the first paragraph after the title."""
+    m = re.search(r"</h1>\s*<p id='verdict'[^>]*>verdict: ([A-Z_]+)</p>", page)
+    assert m, "no verdict at the top of the page"
+    return m.group(1)
+
+
+def _cells(html_row: str) -> list[str]:
+    import html
+
+    return [html.unescape(c) for c in re.findall(r"<td[^>]*>(.*?)</td>", html_row)]
+
+
+def _certificate_rows(page: str) -> list[list[str]]:
+    table = re.search(r"<table id='certificates'>(.*?)</table>", page, re.S)
+    assert table, "no certificate table"
+    return [_cells(row) for row in re.findall(r"<tr[^>]*>(.*?)</tr>", table.group(1)) if "<td" in row]
+
+
+def _check_cells(page: str):
+    """No table cell is empty, nan or None: a figure that was not computed is named in words."""
+    for cell in _cells(page):
+        assert cell.strip(), "an empty table cell"
+        assert not re.search(r"\b(nan|none|null)\b", cell, re.I), f"table cell {cell!r}"
+
+
 def test_report_references_existing_valid_pngs(tmp_path):
     pldi, unc, P = _paper()
     K = polyrob.paper_controller()
@@ -66,8 +99,12 @@ def test_report_references_existing_valid_pngs(tmp_path):
         monte_carlo=mc,
         simulations=[inside, outside],
         certificates={
-            "constant-parameter μ": {"peak_mu_upper": 2.43, "certified": False},
-            "time-varying (quadratic)": {"feasible": False, "gamma": float("inf")},
+            FROZEN_ROW: Certificate(
+                Status.NOT_CERTIFIED, 2.43, 2.43, 2.3, None, Scope(frequencies="the grid"), ("mu not below 1",)
+            ),
+            "time-varying (quadratic)": Certificate(
+                Status.NOT_CERTIFIED, float("inf"), float("nan"), float("nan"), None, Scope(), ("no common P",)
+            ).summary(),
         },
         discretization={"rate_hz": 1000.0, "min_word_length_bits": 24, "spectral_radius": 0.99999997},
         mu_curves={"robust performance": (w, 2 * np.ones(5), 1.9 * np.ones(5))},
@@ -84,6 +121,10 @@ def test_report_references_existing_valid_pngs(tmp_path):
     # the verdicts: the run that left the domain in red, the certificates, the PLDI table, the 0.99999997
     assert "class='bad'" in page and "LEFT THE DOMAIN" in page
     assert "time-varying (quadratic)" in page and "b42" in page and "0.99999997" in page
+    assert _verdict(page) == "NOT_CERTIFIED" and "no finite bound" in page
+    # the PLDI was bounded without a coverage check: no "coverage nan of 0 fresh points"
+    assert pldi.coverage_points == 0 and "fresh points" not in page and "coverage nan" not in page
+    _check_cells(page)
     val = json.loads(files.validation.read_text())
     assert [s["stayed_in_domain"] for s in val["simulations"]] == [True, False]
     # rewriting replaces the files atomically: no temporary files left
@@ -91,60 +132,165 @@ def test_report_references_existing_valid_pngs(tmp_path):
     assert not list(tmp_path.rglob("*.tmp"))
 
 
-def test_build_report_from_run_directory(tmp_path):
-    """`polyrob report RUN_DIR`: rebuilt from K.json + pldi.json (+ certificate.json, K_*.json)."""
-    robot = polyrob.load_robot("planar_2r")
-    pldi = polyrob.bound_pldi(robot, samples=256, coverage=200, progress=False)
-    pldi.save(tmp_path / "pldi.json")
-    doc = json.loads(FIXTURE.read_text())
-    save_controller(
-        load_controller(FIXTURE),
-        tmp_path / "K.json",
-        certificate=doc["certificate"],
-        info={
-            "weights": {
-                k: list(v) for k, v in __import__("polyrob.plant.weights", fromlist=["x"]).PAPER_HYPERPARAMETERS.items()
-            },
-            "uncertainty": {"requested": "box", "merge_symmetric": False},
-        },
-    )
-    save_controller(polyrob.paper_controller(), tmp_path / "K_fixed.json")
-    (tmp_path / "certificate.json").write_text(json.dumps({"time-varying": {"feasible": False}}))
-    from polyrob.report.build import build_report
+def _fixture_problem(pldi):
+    from polyrob.pipeline import build_problem
 
-    files = build_report(
+    info = json.loads(FIXTURE.read_text())["info"]
+    h = {k: tuple(v) for k, v in info["weights"].items()}
+    return build_problem(pldi.robot, pldi=pldi, hyperparameters=h, uncertainty="box")
+
+
+@functools.cache
+def _run():
+    """The fixture's planar_2r controller analysed as `polyrob run` does (small grid, few samples)."""
+    from polyrob.pipeline import analyze_controller
+
+    pldi = polyrob.bound_pldi(polyrob.load_robot("planar_2r"), samples=256, coverage=200, progress=False)
+    problem = _fixture_problem(pldi)
+    K = load_controller(FIXTURE)
+    a = analyze_controller(problem, K, omega=np.logspace(-2, 2, 8), mc=3, progress=False)
+    assert a.time_varying is not None
+    return problem, K, a
+
+
+def _write_run_files(run: Path, problem, K, a) -> None:
+    """What `polyrob run -o DIR` writes before its report: K.json with the decided certificate and the problem."""
+    record = json.loads(FIXTURE.read_text())["certificate"]
+    record.update(certificate=a.certificate.summary(), status=a.certificate.status.value)
+    save_controller(K, run / "K.json", certificate=record, info=problem.description())
+    save_controller(polyrob.paper_controller(), run / "K_fixed.json")
+
+
+#: Validation options that keep the report fast (the figures are still drawn).
+FAST = {"mc": 3, "mu_omega": np.logspace(-2, 2, 8), "search_rate": False, "word_lengths": (30, 34)}
+
+
+def test_run_report_shows_the_certificates_and_rebuilds_them(tmp_path, monkeypatch, capsys):
+    """`polyrob run -o DIR`'s report, then `polyrob report DIR`: same verdict, same certificate rows."""
+    import polyrob.report.build as build
+    from polyrob.cli import main
+    from polyrob.cli.synth import _report_certificates
+    from polyrob.validate.simulate import step_reference
+
+    problem, K, a = _run()
+    tv = a.time_varying
+    _write_run_files(tmp_path, problem, K, a)
+    q0 = np.asarray(problem.pldi.nominal_point["q"], float)
+    files = build.write_run_report(
         tmp_path,
+        problem,
+        K,
+        certificates=_report_certificates(a),  # what cmd_run passes
         rate=100.0,
-        mc=3,
-        mu_omega=np.logspace(-2, 2, 8),
-        search_rate=False,
-        word_lengths=(30, 34),
+        scenarios=[(step_reference(q0 + 0.002), {"t_final": 3.0})],
         discrete_omega=np.logspace(-2, 2, 4),
+        **FAST,
     )
     page = files.html.read_text()
+    # the verdict at the top is the frozen-robot certificate's status, as decided
+    assert _verdict(page) == a.certificate.status.value
+    rows = _certificate_rows(page)
+    assert [r[0] for r in rows] == [FROZEN_ROW, f"{TIME_VARYING_ROW} ({tv.method})"]
+    assert [r[1] for r in rows] == [a.certificate.status.value, tv.certificate.status.value]
+    assert [r[3] for r in rows] == [a.certificate.scope.sentence(), tv.certificate.scope.sentence()]
+    assert float(rows[0][2]) == pytest.approx(a.certificate.bound, rel=1e-4)
+    assert rows[1][2] == (f"{tv.gamma:.5g}" if np.isfinite(tv.gamma) else "no finite bound")
+    assert a.certificate.status.value in [s.value for s in Status]
     _check_links(tmp_path, page, r"<img src='([^']+)'")
-    assert "time-varying" in page and "reduced:9" in page and "Discretisation and quantisation" in page
+    _check_links(tmp_path, files.markdown.read_text(), r"!\[[^\]]*\]\(([^)]+)\)")
+    _check_cells(page)
+    assert "Discretisation and quantisation" in page and "coverage 1 of 200 fresh points" in page
     val = json.loads(files.validation.read_text())
-    assert len(val["simulations"]) == 3  # continuous step, sampled step at 100 Hz, smooth move
-    assert val["simulations"][1]["rate_hz"] == 100.0
-    assert val["discretization"]["rate_hz"] == 100.0 and val["discretization"]["discrete_loop_stable"]
+    assert val["certificates"][FROZEN_ROW]["status"] == a.certificate.status.value
+    assert val["discretization"]["rate_hz"] == 100.0
+    stored = json.loads((tmp_path / "certificate.json").read_text())  # plain JSON: no NaN
+    assert stored["controller"] == "K.json" and list(stored["certificates"]) == [r[0] for r in rows]
+
+    # `polyrob report DIR`: the problem rebuilt from the files (pipeline), the same certificate rows
+    fast = functools.partial(build.validate_controller, rate=None, scenarios=[], **FAST)
+    monkeypatch.setattr(build, "validate_controller", fast)
+    assert main(["report", str(tmp_path), "--json", "--quiet"]) == (0 if a.certificate.certified else 1)
+    doc = json.loads(capsys.readouterr().out)
+    again = files.html.read_text()
+    assert _verdict(again) == _verdict(page) and doc["status"] == a.certificate.status.value
+    assert _certificate_rows(again) == rows
+    assert [c["status"] for c in doc["certificates"]] == [r[1] for r in rows] and not doc["notes"]
+    _check_links(tmp_path, again, r"<img src='([^']+)'")
+    _check_cells(again)
 
 
-def test_build_report_needs_the_run_files(tmp_path):
-    from polyrob.report.build import build_report
+def test_load_run_rebuilds_the_problem(tmp_path, monkeypatch):
+    """pipeline.rebuild: the problem of K.json's info on pldi.json; a file without a decided certificate."""
+    import polyrob.analysis.certificate as certificate
+    from polyrob.pipeline.rebuild import load_run
+
+    robot = polyrob.load_robot("planar_2r")
+    pldi = polyrob.bound_pldi(robot, samples=256, coverage=0, progress=False)
+    pldi.save(tmp_path / "pldi.json")
+    doc = json.loads(FIXTURE.read_text())
+    save_controller(load_controller(FIXTURE), tmp_path / "K.json", certificate=doc["certificate"], info=doc["info"])
+    save_controller(polyrob.paper_controller(), tmp_path / "K_fixed.json")
+    (tmp_path / "certificate.json").write_text(json.dumps({"time-varying": {"feasible": False}}))
+
+    run = load_run(tmp_path, certify_missing=False)
+    assert run.problem.hyperparameters == _fixture_problem(pldi).hyperparameters and run.problem.model == "box"
+    assert set(run.controllers) == {"fixed"} and run.certificates == {}
+    assert any("'time-varying' has no decided status" in n for n in run.notes)
+    assert any("no decided certificate" in n for n in run.notes)
+
+    # decided again, by the analysis' own call (on a small grid here)
+    monkeypatch.setattr(
+        certificate, "certify_loop", functools.partial(certificate.certify_loop, omega=np.logspace(-2, 2, 5))
+    )
+    run = load_run(tmp_path)
+    assert list(run.certificates) == [FROZEN_ROW] and run.certificates[FROZEN_ROW].status is Status.VIOLATED
+    assert any("decided again" in n for n in run.notes)
+
+    # a controller made for another problem (here: another domain) is refused
+    domain = json.loads(json.dumps(doc["info"]["domain"]))
+    domain["qdot"]["joint1"] = [-2.0, 2.0]
+    info = dict(doc["info"], domain=domain)
+    save_controller(load_controller(FIXTURE), tmp_path / "K.json", info=info)
+    with pytest.raises(polyrob.PolyrobError, match="another problem"):
+        load_run(tmp_path, certify_missing=False)
+
+
+def test_load_run_needs_the_run_files(tmp_path):
+    from polyrob.pipeline.rebuild import load_run
 
     with pytest.raises(polyrob.PolyrobError, match="K.json"):
-        build_report(tmp_path)
+        load_run(tmp_path)
+
+
+def test_certificates_of_another_controller_are_not_used(tmp_path):
+    from polyrob.report.build import read_run_certificates, save_run_certificates
+
+    cert = Certificate(Status.CERTIFIED, 0.8, 0.79, 0.7, None, Scope(frequencies="every frequency"))
+    save_run_certificates(tmp_path, {FROZEN_ROW: cert}, "K.json")
+    certs, notes = read_run_certificates(tmp_path, "K.json")
+    assert list(certs) == [FROZEN_ROW] and certs[FROZEN_ROW]["status"] == "CERTIFIED" and not notes
+    certs, notes = read_run_certificates(tmp_path, "K_other.json")
+    assert certs == {} and "not of K_other.json" in notes[0]
+    with pytest.raises(polyrob.PolyrobError, match="no decided status"):
+        write_report(tmp_path, certificates={"mu": {"peak_mu_upper": 2.43}})
 
 
 def test_cli_report_json_is_one_document(tmp_path, monkeypatch, capsys):
     """`polyrob report RUN_DIR --json` prints one JSON document naming the files it wrote."""
     from types import SimpleNamespace
 
+    import polyrob.pipeline.rebuild as rebuild
     import polyrob.report.build as build
     from polyrob.cli import main
 
-    def fake_build_report(run_dir, **_):  # the report itself is tested above; here the CLI's output
+    cert = Certificate(Status.GRID_ONLY, 0.9, 0.9, 0.8, None, Scope(frequencies="the grid"), ("not checked",))
+
+    def fake_load_run(run_dir, **_):  # the rebuild and the report are tested above; here the CLI's output
+        return SimpleNamespace(
+            path=Path(run_dir), problem=None, controller=None, controllers={}, certificates={FROZEN_ROW: cert}, notes=()
+        )
+
+    def fake_write_run_report(run_dir, *_, **__):
         run_dir = Path(run_dir)
         return SimpleNamespace(
             html=run_dir / "report.html",
@@ -153,7 +299,10 @@ def test_cli_report_json_is_one_document(tmp_path, monkeypatch, capsys):
             figures=[run_dir / "figures" / "mu.png"],
         )
 
-    monkeypatch.setattr(build, "build_report", fake_build_report)
-    assert main(["report", str(tmp_path), "--json", "--quiet"]) == 0
+    monkeypatch.setattr(rebuild, "load_run", fake_load_run)
+    monkeypatch.setattr(build, "write_run_report", fake_write_run_report)
+    assert main(["report", str(tmp_path), "--json", "--quiet"]) == 1  # exit 0 only for CERTIFIED
     doc = json.loads(capsys.readouterr().out)
     assert doc["html"] == str(tmp_path / "report.html") and doc["figures"] == [str(tmp_path / "figures" / "mu.png")]
+    assert doc["status"] == "GRID_ONLY" and doc["certified"] is False and doc["verdict"] == "verdict: GRID_ONLY"
+    assert doc["certificates"][0]["status"] == "GRID_ONLY"

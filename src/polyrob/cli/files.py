@@ -23,20 +23,44 @@ def check_output_dir(path, option: str = "-o"):
 
 
 def cmd_report(args) -> int:
-    from polyrob.report.build import build_report
+    from polyrob.pipeline.rebuild import load_run
+    from polyrob.report.build import write_run_report
+    from polyrob.report.certificates import certificate_rows, frozen_status
 
-    out = Output(args, stages=1)
-    out.stage(f"report: validating the controller of {args.run_dir} and writing the report")
-    files = build_report(args.run_dir, controller=args.controller, pldi=args.pldi)
+    out = Output(args, stages=2)
+    out.stage(f"report: reading {args.run_dir} and rebuilding its problem")
+    run = load_run(args.run_dir, controller=args.controller, pldi=args.pldi)
+    for note in run.notes:
+        out.line(f"note: {note}")
+    out.stage("validating the controller and writing the report")
+    files = write_run_report(
+        run.path,
+        run.problem,
+        run.controller,
+        certificates=run.certificates,
+        controllers=run.controllers,
+        controller_file=args.controller,
+        notes=run.notes,
+    )
+    status = frozen_status(run.certificates)
     doc = {
         "html": str(files.html),
         "markdown": str(files.markdown),
         "validation": str(files.validation),
         "figures": [str(f) for f in files.figures],
+        "status": status,
+        "certified": status == "CERTIFIED",
+        "verdict": f"verdict: {status or 'none (no frozen-robot certificate in the files)'}",
+        "certificates": [
+            {"name": name, "status": st, "bound": bound, "covers": covers}
+            for name, st, bound, covers in certificate_rows(run.certificates)
+        ],
+        "notes": list(run.notes),
     }
     out.document(doc)
+    out.line(doc["verdict"])
     out.line(f"wrote {files.html}, {files.markdown}, {files.validation} and {len(files.figures)} figure(s)")
-    return 0
+    return 0 if doc["certified"] else 1  # as every command ending with a verdict (docs/certificates.md)
 
 
 def cmd_export(args) -> int:

@@ -223,7 +223,8 @@ def cmd_run(args) -> int:
             run_dir,
             problem,
             design.controller,
-            certificates=_report_certificates(design, a, extra),
+            certificates=_report_certificates(a),
+            controller_file="K.json",
         )
         doc["report"] = str(files.html)
         out.line(f"wrote {files.html}")
@@ -233,12 +234,14 @@ def cmd_run(args) -> int:
     return exit_status(a.certificate)
 
 
-def _report_certificates(design, analysis, extra: dict) -> dict:
-    """The certificates a run report shows: mu (frozen robot) and, when computed, the time-varying one."""
-    certs = {"frozen robot (constant-parameter mu)": dict(design.record, **extra)}
+def _report_certificates(analysis) -> dict:
+    """The certificates a run report shows, as decided: the frozen robot (mu) and arbitrarily fast variation."""
+    from polyrob.report.certificates import FROZEN_ROW, TIME_VARYING_ROW
+
+    certs = {FROZEN_ROW: analysis.certificate}
     tv = analysis.time_varying
     if tv is not None:
-        certs[f"arbitrarily fast variation ({tv.method})"] = tv.summary()
+        certs[f"{TIME_VARYING_ROW} ({tv.method})"] = tv
     return certs
 
 

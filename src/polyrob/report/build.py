@@ -6,21 +6,15 @@
   simulations (continuous and sampled), the discretisation and quantisation
   analysis and the μ curve.
 * :func:`write_run_report` is what ``polyrob run ROBOT -o DIR`` calls at its
-  end with the objects it has; it also saves ``pldi.json``/``pldi.npz``
-  when they are not there yet, so that ``polyrob report DIR`` can rebuild.
-* :func:`build_report` is ``polyrob report RUN_DIR``: it reads the run's files
-  and writes the same report again.
+  end with the objects it has, and what ``polyrob report DIR`` calls with the
+  objects :func:`polyrob.pipeline.rebuild.load_run` rebuilt from the files.
+  It also saves ``pldi.json``/``pldi.npz`` when they are not there yet, and
+  the certificates it shows (:func:`save_run_certificates`), so that the
+  report rebuilt from the directory shows the same ones.
 
-Files of a run directory::
-
-    K.json               controller file (polyrob.io.controller), its "certificate"
-                         and "info" (the problem description: robot, domain,
-                         weights, uncertainty model)
-    pldi.json, pldi.npz  the PLDI (PLDI.save)
-    certificate.json     optional: {"name": {...}} more certificates, e.g. the
-                         time-varying one
-    K_<name>.json        optional: more controllers for the comparison figure
-    report.html, report.md, figures/*.png, validation.json    written here
+The report takes objects and renders them: it rebuilds no problem (that is
+:mod:`polyrob.pipeline.rebuild`).  Files of a run directory: see
+:mod:`polyrob.pipeline.rebuild`.
 """
 
 from __future__ import annotations
@@ -32,9 +26,23 @@ from pathlib import Path
 import numpy as np
 
 from polyrob.errors import PolyrobError
+from polyrob.io.atomic import atomic_write, json_default
+from polyrob.report.certificates import certificate_record, is_decided
 from polyrob.report.html import ReportFiles, write_report
 
-__all__ = ["Validation", "validate_controller", "default_scenarios", "write_run_report", "build_report"]
+__all__ = [
+    "Validation",
+    "validate_controller",
+    "default_scenarios",
+    "write_run_report",
+    "save_run_certificates",
+    "read_run_certificates",
+    "RUN_CERTIFICATES",
+]
+
+#: The certificates a run's report showed, as decided (read back by ``polyrob report DIR``).
+RUN_CERTIFICATES = "certificate.json"
+RUN_CERTIFICATES_FORMAT = "polyrob.run-certificates/1"
 
 #: Frequencies (rad/s) of the discretisation checks: coarse on purpose, a design check.
 DISCRETE_GRID = np.logspace(-3, 3.5, 25)
@@ -196,6 +204,62 @@ def _paper_reference(robot):
     return {}
 
 
+def save_run_certificates(run_dir, certificates: dict, controller: str = "K.json") -> Path:
+    """Write ``run_dir/certificate.json``: the records of ``certificates`` for the controller file ``controller``.
+
+    ``{"format": RUN_CERTIFICATES_FORMAT, "controller": "K.json", "certificates": {name: record}}``,
+    records as :func:`~polyrob.report.certificates.certificate_record` makes them.
+    """
+    path = Path(run_dir) / RUN_CERTIFICATES
+    doc = {
+        "format": RUN_CERTIFICATES_FORMAT,
+        "controller": str(controller),
+        "certificates": {str(k): _strict(certificate_record(v)) for k, v in certificates.items()},
+    }
+    atomic_write(path, lambda f: f.write(json.dumps(doc, indent=1, default=json_default, allow_nan=False)))
+    return path
+
+
+def _strict(x):
+    """Plain JSON: a NaN or infinite figure (not computed, no finite bound) is ``null``."""
+    if isinstance(x, dict):
+        return {k: _strict(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_strict(v) for v in x]
+    if isinstance(x, (float, np.floating)):
+        return float(x) if np.isfinite(x) else None
+    return x
+
+
+def read_run_certificates(run_dir, controller: str = "K.json") -> tuple[dict, list]:
+    """The decided certificate records of ``run_dir/certificate.json`` for ``controller``, and notes.
+
+    Records saved for another controller file are not used (they certify
+    another controller).  A hand-written ``{name: record}`` mapping is read
+    too; a record without a decided ``status`` is left out, with a note.
+    """
+    path = Path(run_dir) / RUN_CERTIFICATES
+    if not path.exists():
+        return {}, []
+    try:
+        doc = json.loads(path.read_text())
+    except ValueError as exc:
+        raise PolyrobError(f"{path}: not JSON ({exc})") from None
+    if not isinstance(doc, dict):
+        raise PolyrobError(f"{path}: expected a mapping of certificate name -> record")
+    if doc.get("format") == RUN_CERTIFICATES_FORMAT:
+        if doc.get("controller") != controller:
+            return {}, [f"{path.name} holds the certificates of {doc.get('controller')}, not of {controller}: not used"]
+        doc = doc.get("certificates") or {}
+    certs, notes = {}, []
+    for name, record in doc.items():
+        if is_decided(record):
+            certs[str(name)] = record
+        else:
+            notes.append(f"{path.name}: '{name}' has no decided status (CERTIFIED, GRID_ONLY, ...): not shown")
+    return certs, notes
+
+
 def write_run_report(
     run_dir,
     problem,
@@ -204,20 +268,40 @@ def write_run_report(
     certificates: dict | None = None,
     controllers: dict | None = None,
     title: str | None = None,
+    controller_file: str = "K.json",
+    notes=(),
     **options,
 ) -> ReportFiles:
-    """The end of ``polyrob run ROBOT -o DIR``: validate ``K`` and write ``DIR/report.html``.
+    """Validate ``K`` on ``problem`` and write ``DIR/report.html`` (the end of ``polyrob run ROBOT -o DIR``).
 
-    Saves ``DIR/pldi.json`` (+ ``.npz``) when absent, so that
-    :func:`build_report` can rebuild the report from the directory.
-    ``options`` go to :func:`validate_controller`.
+    Parameters
+    ----------
+    run_dir : path
+    problem : Problem
+        Needs ``robot``, ``pldi``, ``unc`` and ``P``.
+    K : LTI
+    certificates : dict, optional
+        ``{name: Certificate, TimeVaryingCertificate or record}`` (see
+        :func:`polyrob.report.html.write_report`); saved to
+        ``DIR/certificate.json`` for ``controller_file`` once the report is written.
+    controllers : dict, optional
+        More controllers for the comparison figure (the paper's K* is added for its arm).
+    controller_file : str
+        The controller file in ``DIR`` the certificates are of.
+    notes : sequence of str
+        Remarks printed under the certificates (e.g. what a rebuild could not read).
+    **options
+        Passed to :func:`validate_controller`.
+
+    ``DIR/pldi.json`` (+ ``.npz``) is saved when absent, so that
+    :func:`polyrob.pipeline.rebuild.load_run` can rebuild the problem.
     """
     run = Path(run_dir)
     if not (run / "pldi.json").exists():
         problem.pldi.save(run / "pldi.json")
     val = validate_controller(problem, K, **options)
     comp = {**_paper_reference(problem.robot), **(controllers or {})}
-    return write_report(
+    files = write_report(
         run,
         title=title,
         robot_name=problem.robot.name,
@@ -230,57 +314,8 @@ def write_run_report(
         simulations=val.simulations,
         discretization=val.discretization,
         mu_curves=val.mu_curves,
-        notes=val.notes,
+        notes=tuple(notes) + tuple(val.notes),
     )
-
-
-def _load_certificates(run: Path, doc: dict) -> dict:
-    certs = {}
-    if doc.get("certificate"):
-        certs["constant-parameter μ (controller file)"] = doc["certificate"]
-    extra = run / "certificate.json"
-    if extra.exists():
-        try:
-            more = json.loads(extra.read_text())
-        except ValueError as exc:
-            raise PolyrobError(f"{extra}: not JSON ({exc})") from None
-        if not isinstance(more, dict):
-            raise PolyrobError(f"{extra}: expected a mapping of certificate name -> figures")
-        certs.update(more)
-    return certs
-
-
-def build_report(run_dir, *, controller: str = "K.json", pldi: str = "pldi.json", **options) -> ReportFiles:
-    """``polyrob report RUN_DIR``: rebuild the report from the files of a run directory.
-
-    Reads ``K.json`` (controller, certificate, problem description in
-    ``info``), ``pldi.json``, the optional ``certificate.json`` and
-    ``K_*.json``, rebuilds the problem with :func:`polyrob.pipeline.build_problem`
-    and calls :func:`write_run_report`.  ``options`` go to :func:`validate_controller`.
-    """
-    from polyrob.bounds.pldi import PLDI
-    from polyrob.io.controller import load_controller, read_controller_file
-    from polyrob.pipeline import build_problem
-
-    run = Path(run_dir)
-    if not run.is_dir():
-        raise PolyrobError(f"{run}: no such run directory")
-    for name in (controller, pldi):
-        if not (run / name).exists():
-            raise PolyrobError(
-                f"{run}: no {name} (a run directory holds K.json and pldi.json: `polyrob run ROBOT -o DIR` writes them)"
-            )
-    doc = read_controller_file(run / controller)
-    K = load_controller(run / controller)
-    p = PLDI.load(run / pldi)
-    info = doc.get("info") or {}
-    unc_info = info.get("uncertainty") or {}
-    problem = build_problem(
-        p.robot,
-        pldi=p,
-        hyperparameters={k: tuple(v) for k, v in info["weights"].items()} if info.get("weights") else None,
-        uncertainty=unc_info.get("requested", "box") if isinstance(unc_info, dict) else str(unc_info),
-        merge_symmetric=bool(unc_info.get("merge_symmetric", False)) if isinstance(unc_info, dict) else False,
-    )
-    others = {f.stem[2:]: load_controller(f) for f in sorted(run.glob("K_*.json"))}
-    return write_run_report(run, problem, K, certificates=_load_certificates(run, doc), controllers=others, **options)
+    if certificates:
+        save_run_certificates(run, certificates, controller_file)
+    return files

@@ -8,9 +8,16 @@ writes, under ``run_dir``::
     figures/*.png      the figures the pages show (relative links)
     validation.json    the validation figures as plain data
 
-Certificates are plain dicts (``{"name": {...figures...}}``) so that any
-stage can contribute one: the constant-parameter μ certificate, and the
-time-varying one where it exists.  Every write is atomic.
+The page opens with the verdict -- the status of the frozen-robot
+certificate, as :mod:`polyrob.analysis.certificate` decided it -- and one
+table with a row per certificate (frozen robot; arbitrarily fast variation
+when it was computed): its status, its bound and what it covers (the scope's
+sentence).  A certificate is a
+:class:`~polyrob.analysis.certificate.Certificate`, a time-varying
+certificate (its robust-performance certificate is shown), or the record
+:func:`polyrob.report.certificates.certificate_record` makes of one (what a run directory stores).  A
+figure that was not computed is left out or named in words: no table cell
+reads ``nan`` or ``None``.  Every write is atomic.
 """
 
 from __future__ import annotations
@@ -18,13 +25,17 @@ from __future__ import annotations
 import datetime
 import html
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from polyrob.analysis.certificate import Status
+from polyrob.errors import ArgumentError
 from polyrob.io.atomic import atomic_write, json_default
 from polyrob.report import plots
+from polyrob.report.certificates import certificate_record, certificate_rows, frozen_status, is_decided
 
 __all__ = ["ReportFiles", "write_report"]
 
@@ -44,7 +55,14 @@ class ReportFiles:
     figures: tuple
 
 
-def _fmt(v) -> str:
+def _missing(v) -> bool:
+    """``None`` or NaN: a figure that was not computed (or does not apply)."""
+    return v is None or (isinstance(v, (float, np.floating)) and math.isnan(float(v)))
+
+
+def _fmt(v, missing: str = "not computed") -> str:
+    if _missing(v):
+        return missing
     if isinstance(v, (bool, np.bool_)):
         return "yes" if v else "no"
     if isinstance(v, (float, np.floating)):
@@ -70,19 +88,21 @@ class _Doc:
         self.h.append(f"<h2>{html.escape(text)}</h2>")
         self.md += [f"## {text}", ""]
 
-    def para(self, text, bad=False):
-        cls = " class='bad'" if bad else ""
-        self.h.append(f"<p{cls}>{html.escape(text)}</p>")
-        self.md += [f"**{text}**" if bad else text, ""]
+    def para(self, text, bad=False, ident=None):
+        attrs = (f" id='{ident}'" if ident else "") + (" class='bad'" if bad else "")
+        self.h.append(f"<p{attrs}>{html.escape(text)}</p>")
+        self.md += [f"**{text}**" if bad or ident else text, ""]
 
-    def table(self, header, rows, bad_rows=()):
-        self.h.append("<table><tr>" + "".join(f"<th class='l'>{html.escape(str(c))}</th>" for c in header) + "</tr>")
+    def table(self, header, rows, bad_rows=(), ident=None, left=(0,)):
+        attrs = f" id='{ident}'" if ident else ""
+        cells = "".join(f"<th class='l'>{html.escape(str(c))}</th>" for c in header)
+        self.h.append(f"<table{attrs}><tr>{cells}</tr>")
         for k, row in enumerate(rows):
             cls = " class='bad'" if k in bad_rows else ""
             self.h.append(
                 f"<tr{cls}>"
                 + "".join(
-                    f"<td class='l'>{html.escape(_fmt(c))}</td>" if i == 0 else f"<td>{html.escape(_fmt(c))}</td>"
+                    f"<td class='l'>{html.escape(_fmt(c))}</td>" if i in left else f"<td>{html.escape(_fmt(c))}</td>"
                     for i, c in enumerate(row)
                 )
                 + "</tr>"
@@ -103,20 +123,39 @@ class _Doc:
         return "\n".join(self.h + ["</body></html>"]), "\n".join(self.md)
 
 
-def _certificate_rows(certificates: dict):
-    rows = []
-    for name, cert in certificates.items():
-        if not isinstance(cert, dict):
-            rows.append((name, "", cert))
-            continue
-        for key, val in cert.items():
-            if isinstance(val, dict):
-                for k2, v2 in val.items():
-                    if not isinstance(v2, (dict, list)) or len(v2) <= 6:
-                        rows.append((name, f"{key}.{k2}", v2))
-            elif not isinstance(val, list) or len(val) <= 6:
-                rows.append((name, key, val))
-    return rows
+def _certificates(doc, certificates) -> dict:
+    """The verdict and the certificate table at the top; returns the records shown."""
+    records = {str(k): certificate_record(v) for k, v in (certificates or {}).items()}
+    undecided = [k for k, r in records.items() if not is_decided(r)]
+    if undecided:
+        raise ArgumentError(f"certificates {undecided} have no decided status (a Certificate, or its summary())")
+    status = frozen_status(records)
+    if status is None:
+        doc.para("verdict: none (no frozen-robot certificate was given)", bad=True, ident="verdict")
+    else:
+        doc.para(f"verdict: {status}", bad=status != Status.CERTIFIED.value, ident="verdict")
+    doc.heading("Certificates")
+    if not records:
+        doc.para("No certificate was given.")
+        return records
+    rows = [(name, st, _fmt(bound, "no finite bound"), covers) for name, st, bound, covers in certificate_rows(records)]
+    bad = [k for k, row in enumerate(rows) if row[1] != Status.CERTIFIED.value]
+    header = ["certificate", "status", "bound", "what it covers"]
+    doc.table(header, rows, bad_rows=bad, ident="certificates", left=(0, 1, 3))
+    for name, rec in records.items():
+        if rec.get("verdict"):
+            doc.para(f"{name}: {rec['verdict']}")
+    return records
+
+
+#: Words for a discretisation figure that no rate or word length reached.
+_NOT_FOUND = {
+    "min_rate_hz": "not found",
+    "mu_at_min_rate": "not found",
+    "min_word_length_bits": "not found (see the note)",
+    "mu_at_min_word_length": "not found",
+    "prewarp_rad_s": "not pre-warped",
+}
 
 
 def write_report(
@@ -150,8 +189,12 @@ def write_report(
     controllers : dict, optional
         More controllers to compare, ``{name: K}`` (paper Fig. 5).
     certificates : dict, optional
-        ``{name: {figure: value}}`` plain dicts, e.g. ``{"constant-parameter μ":
-        {...}, "time-varying (quadratic)": {...}}``.
+        ``{name: certificate}``: a :class:`~polyrob.analysis.certificate.Certificate`,
+        a ``TimeVaryingCertificate`` or a stored record
+        (:func:`~polyrob.report.certificates.certificate_record`), e.g.
+        ``{FROZEN_ROW: analysis.certificate, TIME_VARYING_ROW: analysis.time_varying}``;
+        the page opens with the frozen-robot certificate's status.  A record
+        without a decided status is refused (``ArgumentError``).
     monte_carlo : MonteCarloResult, optional
         S and T against the weight shapes (paper Fig. 4) and step responses.
     simulations : sequence of SimulationResult
@@ -180,14 +223,8 @@ def write_report(
         figures.append(path)
         doc.figure(f"figures/{name}", caption)
 
+    validation["certificates"] = _certificates(doc, certificates)
     doc.para(f"Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC by polyrob.")
-    # ------------------------------------------------------------------ verdicts first
-    doc.heading("Certificates")
-    if certificates:
-        doc.table(["certificate", "figure", "value"], _certificate_rows(certificates))
-        validation["certificates"] = certificates
-    else:
-        doc.para("No certificate was given.")
     for note in notes:
         doc.para(str(note))
 
@@ -212,12 +249,12 @@ def write_report(
                     (
                         f"#{k + 1} {s.reference.kind} {target} ({label})",
                         mt.joint,
-                        mt.rise_time,
-                        mt.overshoot,
-                        mt.settling_time,
+                        _fmt(mt.rise_time, "not reached"),
+                        _fmt(mt.overshoot, "no step"),
+                        _fmt(mt.settling_time, "not settled"),
                         mt.steady_state_error,
                         mt.peak_torque,
-                        mt.effort_limit,
+                        _fmt(mt.effort_limit, "no limit"),
                         "no" if s.left_domain else "yes",
                     )
                 )
@@ -252,17 +289,20 @@ def write_report(
         doc.heading("Discretisation and quantisation")
         doc.table(
             ["figure", "value"],
-            [(k, v) for k, v in discretization.items() if not isinstance(v, (dict, list)) or len(v) <= 6],
+            [
+                (k, _fmt(v, _NOT_FOUND.get(k, "not computed")))
+                for k, v in discretization.items()
+                if not isinstance(v, (dict, list)) or len(v) <= 6
+            ],
         )
         validation["discretization"] = discretization
 
     # ------------------------------------------------------------------ the problem
     if pldi is not None:
         doc.heading("PLDI: bounds of the Jacobians over the domain")
-        doc.para(
-            f"Enclosure: {pldi.enclosure}; coverage {pldi.coverage:.4g} of {pldi.coverage_points} fresh points; "
-            f"domain '{pldi.domain.name}'."
-        )
+        checked = pldi.coverage_points and not _missing(pldi.coverage)
+        coverage = f"coverage {pldi.coverage:.4g} of {pldi.coverage_points} fresh points; " if checked else ""
+        doc.para(f"Enclosure: {pldi.enclosure}; {coverage}domain '{pldi.domain.name}'.")
         doc.table(
             ["entry", "lower", "upper", "nominal"],
             [(n, lo, hi, nm) for n, lo, hi, nm in zip(pldi.entries, pldi.lower, pldi.upper, pldi.nominal)],

@@ -1,0 +1,106 @@
+"""The certificates a run report shows: one record per certificate, one row per record.
+
+A record is what :meth:`~polyrob.analysis.certificate.Certificate.summary`
+gives (``status``, ``bound``, ``scope``, ``verdict``, ...) with ``covers``,
+the scope's sentence; a run directory stores these records, so that the
+report rebuilt from the files shows the same rows.  The status is the one
+:mod:`polyrob.analysis.certificate` decided; nothing here decides or words
+it otherwise.
+
+Examples
+--------
+>>> from polyrob.analysis.certificate import Certificate, Scope, Status
+>>> c = Certificate(Status.GRID_ONLY, 0.9, 0.9, 0.8, None, Scope(frequencies="the grid"), ("not checked",))
+>>> certificate_rows({FROZEN_ROW: c})
+[('frozen robot (μ)', 'GRID_ONLY', 0.9, 'for constant parameters (every frozen robot of the set), on the grid')]
+>>> frozen_status({FROZEN_ROW: certificate_record(c)})
+'GRID_ONLY'
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import fields
+
+from polyrob.analysis.certificate import FROZEN, Scope, Status
+
+__all__ = [
+    "FROZEN_ROW",
+    "TIME_VARYING_ROW",
+    "certificate_record",
+    "certificate_rows",
+    "frozen_status",
+    "is_decided",
+    "is_frozen",
+]
+
+#: Row names of a run's certificates: the frozen robot's μ, and arbitrarily fast variation.
+FROZEN_ROW = "frozen robot (μ)"
+TIME_VARYING_ROW = "arbitrarily fast variation"
+
+
+def _scope_sentence(scope: dict) -> str:
+    names = {f.name for f in fields(Scope)}
+    return Scope(**{k: v for k, v in scope.items() if k in names}).sentence()
+
+
+def certificate_record(cert) -> dict:
+    """A certificate as a run stores and the report shows it: ``summary()`` with ``covers``, the scope's sentence.
+
+    ``cert`` is a :class:`~polyrob.analysis.certificate.Certificate`, a
+    ``TimeVaryingCertificate`` (its robust-performance certificate; its own
+    verdict line, and its figures under ``"time_varying"``), or a record.
+    """
+    if isinstance(cert, dict):
+        rec = dict(cert)
+        if isinstance(rec.get("scope"), dict):
+            rec["covers"] = _scope_sentence(rec["scope"])
+        return rec
+    inner = cert if hasattr(cert, "status") else cert.certificate
+    rec = inner.summary()
+    rec["covers"] = inner.scope.sentence()
+    if inner is not cert:
+        rec["verdict"] = cert.verdict
+        rec["time_varying"] = cert.summary()
+    return rec
+
+
+def _as_record(record):
+    return record if isinstance(record, dict) or record is None else certificate_record(record)
+
+
+def is_decided(record) -> bool:
+    """A record (or certificate) whose status :mod:`polyrob.analysis.certificate` decided."""
+    record = _as_record(record)
+    return isinstance(record, dict) and record.get("status") in {s.value for s in Status}
+
+
+def is_frozen(record) -> bool:
+    """A certificate for constant parameters (each frozen robot of the set)."""
+    record = _as_record(record)
+    scope = record.get("scope") if isinstance(record, dict) else None
+    return isinstance(scope, dict) and scope.get("variation") == FROZEN
+
+
+def frozen_status(records: dict) -> str | None:
+    """The report's verdict: the status of the frozen robot's robust-performance certificate (``None``: none given)."""
+    frozen = [r for r in map(certificate_record, records.values()) if is_frozen(r)]
+    perf = [r for r in frozen if r["scope"].get("kind") == "robust performance"]
+    return (perf or frozen)[0]["status"] if frozen else None
+
+
+def _bound(x) -> float | None:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) else None
+
+
+def certificate_rows(records: dict) -> list[tuple]:
+    """``(name, status, bound, what it covers)`` per certificate; ``bound`` is ``None`` when no finite one exists."""
+    rows = []
+    for name, cert in records.items():
+        rec = certificate_record(cert)
+        rows.append((str(name), str(rec["status"]), _bound(rec.get("bound")), str(rec.get("covers") or "not stated")))
+    return rows
