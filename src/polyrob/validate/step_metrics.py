@@ -46,6 +46,14 @@ class JointMetrics:
 
 
 def step_metrics(robot, t, q, r, u, q0) -> tuple:
+    """Per joint :class:`JointMetrics` of a simulated move from ``q0`` to the reference's final value.
+
+    Written here rather than with python-control's ``step_info`` (which gives
+    the same rise, overshoot and 2 % settling figures on a full response)
+    because ``step_info`` raises ``IndexError`` on a response that never
+    reaches 90 % of its step, as a simulation cut by its time budget does;
+    here those figures are NaN.
+    """
     out = []
     tail = max(1, len(t) // 50)
     for j, name in enumerate(robot.joint_names):
