@@ -8,7 +8,8 @@ import pytest
 
 import polyrob.analysis.mu.upper as mu_upper
 from polyrob.analysis.mu.blocks import BlockStructure, as_block_structure
-from polyrob.analysis.mu.bounds import TimeLimitedCall, mu_bounds, mussv
+from polyrob.analysis.mu.bounds import mu_bounds, mussv
+from polyrob.analysis.timelimit import TimeLimitedCall
 from polyrob.errors import PolyrobError
 
 
@@ -376,7 +377,8 @@ def test_relaxed_repeated_scalars_bound_mu_from_above():
     """Repeated scalars split into independent ones (a superset) give an upper bound by AB13MD."""
     import numpy as np
 
-    from polyrob.analysis.mu.bounds import DESCENT_ABOVE, mussv
+    from polyrob.analysis.mu.bounds import mussv
+    from polyrob.analysis.mu.sweep import DESCENT_ABOVE
 
     rng = np.random.default_rng(5)
     M = rng.normal(size=(4, 4)) + 1j * rng.normal(size=(4, 4))

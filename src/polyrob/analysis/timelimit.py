@@ -64,7 +64,7 @@ class TimeLimitedCall:
 
     Examples
     --------
-    >>> from polyrob.analysis.mu.bounds import TimeLimitedCall
+    >>> from polyrob.analysis.timelimit import TimeLimitedCall
     >>> with TimeLimitedCall(abs, timeout=5.0) as call:
     ...     call(-3)
     (True, 3)

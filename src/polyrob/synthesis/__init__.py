@@ -11,19 +11,19 @@
   certified μ stays within a tolerance of the full-order one.
 """
 
-from polyrob.synthesis.bandwidth import BandwidthScalingResult, max_bandwidth_scaling, scaled_hyperparameters
-from polyrob.synthesis.scalings.dfit import LogMagnitudeFit, SlicotMagnitudeFit
-from polyrob.synthesis.dk.iteration import DKIteration
-from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound
-from polyrob.synthesis.dk.strategies import HinfStep, MuUpperBound
-from polyrob.synthesis.fixed.synthesis import fixed_structure_musyn
-from polyrob.synthesis.fixed.options import FixedStructureOptions
-from polyrob.synthesis.hinf.synthesis import HinfResult, hinfsyn
 from polyrob.analysis.norms import hinf_norm
+from polyrob.synthesis.bandwidth import BandwidthScalingResult, max_bandwidth_scaling, scaled_hyperparameters
+from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound
+from polyrob.synthesis.dk.iteration import DKIteration
+from polyrob.synthesis.dk.strategies import HinfStep, MuUpperBound
+from polyrob.synthesis.fixed.options import FixedStructureOptions
+from polyrob.synthesis.fixed.structures import controller_structure
+from polyrob.synthesis.fixed.synthesis import fixed_structure_musyn
+from polyrob.synthesis.hinf.synthesis import HinfResult, hinfsyn
+from polyrob.synthesis.mu_synthesis import musyn
 from polyrob.synthesis.reduction import ReductionResult, reduce_controller
 from polyrob.synthesis.result import MusynResult
-from polyrob.synthesis.mu_synthesis import musyn
-from polyrob.synthesis.fixed.structures import controller_structure
+from polyrob.synthesis.scalings.dfit import LogMagnitudeFit, SlicotMagnitudeFit
 
 __all__ = [
     "MusynResult",

@@ -19,20 +19,20 @@ import control
 import numpy as np
 
 from polyrob._threads import single_blas_thread
+from polyrob.analysis.certificate import certify_loop
 from polyrob.analysis.mu.blocks import as_block_structure
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import as_controller_ss
-from polyrob.synthesis.scalings.dfit import LogMagnitudeFit
-from polyrob.synthesis.dk.iteration import DKIteration
-from polyrob.analysis.certificate import certify_loop
 from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound
+from polyrob.synthesis.dk.iteration import DKIteration
 from polyrob.synthesis.fixed.synthesis import fixed_structure_musyn
 from polyrob.synthesis.hinf.checks import check_stabilizable
 from polyrob.synthesis.result import MusynResult
+from polyrob.synthesis.scalings.dfit import LogMagnitudeFit
 
 __all__ = ["musyn", "scaling_order_defaults", "LARGE_STRUCTURE_ORDERS"]
 
-#: Above this many padded channels (:data:`polyrob.analysis.mu.bounds.DESCENT_ABOVE`, a 6-7 joint
+#: Above this many padded channels (:data:`polyrob.analysis.mu.sweep.DESCENT_ABOVE`, a 6-7 joint
 #: arm's axes model) the D and G scalings default to constants: a fitted order ``o`` on a block
 #: repeated ``r`` times adds ``o * r`` states on each side of the plant, and on ur5 (twelve blocks
 #: of six) the fits and K-steps of order 1-4 took most of a 15-minute budget per iteration.
@@ -60,7 +60,7 @@ def scaling_order_defaults(st) -> dict:
     >>> scaling_order_defaults(as_block_structure([[-6, 0]] * 5))
     {'d_order': (0,), 'g_order': (0,)}
     """
-    from polyrob.analysis.mu.bounds import DESCENT_ABOVE
+    from polyrob.analysis.mu.sweep import DESCENT_ABOVE
 
     if st.padded_size > DESCENT_ABOVE:
         return dict(LARGE_STRUCTURE_ORDERS)
@@ -129,6 +129,7 @@ def musyn(
     check_weights: bool = True,
     n_u: int | None = None,
     n_y: int | None = None,
+    time_limit: float | None = None,
     **structure_options,
 ) -> MusynResult:
     """Robust controller by μ-synthesis (MATLAB's ``musyn``), with its μ certificate.
@@ -160,7 +161,7 @@ def musyn(
     d_order, g_order : sequence of int, optional
         Candidate orders of the D and G fits (the lowest that fits is used;
         default ``0..4`` and ``0..2``; constant scalings, :data:`LARGE_STRUCTURE_ORDERS`,
-        on structures above :data:`~polyrob.analysis.mu.bounds.DESCENT_ABOVE` padded channels).
+        on structures above :data:`~polyrob.analysis.mu.sweep.DESCENT_ABOVE` padded channels).
     fit_tol : float, optional
         Relative tolerance of the fitted bound (default 0.01), see
         :class:`~polyrob.synthesis.scalings.dfit.LogMagnitudeFit`.
@@ -187,6 +188,11 @@ def musyn(
         μ > 1 (:func:`performance_lower_bound`).
     n_u, n_y : int, optional
         For a bare ``StateSpace``.
+    time_limit : float, optional
+        Seconds after which no new iteration (or fixed-structure start)
+        begins; the best controller so far is certified and ``info["stopped_by"]``
+        says what stopped it.  A safety net on wall-clock time: the figures of
+        the iterations that ran do not depend on it.
 
     Returns
     -------
@@ -225,6 +231,7 @@ def musyn(
     (True, True)
     """
     t_start = time.perf_counter()
+    deadline = None if time_limit is None else t_start + float(time_limit)
     if not isinstance(structure, str):
         raise SynthesisError(f"unknown controller structure {structure!r}: give a string such as 'full' or 'tf3'")
     if structure != "full":
@@ -254,6 +261,7 @@ def musyn(
             initial_controller=initial_controller,
             n_u=n_u,
             n_y=n_y,
+            deadline=deadline,
             certify_omega=certify_omega,
             **structure_options,
         )
@@ -304,6 +312,7 @@ def musyn(
         patience=opt["patience"],
         target=target,
         progress=progress,
+        deadline=deadline,
     )
     K0 = None
     if initial_controller is not None:
@@ -356,6 +365,7 @@ def musyn(
         # K-steps rejected, G steps replaced by D steps: what the iteration did instead
         "fallbacks": list(loop.failures) + list(getattr(getattr(loop.mu_bound, "sweep", None), "notes", [])),
         "timings": [h.seconds for h in hist],
+        "stopped_by": loop.stopped_by,
         "omega": omega,
         "reference": (
             "P. M. Young, Controller design with real parametric uncertainty, IJC 65(3), 1996; "

@@ -33,10 +33,10 @@ import numpy as np
 import scipy.linalg as sla
 
 from polyrob._threads import single_blas_thread
+from polyrob.analysis.certificate import certify_loop
 from polyrob.analysis.mu.blocks import as_block_structure
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import as_controller_ss
-from polyrob.analysis.certificate import certify_loop
 from polyrob.synthesis.dk.frequency import frequency_grid
 from polyrob.synthesis.result import MusynResult
 

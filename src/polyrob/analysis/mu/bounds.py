@@ -49,7 +49,6 @@ from polyrob.analysis.mu.sweep import (
     run_sweep,
 )
 from polyrob.analysis.mu.upper import LmiUpper
-from polyrob.analysis.timelimit import TimeLimitedCall  # re-exported: the worker guard of the sweeps
 from polyrob.errors import PolyrobError
 
 __all__ = [
@@ -58,7 +57,6 @@ __all__ = [
     "mussv",
     "mu_bounds",
     "resolve_method",
-    "TimeLimitedCall",
 ]
 
 Method = Literal["auto", "ab13md", "lmi", "gradient", "relaxed"]

@@ -184,5 +184,3 @@ def run_sweep(
 
 # Public name for the D-scale fit of the synthesis stage; the private spelling
 # stays until polyrob.synthesis.scalings.dscale has moved over to the public one.
-upper_bound_ab13md = mu_upper.upper_ab13md
-_upper_ab13md = upper_bound_ab13md

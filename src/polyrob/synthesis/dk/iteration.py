@@ -39,6 +39,7 @@ certified when the first one's certificate exceeds its grid value by 2%.
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 from collections.abc import Callable
@@ -48,16 +49,18 @@ import control
 import numpy as np
 
 from polyrob.analysis.mu.blocks import as_block_structure
+from polyrob.analysis.mu.frequency import matrix_response
+from polyrob.analysis.norms import hinf_norm_estimate
+from polyrob.analysis.stability import stability_screen
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import lower_lft_matrices
-from polyrob.synthesis.scalings.dfit import LogMagnitudeFit
-from polyrob.analysis.mu.frequency import matrix_response
 from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound, resonances
 from polyrob.synthesis.dk.strategies import HinfStep, MuUpperBound
 from polyrob.synthesis.scalings.data import ScalingData, Scalings, complexified, scaling_data
-from polyrob.analysis.norms import hinf_norm_estimate
-from polyrob.analysis.stability import stability_screen
+from polyrob.synthesis.scalings.dfit import LogMagnitudeFit
 from polyrob.synthesis.scalings.scaled_plant import scaled_plant
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "DKIteration",
@@ -101,7 +104,11 @@ class DKIteration:
     target : float, optional
         Stop as soon as the grid peak μ is below ``target``.
     progress : bool, optional
-        One line per iteration (tqdm); default: only on a terminal.
+        A progress bar (tqdm); default: only on a terminal.  One line per
+        iteration goes to the ``polyrob`` logger whatever this says.
+    deadline : float, optional
+        ``time.perf_counter()`` value after which no new iteration starts;
+        the best controller so far is kept and :attr:`stopped_by` says why.
     switch_tol : float
         Mixed problems: D-K steps while the peak improves by more than this
         (relative, per iteration), then D-G-K steps.
@@ -127,6 +134,7 @@ class DKIteration:
         patience: int = 2,
         target: float | None = None,
         progress: bool | None = None,
+        deadline: float | None = None,
         switch_tol: float = 0.02,
     ):
         self.mu_bound = mu_bound or MuUpperBound()
@@ -134,6 +142,10 @@ class DKIteration:
         self.hinf_step = hinf_step or HinfStep()
         self.max_iter, self.tol, self.patience = int(max_iter), float(tol), int(patience)
         self.target, self.progress = target, progress
+        #: ``time.perf_counter()`` value after which no new iteration starts (``None``: no limit)
+        self.deadline = deadline
+        #: why the last run stopped early (``None``: it did not)
+        self.stopped_by = None
         self.switch_tol = float(switch_tol)
         self.reject_ratio = 1.25
         if self.max_iter < 1:
@@ -198,6 +210,8 @@ class DKIteration:
         omega = np.asarray(omega, float)
         A, B, C, D = (np.asarray(X, float) for X in (Psys.A, Psys.B, Psys.C, Psys.D))
         hist: list[IterationRecord] = []
+        t_run = time.perf_counter()
+        self.stopped_by = None
         show = sys.stderr.isatty() if self.progress is None else bool(self.progress)
         bar = tqdm(total=self.max_iter, disable=not show, desc="musyn", leave=False, file=sys.stderr)
         K = initial_controller
@@ -230,8 +244,7 @@ class DKIteration:
                         K, np.inf, gamma, orders, scal, {"mu": 0.0, "fit": t_fit, "hinf": t_hinf}, notes, phase
                     )
                     hist.append(rec)
-                    if show:
-                        bar.write(f"musyn iter {it + 1}: closed loop unstable, stopping")
+                    log.info(f"musyn iter {it + 1}: closed loop unstable, stopping")
                     break
                 w = np.union1d(omega, resonances(Acl, omega.min(), omega.max()))
                 H = matrix_response(Acl, Bcl, Ccl, Dcl)(w)
@@ -257,16 +270,20 @@ class DKIteration:
                     since_best += 1
                 best = min(best, peak)
                 prev = peak
-                if show:
-                    bar.update(1)
-                    bar.set_postfix(mu=f"{peak:.4f}", best=f"{best:.4f}", gamma=f"{gamma:.4g}", nK=K.nstates)
-                    bound = "mixed" if phase == "DG" else "complex" if st.has_real else ""
-                    bar.write(
-                        f"musyn iter {it + 1:2d}: peak mu {peak:.4f} {bound}(best {best:.4f}), "
-                        f"gamma {gamma:.4g}, K order {K.nstates}, D/G orders {orders}, "
-                        f"{sum(rec.seconds.values()):.1f} s"
-                    )
+                bar.update(1)
+                bar.set_postfix(mu=f"{peak:.4f}", best=f"{best:.4f}", gamma=f"{gamma:.4g}", nK=K.nstates)
+                bound = "mixed " if phase == "DG" else "complex " if st.has_real else ""
+                # one line per iteration on the polyrob logger, terminal or not (grid peak: a search figure)
+                log.info(
+                    f"musyn iter {it + 1:2d}: grid peak mu {peak:.4f} {bound}(best {best:.4f}), "
+                    f"gamma {gamma:.4g}, K order {K.nstates}, D/G orders {orders}, "
+                    f"{sum(rec.seconds.values()):.1f} s, {time.perf_counter() - t_run:.0f} s in all"
+                )
                 if it + 1 >= self.max_iter:
+                    break
+                if self.deadline is not None and time.perf_counter() >= self.deadline:
+                    self.stopped_by = f"the time limit, after {it + 1} iteration(s)"
+                    log.info(f"musyn: stopped by {self.stopped_by}")
                     break
                 if since_best >= self.patience:
                     if mixed and phase == "D":

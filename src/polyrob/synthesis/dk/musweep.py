@@ -25,7 +25,7 @@ class MuSweep:
     Each matrix costs one SLICOT AB13MD call (20-45 ms for the 2R robust
     performance problem, ~100 per D-step).  With ``n_jobs = k`` the
     frequencies are dealt to ``k`` worker processes running ``slycot.ab13md``
-    (a fresh interpreter through :class:`polyrob.analysis.mu.bounds.TimeLimitedCall`, never
+    (a fresh interpreter through :class:`polyrob.analysis.timelimit.TimeLimitedCall`, never
     a fork, and no re-import of the user's script); this process only
     coordinates.  A worker that fails or times out is replaced by a local
     call.
@@ -54,7 +54,8 @@ class MuSweep:
         return max(1, int(self.n_jobs or 1))
 
     def __call__(self, H: np.ndarray, st: BlockStructure):
-        from polyrob.analysis.mu.bounds import mussv, resolve_method, upper_bound_ab13md
+        from polyrob.analysis.mu.bounds import mussv, resolve_method
+        from polyrob.analysis.mu.upper import upper_ab13md
 
         st = as_block_structure(st)
         n = st.padded_size
@@ -80,7 +81,7 @@ class MuSweep:
             return mu, D, G
         import threading
 
-        from polyrob.analysis.mu.bounds import TimeLimitedCall
+        from polyrob.analysis.timelimit import TimeLimitedCall
 
         # All AB13MD calls run in worker processes; this process only waits
         # (an AB13MD call here would hold the GIL and starve the threads that
@@ -101,7 +102,7 @@ class MuSweep:
                 if not ok:
                     failed.append(k)
                     continue
-                up, Dk, Gk, _ = upper_bound_ab13md(Ms, st, val)
+                up, Dk, Gk, _ = upper_ab13md(Ms, st, val)
                 mu[k], D[k], G[k] = up, Dk, Gk
 
         threads = [

@@ -13,9 +13,9 @@ import control
 import numpy as np
 
 from polyrob.analysis.mu.blocks import as_block_structure
-from polyrob.synthesis.scalings.data import complexified
-from polyrob.synthesis.hinf.synthesis import HinfResult, hinfsyn
 from polyrob.synthesis.dk.musweep import MuSweep
+from polyrob.synthesis.hinf.synthesis import HinfResult, hinfsyn
+from polyrob.synthesis.scalings.data import complexified
 
 __all__ = ["MuUpperBound", "HinfStep"]
 

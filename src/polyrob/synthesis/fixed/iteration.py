@@ -210,11 +210,15 @@ def optimise_start(
     report: Callable[[dict], None],
     label: str,
     target: float | None = None,
+    deadline: float | None = None,
 ):
     radius = opts.trust_region
     stall = 0
     for _ in range(max_iter):
         if target is not None and run.peak <= target:
+            break
+        if deadline is not None and time.perf_counter() >= deadline:
+            run.notes.append(f"stopped by the time limit after {run.iterations} iteration(s)")
             break
         t0 = time.perf_counter()
         old = run.peak

@@ -77,9 +77,9 @@ from control.exception import ControlArgument
 from slycot.exceptions import SlycotError
 
 from polyrob._threads import single_blas_thread
+from polyrob.analysis.certificate import certificate_of_sweep
 from polyrob.analysis.mu.blocks import as_block_structure
 from polyrob.analysis.mu.bounds import mu_bounds
-from polyrob.analysis.certificate import certificate_of_sweep
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import lft, paper_controller
 from polyrob.synthesis.fixed.iteration import (
@@ -95,8 +95,8 @@ from polyrob.synthesis.fixed.kstep import default_controller, stabilise
 from polyrob.synthesis.fixed.loop import FixedLoop, closed_loop_response, plant_parts
 from polyrob.synthesis.fixed.options import FixedStructureOptions
 from polyrob.synthesis.fixed.scalings import dstep, scalings_from
-from polyrob.synthesis.result import MusynResult
 from polyrob.synthesis.fixed.structures import ControllerStructure, controller_structure
+from polyrob.synthesis.result import MusynResult
 
 __all__ = ["fixed_structure_musyn", "FixedStructureOptions", "closed_loop_response"]
 
@@ -120,6 +120,7 @@ def fixed_structure_musyn(
     n_u: int | None = None,
     n_y: int | None = None,
     options: FixedStructureOptions | None = None,
+    deadline: float | None = None,
 ) -> MusynResult:
     """Fixed-structure μ-synthesis (MATLAB ``musyn`` with a tunable controller).
 
@@ -171,6 +172,9 @@ def fixed_structure_musyn(
     n_u, n_y : int, optional
         Sizes for a bare ``StateSpace`` plant.
     options : FixedStructureOptions, optional
+    deadline : float, optional
+        ``time.perf_counter()`` value after which no new iteration or start
+        begins; the best controller so far is certified (its notes say so).
 
     Returns
     -------
@@ -256,6 +260,9 @@ def fixed_structure_musyn(
         runs, failures = [], []
         span = None
         for label, th in candidates:
+            if runs and deadline is not None and time.perf_counter() >= deadline:
+                fallbacks.append(f"starts after {len(runs)} not run: the time limit")
+                break
             th, a = stabilise(loop, th, opts.min_decay)
             if not a <= -opts.min_decay:
                 failures.append(f"{label}: spectral abscissa {a:.3g}")
@@ -279,7 +286,7 @@ def fixed_structure_musyn(
             run.history.append(run.peak)
             screen_grid(loop, run, screen, st, opts)
             run.history[-1] = run.peak
-            optimise_start(loop, run, st, opts, int(max_iter), screen, report, label, target)
+            optimise_start(loop, run, st, opts, int(max_iter), screen, report, label, target, deadline)
             run.notes.insert(0, label)
             runs.append(run)
         if not runs:

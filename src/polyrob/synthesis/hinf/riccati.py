@@ -16,10 +16,10 @@ import warnings
 
 import numpy as np
 
-from polyrob.plant.generalized import lower_lft_matrices
-from polyrob.synthesis.hinf.problem import SynthesisProblem
 from polyrob.analysis.norms import hinf_norm_below
 from polyrob.analysis.stability import stability_screen
+from polyrob.plant.generalized import lower_lft_matrices
+from polyrob.synthesis.hinf.problem import SynthesisProblem
 
 __all__ = ["sb10fd_controller", "bisect_gamma", "verify_controller", "riccati_controller", "RANK_FAIL"]
 

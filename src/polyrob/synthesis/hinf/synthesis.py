@@ -64,14 +64,14 @@ import control
 import numpy as np
 
 from polyrob._threads import single_blas_thread
+from polyrob.analysis.norms import hinf_norm, hinf_norm_estimate, state_matrices
+from polyrob.analysis.stability import stability_screen
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import lower_lft_matrices
 from polyrob.synthesis.hinf.checks import check_stabilizable
 from polyrob.synthesis.hinf.lmi import lmi_controller
 from polyrob.synthesis.hinf.problem import SynthesisProblem
 from polyrob.synthesis.hinf.riccati import riccati_controller
-from polyrob.analysis.norms import hinf_norm, hinf_norm_estimate, state_matrices
-from polyrob.analysis.stability import stability_screen
 
 __all__ = ["HinfResult", "hinfsyn", "hinf_norm", "hinf_norm_estimate", "check_stabilizable"]
 

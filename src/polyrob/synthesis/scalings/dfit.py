@@ -17,10 +17,10 @@ import numpy as np
 
 from polyrob.analysis.mu.blocks import BlockStructure
 from polyrob.errors import PolyrobError
+from polyrob.synthesis.dk.musweep import MuSweep, complex_dscales
 from polyrob.synthesis.scalings.data import BlockScaling, ScalingData, Scalings
 from polyrob.synthesis.scalings.gfit import fit_g
 from polyrob.synthesis.scalings.magfit import MagnitudeFit, fit_errors, fit_magnitude
-from polyrob.synthesis.dk.musweep import MuSweep, complex_dscales
 
 __all__ = ["LogMagnitudeFit", "SlicotMagnitudeFit"]
 

@@ -65,11 +65,11 @@ Examples
 from __future__ import annotations
 
 from polyrob.synthesis.balanced import balanced_realization
-from polyrob.synthesis.scalings.dfit import LogMagnitudeFit, SlicotMagnitudeFit
+from polyrob.synthesis.dk.musweep import MuSweep
 from polyrob.synthesis.scalings.data import BlockScaling, ScalingData, Scalings, scaling_data
+from polyrob.synthesis.scalings.dfit import LogMagnitudeFit, SlicotMagnitudeFit
 from polyrob.synthesis.scalings.gfit import GFit, fit_g
 from polyrob.synthesis.scalings.magfit import MagnitudeFit, fit_magnitude
-from polyrob.synthesis.dk.musweep import MuSweep
 from polyrob.synthesis.scalings.scaled_plant import scaled_plant
 
 __all__ = [
