@@ -41,3 +41,20 @@ def test_no_stabilising_gain_is_an_error():
     # u = K e with K < 0 at every gain of the scan: positive feedback on every vertex
     with pytest.raises(SynthesisError):
         vertex_synthesis(_vertices(), W_S, W_T, structure="tf1", initial=control.tf([-5.0], [0.1, 1.0]), certify=False)
+
+
+def test_the_one_vertex_enumeration_box_corners_and_halfspaces_agree():
+    """Box corners and a polytope's vertices have one implementation each (polyrob.bounds.polytope)."""
+    from polyrob.bounds.polytope import box_corners, halfspace_vertices
+
+    lo, hi = np.array([-1.0, 0.0, 2.0]), np.array([1.0, 0.5, 3.0])
+    corners = box_corners(lo, hi)
+    assert corners.shape == (8, 3) and corners[0].tolist() == lo.tolist() and corners[-1].tolist() == hi.tolist()
+    assert corners[1].tolist() == [-1.0, 0.0, 3.0]  # the last coordinate fastest
+    assert box_corners([1.0, 2.0], [1.0, 3.0]).tolist() == [[1.0, 2.0], [1.0, 3.0]]  # lo == hi: one value
+    assert box_corners([], []).shape == (1, 0)
+    G, g = np.r_[np.eye(3), -np.eye(3)], np.r_[hi, -lo]
+    # the box as half-spaces, with a row that does not constrain (a constant entry, g below 0 by rounding)
+    v = halfspace_vertices(np.r_[G, np.zeros((1, 3))], np.r_[g, -1e-17])
+    assert sorted(np.round(v, 12).tolist()) == sorted(corners.tolist())
+    assert halfspace_vertices(G, np.r_[hi, -hi - 1.0]) is None  # empty

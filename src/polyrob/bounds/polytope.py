@@ -5,10 +5,18 @@ The half-spaces are support values of the Jacobian entries along the axes
 linear programs (HiGHS) give the bounding box of the box section in reduced
 coordinates, an interior point (Chebyshev centre) and, in up to
 :data:`VERTEX_MAX_DIM` dimensions, the vertices (qhull).
+
+The package's vertex enumeration is here, once: :func:`box_corners` (the
+corners of an interval box) and :func:`halfspace_vertices` (the vertices of
+``{z : G z <= g}``), with :func:`polytope_vertices` for a :class:`Polytope`.
+The half-space case uses :class:`scipy.spatial.HalfspaceIntersection` (qhull,
+a maintained library already needed here; pycddlib would be one more
+dependency for the same result).
 """
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,7 +24,16 @@ from scipy import optimize
 
 from polyrob.errors import BoundsError
 
-__all__ = ["Polytope", "build_polytope", "principal_directions", "VERTEX_MAX_DIM", "COVERAGE_RTOL"]
+__all__ = [
+    "Polytope",
+    "build_polytope",
+    "principal_directions",
+    "box_corners",
+    "halfspace_vertices",
+    "polytope_vertices",
+    "VERTEX_MAX_DIM",
+    "COVERAGE_RTOL",
+]
 
 #: Vertices are enumerated when the Jacobian cloud spans at most this many dimensions.
 VERTEX_MAX_DIM = 6
@@ -83,6 +100,81 @@ class Polytope:
         return np.all(points @ self.normals.T <= self.offsets + slack, axis=1)
 
 
+def box_corners(lo, hi) -> np.ndarray:
+    """The corners of the box ``[lo, hi]`` (``lo <= hi``), one per row.
+
+    In lexicographic order: the last coordinate fastest, ``lo`` before ``hi``.
+    A coordinate with ``lo == hi`` has one value, so a box with ``d``
+    non-degenerate coordinates has ``2^d`` corners.
+
+    Examples
+    --------
+    >>> box_corners([0.0, 1.0, 5.0], [1.0, 2.0, 5.0]).tolist()
+    [[0.0, 1.0, 5.0], [0.0, 2.0, 5.0], [1.0, 1.0, 5.0], [1.0, 2.0, 5.0]]
+    """
+    lo, hi = np.asarray(lo, float).reshape(-1), np.asarray(hi, float).reshape(-1)
+    levels = [(a,) if a == b else (a, b) for a, b in zip(lo, hi)]
+    corners = list(itertools.product(*levels))
+    return np.array(corners, dtype=float).reshape(len(corners), len(lo))
+
+
+def halfspace_vertices(G, g) -> np.ndarray | None:
+    """The vertices of the bounded polytope ``{z : G z <= g}``, one per row, or None.
+
+    Rows whose normal vanishes (relative to the largest) do not constrain ``z``
+    and are dropped (their ``g`` is 0 up to rounding, possibly < 0).  The
+    interior point qhull needs is the Chebyshev centre (an LP, HiGHS); None
+    when there is none (an empty or flat polytope) or qhull refuses the input
+    (degenerate, unbounded).  Intersections that agree to 1e-9 of the
+    polytope's extent (a degenerate vertex, met by more than ``dim`` facets)
+    are one vertex, the first one qhull gives; the rows are in qhull's order.
+
+    Examples
+    --------
+    >>> G = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0], [1.0, 1.0]])
+    >>> v = halfspace_vertices(G, np.array([1.0, 1.0, 1.0, 1.0, 1.0]))
+    >>> sorted(np.round(v, 12).tolist())
+    [[-1.0, -1.0], [-1.0, 1.0], [0.0, 1.0], [1.0, -1.0], [1.0, 0.0]]
+    """
+    from scipy.spatial import HalfspaceIntersection, QhullError
+
+    G, g = np.atleast_2d(np.asarray(G, float)), np.asarray(g, float).reshape(-1)
+    r = G.shape[1]
+    if r == 0 or not len(G):
+        return None
+    moves = np.abs(G).max(axis=1) > 1e-12 * max(np.abs(G).max(), 1e-300)
+    G, g = G[moves], g[moves]
+    norms = np.linalg.norm(G, axis=1)
+    res = optimize.linprog(
+        np.r_[np.zeros(r), -1.0], A_ub=np.c_[G, norms], b_ub=g, bounds=[(None, None)] * r + [(0, None)], method="highs"
+    )
+    if res.status != 0 or res.x[-1] <= 1e-12:
+        return None
+    try:
+        hs = HalfspaceIntersection(np.c_[G, -g], res.x[:r])
+    except (QhullError, ValueError):  # degenerate inputs: no vertices then (the half-spaces remain)
+        return None
+    z = hs.intersections
+    ext = np.maximum(np.ptp(z, axis=0), 1e-300)
+    _, keep = np.unique(np.round((z - z.min(axis=0)) / ext, 9), axis=0, return_index=True)
+    return z[np.sort(keep)]
+
+
+def polytope_vertices(poly: Polytope, max_dim: int = VERTEX_MAX_DIM) -> np.ndarray | None:
+    """A polytope's vertices: the stored ones, else enumerated in its reduced coordinates.
+
+    None when they are not stored and the reduced dimension is 0 or above
+    ``max_dim``, or :func:`halfspace_vertices` finds none.
+    """
+    if poly.vertices is not None:
+        return np.asarray(poly.vertices, float)
+    r = poly.reduced_dim
+    if r == 0 or r > max_dim:
+        return None
+    z = halfspace_vertices(poly.normals @ poly.basis, poly.offsets - poly.normals @ poly.centre)
+    return None if z is None else poly.centre + z @ poly.basis.T
+
+
 def principal_directions(vals: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """Principal axes of the normalised cloud, as columns, strongest first; their
     number is the rank (the directions that vary)."""
@@ -98,8 +190,6 @@ def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200
     ``basis_n`` are the principal axes of the normalised ``cloud``
     (:func:`principal_directions`).
     """
-    from scipy.spatial import HalfspaceIntersection, QhullError
-
     centre = cloud.mean(axis=0)
     basis = basis_n * scale[:, None]  # p = centre + basis @ z
     r = basis.shape[1]
@@ -127,22 +217,9 @@ def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200
             bounds.append(res.x[i])
         box_z.append(sorted(bounds))
     box_z = np.array(box_z)
-    # Interior point (Chebyshev centre) for the vertex enumeration.
-    norms = np.linalg.norm(G, axis=1)
-    res = optimize.linprog(
-        np.r_[np.zeros(r), -1.0],
-        A_ub=np.c_[G, norms],
-        b_ub=g,
-        bounds=[(None, None)] * r + [(0, None)],
-        method="highs",
-    )
-    if r <= VERTEX_MAX_DIM and res.status == 0 and res.x[-1] > 1e-12:
-        try:
-            hs = HalfspaceIntersection(np.c_[G, -g], res.x[:r])
-            vz = np.unique(np.round(hs.intersections, 12), axis=0)
-            vertices = centre + vz @ basis.T
-        except (QhullError, ValueError):  # degenerate inputs: no vertices then (the half-spaces remain)
-            vertices = None
+    if r <= VERTEX_MAX_DIM:
+        vz = halfspace_vertices(G, g)
+        vertices = None if vz is None else centre + vz @ basis.T
     # Volume ratio against the interval box (lo <= centre + basis z <= hi), in z.
     z = box_z[:, 0] + rng.random((n_mc, r)) * (box_z[:, 1] - box_z[:, 0])
     in_poly = np.all(z @ G.T <= g + 1e-12, axis=1)

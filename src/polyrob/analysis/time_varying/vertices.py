@@ -12,11 +12,13 @@ whole convex hull once it holds at these vertices.
 
 ``"polytope"``
     the vertices of the PLDI's polytope (the interval box cut by the
-    principal-direction half-spaces).  They are enumerated here (qhull in the
+    principal-direction half-spaces).  They are enumerated
+    (:func:`polyrob.bounds.polytope.polytope_vertices`, qhull in the
     polytope's reduced coordinates) when the PLDI did not store them, up to
     :data:`POLYTOPE_MAX_DIM` reduced dimensions.
 ``"box"``
-    the ``2^k`` corners of the interval box of the ``k`` varying entries:
+    the ``2^k`` corners of the interval box of the ``k`` varying entries
+    (:func:`polyrob.bounds.polytope.box_corners`):
     a superset of the polytope, with fewer vertices in low dimension.
 ``"auto"``
     the polytope when its vertices are enumerated and fit in ``max_vertices``
@@ -26,11 +28,11 @@ whole convex hull once it holds at these vertices.
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import numpy as np
 
+from polyrob.bounds.polytope import box_corners, polytope_vertices
 from polyrob.errors import PolyrobError
 
 __all__ = [
@@ -88,38 +90,6 @@ class VertexSet:
     @property
     def m(self) -> int:
         return self.B.shape[2]
-
-
-def _polytope_points(poly) -> np.ndarray | None:
-    """Vertices of the polytope (stored, or enumerated in reduced coordinates)."""
-    if poly.vertices is not None:
-        return np.asarray(poly.vertices, float)
-    r = poly.reduced_dim
-    if r == 0 or r > POLYTOPE_MAX_DIM:
-        return None
-    from scipy import optimize
-    from scipy.spatial import HalfspaceIntersection, QhullError
-
-    G = poly.normals @ poly.basis
-    g = poly.offsets - poly.normals @ poly.centre
-    norms = np.linalg.norm(G, axis=1)
-    res = optimize.linprog(
-        np.r_[np.zeros(r), -1.0], A_ub=np.c_[G, norms], b_ub=g, bounds=[(None, None)] * r + [(0, None)], method="highs"
-    )
-    if res.status != 0 or res.x[-1] <= 1e-12:
-        return None
-    try:
-        hs = HalfspaceIntersection(np.c_[G, -g], res.x[:r])
-    except (QhullError, ValueError):  # qhull refuses degenerate input: no vertex set then
-        return None
-    z = hs.intersections
-    # near-coincident intersections of degenerate vertices: merge them (relative
-    # to the polytope's extent), keeping the outermost representative is not
-    # needed because merged points agree to 1e-9 of the extent
-    ext = np.maximum(np.ptp(z, axis=0), 1e-300)
-    key = np.round((z - z.min(axis=0)) / ext, 9)
-    _, keep = np.unique(key, axis=0, return_index=True)
-    return poly.centre + z[np.sort(keep)] @ poly.basis.T
 
 
 def _matrices(pldi, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -184,9 +154,9 @@ def vertex_set(source, *, which: str = "auto", max_vertices: int = MAX_VERTICES)
 def _from_pldi(pldi, which: str, max_vertices: int) -> VertexSet:
     if which not in ("auto", "polytope", "box"):
         raise PolyrobError(f"which must be 'auto', 'polytope' or 'box', got {which!r}")
-    k = len(pldi.entries)
-    n_box = 2**k
-    poly_pts = _polytope_points(pldi.polytope) if which in ("auto", "polytope") else None
+    lo, hi = np.asarray(pldi.lower, float), np.asarray(pldi.upper, float)
+    n_box = 2 ** int(np.count_nonzero(hi > lo))  # what box_corners gives: 2^k for k varying entries
+    poly_pts = polytope_vertices(pldi.polytope, POLYTOPE_MAX_DIM) if which in ("auto", "polytope") else None
     n_poly = None if poly_pts is None else len(poly_pts)
     note = f"polytope vertices: {n_poly if n_poly is not None else 'not enumerated'}; box corners: {n_box}"
     choices = []
@@ -202,11 +172,7 @@ def _from_pldi(pldi, which: str, max_vertices: int) -> VertexSet:
             "scaled small-gain test on an LFT model (polyrob.analysis.time_varying.smallgain.scaled_small_gain)"
         )
     src = choices[0][1]  # the polytope first: it is the tighter of the two
-    if src == "box":
-        lo, hi = pldi.lower, pldi.upper
-        pts = np.array([np.where(c, hi, lo) for c in itertools.product((False, True), repeat=k)])
-    else:
-        pts = poly_pts
+    pts = box_corners(lo, hi) if src == "box" else poly_pts
     A, B = _matrices(pldi, pts)
     m = B.shape[2]
     C = np.hstack([np.eye(m), np.zeros((m, m))])

@@ -48,6 +48,7 @@ import numpy as np
 from polyrob.bounds.certified.balls import sq
 from polyrob.bounds.certified.branch import BoxProblem, process_box
 from polyrob.bounds.certified.interval_rbd import SymbolicDynamics, box_coefficients, entry_depends, entry_terms
+from polyrob.bounds.polytope import box_corners
 from polyrob.bounds.reference import reference_jacobians
 from polyrob.errors import CertificationError, DomainError
 
@@ -100,10 +101,6 @@ def _relevant_dims(model, damping, lo, hi, vlo, vhi, ulo, uhi, sd, rng):
             if max(np.abs(A1 - A0).max(), np.abs(B1 - B0).max()) > 1e-9 * scale:
                 varies[p] = True
     return rel & varies
-
-
-def _vertices(lo, hi):
-    return sorted(set(itertools.product(*[(a,) if a == b else (a, b) for a, b in zip(lo, hi)])))
 
 
 def _as_vec(name, x, m):
@@ -215,11 +212,11 @@ def certified_jacobian_bounds(
     items = []
     vc = tuple(0.5 * (vlo + vhi))
     for e, terms in enumerate(entry_terms(sd, d)):
-        Us = _vertices(ulo, uhi) if terms & set(range(1, 1 + m)) else [(0.0,) * m]
+        Us = [tuple(c) for c in box_corners(ulo, uhi)] if terms & set(range(1, 1 + m)) else [(0.0,) * m]
         if terms & set(range(1 + 2 * m, 1 + 2 * m + len(sd.pairs))):
             Ss = [(tuple(vlo), tuple(vhi))]
         elif terms & set(range(1 + m, 1 + 2 * m)):
-            Ss = [(v, v) for v in _vertices(vlo, vhi)]
+            Ss = [(v, v) for v in map(tuple, box_corners(vlo, vhi))]
         else:
             Ss = [(vc, vc)]
         items += [[e, U, S0, S1, True, True] for U in Us for S0, S1 in Ss]
