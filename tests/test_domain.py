@@ -101,3 +101,59 @@ def test_paper_domain_is_named_and_default_for_paper_2r():
     d = Domain.from_robot(robot)
     assert d.name == "paper"
     assert np.all(d.u_upper == 0) and np.all(d.u_lower == 0)
+
+
+# a new user's trial: the error names the input that is wrong, not the URDF
+
+
+@pytest.mark.parametrize(
+    "name, text",
+    [
+        ("d.json", '{"qdot": {"joint1": Infinity, "joint2": 3}}'),
+        ("d.json", '{"qdot": {"joint1": "inf"}}'),
+        ("d.yaml", "qdot:\n  joint1: .inf\n"),
+        ("d.yaml", "qdot:\n  joint1: [-1, .inf]\n"),
+    ],
+)
+def test_inf_in_a_domain_file_names_the_file_group_and_joint(tmp_path, name, text):
+    (tmp_path / name).write_text(text)
+    with pytest.raises(DomainError) as err:
+        Domain.from_file(cached_robot("planar_2r"), tmp_path / name)
+    message = str(err.value)
+    assert message.startswith(str(tmp_path / name))
+    assert "'qdot' entry of joint 'joint1'" in message and "not finite" in message
+    assert "planar_2r.urdf" not in message and "no velocity limit" not in message
+
+
+def test_a_zero_scale_names_the_scale_not_the_urdf():
+    robot = cached_robot("planar_2r")
+    for kwargs, option in ((dict(qdot_scale=0.0), "--qdot-scale 0"), (dict(u_scale=0.0), "--u-scale 0")):
+        with pytest.raises(DomainError) as err:
+            Domain.from_robot(robot, **kwargs)
+        message = str(err.value)
+        assert message.startswith(option) and "give a scale > 0" in message
+        assert "urdf" not in message.lower()
+
+
+@pytest.mark.parametrize(
+    "spec, where",
+    [
+        ({"qdot": {"joint1": -4}}, "'qdot' entry of joint 'joint1'"),
+        ({"u": -1.5}, "'u' entry (every joint)"),
+        ({"q": {"joint2": -3}}, "'q' entry of joint 'joint2'"),
+    ],
+)
+def test_a_negative_single_number_in_a_file_is_refused_as_the_cli_refuses_it(tmp_path, spec, where):
+    path = tmp_path / "d.json"
+    path.write_text(json.dumps(spec))
+    with pytest.raises(DomainError) as err:
+        Domain.from_file(cached_robot("planar_2r"), path)
+    assert str(err.value).startswith(f"{path}: {where}: a bound must be >= 0")
+    assert "give a range [lo, hi] otherwise" in str(err.value)
+
+
+def test_from_dict_refuses_infinite_entries_by_name():
+    data = Domain.from_robot(cached_robot("planar_2r")).to_dict()
+    data["u"]["joint2"] = [-np.inf, 1.0]
+    with pytest.raises(DomainError, match=r"run.json: 'u' entry of joint 'joint2': torque range \[-inf, 1\]"):
+        Domain.from_dict(data, source="run.json")

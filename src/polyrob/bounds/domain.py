@@ -9,7 +9,8 @@ JSON/YAML file::
      "qdot": {"joint1": 4.0, "joint2": [-10, 10]},
      "u":    0.0}
 
-A single number ``v`` means ``[-v, v]``; entries left out keep the defaults.
+A single number ``v >= 0`` means ``[-v, v]``; entries left out keep the defaults.
+Every number must be finite.
 
 Examples
 --------
@@ -210,7 +211,9 @@ class Domain:
             if value is not None:
                 _apply(bounds, given, names, {group: value}, f"--{group}")
                 source = source if source != f"{robot.name} limits" else "custom"
-        for group, scale in (("qdot", qdot_scale), ("u", u_scale)):
+        scales = {"q": 1.0, "qdot": qdot_scale, "u": u_scale}
+        for group in ("qdot", "u"):
+            scale = scales[group]
             if not (np.isfinite(scale) and scale >= 0):
                 raise DomainError(f"domain: {group} scale must be a finite number >= 0, got {scale}")
             bounds[group] = [bounds[group][0] * scale, bounds[group][1] * scale]
@@ -227,7 +230,13 @@ class Domain:
         for group in _GROUPS:
             lo, hi = bounds[group]
             for j, name in enumerate(names):
-                if not given[group][j] and lo[j] == hi[j] and np.isfinite(lo[j]):
+                zero = not given[group][j] and lo[j] == hi[j] and np.isfinite(lo[j])
+                if zero and scales[group] == 0:
+                    raise DomainError(
+                        f"--{group}-scale 0 ({group}_scale=0) makes the {_GROUP_TEXT[group]} range of joint "
+                        f"'{name}' zero: give a scale > 0 (for a zero range on purpose, --{group}-max 0 instead)"
+                    )
+                if zero:
                     raise DomainError(
                         f"{robot.source}: joint '{name}' has a zero {_GROUP_TEXT[group]} limit: "
                         f"give the domain with {_GROUP_OPTION[group]} or a domain file (--domain FILE)"
@@ -237,13 +246,7 @@ class Domain:
                         f"{robot.source}: joint '{name}' has no {_GROUP_TEXT[group]} limit: "
                         f"give it with {_GROUP_OPTION[group]} or a domain file (--domain FILE)"
                     )
-        return cls(
-            names,
-            *bounds["q"],
-            *bounds["qdot"],
-            *bounds["u"],
-            name=source,
-        )
+        return cls(names, *bounds["q"], *bounds["qdot"], *bounds["u"], name=source)
 
     @classmethod
     def from_file(cls, robot, path) -> Domain:
@@ -269,12 +272,16 @@ class Domain:
         }
 
     @classmethod
-    def from_dict(cls, data: Mapping) -> Domain:
-        names = tuple(data["joints"])
-        arrays = []
-        for g in _GROUPS:
-            pairs = np.array([data[g][n] for n in names], float)
-            arrays += [pairs[:, 0], pairs[:, 1]]
+    def from_dict(cls, data: Mapping, *, source: str = "domain") -> Domain:
+        """The domain :meth:`to_dict` wrote; ``source`` (e.g. the file it was read from) names it in errors."""
+        try:
+            names = tuple(data["joints"])
+            arrays = []
+            for g in _GROUPS:
+                pairs = [_range(data[g][n], g, f"{source}: '{g}' entry of joint '{n}'") for n in names]
+                arrays += [np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])]
+        except (KeyError, TypeError) as exc:
+            raise DomainError(f"{source}: not a domain as to_dict writes it (missing {exc})") from None
         return cls(names, *arrays, name=data.get("name", "custom"))
 
     def table(self) -> str:
@@ -312,23 +319,17 @@ def _read_spec(path, named) -> Mapping:
         if path.suffix.lower() in (".yaml", ".yml"):
             import yaml
 
-            spec = yaml.safe_load(text)
+            try:
+                spec = yaml.safe_load(text)
+            except yaml.YAMLError as exc:
+                raise ValueError(exc) from None
         else:
             spec = json.loads(text)
-    except (ValueError, _yaml_error()) as exc:  # json/yaml syntax errors: a domain error
+    except ValueError as exc:  # json/yaml syntax errors: a domain error
         raise DomainError(f"{path}: cannot read the domain file ({exc})") from None
     if not isinstance(spec, Mapping):
         raise DomainError(f"{path}: a domain file holds a mapping with keys q, qdot, u")
     return spec
-
-
-def _yaml_error():
-    """YAML's error class (a never-raised stand-in when PyYAML is not installed)."""
-    try:
-        import yaml
-    except ImportError:
-        return ValueError
-    return yaml.YAMLError
 
 
 def _apply(bounds, given, names, spec: Mapping, source: str):
@@ -340,16 +341,18 @@ def _apply(bounds, given, names, spec: Mapping, source: str):
         if group not in spec or spec[group] is None:
             continue
         value = spec[group]
-        if isinstance(value, Mapping):
-            items = value.items()
-        elif _is_per_joint_list(value, len(names)):
-            items = zip(names, value)
+        # an option (--qdot) names one group already; a file or mapping names the entry
+        entry = "" if source.startswith("--") else f"'{group}' entry of "
+        every = f"{source}: '{group}' entry (every joint)" if entry else f"{source}: every joint"
+        if isinstance(value, Mapping) or _is_per_joint_list(value, len(names)):
+            pairs = value.items() if isinstance(value, Mapping) else zip(names, value)
+            items = ((joint, rng, f"{source}: {entry}joint '{joint}'") for joint, rng in pairs)
         else:
-            items = ((n, value) for n in names)
-        for joint, rng in items:
+            items = ((joint, value, every) for joint in names)
+        for joint, rng, where in items:
             if joint not in names:
                 raise DomainError(f"{source}: unknown joint '{joint}' (joints: {', '.join(names)})")
-            lo, hi = _range(rng, group, joint, source)
+            lo, hi = _range(rng, group, where)
             j = names.index(joint)
             bounds[group][0][j], bounds[group][1][j] = lo, hi
             given[group][j] = True
@@ -366,23 +369,31 @@ def _is_per_joint_list(value, m) -> bool:
     return len(value) != 2 and len(value) == m
 
 
-def _range(value, group, joint, source):
+def _range(value, group, where):
+    """``(lo, hi)`` of a bound ``V >= 0`` (``[-V, V]``) or a range; errors name ``where`` (file, group, joint)."""
+    text = _GROUP_TEXT[group]
     try:
         arr = np.asarray(value, dtype=float).reshape(-1)
     except (TypeError, ValueError):
-        raise DomainError(f"{source}: joint '{joint}': {_GROUP_TEXT[group]} range {value!r} is not numeric") from None
-    if arr.size == 1:
-        lo, hi = -abs(arr[0]), abs(arr[0])
-        if np.isnan(arr[0]):
-            lo = hi = np.nan
-    elif arr.size == 2:
-        lo, hi = arr
-    else:
-        raise DomainError(f"{source}: joint '{joint}': give a {_GROUP_TEXT[group]} range as a number or [lo, hi]")
-    if np.isnan(lo) or np.isnan(hi):
-        raise DomainError(f"{source}: joint '{joint}': {_GROUP_TEXT[group]} range contains NaN: give finite numbers")
-    if lo > hi:
+        raise DomainError(f"{where}: {text} range {value!r} is not numeric") from None
+    if arr.size not in (1, 2):
+        raise DomainError(f"{where}: give a {text} range as a number or [lo, hi]")
+    if np.isnan(arr).any():
+        raise DomainError(f"{where}: {text} range contains NaN: give finite numbers")
+    if not np.isfinite(arr).all():
+        shown = f"{arr[0]:g}" if arr.size == 1 else f"[{arr[0]:g}, {arr[1]:g}]"
         raise DomainError(
-            f"{source}: joint '{joint}': {_GROUP_TEXT[group]} range [{lo}, {hi}] is inverted: give lower <= upper"
+            f"{where}: {text} range {shown} is not finite: give a finite bound V (it means [-V, V]) "
+            "or a range [lo, hi] of finite numbers"
         )
+    if arr.size == 1:
+        if arr[0] < 0:
+            raise DomainError(
+                f"{where}: a bound must be >= 0 (it means [-V, V]; give a range [lo, hi] otherwise), got {arr[0]:g}"
+            )
+        lo, hi = -arr[0], arr[0]
+    else:
+        lo, hi = arr
+    if lo > hi:
+        raise DomainError(f"{where}: {text} range [{lo:g}, {hi:g}] is inverted: give lower <= upper")
     return float(lo), float(hi)
