@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import BAD_URDFS, cached_robot
+from conftest import BAD_URDFS, cached_robot, urdf_text
 
 from polyrob import Robot, RobotError, load_robot
 from polyrob.model.robots import available_robots, example_robot_data_dir
@@ -199,3 +199,103 @@ def test_available_robot_names_are_unique_and_each_reachable():
     assert len(paths) == 2  # the qualified name reaches the second file
     with pytest.raises(RobotError, match="serial chain|floating"):
         load_robot(anymals[1])
+
+
+# a new user's trial: xacro files, missing attributes in words, mimic joints noted
+
+_XACRO_NS = 'xmlns:xacro="http://www.ros.org/wiki/xacro"'
+_INERTIAL = '<inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial>'
+#: A xacro file Pinocchio's parser (urdfdom) complains about on stderr: its links come from a macro.
+XACRO_ARM = f"""<?xml version="1.0"?>
+<robot name="arm" {_XACRO_NS}>
+  <xacro:macro name="body" params="name"><link name="${{name}}">{_INERTIAL}</link></xacro:macro>
+  <xacro:body name="base"/>
+  <xacro:body name="l1"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" velocity="1" effort="1"/></joint>
+</robot>"""
+
+
+@pytest.mark.parametrize(
+    "name, expanded", [("arm.urdf.xacro", "arm.urdf"), ("arm.xacro", "arm.urdf"), ("arm.urdf", "arm_expanded.urdf")]
+)
+def test_a_xacro_file_is_refused_before_any_parser_prints(write_urdf, capfd, name, expanded):
+    path = write_urdf(XACRO_ARM, name)
+    with pytest.raises(RobotError) as info:
+        load_robot(str(path))
+    assert (
+        str(info.value)
+        == f"{path}: a xacro file must be expanded to URDF first: xacro {path} > {path.parent / expanded}"
+    )
+    out, err = capfd.readouterr()
+    assert out == "" and err == ""  # nothing from urdfdom's C++ parser
+
+
+def test_an_expanded_urdf_that_keeps_the_xacro_namespace_loads(write_urdf):
+    # xacro keeps xmlns:xacro on <robot> (panda.urdf of example-robot-data does): not a xacro file
+    text = urdf_text(["base", "l1"], [("j1", "revolute", "base", "l1")]).replace(
+        '<robot name="test">', f'<robot name="test" {_XACRO_NS}>'
+    )
+    assert load_robot(str(write_urdf(text))).m == 1
+
+
+_CHAIN = urdf_text(["base", "l1", "l2"], [("j1", "revolute", "base", "l1"), ("j2", "revolute", "l1", "l2")])
+
+
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        ('<joint name="j2"', "<joint", "a <joint> without a name attribute (the 2nd <joint>)"),
+        ('<link name="l2">', "<link>", "a <link> without a name attribute (the 3rd <link>)"),
+        ('<robot name="test">', "<robot>", "the <robot> element has no name attribute"),
+        ('name="j2" type="revolute"', 'name="j2"', "joint 'j2' has no type attribute"),
+        ('<parent link="l1"/>', "<parent/>", "joint 'j2': <parent> has no link attribute"),
+        ('<child link="l2"/>', '<child link="l9"/>', "joint 'j2': child link 'l9' is not a <link> of the file"),
+        ('velocity="1" effort="1"/></joint></robot>', 'velocity="1"/></joint></robot>', "joint 'j2': <limit> has no effort attribute"),
+        ('<axis xyz="0 0 1"/><limit lower="-1" upper="1" velocity="1" effort="1"/></joint></robot>',
+         '<axis xyz="0 0 1"/></joint></robot>', "joint 'j2' is revolute but has no <limit>"),
+        ('<axis xyz="0 0 1"/><limit lower="-1" upper="1" velocity="1" effort="1"/></joint></robot>',
+         '<axis xyz="0 0 1"/><mimic/><limit lower="-1" upper="1" velocity="1" effort="1"/></joint></robot>',
+         "joint 'j2': <mimic> has no joint attribute"),
+    ],
+)  # fmt: skip
+def test_a_missing_attribute_is_named_in_words(write_urdf, capfd, old, new, message):
+    assert old in _CHAIN
+    path = write_urdf(_CHAIN.replace(old, new))
+    with pytest.raises(RobotError) as info:
+        load_robot(str(path))
+    assert str(info.value).startswith(f"{path}: malformed URDF: {message}")
+    assert "KeyError" not in str(info.value)
+    assert capfd.readouterr().err == ""  # nothing from urdfdom's C++ parser
+
+
+_MIMIC = urdf_text(
+    ["base", "l1", "l2", "l3"],
+    [("j1", "revolute", "base", "l1"), ("j2", "revolute", "l1", "l2"), ("j3", "revolute", "l2", "l3")],
+).replace(
+    '<joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><axis xyz="0 0 1"/>',
+    '<joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><axis xyz="0 0 1"/>'
+    '<mimic joint="j2" multiplier="-1" offset="0.5"/>',
+)
+
+
+def test_a_mimic_joint_locked_is_noted_and_warned(write_urdf, caplog):
+    path = write_urdf(_MIMIC)
+    with caplog.at_level("WARNING", logger="polyrob"):
+        robot = load_robot(str(path))
+    assert robot.joint_names == ("j1", "j2") and robot.locked == ("j3",)
+    (note,) = robot.notes
+    assert "mimic joint 'j3' follows actuated joint 'j2' (q = -1 * q_j2 + 0.5)" in note
+    assert "locked at q = 0" in note and "polyrob does not model mimic joints" in note
+    assert any(note in r.getMessage() for r in caplog.records)
+    described = robot.describe()
+    assert described["locked"] == ["j3"] and described["notes"] == [note]
+
+
+def test_a_mimic_joint_of_a_locked_gripper_is_noted_without_a_warning(caplog):
+    with caplog.at_level("WARNING", logger="polyrob"):
+        robot = load_robot("panda")
+    assert robot.notes == (
+        "mimic joint 'panda_finger_joint2' (follows 'panda_finger_joint1', locked too) is locked at q = 0",
+    )
+    assert not caplog.records

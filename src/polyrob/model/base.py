@@ -31,6 +31,10 @@ class Manipulator:
         Limits as the model states them, NaN where it gives none.
     damping : ndarray
         Viscous damping per joint (the diagonal of ``D``).
+    locked : tuple of str
+        Joints of the source locked at their neutral position (not in ``joint_names``).
+    notes : tuple of str
+        What the model leaves out that a user must know (e.g. a mimic joint locked).
     """
 
     name: str
@@ -43,6 +47,7 @@ class Manipulator:
     effort_limit: np.ndarray
     damping: np.ndarray
     locked: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
 
     @property
     def m(self) -> int:
@@ -79,6 +84,8 @@ class Manipulator:
             "name": self.name,
             "source": self.source,
             "m": self.m,
+            "locked": list(self.locked),
+            "notes": list(self.notes),
             "joints": [
                 {
                     "name": n,

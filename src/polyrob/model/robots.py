@@ -62,6 +62,10 @@ EXAMPLE_ROBOT_ALIASES = {
 }
 
 
+#: A name ending so is a path (a ``.xacro`` one is refused by load_urdf with the command that expands it).
+_FILE_SUFFIXES = (".urdf", ".xacro")
+
+
 def bundled_urdf_dir() -> Path:
     """The folder of the URDFs bundled with polyrob (the repository's ``urdf/``)."""
     return Path(__file__).resolve().parent.parent / "urdf"
@@ -131,14 +135,14 @@ def load_robot(source: str | Path = "planar_2r", *, lock: Sequence[str] | None =
 
 
 def _robot_name(text: str, path: Path) -> str:
-    looks_like_path = text.endswith(".urdf") or Path(text).expanduser().is_file()
+    looks_like_path = text.endswith(_FILE_SUFFIXES) or Path(text).expanduser().is_file()
     return path.stem if looks_like_path else text
 
 
 def resolve_urdf(text: str) -> Path:
     """The URDF file a robot name or path refers to."""
     candidate = Path(text).expanduser()
-    if text.endswith(".urdf") or candidate.is_file():
+    if text.endswith(_FILE_SUFFIXES) or candidate.is_file():
         if not candidate.is_file():
             raise RobotError(f"{text}: no such URDF file")
         return candidate

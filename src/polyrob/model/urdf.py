@@ -4,7 +4,14 @@
 joints), builds the Pinocchio model, locks grippers, fingers and mimic joints
 at their neutral position, checks that a serial chain of one-degree-of-freedom
 joints is left and that the inertial data are physical
-(:mod:`polyrob.model.physical`), and returns a :class:`Robot`.
+(:mod:`polyrob.model.physical`), and returns a :class:`Robot`.  The XML is
+checked (:mod:`polyrob.model.urdf_checks`) before Pinocchio's C++ parser
+sees it: an unexpanded xacro file or a missing attribute is one line in words.
+
+Mimic joints are not modelled: a follower is locked at its neutral position
+and :attr:`Robot.notes` says so (``polyrob info`` prints it; a warning on the
+``polyrob`` logger, shown on stderr by every command, when the joint it
+follows is actuated).
 
 Examples
 --------
@@ -17,6 +24,7 @@ Examples
 from __future__ import annotations
 
 import functools
+import logging
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,7 +33,7 @@ import numpy as np
 import pinocchio
 
 from polyrob.errors import RobotError
-from polyrob.model import dynamics, physical
+from polyrob.model import dynamics, physical, urdf_checks
 from polyrob.model.base import Manipulator
 
 __all__ = ["Robot", "load_urdf", "DEFAULT_LOCK_PATTERN", "JOINT_KINDS"]
@@ -57,6 +65,7 @@ class Robot(Manipulator):
     effort_limit: np.ndarray = field(repr=False)
     damping: np.ndarray = field(repr=False)
     locked: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
 
     @functools.cached_property
     def _data(self) -> pinocchio.Data:
@@ -97,6 +106,7 @@ class Robot(Manipulator):
 def load_urdf(path: str | Path, *, name: str | None = None, lock=None) -> Robot:
     """Load a URDF file into a :class:`Robot` (see :func:`load_robot`)."""
     path = Path(path)
+    urdf_checks.refuse_xacro_name(path)  # before any parser prints on stderr
     joints, links = _read_urdf(path)
     model = _build_model(path)
     if lock is None:
@@ -115,8 +125,10 @@ def load_urdf(path: str | Path, *, name: str | None = None, lock=None) -> Robot:
     # Mimic joints follow another joint: they are not actuated; lock them too.
     lock_names += [j for j, info in joints.items() if info["mimic"] and j not in lock_names]
     lock_ids = [model.getJointId(j) for j in lock_names if model.existJointName(j)]
+    notes = []
     if lock_ids:
         reference = _clipped_neutral(model)
+        notes = _mimic_notes(model, joints, lock_names, reference)
         _rename_locked(model, lock_ids)
         model = pinocchio.buildReducedModel(model, lock_ids, reference)
     if model.njoints <= 1:
@@ -149,6 +161,9 @@ def load_urdf(path: str | Path, *, name: str | None = None, lock=None) -> Robot:
             velocity[k], effort[k] = _num(lim.velocity), _num(lim.effort)
         damping[k] = _num(info["damping"], default=0.0)
     model.damping[:] = damping
+    for text, warn in notes:  # only for a robot that loads: a refused one says why
+        if warn:
+            logging.getLogger(__name__).warning("%s: %s", path, text)
     return Robot(
         name=name or path.stem,
         source=str(path),
@@ -161,7 +176,32 @@ def load_urdf(path: str | Path, *, name: str | None = None, lock=None) -> Robot:
         effort_limit=effort,
         damping=damping,
         locked=tuple(lock_names),
+        notes=tuple(text for text, _ in notes),
     )
+
+
+def _mimic_notes(model, joints, lock_names, reference) -> list[tuple[str, bool]]:
+    """One note per mimic joint locked, with whether to warn: the joint it follows stays actuated."""
+    notes = []
+    for jname in lock_names:
+        mimic = joints.get(jname, {}).get("mimic")
+        if not mimic or not model.existJointName(jname):
+            continue
+        joint = model.joints[model.getJointId(jname)]
+        q = reference[joint.idx_q : joint.idx_q + joint.nq]
+        value = float(np.arctan2(q[1], q[0])) if joint.nq == 2 else float(q[0])
+        leader, factor, offset = mimic
+        if leader in lock_names or leader not in joints:
+            why = "locked too" if leader in lock_names else "not a movable joint"
+            notes.append((f"mimic joint '{jname}' (follows '{leader}', {why}) is locked at q = {value:.4g}", False))
+            continue
+        note = (
+            f"mimic joint '{jname}' follows actuated joint '{leader}' (q = {factor:g} * q_{leader} + {offset:g}) "
+            f"in the URDF, but polyrob does not model mimic joints: it is locked at q = {value:.4g}, so every "
+            f"result is for the robot with '{jname}' fixed; lock '{leader}' too (--lock) or remove the <mimic>"
+        )
+        notes.append((note, True))
+    return notes
 
 
 def _num(value, default=np.nan) -> float:
@@ -186,6 +226,7 @@ def _read_urdf(path: Path) -> tuple[dict, list]:
         raise RobotError(f"{path}: malformed URDF ({exc})") from None
     if root.tag != "robot":
         raise RobotError(f"{path}: not a URDF file (root element <{root.tag}>, expected <robot>)")
+    urdf_checks.check_structure(path, root)
     for joint in root.findall("joint"):
         jtype = joint.get("type")
         if jtype in ("floating", "planar"):
@@ -193,11 +234,11 @@ def _read_urdf(path: Path) -> tuple[dict, list]:
                 f"{path}: joint '{joint.get('name')}' is {jtype}: polyrob needs a fixed base "
                 "and one-degree-of-freedom joints"
             )
-        if joint.find("parent") is None or joint.find("child") is None:
-            raise RobotError(f"{path}: joint '{joint.get('name')}' lacks a <parent> or <child> link")
     try:
         urdf = yourdfpy.URDF.load(str(path), build_scene_graph=False, load_meshes=False)
-    except (ValueError, KeyError, TypeError, AttributeError, IndexError, OSError, etree.LxmlError) as exc:
+    except KeyError as exc:  # yourdfpy's way of saying an attribute is missing
+        raise RobotError(f"{path}: malformed URDF: {urdf_checks.describe_key_error(exc)}") from None
+    except (ValueError, TypeError, AttributeError, IndexError, OSError, etree.LxmlError) as exc:
         # yourdfpy reports missing attributes as KeyError/AttributeError, bad numbers as ValueError
         raise RobotError(f"{path}: malformed URDF ({type(exc).__name__}: {exc})") from None
     joints = {}
@@ -207,12 +248,17 @@ def _read_urdf(path: Path) -> tuple[dict, list]:
         joints[joint.name] = {
             "type": joint.type,
             "limit": joint.limit,
-            "mimic": joint.mimic is not None,
+            "mimic": None if joint.mimic is None else _mimic_of(joint.mimic),
             "damping": joint.dynamics.damping if joint.dynamics is not None else None,
         }
     if not joints:
         raise RobotError(f"{path}: the URDF has no movable joint")
     return joints, list(urdf.robot.links)
+
+
+def _mimic_of(mimic) -> tuple[str, float, float]:
+    """``(leader, multiplier, offset)`` of a yourdfpy ``<mimic>``."""
+    return mimic.joint, _num(mimic.multiplier, default=1.0), _num(mimic.offset, default=0.0)
 
 
 def _build_model(path: Path) -> pinocchio.Model:
