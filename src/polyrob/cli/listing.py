@@ -23,7 +23,8 @@ def cmd_robots(args) -> int:
     for name, origin in available_robots():
         try:
             robot = load_robot(name)
-            rows.append({"name": name, "origin": origin, "m": robot.m, "locked": list(robot.locked)})
+            row = {"name": name, "origin": origin, "m": robot.m, "locked": list(robot.locked)}
+            rows.append({**row, "notes": list(robot.notes)})
         except PolyrobError as exc:
             if args.all:
                 rows.append({"name": name, "origin": origin, "m": None, "refused": str(exc).split(": ", 1)[-1]})
@@ -32,6 +33,8 @@ def cmd_robots(args) -> int:
     for r in rows:
         joints = "-" if r["m"] is None else str(r["m"])
         notes = r.get("refused") or (f"locked: {', '.join(r['locked'])}" if r["locked"] else "")
+        if any("polyrob does not model" in n for n in r.get("notes", ())):
+            notes += " (NOTE: a mimic joint is locked, see polyrob info)"
         out.line(f"{r['name']:<28}{joints:>7}  {r['origin']:<20} {notes}")
     return 0
 
@@ -50,6 +53,8 @@ def cmd_info(args) -> int:
     print(f"source  {robot.source}")
     if robot.locked:
         print(f"locked  {', '.join(robot.locked)}")
+    for note in robot.notes:
+        print(f"NOTE    {note}")
     print()
     print(f"{'joint':<24}{'kind':<12}{'position limits':>22}{'velocity':>10}{'effort':>10}{'damping':>9}")
     for j in info["joints"]:
