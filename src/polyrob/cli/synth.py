@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from polyrob.cli.analyze import print_analysis
 from polyrob.cli.common import (
-    exit_status,
     Output,
     add_domain_arguments,
     add_output_flags,
     add_robot_arguments,
     add_weight_arguments,
     alphas_from_args,
+    exit_status,
     robot_from_args,
     scale_names,
 )
@@ -30,6 +30,7 @@ def _options(args, out) -> dict:
         starts=args.starts,
         init=args.init,
         progress=out.progress,
+        time_limit=args.time_limit,
     )
 
 
@@ -72,6 +73,9 @@ def print_design(design, out) -> None:
         out.line(f"reduced controller: order {red.order}, peak mu in [{red.peak_mu_lower:.4g}, {red.peak_mu:.4g}]")
     for note in design.notes:
         out.line(f"note: {note}")
+    stopped = r.info.get("stopped_by") if isinstance(r.info, dict) else None
+    if stopped:
+        out.line(f"synthesis stopped by {stopped}: the best controller so far is kept")
 
 
 def _print_limit(problem, out) -> dict:
@@ -79,6 +83,22 @@ def _print_limit(problem, out) -> dict:
     limit = problem.performance_limit()
     out.line(limit.summary())
     return limit.to_dict()
+
+
+def _ruled_out(doc: dict, args, out) -> bool:
+    """Whether the performance limit already proves mu >= 1 for every controller (then say so, once)."""
+    limit = doc.get("performance_limit") or {}
+    if not limit.get("excludes_mu_below_one") or args.anyway:
+        return False
+    line = (
+        f"stopped: the performance limit proves mu >= {limit['bound']:.4g} for every controller at these weights, "
+        "so no synthesis can certify this problem; try `polyrob synth --max-bandwidth` (the largest bandwidth "
+        "factor that can be certified), a smaller domain, or --anyway for the best controller all the same"
+    )
+    doc["verdict"] = line
+    out.line(line)
+    out.document(doc)
+    return True
 
 
 def _print_input_check(problem, out) -> dict:
@@ -146,6 +166,8 @@ def cmd_synth(args) -> int:
     else:
         doc["performance_limit"] = _print_limit(problem, out)
         doc["input_definiteness"] = _print_input_check(problem, out)
+        if _ruled_out(doc, args, out):
+            return 1
         out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
         design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
         print_design(design, out)
@@ -181,6 +203,9 @@ def cmd_run(args) -> int:
     out.line(pldi.table())
     limit = _print_limit(problem, out)
     input_check = _print_input_check(problem, out)
+    early = {"robot": robot.name, "problem": problem.description(), "performance_limit": limit}
+    if _ruled_out(early, args, out):
+        return 1
     out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
     design = design_controller(
         problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, certify=False, **options
@@ -272,6 +297,19 @@ def _add_synthesis_arguments(p) -> None:
     g.add_argument("--reduce", action="store_true", help="reduce the full-order controller (balanced truncation)")
     g.add_argument(
         "--reduce-max-order", type=int_at_least(1), default=20, help="--reduce: largest controller order accepted"
+    )
+    g.add_argument(
+        "--time-limit",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="no new synthesis iteration (or start) after this many seconds: the best controller so far is "
+        "certified and the output says what stopped it",
+    )
+    g.add_argument(
+        "--anyway",
+        action="store_true",
+        help="synthesise even when the performance limit proves mu >= 1 for every controller (the best one)",
     )
     add_output_flags(p)
     p.add_argument("-o", "--output", default=None, help="write the controller, its certificate and its problem (JSON)")

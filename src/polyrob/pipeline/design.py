@@ -22,18 +22,24 @@ def synthesis_options(
     starts: int | None = None,
     init: str | None = None,
     progress: bool | None = None,
+    time_limit: float | None = None,
 ) -> dict:
     """``musyn`` keyword arguments from the plain synthesis choices.
 
     ``init`` is ``"paper"`` (a fixed structure starts from the paper's K*) or
     the path of a controller file (``K.json``, ``K.mat``) that starts the
-    synthesis, full order or fixed structure.
+    synthesis, full order or fixed structure.  ``time_limit`` (seconds): no
+    new iteration or start after it (``musyn``'s ``time_limit``).
     """
     if max_iter is not None and max_iter < 1:
         raise ArgumentError(f"max_iter must be >= 1, got {max_iter}")
     if starts is not None and starts < 1:
         raise ArgumentError(f"starts must be >= 1, got {starts}")
+    if time_limit is not None and not time_limit > 0:
+        raise ArgumentError(f"time_limit must be > 0 seconds, got {time_limit}")
     options = {"structure": structure, "progress": progress}
+    if time_limit is not None:
+        options["time_limit"] = float(time_limit)
     if max_iter is not None:
         options["max_iter"] = int(max_iter)
     if structure == "full":
@@ -117,10 +123,31 @@ class Design:
 
 
 def certify_design(problem, design: Design) -> Design:
-    """The design with the certificate of its controller on ``problem`` (the analysis' own call)."""
-    from polyrob.analysis.certificate import certify_loop
+    """The design with the certificate of its controller on ``problem`` (the analysis' own call).
 
-    return design.certified_by(certify_loop(problem.P, design.controller, scope=problem.scope()))
+    A synthesis certificate made by that same call (the loop's own grid, the
+    same closed loop and block structure) is decided again with the
+    problem's scope instead of sweeping twice.
+    """
+    import numpy as np
+
+    from polyrob.analysis.certificate import certify_loop, rescoped
+    from polyrob.plant.loops import lft
+
+    P, K = problem.P, design.controller
+    own = getattr(design.result, "certificate", None)
+    if design.reduced is None and own is not None and own.default_grid and own.mu is not None:
+        N = lft(P, K)
+        same = (
+            np.asarray(own.mu.structure.matlab).tolist() == np.asarray(P.block_structure_rp).tolist()
+            and own.closed_loop is not None
+            and all(
+                np.array_equal(np.asarray(getattr(N, x)), np.asarray(getattr(own.closed_loop, x))) for x in "ABCD"
+            )
+        )
+        if same:
+            return design.certified_by(rescoped(own, problem.scope()))
+    return design.certified_by(certify_loop(P, K, scope=problem.scope()))
 
 
 def design_controller(

@@ -96,16 +96,6 @@ def _parse_plant(P, blk, n_u, n_y):
     return Psys, st, int(n_u), int(n_y)
 
 
-def _with_resonances(omega, K, P, kw):
-    """The certificate grid with the closed loop's lightly damped natural frequencies (peaks hide there)."""
-    from polyrob.plant.loops import lft
-    from polyrob.synthesis.dk.frequency import resonances
-
-    omega = np.asarray(omega, float)
-    A = np.asarray(lft(P, K, **kw).A, float)
-    return np.union1d(omega, resonances(A, omega.min(), omega.max()))
-
-
 def musyn(
     P,
     blk=None,
@@ -180,9 +170,8 @@ def musyn(
         Replace :class:`MuUpperBound`, :class:`~polyrob.synthesis.scalings.dscale.LogMagnitudeFit`,
         :class:`HinfStep`.
     certify_omega : array_like, optional
-        Grid of the final certificate (default: 12 points per decade over the
-        D-step range widened by a decade on each side, plus closed-loop
-        resonances, plus peak refinement).
+        Grid of the final certificate (default: the loop's own grid of
+        :func:`polyrob.analysis.certificate.certify_loop`, the one ``analyze`` uses).
     check_weights : bool
         Raise :class:`SynthesisError` when ``W_S`` and ``W_T`` alone force
         μ > 1 (:func:`performance_lower_bound`).
@@ -329,14 +318,6 @@ def musyn(
         order = sorted(range(len(hist)), key=lambda i: hist[i].mu_peak)
         if not np.isfinite(hist[order[0]].mu_peak):
             raise SynthesisError("musyn: no controller stabilised the plant")
-        # the certificate looks a decade beyond the D-step grid on both sides
-        cw = (
-            certify_omega
-            if certify_omega is not None
-            else np.logspace(
-                np.log10(omega.min()) - 1, np.log10(omega.max()) + 1, int(12 * np.log10(omega.max() / omega.min())) + 25
-            )
-        )
         Pc = P if not isinstance(P, control.StateSpace) else Psys
         kw = {} if not isinstance(P, control.StateSpace) else {"n_u": n_u, "n_y": n_y}
         best = None
@@ -344,7 +325,8 @@ def musyn(
             rec = hist[i]
             if not np.isfinite(rec.mu_peak):
                 break
-            cert = certify_loop(Pc, rec.K, st, _with_resonances(cw, rec.K, Pc, kw), sweep_unstable=False, **kw)
+            # the certificate every caller makes: the loop's own grid unless one is given
+            cert = certify_loop(Pc, rec.K, st, certify_omega, sweep_unstable=False, **kw)
             if best is None or cert.mu_upper_grid < best[1].mu_upper_grid:
                 best = (i, cert)
             if cert.mu_upper_grid <= rec.mu_peak * 1.02:

@@ -77,11 +77,10 @@ from control.exception import ControlArgument
 from slycot.exceptions import SlycotError
 
 from polyrob._threads import single_blas_thread
-from polyrob.analysis.certificate import certificate_of_sweep
+from polyrob.analysis.certificate import certify_loop
 from polyrob.analysis.mu.blocks import as_block_structure
-from polyrob.analysis.mu.bounds import mu_bounds
 from polyrob.errors import PolyrobError, SynthesisError
-from polyrob.plant.generalized import lft, paper_controller
+from polyrob.plant.generalized import paper_controller
 from polyrob.synthesis.fixed.iteration import (
     StartRun,
     check_grid,
@@ -300,8 +299,9 @@ def fixed_structure_musyn(
         cert = None
         for rnd in range(opts.certify_rounds + 1):
             K = strc.controller(best.theta)
-            N = lft(P, K) if hasattr(P, "block_structure_rp") else lft(sysP, K, n_u=n_u, n_y=n_y)
-            cert = mu_bounds(N, st, certify_omega, progress=False)
+            kw = {} if hasattr(P, "block_structure_rp") else {"n_u": n_u, "n_y": n_y}
+            decided = certify_loop(P if not kw else sysP, K, st, certify_omega, **kw)
+            N, cert = decided.closed_loop, decided.mu
             if cert.peak_upper <= best.peak * (1 + 1e-3) or rnd == opts.certify_rounds:
                 break
             # a peak the grids missed: take its scalings, iterate a little more
@@ -315,8 +315,7 @@ def fixed_structure_musyn(
             )
             screen = np.union1d(screen, cert.omega[cert.omega > 0])
             optimise_start(loop, best, st, opts, max(3, int(max_iter) // 4), screen, report, "certify", target)
-        sweep = cert
-        cert = certificate_of_sweep(N, sweep)  # stability at Delta = 0, the check between its points, the status
+        sweep, cert = cert, decided
 
     poles = np.linalg.eigvals(np.asarray(N.A)) if N.nstates else np.zeros(0)
     if poles.size and np.max(poles.real) >= 0:  # pragma: no cover - guarded by every accepted step
