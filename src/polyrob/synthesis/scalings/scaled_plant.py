@@ -11,7 +11,6 @@ import numpy as np
 import scipy.linalg as sla
 
 from polyrob.errors import PolyrobError
-from polyrob.plant.loops import lower_lft_matrices
 from polyrob.synthesis.scalings.data import Scalings
 
 __all__ = ["scaled_plant"]
@@ -44,7 +43,7 @@ def _connect(systems, Q, R, H, E):
     """Interconnect ``systems`` (list of (A,B,C,D)): ``U = Q Y + R e``, ``out = H Y + E e``.
 
     The lower LFT of the static wiring ``[e; Y] -> [out; U] = [[E, H], [R, Q]]``
-    with the block-diagonal stack of the systems (:func:`~polyrob.plant.loops.lower_lft_matrices`).
+    with the block-diagonal stack of the systems.
     """
     A = sla.block_diag(*[s[0] for s in systems if s[0].size]) if any(s[0].size for s in systems) else np.zeros((0, 0))
     Bs = sla.block_diag(*[s[1] if s[1].size else np.zeros((s[0].shape[0], s[3].shape[1])) for s in systems])
@@ -52,12 +51,17 @@ def _connect(systems, Q, R, H, E):
     Ds = sla.block_diag(*[s[3] for s in systems])
     Bs = Bs.reshape(A.shape[0], Ds.shape[1])
     Cs = Cs.reshape(Ds.shape[0], A.shape[0])
-    nU, nY = Q.shape
-    wiring = np.block([[E, H], [R, Q]])
-    none = np.zeros((0, 0))
-    return lower_lft_matrices(
-        none, np.zeros((0, wiring.shape[1])), np.zeros((wiring.shape[0], 0)), wiring, A, Bs, Cs, Ds, nY, nU
-    )
+    # the wiring's own solve, not plant.loops.lower_lft_matrices: that one refuses a loop whose
+    # I - D22 Dk has condition above 1e12 (an ill-posed physical loop), and the filter stacks of
+    # high-order D/G scalings reach such conditions while the interconnection is still exact
+    L = np.eye(Q.shape[0]) - Q @ Ds
+    Li = np.linalg.solve(L, np.hstack([Q @ Cs, R]))
+    LQ, LR = Li[:, : A.shape[0]], Li[:, A.shape[0] :]
+    Acl = A + Bs @ LQ
+    Bcl = Bs @ LR
+    Ccl = H @ (Cs + Ds @ LQ)
+    Dcl = H @ Ds @ LR + E
+    return Acl, Bcl, Ccl, Dcl
 
 
 def scaled_plant(P: control.StateSpace, scalings: Scalings, n_u: int, n_y: int) -> control.StateSpace:
