@@ -1,14 +1,17 @@
 """`polyrob synth`, `analyze` and `run` on the paper's problem: certificates reproduced, files compared.
 
-One short synthesis (one D-K iteration, then reduction) on a PLDI file is
-shared by the module; the certificate is what matters here, not how good
-the controller is.
+One short synthesis (one D-K iteration, then reduction) on a PLDI file, and
+its analysis, are shared by the session (tests/test_cli_certificates.py reads
+them too); the certificate is what matters here, not how good the controller is.
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import json
+import os
+from pathlib import Path
 
 import pytest
 from conftest import paper_pldi
@@ -29,39 +32,110 @@ def run(capsys, *argv):
     return code, out, err
 
 
+def shared(tmp_path_factory, name: str, make) -> Path:
+    """The folder ``make(folder)`` filled, once per test session (also across xdist workers).
+
+    A worker waits for another that is making the same folder (a lock file): the
+    synthesis below costs more than the tests that read it.
+    """
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # the session's folder, above every worker's own
+    folder = root / name
+    with open(root / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if not (folder / "done").exists():
+            folder.mkdir(exist_ok=True)
+            make(folder)
+            (folder / "done").touch()
+    return folder
+
+
+def paper_file(tmp_path_factory) -> Path:
+    """The paper's PLDI as a file (``paper.json`` + ``paper.npz``)."""
+    return shared(tmp_path_factory, "paper_pldi", lambda d: paper_pldi().save(d / "paper.json")) / "paper.json"
+
+
+def cli_json(tmp_path_factory, name: str, argv) -> tuple[int, dict, Path]:
+    """``polyrob ARGV`` (``argv(folder)``, with ``--json``) once per session: exit status, document, folder."""
+
+    def make(d):
+        with open(d / "stdout", "w") as stdout, contextlib.redirect_stdout(stdout):
+            (d / "status").write_text(str(main([str(a) for a in argv(d)])))
+
+    d = shared(tmp_path_factory, name, make)
+    return int((d / "status").read_text()), json.loads((d / "stdout").read_text()), d
+
+
+def synth_reduced(tmp_path_factory):
+    """``synth --json -o K.json`` (FAST, ``--reduce``) on the paper's PLDI file: ``(status, document, K.json)``.
+
+    Shared with tests/test_cli_certificates.py (one synthesis per session).
+    """
+    pldi = paper_file(tmp_path_factory)
+    code, doc, d = cli_json(
+        tmp_path_factory,
+        "synth_reduced",
+        lambda d: (
+            ["synth", "paper_2r", "--pldi", pldi.with_suffix(".npz"), *FAST, "--reduce"]
+            + ["--json", "--quiet", "-o", d / "K.json"]
+        ),
+    )
+    return code, doc, d / "K.json"
+
+
+#: analyze's options for the synthesised controller (tests/test_cli_certificates.py uses the same run)
+ANALYZE = [*BOX, *GRID, "--mc", "20", "--no-time-varying", "--quiet", "--json"]
+
+
+def analysis_of_synth(tmp_path_factory):
+    """``analyze --json`` of :func:`synth_reduced`'s controller file: ``(status, document)``."""
+    pldi = paper_file(tmp_path_factory)
+    _, _, K = synth_reduced(tmp_path_factory)
+    argv = ["analyze", "paper_2r", "--pldi", pldi, "--controller", K, *ANALYZE]
+    code, doc, _ = cli_json(tmp_path_factory, "analyze_synth_reduced", lambda d: argv)
+    return code, doc
+
+
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
-    """The paper's PLDI as a file, and a reduced D-K controller made on it (``synth --json``)."""
-    d = tmp_path_factory.mktemp("synth")
-    paper_pldi().save(d / "paper.json")
-    K = d / "K.json"
-    with open(d / "synth.out", "w") as stdout, contextlib.redirect_stdout(stdout):
-        code = main(
-            ["synth", "paper_2r", "--pldi", str(d / "paper.npz"), *FAST, "--reduce", "--json", "--quiet", "-o", str(K)]
-        )
-    assert code == 0
-    return d, K
+    """The paper's PLDI file, and a reduced D-K controller made on it (``synth --json``)."""
+    code, doc, K = synth_reduced(tmp_path_factory)
+    cert = doc["certificate"]
+    # one D-K iteration reduced to a few states: mu far above 1 (lower bound too), on a loop stable at Delta = 0
+    assert cert["status"] == "VIOLATED" and cert["certified"] is False
+    assert code == (0 if cert["certified"] else 1) == 1  # the command ran; its certificate is not CERTIFIED
+    return paper_file(tmp_path_factory), K, doc
 
 
 def test_synth_writes_the_problem_and_an_honest_certificate(files):
-    d, K = files
+    _, K, printed = files
     doc = json.loads(K.read_text())
-    cert, info = doc["certificate"], doc["info"]
-    assert cert["structure"].startswith("reduced:") and cert["order"] <= cert["full_order"]
-    assert cert["peak_mu_lower"] <= cert["peak_mu_upper"]
+    record, info = doc["certificate"], doc["info"]
+    assert record["structure"].startswith("reduced:") and record["order"] <= record["full_order"]
+    assert record["peak_mu_lower"] <= record["peak_mu_upper"]
+    # the file's verdict is the certificate of the controller it holds (the one the command printed)
+    printed = printed["certificate"]
+    assert record["status"] == record["certificate"]["status"] == printed["status"] == "VIOLATED"
+    assert record["certificate"]["certified"] is False and record["certificate"]["verdict"] == printed["verdict"]
     # what the controller was made for (before: no uncertainty model; run saved only the robot)
     assert info["robot"] == "paper_2r" and info["domain"]["name"] == "paper"
     assert info["weights"]["omega_b"] == [0.5, 0.1] and info["uncertainty"]["model"] == "box"
 
 
-def test_synth_text_verdict_is_not_certified_when_mu_exceeds_one(files, capsys, monkeypatch):
-    """The words printed for a synthesis with mu > 1 (the synthesis itself is stubbed: words only)."""
+def test_synth_text_verdict_is_not_certified_when_mu_exceeds_one(tmp_path, capsys, monkeypatch):
+    """The words printed for a synthesis with mu > 1 (the synthesis itself is stubbed: words only).
+
+    The stub's certificate is decided by the one decision (decide_mu) from its figures, with the
+    problem's own scope: the command prints it, and exits 1.
+    """
     from types import SimpleNamespace
 
     import polyrob.pipeline as pipeline
+    from polyrob.analysis.certificate import Certificate, Status, decide_mu
     from polyrob.pipeline import Design
 
-    d, _ = files
+    paper_pldi().save(tmp_path / "paper.json")
     result = SimpleNamespace(
         mu_history=[2.5, 2.227],
         gamma_history=[3.0, 2.5],
@@ -72,66 +146,67 @@ def test_synth_text_verdict_is_not_certified_when_mu_exceeds_one(files, capsys, 
         peak_frequency=7.8,
         iterations=2,
         seconds=1.0,
+        info={},
     )
-    cert = {"structure": "full", "order": 8, "peak_mu_upper": 2.227, "peak_mu_lower": 2.226}
-    monkeypatch.setattr(
-        pipeline,
-        "design_controller",
-        lambda *a, **k: Design(controller=None, result=result, reduced=None, certificate=cert),
-    )
-    code, out, _ = run(capsys, "synth", "paper_2r", "--pldi", d / "paper.json", "--quiet")
-    assert code == 0
+    record = {"structure": "full", "order": 8, "peak_mu_upper": 2.227, "peak_mu_lower": 2.226}
+    stable = SimpleNamespace(stable=True, unstable=False, verdict="stable")
+
+    def design(problem, *args, **kwargs):
+        status, reasons = decide_mu(stable, 2.227, 2.226, None)
+        assert status is Status.VIOLATED
+        cert = Certificate(status, 2.227, 2.227, 2.226, stable, problem.scope(), reasons)
+        return Design(controller=None, result=result, reduced=None, record=record).certified_by(cert)
+
+    monkeypatch.setattr(pipeline, "design_controller", design)
+    code, out, _ = run(capsys, "synth", "paper_2r", "--pldi", tmp_path / "paper.json", "--quiet")
+    assert code == 1  # ran, not CERTIFIED
     assert "certified peak mu" not in out  # before: "certified peak mu in [2.226, 2.227]"
-    last = out.strip().splitlines()[-1]
-    assert last.startswith("verdict: robust performance VIOLATED (mu lower bound 2.226 >= 1") and "try:" in last
-    assert "--max-bandwidth" in last and "paper_2r over domain 'paper'" in last
+    assert "CERTIFIED" not in out
+    lines = out.strip().splitlines()
+    (i,) = [k for k, line in enumerate(lines) if line.startswith("verdict: ")]
+    assert lines[i].startswith("verdict: robust performance VIOLATED: mu lower bound 2.226 >= 1")
+    # below it, what the certificate covers and the loop it rests on
+    assert lines[i + 1].startswith("covers: for constant parameters") and "paper_2r over domain 'paper'" in lines[i + 1]
+    assert lines[-1] == "loop at Delta = 0: stable"
     assert out.splitlines()[0].startswith("[1/2] reading the PLDI")
 
 
 def test_synth_json_is_one_document(files):
-    d, K = files
-    doc = json.loads((d / "synth.out").read_text())
+    _, K, doc = files
     assert doc["synthesis"]["structure"].startswith("reduced:") and doc["output"] == str(K)
     assert doc["problem"]["uncertainty"]["model"] == "box" and doc["verdict"].startswith("verdict: ")
+    # one verdict: the certificate's, also in the synthesis record
+    assert doc["verdict"] == "verdict: " + doc["certificate"]["verdict"]
+    assert doc["synthesis"]["status"] == doc["certificate"]["status"] == "VIOLATED"
+    assert doc["covers"].startswith("for constant parameters") and "'box' uncertainty model" in doc["covers"]
     # the floor no controller beats at these weights: the arm's unstable pole near 7.5 rad/s
     limit = doc["performance_limit"]
     assert 0.6 < limit["bound"] < 1 and not limit["excludes_mu_below_one"] and limit["pole"][0] > 7
 
 
-def test_analyze_reproduces_the_reduced_certificate(files, capsys):
-    d, K = files
+def test_analyze_reproduces_the_reduced_certificate(files, tmp_path_factory):
+    _, K, _ = files
     cert = json.loads(K.read_text())["certificate"]
-    code, out, _ = run(
-        capsys,
-        "analyze",
-        "paper_2r",
-        "--pldi",
-        d / "paper.json",
-        "--controller",
-        K,
-        "--mc",
-        "5",
-        *BOX,
-        *GRID,
-        "--quiet",
-        "--json",
-    )
-    report = json.loads(out)
-    assert code == 0 and report["problem_compared"] is True
+    code, report = analysis_of_synth(tmp_path_factory)
+    assert report["problem_compared"] is True
+    assert code == (0 if report["certified"] else 1) == 1
     rp = report["robust_performance"]
     # two independent sweeps (synthesis grid vs analysis grid, both peak-refined)
     assert rp["mu_upper"] == pytest.approx(cert["peak_mu_upper"], rel=2e-3)
     assert rp["mu_lower"] == pytest.approx(cert["peak_mu_lower"], rel=2e-3)
     assert report["parameters"] == 10
-    # one D-K iteration reduced to a few states: mu far above 1, and no certificate either way
-    word = "VIOLATED" if report["nominal_stability"] else "NOT certified: the nominal closed loop is unstable"
-    assert word in report["verdict"] and "CERTIFIED" not in report["verdict"]
+    # one D-K iteration reduced to a few states: mu far above 1, its lower bound too: disproved,
+    # as the synthesis' own certificate of this controller said
+    assert report["status"] == rp["certificate"]["status"] == cert["status"] == "VIOLATED"
+    assert report["verdict"] == "verdict: " + rp["certificate"]["verdict"]
+    assert report["verdict"].startswith("verdict: robust performance VIOLATED: mu lower bound ")
+    assert "CERTIFIED" not in report["verdict"]
 
 
-def test_run_json_announces_stages_when_they_start_and_matches_synth(files, capsys, monkeypatch):
+def test_run_json_announces_stages_when_they_start_and_matches_synth(files, tmp_path, capsys, monkeypatch):
     import polyrob.pipeline as pipeline
 
-    d, K = files
+    pldi, K, _ = files
     seen = {}
     real_design, real_analyze = pipeline.design_controller, pipeline.analyze_controller
 
@@ -145,12 +220,11 @@ def test_run_json_announces_stages_when_they_start_and_matches_synth(files, caps
 
     monkeypatch.setattr(pipeline, "design_controller", design)
     monkeypatch.setattr(pipeline, "analyze_controller", analyze)
-    out_file = d / "K_run.json"
-    code, out, _ = run(
-        capsys, "run", "paper_2r", "--pldi", d / "paper.json", *FAST, "--mc", "5", *GRID, "--json", "-o", out_file
-    )
-    assert code == 0
+    out_file = tmp_path / "K_run.json"
+    code, out, _ = run(capsys, "run", "paper_2r", "--pldi", pldi, *FAST, "--mc", "5", *GRID, "--json", "-o", out_file)
     doc = json.loads(out)  # stage lines went to stderr, stdout holds one document
+    assert code == (0 if doc["analysis"]["certified"] else 1) == 1
+    assert doc["analysis"]["status"] == doc["synthesis"]["status"] == "VIOLATED"
     # before: "[1/3] bounds" was printed after the synthesis, nothing during the analysis
     assert seen["design"].startswith("[1/3] ") and "[2/3] synthesis" in seen["design"]
     assert "[3/3] analysis" in seen["analyze"]
@@ -173,11 +247,11 @@ def _edit(K, tmp_path, **info):
 
 
 def test_analyze_refuses_a_controller_made_for_another_problem(files, tmp_path, capsys):
-    d, K = files
-    pldi = ["--pldi", d / "paper.json", *BOX]
+    paper, K, _ = files
+    pldi = ["--pldi", paper, *BOX]
     cases = [
         # the file says box; analyze's default model (auto) resolves to another one on this robot
-        (["--pldi", d / "paper.json", "--controller", K], ["--uncertainty box"]),
+        (["--pldi", paper, "--controller", K], ["--uncertainty box"]),
         ([*pldi, "--controller", K, "--wb", "1"], ["omega_b", "--wb 0.5,0.1"]),
         (["--domain", "paper", "--qdot-max", "1", "--controller", K], ["domain qdot", "--qdot-max=joint1="]),
         ([*pldi, "--controller", _edit(K, tmp_path, robot="planar_2r")], ["robot 'planar_2r'"]),
@@ -209,11 +283,9 @@ def test_analyze_nan_controller_is_one_line(tmp_path, capsys):
     assert code == 2 and "non-finite" in err and err.count("\n") == 1  # before: LinAlgError
 
 
-def test_bad_structure_leaves_no_controller_file(files, tmp_path, capsys):
-    d, _ = files
+def test_bad_structure_leaves_no_controller_file(tmp_path_factory, tmp_path, capsys):
     out = tmp_path / "K.json"
-    code, _, err = run(
-        capsys, "synth", "paper_2r", "--pldi", d / "paper.json", "--structure", "tf0x", "--quiet", "-o", out
-    )
+    pldi = paper_file(tmp_path_factory)
+    code, _, err = run(capsys, "synth", "paper_2r", "--pldi", pldi, "--structure", "tf0x", "--quiet", "-o", out)
     assert code == 2 and err.count("\n") == 1 and "structure" in err
     assert not out.exists() and list(tmp_path.iterdir()) == []

@@ -10,6 +10,7 @@ import functools
 import json
 import math
 import pickle
+import re
 import time
 
 import numpy as np
@@ -68,6 +69,31 @@ def reference(pendulums):
     return run_batch([*pendulums, MISSING], workers=1, progress=False, **FAST)
 
 
+#: how each status reads in a verdict line (NOT_CERTIFIED reads "NOT certified")
+STATUS_WORD = {
+    "CERTIFIED": "CERTIFIED",
+    "GRID_ONLY": "GRID_ONLY",
+    "NOT_CERTIFIED": "NOT certified",
+    "VIOLATED": "VIOLATED",
+}
+
+
+def _row_agrees(r):
+    """A fleet row and its verdict never disagree: one status, its word in the verdict, "certified" only for CERTIFIED."""
+    row = r.row()
+    assert row["status"] in STATUS_WORD, row["status"]
+    assert row["certified"] is (row["status"] == "CERTIFIED") is r.certified
+    assert row["verdict"].startswith("verdict: ") and STATUS_WORD[row["status"]] in row["verdict"]
+    assert bool(re.search(r"(?<![A-Za-z_])CERTIFIED(?![A-Za-z_])", row["verdict"])) is row["certified"]
+    # the certificate the row stores is the one it reads (its bound null when not finite)
+    cert = r.certificate["certificate"]
+    assert (cert["status"], cert["certified"]) == (row["status"], row["certified"])
+    assert "verdict: " + cert["verdict"] == row["verdict"]
+    bound = math.inf if cert["bound"] is None else cert["bound"]
+    assert bound == pytest.approx(row["mu_upper"]), (cert["bound"], row["mu_upper"])
+    return row
+
+
 def _same(a, b):
     assert (a.name, a.ok, a.error, a.message) == (b.name, b.ok, b.error, b.message)
     if not a.ok:
@@ -94,7 +120,7 @@ def test_reference_batch_records_the_failure_and_finishes_the_others(reference):
         # one joint: q, qdot -> one varying entry of A (d qddot / d q) in the box model
         assert r.joints == 1 and r.parameters >= 1 and r.order >= 1
         assert math.isfinite(r.mu_upper) and r.mu_lower <= r.mu_upper * (1 + 1e-6)
-        assert r.certified == (r.mu_upper < 1)
+        _row_agrees(r)
         assert set(r.timings) >= {"bounds", "synthesis", "analysis", "validation"}
         assert r.validation  # the nonlinear step ran and said something
         # a robot left without a certificate says why, one that has one does not
@@ -156,6 +182,9 @@ def test_cli_batch_writes_files_and_a_summary(pendulums, tmp_path, capsys):
     assert doc["settings"]["synthesis"] == {"structure": "full", "max_iter": 1}
     rows = {r["name"]: r for r in doc["rows"]}
     assert rows[MISSING]["error"] == "RobotError" and rows["pendulum_a"]["ok"]
+    a = rows["pendulum_a"]
+    assert a["certified"] is (a["status"] == "CERTIFIED") and STATUS_WORD[a["status"]] in a["verdict"]
+    assert doc["certified"] == int(a["certified"])
     cert = json.loads((out / "pendulum_a" / "certificate.json").read_text())
     assert cert["row"] == rows["pendulum_a"]
     K = load_controller(out / "pendulum_a" / "controller.json")
@@ -188,7 +217,7 @@ def test_bandwidth_search_certifies_at_the_found_factor(pendulums):
     # the analysis ran on the scaled weights: the weights recorded are the base ones times alpha
     base = automatic_hyperparameters(1, None)
     assert r.problem["weights"]["omega_b"][0] != base["omega_b"][0]
-    assert r.certified == (r.mu_upper < 1)
+    _row_agrees(r)
 
 
 # --------------------------------------------------------------------------- executor mechanics
@@ -343,6 +372,7 @@ def test_the_bandwidth_search_is_skipped_when_the_model_reverses_inputs(pendulum
     assert r.ok, r.message
     assert r.alpha is None and "bandwidth_scaling" not in r.certificate
     assert r.details["bandwidth_search"].startswith("bandwidth search skipped: 50 %")
+    _row_agrees(r)
     # nor do the analysis sweeps run: the synthesis certificate is the row's figure
     assert "analysis" not in r.timings and r.details["analysis"].startswith("skipped: 50 %")
     # the pendulum certifies at its base weights (mu < 1): no reason then; otherwise the reason names the skip
@@ -358,10 +388,12 @@ def test_a_certified_controller_is_reduced_while_mu_stays_below_one(pendulums):
 
     r = job(4)  # the full-order controller has 8 states; 4 keep mu < 1
     assert r.ok and r.certified and "reduction" in r.timings, (r.message, r.mu_upper)
+    assert _row_agrees(r)["status"] == "CERTIFIED"
     assert r.certificate["structure"] == f"reduced:{r.order}" and r.order <= 4 < r.certificate["full_order"]
     assert r.mu_upper < 1 and r.certificate["full_peak_mu_upper"] < 1
     kept = job(1)  # one state is not enough: the full-order controller stays, and the row says why
     assert kept.certified and kept.order == kept.certificate["order"] == 8
+    assert _row_agrees(kept)["status"] == "CERTIFIED"
     assert kept.details["reduction"].startswith("kept order 8: ")
 
 

@@ -1,12 +1,14 @@
-"""polyrob.pipeline: one problem builder, one verdict, controller files compared with their problem."""
+"""polyrob.pipeline: one problem builder, one decision (decide_mu), controller files compared with their problem."""
 
 from __future__ import annotations
 
 import dataclasses
+from types import SimpleNamespace
 
 import pytest
 from conftest import cached_robot, paper_pldi
 
+from polyrob.analysis.certificate import Status, decide_mu
 from polyrob.errors import ArgumentError, ControllerFileError, DomainError, PolyrobError
 from polyrob.pipeline import (
     build_problem,
@@ -14,7 +16,6 @@ from polyrob.pipeline import (
     controller_differences,
     default_hyperparameters,
     make_uncertain_plant,
-    verdict,
 )
 
 
@@ -104,32 +105,101 @@ def test_controller_problem_differences_name_the_options(problem):
         check_controller_problem(dict(info, robot="planar_2r"), problem, "K.json")
 
 
+STABLE = SimpleNamespace(stable=True, unstable=False, verdict="stable")
+UNSTABLE = SimpleNamespace(stable=False, unstable=True, verdict="unstable")
+UNDECIDED = SimpleNamespace(stable=False, unstable=False, verdict="undecided (eigenvalues within error of the axis)")
+
+
+def between(holds, level=float("nan"), peak_upper=0.9, failed_at=None, reason=""):
+    """A stand-in for the check between grid points (polyrob.analysis.mu.between)."""
+    return SimpleNamespace(holds=holds, level=level, peak_upper=peak_upper, failed_at=failed_at, reason=reason)
+
+
+PROVED = between(True, level=0.91)
+
+
 @pytest.mark.parametrize(
-    "upper, lower, stable, word",
+    "stability, upper, lower, check, status",
     [
-        (0.9, 0.85, True, "CERTIFIED"),
-        (2.227, 2.226, True, "VIOLATED"),
-        (1.2, 0.9, True, "NOT certified"),
-        (0.5, 0.4, False, "NOT certified"),
+        # below one on a stable loop: CERTIFIED only when proved between the grid points
+        (STABLE, 0.9, 0.85, PROVED, Status.CERTIFIED),
+        (STABLE, 0.9, 0.85, None, Status.GRID_ONLY),  # not checked
+        (STABLE, 0.9, 0.85, between(False, reason="gave up after 200 intervals"), Status.GRID_ONLY),
+        # a member of the set breaks it
+        (STABLE, 2.227, 2.226, None, Status.VIOLATED),
+        (STABLE, 1.2, 1.0, None, Status.VIOLATED),
+        # the loop at Delta = 0 (a member of the set) is unstable: nothing below one saves it
+        (UNSTABLE, 0.5, 0.4, PROVED, Status.VIOLATED),
+        (UNSTABLE, 2.227, 2.226, None, Status.VIOLATED),
+        # stability undecided (or not checked): neither proved nor disproved, even with mu < 1 everywhere
+        (UNDECIDED, 0.5, 0.4, PROVED, Status.NOT_CERTIFIED),
+        (None, 0.5, 0.4, PROVED, Status.NOT_CERTIFIED),
+        # mu straddles one on the grid
+        (STABLE, 1.2, 0.9, None, Status.NOT_CERTIFIED),
+        # mu < 1 at the grid points, >= 1 between them
+        (STABLE, 0.9, 0.85, between(True, level=1.2), Status.NOT_CERTIFIED),
+        (STABLE, 0.9, 0.85, between(False, peak_upper=1.3, failed_at=7.7, reason="1.3 at 7.7"), Status.NOT_CERTIFIED),
     ],
 )
-def test_verdict_certifies_only_below_one_on_a_stable_loop(upper, lower, stable, word):
-    line = verdict(upper, lower, nominally_stable=stable, covers="the box")
-    assert line.startswith("verdict: ") and word in line
-    assert ("CERTIFIED" in line) == (upper < 1 and stable)
-    if word != "CERTIFIED":
-        assert "try" in line  # what to do next
+def test_decide_mu_certifies_only_below_one_everywhere_on_a_stable_loop(stability, upper, lower, check, status):
+    got, reasons = decide_mu(stability, upper, lower, check)
+    assert got is status
+    # a status other than CERTIFIED always says why; CERTIFIED needs no excuse
+    assert (reasons == ()) == (status is Status.CERTIFIED)
+    assert all(isinstance(r, str) and r and "\n" not in r for r in reasons)
 
 
-def test_verdict_does_not_certify_when_the_analysis_says_why_not():
-    line = verdict(0.8, 0.7, covers="the box", failed=("lft(P, K) at Delta = 0 not proved stable (unstable)",))
-    assert "NOT certified" in line and "CERTIFIED" not in line and "Delta = 0" in line
+def test_decide_mu_reasons_name_what_is_missing():
+    _, (why,) = decide_mu(STABLE, 0.9, 0.85, between(False, reason="gave up after 200 intervals"))
+    assert "between the grid points" in why and "gave up after 200 intervals" in why
+    _, (why,) = decide_mu(STABLE, 0.9, 0.85, None)
+    assert "not checked" in why
+    _, (why,) = decide_mu(STABLE, 0.9, 0.85, between(True, level=1.2))
+    assert "1.2" in why and "between the points" in why
+    _, (why,) = decide_mu(STABLE, 2.227, 2.226, None)
+    assert "2.226 >= 1" in why
+    _, (why,) = decide_mu(UNSTABLE, 0.5, 0.4, PROVED)
+    assert "Delta = 0" in why and "unstable" in why
+    _, reasons = decide_mu(UNDECIDED, 0.5, 0.4, PROVED)
+    assert "not proved stable" in reasons[0] and "undecided" in reasons[0]
 
 
-def test_verdict_names_the_bound_between_grid_points():
-    """mu < 1 on the grid certifies only if the bound checked between the points stays below 1 too."""
-    everywhere = verdict(0.9, 0.85, covers="the box", everywhere=0.91)
-    assert "CERTIFIED" in everywhere and "0.91 < 1 at every frequency" in everywhere
-    between = verdict(0.9, 0.85, covers="the box", everywhere=1.2)
-    assert "NOT certified" in between and "CERTIFIED" not in between and "up to 1.2 between its points" in between
-    assert "on the frequency grid" in verdict(0.9, 0.85, covers="the box")  # not checked: says so
+def _certificate(status: Status, reasons=()):
+    from polyrob.analysis.certificate import Certificate, Scope
+
+    sweep = SimpleNamespace(between=None)  # a mu certificate (not an L2 gain)
+    return Certificate(status, 0.9, 0.9, 0.85, STABLE, Scope(model="box", robot="paper_2r"), tuple(reasons), sweep)
+
+
+#: decide_mu's inputs that give each status
+CASES = {
+    Status.CERTIFIED: (STABLE, 0.9, 0.85, PROVED),
+    Status.GRID_ONLY: (STABLE, 0.9, 0.85, None),
+    Status.NOT_CERTIFIED: (UNDECIDED, 0.9, 0.85, PROVED),
+    Status.VIOLATED: (UNSTABLE, 0.9, 0.85, PROVED),
+}
+
+
+@pytest.mark.parametrize("status", list(Status))
+def test_the_analysis_verdict_and_summary_read_the_one_certificate(status):
+    """ControllerAnalysis: its verdict, status and "certified" are the robust-performance certificate's."""
+    import numpy as np
+
+    from polyrob.pipeline import ControllerAnalysis
+
+    got, reasons = decide_mu(*CASES[status])
+    assert got is status
+    cert = _certificate(status, reasons)
+    rp = SimpleNamespace(certificate=cert, summary=lambda: {"certificate": cert.summary()})
+    rs = SimpleNamespace(nominally_stable=True, summary=lambda: {})
+    sampling = SimpleNamespace(
+        random=1, random_stable=1.0, corners=1, corners_stable=1.0, worst_delta=np.zeros(1), worst_abscissa=-1.0
+    )
+    a = ControllerAnalysis(rs, rp, 0.5, sampling, 3, cert.scope.sentence())
+    assert a.certificate is cert and a.verdict == "verdict: " + cert.verdict
+    doc = a.summary()
+    assert doc["status"] == status.value and doc["certified"] is (status is Status.CERTIFIED)
+    assert doc["verdict"] == a.verdict
+    # the word CERTIFIED is printed only for that status (NOT_CERTIFIED reads "NOT certified")
+    assert ("CERTIFIED" in a.verdict) == (status is Status.CERTIFIED)
+    assert "CERTIFIED" not in cert.details() or status is Status.CERTIFIED
