@@ -6,6 +6,7 @@ import json
 import os
 import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from polyrob.validate.export_c import write_c, write_json
 from polyrob.validate.quantize import SOSController, quantize, sos_realization
 
 CC = shutil.which("cc") or shutil.which("gcc")
+FIXTURE = Path(__file__).parent / "fixtures" / "validate_planar_2r_K.json"
 N_STEPS = 400
 
 
@@ -134,3 +136,80 @@ def test_sos_matches_state_space():
     z = np.exp(1j * np.array([1e-4, 1e-2, 0.3, 2.0]))
     H, R = sos.to_ss()(z), dc.system(z)
     assert np.max(np.abs(H - R) / np.abs(R)) < 1e-8
+
+
+@pytest.fixture(scope="module")
+def paper_run(tmp_path_factory):
+    """A run directory of the paper's K* on paper_2r: K.json recording its problem, pldi.json beside it."""
+    from polyrob.io.controller import save_controller
+    from polyrob.pipeline import build_problem
+
+    run = tmp_path_factory.mktemp("run")
+    robot = polyrob.load_robot("paper_2r")
+    pldi = polyrob.bound_pldi(robot, samples=256, coverage=0, progress=False)
+    problem = build_problem(robot, pldi=pldi, uncertainty="box")
+    pldi.save(run / "pldi.json")
+    save_controller(polyrob.paper_controller(), run / "K.json", info=problem.description())
+    return run
+
+
+def test_export_refuses_a_word_length_the_analysis_rules_out(paper_run, tmp_path, capsys):
+    """K* at 1000 Hz needs 25 bits (the report's word-length analysis): 24 is refused in one line, exit 2,
+    naming 25; --force writes it with a warning; 25 is written without one."""
+    from polyrob.cli import main
+
+    K = str(paper_run / "K.json")
+    out = tmp_path / "ctrl"
+    assert main(["export", K, "--rate", "1000", "--word-length", "24", "-o", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("polyrob: error: export refused: 24-bit")
+    assert "the smallest word length that does is 25 bits" in err and "--force" in err
+    assert not (out / "controller.c").exists()
+
+    assert main(["export", K, "--rate", "1000", "--word-length", "24", "-o", str(out), "--force", "--json"]) == 0
+    cap = capsys.readouterr()
+    warnings = [line for line in cap.err.splitlines() if line.startswith("polyrob: warning:")]
+    assert len(warnings) == 1 and "25 bits" in warnings[0] and "written anyway (--force)" in warnings[0]
+    doc = json.loads(cap.out)
+    assert doc["word_length"] == 24 and doc["word_length_check"]["ok"] is False
+    assert doc["word_length_check"]["smallest_word_length"] == 25
+    assert "24-bit fixed-point" in (out / "controller.h").read_text()
+
+    assert main(["export", K, "--rate", "1000", "--word-length", "25", "-o", str(out), "--json", "--quiet"]) == 0
+    cap = capsys.readouterr()
+    assert "warning" not in cap.err and json.loads(cap.out)["word_length_check"]["ok"] is True
+
+
+def test_export_refusal_when_no_word_length_works(tmp_path, capsys):
+    """The issue's controller: no word length up to 40 bits keeps its discretised loop stable."""
+    from polyrob.cli import main
+    from polyrob.io.controller import load_controller, save_controller
+
+    doc = json.loads(FIXTURE.read_text())
+    robot = polyrob.load_robot("planar_2r")
+    dom = polyrob.Domain.from_dict(doc["info"]["domain"])
+    polyrob.bound_pldi(robot, dom, samples=256, coverage=0, progress=False).save(tmp_path / "pldi.json")
+    save_controller(load_controller(FIXTURE), tmp_path / "K.json", info=doc["info"])
+    out = tmp_path / "ctrl"
+    argv = ["export", str(tmp_path / "K.json"), "--rate", "1000", "--word-length", "24", "-o", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "no word length up to 40 bits does" in err
+    assert not out.exists() or not list(out.iterdir())
+    assert main([*argv, "--force", "--quiet"]) == 0
+    cap = capsys.readouterr()
+    assert cap.err.count("polyrob: warning:") == 1 and "no word length up to 40 bits does" in cap.err
+    assert (out / "controller.c").is_file()
+
+
+def test_export_without_a_problem_warns(tmp_path, capsys):
+    """A controller file that records no problem: the word length cannot be checked; written, with a warning."""
+    from polyrob.cli import main
+    from polyrob.io.controller import save_controller
+
+    save_controller(polyrob.paper_controller(), tmp_path / "K.json")
+    out = tmp_path / "ctrl"
+    assert main(["export", str(tmp_path / "K.json"), "--rate", "500", "--word-length", "20", "-o", str(out)]) == 0
+    cap = capsys.readouterr()
+    assert "polyrob: warning: 20-bit coefficients not checked" in cap.err and "--pldi" in cap.err
+    assert (out / "controller.c").is_file()

@@ -63,13 +63,69 @@ def cmd_report(args) -> int:
     return 0 if doc["certified"] else 1  # as every command ending with a verdict (docs/certificates.md)
 
 
+def _export_pldi(args, info: dict):
+    """Where the word-length check's problem comes from: ``(PLDI path or None, why none)``.
+
+    ``--pldi``, else ``pldi.json`` beside the controller file (a run
+    directory's); ``(None, None)``: bounded again over the domain the file records.
+    """
+    from pathlib import Path
+
+    from polyrob.cli.plant import pldi_path
+
+    beside = Path(args.controller).with_name("pldi.json")
+    path = pldi_path(args) if args.pldi else (beside if beside.is_file() else None)
+    if path is None and (not info.get("robot") or not isinstance(info.get("domain"), dict)):
+        return None, f"{args.controller} records no robot and domain (pass --pldi FILE)"
+    return path, None
+
+
+def _export_problem(args, info: dict, path, out):
+    """The problem the controller file records, on the PLDI ``path`` (``None``: bounded again)."""
+    import polyrob
+    from polyrob.bounds.domain import Domain
+    from polyrob.bounds.pldi import PLDI
+    from polyrob.pipeline.rebuild import rebuild_problem
+
+    if path is not None:
+        out.stage(f"word-length check: the problem of {args.controller} on the PLDI {path}")
+        return rebuild_problem(PLDI.load(path), info)
+    out.stage(
+        f"word-length check: bounding {info['robot']} over the domain {args.controller} records (--pldi reuses one)"
+    )
+    domain = Domain.from_dict(info["domain"], source=args.controller)
+    return rebuild_problem(
+        polyrob.bound_pldi(polyrob.load_robot(info["robot"]), domain, coverage=0, progress=out.progress), info
+    )
+
+
 def cmd_export(args) -> int:
-    from polyrob.io.controller import load_controller
-    from polyrob.validate.export_c import export_controller
+    import sys
+
+    from polyrob.cli.analyze import load_controller_args
+    from polyrob.errors import PolyrobError
+    from polyrob.validate.export_c import check_export_word_length, export_controller
 
     out_dir = check_output_dir(args.output)
-    out = Output(args, stages=1)
-    K = load_controller(args.controller)
+    K, info, _ = load_controller_args(args.controller)
+    path, why = _export_pldi(args, info) if args.word_length is not None else (None, "no --word-length")
+    checking = why is None
+    out = Output(args, stages=3 if checking else 1)
+    check_doc, warning = None, None
+    if args.word_length is not None and not checking:
+        warning = f"{args.word_length}-bit coefficients not checked: {why}"
+        check_doc = {"checked": False, "why": why}
+    if checking:  # the report's word-length analysis, on the controller written here
+        problem = _export_problem(args, info, path, out)
+        out.stage(f"word-length check: {args.word_length} bits at {args.rate:g} Hz (μ of the discretised loop)")
+        check = check_export_word_length(
+            problem.P, K, args.rate, args.word_length, method=args.method, prewarp=args.prewarp
+        )
+        check_doc = {"checked": True, **check.summary()}
+        if not check.ok:
+            if not args.force:
+                raise PolyrobError(f"export refused: {check.line()}; --force writes it anyway")
+            warning = f"{check.line()}; written anyway (--force)"
     out.stage(
         f"export: {args.controller} at {args.rate:g} Hz ({args.method}"
         + (f", {args.word_length}-bit coefficients" if args.word_length else "")
@@ -85,8 +141,13 @@ def cmd_export(args) -> int:
         real=args.real,
         name=args.name,
     )
-    out.document(res.summary())
+    doc = res.summary()
+    if check_doc is not None:
+        doc["word_length_check"] = check_doc
+    out.document(doc)
     out.line(f"wrote {res.header}, {res.source} and {res.json}")
+    if warning:  # on stderr, also with --json and --quiet
+        print(f"polyrob: warning: {warning}", file=sys.stderr, flush=True)
     return 0
 
 
@@ -105,12 +166,24 @@ def register(sub) -> None:
         "--word-length",
         type=int_at_least(2),
         default=None,
-        help="round the coefficients to this many bits of fixed point (default: floating point)",
+        help="round the coefficients to this many bits of fixed point (default: floating point); refused "
+        "when the discretised loop then loses stability or its μ (the report's word-length analysis)",
     )
     p.add_argument("--method", default="tustin", choices=["tustin", "zoh"], help="discretisation")
     p.add_argument("--prewarp", type=positive_float, default=None, help="Tustin pre-warping frequency (rad/s)")
     p.add_argument("--real", default="double", choices=["double", "float"], help="C type of the signals")
     p.add_argument("--name", default="controller", help="base name of the .h/.c/.json files")
+    p.add_argument(
+        "--pldi",
+        default=None,
+        help="PLDI of the word-length check (default: pldi.json beside the controller file, "
+        "else bounded again over the domain the file records)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="write coefficients of a --word-length that the check finds too short (with a warning)",
+    )
     p.add_argument("-o", "--output", required=True, help="directory for the C and JSON files")
     add_output_flags(p)
     p.set_defaults(func=cmd_export)

@@ -40,7 +40,20 @@ from polyrob.errors import PolyrobError
 from polyrob.io.atomic import atomic_write, json_default
 from polyrob.validate.quantize import SOSController
 
-__all__ = ["write_c", "write_json", "c_sources", "export_controller", "ExportResult"]
+__all__ = [
+    "write_c",
+    "write_json",
+    "c_sources",
+    "export_controller",
+    "ExportResult",
+    "WordLengthCheck",
+    "check_export_word_length",
+]
+
+#: The report's word-length analysis: μ of the discretised loop within 5 % of the continuous loop's,
+#: word lengths searched up to 40 bits (polyrob.report.build.validate_controller).
+MU_MARGIN = 1.05
+LONGEST_WORD = 40
 
 
 def _num(x: float, real: str) -> str:
@@ -227,3 +240,85 @@ def export_controller(
     h, c = write_c(sos, out_dir, name=name, real=real)
     j = write_json(sos, Path(out_dir) / f"{name}.json", discrete=dc, extra=extra)
     return ExportResult(header=h, source=c, json=j, sos=sos, discrete=dc)
+
+
+@dataclass(frozen=True, eq=False)
+class WordLengthCheck:
+    """Whether ``word_length``-bit coefficients keep the discretised loop as the report's analysis asks.
+
+    ``ok``: the loop (plant by zero-order hold, the quantised controller) is
+    stable with μ <= ``threshold`` (:data:`MU_MARGIN` times the continuous
+    loop's μ on the same grid).  When not, ``smallest`` is the shortest word
+    length up to ``longest`` bits that does (``None``: none does).
+    """
+
+    word_length: int
+    rate: float
+    ok: bool
+    stable: bool
+    mu: float
+    threshold: float
+    smallest: int | None = None
+    longest: int = LONGEST_WORD
+
+    def reason(self) -> str:
+        if not self.stable:
+            return "unstable"
+        return f"μ {self.mu:.4g} above {self.threshold:.4g} (the continuous loop's + 5 %)"
+
+    def line(self) -> str:
+        """One line: the refusal's (or the warning's) words."""
+        head = (
+            f"{self.word_length}-bit coefficients do not keep the discretised loop at {self.rate:g} Hz "
+            f"stable with μ within 5 % of the continuous loop's ({self.reason()})"
+        )
+        if self.smallest is not None:
+            return f"{head}; the smallest word length that does is {self.smallest} bits (--word-length {self.smallest})"
+        return f"{head}; no word length up to {max(self.longest, self.word_length)} bits does"
+
+    def summary(self) -> dict:
+        return {
+            "word_length": self.word_length,
+            "ok": self.ok,
+            "stable": self.stable,
+            "mu": self.mu,
+            "threshold": self.threshold,
+            "smallest_word_length": self.smallest,
+            "longest_checked": max(self.longest, self.word_length),
+        }
+
+
+def check_export_word_length(
+    P,
+    K,
+    rate: float,
+    word_length: int,
+    *,
+    method: str = "tustin",
+    prewarp: float | None = None,
+    omega=None,
+    longest: int = LONGEST_WORD,
+) -> WordLengthCheck:
+    """The report's word-length analysis on the controller ``polyrob export`` writes.
+
+    ``K`` discretised as the export does (``method``, ``prewarp``), in second-order
+    sections, rounded to ``word_length`` bits, closed around ``P`` (the
+    generalized plant) sampled by zero-order hold: stable with μ within 5 % of
+    the continuous loop's on ``omega`` (default the report's grid,
+    :data:`polyrob.report.build.DISCRETE_GRID`)?  When not, the shortest
+    word length from ``word_length + 1`` to ``longest`` that is
+    (:func:`~polyrob.validate.quantize.min_word_length`, bisection).
+    """
+    from polyrob.report.build import DISCRETE_GRID
+    from polyrob.validate.discretize import continuous_mu, discretize
+    from polyrob.validate.quantize import check_word_length, min_word_length, sos_realization
+
+    W = int(word_length)
+    grid = DISCRETE_GRID if omega is None else np.asarray(omega, float)
+    sos = sos_realization(discretize(K, rate, method=method, prewarp=prewarp))
+    threshold = MU_MARGIN * continuous_mu(P, K, grid)
+    ok, mu, stable, _ = check_word_length(P, sos, W, threshold=threshold, omega=grid)
+    smallest = None
+    if not ok and W < longest:
+        smallest = min_word_length(P, sos, threshold=threshold, lengths=(W + 1, longest), omega=grid).word_length
+    return WordLengthCheck(W, float(rate), ok, stable, mu, float(threshold), smallest, int(longest))

@@ -14,7 +14,8 @@ quantised: the arithmetic stays floating point (signal quantisation and
 overflow of a fixed-point datapath are not modelled; docs/method.md).
 
 :func:`min_word_length` finds the shortest word length whose quantised
-controller keeps the discretised loop stable and its μ below a threshold.
+controller keeps the discretised loop stable and its μ below a threshold
+(:func:`check_word_length` checks one word length).
 
 Examples
 --------
@@ -41,7 +42,15 @@ import scipy.signal as ss
 
 from polyrob.errors import PolyrobError
 
-__all__ = ["SOSController", "WordLengthResult", "sos_realization", "quantize", "min_word_length", "q_format"]
+__all__ = [
+    "SOSController",
+    "WordLengthResult",
+    "sos_realization",
+    "quantize",
+    "check_word_length",
+    "min_word_length",
+    "q_format",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -315,6 +324,21 @@ class WordLengthResult:
         }
 
 
+def check_word_length(P, sos: SOSController, word_length: int, *, threshold: float, omega=None, **mu_options):
+    """One word length: ``(ok, μ upper, stable, quantised controller)`` of the discretised loop.
+
+    The loop is ``P`` by zero-order hold closed by the controller quantised to
+    ``word_length`` bits; ``ok`` when it is stable with μ <= ``threshold``
+    on ``omega`` (the check of :func:`min_word_length`, and of ``polyrob export``).
+    """
+    from polyrob.validate.discretize import sampled_data_mu
+
+    q = quantize(sos, word_length)
+    res = sampled_data_mu(P, None, sos.rate, controller=q.to_ss(), omega=omega, **{"upper_only": True, **mu_options})
+    ok = bool(res.stable and res.mu_upper <= threshold)
+    return ok, float(res.mu_upper), bool(res.stable), q
+
+
 def min_word_length(
     P, sos: SOSController, *, threshold: float, lengths=(4, 40), omega=None, **mu_options
 ) -> WordLengthResult:
@@ -323,18 +347,12 @@ def min_word_length(
     Bisection over ``lengths = (shortest, longest)`` bits, assuming longer
     words never do worse (checked at ``longest`` first).
     """
-    from polyrob.validate.discretize import sampled_data_mu
-
     history = []
 
     def check(W):
-        q = quantize(sos, W)
-        res = sampled_data_mu(
-            P, None, sos.rate, controller=q.to_ss(), omega=omega, **{"upper_only": True, **mu_options}
-        )
-        ok = res.stable and res.mu_upper <= threshold
-        history.append((int(W), float(res.mu_upper), bool(res.stable), bool(ok)))
-        return ok, res.mu_upper, q
+        ok, mu, stable, q = check_word_length(P, sos, W, threshold=threshold, omega=omega, **mu_options)
+        history.append((int(W), mu, stable, ok))
+        return ok, mu, q
 
     lo, hi = int(lengths[0]), int(lengths[1])
     ok, mu_hi, q_hi = check(hi)
