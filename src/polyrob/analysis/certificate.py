@@ -161,7 +161,7 @@ class Scope:
         return ", ".join(parts)
 
     def summary(self) -> dict:
-        return dict(self.__dict__)
+        return _plain(dict(self.__dict__))
 
 
 @dataclass(frozen=True, eq=False)
@@ -239,7 +239,7 @@ class Certificate:
             "mu_upper_grid": _num(self.mu_upper_grid),
             "mu_lower": _num(self.mu_lower),
             "stable_at_delta0": None if self.stable_at_delta0 is None else self.stable_at_delta0.verdict,
-            "between_grid_points": None if between is None else between.summary(),
+            "between_grid_points": None if between is None else _plain(between.summary()),
             "reasons": list(self.reasons),
             "scope": self.scope.summary(),
             "verdict": self.verdict,
@@ -253,6 +253,11 @@ class Certificate:
 def _num(x):
     x = float(x)
     return x if np.isfinite(x) else None
+
+
+def _plain(d: dict) -> dict:
+    """A summary with non-finite floats as ``None`` (strict JSON)."""
+    return {k: _num(v) if isinstance(v, float) else v for k, v in d.items()}
 
 
 def decide_mu(stability, mu_upper_grid: float, mu_lower: float, between) -> tuple[Status, tuple[str, ...]]:

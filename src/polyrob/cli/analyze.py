@@ -59,6 +59,10 @@ def print_analysis(a, out) -> None:
         out.line(f"which covers the robot: {covers_nonlinear(tv.method)}")
     out.line(a.verdict)
     out.line(a.certificate.details())
+    if not a.certificate.certified:
+        from polyrob.pipeline.analysis import NEXT_STEPS
+
+        out.line(NEXT_STEPS)
 
 
 def cmd_analyze(args) -> int:

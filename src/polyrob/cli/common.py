@@ -40,7 +40,8 @@ class HelpFormatter(argparse.HelpFormatter):
     def _get_help_string(self, action):
         text = action.help or ""
         default = action.default
-        if "default" in text or default in (None, False, argparse.SUPPRESS) or not action.option_strings:
+        flag = isinstance(action, (argparse._StoreTrueAction, argparse._StoreFalseAction))
+        if flag or "default" in text or default in (None, False, argparse.SUPPRESS) or not action.option_strings:
             return text
         return f"{text} (default: {default})"
 

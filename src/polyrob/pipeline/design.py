@@ -192,15 +192,9 @@ def reduce_design(
 
     result = design.result
     reduced = reduce_controller(problem.P, result, max_order=max_order, target=target)
-    cert = dict(design.record)
-    cert.update(
-        structure=f"reduced:{reduced.order}",
-        order=int(reduced.order),
-        peak_mu_upper=float(reduced.peak_mu),
-        peak_mu_lower=float(reduced.peak_mu_lower),
-        full_order=int(result.order),
-        full_peak_mu_upper=float(result.peak_mu),
-    )
+    # the reduced controller's own figures; the full order's only under full_* names
+    cert = _record(reduced.result, problem.P)
+    cert.update(full_order=int(result.order), full_peak_mu_upper=float(result.peak_mu))
     design = Design(controller=reduced.controller, result=result, reduced=reduced, record=cert, notes=design.notes)
     return certify_design(problem, design) if certify else design
 

@@ -182,7 +182,7 @@ class Problem:
             coverage=float(coverage) if checked else None,
             coverage_points=points if checked else 0,
             enclosure=enclosure,
-            domain=str(self.domain.name),
+            domain=_domain_words(self.domain),
             robot=str(self.robot.name),
         )
 
@@ -198,6 +198,24 @@ class Problem:
             f"real parameters around the {enclosure} PLDI of {self.robot.name} over domain "
             f"'{self.domain.name}'"
         )
+
+
+def _domain_words(domain) -> str:
+    """The domain's name and what it bounds, per joint: ``paper: q ±(3.14, 3.14), qdot ±(3.96, 9.96), u 0``."""
+    import numpy as np
+
+    def group(lo, hi):
+        lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+        if not np.any(lo) and not np.any(hi):
+            return "0"
+        if np.allclose(lo, -hi):
+            return "±(" + ", ".join(f"{h:.3g}" for h in hi) + ")"
+        return "[" + ", ".join(f"{a:.3g}:{b:.3g}" for a, b in zip(lo, hi)) + "]"
+
+    return (
+        f"{domain.name}: q {group(domain.q_lower, domain.q_upper)}, "
+        f"qdot {group(domain.qdot_lower, domain.qdot_upper)}, u {group(domain.u_lower, domain.u_upper)}"
+    )
 
 
 def _check_pldi(robot, pldi, domain) -> None:

@@ -151,7 +151,7 @@ class TimeVaryingCertificate:
             "status": self.certificate.status.value,
             "certified": self.certificate.certified,
             "stability_status": self.stability_certificate.status.value,
-            "scope": None if self.scope is None else self.scope.summary(),
+            "scope": self.certificate.scope.summary(),
             "covers_nonlinear": covers_nonlinear(self.method),
             "notes": list(self.notes),
             "seconds": round(float(self.seconds), 3),
