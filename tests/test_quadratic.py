@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from polyrob.analysis.time_varying.quadratic import COVERS_NONLINEAR, quadperf, quadstab
+from polyrob.analysis.time_varying.quadratic import quadperf, quadstab
+from polyrob.analysis.time_varying.results import COVERS_NONLINEAR
 from polyrob.analysis.time_varying.vertices import performance_vertices, vertex_set
 
 ZERO_K = np.zeros((1, 1))

@@ -44,6 +44,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from polyrob.analysis.scope import ARBITRARY, FROZEN, Scope, finite_or_none, strict_json, weakest_enclosure
+
 __all__ = [
     "Status",
     "Scope",
@@ -54,6 +56,8 @@ __all__ = [
     "decide_mu",
     "decide_gain",
     "weakest_enclosure",
+    "FROZEN",
+    "ARBITRARY",
 ]
 
 
@@ -81,87 +85,6 @@ _WORDS = {
     Status.NOT_CERTIFIED: "NOT certified",
     Status.VIOLATED: "VIOLATED",
 }
-
-#: The variations of the parameters a certificate can cover.
-FROZEN = "constant parameters (every frozen robot of the set)"
-ARBITRARY = "parameters varying arbitrarily fast inside the set"
-
-
-def weakest_enclosure(*enclosures) -> str:
-    """``"certified"`` only when every input was proved; ``"sampled"`` when any was sampled; else ``"unknown"``.
-
-    >>> weakest_enclosure("certified", "sampled"), weakest_enclosure("certified"), weakest_enclosure(None)
-    ('sampled', 'certified', 'unknown')
-    """
-    given = [e for e in enclosures if e]
-    if not given or len(given) < len(enclosures):
-        return "sampled" if "sampled" in given else "unknown"
-    if all(e == "certified" for e in given):
-        return "certified"
-    return "sampled" if "sampled" in given else "unknown"
-
-
-@dataclass(frozen=True)
-class Scope:
-    """What a certificate covers.
-
-    Attributes
-    ----------
-    kind : {"robust performance", "robust stability"}
-    variation : str
-        :data:`FROZEN`, :data:`ARBITRARY`, or a rate bound.
-    model : str
-        The uncertainty model (``""`` for a bare loop).
-    coverage : float or None
-        Fraction of fresh domain samples whose Jacobians the model contains;
-        ``None`` when it was not checked.
-    coverage_points : int
-    enclosure : {"sampled", "certified", "unknown"}
-        How the inputs were bounded (the PLDI, and the model's own ranges);
-        the weakest input wins (:func:`weakest_enclosure`).
-    domain : str
-        The domain's name and what it bounds.
-    robot : str
-    frequencies : str
-        Set by the decision: "every frequency" or the grid it rests on.
-    vertices_from : str
-        For a vertex (time-varying) certificate: the set the vertices came from.
-    """
-
-    kind: str = "robust performance"
-    variation: str = FROZEN
-    model: str = ""
-    coverage: float | None = None
-    coverage_points: int = 0
-    enclosure: str = "unknown"
-    domain: str = ""
-    robot: str = ""
-    frequencies: str = ""
-    vertices_from: str = ""
-
-    def sentence(self) -> str:
-        """The scope in one sentence (what the verdict line leaves out)."""
-        parts = [f"for {self.variation}"]
-        if self.frequencies:
-            parts.append(f"on {self.frequencies}")
-        if self.model:
-            cov = (
-                "coverage not checked"
-                if self.coverage is None
-                else f"coverage {self.coverage:.4g} of {self.coverage_points} fresh domain points"
-            )
-            parts.append(f"of the '{self.model}' uncertainty model ({cov})")
-        if self.vertices_from:
-            parts.append(f"with vertices from {self.vertices_from}")
-        if self.robot or self.domain:
-            encl = {"certified": "proved (interval arithmetic)", "sampled": "sampled and searched, not proved"}.get(
-                self.enclosure, "of unknown enclosure"
-            )
-            parts.append(f"around the PLDI of {self.robot or 'the robot'} over domain {self.domain!r}, {encl}")
-        return ", ".join(parts)
-
-    def summary(self) -> dict:
-        return _plain(dict(self.__dict__))
 
 
 @dataclass(frozen=True, eq=False)
@@ -235,11 +158,11 @@ class Certificate:
         return {
             "status": self.status.value,
             "certified": self.certified,
-            "bound": _num(self.bound),
-            "mu_upper_grid": _num(self.mu_upper_grid),
-            "mu_lower": _num(self.mu_lower),
+            "bound": finite_or_none(self.bound),
+            "mu_upper_grid": finite_or_none(self.mu_upper_grid),
+            "mu_lower": finite_or_none(self.mu_lower),
             "stable_at_delta0": None if self.stable_at_delta0 is None else self.stable_at_delta0.verdict,
-            "between_grid_points": None if between is None else _plain(between.summary()),
+            "between_grid_points": None if between is None else strict_json(between.summary()),
             "reasons": list(self.reasons),
             "scope": self.scope.summary(),
             "verdict": self.verdict,
@@ -248,16 +171,6 @@ class Certificate:
     def with_scope(self, scope: Scope) -> Certificate:
         """The same decision with the caller's scope (the frequency clause kept)."""
         return replace(self, scope=replace(scope, frequencies=self.scope.frequencies))
-
-
-def _num(x):
-    x = float(x)
-    return x if np.isfinite(x) else None
-
-
-def _plain(d: dict) -> dict:
-    """A summary with non-finite floats as ``None`` (strict JSON)."""
-    return {k: _num(v) if isinstance(v, float) else v for k, v in d.items()}
 
 
 def decide_mu(stability, mu_upper_grid: float, mu_lower: float, between) -> tuple[Status, tuple[str, ...]]:

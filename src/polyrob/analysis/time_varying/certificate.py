@@ -56,7 +56,7 @@ def covers_nonlinear(method: str) -> str:
             "inside the domain the PLDI was bounded on; mu with constant parameters certifies each frozen robot "
             "of the set, not the robot in motion."
         )
-    from polyrob.analysis.time_varying.quadratic import COVERS_NONLINEAR
+    from polyrob.analysis.time_varying.results import COVERS_NONLINEAR
 
     return COVERS_NONLINEAR
 

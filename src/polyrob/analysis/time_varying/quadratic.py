@@ -37,24 +37,16 @@ import time
 
 import numpy as np
 
-from polyrob.analysis.time_varying.results import QuadPerfResult, QuadStabResult
+from polyrob.analysis.time_varying.results import QuadPerfResult, QuadStabResult, covers_text
 from polyrob.analysis.time_varying.vertices import (
     MAX_VERTICES,
-    VertexSet,
     closed_loop_vertices,
     performance_vertices,
     vertex_set,
 )
 from polyrob.errors import PolyrobError
 
-__all__ = ["QuadStabResult", "QuadPerfResult", "quadstab", "quadperf", "COVERS_NONLINEAR", "covers_text"]
-
-#: The sentence the CLI prints beside the two verdicts.
-COVERS_NONLINEAR = (
-    "Only the time-varying certificate (quadratic stability/performance on the PLDI's vertices) covers the "
-    "moving nonlinear robot, and only while its state and torque stay inside the domain the PLDI was bounded "
-    "on; mu with constant parameters certifies each frozen robot of the set, not the robot in motion."
-)
+__all__ = ["QuadStabResult", "QuadPerfResult", "quadstab", "quadperf"]
 
 _U = np.finfo(float).eps
 #: Largest condition number of ``P`` the LMIs search over (balanced, time-scaled coordinates).
@@ -73,18 +65,6 @@ def _check_size(n: int, what: str) -> None:
             f"{what}: the closed loop has {n} states; the vertex LMIs are built for at most {MAX_STATES} "
             "(memory grows like n^3 per vertex): reduce the controller (--reduce) or use a fixed structure"
         )
-
-
-def covers_text(vs: VertexSet, what: str) -> str:
-    """The precise scope of a vertex certificate (``what``: the property proved)."""
-    return (
-        f"{what} for every trajectory of xdot = A(t) x + B(t) u, u = K(r - y), y = [I 0] x, with "
-        f"(A(t), B(t)) in Co{{(A_i, B_i)}} over the {vs.n_vertices} vertices of the PLDI's {vs.source} "
-        f"({vs.enclosure} bounds), varying arbitrarily fast inside the domain D; for the nonlinear robot "
-        "this holds for the deviation from an equilibrium (x_e, u_e) inside D while the state and the "
-        "torque stay in D (the Jacobians of f there lie in the PLDI)"
-        + ("" if vs.enclosure == "certified" else ", as far as the sampled bounds hold")
-    )
 
 
 # --------------------------------------------------------------------------- numerics

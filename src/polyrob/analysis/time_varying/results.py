@@ -6,7 +6,27 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["QuadStabResult", "QuadPerfResult"]
+__all__ = ["QuadStabResult", "QuadPerfResult", "COVERS_NONLINEAR", "covers_text"]
+
+#: The sentence the CLI prints beside the two verdicts.
+COVERS_NONLINEAR = (
+    "Only the time-varying certificate (quadratic stability/performance on the PLDI's vertices) can cover the "
+    "moving nonlinear robot: when its status says certified, and only while the robot's state and torque stay "
+    "inside the domain the PLDI was bounded on; mu with constant parameters certifies each frozen robot of "
+    "the set, not the robot in motion."
+)
+
+
+def covers_text(vs, what: str) -> str:
+    """The precise scope of a vertex certificate (``what``: the property proved)."""
+    return (
+        f"{what} for every trajectory of xdot = A(t) x + B(t) u, u = K(r - y), y = [I 0] x, with "
+        f"(A(t), B(t)) in Co{{(A_i, B_i)}} over the {vs.n_vertices} vertices of the PLDI's {vs.source} "
+        f"({vs.enclosure} bounds), varying arbitrarily fast inside the domain D; for the nonlinear robot "
+        "this holds for the deviation from an equilibrium (x_e, u_e) inside D while the state and the "
+        "torque stay in D (the Jacobians of f there lie in the PLDI)"
+        + ("" if vs.enclosure == "certified" else ", as far as the sampled bounds hold")
+    )
 
 
 @dataclass(frozen=True, eq=False)
