@@ -49,6 +49,7 @@ from scipy.integrate import solve_ivp
 from polyrob.errors import PolyrobError
 from polyrob.plant.generalized import as_controller_ss
 from polyrob.validate.reference import Reference, smooth_reference, step_reference
+from polyrob.validate.sampled import simulate_sampled
 from polyrob.validate.step_metrics import SETTLING_BAND, JointMetrics, domain_check, step_metrics
 
 __all__ = [
@@ -138,11 +139,7 @@ class SimulationResult:
         if not self.success:
             return "integration failed: " + str(self.info.get("message", ""))
         if self.left_domain:
-            return (
-                "LEFT THE DOMAIN ("
-                + "; ".join(self.domain_exits)
-                + "): no certificate applies to this trajectory"
-            )
+            return "LEFT THE DOMAIN (" + "; ".join(self.domain_exits) + "): no certificate applies to this trajectory"
         if self.rate:
             return (
                 "inside the domain; a sampled-and-held loop: no certificate covers it (they are "
@@ -276,9 +273,12 @@ def simulate(
         discrete = True
     if discrete:
         Kd = K.system if isinstance(K, DiscreteController) else control.ss(K)
-        return _simulate_discrete(
-            robot, Kd, dom, reference, r_of_t, t_final, q0, qdot0, u_eq, u_source, rtol, atol, _deadline(time_budget)
+        t, X, U, R, ok, info = simulate_sampled(
+            robot, Kd, r_of_t, t_final, q0, qdot0, u_eq, rtol, atol, _deadline(time_budget)
         )
+        info["u_eq_source"] = u_source
+        m = robot.m
+        return _result(robot, dom, t, X[:m], X[m:], U, R, "discrete", 1.0 / float(Kd.dt), reference, q0, u_eq, ok, info)
 
     Ks = as_controller_ss(K, m, m)
     Ak, Bk, Ck, Dk = (np.asarray(X, float) for X in (Ks.A, Ks.B, Ks.C, Ks.D))
@@ -355,49 +355,6 @@ def _evaluate(pieces, t, z0):
         y[:, sel] = dense(t[sel])
         start = end
     return y
-
-
-def _simulate_discrete(robot, Kd, dom, reference, r_of_t, t_final, q0, qdot0, u_eq, u_source, rtol, atol, deadline):
-    m = robot.m
-    h = float(Kd.dt)
-    Ad, Bd, Cd, Dd = (np.asarray(X, float) for X in (Kd.A, Kd.B, Kd.C, Kd.D))
-    n_steps = int(np.ceil(t_final / h - 1e-9))
-    x = np.concatenate([q0, qdot0])
-    xk = np.zeros(Ad.shape[0])
-    ts, xs, us, rs = [0.0], [x.copy()], [], []
-    ok, message, nfev = True, "reached t_final", 0
-    for k in range(n_steps):
-        tk = k * h
-        if deadline is not None and time.monotonic() > deadline:
-            ok, message = False, f"not finished within the time budget (stopped at t = {tk:.4g} s of {t_final:.4g} s)"
-            break
-        rk = r_of_t(tk)
-        e = rk - x[:m]
-        uk = u_eq + Cd @ xk + Dd @ e
-        xk = Ad @ xk + Bd @ e
-        sol = solve_ivp(lambda t, z: robot.f(z, uk), (tk, tk + h), x, method="RK45", rtol=rtol, atol=atol)
-        nfev += sol.nfev
-        if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
-            ok, message = False, f"step {k}: {sol.message}"
-            break
-        x = sol.y[:, -1]
-        us.append(uk)
-        rs.append(rk)
-        ts.append(tk + h)
-        xs.append(x.copy())
-    # u and r are held over each period: report them at the period's end too
-    X = np.array(xs).T
-    U = np.array(us + us[-1:]).T if us else np.tile(u_eq[:, None], (1, 1))
-    R = np.array(rs + [r_of_t(ts[-1])]).T if rs else np.asarray(r_of_t(0.0))[:, None]
-    t = np.array(ts)
-    info = {
-        "solver": "solve_ivp RK45 per hold interval",
-        "nfev": int(nfev),
-        "message": message,
-        "u_eq_source": u_source,
-        "period": h,
-    }
-    return _result(robot, dom, t, X[:m], X[m:], U, R, "discrete", 1.0 / h, reference, q0, u_eq, ok, info)
 
 
 def _result(robot, dom, t, q, qd, u, r, kind, rate, reference, q0, u_eq, success, info) -> SimulationResult:
