@@ -205,6 +205,9 @@ def test_run_report_shows_the_certificates_and_rebuilds_them(tmp_path, monkeypat
     assert val["discretization"]["rate_hz"] == 100.0
     stored = json.loads((tmp_path / "certificate.json").read_text())  # plain JSON: no NaN
     assert stored["controller"] == "K.json" and list(stored["certificates"]) == [r[0] for r in rows]
+    # the μ figure shows the certificate's own sweep, ω = 0 included (real parameters)
+    assert stored["certificates"][FROZEN_ROW]["sweep"]["omega"] == a.certificate.mu.omega.tolist()
+    assert a.certificate.mu.omega[0] == 0 and "the value at ω = 0 is the point at the left edge" in page
 
     # `polyrob report DIR`: the problem rebuilt from the files (pipeline), the same certificate rows
     fast = functools.partial(build.validate_controller, rate=None, scenarios=[], **FAST)
@@ -306,3 +309,26 @@ def test_cli_report_json_is_one_document(tmp_path, monkeypatch, capsys):
     assert doc["html"] == str(tmp_path / "report.html") and doc["figures"] == [str(tmp_path / "figures" / "mu.png")]
     assert doc["status"] == "GRID_ONLY" and doc["certified"] is False and doc["verdict"] == "verdict: GRID_ONLY"
     assert doc["certificates"][0]["status"] == "GRID_ONLY"
+
+
+def test_certificate_sweep_is_stored_and_plotted(tmp_path):
+    """A certificate's μ sweep (with ω = 0) goes into its record, survives certificate.json, and into mu.png."""
+    from types import SimpleNamespace
+
+    from polyrob.report.build import read_run_certificates, save_run_certificates
+    from polyrob.report.certificates import certificate_record, certificate_sweep
+
+    w = np.array([0.0, 0.1, 1.0, 10.0])
+    mu = SimpleNamespace(omega=w, upper=np.array([1.5, 1.2, np.inf, 0.5]), lower=np.array([1.4, 1.1, 0.9, 0.4]))
+    cert = Certificate(Status.VIOLATED, 1.5, 1.5, 1.4, None, Scope(frequencies="the grid"), ("mu >= 1",), mu)
+    assert certificate_record(cert)["sweep"]["omega"] == w.tolist()
+    save_run_certificates(tmp_path, {FROZEN_ROW: cert})
+    certs, _ = read_run_certificates(tmp_path)
+    back = certificate_sweep(certs[FROZEN_ROW])
+    assert np.array_equal(back[0], w) and np.isnan(back[1][2]) and back[1][0] == 1.5  # inf stored as null
+    files = write_report(tmp_path, certificates=certs)
+    page = files.html.read_text()
+    assert "figures/mu.png" in page and "the value at ω = 0 is the point at the left edge" in page
+    # a certificate without a sweep (a gain) has none
+    gain = Certificate(Status.NOT_CERTIFIED, float("inf"), float("nan"), float("nan"), None, Scope(), ("no P",))
+    assert "sweep" not in certificate_record(gain) and certificate_sweep(gain) is None

@@ -2,8 +2,10 @@
 
 A record is what :meth:`~polyrob.analysis.certificate.Certificate.summary`
 gives (``status``, ``bound``, ``scope``, ``verdict``, ...) with ``covers``,
-the scope's sentence; a run directory stores these records, so that the
-report rebuilt from the files shows the same rows.  The status is the one
+the scope's sentence, and ``sweep``, the μ sweep it was decided on (its grid,
+ω = 0 included when swept: the report's μ figure shows it); a run directory
+stores these records, so that the report rebuilt from the files shows the
+same rows and the same μ figure.  The status is the one
 :mod:`polyrob.analysis.certificate` decided; nothing here decides or words
 it otherwise.
 
@@ -22,6 +24,8 @@ from __future__ import annotations
 import math
 from dataclasses import fields
 
+import numpy as np
+
 from polyrob.analysis.certificate import FROZEN, Scope, Status
 
 __all__ = [
@@ -29,6 +33,7 @@ __all__ = [
     "TIME_VARYING_ROW",
     "certificate_record",
     "certificate_rows",
+    "certificate_sweep",
     "frozen_status",
     "is_decided",
     "is_frozen",
@@ -59,10 +64,40 @@ def certificate_record(cert) -> dict:
     inner = cert if hasattr(cert, "status") else cert.certificate
     rec = inner.summary()
     rec["covers"] = inner.scope.sentence()
+    sweep = _sweep(getattr(inner, "mu", None))
+    if sweep is not None:
+        rec["sweep"] = sweep
     if inner is not cert:
         rec["verdict"] = cert.verdict
         rec["time_varying"] = cert.summary()
     return rec
+
+
+def _sweep(mu) -> dict | None:
+    """The μ sweep a certificate was decided on, as lists (its grid, ω = 0 included when swept), or ``None``."""
+    try:
+        w, up, lo = (np.asarray(getattr(mu, k), float).ravel() for k in ("omega", "upper", "lower"))
+    except (AttributeError, TypeError, ValueError):  # no sweep (e.g. a gain certificate)
+        return None
+    if not w.size or not (w.shape == up.shape == lo.shape):
+        return None
+    return {"omega": w.tolist(), "upper": up.tolist(), "lower": lo.tolist()}
+
+
+def certificate_sweep(record):
+    """``(omega, upper, lower)`` arrays of a record's (or certificate's) μ sweep, or ``None``.
+
+    A stored figure that was not finite is ``null`` in the file, NaN here.
+    """
+    record = _as_record(record)
+    sweep = record.get("sweep") if isinstance(record, dict) else None
+    if not isinstance(sweep, dict):
+        return None
+    try:
+        w, up, lo = (np.array(sweep[k], dtype=float).ravel() for k in ("omega", "upper", "lower"))
+    except (KeyError, TypeError, ValueError):
+        return None
+    return (w, up, lo) if w.size and w.shape == up.shape == lo.shape else None
 
 
 def _as_record(record):

@@ -35,14 +35,26 @@ from polyrob.analysis.certificate import Status
 from polyrob.errors import ArgumentError
 from polyrob.io.atomic import atomic_write, json_default
 from polyrob.report import plots
-from polyrob.report.certificates import certificate_record, certificate_rows, frozen_status, is_decided
+from polyrob.report.certificates import (
+    certificate_record,
+    certificate_rows,
+    certificate_sweep,
+    frozen_status,
+    is_decided,
+)
 
 __all__ = ["ReportFiles", "write_report"]
 
-CSS = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}
-table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:2px 8px;text-align:right}
-th{background:#eee}td.l,th.l{text-align:left}.bad{color:#c00;font-weight:bold}.ok{color:#070}
-img{max-width:100%;border:1px solid #ddd;margin:0.5em 0}"""
+CSS = """body{font-family:sans-serif;max-width:1100px;margin:1.5em auto;padding:0 1em;color:#222;line-height:1.35}
+h1{font-size:1.7em;margin:0.3em 0}#verdict{font-size:1.25em}
+.scroll{overflow-x:auto;max-width:100%}table{border-collapse:collapse;margin:0.5em 0}
+td,th{border:1px solid #bbb;padding:2px 8px;text-align:right;vertical-align:top}
+th{background:#eee}td.l,th.l{text-align:left}td.text{min-width:14em;overflow-wrap:anywhere}
+.bad{color:#c00}p.bad,tr.bad td.status{font-weight:bold}.ok{color:#070}
+figure{margin:1em 0}figcaption{font-size:0.95em;color:#444}
+img{max-width:100%;height:auto;border:1px solid #ddd;margin:0.5em 0}
+@media (max-width:640px){body{padding:0 0.5em;margin-top:0.8em}h1{font-size:1.3em}h2{font-size:1.15em}
+td,th{padding:2px 3px;font-size:0.85em}td.text{min-width:8em}}"""
 
 
 @dataclass(frozen=True)
@@ -66,7 +78,7 @@ def _fmt(v, missing: str = "not computed") -> str:
     if isinstance(v, (bool, np.bool_)):
         return "yes" if v else "no"
     if isinstance(v, (float, np.floating)):
-        v = float(v)
+        v = float(v) + 0.0  # -0.0 prints as 0
         # a spectral radius 0.99999997 must not print as 1
         return f"{v:.12g}" if 0 < abs(abs(v) - 1.0) < 1e-4 else f"{v:.5g}"
     if isinstance(v, (list, tuple)) and len(v) > 6:
@@ -79,7 +91,9 @@ class _Doc:
 
     def __init__(self, title):
         self.h = [
-            f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+            "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+            "<meta name='viewport' content='width=device-width, initial-scale=1'>"
+            f"<title>{html.escape(title)}</title>"
             f"<style>{CSS}</style></head><body><h1>{html.escape(title)}</h1>"
         ]
         self.md = [f"# {title}", ""]
@@ -93,21 +107,21 @@ class _Doc:
         self.h.append(f"<p{attrs}>{html.escape(text)}</p>")
         self.md += [f"**{text}**" if bad or ident else text, ""]
 
-    def table(self, header, rows, bad_rows=(), ident=None, left=(0,)):
+    def table(self, header, rows, bad_rows=(), ident=None, left=(0,), classes=None):
+        """A table in a horizontally scrolling box (a phone's screen); ``classes[i]``: the class of column ``i``."""
         attrs = f" id='{ident}'" if ident else ""
+        classes = dict(classes or {})
         cells = "".join(f"<th class='l'>{html.escape(str(c))}</th>" for c in header)
-        self.h.append(f"<table{attrs}><tr>{cells}</tr>")
+        self.h.append(f"<div class='scroll'><table{attrs}><tr>{cells}</tr>")
         for k, row in enumerate(rows):
-            cls = " class='bad'" if k in bad_rows else ""
-            self.h.append(
-                f"<tr{cls}>"
-                + "".join(
-                    f"<td class='l'>{html.escape(_fmt(c))}</td>" if i in left else f"<td>{html.escape(_fmt(c))}</td>"
-                    for i, c in enumerate(row)
-                )
-                + "</tr>"
-            )
-        self.h.append("</table>")
+            tr = " class='bad'" if k in bad_rows else ""
+            tds = []
+            for i, c in enumerate(row):
+                cls = " ".join(x for x in ("l" if i in left else "", classes.get(i, "")) if x)
+                attr = f" class='{cls}'" if cls else ""
+                tds.append(f"<td{attr}>{html.escape(_fmt(c))}</td>")
+            self.h.append(f"<tr{tr}>" + "".join(tds) + "</tr>")
+        self.h.append("</table></div>")
         self.md += ["| " + " | ".join(map(str, header)) + " |", "|" + "---|" * len(header)]
         self.md += ["| " + " | ".join(_fmt(c) for c in row) + " |" for row in rows]
         self.md.append("")
@@ -141,7 +155,7 @@ def _certificates(doc, certificates) -> dict:
     rows = [(name, st, _fmt(bound, "no finite bound"), covers) for name, st, bound, covers in certificate_rows(records)]
     bad = [k for k, row in enumerate(rows) if row[1] != Status.CERTIFIED.value]
     header = ["certificate", "status", "bound", "what it covers"]
-    doc.table(header, rows, bad_rows=bad, ident="certificates", left=(0, 1, 3))
+    doc.table(header, rows, bad_rows=bad, ident="certificates", left=(0, 1, 3), classes={1: "status", 3: "text"})
     for name, rec in records.items():
         if rec.get("verdict"):
             doc.para(f"{name}: {rec['verdict']}")
@@ -202,7 +216,8 @@ def write_report(
     discretization : dict, optional
         Plain figures of the discretisation/quantisation analysis.
     mu_curves : dict, optional
-        ``{name: (omega, upper, lower)}`` for the μ plot.
+        ``{name: (omega, upper, lower)}`` for the μ plot, after the sweep each
+        certificate was decided on (its whole grid, ω = 0 included when swept).
     notes : sequence of str
         Extra remarks (fallbacks, approximations) printed under the summary.
 
@@ -223,7 +238,9 @@ def write_report(
         figures.append(path)
         doc.figure(f"figures/{name}", caption)
 
-    validation["certificates"] = _certificates(doc, certificates)
+    records = _certificates(doc, certificates)
+    validation["certificates"] = records
+    kinds = getattr(getattr(pldi, "robot", None), "joint_kinds", None)
     doc.para(f"Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC by polyrob.")
     for note in notes:
         doc.para(str(note))
@@ -279,7 +296,7 @@ def write_report(
             doc.para(f"#{k + 1}: {s.verdict()}", bad=s.left_domain or not s.success)
         fig(
             "tracking.png",
-            lambda p: plots.plot_tracking(sims, p, joint_names=[m.joint for m in sims[0].metrics]),
+            lambda p: plots.plot_tracking(sims, p, joint_names=[m.joint for m in sims[0].metrics], kinds=kinds),
             "Nonlinear closed loop: positions and references, torques against the effort limits "
             "(red: after leaving the domain)",
         )
@@ -310,7 +327,7 @@ def write_report(
     if unc is not None:
         fig(
             "pldi_bode.png",
-            lambda p: plots.plot_pldi_bode(unc, p),
+            lambda p: plots.plot_pldi_bode(unc, p, kinds=kinds),
             "Bode magnitude of sampled and corner plants of the uncertain plant, and the nominal (paper Fig. 3)",
         )
     if monte_carlo is not None:
@@ -327,7 +344,11 @@ def write_report(
             lambda p: plots.plot_sensitivities(monte_carlo, p),
             "S and T of the sampled plants (grey), the nominal (black) and 1/|W_S|, 1/|W_T| (red) (paper Fig. 4)",
         )
-        fig("steps.png", lambda p: plots.plot_steps(monte_carlo, p), "Step responses of the sampled linear loops")
+        fig(
+            "steps.png",
+            lambda p: plots.plot_steps(monte_carlo, p, kinds=kinds),
+            "Unit-step responses of the sampled linear loops",
+        )
         validation["monte_carlo"] = s
     comp = dict(controllers or {})
     if controller is not None:
@@ -336,12 +357,20 @@ def write_report(
         doc.heading("Controllers")
         fig(
             "controllers.png",
-            lambda p: plots.plot_controllers(comp, p),
+            lambda p: plots.plot_controllers(comp, p, kinds=kinds),
             "Magnitude of each controller entry (paper Fig. 5)",
         )
-    if mu_curves:
+    curves = {f"certificate: {k}": sw for k, sw in ((k, certificate_sweep(r)) for k, r in records.items()) if sw}
+    curves.update(mu_curves or {})
+    if curves:
         doc.heading("μ over frequency")
-        fig("mu.png", lambda p: plots.plot_mu(mu_curves, p), "μ upper (solid) and lower (dashed) bounds")
+        zero = any(np.any(np.asarray(c[0]) == 0) for c in curves.values())
+        fig(
+            "mu.png",
+            lambda p: plots.plot_mu(curves, p),
+            "μ upper (solid) and lower (dashed) bounds over each grid, from its lowest frequency"
+            + ("; the value at ω = 0 is the point at the left edge" if zero else ""),
+        )
 
     page, md = doc.text()
     h, m = run / "report.html", run / "report.md"
