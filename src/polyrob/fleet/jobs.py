@@ -330,12 +330,9 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
     details = {}
     design, alpha, hyper, omega, skipped = design_stage(problem, settings, timings, details)
     if alpha is not None:
-        # the certificate is at the found bandwidth: the same PLDI (no new bounding) with the scaled weights
-        from polyrob.pipeline import build_problem
+        from polyrob.pipeline.design import scaled_problem
 
-        problem = build_problem(
-            problem.robot, hyperparameters=hyper, uncertainty=job.uncertainty, pldi=problem.pldi, progress=False
-        )
+        problem = scaled_problem(problem, hyper)  # where the design was certified: the same PLDI and model
     design = reduce_stage(problem, design, settings, timings, details)
     description = problem.description()
     description["job"] = job.to_dict()

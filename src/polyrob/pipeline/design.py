@@ -195,6 +195,8 @@ def reduce_design(
     # the reduced controller's own figures; the full order's only under full_* names
     cert = _record(reduced.result, problem.P)
     cert.update(full_order=int(result.order), full_peak_mu_upper=float(result.peak_mu))
+    if "bandwidth_scaling" in design.record:  # how the weights were found stays with the controller
+        cert["bandwidth_scaling"] = design.record["bandwidth_scaling"]
     design = Design(controller=reduced.controller, result=result, reduced=reduced, record=cert, notes=design.notes)
     return certify_design(problem, design) if certify else design
 
