@@ -166,7 +166,7 @@ def test_synth_text_verdict_is_not_certified_when_mu_exceeds_one(tmp_path, capsy
     (i,) = [k for k, line in enumerate(lines) if line.startswith("verdict: ")]
     assert lines[i].startswith("verdict: robust performance VIOLATED: mu lower bound 2.226 >= 1")
     # below it, what the certificate covers and the loop it rests on
-    assert lines[i + 1].startswith("covers: for constant parameters") and "paper_2r over domain 'paper'" in lines[i + 1]
+    assert lines[i + 1].startswith("covers: for constant parameters") and "paper_2r over domain 'paper: q ±(3.14, 3.14), qdot ±(3.96, 9.96), u 0'" in lines[i + 1]
     assert lines[-1] == "loop at Delta = 0: stable"
     assert out.splitlines()[0].startswith("[1/2] reading the PLDI")
 
