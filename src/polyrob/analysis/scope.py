@@ -69,6 +69,8 @@ class Scope:
         Set by the decision: "every frequency" or the grid it rests on.
     vertices_from : str
         For a vertex (time-varying) certificate: the set the vertices came from.
+    notes : tuple of str
+        What else limits it, e.g. a mimic joint the robot model locked.
     """
 
     kind: str = "robust performance"
@@ -81,6 +83,7 @@ class Scope:
     robot: str = ""
     frequencies: str = ""
     vertices_from: str = ""
+    notes: tuple = ()
 
     def sentence(self) -> str:
         """The scope in one sentence (what the verdict line leaves out)."""
@@ -101,7 +104,8 @@ class Scope:
                 self.enclosure, "of unknown enclosure"
             )
             parts.append(f"around the PLDI of {self.robot or 'the robot'} over domain {self.domain!r}, {encl}")
-        return ", ".join(parts)
+        text = ", ".join(parts)
+        return text + "".join(f"; note: {n}" for n in self.notes)
 
     def summary(self) -> dict:
         return strict_json(dict(self.__dict__))

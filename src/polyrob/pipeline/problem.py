@@ -183,6 +183,7 @@ class Problem:
             coverage_points=points if checked else 0,
             enclosure=enclosure,
             domain=_domain_words(self.domain),
+            notes=tuple(getattr(self.robot, "notes", ()) or ()),
             robot=str(self.robot.name),
         )
 
