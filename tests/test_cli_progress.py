@@ -37,3 +37,8 @@ def test_fixed_structure_progress_off_a_terminal_and_its_time_limit(capsys, tmp_
     # --quiet: no progress lines
     code, _, err = _run(capsys, *argv, "--init", "paper", "--starts", "1", "--max-iter", "1", "--quiet")
     assert "[fixed " not in err
+
+
+def test_run_into_a_place_for_no_results_names_the_file_it_would_write(capsys):
+    code, _, err = _run(capsys, "run", "planar_2r", "-o", "/proc/polyrob_run")
+    assert code == 2 and "K.json" in err and "controller.json" not in err

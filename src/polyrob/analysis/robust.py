@@ -246,10 +246,10 @@ def nominal_performance(P: GeneralizedPlant, K) -> float:
     """H∞ norm from ``w`` to ``z`` of the loop around the nominal plant ``G_n``.
 
     ``inf`` when that loop is proved unstable (an unstable system has no
-    finite H∞ norm, whatever ``control.linfnorm`` returns for it), ``nan``
-    when its stability is undecided at double precision.
+    finite H∞ norm), ``nan`` when its stability is undecided; else the
+    proved upper bound of :func:`polyrob.analysis.norms.hinf_norm`.
     """
-    import control
+    from polyrob.analysis.norms import hinf_norm
 
     N = lft(P.at(P.uncertain.nominal_delta, strict=False), K, n_u=P.n_u, n_y=P.n_y)
     verdict = stability_verdict(N)
@@ -257,7 +257,7 @@ def nominal_performance(P: GeneralizedPlant, K) -> float:
         return float("inf")
     if not verdict.stable:
         return float("nan")
-    return float(control.linfnorm(N)[0])
+    return float(hinf_norm(N))
 
 
 @dataclass(frozen=True, eq=False)

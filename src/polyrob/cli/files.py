@@ -9,8 +9,12 @@ from polyrob.errors import ArgumentError
 __all__ = ["register", "check_output_dir"]
 
 
-def check_output_dir(path, option: str = "-o"):
-    """A directory to write into: may exist; must not be a file, a virtual file system or read-only."""
+def check_output_dir(path, option: str = "-o", first_file: str = "controller.json"):
+    """A directory to write into: may exist; must not be a file, a virtual file system or read-only.
+
+    ``first_file`` is a file the command writes there: the same place rules
+    apply to it, and an error names it (``run`` writes ``K.json`` first).
+    """
     from pathlib import Path
 
     from polyrob.io.paths import check_output_path
@@ -18,7 +22,7 @@ def check_output_dir(path, option: str = "-o"):
     p = Path(path)
     if p.exists() and not p.is_dir():
         raise ArgumentError(f"{option} {path}: is a file, not a directory")
-    check_output_path(p / "controller.json", option)  # same place rules as for a file inside it
+    check_output_path(p / first_file, option)
     return p
 
 

@@ -48,7 +48,7 @@ def _run_dir(args):
         return None
     from polyrob.cli.files import check_output_dir
 
-    return check_output_dir(args.output)
+    return check_output_dir(args.output, first_file="K.json")
 
 
 def print_design(design, out) -> None:

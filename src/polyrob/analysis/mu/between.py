@@ -39,6 +39,7 @@ import numpy as np
 from scipy.linalg import matrix_balance
 
 from polyrob.analysis.mu.blocks import as_block_structure
+from polyrob.analysis.mu.frequency import matrix_response
 
 __all__ = ["BetweenGridResult", "verify_between", "with_between", "crossing_frequencies"]
 
@@ -152,11 +153,16 @@ def crossing_frequencies(A, B, C, D, P, G, level) -> np.ndarray | None:
     return np.array(found, float)
 
 
+def _at(A, B, C, D, w) -> np.ndarray:
+    """``M(jω)`` by one direct solve (the frequency module's raw-matrix evaluation); ``w = inf``: ``D``."""
+    return D if np.isinf(w) else matrix_response(A, B, C, D, modal=False)([w])[0]
+
+
 def _largest_eigenvalue(A, B, C, D, P, G, level, w) -> float:
     """Largest eigenvalue of ``Φ(ω)`` (``w = inf``: the feedthrough)."""
     if not B.shape[1]:
         return -np.inf
-    M = D if np.isinf(w) else C @ np.linalg.solve(1j * w * np.eye(A.shape[0]) - A, B) + D
+    M = _at(A, B, C, D, w)
     L = M.conj().T @ P @ M + 1j * (G @ M - M.conj().T @ G) - level**2 * P
     return float(np.linalg.eigvalsh((L + L.conj().T) / 2)[-1])
 
@@ -258,7 +264,7 @@ def verify_between(
         return True
 
     def bound_at(x):
-        M = D if np.isinf(x) else C @ np.linalg.solve(1j * x * np.eye(A.shape[0]) - A, B) + D
+        M = _at(A, B, C, D, x)
         ec, er = st.embeddings()
         r = mussv(M[np.ix_(ec, er)], st, method=how, lower=False)
         return float(r.upper), (r.D, r.G)
