@@ -5,7 +5,7 @@ a peak-refined sweep, then :func:`polyrob.analysis.mu.between.with_between`)
 and prints, as JSON, the grid peak, the level verified at every frequency
 (or why none), the points added and the times.  Usage (docs/mu.md)::
 
-    python benchmarks/mu_between.py paper_2r --domain paper --uncertainty lft --bandwidth-scale 4 K.json
+    python benchmarks/mu_between.py paper_2r K.json --domain paper --uncertainty lft --bandwidth-scale 4
     python benchmarks/mu_between.py --batch-dir out/planar_2r    # a `polyrob batch -o out` robot folder
 """
 
