@@ -29,8 +29,8 @@ def test_a_problem_the_performance_limit_rules_out_stops_with_one_line(capsys):
 def test_fixed_structure_progress_off_a_terminal_and_its_time_limit(capsys, tmp_path):
     """A line per iteration on stderr although stderr is not a terminal; no new iteration after --time-limit."""
     paper_pldi().save(tmp_path / "paper.json")
-    argv = ["synth", "paper_2r", "--pldi", tmp_path / "paper.npz", "--uncertainty", "box", "--structure", "tf3"]
-    code, out, err = _run(capsys, *argv, "--init", "paper", "--starts", "2", "--max-iter", "40", "--time-limit", "20")
+    argv = ["synth", "paper_2r", "--pldi", tmp_path / "paper.npz", "--uncertainty", "box", "--complex", "--structure", "tf3"]
+    code, out, err = _run(capsys, *argv, "--init", "paper", "--starts", "2", "--max-iter", "40", "--time-limit", "10")
     assert "[fixed " in err and "peak mu" in err  # the library's progress lines, shown by the CLI
     assert "synthesis stopped by" in out or "stopped by the time limit" in out
     assert code in (0, 1)
