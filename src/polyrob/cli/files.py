@@ -27,6 +27,7 @@ def check_output_dir(path, option: str = "-o", first_file: str = "controller.jso
 
 
 def cmd_report(args) -> int:
+    from polyrob.analysis.certificate import Status
     from polyrob.pipeline.rebuild import load_run
     from polyrob.report.build import write_run_report
     from polyrob.report.certificates import certificate_rows, frozen_status
@@ -53,7 +54,7 @@ def cmd_report(args) -> int:
         "validation": str(files.validation),
         "figures": [str(f) for f in files.figures],
         "status": status,
-        "certified": status == "CERTIFIED",
+        "certified": status is not None and Status(status).certified,
         "verdict": f"verdict: {status or 'none (no frozen-robot certificate in the files)'}",
         "certificates": [
             {"name": name, "status": st, "bound": bound, "covers": covers}

@@ -256,7 +256,7 @@ def read_run_certificates(run_dir, controller: str = "K.json") -> tuple[dict, li
         if is_decided(record):
             certs[str(name)] = record
         else:
-            notes.append(f"{path.name}: '{name}' has no decided status (CERTIFIED, GRID_ONLY, ...): not shown")
+            notes.append(f"{path.name}: '{name}' has no decided status (one of the four of polyrob.analysis.certificate): not shown")
     return certs, notes
 
 

@@ -147,7 +147,7 @@ def _certificates(doc, certificates) -> dict:
     if status is None:
         doc.para("verdict: none (no frozen-robot certificate was given)", bad=True, ident="verdict")
     else:
-        doc.para(f"verdict: {status}", bad=status != Status.CERTIFIED.value, ident="verdict")
+        doc.para(f"verdict: {status}", bad=not (status and Status(status).certified), ident="verdict")
     doc.heading("Certificates")
     if not records:
         doc.para("No certificate was given.")
