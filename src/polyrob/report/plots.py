@@ -189,7 +189,7 @@ def plot_mu(curves: dict, path, *, title: str = "μ bounds over frequency") -> P
     The axis spans every curve's grid, from its lowest frequency; a curve
     with a value at ω = 0 has it drawn as a point at the left edge, past a
     dotted line, labelled "ω = 0".  Each curve's legend names its peak and
-    where it is.
+    where it is.  A lower bound of 0 (none found at that frequency) is left out.
     """
     fig = Figure(layout="constrained", figsize=(9.6, 4.2))
     ax = fig.subplots()
@@ -198,6 +198,8 @@ def plot_mu(curves: dict, path, *, title: str = "μ bounds over frequency") -> P
         w = np.asarray(w, float).ravel()
         up = _finite(up).ravel()
         lo = None if lo is None else _finite(lo).ravel()
+        if lo is not None:
+            lo[lo <= 0] = np.nan  # 0: no lower bound found there (a gap, not a plunge to 0)
         prepared.append((name, w, up, lo))
     pos = np.concatenate([w[w > 0] for _, w, _, _ in prepared] or [np.array([])])
     wmin, wmax = (pos.min(), pos.max()) if pos.size else (1e-3, 1e3)
@@ -210,14 +212,24 @@ def plot_mu(curves: dict, path, *, title: str = "μ bounds over frequency") -> P
             w[keep], up[keep], color=color, lw=lw, zorder=2 - 0.1 * k, label=f"{name}: upper ({_peak_words(w, up)})"
         )
         if lo is not None:
-            ax.semilogx(w[keep], lo[keep], color=color, lw=0.8 * lw, ls="--", label=f"{name}: lower")
+            ax.semilogx(
+                w[keep], lo[keep], color=color, lw=0.5 * lw, ls="--", marker=".", ms=2.5, label=f"{name}: lower"
+            )
         zero = np.flatnonzero(w == 0)
         if zero.size:
             z = zero[0]
             ax.plot([x0], [up[z]], "o", color=color, ms=6)
             if lo is not None and np.isfinite(lo[z]):
                 ax.plot([x0], [lo[z]], "o", color=color, ms=6, mfc="none")
-            ax.annotate(f"{up[z]:.4g}", (x0, up[z]), textcoords="offset points", xytext=(6, 4), fontsize=7, color=color)
+            ax.annotate(
+                f"{up[z]:.4g}",
+                (x0, up[z]),
+                textcoords="offset points",
+                xytext=(6, 0),
+                va="center",
+                fontsize=7,
+                color=color,
+            )
     ax.axhline(1.0, color="r", lw=0.8, label="μ = 1")
     if has_zero:
         ax.axvline(x0 * 10**0.35, color="0.4", lw=0.8, ls=":")
