@@ -103,7 +103,9 @@ def matrix_response(A, B, C, D, *, modal: bool = True):
     >>> complex(np.round(f([1.0])[0, 0, 0], 6))    # 1/(j + 2)
     (0.4-0.2j)
     """
-    A, B, C, D = (np.asarray(X, dtype=float) for X in (A, B, C, D))
+    # complex realisations (a D-scaled loop) stay complex: no cast that drops imaginary parts
+    dtype = np.result_type(*(np.asarray(X) for X in (A, B, C, D)), float)
+    A, B, C, D = (np.asarray(X, dtype=dtype) for X in (A, B, C, D))
     n = A.shape[0]
     shape = (C.shape[0], B.shape[1])
     if n == 0:
