@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from polyrob.plant.lftplant import weakest_enclosure  # one rule: a missing or sampled input is sampled
+
 __all__ = ["Scope", "FROZEN", "ARBITRARY", "weakest_enclosure", "finite_or_none", "strict_json"]
 
 
@@ -28,20 +30,6 @@ def strict_json(d: dict) -> dict:
 #: The variations of the parameters a certificate can cover.
 FROZEN = "constant parameters (every frozen robot of the set)"
 ARBITRARY = "parameters varying arbitrarily fast inside the set"
-
-
-def weakest_enclosure(*enclosures) -> str:
-    """``"certified"`` only when every input was proved; ``"sampled"`` when any was sampled; else ``"unknown"``.
-
-    >>> weakest_enclosure("certified", "sampled"), weakest_enclosure("certified"), weakest_enclosure(None)
-    ('sampled', 'certified', 'unknown')
-    """
-    given = [e for e in enclosures if e]
-    if not given or len(given) < len(enclosures):
-        return "sampled" if "sampled" in given else "unknown"
-    if all(e == "certified" for e in given):
-        return "certified"
-    return "sampled" if "sampled" in given else "unknown"
 
 
 @dataclass(frozen=True)

@@ -103,11 +103,6 @@ class Design:
     def peak_mu_lower(self) -> float:
         return float(self.record["peak_mu_lower"])
 
-    @property
-    def peak_mu_everywhere(self) -> float | None:
-        """The μ bound verified at every frequency for :attr:`controller` (``None`` if not verified)."""
-        return getattr(getattr(self.certificate, "mu", None), "upper_everywhere", None)
-
     def certified_by(self, certificate) -> Design:
         """The design with ``certificate`` (of :attr:`controller` on the problem) as its verdict."""
         record = dict(self.record, certificate=certificate.summary(), status=certificate.status.value)

@@ -187,19 +187,6 @@ class Problem:
             robot=str(self.robot.name),
         )
 
-    def covers(self) -> str:
-        """Plain words for what a μ verdict on this problem covers."""
-        enclosure = (
-            "proved (interval arithmetic)"
-            if self.pldi.enclosure == "certified"
-            else "sampled and searched (not proved)"
-        )
-        return (
-            f"every frozen (constant in time) Jacobian pair in the {self.model} set of {self.unc.n_params} "
-            f"real parameters around the {enclosure} PLDI of {self.robot.name} over domain "
-            f"'{self.domain.name}'"
-        )
-
 
 def _domain_words(domain) -> str:
     """The domain's name and what it bounds, per joint: ``paper: q ±(3.14, 3.14), qdot ±(3.96, 9.96), u 0``."""

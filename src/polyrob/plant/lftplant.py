@@ -31,7 +31,11 @@ MAX_CORNERS = 1024
 
 
 def weakest_enclosure(*levels) -> str:
-    """``"certified"`` if every level is ``"certified"``, else ``"sampled"`` (a missing level is sampled)."""
+    """``"certified"`` if every level is ``"certified"``, else ``"sampled"`` (a missing level is sampled).
+
+    >>> weakest_enclosure("certified", "sampled"), weakest_enclosure("certified"), weakest_enclosure(None)
+    ('sampled', 'certified', 'sampled')
+    """
     return "certified" if levels and all(level == "certified" for level in levels) else "sampled"
 
 
