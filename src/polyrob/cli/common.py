@@ -7,7 +7,13 @@ import json
 import math
 import sys
 
-from polyrob.cli.options import nonnegative_float, parse_joint_values, parse_list, positive_float
+from polyrob.cli.options import (
+    nonnegative_float,
+    parse_armature,
+    parse_joint_values,
+    parse_list,
+    positive_float,
+)
 from polyrob.errors import ArgumentError, DomainError
 
 __all__ = [
@@ -146,6 +152,12 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--lock", default=None, help="comma-separated joints to lock (default: grippers/fingers; '' locks none)"
     )
+    parser.add_argument(
+        "--armature",
+        default=None,
+        help="reflected rotor inertia added to M's diagonal: V, V1,V2,... or JOINT=V,... "
+        "(replaces the SRDF's gear ratio^2 x rotor inertia; default: the SRDF's, else none)",
+    )
 
 
 def add_domain_arguments(parser: argparse.ArgumentParser) -> None:
@@ -166,7 +178,7 @@ def robot_from_args(args):
     from polyrob.model.robots import load_robot
 
     lock = None if args.lock is None else [s.strip() for s in args.lock.split(",") if s.strip()]
-    return load_robot(args.robot, lock=lock)
+    return load_robot(args.robot, lock=lock, armature=parse_armature(getattr(args, "armature", None)))
 
 
 def domain_options_given(args) -> bool:

@@ -55,6 +55,11 @@ def cmd_info(args) -> int:
         print(f"locked  {', '.join(robot.locked)}")
     for note in robot.notes:
         print(f"NOTE    {note}")
+    print(f"inertia reflected rotor inertia (armature): {robot.reflected_inertia}")
+    if any(info["armature"]):
+        print("        armature " + ", ".join(f"{a:.4g}" for a in info["armature"]))
+    for name, pose in info["poses"].items():
+        print(f"pose    {name}: [" + ", ".join(f"{x:.4g}" for x in pose) + "] (SRDF)")
     print()
     print(f"{'joint':<24}{'kind':<12}{'position limits':>22}{'velocity':>10}{'effort':>10}{'damping':>9}")
     for j in info["joints"]:

@@ -20,6 +20,10 @@ __all__ = [
     "positive_float",
     "nonnegative_float",
     "fraction",
+    "parse_armature",
+    "parse_pose",
+    "parse_bound",
+    "parse_interval",
 ]
 
 
@@ -81,6 +85,72 @@ def parse_joint_values(text: str | None, option: str, *, ranges: bool):
     if len(values) == 1:
         return values[0]
     return [v if isinstance(v, list) else [-abs(v), abs(v)] for v in values]
+
+
+def parse_armature(text: str | None):
+    """``--armature``: ``0.1`` (every joint), ``0.1,0.2,...`` (one per joint) or ``joint1=0.1,joint3=0.2``.
+
+    Every value must be a finite number >= 0 (kg m^2 for a revolute joint).
+    """
+    if text is None:
+        return None
+    items = [s for s in text.split(",") if s.strip()]
+    if not items:
+        raise ArgumentError("--armature: empty value")
+
+    def value(s):
+        v = number(s, "--armature")
+        if v < 0:
+            raise ArgumentError(f"--armature: a reflected inertia must be >= 0, got '{s}'")
+        return v
+
+    if all("=" in s for s in items):
+        return {k.strip(): value(v) for k, v in (s.split("=", 1) for s in items)}
+    if any("=" in s for s in items):
+        raise ArgumentError(f"--armature: mix of JOINT=VALUE and plain values in '{text}'")
+    values = [value(s) for s in items]
+    return values[0] if len(values) == 1 else values
+
+
+def parse_pose(text: str | None):
+    """``--pose``: a name (``default``, ``home``) or positions ``q1,q2,...`` (finite numbers, ``pi`` allowed)."""
+    if text is None:
+        return None
+    t = text.strip()
+    if not t:
+        raise ArgumentError("--pose: empty value: give a pose name or q1,q2,...")
+    if "," not in t:
+        try:
+            return [number(t, "--pose")]
+        except ArgumentError:
+            if t.lower() in ("nan", "-nan", "+nan"):
+                raise
+            return t
+    return [number(s, "--pose") for s in t.split(",")]
+
+
+def parse_bound(text: str | None, option: str) -> float | None:
+    """One finite number >= 0 (``--q-radius``, ``--qddot-max``), or None."""
+    if text is None:
+        return None
+    value = number(text, option)
+    if value < 0:
+        raise ArgumentError(f"{option}: must be >= 0, got '{text}'")
+    return value
+
+
+def parse_interval(text: str | None, option: str) -> list[float] | None:
+    """``LO:HI`` or ``HI`` (meaning ``0:HI``) of finite numbers with ``0 <= LO <= HI``, or None."""
+    if text is None:
+        return None
+    parts = text.split(":")
+    if len(parts) > 2:
+        raise ArgumentError(f"{option}: give LO:HI, got '{text}'")
+    vals = [number(s, option) for s in parts]
+    lo, hi = (0.0, vals[0]) if len(vals) == 1 else vals
+    if not 0 <= lo <= hi:
+        raise ArgumentError(f"{option}: need 0 <= LO <= HI, got '{text}'")
+    return [lo, hi]
 
 
 def parse_list(text: str | None, option: str, *, positive: bool = True) -> list[float] | None:

@@ -35,6 +35,10 @@ class Manipulator:
         Joints of the source locked at their neutral position (not in ``joint_names``).
     notes : tuple of str
         What the model leaves out that a user must know (e.g. a mimic joint locked).
+    reflected_inertia : str
+        Whether the rotors' reflected inertia (armature) is in ``M(q)``, and from where.
+    reference_poses : dict
+        Named poses ``name -> tuple of m values`` (from the robot's SRDF).
     """
 
     name: str
@@ -48,6 +52,8 @@ class Manipulator:
     damping: np.ndarray
     locked: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
+    reflected_inertia: str = "not modelled: an analytic M(q) is used as given"
+    reference_poses: dict = {}  # noqa: RUF012 - read-only default, instances set their own
 
     @property
     def m(self) -> int:
@@ -86,6 +92,9 @@ class Manipulator:
             "m": self.m,
             "locked": list(self.locked),
             "notes": list(self.notes),
+            "reflected_inertia": self.reflected_inertia,
+            "armature": [float(a) for a in getattr(self, "armature", np.zeros(self.m))],
+            "poses": {k: list(v) for k, v in self.reference_poses.items()},
             "joints": [
                 {
                     "name": n,

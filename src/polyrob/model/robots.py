@@ -91,7 +91,7 @@ def example_robot_data_dir() -> Path | None:
 # --------------------------------------------------------------------------- loading
 
 
-def load_robot(source: str | Path = "planar_2r", *, lock: Sequence[str] | None = None):
+def load_robot(source: str | Path = "planar_2r", *, lock: Sequence[str] | None = None, armature=None):
     """Load a robot, reduced to its actuated serial joints.
 
     Parameters
@@ -105,6 +105,10 @@ def load_robot(source: str | Path = "planar_2r", *, lock: Sequence[str] | None =
     lock : sequence of str, optional
         Joints to lock at their neutral position.  By default every joint whose
         name mentions a finger, gripper, hand or jaw; pass ``[]`` to lock none.
+    armature : float, sequence or mapping joint -> float, optional
+        Reflected rotor inertia added to the diagonal of ``M(q)``; replaces
+        the SRDF's rotor parameters (``gear_ratio^2 * rotor_inertia``) for
+        the joints given.  ``robot.reflected_inertia`` says what was used.
 
     Returns
     -------
@@ -122,6 +126,8 @@ def load_robot(source: str | Path = "planar_2r", *, lock: Sequence[str] | None =
     --------
     >>> load_robot("panda").m      # fingers locked by default
     7
+    >>> load_robot("talos_left_arm").reflected_inertia
+    'from the SRDF (talos.srdf): gear ratio^2 x rotor inertia'
     >>> load_robot("no_such_robot")
     Traceback (most recent call last):
     ...
@@ -129,9 +135,11 @@ def load_robot(source: str | Path = "planar_2r", *, lock: Sequence[str] | None =
     """
     text = str(source)
     if text in analytic.ANALYTIC_ROBOTS:
+        if armature is not None:
+            raise RobotError(f"{text} is an analytic model: its M(q) is given as is, an armature cannot be added")
         return analytic.ANALYTIC_ROBOTS[text]()
     path = resolve_urdf(text)
-    return load_urdf(path, name=_robot_name(text, path), lock=lock)
+    return load_urdf(path, name=_robot_name(text, path), lock=lock, armature=armature)
 
 
 def _robot_name(text: str, path: Path) -> str:

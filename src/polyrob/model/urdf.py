@@ -33,7 +33,7 @@ import numpy as np
 import pinocchio
 
 from polyrob.errors import RobotError
-from polyrob.model import dynamics, physical, urdf_checks
+from polyrob.model import dynamics, physical, srdf, urdf_checks
 from polyrob.model.base import Manipulator
 
 __all__ = ["Robot", "load_urdf", "DEFAULT_LOCK_PATTERN", "JOINT_KINDS"]
@@ -66,6 +66,14 @@ class Robot(Manipulator):
     damping: np.ndarray = field(repr=False)
     locked: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
+    armature: np.ndarray = field(default=None, repr=False)
+    reflected_inertia: str = "none in the URDF/SRDF"
+    srdf: str | None = None
+    reference_poses: dict = field(default_factory=dict, repr=False)
+
+    def __post_init__(self):
+        if self.armature is None:
+            object.__setattr__(self, "armature", np.zeros(len(self.joint_names)))
 
     @functools.cached_property
     def _data(self) -> pinocchio.Data:
@@ -103,8 +111,14 @@ class Robot(Manipulator):
         return dynamics.jacobians_batch(self, q, qdot, u)
 
 
-def load_urdf(path: str | Path, *, name: str | None = None, lock=None) -> Robot:
-    """Load a URDF file into a :class:`Robot` (see :func:`load_robot`)."""
+def load_urdf(path: str | Path, *, name: str | None = None, lock=None, armature=None) -> Robot:
+    """Load a URDF file into a :class:`Robot` (see :func:`load_robot`).
+
+    The SRDF beside it (:func:`polyrob.model.srdf.find_srdf`) gives the named
+    reference poses and the rotor parameters: ``model.armature`` is set to
+    ``gear_ratio^2 * rotor_inertia`` of the kept joints, or to ``armature``
+    (a number, one per joint, or ``joint -> value``) where given.
+    """
     path = Path(path)
     urdf_checks.refuse_xacro_name(path)  # before any parser prints on stderr
     joints, links = _read_urdf(path)
@@ -161,6 +175,15 @@ def load_urdf(path: str | Path, *, name: str | None = None, lock=None) -> Robot:
             velocity[k], effort[k] = _num(lim.velocity), _num(lim.effort)
         damping[k] = _num(info["damping"], default=0.0)
     model.damping[:] = damping
+    srdf_path = srdf.find_srdf(path)
+    srdf_data = None if srdf_path is None else srdf.read_srdf(srdf_path)
+    reflected, reflected_source = srdf.reflected_inertia(srdf_data, names, armature)
+    model.armature[:] = reflected
+    for k, jname in enumerate(names):
+        if srdf_data is not None and jname in srdf_data.rotors:
+            model.rotorInertia[k], model.rotorGearRatio[k] = srdf_data.rotors[jname]
+    centre = np.where(np.isfinite(lower) & np.isfinite(upper), np.clip(0.0, lower, upper), 0.0)
+    poses = srdf.reference_poses(srdf_data, names, centre)
     for text, warn in notes:  # only for a robot that loads: a refused one says why
         if warn:
             logging.getLogger(__name__).warning("%s: %s", path, text)
@@ -177,6 +200,10 @@ def load_urdf(path: str | Path, *, name: str | None = None, lock=None) -> Robot:
         damping=damping,
         locked=tuple(lock_names),
         notes=tuple(text for text, _ in notes),
+        armature=np.array(reflected, float),
+        reflected_inertia=reflected_source,
+        srdf=None if srdf_path is None else str(srdf_path),
+        reference_poses=poses,
     )
 
 

@@ -147,6 +147,7 @@ class Problem:
         return {
             "robot": self.robot.name,
             "m": int(self.robot.m),
+            "reflected_inertia": str(getattr(self.robot, "reflected_inertia", "unknown")),
             "domain": self.domain.to_dict(),
             "weights": {k: list(v) for k, v in self.hyperparameters.items()},
             "uncertainty": {
@@ -183,7 +184,8 @@ class Problem:
             coverage_points=points if checked else 0,
             enclosure=enclosure,
             domain=_domain_words(self.domain),
-            notes=tuple(getattr(self.robot, "notes", ()) or ()),
+            notes=tuple(getattr(self.robot, "notes", ()) or ())
+            + (f"reflected rotor inertia: {getattr(self.robot, 'reflected_inertia', 'unknown')}",),
             robot=str(self.robot.name),
         )
 
@@ -191,6 +193,9 @@ class Problem:
 def _domain_words(domain) -> str:
     """The domain's name and what it bounds, per joint: ``paper: q ±(3.14, 3.14), qdot ±(3.96, 9.96), u 0``."""
     import numpy as np
+
+    if hasattr(domain, "words"):  # a task domain says it itself (pose, accelerations, payload)
+        return domain.words()
 
     def group(lo, hi):
         lo, hi = np.asarray(lo, float), np.asarray(hi, float)
