@@ -288,3 +288,23 @@ def test_summary_and_text(demo_slow):
     text = str(demo_slow)
     assert "PROVED" in text and "frozen (LTI) peak" in text and "rate-bounded" in text
     assert isinstance(demo_slow, GridData) is False
+
+
+def test_lpvtools_lpv_analysis_demo_order_of_magnitude():
+    """LPVTools doc 'LPV Analysis' (Peni & Seiler, ACC 2015): H = delta G - G delta, G = 1/(s+1).
+
+    The page prints no number for the rate-bounded loop, only that the
+    difference of the two paths is "on the order of 1% when |d delta/dt| <= 0.01"
+    and "on the order of 20% when ... 0.2"; frozen, H is 0.  (Here: z = x2 -
+    delta x1 obeys z' = -z - delta' x1, so the gain is at most the rate bound.)
+    """
+
+    def H(r):
+        d = r[0]
+        return np.diag([-1.0, -1.0]), np.array([[1.0], [d]]), np.array([[d, -1.0]]), np.zeros((1, 1))
+
+    grid = [np.linspace(-1, 1, 10)]
+    basis = [(lambda r, k=k: r[0] ** k, lambda r, k=k: [k * r[0] ** (k - 1) if k else 0.0]) for k in range(4)]
+    slow, fast = (polyrob.lpvnorm(H, grid, [(-b, b)], basis) for b in (0.01, 0.2))
+    assert slow.frozen_gamma == pytest.approx(0.0, abs=1e-9)
+    assert 0.005 < slow.gamma <= 0.01 * (1 + 1e-6) and 0.1 < fast.gamma <= 0.2 * (1 + 1e-6)
