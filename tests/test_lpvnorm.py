@@ -1,9 +1,8 @@
 """polyrob.lpvnorm: rate-bounded induced-L2 analysis of gridded LPV systems (issue 19, item 1).
 
 The published figures reproduced here come from the LPVTools documentation
-(Hjartarson, Seiler, Packard; MUSYN / University of Minnesota, LPVTools
-V1.00, demo "Worst-Case Gain Analysis of LPV System", file
-``Demos/.../WorstCaseGainAnalysisOfLPVSystem``): the first-order plant of Tan,
+(Balas, Packard, Seiler, Hjartarson; MUSYN / University of Minnesota, LPVTools
+V1.00, demo page "Worst-Case Gain Analysis of LPV System"): the first-order plant of Tan,
 Hang & Chai (Automatica 33, 1997) with a 2nd-order Padé delay and a
 gain-scheduled PI loop, posed as an LPV analysis problem by Pfifer & Seiler
 (ACC 2014).  With the worst-case multiplicative uncertainty Delta = +0.1

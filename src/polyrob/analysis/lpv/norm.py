@@ -55,8 +55,9 @@ OPTIONS = {"balance": True, "orthonormalize": True, "affine": False, "x_bounds":
 def state_scaling(A: np.ndarray) -> np.ndarray:
     """Power-of-two diagonal scaling ``s`` balancing the elementwise peak ``|A|`` over the grid.
 
-    The similarity ``x = diag(s) x~`` maps ``(A, B, C)`` to ``(A / s s^T-ish, B / s, C s)``
-    exactly in floating point (powers of two).
+    The similarity ``x = diag(s) x~`` maps ``(A, B, C)`` to
+    ``(diag(s)^-1 A diag(s), diag(s)^-1 B, C diag(s))``, exactly in floating
+    point (powers of two).
 
     Parameters
     ----------
