@@ -186,7 +186,10 @@ def performance_limit(robot, domain, W_T, *, samples: int = 4096, starts: int = 
         raise ArgumentError(f"samples must be >= 1 and starts >= 0, got {samples}, {starts}")
     m = robot.m
     W_T = _WeightAt(W_T, m)
-    q, qd, u = domain.sample(samples, seed=seed)
+    # box points (a task domain's third group is the acceleration) and the points (q, qdot, u) they stand for
+    z_box = domain.sample_box(samples, seed=seed) if hasattr(domain, "sample_box") else None
+    q, qd, u = domain.sample(samples, seed=seed) if z_box is None else domain.split(domain.points(z_box))
+    z_box = np.hstack([q, qd, u]) if z_box is None else z_box
     A, _ = robot.jacobians_batch(q, qd, u)
     # screen on the largest real part first: only the unstable points matter
     unstable = np.flatnonzero(np.linalg.eigvals(A).real.max(axis=1) > 0)
@@ -205,24 +208,24 @@ def performance_limit(robot, domain, W_T, *, samples: int = 4096, starts: int = 
     def negative(z_free, z0):
         nonlocal evaluated
         evaluated += 1
-        qq, vv, uu = domain.split(point(z_free, z0))
+        qq, vv, uu = _point(domain, point(z_free, z0))
         Ak, _ = robot.jacobians(qq[0], vv[0], uu[0])
         return -pole_bound(Ak, W_T, m)[0]
 
-    best_z = np.concatenate([q[0], qd[0], u[0]])
+    best_z = z_box[0]
     best = scores[0]
     order = np.argsort(-scores)
     if scores[order[0]] > 0:
-        best_z, best = np.concatenate([q[order[0]], qd[order[0]], u[order[0]]]), scores[order[0]]
+        best_z, best = z_box[order[0]], scores[order[0]]
         bounds = list(zip(lo[free], hi[free]))
         for k in order[: min(starts, len(unstable))] if free.any() else []:
-            z0 = np.concatenate([q[k], qd[k], u[k]])
+            z0 = z_box[k].copy()
             res = minimize(
                 negative, z0[free], args=(z0,), method="Powell", bounds=bounds, options={"xtol": 1e-6, "maxfev": 400}
             )
             if -res.fun > best:
                 best, best_z = -res.fun, point(res.x, z0)
-    qq, vv, uu = domain.split(best_z)
+    qq, vv, uu = _point(domain, best_z)
     Ak, _ = robot.jacobians(qq[0], vv[0], uu[0])
     bound, pole, direction = pole_bound(Ak, W_T, m)  # recomputed at the clipped point: what is reported is its own
     return PerformanceLimit(
@@ -234,3 +237,8 @@ def performance_limit(robot, domain, W_T, *, samples: int = 4096, starts: int = 
         u=uu[0] if pole is not None else None,
         points=evaluated,
     )
+
+
+def _point(domain, z):
+    """``(q, qdot, u)`` of a box point (a task domain maps its acceleration to the torque)."""
+    return domain.split(domain.points(z) if hasattr(domain, "points") else z)

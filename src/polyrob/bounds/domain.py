@@ -36,10 +36,10 @@ from scipy.stats import qmc
 
 from polyrob.errors import DomainError
 
-__all__ = ["Domain"]
+__all__ = ["Domain", "unit_design", "joint_range"]
 
 _GROUPS = ("q", "qdot", "u")
-_GROUP_TEXT = {"q": "position", "qdot": "velocity", "u": "torque"}
+_GROUP_TEXT = {"q": "position", "qdot": "velocity", "u": "torque", "qddot": "acceleration"}
 _GROUP_OPTION = {"q": "--q-range JOINT=LO:HI", "qdot": "--qdot-max JOINT=VALUE", "u": "--u-max JOINT=VALUE"}
 #: Largest URDF velocity limit (rad/s or m/s) taken as a default: some URDFs
 #: state 1,000-10,000 rad/s (finger_edu, borinot_flying_arm_2), placeholders
@@ -133,7 +133,37 @@ class Domain:
         m = self.m
         return z[:, :m], z[:, m : 2 * m], z[:, 2 * m :]
 
+    # ------------------------------------------------------------------ the map to the dynamics
+    #: ``"box"``: the third group is the torque itself (a task domain's is the acceleration).
+    kind = "box"
+
+    def inputs(self, q, qdot, w) -> np.ndarray:
+        """The torques ``u`` at box points ``(q, qdot, w)``: here ``w`` itself.
+
+        The seam the bounds search evaluates the Jacobians through: a
+        :class:`~polyrob.bounds.task_domain.TaskDomain`'s third group is the
+        acceleration, mapped to ``u`` by inverse dynamics.
+        """
+        return np.atleast_2d(np.asarray(w, dtype=float))
+
+    def points(self, z) -> np.ndarray:
+        """Box points ``z`` (n, 3m) as the points ``(q, qdot, u)`` (n, 3m) the Jacobians are taken at."""
+        q, qdot, w = self.split(z)
+        return np.hstack([q, qdot, self.inputs(q, qdot, w)])
+
     # ------------------------------------------------------------------ sampling
+    def sample_box(self, n: int, *, method: str = "sobol", seed=None, groups=_GROUPS) -> np.ndarray:
+        """``n`` points of the box, stacked (n, 3m); see :meth:`sample`."""
+        lo, hi = self.lower, self.upper
+        m = self.m
+        vary = np.concatenate([np.full(m, g in groups) for g in _GROUPS]) & (hi > lo)
+        k = int(vary.sum())
+        z = np.tile(0.5 * (lo + hi), (n, 1))
+        if k:
+            unit = unit_design(n, k, method, seed)
+            z[:, vary] = lo[vary] + unit * (hi[vary] - lo[vary])
+        return z
+
     def sample(self, n: int, *, method: str = "sobol", seed=None, groups=_GROUPS):
         """``n`` points of the box as ``(q, qdot, u)``, each of shape (n, m).
 
@@ -145,15 +175,7 @@ class Domain:
         groups : tuple
             The groups to vary; the others are set to the middle of their range.
         """
-        lo, hi = self.lower, self.upper
-        m = self.m
-        vary = np.concatenate([np.full(m, g in groups) for g in _GROUPS]) & (hi > lo)
-        k = int(vary.sum())
-        z = np.tile(0.5 * (lo + hi), (n, 1))
-        if k:
-            unit = _unit_design(n, k, method, seed)
-            z[:, vary] = lo[vary] + unit * (hi[vary] - lo[vary])
-        return self.split(z)
+        return self.split(self.sample_box(n, method=method, seed=seed, groups=groups))
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -293,7 +315,8 @@ class Domain:
         return "\n".join(rows)
 
 
-def _unit_design(n, k, method, seed):
+def unit_design(n, k, method, seed):
+    """``n`` points of the unit cube ``[0, 1]^k`` (:meth:`Domain.sample`'s designs)."""
     if method == "uniform":
         return np.random.default_rng(seed).random((n, k))
     if method == "sobol":
@@ -367,6 +390,11 @@ def _is_per_joint_list(value, m) -> bool:
     if any(np.ndim(v) > 0 for v in value):
         return True
     return len(value) != 2 and len(value) == m
+
+
+def joint_range(value, group, where):
+    """``(lo, hi)`` of a bound ``V >= 0`` (``[-V, V]``) or a range ``[lo, hi]``; errors name ``where``."""
+    return _range(value, group, where)
 
 
 def _range(value, group, where):

@@ -85,7 +85,8 @@ SERIAL_MAX_ACTIVE_POSITIONS = 2
 def _nominal(robot, domain: Domain, nominal):
     m = robot.m
     if isinstance(nominal, str) and nominal == "equilibrium":
-        q0 = np.clip(np.zeros(m), domain.q_lower, domain.q_upper)
+        # a task domain's reference pose, else q = 0 clipped into the box
+        q0 = np.array(getattr(domain, "pose", np.clip(np.zeros(m), domain.q_lower, domain.q_upper)), float)
         qd0 = np.zeros(m)
         # u0 holds the arm still: the gravity torque g(q0) = -M(q0) qddot(q0, 0, 0)
         u0 = -robot.mass_matrix(q0) @ robot.acceleration(q0, qd0, np.zeros(m))
@@ -121,13 +122,17 @@ def bound_pldi(
     Parameters
     ----------
     robot : Manipulator
-    domain : Domain, optional
-        Defaults to ``Domain.from_robot(robot)``.
+    domain : Domain or TaskDomain, optional
+        Defaults to ``Domain.from_robot(robot)``.  Over a
+        :class:`~polyrob.bounds.task_domain.TaskDomain` the search moves in
+        ``(q, qdot, qddot)`` and evaluates the Jacobians at the torques of
+        the inverse dynamics; the witnesses are given as ``(q, qdot, u)``.
     samples : int, optional
         Sobol' positions (rounded up to a power of two); default grows with
         the number of positions that matter (512 per dimension, at most 8192).
     nominal : "equilibrium", "midpoint" or dict
-        ``(A0, B0)`` at ``q = 0`` (clipped into the domain), ``qdot = 0`` and the
+        ``(A0, B0)`` at ``q = 0`` (clipped into the domain; a task domain's
+        reference pose), ``qdot = 0`` and the
         torque that holds it (``u = g(q)``), at the interval midpoints, or at a
         given ``{"q", "qdot", "u"}``.
     refine : bool
@@ -188,6 +193,11 @@ def bound_pldi(
         progress = sys.stderr.isatty()
     rng = np.random.default_rng(seed)
     proved = None
+    if certify and getattr(domain, "kind", "box") != "box":
+        raise CertificationError(
+            "certified bounds cover a torque box only: a task domain's torques come from inverse dynamics, "
+            "which the interval arithmetic does not enclose; drop --certify (its bounds are sampled)"
+        )
     if certify:  # first: it gives up at once where it cannot work
         # 1e-5 of each width: tight enough for the paper's printed digits, ~1 s on a 2R
         options = {"rel_tol": 1e-5, **(certify_options or {})}
@@ -293,8 +303,8 @@ def bound_pldi(
         B_upper=B_upper,
         entries=names,
         entry_index=index,
-        witness_lower=witnesses[k : 2 * k],
-        witness_upper=witnesses[:k],
+        witness_lower=domain.points(witnesses[k : 2 * k]) if k else witnesses[k : 2 * k],
+        witness_upper=domain.points(witnesses[:k]) if k else witnesses[:k],
         polytope=polytope,
         enclosure=enclosure,
         coverage=float("nan"),

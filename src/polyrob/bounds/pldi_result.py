@@ -23,6 +23,7 @@ import numpy as np
 
 from polyrob.bounds.domain import Domain
 from polyrob.bounds.polytope import COVERAGE_RTOL, Polytope
+from polyrob.bounds.task_domain import domain_from_dict
 from polyrob.errors import BoundsError, DomainError
 from polyrob.io.atomic import atomic_write, json_default
 
@@ -292,10 +293,10 @@ def load_pldi(path) -> PLDI:
             volume_note=poly.get("volume_note", ""),
         )
         locked = meta["robot"].get("locked")
-        return PLDI(
+        pldi = PLDI(
             robot_name=meta["robot"]["name"],
             robot_source=meta["robot"]["source"],
-            domain=Domain.from_dict(meta["domain"]),
+            domain=domain_from_dict(meta["domain"]),
             nominal_point=meta["nominal_point"],
             entries=tuple(e["name"] for e in meta["entries"]),
             polytope=polytope,
@@ -307,5 +308,8 @@ def load_pldi(path) -> PLDI:
             robot_locked=None if locked is None else tuple(locked),
             **{k: data[k] for k in _ARRAYS},
         )
+        if getattr(pldi.domain, "kind", "box") == "task":  # its torques need the robot's inverse dynamics
+            object.__setattr__(pldi.domain, "robot", pldi.robot)
+        return pldi
     except (OSError, ValueError, KeyError, TypeError, DomainError) as exc:
         raise BoundsError(f"{path}: not a PLDI file written by polyrob ({type(exc).__name__}: {exc})") from None

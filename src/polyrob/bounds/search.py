@@ -42,15 +42,17 @@ class Problem:
         self.all_index = np.array(
             [(0, r, c) for r in rows for c in range(2 * m)] + [(1, r, c) for r in rows for c in range(m)]
         )
+        # the box the search moves in: (q, qdot, w) with w the torque u of a
+        # Domain, or the acceleration of a TaskDomain (u by inverse dynamics)
         self.lo, self.hi = domain.lower, domain.upper
         self.t_centre = 0.5 * (domain.qdot_lower + domain.qdot_upper)
         self.t_scale = 0.5 * (domain.qdot_upper - domain.qdot_lower)
-        self.u_centre = 0.5 * (domain.u_lower + domain.u_upper)
-        self.u_scale = 0.5 * (domain.u_upper - domain.u_lower)
+        self.u_centre = 0.5 * (self.lo[2 * m :] + self.hi[2 * m :])
+        self.u_scale = 0.5 * (self.hi[2 * m :] - self.lo[2 * m :])
 
-    def entries_at(self, q, qdot, u, index=None) -> np.ndarray:
-        """Entries (n, k) of the Jacobians at ``n`` points."""
-        A, B = self.robot.jacobians_batch(q, qdot, u)
+    def entries_at(self, q, qdot, w, index=None) -> np.ndarray:
+        """Entries (n, k) of the Jacobians at ``n`` box points ``(q, qdot, w)`` (``u = domain.inputs(q, qdot, w)``)."""
+        A, B = self.robot.jacobians_batch(q, qdot, self.domain.inputs(q, qdot, w))
         return self.entries_from(A, B, index)
 
     def entries_from(self, A, B, index=None) -> np.ndarray:
@@ -67,7 +69,7 @@ def dropped_positions(problem: Problem, rng) -> tuple[int, ...]:
     """Position coordinates on which no Jacobian entry depends (numerically)."""
     d = problem.domain
     m = problem.m
-    base = np.column_stack(d.sample(6, method="uniform", seed=rng.integers(2**31)))
+    base = d.sample_box(6, method="uniform", seed=rng.integers(2**31))
     dropped = []
     for j in range(m):
         if d.q_upper[j] == d.q_lower[j]:
@@ -215,7 +217,7 @@ def _screen_task(problem: Problem, item):
     b, seed, directions, index, axis, other, col, coef, around = item
     m, n = problem.m, SCREEN_BATCH
     if around is None:
-        q, qdot, u = problem.domain.sample(n, method="uniform", seed=[seed, b])
+        q, qdot, u = problem.domain.split(problem.domain.sample_box(n, method="uniform", seed=[seed, b]))
     else:
         rng = np.random.default_rng([seed, b])
         base = around[rng.integers(len(around), size=n)]

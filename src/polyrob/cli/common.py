@@ -10,8 +10,10 @@ import sys
 from polyrob.cli.options import (
     nonnegative_float,
     parse_armature,
+    parse_bound,
     parse_joint_values,
     parse_list,
+    parse_pose,
     positive_float,
 )
 from polyrob.errors import ArgumentError, DomainError
@@ -172,6 +174,12 @@ def add_domain_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--u-max", default=None, help="torque bound >= 0, e.g. 50 or joint1=0,joint2=5")
     g.add_argument("--qdot-scale", type=nonnegative_float, default=1.0, help="scale the velocity box")
     g.add_argument("--u-scale", type=nonnegative_float, default=1.0, help="scale the torque box")
+    t = parser.add_argument_group(
+        "task domain (any of these replaces the torque box: u = inverse dynamics of (q, qdot, qddot))"
+    )
+    t.add_argument("--pose", default=None, help="reference pose: an SRDF pose name (see `polyrob info`) or q1,q2,...")
+    t.add_argument("--q-radius", default=None, help="positions within pose +- RADIUS (and the joint limits)")
+    t.add_argument("--qddot-max", default=None, help="acceleration bound >= 0 (rad/s^2), e.g. 2 or 2,2,4")
 
 
 def robot_from_args(args):
@@ -184,15 +192,22 @@ def robot_from_args(args):
 def domain_options_given(args) -> bool:
     return (
         any(getattr(args, k, None) is not None for k in ("domain", "q_range", "qdot_max", "u_max"))
+        or task_options_given(args)
         or getattr(args, "qdot_scale", 1.0) != 1.0
         or getattr(args, "u_scale", 1.0) != 1.0
     )
+
+
+def task_options_given(args) -> bool:
+    return any(getattr(args, k, None) is not None for k in ("pose", "q_radius", "qddot_max"))
 
 
 def domain_from_args(robot, args):
     from polyrob.bounds.domain import Domain
 
     try:
+        if task_options_given(args):
+            return task_domain_from_args(robot, args)
         return Domain.from_robot(
             robot,
             args.domain,
@@ -209,6 +224,26 @@ def domain_from_args(robot, args):
             if text.startswith(f"--{group}:"):
                 raise DomainError(option + text[len(group) + 2 :]) from None
         raise
+
+
+def task_domain_from_args(robot, args):
+    """A :class:`~polyrob.bounds.task_domain.TaskDomain` from ``--pose``, ``--q-radius``, ``--qdot-max``, ``--qddot-max``."""
+    from polyrob.bounds.task_domain import TaskDomain
+
+    for option in ("domain", "q_range", "u_max"):
+        if getattr(args, option, None) is not None:
+            raise ArgumentError(
+                f"--{option.replace('_', '-')} sets a torque-box domain: not with --pose/--q-radius/--qddot-max"
+            )
+    if getattr(args, "qdot_scale", 1.0) != 1.0 or getattr(args, "u_scale", 1.0) != 1.0:
+        raise ArgumentError("--qdot-scale/--u-scale scale a torque-box domain: give --qdot-max for a task domain")
+    return TaskDomain.from_robot(
+        robot,
+        pose=parse_pose(args.pose),
+        q_radius=parse_bound(args.q_radius, "--q-radius"),
+        qdot_max=parse_joint_values(args.qdot_max, "--qdot-max", ranges=False),
+        qddot_max=parse_joint_values(args.qddot_max, "--qddot-max", ranges=False),
+    )
 
 
 # --------------------------------------------------------------------------- weights

@@ -112,6 +112,13 @@ class AnalyticRobot(Manipulator):
         args = [np.atleast_2d(np.asarray(a, float)) for a in (q, qdot, u)]
         return self._acceleration(*args)[0]
 
+    def inverse_dynamics(self, q, qdot, qddot) -> np.ndarray:
+        """``u = M(q) qddot + C(q, qdot) qdot + g(q) + D qdot`` at ``n`` points (n, m)."""
+        q, qdot, qddot = (np.atleast_2d(np.asarray(a, float)) for a in (q, qdot, qddot))
+        u = np.einsum("nij,nj->ni", self.M(q), qddot) + np.einsum("nij,nj->ni", self.C(q, qdot), qdot)
+        u = u + self.damping * qdot
+        return u + self.g(q) if self.g is not None else u
+
     def jacobians_batch(self, q, qdot, u):
         """``A`` (n, 2m, 2m) and ``B`` (n, 2m, m) by the complex step, vectorised."""
         q, qdot, u = (np.atleast_2d(np.asarray(a, float)) for a in (q, qdot, u))

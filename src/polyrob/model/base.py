@@ -70,6 +70,9 @@ class Manipulator:
     def acceleration(self, q, qdot, u) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
 
+    def inverse_dynamics(self, q, qdot, qddot):  # pragma: no cover - abstract
+        raise NotImplementedError
+
     def jacobians_batch(self, q, qdot, u):  # pragma: no cover - abstract
         raise NotImplementedError
 

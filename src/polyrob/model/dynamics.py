@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio
 
-__all__ = ["to_configuration", "acceleration", "jacobians_batch"]
+__all__ = ["to_configuration", "acceleration", "inverse_dynamics", "jacobians_batch"]
 
 
 def _layout(robot):
@@ -61,6 +61,24 @@ def acceleration(robot, q, qdot, u) -> np.ndarray:
     qdot = np.asarray(qdot, dtype=float)
     tau = np.asarray(u, dtype=float) - robot.damping * qdot
     return pinocchio.aba(robot.model, robot._data, to_configuration(robot, q), qdot, tau).copy()
+
+
+def inverse_dynamics(robot, q, qdot, qddot) -> np.ndarray:
+    """The torques ``u`` (n, m) that give accelerations ``qddot`` at ``(q, qdot)`` (arrays (n, m)).
+
+    ``u = rnea(q, qdot, qddot) + D qdot``: Pinocchio's recursive Newton-Euler
+    (with the armature of ``model.armature``) plus the damping ``aba`` leaves out.
+    """
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    n, m = q.shape
+    qdot = np.ascontiguousarray(np.broadcast_to(np.asarray(qdot, dtype=float), (n, m)))
+    qddot = np.ascontiguousarray(np.broadcast_to(np.asarray(qddot, dtype=float), (n, m)))
+    model, data = robot.model, robot._data
+    config = to_configuration(robot, q)
+    u = np.empty((n, m))
+    for k in range(n):
+        u[k] = pinocchio.rnea(model, data, config[k], qdot[k], qddot[k])
+    return u + robot.damping * qdot
 
 
 def jacobians_batch(robot, q, qdot, u, *, blocks=False):

@@ -103,6 +103,10 @@ class Robot(Manipulator):
         """``qddot = M(q)^-1 (u - C(q, qdot) qdot - g(q) - D qdot)``."""
         return dynamics.acceleration(self, q, qdot, u)
 
+    def inverse_dynamics(self, q, qdot, qddot) -> np.ndarray:
+        """Torques (n, m) that give ``qddot`` at ``(q, qdot)``; see :func:`polyrob.model.dynamics.inverse_dynamics`."""
+        return dynamics.inverse_dynamics(self, q, qdot, qddot)
+
     def jacobians_batch(self, q, qdot, u):
         """Jacobians at many points: arrays (n, 2m, 2m) and (n, 2m, m).
 
