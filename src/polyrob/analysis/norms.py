@@ -85,9 +85,13 @@ def hinf_norm_below(sys, gamma: float, *, rtol: float = 1e-2) -> bool:
         A, B, C = _balanced(A, B, C)
     m = B.shape[1]
     R = gamma**2 * np.eye(m) - D.T @ D
-    Ri = np.linalg.inv(R)
-    Ah = A + B @ Ri @ D.T @ C
-    H = np.block([[Ah, B @ Ri @ B.T], [-C.T @ (np.eye(C.shape[0]) + D @ Ri @ D.T) @ C, -Ah.T]])
+    try:
+        Ri = np.linalg.inv(R)
+    except np.linalg.LinAlgError:  # gamma**2 underflows (a level near 0): no proof at that level
+        return False
+    with np.errstate(all="ignore"):  # a level near 0 overflows: checked just below
+        Ah = A + B @ Ri @ D.T @ C
+        H = np.block([[Ah, B @ Ri @ B.T], [-C.T @ (np.eye(C.shape[0]) + D @ Ri @ D.T) @ C, -Ah.T]])
     if not np.all(np.isfinite(H)):
         return False
     lam = sla.eigvals(H)
@@ -140,7 +144,7 @@ def hinf_norm_upper(sys, *, rtol: float = 1e-6, lower: float = 0.0) -> float:
     if not stability_screen(A, 0.0):
         return float("inf")
     lo = max(float(lower), hinf_norm_estimate(A, B, C, D), float(np.linalg.norm(D, 2)) if D.size else 0.0)
-    hi = max(lo, 1e-300) * (1 + rtol)
+    hi = max(lo, 1e-150) * (1 + rtol)  # 1e-150: gamma**2 stays a normal float
     tries = 0
     while not hinf_norm_below((A, B, C, D), hi):
         lo, hi = hi, 2.0 * hi
