@@ -135,3 +135,14 @@ def test_cli_bounds_and_problem_scope_over_a_task_domain(robot, domain, capsys):
     assert scope.domain.startswith("task domain around a given pose (±0.3 rad)")
     assert any(n.startswith("reflected rotor inertia: none") for n in scope.notes)
     assert prob.description()["domain"]["kind"] == "task"
+
+
+def test_validation_checks_the_accelerations_along_a_trajectory(robot, domain):
+    from polyrob.validate.step_metrics import domain_check
+
+    q, qd, qdd = trajectories(robot, n=1)
+    t = np.arange(len(q)) * 0.01
+    u = robot.inverse_dynamics(q, qd, qdd)
+    assert domain_check(domain, robot, t, q.T, qd.T, u.T)[0] == ()
+    exits, first, outside = domain_check(domain, robot, t, q.T, qd.T, robot.inverse_dynamics(q, qd, 2 * qdd).T)
+    assert exits and all(e.startswith("qddot[") for e in exits) and 0 < outside < 1

@@ -91,9 +91,18 @@ def step_metrics(robot, t, q, r, u, q0) -> tuple:
 
 
 def domain_check(domain, robot, t, q, qdot, u):
+    """What left the domain and when: ``(exits, first time, fraction of samples outside)``; arrays (m, T).
+
+    A task domain (``domain.kind == "task"``) bounds the accelerations, not
+    the torques: ``qddot`` of the robot at ``(q, qdot, u)`` is checked instead of ``u``.
+    """
     z = {"q": q, "qdot": qdot, "u": u}
+    groups = ("q", "qdot", "u")
+    if getattr(domain, "kind", "box") == "task":
+        z["qddot"] = np.array([robot.acceleration(q[:, k], qdot[:, k], u[:, k]) for k in range(len(t))]).T
+        groups = ("q", "qdot", "qddot")
     exits, bad_any, first = [], np.zeros(len(t), bool), None
-    for group in ("q", "qdot", "u"):
+    for group in groups:
         lo, hi = getattr(domain, f"{group}_lower"), getattr(domain, f"{group}_upper")
         for j, name in enumerate(robot.joint_names):
             tol = DOMAIN_RTOL * (1.0 + max(abs(lo[j]), abs(hi[j])))
