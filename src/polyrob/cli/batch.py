@@ -169,7 +169,10 @@ def register(sub) -> None:
     )
     g.add_argument("--alphas", default=None, help="--max-bandwidth: comma-separated factors to scan")
     g.add_argument(
-        "--uncertainty", default="auto", choices=["auto", "box", "axes", "lft", "lft-torque"], help="uncertainty model"
+        "--uncertainty",
+        default="auto",
+        choices=["auto", "box", "axes", "lft", "lft-torque", "inertia"],
+        help="uncertainty model",
     )
     g = p.add_argument_group("work per robot")
     g.add_argument("--samples", type=int_at_least(2), default=None, help="bounds: Sobol' positions")

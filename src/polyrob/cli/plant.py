@@ -17,8 +17,9 @@ def add_plant_arguments(p) -> None:
     p.add_argument(
         "--uncertainty",
         default="auto",
-        choices=["auto", "box", "axes", "lft", "lft-torque"],
-        help="uncertainty model of the PLDI (box: one independent real parameter per entry, the paper's)",
+        choices=["auto", "box", "axes", "lft", "lft-torque", "inertia"],
+        help="uncertainty model of the PLDI (box: one independent real parameter per entry, the paper's; "
+        "inertia: M(q) on its L D L^T factors, positive definite in every member, any arm)",
     )
     p.add_argument("--merge-symmetric", action="store_true", help="one repeated parameter for b_ij = b_ji")
 

@@ -25,7 +25,7 @@ from polyrob.errors import ArgumentError
 __all__ = ["Problem", "build_problem", "default_hyperparameters", "UNCERTAINTY_MODELS", "WEIGHT_KEYS"]
 
 #: Uncertainty models of :func:`polyrob.plant.uncertainty.uncertain_plant` (``box`` is the paper's).
-UNCERTAINTY_MODELS = ("auto", "box", "axes", "lft", "lft-torque")
+UNCERTAINTY_MODELS = ("auto", "box", "axes", "lft", "lft-torque", "inertia")
 #: The weight hyperparameters, in the order of :func:`polyrob.plant.weights.paper_weights`.
 WEIGHT_KEYS = ("omega_b", "M_s", "A_s", "omega_bt", "M_t", "A_t")
 
@@ -242,7 +242,7 @@ def build_problem(
         Default: the robot's default domain.  Not with ``pldi``.
     hyperparameters : dict, optional
         Weight hyperparameters (see :func:`default_hyperparameters`); default the paper's.
-    uncertainty : {"auto", "box", "axes", "lft", "lft-torque"}
+    uncertainty : {"auto", "box", "axes", "lft", "lft-torque", "inertia"}
         Model of :func:`polyrob.plant.uncertainty.uncertain_plant`; ``"box"``
         is the paper's (one independent real parameter per entry).
     pldi : PLDI, optional

@@ -32,7 +32,14 @@ import numpy as np
 from polyrob.errors import NotApplicable, PolyrobError
 from polyrob.plant.lftplant import UncertainPlant, weakest_enclosure
 
-__all__ = ["inertia_lft_plant", "inertia_lft_contains", "affine_inertia", "NotApplicable", "AFFINE_RTOL"]
+__all__ = [
+    "inertia_lft_plant",
+    "inertia_lft_contains",
+    "affine_inertia",
+    "NotApplicable",
+    "AFFINE_RTOL",
+    "TorqueJacobians",
+]
 
 #: Largest relative residual of the affine fit of ``M(q)`` that counts as exact.
 AFFINE_RTOL = 1e-9
@@ -100,7 +107,7 @@ def affine_inertia(robot, domain, *, samples: int = 64, seed: int = 0):
     return names, joints, kinds, M0, Mf, ranges
 
 
-class _TorqueJacobians:
+class TorqueJacobians:
     """A robot stand-in whose Jacobians are ``[0 I; N]`` and ``[0; I]`` with ``N = M(q) A_low``.
 
     Lets :func:`~polyrob.bounds.pldi.bound_pldi` bound ``N`` with the same
@@ -196,7 +203,7 @@ def inertia_lft_plant(
     torque = a_part == "torque"
     if torque:
         opts = {"samples": pldi.info.get("samples"), "progress": False, "coverage": 0, **(bound_options or {})}
-        npldi = bound_pldi(_TorqueJacobians(robot), domain, **opts)
+        npldi = bound_pldi(TorqueJacobians(robot), domain, **opts)
     else:
         npldi = pldi
     nidx = np.asarray(npldi.entry_index, int).reshape(-1, 3)

@@ -18,7 +18,8 @@ Every model of the set of Jacobians is an :class:`UncertaintyModel`:
     when the PLDI was certified *and* the model's own ranges were proved:
     ``axes`` takes its directional ranges from the PLDI's sampled support
     values, so it is ``"sampled"`` even on a certified PLDI; ``lft-torque``
-    is also as weak as its second PLDI, the one of ``N = M(q) A_low``.
+    is also as weak as its second PLDI, the one of ``N = M(q) A_low``;
+    ``inertia`` is sampled always (its factor ranges and ``N`` directions).
 
 :data:`MODELS` maps each name to its instance and :func:`model_of` finds the
 instance of a built plant.
@@ -28,7 +29,7 @@ Examples
 >>> import polyrob
 >>> from polyrob.plant.models import MODELS, model_of
 >>> list(MODELS)
-['box', 'axes', 'lft', 'lft-torque']
+['box', 'axes', 'lft', 'lft-torque', 'inertia']
 >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
 >>> unc = MODELS["axes"].build(pldi)
 >>> model_of(unc).name, model_of(unc).enclosure(unc), unc.info["enclosure_inputs"]
@@ -47,7 +48,16 @@ import numpy as np
 from polyrob.errors import PolyrobError
 from polyrob.plant.lftplant import UncertainPlant, weakest_enclosure
 
-__all__ = ["UncertaintyModel", "BoxModel", "AxesModel", "InertiaLFTModel", "MODELS", "model_of", "enclosure_inputs"]
+__all__ = [
+    "UncertaintyModel",
+    "BoxModel",
+    "AxesModel",
+    "InertiaLFTModel",
+    "InertiaModel",
+    "MODELS",
+    "model_of",
+    "enclosure_inputs",
+]
 
 
 def enclosure_inputs(unc: UncertainPlant) -> dict[str, str]:
@@ -207,10 +217,64 @@ class InertiaLFTModel(UncertaintyModel):
         )
 
 
+class InertiaModel(UncertaintyModel):
+    """``M(q)`` on its ``L D Lᵀ`` factors (every member positive definite), ``M⁻¹`` an exact LFT of them,
+    times an ``axes`` model of the torque-side ``N = M(q) A_low`` (:mod:`polyrob.plant.inertia_plant`)."""
+
+    name = "inertia"
+    options = ("nominal", "robot", "n_directions", "residual_tol")
+    needs_robot = True
+
+    def build(
+        self,
+        pldi,
+        *,
+        nominal: str = "pldi",
+        robot=None,
+        n_directions: int | None = None,
+        residual_tol: float | None = None,
+        bound_options: dict | None = None,
+        factor_options: dict | None = None,
+    ) -> UncertainPlant:
+        from polyrob.plant.inertia_plant import inertia_plant
+
+        return inertia_plant(
+            pldi,
+            robot=robot,
+            nominal=nominal,
+            n_directions=n_directions,
+            residual_tol=residual_tol,
+            bound_options=bound_options,
+            factor_options=factor_options,
+        )
+
+    def contains(self, unc, A, B):
+        from polyrob.plant.inertia_plant import inertia_contains
+
+        return inertia_contains(unc, A, B)
+
+    def describe(self, unc):
+        factors, sub = unc.info["factors"], unc.info["N_plant"]
+        size = sum(sub.full_blocks)
+        residual = f" plus a norm-bounded residual block of size {size}" if size else ""
+        return (
+            f"inertia: M(q) = L D L^T with an interval on each of its {len(factors.index)} varying factors "
+            f"(positive definite in every member), M(q)^-1 an exact LFT of them, times an axes model of the "
+            f"torque-side Jacobian N = M(q) A_low from a second PLDI ({sub.n_params} principal directions"
+            f"{residual}) ({self.enclosure(unc)} enclosure)."
+        )
+
+
 #: The uncertainty models by name (``unc.model``).
 MODELS: dict[str, UncertaintyModel] = {
     model.name: model
-    for model in (BoxModel(), AxesModel(), InertiaLFTModel("lft", "entries"), InertiaLFTModel("lft-torque", "torque"))
+    for model in (
+        BoxModel(),
+        AxesModel(),
+        InertiaLFTModel("lft", "entries"),
+        InertiaLFTModel("lft-torque", "torque"),
+        InertiaModel(),
+    )
 }
 
 

@@ -22,6 +22,12 @@ these models of the set of Jacobians (docs/uncertainty.md):
     (``[A_low B_low] = M(q)^{-1} [N I]``, ``a_part="torque"``): fewer
     parameters and ``A`` moves with the inertia, but the product can leave
     the entries' intervals.
+``"inertia"``
+    ``M(q)`` on the intervals of its ``L D Lᵀ`` factors (every member
+    positive definite, so is every member's input matrix ``M⁻¹``, an exact
+    LFT of them) times an ``axes`` model of the torque-side Jacobian
+    ``N = M(q) A_low`` (:mod:`polyrob.plant.inertia_plant`); any arm whose
+    ``B`` is ``[0; M(q)⁻¹]``.
 ``"auto"`` (default)
     ``lft`` where it applies, else ``axes`` (:data:`AUTO`); the choice and
     its reason are in ``info["auto"]``.
@@ -118,7 +124,7 @@ def uncertain_plant(
     ----------
     pldi : PLDI
         From :func:`polyrob.bound_pldi`.
-    model : {"auto", "box", "axes", "lft", "lft-torque"}
+    model : {"auto", "box", "axes", "lft", "lft-torque", "inertia"}
         See the module docstring.  ``"box"`` is the paper's model, unchanged.
     nominal : {"pldi", "midpoint"}
         ``G_n`` is the PLDI's nominal ``(A0, B0)`` or the model's centre.
@@ -126,8 +132,9 @@ def uncertain_plant(
         ``box`` only: entries equal by symmetry of ``M(q)^{-1}`` share one
         repeated parameter (block ``[-2, 0]``).
     n_directions, residual_tol
-        ``axes`` only: retained principal directions (default automatic) and
-        the residual tolerance of the automatic choice.
+        ``axes`` (and ``inertia``'s model of ``N``): retained principal
+        directions (default automatic) and the residual tolerance of the
+        automatic choice.
     repeated : bool
         ``lft`` only: exact repeated scalars (``True``) or independent
         rank-one pieces (``False``, default; see :func:`~polyrob.plant.inertia_lft.inertia_lft_plant`).
