@@ -226,7 +226,7 @@ def _building_jacobians(pldi, n=300):
 
 
 def test_every_model_contains_the_jacobians_it_was_built_from(pldi, built):
-    assert list(MODELS) == ["box", "axes", "lft", "lft-torque"]
+    assert list(MODELS) == ["box", "axes", "lft", "lft-torque", "inertia"]
     A, B = _building_jacobians(pldi)
     for name, unc in built.items():
         model = model_of(unc)
@@ -256,15 +256,21 @@ def test_enclosure_is_the_weakest_of_the_inputs(pldi, built):
     assert built["lft-torque"].info["enclosure_inputs"] == {"PLDI": "sampled", "N PLDI": "sampled"}
     # the same bounds labelled certified: only the models built on nothing else follow
     proved = dataclasses.replace(pldi, enclosure="certified")
-    expected = {"box": "certified", "lft": "certified", "axes": "sampled", "lft-torque": "sampled"}
+    expected = {
+        "box": "certified",
+        "lft": "certified",
+        "axes": "sampled",
+        "lft-torque": "sampled",
+        "inertia": "sampled",
+    }
     for name, model in MODELS.items():
         unc = model.build(proved)
         assert model.enclosure(unc) == unc.info["enclosure"] == expected[name], name
 
 
 def test_unknown_models_give_clear_errors(pldi, unc):
-    assert CHOICES == ("auto", "box", "axes", "lft", "lft-torque")
-    msg = "unknown uncertainty model 'cube': use one of auto, box, axes, lft, lft-torque"
+    assert CHOICES == ("auto", "box", "axes", "lft", "lft-torque", "inertia")
+    msg = "unknown uncertainty model 'cube': use one of auto, box, axes, lft, lft-torque, inertia"
     with pytest.raises(ArgumentError, match=msg):
         uncertain_plant(pldi, model="cube")
     cube = dataclasses.replace(unc, model="cube")
@@ -274,7 +280,7 @@ def test_unknown_models_give_clear_errors(pldi, unc):
         model_contains(cube, np.zeros((1, 4, 4)), np.zeros((1, 4, 2)))
     with pytest.raises(ArgumentError, match="merge_symmetric applies to model='box' only"):
         uncertain_plant(pldi, model="axes", merge_symmetric=True)
-    with pytest.raises(ArgumentError, match="n_directions and residual_tol apply to model='axes' only"):
+    with pytest.raises(ArgumentError, match="n_directions and residual_tol apply to model='axes' or 'inertia' only"):
         uncertain_plant(pldi, model="lft", residual_tol=0.2)
 
 

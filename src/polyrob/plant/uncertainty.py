@@ -177,7 +177,8 @@ def uncertain_plant(
     for owner in MODELS.values():
         if any(options[key] != default and key not in taken for key, default in owner.exclusive.items()):
             verb = "applies" if len(owner.exclusive) == 1 else "apply"
-            raise ArgumentError(f"{' and '.join(owner.exclusive)} {verb} to model='{owner.name}' only")
+            takers = [f"'{o.name}'" for o in MODELS.values() if set(owner.exclusive) <= set(o.options)]
+            raise ArgumentError(f"{' and '.join(owner.exclusive)} {verb} to model={' or '.join(takers)} only")
     if robot is None and (coverage or any(c.needs_robot for c in candidates)):
         options["robot"] = robot = pldi.robot
     if model == "auto":
