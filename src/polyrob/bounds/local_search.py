@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import optimize
 
-from polyrob.bounds.extremes import box_maximum, polynomial_coefficients
 from polyrob.bounds.search import Problem, exact_witnesses, inner_maxima
+from polyrob.bounds.witnesses import witness_task
 
 __all__ = ["refine", "cross_seed"]
 
@@ -64,7 +64,7 @@ def _local_search(problem: Problem, d, value, index, x0, free, maxiter, coarse=F
         pts[1 + np.arange(nfree), pos] += h
         pts[1 + nfree + np.arange(nfree), pos] -= h
         pts = np.clip(pts, lo, hi)
-        vals = problem.entries_at(pts[:, :m], pts[:, m : 2 * m], pts[:, 2 * m :], index) @ d
+        vals = problem.along(pts[:, :m], pts[:, m : 2 * m], pts[:, 2 * m :], index, d)
         dh = pts[1 + np.arange(nfree), pos] - pts[1 + nfree + np.arange(nfree), pos]
         grad = (vals[1 : 1 + nfree] - vals[1 + nfree :]) / np.where(dh > 0, dh, 1.0)
         return -vals[0] / scale, -grad / scale
@@ -82,26 +82,15 @@ def _local_search(problem: Problem, d, value, index, x0, free, maxiter, coarse=F
     )
     x = x0.copy()
     x[free] = np.clip(res.x, lo[free], hi[free])
-    return float(problem.entries_at(x[None, :m], x[None, m : 2 * m], x[None, 2 * m :], index)[0] @ d), x
+    return float(problem.along(x[None, :m], x[None, m : 2 * m], x[None, 2 * m :], index, d)[0]), x
 
 
 def _exact_inner(problem: Problem, d, index, x):
-    """The exact maximum over the velocity/torque box at the position of ``x``."""
-    m = problem.m
-    c, a, b, Q = polynomial_coefficients(
-        lambda qq, qd, uu: problem.entries_at(qq, qd, uu, index),
-        x[None, :m],
-        problem.t_centre,
-        problem.t_scale,
-        problem.u_centre,
-        problem.u_scale,
-    )
-    dd = d[:, None]
-    _, t, u = box_maximum(c @ dd, a @ dd, b @ dd, Q @ dd, problem.t_scale > 0, problem.u_scale > 0, exact=True)
-    y = np.concatenate(
-        [x[:m], problem.t_centre + problem.t_scale * t[0, 0], problem.u_centre + problem.u_scale * u[0, 0]]
-    )
-    return float(problem.entries_at(y[None, :m], y[None, m : 2 * m], y[None, 2 * m :], index)[0] @ d), y
+    """The exact maximum over the velocity/torque box at the position of ``x`` (best variant)."""
+    val, y = witness_task(problem, (x[None, : problem.m], d[None], index))
+    return float(
+        problem.along(y[:1, : problem.m], y[:1, problem.m : 2 * problem.m], y[:1, 2 * problem.m :], index, d)[0]
+    ), y[0]
 
 
 def _refine_task(problem: Problem, item):

@@ -346,12 +346,18 @@ def _check_counts(**counts) -> None:
 
 
 def coverage_fraction(pldi: PLDI, robot, n: int, *, seed=None) -> float:
-    """Fraction of ``n`` fresh uniform points whose Jacobians lie in the intervals and polytope."""
-    q, qdot, u = pldi.domain.sample(n, method="uniform", seed=seed)
-    A, B = robot.jacobians_batch(q, qdot, u)
-    inside = pldi.contains(A, B)
-    if len(pldi.entries):
-        inside &= pldi.polytope.contains(pldi.entry_values(A, B))
+    """Fraction of ``n`` fresh uniform points whose Jacobians lie in the intervals and polytope.
+
+    For an inner loop (:mod:`polyrob.model.inner`) every point is checked on each of its
+    true robots (``robot.variants()``): a point counts when all its Jacobians are inside.
+    """
+    problem = search.Problem(robot, pldi.domain)
+    inside = np.ones(n, bool)
+    for variant, domain in zip(problem.variants, problem.domains):
+        A, B = variant.jacobians_batch(*domain.sample(n, method="uniform", seed=seed))
+        inside &= pldi.contains(A, B)
+        if len(pldi.entries):
+            inside &= pldi.polytope.contains(pldi.entry_values(A, B))
     return float(inside.mean())
 
 

@@ -14,6 +14,7 @@ from scipy.stats import qmc
 
 from polyrob.bounds.domain import Domain
 from polyrob.bounds.extremes import box_maximum, polynomial_coefficients
+from polyrob.bounds.witnesses import exact_witnesses
 from polyrob.errors import BoundsError
 
 __all__ = [
@@ -50,10 +51,21 @@ class Problem:
         self.u_centre = 0.5 * (self.lo[2 * m :] + self.hi[2 * m :])
         self.u_scale = 0.5 * (self.hi[2 * m :] - self.lo[2 * m :])
 
-    def entries_at(self, q, qdot, w, index=None) -> np.ndarray:
+        # the true robots the bounds hold for (an inner loop's payload and model error
+        # ranges, sampled: see polyrob.model.inner); one, the robot itself, otherwise
+        variants = getattr(robot, "variants", None)
+        self.variants = tuple(variants()) if callable(variants) else (robot,)
+        self.domains = tuple(_domain_of(domain, r) for r in self.variants)
+
+    def entries_at(self, q, qdot, w, index=None, variant: int = 0) -> np.ndarray:
         """Entries (n, k) of the Jacobians at ``n`` box points ``(q, qdot, w)`` (``u = domain.inputs(q, qdot, w)``)."""
-        A, B = self.robot.jacobians_batch(q, qdot, self.domain.inputs(q, qdot, w))
+        robot, domain = self.variants[variant], self.domains[variant]
+        A, B = robot.jacobians_batch(q, qdot, domain.inputs(q, qdot, w))
         return self.entries_from(A, B, index)
+
+    def along(self, q, qdot, w, index, d) -> np.ndarray:
+        """``max`` over the variants of the entries times ``d`` (k,) or (k, D): (n,) or (n, D)."""
+        return np.max([self.entries_at(q, qdot, w, index, i) @ d for i in range(len(self.variants))], axis=0)
 
     def entries_from(self, A, B, index=None) -> np.ndarray:
         """Entries (n, k) of given Jacobians ``A`` (n, 2m, 2m), ``B`` (n, 2m, m)."""
@@ -63,6 +75,15 @@ class Problem:
         out[:, isA] = A[:, idx[isA, 1], idx[isA, 2]]
         out[:, ~isA] = B[:, idx[~isA, 1], idx[~isA, 2]]
         return out
+
+
+def _domain_of(domain, robot):
+    """The domain whose inputs map through ``robot`` (a task domain's inverse dynamics are the robot's)."""
+    if getattr(domain, "robot", None) is None or domain.robot is robot:
+        return domain
+    from dataclasses import replace
+
+    return replace(domain, robot=robot)
 
 
 def dropped_positions(problem: Problem, rng) -> tuple[int, ...]:
@@ -79,7 +100,12 @@ def dropped_positions(problem: Problem, rng) -> tuple[int, ...]:
         # random values, not a uniform grid: a grid over [-2 pi, 2 pi] aliases
         # the 2 q terms of a rotating inertia into identical values
         pts[:, j] = rng.uniform(d.q_lower[j], d.q_upper[j], len(pts))
-        vals = problem.entries_at(pts[:, :m], pts[:, m : 2 * m], pts[:, 2 * m :]).reshape(len(base), 5, -1)
+        vals = np.concatenate(
+            [
+                problem.entries_at(pts[:, :m], pts[:, m : 2 * m], pts[:, 2 * m :], None, i)
+                for i in range(len(problem.variants))
+            ]
+        ).reshape(-1, 5, len(problem.all_index))
         spread = np.abs(vals - vals[:, :1]).max()
         if spread <= 1e-10 * max(1.0, np.abs(vals).max()):
             dropped.append(j)
@@ -111,14 +137,16 @@ def pilot(problem: Problem, seed, n=4096):
     The same samples check that ``M(q)`` is positive definite
     (:func:`check_mass_matrices`).
     """
-    q, qdot, u = problem.domain.sample(n, method="uniform", seed=seed)
-    robot = problem.robot
-    try:
-        A, B = robot.jacobians_batch(q, qdot, u)
-    except np.linalg.LinAlgError:  # an analytic M(q) that is singular somewhere
-        A = B = None
-    check_mass_matrices(robot, q, None if B is None else B[:, problem.m :, :])
-    vals = problem.entries_from(A, B)
+    vals = []
+    for robot, domain in zip(problem.variants, problem.domains):
+        q, qdot, u = domain.sample(n // len(problem.variants) or 1, method="uniform", seed=seed)
+        try:
+            A, B = robot.jacobians_batch(q, qdot, u)
+        except np.linalg.LinAlgError:  # an analytic M(q) that is singular somewhere
+            A = B = None
+        check_mass_matrices(robot, q, None if B is None else B[:, problem.m :, :])
+        vals.append(problem.entries_from(A, B))
+    vals = np.vstack(vals)
     spread = vals.max(axis=0) - vals.min(axis=0)
     scale_all = np.maximum(np.abs(vals).max(axis=0), 1e-300)
     varying = spread > 1e-12 * np.maximum(1.0, scale_all)
@@ -177,20 +205,23 @@ DEPENDENCE_RTOL = 1e-10
 
 def _inner_task(problem: Problem, item):
     q, directions, index = item
-    c, a, b, Q = polynomial_coefficients(
-        lambda qq, qd, uu: problem.entries_at(qq, qd, uu, index),
-        q,
-        problem.t_centre,
-        problem.t_scale,
-        problem.u_centre,
-        problem.u_scale,
-    )
-    Dt = directions.T  # (k, D)
-    c, a, b, Q = c @ Dt, a @ Dt, b @ Dt, Q @ Dt
-    val, _, _ = box_maximum(c, a, b, Q, problem.t_scale > 0, problem.u_scale > 0)
-    size = np.abs(c).max(axis=0)
-    dep = np.vstack([np.abs(b).max(axis=0) + np.abs(Q).max(axis=(0, 2)), np.abs(a).max(axis=0)])  # (2m, D)
-    return val, dep, size
+    out = []
+    for i in range(len(problem.variants)):
+        c, a, b, Q = polynomial_coefficients(
+            lambda qq, qd, uu, i=i: problem.entries_at(qq, qd, uu, index, i),
+            q,
+            problem.t_centre,
+            problem.t_scale,
+            problem.u_centre,
+            problem.u_scale,
+        )
+        Dt = directions.T  # (k, D)
+        c, a, b, Q = c @ Dt, a @ Dt, b @ Dt, Q @ Dt
+        val, _, _ = box_maximum(c, a, b, Q, problem.t_scale > 0, problem.u_scale > 0)
+        size = np.abs(c).max(axis=0)
+        dep = np.vstack([np.abs(b).max(axis=0) + np.abs(Q).max(axis=(0, 2)), np.abs(a).max(axis=0)])  # (2m, D)
+        out.append((val, dep, size))
+    return tuple(np.max([o[j] for o in out], axis=0) for j in range(3))
 
 
 def inner_maxima(problem: Problem, q, directions, index, progress, pool):
@@ -225,10 +256,11 @@ def _screen_task(problem: Problem, item):
         step = rng.standard_normal(base.shape) * sigma * (problem.hi - problem.lo)
         x = np.clip(base + step, problem.lo, problem.hi)
         q, qdot, u = x[:, :m], x[:, m : 2 * m], x[:, 2 * m :]
-    e = problem.entries_at(q, qdot, u, index)
-    v = np.empty((len(q), len(directions)))
-    v[:, axis] = e[:, col] * coef
-    v[:, other] = e @ directions[other].T
+    v = np.full((len(q), len(directions)), -np.inf)
+    for i in range(len(problem.variants)):
+        e = problem.entries_at(q, qdot, u, index, i)
+        v[:, axis] = np.maximum(v[:, axis], e[:, col] * coef)
+        v[:, other] = np.maximum(v[:, other], e @ directions[other].T)
     arg = np.argmax(v, axis=0)
     return v[arg, np.arange(len(directions))], q[arg]
 
@@ -332,52 +364,3 @@ def landscape_peaks(problem: Problem, q, vals, n: int, neighbours: int | None = 
     top = np.argsort(-score, axis=0)[:n].T  # (D, n)
     valid = np.isfinite(np.take_along_axis(score.T, top, axis=1))
     return np.where(valid, top, best[:, None])
-
-
-def _witness_task(problem: Problem, item):
-    qq, d, index = item  # one polynomial d . p per position
-    c, a, b, Q = polynomial_coefficients(
-        lambda x, y, z: problem.entries_at(x, y, z, index),
-        qq,
-        problem.t_centre,
-        problem.t_scale,
-        problem.u_centre,
-        problem.u_scale,
-    )
-    val, t, u = box_maximum(
-        np.einsum("nk,nk->n", c, d)[:, None],
-        np.einsum("nmk,nk->nm", a, d)[..., None],
-        np.einsum("nmk,nk->nm", b, d)[..., None],
-        np.einsum("nijk,nk->nij", Q, d)[..., None],
-        problem.t_scale > 0,
-        problem.u_scale > 0,
-        exact=True,
-    )
-    x = np.hstack([qq, problem.t_centre + problem.t_scale * t[:, 0], problem.u_centre + problem.u_scale * u[:, 0]])
-    return val[:, 0], x
-
-
-def exact_witnesses(problem: Problem, positions, directions, index, pool):
-    """The exact maximiser over the velocity/torque box at given positions, per direction.
-
-    Parameters
-    ----------
-    positions : ndarray (D, S, m)
-        ``S`` positions for each of the ``D`` directions.
-
-    Returns
-    -------
-    points : ndarray (D, S, 3m)
-        ``(q, qdot, u)``, per direction sorted best first.
-    values : ndarray (D, S)
-    """
-    m = problem.m
-    D, S, _ = positions.shape
-    pair_dir = np.repeat(np.arange(D), S)
-    pair_q = positions.reshape(D * S, m)
-    chunks = np.array_split(np.arange(D * S), max(1, int(np.ceil(D * S / 64))))
-    out = pool.map(_witness_task, [(pair_q[c], directions[pair_dir[c]], index) for c in chunks], label="witnesses")
-    vals = np.concatenate([o[0] for o in out]).reshape(D, S)
-    points = np.vstack([o[1] for o in out]).reshape(D, S, 3 * m)
-    order = np.argsort(-vals, axis=1, kind="stable")
-    return np.take_along_axis(points, order[..., None], axis=1), np.take_along_axis(vals, order, axis=1)

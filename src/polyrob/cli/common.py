@@ -9,6 +9,7 @@ import sys
 
 from polyrob.cli.options import (
     nonnegative_float,
+    number,
     parse_armature,
     parse_bound,
     parse_joint_values,
@@ -160,6 +161,27 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
         help="reflected rotor inertia added to M's diagonal: V, V1,V2,... or JOINT=V,... "
         "(replaces the SRDF's gear ratio^2 x rotor inertia; default: the SRDF's, else none)",
     )
+    g = parser.add_argument_group(
+        "inner layer and payload (the outer controller drives v through an inner loop computed from a model)"
+    )
+    g.add_argument(
+        "--inner",
+        default="none",
+        choices=("none", "gravity", "computed-torque"),
+        help="none (the paper: v = u), gravity (u = g_hat(q) + v), computed-torque (u = M_hat(q) v + h_hat(q, qdot))",
+    )
+    g.add_argument("--payload-mass", default=None, help="payload at the tool flange, kg: LO:HI or M")
+    g.add_argument(
+        "--payload-com",
+        default=None,
+        help="payload centre-of-mass offset box in the flange frame, m: X,Y,Z (meaning -|X|:|X|, ...), "
+        "R (a cube), or X0:X1,Y0:Y1,Z0:Z1 (default: at the flange)",
+    )
+    g.add_argument(
+        "--model-error",
+        default=None,
+        help="PCT in [0, 100): the true link masses/inertias are the model's times 1 -+ PCT/100 (default 0)",
+    )
 
 
 def add_domain_arguments(parser: argparse.ArgumentParser) -> None:
@@ -183,10 +205,34 @@ def add_domain_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def robot_from_args(args):
+    """The robot of the options: with ``--inner``/``--payload-*``/``--model-error``, its inner loop."""
     from polyrob.model.robots import load_robot
 
     lock = None if args.lock is None else [s.strip() for s in args.lock.split(",") if s.strip()]
-    return load_robot(args.robot, lock=lock, armature=parse_armature(getattr(args, "armature", None)))
+    inner, payload = inner_options(args)
+    robot = load_robot(args.robot, lock=lock, armature=parse_armature(getattr(args, "armature", None)))
+    if inner is None:
+        return robot
+    from polyrob.model.inner import inner_loop
+
+    return inner_loop(robot, inner["inner"], payload=payload, model_error=inner["model_error"])
+
+
+def inner_options(args):
+    """``({"inner", "model_error"}, PayloadRange or None)``, or ``(None, None)`` when none of the options is given."""
+    layer = getattr(args, "inner", None) or "none"
+    mass, com, pct = (getattr(args, k, None) for k in ("payload_mass", "payload_com", "model_error"))
+    if layer == "none" and mass is None and com is None and pct is None:
+        return None, None
+    from polyrob.model.payload import PayloadRange
+
+    if com is not None and mass is None:
+        raise ArgumentError("--payload-com: give the payload's mass too (--payload-mass LO:HI)")
+    payload = None if mass is None else PayloadRange.parse(mass, com)
+    p = 0.0 if pct is None else number(pct, "--model-error")
+    if not 0.0 <= p < 100.0:
+        raise ArgumentError(f"--model-error: give a percentage in [0, 100), got '{pct}'")
+    return {"inner": layer, "model_error": p / 100.0}, payload
 
 
 def domain_options_given(args) -> bool:
@@ -208,6 +254,11 @@ def domain_from_args(robot, args):
     try:
         if task_options_given(args):
             return task_domain_from_args(robot, args)
+        if getattr(robot, "inner", None) == "computed-torque":
+            raise ArgumentError(
+                "--inner computed-torque: the outer input v is an acceleration: give a task domain "
+                "(--qddot-max, with --pose/--q-radius), not a torque box"
+            )
         return Domain.from_robot(
             robot,
             args.domain,

@@ -148,6 +148,7 @@ class Problem:
             "robot": self.robot.name,
             "m": int(self.robot.m),
             "reflected_inertia": str(getattr(self.robot, "reflected_inertia", "unknown")),
+            **({"inner": self.robot.words()} if hasattr(self.robot, "inner") else {}),
             "domain": self.domain.to_dict(),
             "weights": {k: list(v) for k, v in self.hyperparameters.items()},
             "uncertainty": {
@@ -185,7 +186,8 @@ class Problem:
             enclosure=enclosure,
             domain=_domain_words(self.domain),
             notes=tuple(getattr(self.robot, "notes", ()) or ())
-            + (f"reflected rotor inertia: {getattr(self.robot, 'reflected_inertia', 'unknown')}",),
+            + (f"reflected rotor inertia: {getattr(self.robot, 'reflected_inertia', 'unknown')}",)
+            + ((self.robot.words(),) if hasattr(self.robot, "inner") else ()),
             robot=str(self.robot.name),
         )
 

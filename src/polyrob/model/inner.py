@@ -1,0 +1,262 @@
+"""Inner control layers: the robot seen by the outer (robust) controller through an inner loop.
+
+The paper's controller drives the torques itself (``inner = "none"``).  Two
+inner layers, computed from a *model* of the robot, can sit between it and
+the motors; the outer controller's input is then ``v``:
+
+* ``"gravity"``: ``u = g_hat(q) + v`` (gravity compensation);
+* ``"computed-torque"``: ``u = M_hat(q) v + h_hat(q, qdot)`` with
+  ``h_hat = C_hat qdot + g_hat + D qdot`` (so ``u = rnea_hat(q, qdot, v) + D qdot``).
+
+The model differs from the true robot by a payload (a :class:`PayloadRange`:
+the model carries the middle of the range) and a model error ``p``: the
+true robot's link inertias are the model's times ``s`` in ``[1 - p, 1 + p]``.
+:class:`InnerLoopRobot` is the closed inner loop ``xdot = f(x, u(x, v))`` of
+one true robot, with the interface of every robot
+(:class:`~polyrob.model.base.Manipulator`), so the bounds, the plant and
+the validation run on it unchanged.  Its Jacobians are exact (chain rule on
+Pinocchio's analytic derivatives)::
+
+    A = df/dx + df/du [du/dq, du/dqdot],      B = df/du du/dv = M^-1 (1, 1 or M_hat)
+
+:meth:`InnerLoopRobot.variants` are the true robots the bounds are taken
+over (the ranges are *sampled*: the lightest payload at the centre of the
+offset box, the heaviest at every corner of it, times ``s = 1 - p, 1 + p``,
+all links scaled together, plus the nominal one).
+
+Examples
+--------
+>>> import numpy as np
+>>> from polyrob import load_robot
+>>> arm = inner_loop(load_robot("double_pendulum"), "gravity")
+>>> q = np.array([[0.3, -0.2]]); z = np.zeros((1, 2))
+>>> A, B = arm.jacobians_batch(q, z, z)            # at rest with v = 0: gravity is cancelled
+>>> bool(np.allclose(A[0, 2:, :2], 0.0, atol=1e-9)), bool(np.allclose(arm.acceleration(q[0], z[0], z[0]), 0.0))
+(True, True)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pinocchio
+
+from polyrob.errors import ArgumentError, RobotError
+from polyrob.model import dynamics
+from polyrob.model.base import Manipulator
+from polyrob.model.payload import PayloadRange, with_payload
+
+__all__ = ["INNER_LAYERS", "InnerLoopRobot", "inner_loop", "runtime_needs"]
+
+#: The inner layers: the paper's none, gravity compensation, computed torque.
+INNER_LAYERS = ("none", "gravity", "computed-torque")
+
+_COPIED = (
+    "name",
+    "source",
+    "joint_names",
+    "joint_kinds",
+    "position_lower",
+    "position_upper",
+    "velocity_limit",
+    "effort_limit",
+    "damping",
+    "locked",
+    "notes",
+    "reflected_inertia",
+    "reference_poses",
+)
+
+
+def runtime_needs(inner: str) -> str:
+    """What the inner layer computes at run time, every sample (for exports and messages)."""
+    return {
+        "none": "nothing: the controller's output is the joint torque u",
+        "gravity": "u = g_hat(q) + v: the model's gravity torque g_hat(q) at the measured q, every sample",
+        "computed-torque": (
+            "u = M_hat(q) v + h_hat(q, qdot): the model's mass matrix M_hat(q) and "
+            "h_hat(q, qdot) = C_hat(q, qdot) qdot + g_hat(q) + D qdot at the measured q, qdot, every sample"
+        ),
+    }[inner]
+
+
+@dataclass(frozen=True, eq=False)
+class InnerLoopRobot(Manipulator):
+    """The inner closed loop of one true robot, input ``v``; build it with :func:`inner_loop`.
+
+    Attributes
+    ----------
+    inner : str
+        One of :data:`INNER_LAYERS`.
+    model_robot : Robot
+        What the inner layer computes with (the robot with the middle payload).
+    true_robot : Robot
+        The robot the loop is closed on (a payload and a model error).
+    payload : PayloadRange or None
+    model_error : float
+        ``p``: the true link inertias are the model's times a factor in ``[1 - p, 1 + p]``.
+    scenario : str
+        This true robot's payload and inertia factor, in words.
+    """
+
+    inner: str
+    model_robot: object = field(repr=False)
+    true_robot: object = field(repr=False)
+    payload: PayloadRange | None = None
+    model_error: float = 0.0
+    scenario: str = "nominal"
+    _scenarios: tuple = field(default=(), repr=False)
+
+    def __post_init__(self):
+        for attr in _COPIED:
+            object.__setattr__(self, attr, getattr(self.true_robot, attr))
+
+    # ------------------------------------------------------------------ the inner law
+    def torque(self, q, qdot, v) -> np.ndarray:
+        """The motor torques ``u`` (n, m) the inner layer gives for outer inputs ``v``."""
+        q, qdot, v = _rows(q, qdot, v)
+        if self.inner == "none":
+            return v.copy()
+        if self.inner == "gravity":
+            return self.model_robot.inverse_dynamics(q, np.zeros_like(q), np.zeros_like(q)) + v
+        return self.model_robot.inverse_dynamics(q, qdot, v)
+
+    def acceleration(self, q, qdot, v) -> np.ndarray:
+        """``qddot`` of the true robot under ``u = torque(q, qdot, v)``."""
+        u = self.torque(q, qdot, v)[0]
+        return self.true_robot.acceleration(q, qdot, u)
+
+    def inverse_dynamics(self, q, qdot, qddot) -> np.ndarray:
+        """The outer inputs ``v`` (n, m) that give ``qddot`` on the true robot (the inner law inverted)."""
+        q, qdot, qddot = _rows(q, qdot, qddot)
+        u = self.true_robot.inverse_dynamics(q, qdot, qddot)
+        if self.inner == "none":
+            return u
+        zero = np.zeros_like(q)
+        if self.inner == "gravity":
+            return u - self.model_robot.inverse_dynamics(q, zero, zero)
+        h = self.model_robot.inverse_dynamics(q, qdot, zero)
+        return np.stack([np.linalg.solve(self.model_robot.mass_matrix(qk), r) for qk, r in zip(q, u - h)])
+
+    def mass_matrix(self, q) -> np.ndarray:
+        """``(df/dv)^-1`` on the velocity rows: ``M(q)``, or ``M_hat^-1 M`` for computed torque."""
+        M = self.true_robot.mass_matrix(q)
+        if self.inner == "computed-torque":
+            return np.linalg.solve(self.model_robot.mass_matrix(q), M)
+        return M
+
+    def jacobians_batch(self, q, qdot, v):
+        """``A = df/dx + df/du du/dx`` (n, 2m, 2m) and ``B = df/du du/dv`` (n, 2m, m) of the inner loop."""
+        q, qdot, v = _rows(q, qdot, v)
+        m = self.m
+        A, B = self.true_robot.jacobians_batch(q, qdot, self.torque(q, qdot, v))
+        if self.inner == "none":
+            return A, B
+        minv = B[:, m:, :].copy()
+        model_robot = self.model_robot
+        model, data = model_robot.model, model_robot._data
+        config = dynamics.to_configuration(model_robot, q)
+        if self.inner == "gravity":
+            for k in range(len(q)):
+                dg = pinocchio.computeGeneralizedGravityDerivatives(model, data, config[k])
+                A[k, m:, :m] += minv[k] @ dg
+            return A, B
+        qdot_c, v_c = np.ascontiguousarray(qdot), np.ascontiguousarray(v)
+        for k in range(len(q)):
+            du_dq, du_dv, Mhat = pinocchio.computeRNEADerivatives(model, data, config[k], qdot_c[k], v_c[k])
+            Mhat = np.triu(Mhat) + np.triu(Mhat, 1).T
+            du_dv = du_dv + np.diag(model_robot.damping)
+            A[k, m:, :m] += minv[k] @ du_dq
+            A[k, m:, m:] += minv[k] @ du_dv
+            B[k, m:, :] = minv[k] @ Mhat
+        return A, B
+
+    # ------------------------------------------------------------------ the ranges
+    def variants(self) -> tuple[InnerLoopRobot, ...]:
+        """The true robots the bounds are taken over: this one first, then the sampled corners."""
+        return (self, *self._scenarios)
+
+    def with_true(self, mass: float | None = None, com=None, scale: float = 1.0) -> InnerLoopRobot:
+        """The same inner layer and model on a true robot with this payload and inertia factor."""
+        if mass is None:
+            mass, com = self.payload.midpoint if self.payload is not None else (0.0, np.zeros(3))
+        true = with_payload(self._base, mass, com, scale=scale)
+        words = f"payload {mass:.4g} kg at ({', '.join(f'{c:.3g}' for c in np.ravel(com))}), links x {scale:.4g}"
+        return replace(self, true_robot=true, scenario=words, _scenarios=())
+
+    def drawn(self, rng) -> InnerLoopRobot:
+        """A true robot with a payload and an inertia factor drawn uniformly from their ranges."""
+        mass, com = self.payload.draw(rng) if self.payload is not None else (0.0, np.zeros(3))
+        scale = rng.uniform(1 - self.model_error, 1 + self.model_error)
+        return self.with_true(mass, com, float(scale))
+
+    @property
+    def _base(self):
+        return self.model_robot.__dict__.get("_polyrob_base", self.model_robot)
+
+    def words(self) -> str:
+        """The inner layer and the ranges in one line (a certificate's scope note)."""
+        parts = [f"inner layer: {self.inner}" + ("" if self.inner == "none" else f" ({runtime_needs(self.inner)})")]
+        if self.payload is not None:
+            parts.append(self.payload.words() + " (model: the middle)")
+        if self.model_error:
+            parts.append(f"link masses/inertias ±{100 * self.model_error:g} % (all links by one factor)")
+        if len(self._scenarios):
+            parts.append(f"bounds sampled at {len(self._scenarios) + 1} true robots (range corners)")
+        return "; ".join(parts)
+
+    def describe(self) -> dict:
+        out = super().describe()
+        out["inner"] = {"layer": self.inner, "model_error": self.model_error}
+        if self.payload is not None:
+            out["inner"]["payload"] = self.payload.to_dict()
+        return out
+
+
+def _rows(*arrays):
+    return tuple(np.atleast_2d(np.asarray(a, dtype=float)) for a in arrays)
+
+
+def inner_loop(robot, inner: str = "gravity", *, payload: PayloadRange | None = None, model_error: float = 0.0):
+    """The inner closed loop of ``robot`` (a :class:`InnerLoopRobot`) over a payload range and a model error.
+
+    Parameters
+    ----------
+    robot : Robot
+        A URDF robot from :func:`polyrob.load_robot` (without payload).
+    inner : {"none", "gravity", "computed-torque"}
+    payload : PayloadRange, optional
+        The model carries its middle; the true robots range over it.
+    model_error : float
+        ``p`` in ``[0, 1)``: the true link inertias are the model's times ``1 - p`` ... ``1 + p``.
+
+    Raises
+    ------
+    ArgumentError
+        An unknown layer, or ``p`` not in ``[0, 1)``.
+    RobotError
+        An analytic robot (no Pinocchio model for the inner layer).
+    """
+    if inner not in INNER_LAYERS:
+        raise ArgumentError(f"--inner: unknown inner layer {inner!r}: use one of {', '.join(INNER_LAYERS)}")
+    try:
+        p = float(model_error)
+    except (TypeError, ValueError):
+        raise ArgumentError(f"--model-error: {model_error!r} is not a number") from None
+    if not (np.isfinite(p) and 0.0 <= p < 1.0):
+        raise ArgumentError(f"--model-error: give a percentage in [0, 100), got {100 * p:g}")
+    if getattr(robot, "model", None) is None:
+        raise RobotError(f"{robot.name}: an inner layer needs a URDF robot (a Pinocchio model), not an analytic one")
+    if payload is not None:
+        payload = payload.at(robot)
+    mass, com = payload.midpoint if payload is not None else (0.0, np.zeros(3))
+    model_robot = with_payload(robot, mass, com)
+    model_robot.__dict__["_polyrob_base"] = robot
+    nominal = InnerLoopRobot(inner, model_robot, model_robot, payload, p)
+    corners = payload.corners() if payload is not None else [(0.0, np.zeros(3))]
+    scales = (1.0 - p, 1.0 + p) if p > 0 else (1.0,)
+    scenarios = tuple(nominal.with_true(mm, cc, s) for mm, cc in corners for s in scales)
+    if payload is None and p == 0:
+        scenarios = ()
+    return replace(nominal, _scenarios=scenarios)
