@@ -18,7 +18,7 @@ Examples
 >>> robot = load_robot("planar_2r")
 >>> rng = PayloadRange(0.0, 2.0, com_lower=(0.0, 0.0, 0.0), com_upper=(0.05, 0.0, 0.0)).at(robot)
 >>> rng.words()
-'payload 0-2 kg, COM offset [0:0.05, 0:0, 0:0] m at link2'
+'payload 0-2 kg, COM offset [0:0.05, 0:0, 0:0] m at joint2'
 >>> heavy = with_payload(robot, 2.0, (0.05, 0.0, 0.0))
 >>> bool(heavy.mass_matrix([0.0, 0.0])[1, 1] > robot.mass_matrix([0.0, 0.0])[1, 1])
 True
