@@ -159,3 +159,39 @@ def test_cli_parses_inner_options():
     assert arm.inner == "gravity" and arm.model_error == pytest.approx(0.1)
     assert arm.payload.mass_upper == 1.5 and arm.payload.com_upper == (0.0, 0.0, 0.02)
     assert "inner layer: gravity" in arm.words() and "payload 0-1.5 kg" in arm.words()
+
+
+@pytest.mark.parametrize("inner", ["gravity", "computed-torque"])
+def test_validation_simulates_a_true_robot_drawn_from_the_ranges(pendulum, inner):
+    """The nonlinear validation closes the inner layer (model) on a true robot with a drawn payload and error."""
+    import control
+
+    from polyrob.validate.simulate import simulate, smooth_reference
+
+    arm = inner_loop(pendulum, inner, payload=PayloadRange.parse("0:0.1"), model_error=0.05)
+    dom = _pendulum_domain(arm, qddot=5.0)
+    k = np.diag(pendulum.mass_matrix([0.4, 0.3])) if inner == "gravity" else np.ones(2)
+    s = control.tf("s")
+    K = control.append(*[control.ss(kj * (25 + 5 / s + 10 * s / (0.01 * s + 1))) for kj in k])
+    v0 = arm.inverse_dynamics([0.4, 0.3], [0, 0], [0, 0])[0]  # the model's equilibrium input
+    sim = simulate(arm, K, dom, smooth_reference([0.5, 0.35], 2.0), t_final=4.0, q0=[0.4, 0.3], u_eq=v0)
+    assert sim.success and sim.stayed_in_domain, sim.domain_exits
+    mass = float(sim.info["true_robot"].split()[1])
+    assert 0.0 <= mass <= 0.1 and "links x" in sim.info["true_robot"] and sim.info["inner"] == inner
+    assert np.all(np.isfinite(sim.info["motor_torque_peak"]))
+    assert abs(sim.q[0, -1] - 0.5) < 0.1  # a plain PID, slow integral action: near the target, not settled
+    nominal = simulate(arm, K, dom, smooth_reference([0.5, 0.35], 2.0), t_final=0.5, q0=[0.4, 0.3], true_seed=None)
+    assert nominal.info["true_robot"] == "nominal"
+
+
+def test_export_header_says_what_the_inner_layer_needs(tmp_path, pendulum):
+    import polyrob
+    from polyrob.validate.export_c import export_controller
+
+    arm = inner_loop(pendulum, "computed-torque", model_error=0.1)
+    res = export_controller(polyrob.paper_controller(), 1000.0, tmp_path, inner=arm.words())
+    header = res.header.read_text()
+    assert "outer input v of an inner layer" in header and "M_hat(q) v + h_hat(q, qdot)" in header
+    assert header.isascii()
+    plain = export_controller(polyrob.paper_controller(), 1000.0, tmp_path / "p", inner=None).header.read_text()
+    assert "inner layer" not in plain

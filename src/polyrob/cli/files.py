@@ -145,12 +145,17 @@ def cmd_export(args) -> int:
         prewarp=args.prewarp,
         real=args.real,
         name=args.name,
+        inner=info.get("inner"),
     )
     doc = res.summary()
+    if info.get("inner"):
+        doc["inner"] = info["inner"]
     if check_doc is not None:
         doc["word_length_check"] = check_doc
     out.document(doc)
     out.line(f"wrote {res.header}, {res.source} and {res.json}")
+    if info.get("inner") and not str(info["inner"]).startswith("inner layer: none"):
+        out.line(f"the controller's output is an inner layer's input v; at run time: {info['inner']}")
     if warning:  # on stderr, also with --json and --quiet
         print(f"polyrob: warning: {warning}", file=sys.stderr, flush=True)
     return 0

@@ -63,8 +63,10 @@ def _num(x: float, real: str) -> str:
     return text + ("f" if real == "float" else "")
 
 
-def c_sources(sos: SOSController, *, name: str = "controller", real: str = "double") -> tuple[str, str]:
-    """The text of ``name.h`` and ``name.c``."""
+def c_sources(
+    sos: SOSController, *, name: str = "controller", real: str = "double", inner: str | None = None
+) -> tuple[str, str]:
+    """The text of ``name.h`` and ``name.c``; ``inner``: the controller's inner layer (a header note)."""
     if real not in ("double", "float"):
         raise PolyrobError(f"real must be 'double' or 'float', got '{real}'")
     if not name.isidentifier():
@@ -78,7 +80,7 @@ def c_sources(sos: SOSController, *, name: str = "controller", real: str = "doub
  *
  * u[i] = sum_j K_ij(z) e[j], e = r - q (joint position error), u the joint torque
  * deviation from the equilibrium torque (add u_eq yourself).  Call {name}_step()
- * once per sample period, {sos.dt!r} s ({sos.rate:.9g} Hz).
+ * once per sample period, {sos.dt!r} s ({sos.rate:.9g} Hz).{_inner_note(inner)}
  */
 #ifndef {guard}
 #define {guard}
@@ -158,10 +160,28 @@ void {name}_step({name}_state_t *state, const {real} e[{P}_N_INPUTS], {real} u[{
     return header, source
 
 
-def write_c(sos: SOSController, out_dir, *, name: str = "controller", real: str = "double") -> tuple[Path, Path]:
+def _inner_note(inner: str | None) -> str:
+    """Header lines saying what an inner layer needs at run time (none for the paper's layer)."""
+    if not inner or inner.startswith("inner layer: none"):
+        return ""
+    words = " ".join(inner.replace("*/", "* /").replace("±", "+-").split())
+    lines, line = [], ""
+    for w in words.split(" "):
+        if len(line) + len(w) > 74:
+            lines.append(line.rstrip())
+            line = ""
+        line += w + " "
+    lines.append(line.rstrip())
+    text = "\n * ".join(lines)
+    return f"\n *\n * Here u is the outer input v of an inner layer, run at every sample beside this filter:\n * {text}"
+
+
+def write_c(
+    sos: SOSController, out_dir, *, name: str = "controller", real: str = "double", inner: str | None = None
+) -> tuple[Path, Path]:
     """Write ``out_dir/name.h`` and ``out_dir/name.c`` (atomically); returns both paths."""
     out = Path(out_dir)
-    header, source = c_sources(sos, name=name, real=real)
+    header, source = c_sources(sos, name=name, real=real, inner=inner)
     h, c = out / f"{name}.h", out / f"{name}.c"
     atomic_write(h, lambda f: f.write(header))
     atomic_write(c, lambda f: f.write(source))
@@ -217,10 +237,13 @@ def export_controller(
     real: str = "double",
     name: str = "controller",
     extra: dict | None = None,
+    inner: str | None = None,
 ) -> ExportResult:
     """``polyrob export``: discretise ``K`` at ``rate`` Hz, biquads per entry, optional quantisation, C + JSON.
 
     Writes ``out_dir/<name>.h``, ``out_dir/<name>.c`` and ``out_dir/<name>.json``.
+    ``inner`` (a controller file's ``info["inner"]``, :meth:`polyrob.model.inner.InnerLoopRobot.words`)
+    says in the header what the inner layer computes at run time.
 
     Examples
     --------
@@ -237,7 +260,7 @@ def export_controller(
     sos = sos_realization(dc)
     if word_length is not None:
         sos = quantize(sos, word_length)
-    h, c = write_c(sos, out_dir, name=name, real=real)
+    h, c = write_c(sos, out_dir, name=name, real=real, inner=inner)
     j = write_json(sos, Path(out_dir) / f"{name}.json", discrete=dc, extra=extra)
     return ExportResult(header=h, source=c, json=j, sos=sos, discrete=dc)
 

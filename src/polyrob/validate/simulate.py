@@ -208,6 +208,7 @@ def simulate(
     rtol: float = 1e-7,
     atol: float = 1e-9,
     time_budget: float | None = None,
+    true_seed: int | None = 0,
 ) -> SimulationResult:
     """Simulate the robot's nonlinear dynamics in closed loop with ``K``.
 
@@ -245,6 +246,12 @@ def simulate(
         tiny steps for many minutes; past the budget the simulation stops,
         keeps what it integrated and reports ``success=False`` with a message
         saying how far it got.  ``None``: no limit.
+    true_seed : int or None
+        For an inner loop with ranges (:mod:`polyrob.model.inner`): the seed
+        of the true robot simulated, its payload and inertia factor drawn
+        from their ranges (``info["true_robot"]`` says which; the inner layer
+        computes with the model); ``None``: the model itself.  ``u`` is then
+        the outer input ``v`` and ``info["motor_torque_peak"]`` the motors'.
 
     Returns
     -------
@@ -253,6 +260,9 @@ def simulate(
     from polyrob.validate.discretize import DiscreteController, discretize
 
     m = robot.m
+    ranged = getattr(robot, "payload", None) is not None or getattr(robot, "model_error", 0.0)
+    if hasattr(robot, "drawn") and ranged and true_seed is not None:
+        robot = robot.drawn(np.random.default_rng(true_seed))
     dom, u_eq, u_source = _domain_and_offset(robot, domain, u_eq)
     if not isinstance(reference, Reference):
         reference = Reference("custom", function=reference) if callable(reference) else step_reference(reference)
@@ -359,6 +369,10 @@ def _evaluate(pieces, t, z0):
 
 def _result(robot, dom, t, q, qd, u, r, kind, rate, reference, q0, u_eq, success, info) -> SimulationResult:
     exits, first, outside = domain_check(dom, robot, t, q, qd, u)
+    if hasattr(robot, "torque"):  # an inner loop: u is the outer input v; the motors give torque(q, qdot, v)
+        info["true_robot"] = robot.scenario
+        info["inner"] = robot.inner
+        info["motor_torque_peak"] = np.abs(robot.torque(q.T, qd.T, u.T)).max(axis=0).tolist()
     return SimulationResult(
         t=t,
         q=q,
