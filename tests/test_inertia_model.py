@@ -174,3 +174,14 @@ def test_paper_arm_model_size_nominal_and_description(pldi, paper):
     assert text.startswith("inertia: M(q) = L D L^T") and "positive definite in every member" in text
     assert model_of(paper).enclosure(paper) == "sampled"
     assert input_definiteness(paper, 200)["fraction"] == 0.0
+
+
+def test_torque_jacobians_stand_in_survives_pickling():
+    """The N PLDI's bounds workers unpickle it (a RecursionError in every worker before)."""
+    import pickle
+
+    from polyrob.plant.inertia_lft import TorqueJacobians
+
+    copy = pickle.loads(pickle.dumps(TorqueJacobians(cached_robot("planar_2r"))))
+    A, B = copy.jacobians([0.1, 0.2], [0.0, 0.0], [0.0, 0.0])
+    assert copy.name == "planar_2r/N" and copy.m == 2 and np.array_equal(B[2:], np.eye(2))

@@ -121,6 +121,8 @@ class TorqueJacobians:
         self.joint_names = robot.joint_names
 
     def __getattr__(self, item):
+        if item.startswith("__") or "_robot" not in self.__dict__:  # unpickling (a bounds worker): not yet set
+            raise AttributeError(item)
         return getattr(self._robot, item)
 
     def jacobians_batch(self, q, qdot, u):
