@@ -35,6 +35,12 @@ def print_analysis(a, out) -> None:
     out.line(f"nominal stability      {'yes' if rs.nominally_stable else 'NO'}")
     out.line(f"nominal performance    ||N_zw||inf = {npf:.4g}  ({'met' if npf < 1 else 'not met'})")
     for title, r in (("robust stability", rs), ("robust performance", rp)):
+        if r.implied_by:  # read from the other certificate: no figures of its own to show
+            out.line(
+                f"{title:<22} {r.certificate.status}: mu <= {r.certificate.bound:.4g} at every frequency, implied by "
+                f"the {r.implied_by} certificate (its own value: --stability-sweep)"
+            )
+            continue
         out.line(
             f"{title:<22} mu in [{r.mu_lower:.4g}, {r.mu_upper:.4g}] (peak on the frequency grid) "
             f"at {r.critical_frequency:.4g} rad/s: {r.certificate.status}"

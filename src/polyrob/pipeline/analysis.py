@@ -118,6 +118,7 @@ def analyze_controller(
     seed: int = 0,
     progress: bool | None = None,
     time_varying: bool = True,
+    stability: str = "sweep",
 ) -> ControllerAnalysis:
     """Nominal/robust stability and performance of ``K`` on ``problem``, and sampled stability.
 
@@ -136,15 +137,24 @@ def analyze_controller(
     time_varying : bool
         Also compute the time-varying certificate (quadratic stability and
         performance on the PLDI's vertices, or the constant-D small gain).
+    stability : {"sweep", "implied"}
+        ``"sweep"``: robust-stability μ by its own sweep; ``"implied"``: read
+        from the robust-performance certificate when that one is certified
+        (:func:`~polyrob.analysis.robust.robstab_implied`: a bound of
+        robust-stability μ, not its value), else swept.
     """
-    from polyrob.analysis.robust import nominal_performance, robperf, robstab, sample_stability
+    from polyrob.analysis.robust import nominal_performance, robperf, robstab, robstab_implied, sample_stability
 
     if int(mc) < 1:
         raise ArgumentError(f"Monte Carlo samples must be >= 1, got {mc}")
     _check_sizes(problem, K)
     options = {"progress": progress, "scope": problem.scope()}
-    rs = robstab(problem.P, K, omega, **options)
+    if stability not in ("sweep", "implied"):
+        raise ArgumentError(f"stability must be 'sweep' or 'implied', got {stability!r}")
     rp = robperf(problem.P, K, omega, **options)
+    rs = robstab_implied(rp) if stability == "implied" else None
+    if rs is None:
+        rs = robstab(problem.P, K, omega, **options)
     npf = nominal_performance(problem.P, K)
     sampling = sample_stability(problem.unc, K, n=int(mc), seed=seed)
     covers = rp.certificate.scope.sentence()

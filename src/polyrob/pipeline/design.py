@@ -23,13 +23,16 @@ def synthesis_options(
     init: str | None = None,
     progress: bool | None = None,
     time_limit: float | None = None,
+    target: float | None = None,
 ) -> dict:
     """``musyn`` keyword arguments from the plain synthesis choices.
 
     ``init`` is ``"paper"`` (a fixed structure starts from the paper's K*) or
     the path of a controller file (``K.json``, ``K.mat``) that starts the
     synthesis, full order or fixed structure.  ``time_limit`` (seconds): no
-    new iteration or start after it (``musyn``'s ``time_limit``).
+    new iteration or start after it (``musyn``'s ``time_limit``).  ``target``:
+    the iteration stops once its grid peak μ is below it (``musyn``'s ``target``,
+    MATLAB's ``TargetPerf``).
     """
     if max_iter is not None and max_iter < 1:
         raise ArgumentError(f"max_iter must be >= 1, got {max_iter}")
@@ -38,8 +41,12 @@ def synthesis_options(
     if time_limit is not None and not time_limit > 0:
         raise ArgumentError(f"time_limit must be > 0 seconds, got {time_limit}")
     options = {"structure": structure, "progress": progress}
+    if target is not None and not target > 0:
+        raise ArgumentError(f"target must be > 0, got {target}")
     if time_limit is not None:
         options["time_limit"] = float(time_limit)
+    if target is not None:
+        options["target"] = float(target)
     if max_iter is not None:
         options["max_iter"] = int(max_iter)
     if structure == "full":

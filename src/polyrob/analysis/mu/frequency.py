@@ -148,12 +148,25 @@ def matrix_response(A, B, C, D, *, modal: bool = True):
     return solve_eval
 
 
-def refine_peaks(omega, up, f, n_peaks=3, xtol=1e-7):
-    """Bounded scalar maximisation (in log omega) around the best local maxima."""
+def refine_peaks(omega, up, f, n_peaks=3, xtol=1e-7, within=0.5):
+    """Bounded scalar maximisation (in log omega) around the best local maxima.
+
+    Only maxima of at least ``within`` times the grid's peak are refined: the
+    refinement moves the reported peak, and a local maximum far below it
+    cannot become the peak between its neighbours (the check between grid
+    points proves that).  Measured on ``paper_2r`` at four times the paper's
+    bandwidths: the robust-stability sweep refined a local maximum at 0.05
+    (peak 0.40) where M has four near-zero singular values and each AB13MD
+    call took 5-30 s (14 calls, 240 s); the peak itself refines in 1 s.
+    """
     from scipy.optimize import minimize_scalar
 
+    up = np.asarray(up, float)
+    top = float(np.max(up)) if up.size else 0.0
     inner = [
-        i for i in range(omega.size) if (i == 0 or up[i] >= up[i - 1]) and (i == omega.size - 1 or up[i] >= up[i + 1])
+        i
+        for i in range(omega.size)
+        if (i == 0 or up[i] >= up[i - 1]) and (i == omega.size - 1 or up[i] >= up[i + 1]) and up[i] >= within * top
     ]
     inner = sorted(inner, key=lambda i: -up[i])[:n_peaks]
     out = []

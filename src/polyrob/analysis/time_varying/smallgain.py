@@ -155,29 +155,34 @@ def scaled_small_gain(N, blk, *, rtol: float = 1e-3, max_steps: int = 30) -> Sca
     A, B, C = _balanced(A, B, C)
     unscaled = hinf_norm((A, B, C, D), tol=1e-10)
 
+    # One problem, the level a parameter: cvxpy compiles it once and each
+    # bisection step only re-solves (DPP), instead of compiling ~15 times.
+    g2p = cp.Parameter(nonneg=True)
+    Y = cp.Variable((n, n), symmetric=True)
+    Xr, Xc, cons = 0, 0, []
+    for b, rs, cs in zip(st.blocks, st.row_slices, st.col_slices):
+        Er, Ec = np.eye(nr)[rs], np.eye(nc)[cs]
+        if b.kind == "full" or b.rows == 1:
+            x = cp.Variable(nonneg=True)
+            Xr, Xc = Xr + x * (Er.T @ Er), Xc + x * (Ec.T @ Ec)
+            cons.append(x >= 1e-6)
+        else:  # repeated scalar: a full symmetric scaling, the same on both sides
+            S = cp.Variable((b.rows, b.rows), symmetric=True)
+            Xr, Xc = Xr + Er.T @ S @ Er, Xc + Ec.T @ S @ Ec
+            cons.append(S >> 1e-6 * np.eye(b.rows))
+    CD = np.hstack([C, D])
+    L = cp.bmat([[A.T @ Y + Y @ A, Y @ B], [B.T @ Y, np.zeros((nr, nr))]]) + CD.T @ Xc @ CD
+    L = L - cp.bmat([[np.zeros((n, n)), np.zeros((n, nr))], [np.zeros((nr, n)), g2p * Xr]])
+    cons += [0.5 * (L + L.T) << -1e-9 * np.eye(n + nr), Xr >> np.eye(nr)]
+    prob = cp.Problem(cp.Minimize(0), cons)
+
     def solve(g2):
-        Y = cp.Variable((n, n), symmetric=True)
-        Xr, Xc, cons = 0, 0, []
-        for b, rs, cs in zip(st.blocks, st.row_slices, st.col_slices):
-            Er, Ec = np.eye(nr)[rs], np.eye(nc)[cs]
-            if b.kind == "full" or b.rows == 1:
-                x = cp.Variable(nonneg=True)
-                Xr, Xc = Xr + x * (Er.T @ Er), Xc + x * (Ec.T @ Ec)
-                cons.append(x >= 1e-6)
-            else:  # repeated scalar: a full symmetric scaling, the same on both sides
-                S = cp.Variable((b.rows, b.rows), symmetric=True)
-                Xr, Xc = Xr + Er.T @ S @ Er, Xc + Ec.T @ S @ Ec
-                cons.append(S >> 1e-6 * np.eye(b.rows))
-        CD = np.hstack([C, D])
-        L = cp.bmat([[A.T @ Y + Y @ A, Y @ B], [B.T @ Y, np.zeros((nr, nr))]]) + CD.T @ Xc @ CD
-        L = L - cp.bmat([[np.zeros((n, n)), np.zeros((n, nr))], [np.zeros((nr, n)), g2 * Xr]])
-        cons += [0.5 * (L + L.T) << -1e-9 * np.eye(n + nr), Xr >> np.eye(nr)]
-        prob = cp.Problem(cp.Minimize(0), cons)
+        g2p.value = float(g2)
         try:
             prob.solve(solver=cp.CLARABEL)
         except cp.error.SolverError:
             return None
-        if Y.value is None:
+        if prob.status not in ("optimal", "optimal_inaccurate") or Y.value is None:
             return None
         sol = (0.5 * (Y.value + Y.value.T), np.asarray(Xr.value), np.asarray(Xc.value))
         return sol if _kyp_ok(A, B, C, D, *sol, g2) and np.linalg.eigvalsh(sol[1])[0] > 0 else None
