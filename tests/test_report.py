@@ -112,9 +112,10 @@ def test_report_references_existing_valid_pngs(tmp_path):
     page = files.html.read_text()
     refs = _check_links(tmp_path, page, r"<img src='([^']+)'")
     assert set(refs) == {f"figures/{p.name}" for p in files.figures}
-    assert {"pldi_bode.png", "sensitivities.png", "controllers.png", "mu.png", "tracking.png"} <= {
-        Path(r).name for r in refs
-    }
+    # steps are raw figures: their simulations go to the appendix, after the paper's figures
+    names = [Path(r).name for r in refs]
+    assert {"pldi_bode.png", "sensitivities.png", "controllers.png", "mu.png", "tracking_steps.png"} <= set(names)
+    assert names.index("mu.png") < names.index("tracking_steps.png") and "tracking.png" not in names
     _check_links(tmp_path, files.markdown.read_text(), r"!\[[^\]]*\]\(([^)]+)\)")
     # self-contained: no scripts, stylesheets or remote resources
     assert "<script" not in page and "http" not in page.replace("http-equiv", "")

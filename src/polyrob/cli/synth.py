@@ -35,30 +35,46 @@ def _options(args, out) -> dict:
     )
 
 
-#: ``polyrob run`` with no robot: the main job, the paper's problem at a
-#: bandwidth its arm certifies.  At the paper's own bandwidths (factor 1) the
-#: best controller polyrob finds has μ 1.02 (docs/uncertainty.md); at four
-#: times them the full-order D-G-K controller, reduced to order <= 20, is
-#: certified (README, "Wall times").  The D-K iteration stops once its grid
-#: peak is below 0.95: the certificate of the reduced controller is decided
-#: afterwards, at every frequency, as for any other run.
-MAIN_JOB = {"robot": "paper_2r", "bandwidth_scale": 4.0, "target": 0.95}
+#: ``polyrob run`` with no robot: the main job.  The paper's arm (the bundled
+#: URDF ``planar_2r``) on a task a treatment robot performs: around an elbow-bent
+#: pose, +-0.5 rad, |qdot| <= 1 rad/s, |qddot| <= 2 rad/s^2, the torques
+#: following from inverse dynamics (a task domain, docs/task_domains.md), at
+#: the paper's own weights and bandwidths.  On the paper's full torque box the
+#: Jacobians hold accelerations of hundreds of rad/s^2 that no planned motion
+#: asks for, and no controller polyrob finds is certified there at the paper's
+#: bandwidths (README).  The D-K iteration stops once its grid peak is below
+#: 0.95; the reduced controller's certificate is decided afterwards, at every
+#: frequency, as for any other run.
+MAIN_JOB = {
+    "robot": "planar_2r",
+    "pose": "0,1.5708",
+    "q_radius": "0.5",
+    "qdot_max": "1",
+    "qddot_max": "2",
+    "target": 0.95,
+}
 
 
 def _main_job_defaults(args, out) -> None:
-    """Fill in what ``run`` was not given: the main job without a robot, else the plain defaults."""
-    if args.robot is None:
-        for key, value in MAIN_JOB.items():
-            if getattr(args, key, None) is None:
-                setattr(args, key, value)
-        out.line(
-            f"main job (no robot given): {args.robot} on its domain 'paper' (the paper's Table), "
-            f"bandwidths x {args.bandwidth_scale:g} of the paper's, full-order D-G-K stopped at grid mu < "
-            f"{args.target:g}" + (", reduced to order <= " + str(args.reduce_max_order) if args.reduce else "")
-            + "; give a robot to pose your own problem"
-        )
-    if args.bandwidth_scale is None:
-        args.bandwidth_scale = 1.0
+    """``run`` without a robot: the main job (:data:`MAIN_JOB`), unless its options were given."""
+    if args.robot is not None:
+        return
+    given = [k for k in ("pose", "q_radius", "qdot_max", "qddot_max", "q_range", "u_max", "domain") if getattr(args, k, None)]
+    for key, value in MAIN_JOB.items():
+        if key in ("pose", "q_radius", "qdot_max", "qddot_max") and given:
+            continue  # a domain was given: it replaces the main job's task
+        if getattr(args, key, None) is None:
+            setattr(args, key, value)
+    task = "" if given else (
+        f" on the task around q = ({args.pose}) rad, +-{args.q_radius} rad, |qdot| <= {args.qdot_max} rad/s, "
+        f"|qddot| <= {args.qddot_max} rad/s^2"
+    )
+    out.line(
+        f"main job (no robot given): {args.robot}, the paper's arm{task}, the paper's weights, full-order D-G-K "
+        f"stopped at grid mu < {args.target:g}"
+        + (f", reduced to order <= {args.reduce_max_order}" if args.reduce else "")
+        + "; give a robot to pose your own problem"
+    )
 
 
 def _check_output(args) -> None:
@@ -279,6 +295,7 @@ def cmd_run(args) -> int:
             design.controller,
             certificates=_report_certificates(a),
             controller_file="K.json",
+            controller_words=_controller_words(design),
         )
         doc["report"] = str(files.html)
         out.line(f"wrote {files.html}")
@@ -286,6 +303,17 @@ def cmd_run(args) -> int:
         doc["output"] = _save(design, problem, args, out, certificate_extra=extra)
     out.document(doc)
     return exit_status(a.certificate)
+
+
+def _controller_words(design) -> str:
+    """How the run's controller was made, for the report's first lines."""
+    r = design.result
+    if design.reduced is not None:
+        return (
+            f"full-order D-G-K (order {design.reduced.full_order}), reduced by balanced truncation to order "
+            f"{design.reduced.order}"
+        )
+    return f"{r.structure}, order {r.order}"
 
 
 def _report_certificates(analysis) -> dict:
@@ -379,7 +407,7 @@ def register(sub) -> None:
         "--full-order", dest="reduce", action="store_false", help="keep the full-order controller (no reduction)"
     )
     # run reduces by default (a controller an engineer can implement); no robot: the main job (MAIN_JOB)
-    p.set_defaults(reduce=True, robot=None, bandwidth_scale=None)
+    p.set_defaults(reduce=True, robot=None)
     p.add_argument("--mc", type=int_at_least(1), default=200, help="Monte Carlo parameter sets in the analysis")
     p.add_argument(
         "--no-time-varying",

@@ -260,6 +260,30 @@ def read_run_certificates(run_dir, controller: str = "K.json") -> tuple[dict, li
     return certs, notes
 
 
+def problem_summary(problem, K, controller_words: str | None = None) -> dict:
+    """The lines at the top of a report: the robot, the domain and what it means for motion, the weights, the controller."""
+    import control
+
+    robot, domain = problem.robot, problem.domain
+    inertia = getattr(robot, "reflected_inertia", None)
+    if getattr(domain, "kind", "") == "task":
+        motion = (
+            "the certificate applies while positions, velocities and accelerations stay inside these bounds "
+            "(torques from inverse dynamics)"
+        )
+    else:
+        motion = "the certificate applies while positions, velocities and torques stay inside these bounds"
+    hp = problem.hyperparameters
+    weights = ", ".join(f"{k} {tuple(float(x) for x in hp[k])}" for k in ("omega_b", "omega_bt") if k in hp)
+    return {
+        "robot": f"{robot.name} ({robot.m} joints" + (f"; reflected inertia: {inertia}" if inertia else "") + ")",
+        "domain": f"{domain.name}: {motion}",
+        "performance weights": f"W_S, W_T of the paper's shape; bandwidths (rad/s) {weights}",
+        "uncertainty model": f"{problem.model}, {problem.unc.n_params} real parameters, PLDI {problem.pldi.enclosure}",
+        "controller": controller_words or f"order {control.ss(K).nstates}",
+    }
+
+
 def write_run_report(
     run_dir,
     problem,
@@ -270,6 +294,7 @@ def write_run_report(
     title: str | None = None,
     controller_file: str = "K.json",
     notes=(),
+    controller_words: str | None = None,
     **options,
 ) -> ReportFiles:
     """Validate ``K`` on ``problem`` and write ``DIR/report.html`` (the end of ``polyrob run ROBOT -o DIR``).
@@ -290,6 +315,8 @@ def write_run_report(
         The controller file in ``DIR`` the certificates are of.
     notes : sequence of str
         Remarks printed under the certificates (e.g. what a rebuild could not read).
+    controller_words : str, optional
+        How the controller was made (structure, orders); default its order.
     **options
         Passed to :func:`validate_controller`.
 
@@ -315,6 +342,7 @@ def write_run_report(
         discretization=val.discretization,
         mu_curves=val.mu_curves,
         notes=tuple(notes) + tuple(val.notes),
+        problem_summary=problem_summary(problem, K, controller_words),
     )
     if certificates:
         save_run_certificates(run, certificates, controller_file)

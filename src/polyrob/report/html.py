@@ -137,8 +137,8 @@ class _Doc:
         return "\n".join(self.h + ["</body></html>"]), "\n".join(self.md)
 
 
-def _certificates(doc, certificates) -> dict:
-    """The verdict and the certificate table at the top; returns the records shown."""
+def _certificates(doc, certificates, problem_summary=None) -> dict:
+    """The verdict, the problem and the certificate table at the top; returns the records shown."""
     records = {str(k): certificate_record(v) for k, v in (certificates or {}).items()}
     undecided = [k for k, r in records.items() if not is_decided(r)]
     if undecided:
@@ -148,6 +148,8 @@ def _certificates(doc, certificates) -> dict:
         doc.para("verdict: none (no frozen-robot certificate was given)", bad=True, ident="verdict")
     else:
         doc.para(f"verdict: {status}", bad=not (status and Status(status).certified), ident="verdict")
+    if problem_summary:  # what was certified, for what motion, with what controller
+        doc.table(["problem", "as posed"], [(k, str(v)) for k, v in problem_summary.items()], ident="problem", left=(0, 1))
     doc.heading("Certificates")
     if not records:
         doc.para("No certificate was given.")
@@ -187,6 +189,7 @@ def write_report(
     discretization: dict | None = None,
     mu_curves: dict | None = None,
     notes=(),
+    problem_summary: dict | None = None,
 ) -> ReportFiles:
     """Write ``report.html``, ``report.md``, ``figures/`` and ``validation.json`` into ``run_dir``.
 
@@ -220,6 +223,9 @@ def write_report(
         certificate was decided on (its whole grid, ω = 0 included when swept).
     notes : sequence of str
         Extra remarks (fallbacks, approximations) printed under the summary.
+    problem_summary : dict, optional
+        ``{"robot": ..., "domain": ..., "controller": ...}``: the lines under
+        the certificates (what was certified, for what motion, with what).
 
     Returns
     -------
@@ -238,16 +244,18 @@ def write_report(
         figures.append(path)
         doc.figure(f"figures/{name}", caption)
 
-    records = _certificates(doc, certificates)
+    records = _certificates(doc, certificates, problem_summary)
     validation["certificates"] = records
+    if problem_summary:
+        validation["problem"] = {k: str(v) for k, v in problem_summary.items()}
     kinds = getattr(getattr(pldi, "robot", None), "joint_kinds", None)
     doc.para(f"Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC by polyrob.")
     for note in notes:
         doc.para(str(note))
-
-    sims = list(simulations)
-    if sims:
-        doc.heading("Nonlinear closed loop (the robot's own dynamics)")
+    def simulation_section(sims, heading, name):
+        if not sims:
+            return
+        doc.heading(heading)
         left = [s for s in sims if not s.stayed_in_domain]
         if left:
             doc.para(
@@ -295,24 +303,14 @@ def write_report(
         for k, s in enumerate(sims):
             doc.para(f"#{k + 1}: {s.verdict()}", bad=s.left_domain or not s.success)
         fig(
-            "tracking.png",
+            name,
             lambda p: plots.plot_tracking(sims, p, joint_names=[m.joint for m in sims[0].metrics], kinds=kinds),
             "Nonlinear closed loop: positions and references, torques against the effort limits "
             "(red: after leaving the domain)",
         )
-        validation["simulations"] = [s.summary() for s in sims]
+        validation.setdefault("simulations", []).extend(s.summary() for s in sims)
 
-    if discretization:
-        doc.heading("Discretisation and quantisation")
-        doc.table(
-            ["figure", "value"],
-            [
-                (k, _fmt(v, _NOT_FOUND.get(k, "not computed")))
-                for k, v in discretization.items()
-                if not isinstance(v, (dict, list)) or len(v) <= 6
-            ],
-        )
-        validation["discretization"] = discretization
+
 
     # ------------------------------------------------------------------ the problem
     if pldi is not None:
@@ -371,6 +369,33 @@ def write_report(
             "μ upper (solid) and lower (dashed) bounds over each grid, from its lowest frequency"
             + ("; the value at ω = 0 is the point at the left edge" if zero else ""),
         )
+
+    # ------------------------------------------------------------------ validation, then the appendix
+    sims = list(simulations)
+    along = [s for s in sims if s.reference.kind != "step"]
+    steps = [s for s in sims if s.reference.kind == "step"]
+    simulation_section(
+        along, "Nonlinear closed loop along a trajectory (the robot's own dynamics)", "tracking.png"
+    )
+    if steps:
+        doc.heading("Appendix")
+        doc.para(
+            "Raw figures: small steps (a step asks for unbounded acceleration, so it may leave a domain "
+            "that bounds accelerations or torques), the discretisation and quantisation analysis."
+        )
+    simulation_section(steps, "Appendix: steps on the nonlinear robot", "tracking_steps.png")
+    if discretization:
+        doc.heading("Appendix: discretisation and quantisation")
+        doc.table(
+            ["figure", "value"],
+            [
+                (k, _fmt(v, _NOT_FOUND.get(k, "not computed")))
+                for k, v in discretization.items()
+                if not isinstance(v, (dict, list)) or len(v) <= 6
+            ],
+        )
+        validation["discretization"] = discretization
+
 
     page, md = doc.text()
     h, m = run / "report.html", run / "report.md"

@@ -12,6 +12,7 @@ Whatever the iteration optimised, the controller is certified by
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Sequence
 
@@ -31,6 +32,8 @@ from polyrob.synthesis.result import MusynResult
 from polyrob.synthesis.scalings.dfit import LogMagnitudeFit
 
 __all__ = ["musyn", "scaling_order_defaults", "LARGE_STRUCTURE_ORDERS"]
+
+log = logging.getLogger("polyrob")
 
 #: Above this many padded channels (:data:`polyrob.analysis.mu.sweep.DESCENT_ABOVE`, a 6-7 joint
 #: arm's axes model) the D and G scalings default to constants: a fitted order ``o`` on a block
@@ -326,7 +329,12 @@ def musyn(
             if not np.isfinite(rec.mu_peak):
                 break
             # the certificate every caller makes: the loop's own grid unless one is given
+            t_cert = time.perf_counter()
             cert = certify_loop(Pc, rec.K, st, certify_omega, sweep_unstable=False, **kw)
+            log.info(
+                f"musyn: certificate of iteration {i + 1} (order {rec.K.nstates}): {cert.status.value}, "
+                f"grid peak {cert.mu_upper_grid:.4g}, {time.perf_counter() - t_cert:.1f} s"
+            )
             if best is None or cert.mu_upper_grid < best[1].mu_upper_grid:
                 best = (i, cert)
             if cert.mu_upper_grid <= rec.mu_peak * 1.02:

@@ -25,6 +25,7 @@ misses the target the search moves up one order at a time.
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass
 
@@ -39,6 +40,8 @@ from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import as_controller_ss
 from polyrob.synthesis.dk.frequency import frequency_grid
 from polyrob.synthesis.result import MusynResult
+
+log = logging.getLogger("polyrob")
 
 __all__ = ["ReductionResult", "reduce_controller", "stable_unstable_split", "balanced_reduction"]
 
@@ -290,9 +293,14 @@ def reduce_controller(
             return cache[order]
         if Kr is None:
             Kr = balanced_reduction(K, order, method)
+        t = time.perf_counter()
         cert = certify_loop(P, Kr, st, omega, sweep_unstable=False, **kw)
         wpk = float(cert.mu.peak_upper_frequency) if cert.mu is not None else float("nan")
         cache[order] = (cert.mu_upper_grid, cert.mu_lower, wpk, cert.closed_loop, cert, Kr)
+        log.info(
+            f"reduction: order {order}: peak mu {cert.mu_upper_grid:.4g} ({cert.status.value}), "
+            f"{time.perf_counter() - t:.1f} s"
+        )
         return cache[order]
 
     with single_blas_thread():
