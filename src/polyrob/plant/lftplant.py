@@ -106,7 +106,7 @@ class UncertainPlant:
     Attributes
     ----------
     robot_name : str
-    model : {"box", "axes", "lft", "lft-torque"}
+    model : {"box", "axes", "lft", "lft-torque", "inertia"}
         The uncertainty model (:func:`~polyrob.plant.uncertainty.uncertain_plant`).
     nominal_kind : {"pldi", "midpoint"}
     A_nom, B_nom, C : ndarray
