@@ -106,3 +106,17 @@ def test_a_prismatic_joint_is_a_slider_in_metres_and_newtons(tmp_path, capfd):
     info = json.loads(out)
     assert code == 0 and [j["kind"] for j in info["joints"]] == ["revolute", "prismatic"]
     assert info["domain"]["q"]["slide"] == [-1.0, 1.0]  # metres, from the URDF <limit>
+
+
+def test_a_wrong_size_controller_file_is_refused_for_its_size_first(tmp_path, capfd):
+    """A 1x1 controller made (it says) with other weights: the size is what the user hears first."""
+    import control
+
+    from polyrob.io.controller import save_controller
+
+    path = tmp_path / "K.json"
+    info = {"robot": "planar_2r", "weights": {"omega_b": [9.0, 9.0]}}
+    save_controller(control.ss([[-1.0]], [[1.0]], [[1.0]], [[0.0]]), path, info=info)
+    code, _, err = run(capfd, "analyze", "planar_2r", "--controller", str(path))
+    line = one_error_line(err)
+    assert code == 2 and "1 input(s) and 1 output(s)" in line and "needs 2" in line and "weight" not in line

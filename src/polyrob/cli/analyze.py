@@ -78,6 +78,9 @@ def cmd_analyze(args) -> int:
     out = Output(args, stages=2)
     K, info, source = load_controller_args(args.controller)
     robot = robot_from_args(args)
+    from polyrob.pipeline.matching import check_controller_size
+
+    check_controller_size(K, robot, source)  # its size first: a file of another size is not for this robot
 
     def check(known):  # robot, domain and weights are known before the bounding step
         check_controller_problem(info, known, source)

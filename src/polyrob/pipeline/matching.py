@@ -20,7 +20,7 @@ from __future__ import annotations
 from polyrob.errors import ControllerFileError
 from polyrob.io.controller import same_number
 
-__all__ = ["check_controller_problem", "controller_differences"]
+__all__ = ["check_controller_problem", "check_controller_size", "controller_differences"]
 
 _WEIGHT_OPTIONS = {"omega_b": "--wb", "M_s": "--ms", "A_s": "--as", "omega_bt": "--wbt", "M_t": "--mt", "A_t": "--at"}
 _GROUP_OPTIONS = {"q": "--q-range", "qdot": "--qdot-max", "u": "--u-max"}
@@ -99,3 +99,35 @@ def check_controller_problem(info: dict, problem, source="the controller file") 
             "Analyse it on the problem it was made for (options above)"
         )
     return diffs
+
+
+def check_controller_size(K, robot, source="the controller file") -> None:
+    """Refuse a controller whose size does not fit ``robot`` before anything else is compared.
+
+    A controller maps the ``m`` position measurements to the ``m`` joint
+    inputs; a file of another size cannot be meant for this robot, whatever
+    its weights say, so its size is the first thing a user is told.
+
+    Raises
+    ------
+    ControllerFileError
+
+    Examples
+    --------
+    >>> import control, polyrob
+    >>> from polyrob.pipeline.matching import check_controller_size
+    >>> check_controller_size(control.ss([], [], [], [[1.0, 0.0], [0.0, 1.0]]), polyrob.load_robot("planar_2r"))
+    >>> check_controller_size(control.ss([], [], [], [[1.0]]), polyrob.load_robot("planar_2r"))
+    Traceback (most recent call last):
+    ...
+    polyrob.errors.ControllerFileError: the controller file has 1 input(s) and 1 output(s); planar_2r needs 2 measurement input(s) and 2 joint output(s)
+    """
+    import control
+
+    Kss = control.ss(K)
+    m = int(robot.m)
+    if (Kss.ninputs, Kss.noutputs) != (m, m):
+        raise ControllerFileError(
+            f"{source} has {Kss.ninputs} input(s) and {Kss.noutputs} output(s); {robot.name} needs {m} "
+            f"measurement input(s) and {m} joint output(s)"
+        )
