@@ -121,7 +121,7 @@ def test_cli_bounds_and_problem_scope_over_a_task_domain(robot, domain, capsys):
     argv = ["bounds", "planar_2r", "--pose", "0.4,1.2", "--q-radius", "0.3", "--qdot-max", "0.5", "--qddot-max", "2"]
     assert main([*argv, "--samples", "128", "--coverage", "500", "--no-models"]) == 0
     out = capsys.readouterr().out
-    assert "task around a given pose: q ±0.3, qdot ±0.5, qddot ±2" in out and "coverage: 1.0000" in out
+    assert "task around q = (0.4, 1.2): q ±0.3, qdot ±0.5, qddot ±2" in out and "coverage: 1.0000" in out
     assert main(["bounds", "planar_2r", "--pose", "elbow_up", "--qddot-max", "2"]) == 2
     assert "unknown pose 'elbow_up'" in capsys.readouterr().err
     prob = build_problem(
@@ -132,7 +132,7 @@ def test_cli_bounds_and_problem_scope_over_a_task_domain(robot, domain, capsys):
         progress=False,
     )
     scope = prob.scope()
-    assert scope.domain.startswith("task domain around a given pose (±0.3 rad)")
+    assert scope.domain.startswith("task domain around q = (0.4, 1.2) (±0.3 rad)")
     assert any(n.startswith("reflected rotor inertia: none") for n in scope.notes)
     assert prob.description()["domain"]["kind"] == "task"
 

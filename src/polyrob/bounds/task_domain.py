@@ -216,10 +216,12 @@ class TaskDomain:
                 raise DomainError(f"--pose: unknown pose '{pose}' of {robot.name} (poses: {known})")
             pose, source = poses[pose], f"SRDF pose '{pose}'"
         else:
-            source = "a given pose"
+            source = None  # named by its values once checked
         pose = np.asarray(pose, dtype=float).reshape(-1)
         if pose.shape != (len(names),) or not np.all(np.isfinite(pose)):
             raise DomainError(f"--pose: give {len(names)} finite positions (one per joint), got {pose.tolist()}")
+        if source is None:
+            source = "q = (" + ", ".join(f"{x:.4g}" for x in pose) + ")"
         outside = (pose < box.q_lower - 1e-9) | (pose > box.q_upper + 1e-9)
         if outside.any():
             j = int(np.argmax(outside))
