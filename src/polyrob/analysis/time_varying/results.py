@@ -11,7 +11,7 @@ __all__ = ["QuadStabResult", "QuadPerfResult", "COVERS_NONLINEAR", "covers_text"
 #: The sentence the CLI prints beside the two verdicts.
 COVERS_NONLINEAR = (
     "Only the time-varying certificate (quadratic stability/performance on the PLDI's vertices) can cover the "
-    "moving nonlinear robot: when its status says certified, and only while the robot's state and torque stay "
+    "moving nonlinear robot: when its status says certified, and only while the robot's state and its torques (accelerations, for a task domain) stay "
     "inside the domain the PLDI was bounded on; mu with constant parameters certifies each frozen robot of "
     "the set, not the robot in motion."
 )

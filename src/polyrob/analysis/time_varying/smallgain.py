@@ -354,5 +354,5 @@ def _covers(st) -> str:
         f"every Delta(t) of the structure {st} varying arbitrarily fast in time (real parameters in [-1, 1], "
         "full blocks as norm-bounded linear time-varying operators): stability, and L2 performance when the "
         "structure holds the performance block; for the robot, as far as the LFT model covers its Jacobians "
-        "over the domain and the state and torque stay inside it"
+        "over the domain and the state and torques (accelerations, for a task domain) stay inside it"
     )
