@@ -55,6 +55,7 @@ __all__ = [
     "rescoped",
     "decide_mu",
     "decide_gain",
+    "decide_gridded_gain",
     "weakest_enclosure",
     "FROZEN",
     "ARBITRARY",
@@ -140,6 +141,8 @@ class Certificate:
             if self.mu is None:
                 return f"{what}: L2 gain <= {self.bound:.4g} < 1" if "performance" in self.scope.kind else what
             return f"{what}: mu <= {self.bound:.4g} at every frequency"
+        if self.status is Status.GRID_ONLY and self.mu is None and np.isnan(self.mu_upper_grid):
+            return f"{self.scope.kind} GRID_ONLY: L2 gain <= {self.bound:.4g} < 1 at the parameter grid's points only"
         if self.status is Status.GRID_ONLY:
             return f"{what}: peak {self.mu_upper_grid:.4g}"
         return f"{what}: {self.reasons[0]}" if self.reasons else what
@@ -219,6 +222,18 @@ def decide_gain(stable: bool, gamma: float, checked: bool, why: str = "") -> tup
     return Status.NOT_CERTIFIED, (
         why or (f"verified bound {gamma:.4g} is not below 1" if checked else "no verified bound"),
     )
+
+
+def decide_gridded_gain(proved: bool, gamma: float, between: bool, why: str = "") -> tuple[Status, tuple[str, ...]]:
+    """:func:`decide_gain` for a bound proved on a parameter grid: GRID_ONLY unless it holds between the points too.
+
+    >>> decide_gridded_gain(True, 0.5, False)[0].value, decide_gridded_gain(True, 0.5, True)[0].value
+    ('GRID_ONLY', 'CERTIFIED')
+    """
+    status, reasons = decide_gain(proved, gamma, proved, why)
+    if status is Status.CERTIFIED and not between:
+        return Status.GRID_ONLY, ("proved at the parameter grid's points only, not between them",)
+    return status, reasons
 
 
 def _grid_words(omega) -> str:

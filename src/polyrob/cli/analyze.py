@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+
 from polyrob.cli.common import (
     Output,
     add_domain_arguments,
@@ -63,6 +65,11 @@ def print_analysis(a, out) -> None:
 
         out.line(tv.verdict)
         out.line(f"which covers the robot: {covers_nonlinear(tv.method)}")
+    mv = getattr(a, "moving", None)
+    if mv is not None:  # the third verdict: the linearised robot moving within the domain's rates
+        out.line(mv.verdict)
+        if mv.computed:
+            out.line(mv.details())
     out.line(a.verdict)
     out.line(a.certificate.details())
     if not a.certificate.certified:
@@ -94,7 +101,14 @@ def cmd_analyze(args) -> int:
         + (", time-varying certificate" if args.time_varying else "")
     )
     a = analyze_controller(
-        problem, K, omega=omega, mc=args.mc, seed=args.seed, progress=out.progress, time_varying=args.time_varying
+        problem,
+        K,
+        omega=omega,
+        mc=args.mc,
+        seed=args.seed,
+        progress=out.progress,
+        time_varying=args.time_varying,
+        moving=args.moving,
     )
     report = {
         "robot": robot.name,
@@ -137,6 +151,13 @@ def register(sub) -> None:
         action="store_false",
         help="skip the time-varying certificate (quadratic stability/performance on the PLDI's vertices, "
         "or the constant-D small gain), the one that covers the moving robot",
+    )
+    p.add_argument(
+        "--moving",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="the moving-robot certificate (rate-bounded LPV analysis on the robot's state, rates from the "
+        "domain); default: computed only for small closed loops (docs/certificates.md)",
     )
     add_output_flags(p)
     p.set_defaults(func=cmd_analyze)

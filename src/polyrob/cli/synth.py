@@ -317,13 +317,16 @@ def _controller_words(design) -> str:
 
 
 def _report_certificates(analysis) -> dict:
-    """The certificates a run report shows, as decided: the frozen robot (mu) and arbitrarily fast variation."""
-    from polyrob.report.certificates import FROZEN_ROW, TIME_VARYING_ROW
+    """The certificates a run report shows, as decided: frozen robot (mu), arbitrarily fast, moving robot."""
+    from polyrob.report.certificates import FROZEN_ROW, MOVING_ROW, TIME_VARYING_ROW
 
     certs = {FROZEN_ROW: analysis.certificate}
     tv = analysis.time_varying
     if tv is not None:
         certs[f"{TIME_VARYING_ROW} ({tv.method})"] = tv
+    mv = getattr(analysis, "moving", None)
+    if mv is not None and mv.computed:
+        certs[f"{MOVING_ROW} ({mv.rate_words})"] = mv
     return certs
 
 

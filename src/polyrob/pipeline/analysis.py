@@ -66,6 +66,10 @@ class ControllerAnalysis:
         The certificate for Jacobians varying in time (the moving robot),
         :func:`polyrob.analysis.time_varying.certificate.time_varying_certificate`;
         ``None`` when not asked for.
+    moving : MovingRobotCertificate or None
+        Robust performance of the linearised robot moving within the domain's
+        rates (:func:`polyrob.analysis.lpv.moving.moving_robot_certificate`);
+        ``None`` when not asked for.
     """
 
     robust_stability: object
@@ -75,6 +79,7 @@ class ControllerAnalysis:
     order: int
     covers: str
     time_varying: object = None
+    moving: object = None
 
     @property
     def certificate(self):
@@ -106,6 +111,7 @@ class ControllerAnalysis:
             "certified": self.certificate.certified,
             "verdict": self.verdict,
             "time_varying": None if self.time_varying is None else self.time_varying.summary(),
+            "moving": None if self.moving is None else self.moving.summary(),
         }
 
 
@@ -119,6 +125,7 @@ def analyze_controller(
     progress: bool | None = None,
     time_varying: bool = True,
     stability: str = "sweep",
+    moving: bool | None = None,
 ) -> ControllerAnalysis:
     """Nominal/robust stability and performance of ``K`` on ``problem``, and sampled stability.
 
@@ -142,6 +149,11 @@ def analyze_controller(
         from the robust-performance certificate when that one is certified
         (:func:`~polyrob.analysis.robust.robstab_implied`: a bound of
         robust-stability μ, not its value), else swept.
+    moving : bool or None
+        The moving-robot certificate (rate-bounded LPV analysis scheduled on
+        the robot's state, :mod:`polyrob.analysis.lpv.moving`): ``None``
+        computes it for small closed loops only (its ``AUTO_STATES``),
+        ``False`` records that it was not asked for.
     """
     from polyrob.analysis.robust import nominal_performance, robperf, robstab, robstab_implied, sample_stability
 
@@ -163,6 +175,12 @@ def analyze_controller(
         from polyrob.analysis.time_varying.certificate import time_varying_certificate
 
         tv = time_varying_certificate(problem, K)
+    from polyrob.analysis.lpv.moving import MovingRobotCertificate, moving_robot_certificate
+
+    if moving is False:
+        mv = MovingRobotCertificate.not_computed("not asked for (--no-moving)")
+    else:
+        mv = moving_robot_certificate(problem, K, auto=moving is None)
     return ControllerAnalysis(
         robust_stability=rs,
         robust_performance=rp,
@@ -171,4 +189,5 @@ def analyze_controller(
         order=controller_order(K),
         covers=str(covers),
         time_varying=tv,
+        moving=mv,
     )

@@ -31,6 +31,7 @@ from polyrob.analysis.certificate import FROZEN, Scope, Status
 __all__ = [
     "FROZEN_ROW",
     "TIME_VARYING_ROW",
+    "MOVING_ROW",
     "certificate_record",
     "certificate_rows",
     "certificate_sweep",
@@ -39,9 +40,10 @@ __all__ = [
     "is_frozen",
 ]
 
-#: Row names of a run's certificates: the frozen robot's μ, and arbitrarily fast variation.
+#: Row names of a run's certificates: the frozen robot's μ, arbitrarily fast variation, the moving robot.
 FROZEN_ROW = "frozen robot (μ)"
 TIME_VARYING_ROW = "arbitrarily fast variation"
+MOVING_ROW = "moving robot"
 
 
 def _scope_sentence(scope: dict) -> str:
@@ -54,7 +56,8 @@ def certificate_record(cert) -> dict:
 
     ``cert`` is a :class:`~polyrob.analysis.certificate.Certificate`, a
     ``TimeVaryingCertificate`` (its robust-performance certificate; its own
-    verdict line, and its figures under ``"time_varying"``), or a record.
+    verdict line, and its figures under ``"time_varying"``), a
+    ``MovingRobotCertificate`` (likewise, under ``"moving"``), or a record.
     """
     if isinstance(cert, dict):
         rec = dict(cert)
@@ -69,7 +72,7 @@ def certificate_record(cert) -> dict:
         rec["sweep"] = sweep
     if inner is not cert:
         rec["verdict"] = cert.verdict
-        rec["time_varying"] = cert.summary()
+        rec[getattr(cert, "record_key", "time_varying")] = cert.summary()
     return rec
 
 

@@ -1,0 +1,274 @@
+"""The moving-robot certificate: robust performance of the linearised robot moving within the domain's rates.
+
+The third certificate beside μ (each frozen robot) and the time-varying one
+(arbitrarily fast variation, :mod:`polyrob.analysis.time_varying.certificate`):
+the weighted closed loop ``r -> z`` of :func:`~polyrob.analysis.lpv.robot.closed_loop_system`,
+scheduled on the robot's state ``rho = (q_i that enter, qdot)``
+(:func:`~polyrob.analysis.lpv.robot.scheduling`), has a proved induced L2
+gain ``gamma`` (:func:`polyrob.lpvnorm`, parameter-dependent Lyapunov matrix
+``X(rho)`` on :func:`~polyrob.analysis.lpv.robot.default_basis`) for every
+trajectory of ``rho`` in the domain whose rates stay within the bounds of
+:func:`~polyrob.analysis.lpv.robot.rate_bounds`.  Robust performance is
+``gamma < 1``; the status is decided by
+:func:`polyrob.analysis.certificate.decide_gridded_gain`: the LMIs hold at
+the grid's points, so a proved ``gamma < 1`` gives GRID_ONLY, not CERTIFIED
+(no guarantee between the grid points is available for these
+non-affine Jacobians).
+
+It covers the **linearised** robot (the LPV family ``A(rho(t)), B(rho(t))``),
+not the nonlinear one: a trajectory's perturbation obeys this family only to
+first order.
+
+Examples
+--------
+>>> from polyrob.analysis.lpv.moving import MovingRobotCertificate
+>>> c = MovingRobotCertificate.not_computed("asked not to (--no-moving)")
+>>> c.verdict
+'moving robot: robust performance not computed (asked not to (--no-moving))'
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from polyrob.errors import NotApplicable, SolverError
+
+__all__ = ["MovingRobotCertificate", "moving_robot_certificate", "moving_robot_gain", "MAX_STATES", "AUTO_STATES"]
+
+#: Largest closed loop (states) the moving-robot LMIs are built for.
+MAX_STATES = 40
+#: Largest closed loop computed by default (``moving=None``): measured cost in docs/certificates.md.
+AUTO_STATES = 12
+
+
+def _rate_words(names, rates, source: str) -> str:
+    parts = []
+    for name, (_lo, hi) in zip(names, rates):
+        dot = f"d{name}/dt"
+        parts.append(f"|{dot}| <= {hi:.4g}" if np.isfinite(hi) else f"{dot} arbitrary")
+    return ", ".join(parts) + (f" (accelerations {source})" if any(n.startswith("qdot") for n in names) else "")
+
+
+@dataclass(frozen=True, eq=False)
+class MovingRobotCertificate:
+    """Robust performance of the linearised robot moving within rate bounds.
+
+    Attributes
+    ----------
+    computed : bool
+    gamma : float
+        Proved bound of the ``r -> z`` induced L2 gain on the grid (``inf``: none).
+    frozen_gamma : float
+        Largest frozen (LTI) H-infinity norm over the grid points: no rate bound gives less.
+    rates : tuple of (float, float)
+    rate_words : str
+    grid_words : str
+    result : LpvNormResult or None
+    scope : Scope or None
+    notes : tuple of str
+    seconds : float
+    """
+
+    #: The key of its figures in a run's certificate record (:mod:`polyrob.report.certificates`).
+    record_key = "moving"
+
+    computed: bool
+    gamma: float = float("inf")
+    frozen_gamma: float = float("nan")
+    rates: tuple = ()
+    rate_words: str = ""
+    grid_words: str = ""
+    result: object = None
+    scope: object = None
+    notes: tuple = ()
+    seconds: float = 0.0
+
+    @classmethod
+    def not_computed(cls, why: str) -> MovingRobotCertificate:
+        """A certificate that was not computed, and why."""
+        return cls(False, notes=(why,))
+
+    @property
+    def certificate(self):
+        """The decided :class:`~polyrob.analysis.certificate.Certificate` (``None`` when not computed)."""
+        from polyrob.analysis.certificate import Certificate, Scope, decide_gridded_gain
+
+        if not self.computed:
+            return None
+        r = self.result
+        proved = bool(r is not None and r.proved)
+        between = proved and not str(r.coverage).startswith("on the grid")
+        why = "" if proved else (r.reason if r is not None else (self.notes[-1] if self.notes else ""))
+        status, reasons = decide_gridded_gain(proved, self.gamma, between, why)
+        scope = replace(self.scope or Scope(), kind="robust performance", frequencies="")
+        return Certificate(status, float(self.gamma), float("nan"), float("nan"), None, scope, reasons)
+
+    @property
+    def verdict(self) -> str:
+        """``moving robot with rates <= ...: robust performance ...``."""
+        if not self.computed:
+            return f"moving robot: robust performance not computed ({self.notes[0] if self.notes else 'not asked'})"
+        return f"moving robot with rates {self.rate_words}: {self.certificate.verdict}"
+
+    def details(self) -> str:
+        """What it covers, the frozen peak beside it."""
+        if not self.computed:
+            return ""
+        lines = [f"covers: {self.certificate.scope.sentence()}"]
+        lines.append(
+            f"frozen peak over the grid {self.frozen_gamma:.4g} (no rate bound gives less); "
+            f"{self.grid_words}; {self.seconds:.0f} s"
+        )
+        return "\n".join(lines)
+
+    def summary(self) -> dict:
+        """Strict JSON."""
+        from polyrob.analysis.scope import finite_or_none
+
+        cert = self.certificate
+        return {
+            "computed": self.computed,
+            "status": None if cert is None else cert.status.value,
+            "certified": bool(cert is not None and cert.certified),
+            "gamma": finite_or_none(self.gamma),
+            "frozen_gamma": finite_or_none(self.frozen_gamma),
+            "rates": [[finite_or_none(lo), finite_or_none(hi)] for lo, hi in self.rates],
+            "rate_words": self.rate_words,
+            "grid": self.grid_words,
+            "lpvnorm": None if self.result is None else self.result.summary(),
+            "scope": None if cert is None else cert.scope.summary(),
+            "notes": list(self.notes),
+            "seconds": round(float(self.seconds), 3),
+            "verdict": self.verdict,
+        }
+
+
+def moving_robot_gain(model, system, rates, *, quadratic: bool = False):
+    """:func:`polyrob.lpvnorm` of ``system`` on ``model``'s grid, conditioned (:func:`~polyrob.analysis.lpv.robot.conditioned`).
+
+    ``rates`` with every bound infinite gives a constant ``X`` (arbitrarily
+    fast variation); otherwise ``X(rho)`` on :func:`~polyrob.analysis.lpv.robot.default_basis`.
+    A solver failure is returned as an unproved result, not raised.
+    """
+    from polyrob.analysis.lpv.norm import lpvnorm
+    from polyrob.analysis.lpv.result import LpvNormResult
+    from polyrob.analysis.lpv.robot import conditioned, default_basis
+
+    centre = np.array([0.5 * (a[0] + a[-1]) for a in model.axes])
+    system_c, c = conditioned(system, centre)
+    fast = all(not np.isfinite(hi) for _, hi in rates)
+    basis = None if fast else default_basis(model, quadratic=quadratic)
+    scaled = None if fast else [(lo / c, hi / c) for lo, hi in rates]
+
+    def time_scaled(rho):
+        a, b, cc, d = system(rho)
+        return a / c, b / c, cc, d
+
+    best = None
+    # the time-scaled loop first, then with a larger strictness margin (Clarabel can stall near the
+    # optimum), then the Riccati-conditioned copy: the first that proves a bound is kept
+    for sysf, options in ((time_scaled, {}), (time_scaled, {"eps": 1e-5}), (system_c, {})):
+        try:
+            r = lpvnorm(sysf, list(model.axes), scaled, basis, **options)
+        except SolverError as exc:
+            r = LpvNormResult(
+                float("inf"), False, float("inf"), float("nan"), "", f"on the grid of {model.n_points} points",
+                model.n_points, 0, 0, 0, "solver error", reason=str(exc),
+            )  # fmt: skip
+        if best is None or r.gamma < best.gamma:
+            best = r
+        if best.proved:
+            break
+    return best
+
+
+def moving_robot_certificate(
+    problem,
+    K,
+    *,
+    points=(5, 3),
+    rate_scale: float = 1.0,
+    qddot_max=None,
+    quadratic: bool = False,
+    auto: bool = False,
+) -> MovingRobotCertificate:
+    """The moving-robot certificate of ``K`` on ``problem`` (its robot, domain and weights).
+
+    Parameters
+    ----------
+    problem : Problem
+        ``robot``, ``domain``, ``P`` (its weights ``W_S, W_T, W_KS``) and ``scope()``.
+    K : LTI
+    points : (int, int)
+        Grid points per position and per velocity parameter.
+    rate_scale : float
+        Multiplies the domain's rate bounds (``0``: frozen; ``inf``: arbitrarily fast).
+    qddot_max : array_like, optional
+        Acceleration bounds (default: a task domain's, else sampled over the domain).
+    quadratic : bool
+        Add the velocities' products to the basis of ``X``.
+    auto : bool
+        Compute it only for a closed loop of at most :data:`AUTO_STATES`
+        states (the default of ``analyze`` and ``run``); a larger one says why not.
+
+    Returns
+    -------
+    MovingRobotCertificate
+        ``computed=False`` (and why) when the domain or the loop is out of reach.
+    """
+    from polyrob.analysis.certificate import Scope
+    from polyrob.analysis.lpv.robot import closed_loop_system, rate_bounds, scheduling
+
+    t0 = time.perf_counter()
+    domain, P = problem.domain, problem.P
+    if qddot_max is None and hasattr(domain, "qddot_upper"):
+        qddot_max = np.maximum(np.abs(domain.qddot_lower), np.abs(domain.qddot_upper))
+    try:
+        model = scheduling(problem.robot, domain, points=points)
+        system = closed_loop_system(model, K, P.W_S, P.W_T, P.W_KS)
+        n = system(np.array([a[0] for a in model.axes]))[0].shape[0]
+        if n > MAX_STATES:
+            raise NotApplicable(f"the closed loop has {n} states (the LMIs are built for {MAX_STATES}): reduce K")
+        if auto and n > AUTO_STATES:
+            raise NotApplicable(
+                f"the closed loop has {n} states, more than the {AUTO_STATES} computed by default: "
+                "--moving computes it (minutes, docs/certificates.md)"
+            )
+        if np.isinf(rate_scale):
+            rates, source = [(-np.inf, np.inf)] * len(model.names), "unbounded"
+        else:
+            rates, source = rate_bounds(model, domain, qddot_max=qddot_max, scale=rate_scale)
+        result = moving_robot_gain(model, system, rates, quadratic=quadratic)
+    except NotApplicable as exc:
+        return MovingRobotCertificate.not_computed(str(exc))
+    base = problem.scope() if hasattr(problem, "scope") else Scope()
+    words = _rate_words(model.names, rates, source)
+    notes = (f"on the grid of {model.words()}; not proved between the grid points",)
+    notes += tuple(result.notes) + (
+        "the linearised robot (LPV family A(rho(t)), B(rho(t))) with the domain's fixed torque, not the nonlinear one",
+    )
+    scope = replace(
+        base,
+        variation=f"the linearised robot (LPV) moving with rates {words}",
+        model="",
+        coverage=None,
+        coverage_points=0,
+        enclosure="sampled",
+        vertices_from="",
+        notes=notes,
+    )
+    return MovingRobotCertificate(
+        computed=True,
+        gamma=float(result.gamma),
+        frozen_gamma=float(result.frozen_gamma),
+        rates=tuple(rates),
+        rate_words=words,
+        grid_words=model.words(),
+        result=result,
+        scope=scope,
+        notes=() if result.proved else (result.reason,),
+        seconds=time.perf_counter() - t0,
+    )

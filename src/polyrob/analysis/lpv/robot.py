@@ -1,0 +1,331 @@
+"""The moving robot as a gridded LPV system: the weighted closed loop scheduled on the robot's state.
+
+The Jacobians ``A = df/dx``, ``B = df/du`` of a robot are exact functions of
+its state.  For a domain with a fixed torque (the paper's domain: ``u = 0``)
+they depend on the joint positions and velocities only, and not on every
+position: a planar arm without gravity does not depend on ``q1``.  So the
+robot linearised along a trajectory that stays in the domain is the LPV
+system
+
+.. math:: \\dot x = A(\\rho(t)) x + B(\\rho(t)) u, \\qquad y = [I\\ 0] x,
+
+scheduled on ``rho = (q_i that enter, qdot)``; with the controller and the
+weights of the mixed-sensitivity problem (:func:`polyrob.plant.generalized.generalized_plant`,
+without the uncertainty channels) it gives the closed loop ``r -> z``
+(:func:`closed_loop_system`) whose induced L2 gain :func:`polyrob.lpvnorm`
+bounds for rates ``|d q_i/dt| <= qdot_max_i`` (the domain's velocities) and
+``|d qdot_i/dt| <= qddot_max_i`` (sampled from the domain: ``qddot =
+f(q, qdot, u)``; :func:`rate_bounds`).
+
+Examples
+--------
+>>> import numpy as np, polyrob
+>>> from polyrob.bounds.domain import Domain
+>>> robot = polyrob.load_robot("paper_2r")
+>>> model = scheduling(robot, Domain.from_robot(robot, "paper"), points=(5, 3))
+>>> model.names, [a.size for a in model.axes]
+(('q2', 'qdot1', 'qdot2'), [5, 3, 3])
+>>> A, B = model.plant(np.array([0.5, 1.0, -2.0]))
+>>> bool(np.allclose(A, robot.jacobians([0.0, 0.5], [1.0, -2.0], [0.0, 0.0])[0]))
+True
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from polyrob.errors import NotApplicable
+
+__all__ = [
+    "MovingRobotModel",
+    "scheduling",
+    "rate_bounds",
+    "closed_loop_system",
+    "conditioned",
+    "default_basis",
+    "RATE_SAMPLES",
+    "RATE_MARGIN",
+]
+
+#: Domain points the acceleration bounds are sampled on (Sobol, plus the grid's corners).
+RATE_SAMPLES = 4096
+#: Factor on the sampled acceleration peaks (a sampled maximum is a bound from below).
+RATE_MARGIN = 1.05
+#: Relative change of the Jacobians below which a joint position does not enter them.
+_ENTERS_RTOL = 1e-12
+
+
+@dataclass(frozen=True, eq=False)
+class MovingRobotModel:
+    """The scheduling parameters of a robot on a domain and their grid.
+
+    Attributes
+    ----------
+    robot : Manipulator
+    names : tuple of str
+        ``"q2"``, ``"qdot1"``, ...: the parameters, positions first.
+    kinds : tuple of str
+        ``"q"`` or ``"qdot"`` per parameter.
+    joints : tuple of int
+        The joint (0-based) of each parameter.
+    axes : tuple of ndarray
+        The grid of each parameter (its box is the domain's range).
+    q_fixed : ndarray
+        Positions of the joints that do not enter the Jacobians (the domain's midpoint).
+    u : ndarray
+        The domain's fixed torque.
+    """
+
+    robot: object
+    names: tuple
+    kinds: tuple
+    joints: tuple
+    axes: tuple
+    q_fixed: np.ndarray
+    u: np.ndarray
+
+    @property
+    def n_points(self) -> int:
+        return int(np.prod([a.size for a in self.axes]))
+
+    def state(self, rho) -> tuple[np.ndarray, np.ndarray]:
+        """``(q, qdot)`` of the robot at the parameter point ``rho``."""
+        q, qdot = self.q_fixed.copy(), np.zeros(self.robot.m)
+        for value, kind, j in zip(np.asarray(rho, float), self.kinds, self.joints):
+            (q if kind == "q" else qdot)[j] = value
+        return q, qdot
+
+    def plant(self, rho) -> tuple[np.ndarray, np.ndarray]:
+        """The robot's Jacobians ``(A, B)`` at ``rho``."""
+        q, qdot = self.state(rho)
+        return self.robot.jacobians(q, qdot, self.u)
+
+    def words(self) -> str:
+        """The grid in words: ``5 x 3 x 3 = 45 points of (q2, qdot1, qdot2)``."""
+        sizes = " x ".join(str(a.size) for a in self.axes)
+        return f"{sizes} = {self.n_points} points of ({', '.join(self.names)})"
+
+
+def _enters(robot, domain, j: int, rng) -> bool:
+    """Does joint position ``j`` enter the Jacobians (checked at a few random domain states)?"""
+    m = robot.m
+    for _ in range(4):
+        q = rng.uniform(domain.q_lower, domain.q_upper)
+        qdot = rng.uniform(domain.qdot_lower, domain.qdot_upper)
+        A, B = robot.jacobians(q, qdot, domain.u_lower)
+        q2 = q.copy()
+        q2[j] += 0.7
+        A2, B2 = robot.jacobians(q2, qdot, domain.u_lower)
+        scale = max(np.abs(A).max(), np.abs(B).max(), 1.0)
+        if max(np.abs(A2 - A).max(), np.abs(B2 - B).max()) > _ENTERS_RTOL * scale * (m + 1):
+            return True
+    return False
+
+
+def scheduling(robot, domain, *, points=(9, 3), max_parameters: int = 3) -> MovingRobotModel:
+    """The scheduling parameters of ``robot`` on ``domain`` and their tensor grid.
+
+    Parameters
+    ----------
+    robot : Manipulator
+    domain : Domain
+        With a fixed torque (``u_lower == u_upper``).
+    points : (int, int)
+        Grid points per position and per velocity parameter.
+    max_parameters : int
+        Largest number of parameters (the grid grows like ``points^p``).
+
+    Returns
+    -------
+    MovingRobotModel
+
+    Raises
+    ------
+    NotApplicable
+        The torque varies in the domain (the Jacobians would depend on it, or
+        on the accelerations of a task domain), or too many parameters.
+    """
+    u_lo, u_hi = np.asarray(domain.u_lower, float), np.asarray(domain.u_upper, float)
+    if not np.array_equal(u_lo, u_hi):
+        raise NotApplicable(
+            "the torque varies in the domain: the Jacobians depend on it (scheduled here on positions and "
+            "velocities only, for a domain with a fixed torque such as the paper's u = 0)"
+        )
+    rng = np.random.default_rng(0)
+    q_lo, q_hi = np.asarray(domain.q_lower, float), np.asarray(domain.q_upper, float)
+    v_lo, v_hi = np.asarray(domain.qdot_lower, float), np.asarray(domain.qdot_upper, float)
+    names, kinds, joints, axes = [], [], [], []
+    for j in range(robot.m):
+        if q_hi[j] > q_lo[j] and _enters(robot, domain, j, rng):
+            names.append(f"q{j + 1}"), kinds.append("q"), joints.append(j)
+            axes.append(np.linspace(q_lo[j], q_hi[j], int(points[0])))
+    for j in range(robot.m):
+        if v_hi[j] > v_lo[j]:
+            names.append(f"qdot{j + 1}"), kinds.append("qdot"), joints.append(j)
+            axes.append(np.linspace(v_lo[j], v_hi[j], int(points[1])))
+    if len(names) > max_parameters:
+        raise NotApplicable(
+            f"{len(names)} scheduling parameters ({', '.join(names)}): the grid is built for at most {max_parameters}"
+        )
+    if not names:
+        raise NotApplicable("the Jacobians do not vary over the domain: the frozen-robot certificate covers it")
+    return MovingRobotModel(robot, tuple(names), tuple(kinds), tuple(joints), tuple(axes), 0.5 * (q_lo + q_hi), u_lo)
+
+
+def rate_bounds(model: MovingRobotModel, domain, *, qddot_max=None, samples: int = RATE_SAMPLES, scale=1.0):
+    """Bounds of ``d rho_i/dt``: the domain's velocities for positions, accelerations for velocities.
+
+    ``d q_i/dt = qdot_i`` lies in the domain's velocity range; ``d qdot_i/dt =
+    qddot_i = f(q, qdot, u)`` is bounded by ``qddot_max`` when given (a task
+    domain's), else by its largest value on ``samples`` Sobol points of the
+    domain and the grid's points, times :data:`RATE_MARGIN` (a sampled bound).
+
+    Parameters
+    ----------
+    model : MovingRobotModel
+    domain : Domain
+    qddot_max : array_like, optional
+        ``(m,)`` acceleration bounds.
+    samples : int
+    scale : float
+        Multiplies every bound (``0``: frozen; ``inf``: arbitrarily fast).
+
+    Returns
+    -------
+    rates : list of (float, float)
+    source : str
+        How the acceleration bounds were obtained.
+    """
+    from scipy.stats import qmc
+
+    robot, m = model.robot, model.robot.m
+    if qddot_max is not None:
+        acc, source = np.abs(np.asarray(qddot_max, float)).reshape(m), "given"
+    else:
+        lo = np.concatenate([domain.q_lower, domain.qdot_lower])
+        hi = np.concatenate([domain.q_upper, domain.qdot_upper])
+        z = qmc.scale(qmc.Sobol(2 * m, seed=0).random(int(samples)), lo, np.where(hi > lo, hi, lo + 1e-300))
+        z = np.clip(z, lo, hi)
+        grid = np.array(np.meshgrid(*model.axes, indexing="ij")).reshape(len(model.axes), -1).T
+        states = [model.state(r) for r in grid] + [(s[:m], s[m:]) for s in z]
+        acc = np.max([np.abs(robot.acceleration(q, qd, model.u)) for q, qd in states], axis=0) * RATE_MARGIN
+        source = f"sampled on {len(states)} domain points, x {RATE_MARGIN}"
+    vel = np.maximum(np.abs(domain.qdot_lower), np.abs(domain.qdot_upper))
+    rates = []
+    for kind, j in zip(model.kinds, model.joints):
+        b = float((vel if kind == "q" else acc)[j]) * scale if scale else 0.0
+        rates.append((-b, b))
+    return rates, source
+
+
+def closed_loop_system(model: MovingRobotModel, K, W_S=None, W_T=None, W_KS=None):
+    """``rho -> (A, B, C, D)``: the closed loop ``r -> z = [W_S e; W_T y; W_KS u]`` at the robot's state ``rho``.
+
+    The realisation is :func:`~polyrob.analysis.time_varying.vertices.performance_vertices`'
+    (the weights as :func:`polyrob.plant.generalized.generalized_plant`
+    realises them, states ``[x, W_S, W_T, W_KS, x_K]``).
+    """
+    from polyrob.analysis.time_varying.vertices import controller_mats, performance_vertices, vertex_set
+
+    Kmats = controller_mats(K, model.robot.m)
+
+    def system(rho):
+        mats = performance_vertices(vertex_set([model.plant(rho)]), Kmats, W_S, W_T, W_KS)
+        return tuple(x[0] for x in mats)
+
+    return system
+
+
+def _brl_solution(A, B, C, D, gamma: float) -> np.ndarray:
+    """Stabilising solution of the bounded-real Riccati equation at level ``gamma`` (Hamiltonian, ordered Schur)."""
+    import scipy.linalg as sla
+
+    n = A.shape[0]
+    R = gamma**2 * np.eye(B.shape[1]) - D.T @ D
+    Ri = np.linalg.inv(R)
+    Ab = A + B @ Ri @ D.T @ C
+    H = np.block([[Ab, B @ Ri @ B.T], [-C.T @ (np.eye(C.shape[0]) + D @ Ri @ D.T) @ C, -Ab.T]])
+    _, Z, sdim = sla.schur(H, sort="lhp")
+    if sdim != n:
+        raise NotApplicable(f"bounded-real Riccati: {sdim} stable eigenvalues of {2 * n}")
+    X = np.linalg.solve(Z[:n, :n].T, Z[n:, :n].T).T
+    return 0.5 * (X + X.T)
+
+
+def conditioned(system, centre, *, floor: float = 1e-8):
+    """A time-scaled, similarity-transformed copy of ``system`` with the same induced L2 gain.
+
+    Stiff closed loops (poles from 1e-3 to 1e4 rad/s) defeat the LMI solver.
+    Time ``tau = c t`` (``c`` a power of two near the geometric mean of the
+    slowest and the fastest pole at the centre) maps
+    ``(A, B, C, D)`` to ``(A/c, B/c, C, D)`` and every rate to ``rate/c``;
+    the state similarity ``T = X0^{-1/2}`` with ``X0`` the bounded-real
+    Riccati solution at the centre point (level 1.5 times its H-infinity norm,
+    eigenvalues floored at ``floor`` times the largest) makes the Lyapunov
+    matrix there the identity.  Both leave the gain of every trajectory
+    unchanged; the proof of :func:`polyrob.lpvnorm` is made on the copy.
+
+    Returns
+    -------
+    system_c : callable
+    c : float
+        The time scale (rates are divided by it).
+    """
+    import scipy.linalg as sla
+
+    from polyrob.analysis.norms import hinf_norm
+
+    A, B, C, D = system(np.asarray(centre, float))
+    lam = np.abs(np.linalg.eigvals(A))
+    lam = lam[lam > 0] if np.any(lam > 0) else np.ones(1)
+    c = float(2.0 ** np.round(0.5 * np.log2(lam.min() * lam.max())))
+    # the Riccati solution is the same up to a factor at any time scale; the fastest pole's is the best posed
+    c_ric = float(2.0 ** np.round(np.log2(lam.max())))
+    h = hinf_norm((A / c_ric, B / c_ric, C, D))
+    if not np.isfinite(h):
+        raise NotApplicable("the closed loop at the centre of the grid is unstable")
+    try:
+        X0 = _brl_solution(A / c_ric, B / c_ric, C, D, 1.5 * max(h, 1e-6))
+    except NotApplicable:  # the Hamiltonian's stable subspace not found: the observability Gramian instead
+        X0 = sla.solve_continuous_lyapunov((A / c_ric).T, -C.T @ C)
+    w, V = np.linalg.eigh(0.5 * (X0 + X0.T))
+    w = np.maximum(w, floor * w.max())
+    T, Ti = (V * w**-0.5) @ V.T, (V * w**0.5) @ V.T
+
+    def system_c(rho):
+        a, b, cc, d = system(rho)
+        return Ti @ (a / c) @ T, Ti @ (b / c), cc @ T, d
+
+    return system_c, c
+
+
+def default_basis(model: MovingRobotModel, *, quadratic: bool = False):
+    """Basis of ``X(rho)``: ``1``, ``cos q_i``, ``sin q_i``, ``qdot_i`` (and their products with ``quadratic``).
+
+    Returns
+    -------
+    list of (f, grad)
+    """
+    p = len(model.names)
+
+    def unit(i, dv):
+        g = np.zeros(p)
+        g[i] = dv
+        return g
+
+    basis = [(lambda r: 1.0, lambda r: np.zeros(p))]
+    for i, kind in enumerate(model.kinds):
+        if kind == "q":
+            basis.append((lambda r, i=i: np.cos(r[i]), lambda r, i=i: unit(i, -np.sin(r[i]))))
+            basis.append((lambda r, i=i: np.sin(r[i]), lambda r, i=i: unit(i, np.cos(r[i]))))
+        else:
+            basis.append((lambda r, i=i: r[i], lambda r, i=i: unit(i, 1.0)))
+    if quadratic:
+        vel = [i for i, k in enumerate(model.kinds) if k == "qdot"]
+        for a in vel:
+            for b in vel:
+                if b >= a:
+                    basis.append((lambda r, a=a, b=b: r[a] * r[b], lambda r, a=a, b=b: unit(a, r[b]) + unit(b, r[a])))
+    return basis
