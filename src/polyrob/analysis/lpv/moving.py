@@ -41,7 +41,7 @@ __all__ = ["MovingRobotCertificate", "moving_robot_certificate", "moving_robot_g
 #: Largest closed loop (states) the moving-robot LMIs are built for.
 MAX_STATES = 40
 #: Largest closed loop computed by default (``moving=None``): measured cost in docs/certificates.md.
-AUTO_STATES = 12
+AUTO_STATES = 8
 
 
 def _rate_words(names, rates, source: str) -> str:

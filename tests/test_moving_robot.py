@@ -1,0 +1,126 @@
+"""The moving-robot certificate: the linearised robot scheduled on its state, rate-bounded LPV analysis.
+
+The LPV model at a grid point is the frozen weighted loop; the proved gain lies
+between the frozen peak and the arbitrarily fast bound and grows with the rate
+bound; the status follows :func:`polyrob.analysis.certificate.decide_gridded_gain`;
+``analyze --json`` carries the third verdict.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace as NS
+
+import control
+import numpy as np
+import pytest
+from test_cli_certificates import small_domain  # noqa: F401  (the shared small-domain PLDI, a fixture)
+
+import polyrob
+from polyrob.analysis.certificate import Status, decide_gridded_gain
+from polyrob.analysis.lpv.moving import MovingRobotCertificate, moving_robot_gain
+from polyrob.analysis.lpv.robot import closed_loop_system, rate_bounds, scheduling
+from polyrob.bounds.domain import Domain
+from polyrob.pipeline import default_hyperparameters
+from polyrob.plant.generalized import loop_functions
+from polyrob.plant.weights import paper_weights
+
+
+def pd_controller(wn: float = 12.0, zeta: float = 0.8, tau: float = 0.02) -> control.StateSpace:
+    """``u = (kp + kd s / (tau s + 1)) e`` per joint, gains for inertias 40 and 8 (paper_2r's M(q) range)."""
+    M = np.array([40.0, 8.0])
+    kp, kd = M * wn**2, 2 * zeta * wn * M
+    return control.ss(-np.eye(2) / tau, np.eye(2), np.diag(-kd / tau**2), np.diag(kp + kd / tau))
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return polyrob.load_robot("paper_2r")
+
+
+@pytest.fixture(scope="module")
+def small(robot):
+    """The paper's domain shrunk around q = 0 and nearly at rest: a well-posed small LPV problem."""
+    d = Domain.from_robot(robot, "paper")
+    return d.with_bounds(q_lower=np.full(2, -0.3), q_upper=np.full(2, 0.3), qdot_lower=d.qdot_lower * 0.05,
+                         qdot_upper=d.qdot_upper * 0.05)  # fmt: skip
+
+
+def test_scheduling_of_the_planar_arm_leaves_out_q1(robot):
+    model = scheduling(robot, Domain.from_robot(robot, "paper"), points=(5, 3))
+    assert model.names == ("q2", "qdot1", "qdot2") and model.n_points == 45
+    rates, source = rate_bounds(model, Domain.from_robot(robot, "paper"))
+    assert rates[0] == (-9.9561, 9.9561) and source.startswith("sampled")
+    assert 15 < rates[1][1] < 25 and 15 < rates[2][1] < 25  # |qddot| with u = 0, sampled x 1.05
+
+
+def test_lpv_model_at_a_grid_point_is_the_frozen_weighted_loop(robot):
+    """closed_loop_system(rho) against S, T of the plant linearised at that state (plant.loops), to 1e-9."""
+    W_S, W_T = paper_weights(default_hyperparameters(2))
+    K = pd_controller()
+    model = scheduling(robot, Domain.from_robot(robot, "paper"), points=(5, 3))
+    rho = np.array([0.7, -1.5, 4.0])
+    A, B, C, D = closed_loop_system(model, K, W_S, W_T)(rho)
+    Aj, Bj = robot.jacobians([0.0, 0.7], [-1.5, 4.0], [0.0, 0.0])
+    G = control.ss(Aj, Bj, np.hstack([np.eye(2), np.zeros((2, 2))]), np.zeros((2, 2)))
+    cl = loop_functions(G, K)
+    for w in (0.01, 0.3, 2.0, 17.0, 300.0):
+        s = 1j * w
+        lpv = C @ np.linalg.solve(s * np.eye(A.shape[0]) - A, B) + D
+        ref = np.vstack(
+            [control.evalfr(W_S, s) @ control.evalfr(cl.S, s), control.evalfr(W_T, s) @ control.evalfr(cl.T, s)]
+        )
+        assert np.abs(lpv - ref).max() <= 1e-9 * max(1.0, np.abs(ref).max())
+
+
+def test_moving_gain_lies_between_frozen_and_fast_and_grows_with_the_rate(robot, small):
+    model = scheduling(robot, small, points=(4, 2))
+    system = closed_loop_system(model, pd_controller(), 0.5 * np.eye(2), None)  # z = e / 2: a 6-state loop
+    gammas = []
+    for scale in (0.0, 20.0):
+        rates, _ = rate_bounds(model, small, scale=scale)
+        r = moving_robot_gain(model, system, rates)
+        assert r.proved, r.reason
+        gammas.append(r.gamma)
+    fast = moving_robot_gain(model, system, [(-np.inf, np.inf)] * 3)
+    frozen = r.frozen_gamma
+    assert frozen <= gammas[0] * (1 + 1e-6)
+    assert gammas[0] <= gammas[1] * (1 + 1e-4)
+    if fast.proved:  # a constant X covers every rate: never below a rate-bounded X(rho) (up to the solver)
+        assert gammas[1] <= fast.gamma * (1 + 1e-3)
+
+
+@pytest.mark.parametrize(
+    ("proved", "gamma", "coverage"),
+    [(True, 0.5, "on the grid of 4 points"), (True, 0.5, "the whole parameter box"), (True, 1.5, "on the grid"),
+     (False, float("inf"), "on the grid")],
+)  # fmt: skip
+def test_status_follows_decide_gridded_gain(proved, gamma, coverage):
+    res = NS(proved=proved, coverage=coverage, reason="" if proved else "no X", summary=dict)
+    cert = MovingRobotCertificate(True, gamma=gamma, result=res, rate_words="|dq2/dt| <= 1")
+    status, _ = decide_gridded_gain(proved, gamma, proved and coverage.startswith("the whole"), "no X")
+    assert cert.certificate.status is status
+    assert cert.verdict.startswith("moving robot with rates |dq2/dt| <= 1: robust performance ")
+    assert (status is Status.GRID_ONLY) == (proved and gamma < 1 and coverage.startswith("on the grid"))
+    assert cert.summary()["certified"] is (status is Status.CERTIFIED)
+
+
+def test_not_computed_says_why():
+    c = MovingRobotCertificate.not_computed("the closed loop has 80 states")
+    assert c.certificate is None and not c.summary()["certified"]
+    assert c.verdict == "moving robot: robust performance not computed (the closed loop has 80 states)"
+
+
+def test_analyze_json_carries_the_moving_robot_verdict(tmp_path_factory, small_domain):  # noqa: F811
+    """``analyze --json``: the third verdict, here not computed by default (a 10-state loop) and saying why."""
+    from test_cli_synth import GRID, cli_json
+
+    from polyrob.io.controller import save_controller
+
+    folder = tmp_path_factory.mktemp("moving")
+    kfile = save_controller(pd_controller(), folder / "pd.json")
+    argv = ["analyze", "paper_2r", "--pldi", small_domain, "--controller", kfile, "--uncertainty", "box", "--mc", "5"]
+    _, doc, _ = cli_json(tmp_path_factory, "moving_analyze", lambda d: [*argv, *GRID, "--no-time-varying", "--json"])
+    mv = doc["moving"]
+    assert mv["computed"] is False and mv["certified"] is False and mv["status"] is None
+    assert mv["verdict"].startswith("moving robot: robust performance not computed (the closed loop has 10 states")
+    assert "--moving" in mv["verdict"]
