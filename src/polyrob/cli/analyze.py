@@ -59,17 +59,17 @@ def print_analysis(a, out) -> None:
     if s.corners_stable is not None:
         out.line(f"corners                {s.corners_stable:.1%} of {s.corners} corners stable")
     out.line(f"worst sampled          max Re(pole) = {s.worst_abscissa:.4g}")
+    mv = getattr(a, "moving", None)
+    if mv is not None:  # the third verdict: the linearised robot moving within the domain's rates
+        out.line(mv.verdict)
+        if mv.computed:
+            out.line(mv.details())
     tv = a.time_varying
     if tv is not None:  # side by side with the mu verdict, which ends the report
         from polyrob.analysis.time_varying.certificate import covers_nonlinear
 
         out.line(tv.verdict)
         out.line(f"which covers the robot: {covers_nonlinear(tv.method)}")
-    mv = getattr(a, "moving", None)
-    if mv is not None:  # the third verdict: the linearised robot moving within the domain's rates
-        out.line(mv.verdict)
-        if mv.computed:
-            out.line(mv.details())
     out.line(a.verdict)
     out.line(a.certificate.details())
     if not a.certificate.certified:

@@ -247,12 +247,19 @@ def moving_robot_certificate(
     base = problem.scope() if hasattr(problem, "scope") else Scope()
     words = _rate_words(model.names, rates, source)
     notes = (f"on the grid of {model.words()}; not proved between the grid points",)
-    notes += tuple(result.notes) + (
-        "the linearised robot (LPV family A(rho(t)), B(rho(t))) with the domain's fixed torque, not the nonlinear one",
+    notes += (
+        tuple(result.notes)
+        + (
+            "the linearised robot (LPV family A(rho(t)), B(rho(t))) with the domain's fixed torque, not the nonlinear one",
+        )
+        + tuple(base.notes)
     )
+    where = f" inside domain {base.domain!r}" if base.domain else ""
     scope = replace(
         base,
-        variation=f"the linearised robot (LPV) moving with rates {words}",
+        variation=f"the linearised robot {base.robot} (LPV family){where} moving with rates {words}",
+        robot="",
+        domain="",
         model="",
         coverage=None,
         coverage_points=0,
