@@ -43,7 +43,7 @@ def test_armature_conditions_talos_mass_matrix(talos):
 def test_override_per_joint_and_errors():
     robot = load_robot("planar_2r", armature={"joint2": 0.5})
     bare = load_robot("planar_2r")
-    assert bare.reflected_inertia == "none in the URDF/SRDF" and robot.reflected_inertia == "given"
+    assert bare.reflected_inertia == "not modelled (no rotor data in the URDF/SRDF)" and robot.reflected_inertia == "given"
     np.testing.assert_allclose(robot.mass_matrix([0.3, 0.2]) - bare.mass_matrix([0.3, 0.2]), np.diag([0.0, 0.5]))
     with pytest.raises(RobotError, match="unknown joint"):
         load_robot("planar_2r", armature={"elbow": 0.5})

@@ -221,7 +221,9 @@ def test_run_json_announces_stages_when_they_start_and_matches_synth(files, tmp_
     monkeypatch.setattr(pipeline, "design_controller", design)
     monkeypatch.setattr(pipeline, "analyze_controller", analyze)
     out_file = tmp_path / "K_run.json"
-    code, out, _ = run(capsys, "run", "paper_2r", "--pldi", pldi, *FAST, "--mc", "5", *GRID, "--json", "-o", out_file)
+    code, out, _ = run(
+        capsys, "run", "paper_2r", "--pldi", pldi, *FAST, "--mc", "5", *GRID, "--json", "--full-order", "-o", out_file
+    )
     doc = json.loads(out)  # stage lines went to stderr, stdout holds one document
     assert code == (0 if doc["analysis"]["certified"] else 1) == 1
     assert doc["analysis"]["status"] == doc["synthesis"]["status"] == "VIOLATED"

@@ -200,7 +200,7 @@ def test_run_report_shows_the_certificates_and_rebuilds_them(tmp_path, monkeypat
     _check_links(tmp_path, page, r"<img src='([^']+)'")
     _check_links(tmp_path, files.markdown.read_text(), r"!\[[^\]]*\]\(([^)]+)\)")
     _check_cells(page)
-    assert "Discretisation and quantisation" in page and "coverage 1 of 200 fresh points" in page
+    assert "Appendix: discretisation and quantisation" in page and "coverage 1 of 200 fresh points" in page
     val = json.loads(files.validation.read_text())
     assert val["certificates"][FROZEN_ROW]["status"] == a.certificate.status.value
     assert val["discretization"]["rate_hz"] == 100.0

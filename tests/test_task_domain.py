@@ -133,7 +133,7 @@ def test_cli_bounds_and_problem_scope_over_a_task_domain(robot, domain, capsys):
     )
     scope = prob.scope()
     assert scope.domain.startswith("task domain around q = (0.4, 1.2) (±0.3 rad)")
-    assert any(n.startswith("reflected rotor inertia: none") for n in scope.notes)
+    assert any(n.startswith("reflected rotor inertia: not modelled") for n in scope.notes)
     assert prob.description()["domain"]["kind"] == "task"
 
 

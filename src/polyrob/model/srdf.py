@@ -142,7 +142,7 @@ def reflected_inertia(srdf: SrdfData | None, names, override=None):
     source : str
         ``"from the SRDF (talos.srdf): gear ratio^2 x rotor inertia"``,
         ``"given"``, ``"given, the rest from the SRDF (...)"`` or
-        ``"none in the URDF/SRDF"``.
+        ``"not modelled (no rotor data in the URDF/SRDF)"``.
 
     Examples
     --------
@@ -160,7 +160,7 @@ def reflected_inertia(srdf: SrdfData | None, names, override=None):
             inertia, ratio = rotors[n]
             values[k] = ratio**2 * inertia
     where = "" if srdf is None else Path(srdf.path).name
-    source = f"from the SRDF ({where}): gear ratio^2 x rotor inertia" if any(from_srdf) else "none in the URDF/SRDF"
+    source = f"from the SRDF ({where}): gear ratio^2 x rotor inertia" if any(from_srdf) else "not modelled (no rotor data in the URDF/SRDF)"
     if override is None:
         return values, source
     if isinstance(override, dict):

@@ -67,7 +67,7 @@ class Robot(Manipulator):
     locked: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
     armature: np.ndarray = field(default=None, repr=False)
-    reflected_inertia: str = "none in the URDF/SRDF"
+    reflected_inertia: str = "not modelled (no rotor data in the URDF/SRDF)"
     srdf: str | None = None
     reference_poses: dict = field(default_factory=dict, repr=False)
 

@@ -81,14 +81,15 @@ class StartRun:
 
 def refine_points(sc: PerFrequencyScalings, n_peaks=3, min_gap=1e-2) -> np.ndarray:
     """Log-midpoints next to the highest local maxima of the grid bound."""
-    mu, lw = sc.mu, np.log10(sc.omega)
+    with np.errstate(divide="ignore"):  # omega = 0 (real blocks): log10 -inf, no log-midpoint next to it
+        mu, lw = sc.mu, np.log10(sc.omega)
     F = mu.size
     peaks = [i for i in range(F) if (i == 0 or mu[i] >= mu[i - 1]) and (i == F - 1 or mu[i] >= mu[i + 1])]
     peaks = sorted(peaks, key=lambda i: -mu[i])[:n_peaks]
     new = []
     for i in peaks:
         for j in (i - 1, i + 1):
-            if 0 <= j < F and abs(lw[j] - lw[i]) > min_gap:
+            if 0 <= j < F and np.isfinite(lw[i]) and np.isfinite(lw[j]) and abs(lw[j] - lw[i]) > min_gap:
                 new.append(10 ** (0.5 * (lw[i] + lw[j])))
     return np.unique(np.array(new, float))
 
