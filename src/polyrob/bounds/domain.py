@@ -36,7 +36,7 @@ from scipy.stats import qmc
 
 from polyrob.errors import DomainError
 
-__all__ = ["Domain", "unit_design", "joint_range"]
+__all__ = ["Domain", "JointBox", "unit_design", "joint_range"]
 
 _GROUPS = ("q", "qdot", "u")
 _GROUP_TEXT = {"q": "position", "qdot": "velocity", "u": "torque", "qddot": "acceleration"}
@@ -47,8 +47,37 @@ _GROUP_OPTION = {"q": "--q-range JOINT=LO:HI", "qdot": "--qdot-max JOINT=VALUE",
 MAX_DEFAULT_VELOCITY = 100.0
 
 
+class JointBox:
+    """The views every domain shares: a box over ``(q, qdot, third)``, ``third`` being ``u`` or ``qddot``."""
+
+    _third = "u"  # the group after the velocities (a TaskDomain: "qddot")
+
+    @property
+    def m(self) -> int:
+        return len(self.joint_names)
+
+    @property
+    def dim(self) -> int:
+        """Dimension of the box over ``(q, qdot, third)``: ``3 m``."""
+        return 3 * self.m
+
+    @property
+    def lower(self) -> np.ndarray:
+        """Lower corner over ``(q, qdot, third)``."""
+        return np.concatenate([self.q_lower, self.qdot_lower, getattr(self, f"{self._third}_lower")])
+
+    @property
+    def upper(self) -> np.ndarray:
+        """Upper corner over ``(q, qdot, third)``."""
+        return np.concatenate([self.q_upper, self.qdot_upper, getattr(self, f"{self._third}_upper")])
+
+    @property
+    def midpoint(self) -> np.ndarray:
+        return 0.5 * (self.lower + self.upper)
+
+
 @dataclass(frozen=True, eq=False)
-class Domain:
+class Domain(JointBox):
     """A box ``q_lower <= q <= q_upper``, ``qdot_lower <= qdot <= qdot_upper``, ``u_lower <= u <= u_upper``.
 
     Build it with :meth:`from_robot` (defaults from limits, with overrides),
@@ -90,30 +119,6 @@ class Domain:
                         f"domain: joint '{name}' has an inverted {_GROUP_TEXT[group]} range "
                         f"[{lo[j]}, {hi[j]}]: give lower <= upper"
                     )
-
-    # ------------------------------------------------------------------ views
-    @property
-    def m(self) -> int:
-        return len(self.joint_names)
-
-    @property
-    def dim(self) -> int:
-        """Dimension of the box over ``(q, qdot, u)``: ``3 m``."""
-        return 3 * self.m
-
-    @property
-    def lower(self) -> np.ndarray:
-        """Lower corner over ``(q, qdot, u)``."""
-        return np.concatenate([self.q_lower, self.qdot_lower, self.u_lower])
-
-    @property
-    def upper(self) -> np.ndarray:
-        """Upper corner over ``(q, qdot, u)``."""
-        return np.concatenate([self.q_upper, self.qdot_upper, self.u_upper])
-
-    @property
-    def midpoint(self) -> np.ndarray:
-        return 0.5 * (self.lower + self.upper)
 
     def contains(self, q, qdot, u, *, atol: float = 0.0) -> np.ndarray:
         """Whether points (arrays (n, m)) lie in the box."""

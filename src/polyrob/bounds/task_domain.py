@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from polyrob.bounds.domain import Domain, joint_range, unit_design
+from polyrob.bounds.domain import Domain, JointBox, joint_range, unit_design
 from polyrob.errors import DomainError
 
 __all__ = ["TaskDomain", "domain_from_dict"]
@@ -54,7 +54,7 @@ _BOX = ("q", "qdot", "qddot")
 
 
 @dataclass(frozen=True, eq=False)
-class TaskDomain:
+class TaskDomain(JointBox):
     """The box ``(q, qdot, qddot)`` around a reference pose; torques ``u = rnea(q, qdot, qddot) + D qdot``.
 
     Build it with :meth:`from_robot`.
@@ -90,6 +90,7 @@ class TaskDomain:
     _torques: list = field(default_factory=list, init=False, repr=False)
 
     kind = "task"
+    _third = "qddot"  # JointBox views over (q, qdot, qddot)
 
     def __post_init__(self):
         object.__setattr__(self, "joint_names", tuple(self.joint_names))
@@ -106,29 +107,7 @@ class TaskDomain:
                 j = int(np.argmax(lo > hi))
                 raise DomainError(f"task domain: joint '{self.joint_names[j]}' has an empty {g} range")
 
-    # ------------------------------------------------------------------ views (as Domain)
-    @property
-    def m(self) -> int:
-        return len(self.joint_names)
-
-    @property
-    def dim(self) -> int:
-        """Dimension of the box over ``(q, qdot, qddot)``: ``3 m``."""
-        return 3 * self.m
-
-    @property
-    def lower(self) -> np.ndarray:
-        """Lower corner over ``(q, qdot, qddot)``."""
-        return np.concatenate([self.q_lower, self.qdot_lower, self.qddot_lower])
-
-    @property
-    def upper(self) -> np.ndarray:
-        """Upper corner over ``(q, qdot, qddot)``."""
-        return np.concatenate([self.q_upper, self.qdot_upper, self.qddot_upper])
-
-    @property
-    def midpoint(self) -> np.ndarray:
-        return 0.5 * (self.lower + self.upper)
+    # ------------------------------------------------------------------ views: JointBox's, over (q, qdot, qddot)
 
     split = Domain.split
 
