@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-import re
 import shlex
+import sys
 from pathlib import Path
 
 import pytest
@@ -11,19 +11,9 @@ import pytest
 from polyrob.cli import build_parser, main
 
 README = Path(__file__).resolve().parents[1] / "README.md"
-
-
-def _readme_commands() -> list[str]:
-    blocks = re.findall(r"```bash\n(.*?)```", README.read_text(), flags=re.S)
-    out = []
-    for block in blocks:
-        for line in block.splitlines():
-            line = line.split("  #")[0].strip()
-            for part in line.split("&&"):
-                part = part.strip()
-                if part.startswith("polyrob "):
-                    out.append(part)
-    return out
+# the one parser of the README's commands: the benchmark that times them has it
+sys.path.insert(0, str(README.parent / "benchmarks"))
+from readme_commands import readme_commands as _readme_commands  # noqa: E402
 
 
 COMMANDS = _readme_commands()

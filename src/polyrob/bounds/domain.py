@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import qmc
 
+from polyrob.bounds.joint_box import JointBox
 from polyrob.errors import DomainError
 
 __all__ = ["Domain", "JointBox", "unit_design", "joint_range"]
@@ -45,35 +46,6 @@ _GROUP_OPTION = {"q": "--q-range JOINT=LO:HI", "qdot": "--qdot-max JOINT=VALUE",
 #: state 1,000-10,000 rad/s (finger_edu, borinot_flying_arm_2), placeholders
 #: that make the Jacobians ~1e7 and the bounds meaningless.
 MAX_DEFAULT_VELOCITY = 100.0
-
-
-class JointBox:
-    """The views every domain shares: a box over ``(q, qdot, third)``, ``third`` being ``u`` or ``qddot``."""
-
-    _third = "u"  # the group after the velocities (a TaskDomain: "qddot")
-
-    @property
-    def m(self) -> int:
-        return len(self.joint_names)
-
-    @property
-    def dim(self) -> int:
-        """Dimension of the box over ``(q, qdot, third)``: ``3 m``."""
-        return 3 * self.m
-
-    @property
-    def lower(self) -> np.ndarray:
-        """Lower corner over ``(q, qdot, third)``."""
-        return np.concatenate([self.q_lower, self.qdot_lower, getattr(self, f"{self._third}_lower")])
-
-    @property
-    def upper(self) -> np.ndarray:
-        """Upper corner over ``(q, qdot, third)``."""
-        return np.concatenate([self.q_upper, self.qdot_upper, getattr(self, f"{self._third}_upper")])
-
-    @property
-    def midpoint(self) -> np.ndarray:
-        return 0.5 * (self.lower + self.upper)
 
 
 @dataclass(frozen=True, eq=False)

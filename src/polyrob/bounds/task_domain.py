@@ -45,7 +45,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from polyrob.bounds.domain import Domain, JointBox, joint_range, unit_design
+from polyrob.bounds.domain import Domain, joint_range, unit_design
+from polyrob.bounds.joint_box import JointBox
 from polyrob.errors import DomainError
 
 __all__ = ["TaskDomain", "domain_from_dict"]
