@@ -218,7 +218,9 @@ def optimise_start(
     for _ in range(max_iter):
         if target is not None and run.peak <= target:
             break
-        if deadline is not None and time.perf_counter() >= deadline:
+        # a start that began makes at least one iteration (a start is not begun after the limit):
+        # on a loaded machine its set-up alone can outlast a short limit
+        if deadline is not None and run.iterations > 0 and time.perf_counter() >= deadline:
             run.notes.append(f"stopped by the time limit after {run.iterations} iteration(s)")
             break
         t0 = time.perf_counter()
