@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+
 from polyrob.cli.analyze import print_analysis
 from polyrob.cli.common import (
     Output,
@@ -269,6 +271,7 @@ def cmd_run(args) -> int:
         progress=out.progress,
         time_varying=args.time_varying,
         stability="sweep" if args.stability_sweep else "implied",
+        moving=args.moving,
     )
     print_analysis(a, out)
     design = design.certified_by(a.certificate)  # the analysis' certificate is the design's: one call, one verdict
@@ -419,6 +422,13 @@ def register(sub) -> None:
         help="skip the time-varying certificate of the analysis (the one that covers the moving robot)",
     )
     p.add_argument("--omega", default=None, help="analysis frequency grid LO:HI:N in rad/s (default automatic)")
+    p.add_argument(
+        "--moving",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="the moving-robot certificate (rate-bounded LPV analysis on the robot's state, rates from the "
+        "domain); default: computed only for small closed loops (docs/certificates.md)",
+    )
     p.add_argument(
         "--stability-sweep",
         action="store_true",
