@@ -5,10 +5,10 @@
 Runs the commands of README.md's ```bash blocks one after the other, as
 written, in ``--workdir`` (a fresh temporary folder by default, so ``-o``
 outputs and the controller files one command writes for the next stay
-there), each in its own process with ``--quiet``.  Prints one JSON document:
+there), each in its own process.  Prints one JSON document:
 per command the seconds, the exit status (0 CERTIFIED or success, 1 ran but
-not certified, 2 bad input), its last line (the verdict of judging
-commands), and the load average before it: a figure measured on a loaded
+not certified, 2 bad input), its last line of output (stderr after
+stdout: often a progress line), and the load average before it: a figure measured on a loaded
 machine says so.  ``--skip`` leaves out commands containing a word (e.g.
 ``tf3`` for the 5-start fixed-structure synthesis of about ten minutes).
 """
