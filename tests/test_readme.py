@@ -15,7 +15,6 @@ README = Path(__file__).resolve().parents[1] / "README.md"
 sys.path.insert(0, str(README.parent / "benchmarks"))
 from readme_commands import readme_commands as _readme_commands  # noqa: E402
 
-
 COMMANDS = _readme_commands()
 
 

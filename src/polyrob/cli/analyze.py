@@ -130,6 +130,17 @@ def cmd_analyze(args) -> int:
     return exit_status(a.certificate)
 
 
+def add_moving_argument(p) -> None:
+    """``--moving/--no-moving`` (``analyze`` and ``run``)."""
+    p.add_argument(
+        "--moving",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="the moving-robot certificate (rate-bounded LPV analysis on the robot's state, rates from the "
+        "domain); default: computed only for small closed loops (docs/certificates.md)",
+    )
+
+
 def register(sub) -> None:
     p = sub.add_parser("analyze", help="nominal/robust stability and performance (mu) of a controller")
     add_robot_arguments(p)
@@ -152,12 +163,6 @@ def register(sub) -> None:
         help="skip the time-varying certificate (quadratic stability/performance on the PLDI's vertices, "
         "or the constant-D small gain), the one that covers the moving robot",
     )
-    p.add_argument(
-        "--moving",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="the moving-robot certificate (rate-bounded LPV analysis on the robot's state, rates from the "
-        "domain); default: computed only for small closed loops (docs/certificates.md)",
-    )
+    add_moving_argument(p)
     add_output_flags(p)
     p.set_defaults(func=cmd_analyze)

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import argparse
-
-from polyrob.cli.analyze import print_analysis
+from polyrob.cli.analyze import add_moving_argument, print_analysis
 from polyrob.cli.common import (
     Output,
     add_domain_arguments,
@@ -422,13 +420,7 @@ def register(sub) -> None:
         help="skip the time-varying certificate of the analysis (the one that covers the moving robot)",
     )
     p.add_argument("--omega", default=None, help="analysis frequency grid LO:HI:N in rad/s (default automatic)")
-    p.add_argument(
-        "--moving",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="the moving-robot certificate (rate-bounded LPV analysis on the robot's state, rates from the "
-        "domain); default: computed only for small closed loops (docs/certificates.md)",
-    )
+    add_moving_argument(p)
     p.add_argument(
         "--stability-sweep",
         action="store_true",
