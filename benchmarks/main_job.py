@@ -3,7 +3,7 @@
     python benchmarks/main_job.py [--output-dir DIR] [--repeat N]
 
 Runs ``polyrob run --json`` (no robot: the main job, see
-``polyrob.cli.synth.MAIN_JOB``) as a user would, in a fresh process, and
+``polyrob.cli.run.MAIN_JOB``) as a user would, in a fresh process, and
 ``polyrob run -o DIR`` (the same job with the validation and ``report.html``)
 when ``--output-dir`` is given.  Prints one JSON document: per command the
 wall-clock seconds, the exit status, the certificate's status and bound, the

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from polyrob.cli import build_parser
-from polyrob.cli.synth import MAIN_JOB, _main_job_defaults
+from polyrob.cli.run import MAIN_JOB, main_job_defaults
 
 
 class _Lines:
@@ -24,7 +24,7 @@ def _args(*argv):
 
 def test_no_robot_is_the_main_job_task_domain():
     args, out = _args(), _Lines()
-    _main_job_defaults(args, out)
+    main_job_defaults(args, out)
     assert (args.robot, args.pose, args.q_radius, args.qdot_max, args.qddot_max, args.target) == (
         "planar_2r",
         "0,1.5708",
@@ -39,10 +39,10 @@ def test_no_robot_is_the_main_job_task_domain():
 
 def test_a_given_robot_or_domain_is_not_overridden():
     args, out = _args("paper_2r"), _Lines()
-    _main_job_defaults(args, out)
+    main_job_defaults(args, out)
     assert args.robot == "paper_2r" and args.pose is None and args.target is None and not out.lines
     args = _args("--qddot-max", "5", "--target", "0.9")
-    _main_job_defaults(args, _Lines())
+    main_job_defaults(args, _Lines())
     # a domain option replaces the main job's task; the robot and the rest stay the main job's
     assert (args.robot, args.qddot_max, args.pose, args.q_radius, args.target) == ("planar_2r", "5", None, None, 0.9)
     assert set(MAIN_JOB) >= {"robot", "pose", "q_radius", "qdot_max", "qddot_max", "target"}

@@ -170,7 +170,7 @@ def test_run_report_shows_the_certificates_and_rebuilds_them(tmp_path, monkeypat
     """`polyrob run -o DIR`'s report, then `polyrob report DIR`: same verdict, same certificate rows."""
     import polyrob.report.build as build
     from polyrob.cli import main
-    from polyrob.cli.synth import _report_certificates
+    from polyrob.cli.run import report_certificates
     from polyrob.validate.simulate import step_reference
 
     problem, K, a = _run()
@@ -181,7 +181,7 @@ def test_run_report_shows_the_certificates_and_rebuilds_them(tmp_path, monkeypat
         tmp_path,
         problem,
         K,
-        certificates=_report_certificates(a),  # what cmd_run passes
+        certificates=report_certificates(a),  # what cmd_run passes
         rate=100.0,
         scenarios=[(step_reference(q0 + 0.002), {"t_final": 3.0})],
         discrete_omega=np.logspace(-2, 2, 4),

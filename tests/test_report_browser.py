@@ -164,7 +164,7 @@ def check_html(page: Path) -> list[dict]:
 def report(tmp_path_factory) -> Path:
     """report.html of test_report's fast run fixture, written as `polyrob run -o DIR` writes it."""
     import polyrob.report.build as build
-    from polyrob.cli.synth import _report_certificates
+    from polyrob.cli.run import report_certificates
 
     run = tmp_path_factory.mktemp("run")
     problem, K, a = _run()
@@ -174,7 +174,7 @@ def report(tmp_path_factory) -> Path:
         run,
         problem,
         K,
-        certificates=_report_certificates(a),
+        certificates=report_certificates(a),
         rate=100.0,
         scenarios=[(step_reference(q0 + 0.002), {"t_final": 3.0})],
         discrete_omega=np.logspace(-2, 2, 4),

@@ -31,7 +31,7 @@ class PolyrobParser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from polyrob.cli import analyze, batch, bounds, files, listing, synth
+    from polyrob.cli import analyze, batch, bounds, files, listing, run, synth
     from polyrob.cli.common import HelpFormatter
 
     parser = PolyrobParser(
@@ -40,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True, parser_class=PolyrobParser)
     sub.add_parser = functools.partial(sub.add_parser, formatter_class=HelpFormatter)
-    for module in (listing, bounds, analyze, synth, files, batch):
+    for module in (listing, bounds, analyze, synth, run, files, batch):
         module.register(sub)
     return parser
 

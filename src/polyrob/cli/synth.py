@@ -1,8 +1,7 @@
-"""``polyrob synth`` and ``polyrob run``: μ-synthesis with its certificate, and the whole pipeline."""
+"""``polyrob synth``: μ-synthesis with its certificate; the synthesis options and outputs ``polyrob run`` shares."""
 
 from __future__ import annotations
 
-from polyrob.cli.analyze import add_moving_argument, print_analysis
 from polyrob.cli.common import (
     Output,
     add_domain_arguments,
@@ -14,13 +13,24 @@ from polyrob.cli.common import (
     robot_from_args,
     scale_names,
 )
-from polyrob.cli.options import int_at_least, parse_frequencies, positive_float
+from polyrob.cli.options import int_at_least, positive_float
 from polyrob.cli.plant import add_plant_arguments, problem_from_args
 
-__all__ = ["register"]
+__all__ = [
+    "register",
+    "add_synthesis_arguments",
+    "options_from_args",
+    "check_output",
+    "print_design",
+    "print_limit",
+    "ruled_out",
+    "print_input_check",
+    "save_design",
+]
 
 
-def _options(args, out) -> dict:
+def options_from_args(args, out) -> dict:
+    """``musyn`` keyword arguments from the synthesis options of ``synth`` and ``run``."""
     from polyrob.pipeline import synthesis_options
 
     return synthesis_options(
@@ -35,63 +45,11 @@ def _options(args, out) -> dict:
     )
 
 
-#: ``polyrob run`` with no robot: the main job.  The paper's arm (the bundled
-#: URDF ``planar_2r``) on a task a treatment robot performs: around an elbow-bent
-#: pose, +-0.5 rad, |qdot| <= 1 rad/s, |qddot| <= 2 rad/s^2, the torques
-#: following from inverse dynamics (a task domain, docs/task_domains.md), at
-#: the paper's own weights and bandwidths.  On the paper's full torque box the
-#: Jacobians hold accelerations of hundreds of rad/s^2 that no planned motion
-#: asks for, and no controller polyrob finds is certified there at the paper's
-#: bandwidths (README).  The D-K iteration stops once its grid peak is below
-#: 0.95; the reduced controller's certificate is decided afterwards, at every
-#: frequency, as for any other run.
-MAIN_JOB = {
-    "robot": "planar_2r",
-    "pose": "0,1.5708",
-    "q_radius": "0.5",
-    "qdot_max": "1",
-    "qddot_max": "2",
-    "target": 0.95,
-}
-
-
-def _main_job_defaults(args, out) -> None:
-    """``run`` without a robot: the main job (:data:`MAIN_JOB`), unless its options were given."""
-    if args.robot is not None:
-        return
-    given = [k for k in ("pose", "q_radius", "qdot_max", "qddot_max", "q_range", "u_max", "domain") if getattr(args, k, None)]
-    for key, value in MAIN_JOB.items():
-        if key in ("pose", "q_radius", "qdot_max", "qddot_max") and given:
-            continue  # a domain was given: it replaces the main job's task
-        if getattr(args, key, None) is None:
-            setattr(args, key, value)
-    task = "" if given else (
-        f" on the task around q = ({args.pose}) rad, +-{args.q_radius} rad, |qdot| <= {args.qdot_max} rad/s, "
-        f"|qddot| <= {args.qddot_max} rad/s^2"
-    )
-    out.line(
-        f"main job (no robot given): {args.robot}, the paper's arm{task}, the paper's weights, full-order D-G-K "
-        f"stopped at grid mu < {args.target:g}"
-        + (f", reduced to order <= {args.reduce_max_order}" if args.reduce else "")
-        + "; give a robot to pose your own problem"
-    )
-
-
-def _check_output(args) -> None:
+def check_output(args) -> None:
     if args.output:
         from polyrob.io.paths import check_output_path
 
         check_output_path(args.output, "-o")
-
-
-def _run_dir(args):
-    """``run -o DIR`` (no ``.json`` suffix): a run directory with K.json, the PLDI and the report."""
-    if not args.output or args.output.lower().endswith(".json"):
-        _check_output(args)
-        return None
-    from polyrob.cli.files import check_output_dir
-
-    return check_output_dir(args.output, first_file="K.json")
 
 
 def print_design(design, out) -> None:
@@ -121,14 +79,14 @@ def print_design(design, out) -> None:
         out.line(f"synthesis stopped by {stopped}: the best controller so far is kept")
 
 
-def _print_limit(problem, out) -> dict:
+def print_limit(problem, out) -> dict:
     """Print what no controller can beat at these weights (the robot's unstable poles)."""
     limit = problem.performance_limit()
     out.line(limit.summary())
     return limit.to_dict()
 
 
-def _ruled_out(doc: dict, args, out) -> bool:
+def ruled_out(doc: dict, args, out) -> bool:
     """Whether the performance limit already proves mu >= 1 for every controller (then say so, once)."""
     limit = doc.get("performance_limit") or {}
     if not limit.get("excludes_mu_below_one") or args.anyway:
@@ -144,7 +102,7 @@ def _ruled_out(doc: dict, args, out) -> bool:
     return True
 
 
-def _print_input_check(problem, out) -> dict:
+def print_input_check(problem, out) -> dict:
     """Say when the model's input matrices lose the definiteness of the robot's ``M(q)^-1``."""
     from polyrob.plant.coverage import input_definiteness
 
@@ -159,7 +117,7 @@ def _print_input_check(problem, out) -> dict:
     return check
 
 
-def _save(design, problem, args, out, info_extra=None, certificate_extra=None, path=None):
+def save_design(design, problem, args, out, info_extra=None, certificate_extra=None, path=None):
     from polyrob.io.controller import save_controller
 
     info = problem.description()
@@ -173,11 +131,11 @@ def _save(design, problem, args, out, info_extra=None, certificate_extra=None, p
 def cmd_synth(args) -> int:
     from polyrob.pipeline import design_controller, design_max_bandwidth
 
-    _check_output(args)
+    check_output(args)
     scale = scale_names(args.scale_only) if args.max_bandwidth else None
     alphas = alphas_from_args(args.alphas) if args.max_bandwidth else None
     out = Output(args, stages=2)
-    options = _options(args, out)
+    options = options_from_args(args, out)
     robot = robot_from_args(args)
     problem = problem_from_args(robot, args, out)
     out.line(
@@ -207,9 +165,9 @@ def cmd_synth(args) -> int:
         doc["problem"].update(extra)
         doc["bandwidth_scaling"] = res.summary()
     else:
-        doc["performance_limit"] = _print_limit(problem, out)
-        doc["input_definiteness"] = _print_input_check(problem, out)
-        if _ruled_out(doc, args, out):
+        doc["performance_limit"] = print_limit(problem, out)
+        doc["input_definiteness"] = print_input_check(problem, out)
+        if ruled_out(doc, args, out):
             return 1
         out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
         design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
@@ -217,7 +175,7 @@ def cmd_synth(args) -> int:
         extra = None
     doc["synthesis"] = design.summary()
     if args.output:
-        doc["output"] = _save(design, problem, args, out, info_extra=extra)
+        doc["output"] = save_design(design, problem, args, out, info_extra=extra)
     cert = design.certificate
     doc["covers"] = cert.scope.sentence()
     doc["certificate"] = cert.summary()
@@ -228,110 +186,7 @@ def cmd_synth(args) -> int:
     return exit_status(cert)
 
 
-def cmd_run(args) -> int:
-    """bounds -> synthesis -> analysis in one go."""
-    from polyrob.pipeline import analyze_controller, design_controller, frequency_grid, pldi_report
-
-    omega_spec = parse_frequencies(args.omega)
-    run_dir = _run_dir(args)
-    out = Output(args, stages=3 if run_dir is None else 4)
-    _main_job_defaults(args, out)
-    options = _options(args, out)
-    robot = robot_from_args(args)
-    problem = problem_from_args(robot, args, out)
-    pldi = problem.pldi
-    out.line(
-        f"{len(pldi.entries)} varying entries ({pldi.enclosure}), {problem.unc.n_params} real parameters "
-        f"({problem.model} model)"
-    )
-    out.line(pldi.table())
-    limit = _print_limit(problem, out)
-    input_check = _print_input_check(problem, out)
-    early = {"robot": robot.name, "problem": problem.description(), "performance_limit": limit}
-    if _ruled_out(early, args, out):
-        return 1
-    out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
-    design = design_controller(
-        problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, certify=False, **options
-    )
-    print_design(design, out)
-    out.stage(
-        f"analysis: mu sweeps (robust stability, robust performance), {args.mc} Monte Carlo parameter sets"
-        + (", time-varying certificate" if args.time_varying else "")
-    )
-    omega = frequency_grid(*omega_spec) if omega_spec else None
-    a = analyze_controller(
-        problem,
-        design.controller,
-        omega=omega,
-        mc=args.mc,
-        seed=0,
-        progress=out.progress,
-        time_varying=args.time_varying,
-        stability="sweep" if args.stability_sweep else "implied",
-        moving=args.moving,
-    )
-    print_analysis(a, out)
-    design = design.certified_by(a.certificate)  # the analysis' certificate is the design's: one call, one verdict
-    doc = {
-        "robot": robot.name,
-        "problem": problem.description(),
-        "bounds": pldi_report(pldi, robot.joint_names),
-        "performance_limit": limit,
-        "input_definiteness": input_check,
-        "synthesis": design.summary(),
-        "analysis": a.summary(),
-        "covers": a.covers,
-        "verdict": a.verdict,
-    }
-    extra = {"robust_stability": a.robust_stability.summary(), "robust_performance": a.robust_performance.summary()}
-    if run_dir is not None:
-        from polyrob.report.build import write_run_report
-
-        doc["output"] = _save(design, problem, args, out, certificate_extra=extra, path=run_dir / "K.json")
-        out.stage(f"validation and report into {run_dir} (nonlinear simulations, discretisation)")
-        files = write_run_report(
-            run_dir,
-            problem,
-            design.controller,
-            certificates=_report_certificates(a),
-            controller_file="K.json",
-            controller_words=_controller_words(design),
-        )
-        doc["report"] = str(files.html)
-        out.line(f"wrote {files.html}")
-    elif args.output:
-        doc["output"] = _save(design, problem, args, out, certificate_extra=extra)
-    out.document(doc)
-    return exit_status(a.certificate)
-
-
-def _controller_words(design) -> str:
-    """How the run's controller was made, for the report's first lines."""
-    r = design.result
-    if design.reduced is not None:
-        return (
-            f"full-order D-G-K (order {design.reduced.full_order}), reduced by balanced truncation to order "
-            f"{design.reduced.order}"
-        )
-    return f"{r.structure}, order {r.order}"
-
-
-def _report_certificates(analysis) -> dict:
-    """The certificates a run report shows, as decided: frozen robot (mu), arbitrarily fast, moving robot."""
-    from polyrob.report.certificates import FROZEN_ROW, MOVING_ROW, TIME_VARYING_ROW
-
-    certs = {FROZEN_ROW: analysis.certificate}
-    tv = analysis.time_varying
-    if tv is not None:
-        certs[f"{TIME_VARYING_ROW} ({tv.method})"] = tv
-    mv = getattr(analysis, "moving", None)
-    if mv is not None and mv.computed:
-        certs[f"{MOVING_ROW} ({mv.rate_words})"] = mv
-    return certs
-
-
-def _add_synthesis_arguments(p) -> None:
+def add_synthesis_arguments(p) -> None:
     add_robot_arguments(p)
     add_domain_arguments(p)
     add_weight_arguments(p)
@@ -386,7 +241,7 @@ def _add_synthesis_arguments(p) -> None:
 
 def register(sub) -> None:
     p = sub.add_parser("synth", help="mu-synthesis: full order (D-K, D-G-K) or fixed structure")
-    _add_synthesis_arguments(p)
+    add_synthesis_arguments(p)
     g = p.add_argument_group("bandwidth scan")
     g.add_argument(
         "--max-bandwidth",
@@ -402,35 +257,3 @@ def register(sub) -> None:
         "--alphas", default=None, help="--max-bandwidth: comma-separated scan of the factor (default 0.125,0.25,...,32)"
     )
     p.set_defaults(func=cmd_synth)
-    p = sub.add_parser(
-        "run",
-        help="bounds -> synthesis -> analysis in one go (no robot: the main job, the paper's arm certified)",
-    )
-    _add_synthesis_arguments(p)
-    p.add_argument(
-        "--full-order", dest="reduce", action="store_false", help="keep the full-order controller (no reduction)"
-    )
-    # run reduces by default (a controller an engineer can implement); no robot: the main job (MAIN_JOB)
-    p.set_defaults(reduce=True, robot=None)
-    p.add_argument("--mc", type=int_at_least(1), default=200, help="Monte Carlo parameter sets in the analysis")
-    p.add_argument(
-        "--no-time-varying",
-        dest="time_varying",
-        action="store_false",
-        help="skip the time-varying certificate of the analysis (the one that covers the moving robot)",
-    )
-    p.add_argument("--omega", default=None, help="analysis frequency grid LO:HI:N in rad/s (default automatic)")
-    add_moving_argument(p)
-    p.add_argument(
-        "--stability-sweep",
-        action="store_true",
-        help="sweep robust-stability mu even when the robust-performance certificate already bounds it "
-        "(its value, not only a bound; `analyze` always sweeps)",
-    )
-    for a in p._actions:
-        if a.dest == "output":  # run: a directory unless the name ends in .json
-            a.help = (
-                "FILE.json: the controller, its certificate and its problem; DIR: a run directory with "
-                "K.json, pldi.json/.npz and the validation report (report.html)"
-            )
-    p.set_defaults(func=cmd_run)

@@ -1,0 +1,210 @@
+"""``polyrob run``: bounds -> synthesis -> analysis in one go, and the main job (no robot)."""
+
+from __future__ import annotations
+
+from polyrob.cli.analyze import add_moving_argument, print_analysis
+from polyrob.cli.common import Output, exit_status, robot_from_args
+from polyrob.cli.options import int_at_least, parse_frequencies
+from polyrob.cli.plant import problem_from_args
+from polyrob.cli.synth import (
+    add_synthesis_arguments,
+    check_output,
+    options_from_args,
+    print_design,
+    print_input_check,
+    print_limit,
+    ruled_out,
+    save_design,
+)
+
+__all__ = ["register", "MAIN_JOB", "main_job_defaults", "report_certificates", "controller_words"]
+
+
+#: ``polyrob run`` with no robot: the main job.  The paper's arm (the bundled
+#: URDF ``planar_2r``) on a task a treatment robot performs: around an elbow-bent
+#: pose, +-0.5 rad, |qdot| <= 1 rad/s, |qddot| <= 2 rad/s^2, the torques
+#: following from inverse dynamics (a task domain, docs/task_domains.md), at
+#: the paper's own weights and bandwidths.  On the paper's full torque box the
+#: Jacobians hold accelerations of hundreds of rad/s^2 that no planned motion
+#: asks for, and no controller polyrob finds is certified there at the paper's
+#: bandwidths (README).  The D-K iteration stops once its grid peak is below
+#: 0.95; the reduced controller's certificate is decided afterwards, at every
+#: frequency, as for any other run.
+MAIN_JOB = {
+    "robot": "planar_2r",
+    "pose": "0,1.5708",
+    "q_radius": "0.5",
+    "qdot_max": "1",
+    "qddot_max": "2",
+    "target": 0.95,
+}
+
+
+def main_job_defaults(args, out) -> None:
+    """``run`` without a robot: the main job (:data:`MAIN_JOB`), unless its options were given."""
+    if args.robot is not None:
+        return
+    given = [k for k in ("pose", "q_radius", "qdot_max", "qddot_max", "q_range", "u_max", "domain") if getattr(args, k, None)]
+    for key, value in MAIN_JOB.items():
+        if key in ("pose", "q_radius", "qdot_max", "qddot_max") and given:
+            continue  # a domain was given: it replaces the main job's task
+        if getattr(args, key, None) is None:
+            setattr(args, key, value)
+    task = "" if given else (
+        f" on the task around q = ({args.pose}) rad, +-{args.q_radius} rad, |qdot| <= {args.qdot_max} rad/s, "
+        f"|qddot| <= {args.qddot_max} rad/s^2"
+    )
+    out.line(
+        f"main job (no robot given): {args.robot}, the paper's arm{task}, the paper's weights, full-order D-G-K "
+        f"stopped at grid mu < {args.target:g}"
+        + (f", reduced to order <= {args.reduce_max_order}" if args.reduce else "")
+        + "; give a robot to pose your own problem"
+    )
+
+
+def _run_dir(args):
+    """``run -o DIR`` (no ``.json`` suffix): a run directory with K.json, the PLDI and the report."""
+    if not args.output or args.output.lower().endswith(".json"):
+        check_output(args)
+        return None
+    from polyrob.cli.files import check_output_dir
+
+    return check_output_dir(args.output, first_file="K.json")
+
+
+def cmd_run(args) -> int:
+    """bounds -> synthesis -> analysis in one go."""
+    from polyrob.pipeline import analyze_controller, design_controller, frequency_grid, pldi_report
+
+    omega_spec = parse_frequencies(args.omega)
+    run_dir = _run_dir(args)
+    out = Output(args, stages=3 if run_dir is None else 4)
+    main_job_defaults(args, out)
+    options = options_from_args(args, out)
+    robot = robot_from_args(args)
+    problem = problem_from_args(robot, args, out)
+    pldi = problem.pldi
+    out.line(
+        f"{len(pldi.entries)} varying entries ({pldi.enclosure}), {problem.unc.n_params} real parameters "
+        f"({problem.model} model)"
+    )
+    out.line(pldi.table())
+    limit = print_limit(problem, out)
+    input_check = print_input_check(problem, out)
+    early = {"robot": robot.name, "problem": problem.description(), "performance_limit": limit}
+    if ruled_out(early, args, out):
+        return 1
+    out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
+    design = design_controller(
+        problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, certify=False, **options
+    )
+    print_design(design, out)
+    out.stage(
+        f"analysis: mu sweeps (robust stability, robust performance), {args.mc} Monte Carlo parameter sets"
+        + (", time-varying certificate" if args.time_varying else "")
+    )
+    omega = frequency_grid(*omega_spec) if omega_spec else None
+    a = analyze_controller(
+        problem,
+        design.controller,
+        omega=omega,
+        mc=args.mc,
+        seed=0,
+        progress=out.progress,
+        time_varying=args.time_varying,
+        stability="sweep" if args.stability_sweep else "implied",
+        moving=args.moving,
+    )
+    print_analysis(a, out)
+    design = design.certified_by(a.certificate)  # the analysis' certificate is the design's: one call, one verdict
+    doc = {
+        "robot": robot.name,
+        "problem": problem.description(),
+        "bounds": pldi_report(pldi, robot.joint_names),
+        "performance_limit": limit,
+        "input_definiteness": input_check,
+        "synthesis": design.summary(),
+        "analysis": a.summary(),
+        "covers": a.covers,
+        "verdict": a.verdict,
+    }
+    extra = {"robust_stability": a.robust_stability.summary(), "robust_performance": a.robust_performance.summary()}
+    if run_dir is not None:
+        from polyrob.report.build import write_run_report
+
+        doc["output"] = save_design(design, problem, args, out, certificate_extra=extra, path=run_dir / "K.json")
+        out.stage(f"validation and report into {run_dir} (nonlinear simulations, discretisation)")
+        files = write_run_report(
+            run_dir,
+            problem,
+            design.controller,
+            certificates=report_certificates(a),
+            controller_file="K.json",
+            controller_words=controller_words(design),
+        )
+        doc["report"] = str(files.html)
+        out.line(f"wrote {files.html}")
+    elif args.output:
+        doc["output"] = save_design(design, problem, args, out, certificate_extra=extra)
+    out.document(doc)
+    return exit_status(a.certificate)
+
+
+def controller_words(design) -> str:
+    """How the run's controller was made, for the report's first lines."""
+    r = design.result
+    if design.reduced is not None:
+        return (
+            f"full-order D-G-K (order {design.reduced.full_order}), reduced by balanced truncation to order "
+            f"{design.reduced.order}"
+        )
+    return f"{r.structure}, order {r.order}"
+
+
+def report_certificates(analysis) -> dict:
+    """The certificates a run report shows, as decided: frozen robot (mu), arbitrarily fast, moving robot."""
+    from polyrob.report.certificates import FROZEN_ROW, MOVING_ROW, TIME_VARYING_ROW
+
+    certs = {FROZEN_ROW: analysis.certificate}
+    tv = analysis.time_varying
+    if tv is not None:
+        certs[f"{TIME_VARYING_ROW} ({tv.method})"] = tv
+    mv = getattr(analysis, "moving", None)
+    if mv is not None and mv.computed:
+        certs[f"{MOVING_ROW} ({mv.rate_words})"] = mv
+    return certs
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "run",
+        help="bounds -> synthesis -> analysis in one go (no robot: the main job, the paper's arm certified)",
+    )
+    add_synthesis_arguments(p)
+    p.add_argument(
+        "--full-order", dest="reduce", action="store_false", help="keep the full-order controller (no reduction)"
+    )
+    # run reduces by default (a controller an engineer can implement); no robot: the main job (MAIN_JOB)
+    p.set_defaults(reduce=True, robot=None)
+    p.add_argument("--mc", type=int_at_least(1), default=200, help="Monte Carlo parameter sets in the analysis")
+    p.add_argument(
+        "--no-time-varying",
+        dest="time_varying",
+        action="store_false",
+        help="skip the time-varying certificate of the analysis (the one that covers the moving robot)",
+    )
+    p.add_argument("--omega", default=None, help="analysis frequency grid LO:HI:N in rad/s (default automatic)")
+    add_moving_argument(p)
+    p.add_argument(
+        "--stability-sweep",
+        action="store_true",
+        help="sweep robust-stability mu even when the robust-performance certificate already bounds it "
+        "(its value, not only a bound; `analyze` always sweeps)",
+    )
+    for a in p._actions:
+        if a.dest == "output":  # run: a directory unless the name ends in .json
+            a.help = (
+                "FILE.json: the controller, its certificate and its problem; DIR: a run directory with "
+                "K.json, pldi.json/.npz and the validation report (report.html)"
+            )
+    p.set_defaults(func=cmd_run)
