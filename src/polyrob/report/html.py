@@ -23,9 +23,7 @@ reads ``nan`` or ``None``.  Every write is atomic.
 from __future__ import annotations
 
 import datetime
-import html
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,20 +40,9 @@ from polyrob.report.certificates import (
     frozen_status,
     is_decided,
 )
+from polyrob.report.page import Page, cell, is_missing
 
 __all__ = ["ReportFiles", "write_report"]
-
-CSS = """body{font-family:sans-serif;max-width:1100px;margin:1.5em auto;padding:0 1em;color:#222;line-height:1.35}
-h1{font-size:1.7em;margin:0.3em 0}#verdict{font-size:1.25em}
-.scroll{overflow-x:auto;max-width:100%}table{border-collapse:collapse;margin:0.5em 0}
-td,th{border:1px solid #bbb;padding:2px 8px;text-align:right;vertical-align:top}
-th{background:#eee}td.l,th.l{text-align:left}td.text{min-width:14em;overflow-wrap:anywhere}
-.bad{color:#c00}p.bad,tr.bad td.status{font-weight:bold}.ok{color:#070}
-figure{margin:1em 0}figcaption{font-size:0.95em;color:#444}
-img{max-width:100%;height:auto;border:1px solid #ddd;margin:0.5em 0}
-@media (max-width:640px){body{padding:0 0.5em;margin-top:0.8em}h1{font-size:1.3em}h2{font-size:1.15em}
-td,th{padding:2px 3px;font-size:0.85em}td.text{min-width:8em}}"""
-
 
 @dataclass(frozen=True)
 class ReportFiles:
@@ -65,76 +52,6 @@ class ReportFiles:
     markdown: Path
     validation: Path
     figures: tuple
-
-
-def _missing(v) -> bool:
-    """``None`` or NaN: a figure that was not computed (or does not apply)."""
-    return v is None or (isinstance(v, (float, np.floating)) and math.isnan(float(v)))
-
-
-def _fmt(v, missing: str = "not computed") -> str:
-    if _missing(v):
-        return missing
-    if isinstance(v, (bool, np.bool_)):
-        return "yes" if v else "no"
-    if isinstance(v, (float, np.floating)):
-        v = float(v) + 0.0  # -0.0 prints as 0
-        # a spectral radius 0.99999997 must not print as 1
-        return f"{v:.12g}" if 0 < abs(abs(v) - 1.0) < 1e-4 else f"{v:.5g}"
-    if isinstance(v, (list, tuple)) and len(v) > 6:
-        return f"[{len(v)} values]"
-    return str(v)
-
-
-class _Doc:
-    """HTML and Markdown built side by side."""
-
-    def __init__(self, title):
-        self.h = [
-            "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
-            "<meta name='viewport' content='width=device-width, initial-scale=1'>"
-            f"<title>{html.escape(title)}</title>"
-            f"<style>{CSS}</style></head><body><h1>{html.escape(title)}</h1>"
-        ]
-        self.md = [f"# {title}", ""]
-
-    def heading(self, text):
-        self.h.append(f"<h2>{html.escape(text)}</h2>")
-        self.md += [f"## {text}", ""]
-
-    def para(self, text, bad=False, ident=None):
-        attrs = (f" id='{ident}'" if ident else "") + (" class='bad'" if bad else "")
-        self.h.append(f"<p{attrs}>{html.escape(text)}</p>")
-        self.md += [f"**{text}**" if bad or ident else text, ""]
-
-    def table(self, header, rows, bad_rows=(), ident=None, left=(0,), classes=None):
-        """A table in a horizontally scrolling box (a phone's screen); ``classes[i]``: the class of column ``i``."""
-        attrs = f" id='{ident}'" if ident else ""
-        classes = dict(classes or {})
-        cells = "".join(f"<th class='l'>{html.escape(str(c))}</th>" for c in header)
-        self.h.append(f"<div class='scroll'><table{attrs}><tr>{cells}</tr>")
-        for k, row in enumerate(rows):
-            tr = " class='bad'" if k in bad_rows else ""
-            tds = []
-            for i, c in enumerate(row):
-                cls = " ".join(x for x in ("l" if i in left else "", classes.get(i, "")) if x)
-                attr = f" class='{cls}'" if cls else ""
-                tds.append(f"<td{attr}>{html.escape(_fmt(c))}</td>")
-            self.h.append(f"<tr{tr}>" + "".join(tds) + "</tr>")
-        self.h.append("</table></div>")
-        self.md += ["| " + " | ".join(map(str, header)) + " |", "|" + "---|" * len(header)]
-        self.md += ["| " + " | ".join(_fmt(c) for c in row) + " |" for row in rows]
-        self.md.append("")
-
-    def figure(self, rel, caption):
-        self.h.append(
-            f"<figure><img src='{html.escape(rel)}' alt='{html.escape(caption)}'>"
-            f"<figcaption>{html.escape(caption)}</figcaption></figure>"
-        )
-        self.md += [f"![{caption}]({rel})", ""]
-
-    def text(self):
-        return "\n".join(self.h + ["</body></html>"]), "\n".join(self.md)
 
 
 def _certificates(doc, certificates, problem_summary=None) -> dict:
@@ -154,7 +71,7 @@ def _certificates(doc, certificates, problem_summary=None) -> dict:
     if not records:
         doc.para("No certificate was given.")
         return records
-    rows = [(name, st, _fmt(bound, "no finite bound"), covers) for name, st, bound, covers in certificate_rows(records)]
+    rows = [(name, st, cell(bound, "no finite bound"), covers) for name, st, bound, covers in certificate_rows(records)]
     bad = [k for k, row in enumerate(rows) if row[1] != Status.CERTIFIED.value]
     header = ["certificate", "status", "bound", "what it covers"]
     doc.table(header, rows, bad_rows=bad, ident="certificates", left=(0, 1, 3), classes={1: "status", 3: "text"})
@@ -235,7 +152,7 @@ def write_report(
     figdir = run / "figures"
     figdir.mkdir(parents=True, exist_ok=True)
     title = title or f"polyrob report: {robot_name}"
-    doc = _Doc(title)
+    doc = Page(title)
     figures = []
     validation = {"robot": robot_name}
 
@@ -274,12 +191,12 @@ def write_report(
                     (
                         f"#{k + 1} {s.reference.kind} {target} ({label})",
                         mt.joint,
-                        _fmt(mt.rise_time, "not reached"),
-                        _fmt(mt.overshoot, "no step"),
-                        _fmt(mt.settling_time, "not settled"),
+                        cell(mt.rise_time, "not reached"),
+                        cell(mt.overshoot, "no step"),
+                        cell(mt.settling_time, "not settled"),
                         mt.steady_state_error,
                         mt.peak_torque,
-                        _fmt(mt.effort_limit, "no limit"),
+                        cell(mt.effort_limit, "no limit"),
                         "no" if s.left_domain else "yes",
                     )
                 )
@@ -315,7 +232,7 @@ def write_report(
     # ------------------------------------------------------------------ the problem
     if pldi is not None:
         doc.heading("PLDI: bounds of the Jacobians over the domain")
-        checked = pldi.coverage_points and not _missing(pldi.coverage)
+        checked = pldi.coverage_points and not is_missing(pldi.coverage)
         coverage = f"coverage {pldi.coverage:.4g} of {pldi.coverage_points} fresh points; " if checked else ""
         doc.para(f"Enclosure: {pldi.enclosure}; {coverage}domain '{pldi.domain.name}'.")
         doc.table(
@@ -389,7 +306,7 @@ def write_report(
         doc.table(
             ["figure", "value"],
             [
-                (k, _fmt(v, _NOT_FOUND.get(k, "not computed")))
+                (k, cell(v, _NOT_FOUND.get(k, "not computed")))
                 for k, v in discretization.items()
                 if not isinstance(v, (dict, list)) or len(v) <= 6
             ],
