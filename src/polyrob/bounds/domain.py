@@ -25,7 +25,6 @@ Examples
 
 from __future__ import annotations
 
-import json
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -34,13 +33,12 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import qmc
 
+from polyrob.bounds.domain_spec import GROUP_TEXT, GROUPS, apply_spec, joint_range, read_spec
 from polyrob.bounds.joint_box import JointBox
 from polyrob.errors import DomainError
 
-__all__ = ["Domain", "JointBox", "unit_design", "joint_range"]
+__all__ = ["Domain", "JointBox", "unit_design"]
 
-_GROUPS = ("q", "qdot", "u")
-_GROUP_TEXT = {"q": "position", "qdot": "velocity", "u": "torque", "qddot": "acceleration"}
 _GROUP_OPTION = {"q": "--q-range JOINT=LO:HI", "qdot": "--qdot-max JOINT=VALUE", "u": "--u-max JOINT=VALUE"}
 #: Largest URDF velocity limit (rad/s or m/s) taken as a default: some URDFs
 #: state 1,000-10,000 rad/s (finger_edu, borinot_flying_arm_2), placeholders
@@ -68,7 +66,7 @@ class Domain(JointBox):
     def __post_init__(self):
         m = len(self.joint_names)
         object.__setattr__(self, "joint_names", tuple(self.joint_names))
-        for group in _GROUPS:
+        for group in GROUPS:
             for side in ("lower", "upper"):
                 attr = f"{group}_{side}"
                 arr = np.array(getattr(self, attr), dtype=float).reshape(-1)
@@ -78,17 +76,17 @@ class Domain(JointBox):
                     raise DomainError(f"domain: {attr} has {arr.size} values for {m} joints")
                 arr.setflags(write=False)
                 object.__setattr__(self, attr, arr)
-        for group in _GROUPS:
+        for group in GROUPS:
             lo, hi = getattr(self, f"{group}_lower"), getattr(self, f"{group}_upper")
             for j, name in enumerate(self.joint_names):
                 if not (np.isfinite(lo[j]) and np.isfinite(hi[j])):
                     raise DomainError(
-                        f"domain: joint '{name}' has no finite {_GROUP_TEXT[group]} limit "
+                        f"domain: joint '{name}' has no finite {GROUP_TEXT[group]} limit "
                         f"({lo[j]}, {hi[j]}): give it with {_GROUP_OPTION[group]} or a domain file"
                     )
                 if lo[j] > hi[j]:
                     raise DomainError(
-                        f"domain: joint '{name}' has an inverted {_GROUP_TEXT[group]} range "
+                        f"domain: joint '{name}' has an inverted {GROUP_TEXT[group]} range "
                         f"[{lo[j]}, {hi[j]}]: give lower <= upper"
                     )
 
@@ -129,11 +127,11 @@ class Domain(JointBox):
         return np.hstack([q, qdot, self.inputs(q, qdot, w)])
 
     # ------------------------------------------------------------------ sampling
-    def sample_box(self, n: int, *, method: str = "sobol", seed=None, groups=_GROUPS) -> np.ndarray:
+    def sample_box(self, n: int, *, method: str = "sobol", seed=None, groups=GROUPS) -> np.ndarray:
         """``n`` points of the box, stacked (n, 3m); see :meth:`sample`."""
         lo, hi = self.lower, self.upper
         m = self.m
-        vary = np.concatenate([np.full(m, g in groups) for g in _GROUPS]) & (hi > lo)
+        vary = np.concatenate([np.full(m, g in groups) for g in GROUPS]) & (hi > lo)
         k = int(vary.sum())
         z = np.tile(0.5 * (lo + hi), (n, 1))
         if k:
@@ -141,7 +139,7 @@ class Domain(JointBox):
             z[:, vary] = lo[vary] + unit * (hi[vary] - lo[vary])
         return z
 
-    def sample(self, n: int, *, method: str = "sobol", seed=None, groups=_GROUPS):
+    def sample(self, n: int, *, method: str = "sobol", seed=None, groups=GROUPS):
         """``n`` points of the box as ``(q, qdot, u)``, each of shape (n, m).
 
         Parameters
@@ -193,7 +191,7 @@ class Domain(JointBox):
         source = f"{robot.name} limits"
         # Zero limits in a URDF mean "not given" (e.g. double_pendulum): refuse
         # them as defaults, but a user may set a zero-width range on purpose.
-        given = {g: np.zeros(len(names), bool) for g in _GROUPS}
+        given = {g: np.zeros(len(names), bool) for g in GROUPS}
         named = getattr(robot, "named_domains", {}) or {}
         if domain is None and getattr(robot, "default_domain", None):
             domain = robot.default_domain
@@ -203,12 +201,12 @@ class Domain(JointBox):
             elif isinstance(domain, Mapping):
                 spec, source = domain, "custom"
             else:
-                spec, source = _read_spec(domain, named), str(domain)
-            _apply(bounds, given, names, spec, source)
+                spec, source = read_spec(domain, named), str(domain)
+            apply_spec(bounds, given, names, spec, source)
         overrides = {"q": q_range, "qdot": qdot_max, "u": u_max}
         for group, value in overrides.items():
             if value is not None:
-                _apply(bounds, given, names, {group: value}, f"--{group}")
+                apply_spec(bounds, given, names, {group: value}, f"--{group}")
                 source = source if source != f"{robot.name} limits" else "custom"
         scales = {"q": 1.0, "qdot": qdot_scale, "u": u_scale}
         for group in ("qdot", "u"):
@@ -226,23 +224,23 @@ class Domain(JointBox):
                     f"velocity range with {_GROUP_OPTION['qdot']} (or --qdot-max VALUE for every joint) "
                     "or a domain file (--domain FILE)"
                 )
-        for group in _GROUPS:
+        for group in GROUPS:
             lo, hi = bounds[group]
             for j, name in enumerate(names):
                 zero = not given[group][j] and lo[j] == hi[j] and np.isfinite(lo[j])
                 if zero and scales[group] == 0:
                     raise DomainError(
-                        f"--{group}-scale 0 ({group}_scale=0) makes the {_GROUP_TEXT[group]} range of joint "
+                        f"--{group}-scale 0 ({group}_scale=0) makes the {GROUP_TEXT[group]} range of joint "
                         f"'{name}' zero: give a scale > 0 (for a zero range on purpose, --{group}-max 0 instead)"
                     )
                 if zero:
                     raise DomainError(
-                        f"{robot.source}: joint '{name}' has a zero {_GROUP_TEXT[group]} limit: "
+                        f"{robot.source}: joint '{name}' has a zero {GROUP_TEXT[group]} limit: "
                         f"give the domain with {_GROUP_OPTION[group]} or a domain file (--domain FILE)"
                     )
                 if not (np.isfinite(lo[j]) and np.isfinite(hi[j])):
                     raise DomainError(
-                        f"{robot.source}: joint '{name}' has no {_GROUP_TEXT[group]} limit: "
+                        f"{robot.source}: joint '{name}' has no {GROUP_TEXT[group]} limit: "
                         f"give it with {_GROUP_OPTION[group]} or a domain file (--domain FILE)"
                     )
         return cls(names, *bounds["q"], *bounds["qdot"], *bounds["u"], name=source)
@@ -266,7 +264,7 @@ class Domain(JointBox):
                     n: [float(lo), float(hi)]
                     for n, lo, hi in zip(self.joint_names, getattr(self, f"{g}_lower"), getattr(self, f"{g}_upper"))
                 }
-                for g in _GROUPS
+                for g in GROUPS
             },
         }
 
@@ -276,8 +274,8 @@ class Domain(JointBox):
         try:
             names = tuple(data["joints"])
             arrays = []
-            for g in _GROUPS:
-                pairs = [_range(data[g][n], g, f"{source}: '{g}' entry of joint '{n}'") for n in names]
+            for g in GROUPS:
+                pairs = [joint_range(data[g][n], g, f"{source}: '{g}' entry of joint '{n}'") for n in names]
                 arrays += [np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])]
         except (KeyError, TypeError) as exc:
             raise DomainError(f"{source}: not a domain as to_dict writes it (missing {exc})") from None
@@ -287,7 +285,7 @@ class Domain(JointBox):
         """A plain-text table of the box, one row per joint."""
         rows = [f"{'joint':<24}{'q':>26}{'qdot':>24}{'u':>24}"]
         for j, n in enumerate(self.joint_names):
-            cells = [f"[{getattr(self, g + '_lower')[j]:.4g}, {getattr(self, g + '_upper')[j]:.4g}]" for g in _GROUPS]
+            cells = [f"[{getattr(self, g + '_lower')[j]:.4g}, {getattr(self, g + '_upper')[j]:.4g}]" for g in GROUPS]
             rows.append(f"{n:<24}{cells[0]:>26}{cells[1]:>24}{cells[2]:>24}")
         return "\n".join(rows)
 
@@ -307,98 +305,3 @@ def unit_design(n, k, method, seed):
     if method == "lhs":
         return qmc.LatinHypercube(k, seed=seed).random(n)
     raise DomainError(f"unknown sampling method '{method}': use sobol, halton, lhs or uniform")
-
-
-def _read_spec(path, named) -> Mapping:
-    path = Path(path)
-    if not path.is_file():
-        known = ", ".join(named) if named else "none for this robot"
-        raise DomainError(f"{path}: no such domain file (named domains: {known})")
-    text = path.read_text()
-    try:
-        if path.suffix.lower() in (".yaml", ".yml"):
-            import yaml
-
-            try:
-                spec = yaml.safe_load(text)
-            except yaml.YAMLError as exc:
-                raise ValueError(exc) from None
-        else:
-            spec = json.loads(text)
-    except ValueError as exc:  # json/yaml syntax errors: a domain error
-        raise DomainError(f"{path}: cannot read the domain file ({exc})") from None
-    if not isinstance(spec, Mapping):
-        raise DomainError(f"{path}: a domain file holds a mapping with keys q, qdot, u")
-    return spec
-
-
-def _apply(bounds, given, names, spec: Mapping, source: str):
-    """Write the ranges of a domain spec into ``bounds`` (in place)."""
-    unknown_groups = set(spec) - set(_GROUPS) - {"name", "joints"}
-    if unknown_groups:
-        raise DomainError(f"{source}: unknown domain keys {sorted(unknown_groups)}: use q, qdot, u")
-    for group in _GROUPS:
-        if group not in spec or spec[group] is None:
-            continue
-        value = spec[group]
-        # an option (--qdot) names one group already; a file or mapping names the entry
-        entry = "" if source.startswith("--") else f"'{group}' entry of "
-        every = f"{source}: '{group}' entry (every joint)" if entry else f"{source}: every joint"
-        if isinstance(value, Mapping) or _is_per_joint_list(value, len(names)):
-            pairs = value.items() if isinstance(value, Mapping) else zip(names, value)
-            items = ((joint, rng, f"{source}: {entry}joint '{joint}'") for joint, rng in pairs)
-        else:
-            items = ((joint, value, every) for joint in names)
-        for joint, rng, where in items:
-            if joint not in names:
-                raise DomainError(f"{source}: unknown joint '{joint}' (joints: {', '.join(names)})")
-            lo, hi = _range(rng, group, where)
-            j = names.index(joint)
-            bounds[group][0][j], bounds[group][1][j] = lo, hi
-            given[group][j] = True
-
-
-def _is_per_joint_list(value, m) -> bool:
-    """A nested list holds one entry per joint; a flat list of two numbers is
-    one ``[lo, hi]`` range for every joint; a flat list of ``m != 2`` numbers
-    holds one symmetric bound per joint (use a mapping to be explicit)."""
-    if isinstance(value, (str, bytes)) or np.ndim(value) == 0:
-        return False
-    if any(np.ndim(v) > 0 for v in value):
-        return True
-    return len(value) != 2 and len(value) == m
-
-
-def joint_range(value, group, where):
-    """``(lo, hi)`` of a bound ``V >= 0`` (``[-V, V]``) or a range ``[lo, hi]``; errors name ``where``."""
-    return _range(value, group, where)
-
-
-def _range(value, group, where):
-    """``(lo, hi)`` of a bound ``V >= 0`` (``[-V, V]``) or a range; errors name ``where`` (file, group, joint)."""
-    text = _GROUP_TEXT[group]
-    try:
-        arr = np.asarray(value, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise DomainError(f"{where}: {text} range {value!r} is not numeric") from None
-    if arr.size not in (1, 2):
-        raise DomainError(f"{where}: give a {text} range as a number or [lo, hi]")
-    if np.isnan(arr).any():
-        raise DomainError(f"{where}: {text} range contains NaN: give finite numbers")
-    if not np.isfinite(arr).all():
-        shown = f"{arr[0]:g}" if arr.size == 1 else f"[{arr[0]:g}, {arr[1]:g}]"
-        raise DomainError(
-            f"{where}: {text} range {shown} is not finite: give a finite bound V (it means [-V, V]) "
-            "or a range [lo, hi] of finite numbers"
-        )
-    if arr.size == 1:
-        if arr[0] < 0:
-            raise DomainError(
-                f"{where}: a bound must be >= 0 (it means [-V, V]; give a range [lo, hi] otherwise), got {arr[0]:g}"
-            )
-        lo, hi = -arr[0], arr[0]
-    else:
-        lo, hi = arr
-    if lo > hi:
-        raise DomainError(f"{where}: {text} range [{lo:g}, {hi:g}] is inverted: give lower <= upper")
-    return float(lo), float(hi)

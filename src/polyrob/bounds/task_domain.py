@@ -45,7 +45,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from polyrob.bounds.domain import Domain, joint_range, unit_design
+from polyrob.bounds.domain import Domain, unit_design
+from polyrob.bounds.domain_spec import joint_range
 from polyrob.bounds.joint_box import JointBox
 from polyrob.errors import DomainError
 
