@@ -114,6 +114,7 @@ def test_robots_json_is_one_document(capsys):
         (["analyze", "--controller", "paper", "--omega", "0.1:inf:5"], "--omega"),
         (["synth", "--max-bandwidth", "--alphas", "0.5,-1"], "--alphas"),
         (["synth", "--max-bandwidth", "--scale-only", "bandwidth"], "--scale-only"),
+        (["run", "--max-bandwidth", "--alphas", "0.5,-1"], "--alphas"),  # was: --max-bandwidth not an option of run
         (["synth", "--wb", "-1"], "--wb"),
         (["synth", "--ms", "nan"], "--ms"),
         (["synth", "--wb", "1,2,3"], "--wb"),

@@ -231,6 +231,13 @@ def test_run_json_announces_stages_when_they_start_and_matches_synth(files, tmp_
     assert seen["design"].startswith("[1/3] ") and "[2/3] synthesis" in seen["design"]
     assert "[3/3] analysis" in seen["analyze"]
     assert doc["verdict"] == doc["analysis"]["verdict"] and "CERTIFIED" not in doc["verdict"]
+    # not certified: one line of what it certifies instead (the mu level proved at every frequency,
+    # read as a share of the parameter ranges) and what stands in the way
+    margin, instead = doc["analysis"]["margin"], doc["analysis"]["instead"]
+    assert margin["proved"] and margin["level"] >= doc["analysis"]["robust_performance"]["mu_upper"]
+    assert margin["fraction_of_ranges"] == pytest.approx(1 / margin["level"])
+    assert instead.startswith("instead: robust performance at level ") and "in the way: mu peaks at " in instead
+    assert "\n" not in instead and len(instead) < 300
     assert doc["output"] == str(out_file) and len(doc["bounds"]["entries"]) == 10
     assert doc["performance_limit"]["bound"] == pytest.approx(0.65, abs=0.01)
     saved = json.loads(out_file.read_text())

@@ -72,10 +72,8 @@ def print_analysis(a, out) -> None:
         out.line(f"which covers the robot: {covers_nonlinear(tv.method)}")
     out.line(a.verdict)
     out.line(a.certificate.details())
-    if not a.certificate.certified:
-        from polyrob.pipeline.analysis import NEXT_STEPS
-
-        out.line(NEXT_STEPS)
+    if a.instead:  # not certified: what it certifies instead, and what stands in the way
+        out.line(a.instead)
 
 
 def cmd_analyze(args) -> int:

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 from polyrob.cli.analyze import add_moving_argument, print_analysis
-from polyrob.cli.common import Output, exit_status, robot_from_args
+from polyrob.cli.common import Output, alphas_from_args, exit_status, robot_from_args, scale_names
 from polyrob.cli.options import int_at_least, parse_frequencies
 from polyrob.cli.plant import problem_from_args
 from polyrob.cli.synth import (
+    add_bandwidth_arguments,
     add_synthesis_arguments,
     check_output,
+    max_bandwidth_design,
     options_from_args,
     print_design,
     print_input_check,
@@ -44,15 +46,21 @@ def main_job_defaults(args, out) -> None:
     """``run`` without a robot: the main job (:data:`MAIN_JOB`), unless its options were given."""
     if args.robot is not None:
         return
-    given = [k for k in ("pose", "q_radius", "qdot_max", "qddot_max", "q_range", "u_max", "domain") if getattr(args, k, None)]
+    given = [
+        k for k in ("pose", "q_radius", "qdot_max", "qddot_max", "q_range", "u_max", "domain") if getattr(args, k, None)
+    ]
     for key, value in MAIN_JOB.items():
         if key in ("pose", "q_radius", "qdot_max", "qddot_max") and given:
             continue  # a domain was given: it replaces the main job's task
         if getattr(args, key, None) is None:
             setattr(args, key, value)
-    task = "" if given else (
-        f" on the task around q = ({args.pose}) rad, +-{args.q_radius} rad, |qdot| <= {args.qdot_max} rad/s, "
-        f"|qddot| <= {args.qddot_max} rad/s^2"
+    task = (
+        ""
+        if given
+        else (
+            f" on the task around q = ({args.pose}) rad, +-{args.q_radius} rad, |qdot| <= {args.qdot_max} rad/s, "
+            f"|qddot| <= {args.qddot_max} rad/s^2"
+        )
     )
     out.line(
         f"main job (no robot given): {args.robot}, the paper's arm{task}, the paper's weights, full-order D-G-K "
@@ -77,6 +85,8 @@ def cmd_run(args) -> int:
     from polyrob.pipeline import analyze_controller, design_controller, frequency_grid, pldi_report
 
     omega_spec = parse_frequencies(args.omega)
+    if args.max_bandwidth:  # option errors before any work
+        scale_names(args.scale_only), alphas_from_args(args.alphas)
     run_dir = _run_dir(args)
     out = Output(args, stages=3 if run_dir is None else 4)
     main_job_defaults(args, out)
@@ -92,12 +102,20 @@ def cmd_run(args) -> int:
     limit = print_limit(problem, out)
     input_check = print_input_check(problem, out)
     early = {"robot": robot.name, "problem": problem.description(), "performance_limit": limit}
-    if ruled_out(early, args, out):
+    if not args.max_bandwidth and ruled_out(early, args, out):
         return 1
-    out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
-    design = design_controller(
-        problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, certify=False, **options
-    )
+    if args.max_bandwidth:  # a synthesis per factor; the analysis below is on the certified factor's weights
+        design, problem, extra = max_bandwidth_design(problem, args, out, options)
+        early["problem"].update(extra)
+        if args.reduce and args.structure == "full":
+            from polyrob.pipeline.design import reduce_design
+
+            design = reduce_design(problem, design, args.reduce_max_order, certify=False)
+    else:
+        out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
+        design = design_controller(
+            problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, certify=False, **options
+        )
     print_design(design, out)
     out.stage(
         f"analysis: mu sweeps (robust stability, robust performance), {args.mc} Monte Carlo parameter sets"
@@ -114,12 +132,13 @@ def cmd_run(args) -> int:
         time_varying=args.time_varying,
         stability="sweep" if args.stability_sweep else "implied",
         moving=args.moving,
+        limit=None if args.max_bandwidth else limit,  # the limit printed above is factor 1's
     )
     print_analysis(a, out)
     design = design.certified_by(a.certificate)  # the analysis' certificate is the design's: one call, one verdict
     doc = {
         "robot": robot.name,
-        "problem": problem.description(),
+        "problem": early["problem"],
         "bounds": pldi_report(pldi, robot.joint_names),
         "performance_limit": limit,
         "input_definiteness": input_check,
@@ -181,6 +200,7 @@ def register(sub) -> None:
         help="bounds -> synthesis -> analysis in one go (no robot: the main job, the paper's arm certified)",
     )
     add_synthesis_arguments(p)
+    add_bandwidth_arguments(p)
     p.add_argument(
         "--full-order", dest="reduce", action="store_false", help="keep the full-order controller (no reduction)"
     )

@@ -128,12 +128,40 @@ def save_design(design, problem, args, out, info_extra=None, certificate_extra=N
     return str(path)
 
 
+def max_bandwidth_design(problem, args, out, options: dict):
+    """``--max-bandwidth``: the largest certified bandwidth factor, printed; returns ``(design, scaled problem, weights)``."""
+    from polyrob.pipeline import design_max_bandwidth
+    from polyrob.pipeline.design import scaled_problem
+
+    scale = scale_names(args.scale_only)
+    alphas = alphas_from_args(args.alphas)
+    out.stage(f"largest bandwidth factor with mu < 1 (scaling {', '.join(scale)}; a synthesis per factor)")
+    design, res = design_max_bandwidth(problem, scale=scale, alphas=alphas, **options)
+    out.line(f"{'alpha':>10}  {'mu at every frequency (inf: not certified)':>18}")
+    for alpha, mu in res.history:
+        out.line(f"{alpha:>10.4g}  {mu:>18.5g}")
+    for alpha, bound in res.excluded:
+        out.line(f"{alpha:>10.4g}  {'>= ' + format(bound, '.5g'):>18}  (performance limit: not synthesised)")
+    beyond = (
+        f"alpha {res.bracket[1]:.4g} does not reach it"
+        if res.bracket[1] < float("inf")
+        else "the largest factor scanned: larger ones were not tried, see --alphas"
+    )
+    out.line(
+        f"largest certified alpha: {res.alpha:.4g} (mu <= {res.peak_mu:.4g} at every frequency; {beyond}), "
+        f"controller order {res.result.order}"
+    )
+    out.line("weights: " + ", ".join(f"{k} = {list(v)}" for k, v in res.hyperparameters.items()))
+    extra = {"weights": {k: list(v) for k, v in res.hyperparameters.items()}}
+    return design, scaled_problem(problem, res.hyperparameters), extra
+
+
 def cmd_synth(args) -> int:
-    from polyrob.pipeline import design_controller, design_max_bandwidth
+    from polyrob.pipeline import design_controller
 
     check_output(args)
-    scale = scale_names(args.scale_only) if args.max_bandwidth else None
-    alphas = alphas_from_args(args.alphas) if args.max_bandwidth else None
+    if args.max_bandwidth:  # option errors before any work
+        scale_names(args.scale_only), alphas_from_args(args.alphas)
     out = Output(args, stages=2)
     options = options_from_args(args, out)
     robot = robot_from_args(args)
@@ -144,26 +172,9 @@ def cmd_synth(args) -> int:
     )
     doc = {"robot": robot.name, "problem": problem.description()}
     if args.max_bandwidth:
-        out.stage(f"largest bandwidth factor with mu < 1 (scaling {', '.join(scale)}; a synthesis per factor)")
-        design, res = design_max_bandwidth(problem, scale=scale, alphas=alphas, **options)
-        out.line(f"{'alpha':>10}  {'mu at every frequency (inf: not certified)':>18}")
-        for alpha, mu in res.history:
-            out.line(f"{alpha:>10.4g}  {mu:>18.5g}")
-        for alpha, bound in res.excluded:
-            out.line(f"{alpha:>10.4g}  {'>= ' + format(bound, '.5g'):>18}  (performance limit: not synthesised)")
-        beyond = (
-            f"alpha {res.bracket[1]:.4g} does not reach it"
-            if res.bracket[1] < float("inf")
-            else "the largest factor scanned: larger ones were not tried, see --alphas"
-        )
-        out.line(
-            f"largest certified alpha: {res.alpha:.4g} (mu <= {res.peak_mu:.4g} at every frequency; {beyond}), "
-            f"controller order {res.result.order}"
-        )
-        out.line("weights: " + ", ".join(f"{k} = {list(v)}" for k, v in res.hyperparameters.items()))
-        extra = {"weights": {k: list(v) for k, v in res.hyperparameters.items()}}
+        design, problem, extra = max_bandwidth_design(problem, args, out, options)
         doc["problem"].update(extra)
-        doc["bandwidth_scaling"] = res.summary()
+        doc["bandwidth_scaling"] = design.record["bandwidth_scaling"]
     else:
         doc["performance_limit"] = print_limit(problem, out)
         doc["input_definiteness"] = print_input_check(problem, out)
@@ -239,9 +250,8 @@ def add_synthesis_arguments(p) -> None:
     p.add_argument("-o", "--output", default=None, help="write the controller, its certificate and its problem (JSON)")
 
 
-def register(sub) -> None:
-    p = sub.add_parser("synth", help="mu-synthesis: full order (D-K, D-G-K) or fixed structure")
-    add_synthesis_arguments(p)
+def add_bandwidth_arguments(p) -> None:
+    """``--max-bandwidth`` and its options (``synth`` and ``run``)."""
     g = p.add_argument_group("bandwidth scan")
     g.add_argument(
         "--max-bandwidth",
@@ -256,4 +266,10 @@ def register(sub) -> None:
     g.add_argument(
         "--alphas", default=None, help="--max-bandwidth: comma-separated scan of the factor (default 0.125,0.25,...,32)"
     )
+
+
+def register(sub) -> None:
+    p = sub.add_parser("synth", help="mu-synthesis: full order (D-K, D-G-K) or fixed structure")
+    add_synthesis_arguments(p)
+    add_bandwidth_arguments(p)
     p.set_defaults(func=cmd_synth)

@@ -7,24 +7,58 @@ verdict is the robust-performance :class:`~polyrob.analysis.certificate.Certific
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+
+import numpy as np
 
 from polyrob.errors import ArgumentError
 
-__all__ = ["ControllerAnalysis", "analyze_controller", "frequency_grid", "controller_order", "NEXT_STEPS"]
+__all__ = [
+    "ControllerAnalysis",
+    "analyze_controller",
+    "frequency_grid",
+    "controller_order",
+    "instead_line",
+]
 
-#: What to try when robust performance is not certified.
-NEXT_STEPS = (
-    "try: other performance targets (--bandwidth-scale; `polyrob synth --max-bandwidth` finds the largest "
-    "bandwidth factor with a certificate), a smaller domain (--qdot-max, --u-max, --q-range), or a tighter "
-    "uncertainty model (--uncertainty)"
-)
+
+def instead_line(problem, K, analysis, limit: dict | None = None) -> str:
+    """One line, when robust performance is not certified: what the controller certifies instead, and what stands in the way.
+
+    Instead: robust stability when its own certificate holds, and the
+    robust-performance margin (``analysis.margin``: the μ level proved at every
+    frequency, i.e. the performance level kept on a share of the modelled
+    parameter ranges).  In the way: the frequency of the μ peak and the
+    weighted signal that dominates there, and the performance limit of the
+    robot's unstable poles when it excludes μ < 1.  Empty when certified.
+    """
+    from polyrob.analysis.margins import dominant_weight
+
+    if analysis.certificate.certified:
+        return ""
+    got = []
+    rs = analysis.robust_stability.certificate
+    if rs.certified:
+        got.append(f"robust stability CERTIFIED (mu <= {rs.bound:.3g} at every frequency)")
+    m = analysis.margin
+    if m is not None and m.proved:
+        got.append(f"robust performance at level {m.level:.3g} for {100 * m.fraction:.0f} % of the parameter ranges")
+    instead = "; ".join(got) or "nothing (no margin proved" + (f": {m.reason})" if m is not None else ")")
+    w = float(analysis.certificate.mu.peak_upper_frequency) if analysis.certificate.mu is not None else np.nan
+    label = dominant_weight(problem.P, K, w) if np.isfinite(w) else None
+    way = (
+        "mu peaks " + ("as omega -> 0" if w == 0 else f"at {w:.3g} rad/s") + (f" ({label} dominates)" if label else "")
+    )
+    if limit and limit.get("excludes_mu_below_one"):
+        way += f"; the unstable poles keep mu >= {limit['bound']:.3g} at these weights"
+    return (
+        f"instead: {instead}; in the way: {way}; try --max-bandwidth (the largest bandwidth factor that "
+        "certifies) or a smaller domain"
+    )
 
 
 def frequency_grid(lo: float, hi: float, n: int):
     """``n`` log-spaced frequencies from ``lo`` to ``hi`` (rad/s)."""
-    import numpy as np
-
     if not (0 < lo < hi and n >= 2):
         raise ArgumentError(f"frequency grid: need 0 < LO < HI and N >= 2, got {lo}:{hi}:{n}")
     return np.logspace(np.log10(lo), np.log10(hi), int(n))
@@ -70,6 +104,12 @@ class ControllerAnalysis:
         Robust performance of the linearised robot moving within the domain's
         rates (:func:`polyrob.analysis.lpv.moving.moving_robot_certificate`);
         ``None`` when not asked for.
+    margin : RobustMargin or None
+        When robust performance is not certified: the μ level proved at every
+        frequency, read as a margin (:func:`polyrob.analysis.margins.robust_margin`).
+    instead : str
+        The one line of what the controller certifies instead and what stands
+        in the way (:func:`instead_line`); empty when certified.
     """
 
     robust_stability: object
@@ -80,6 +120,8 @@ class ControllerAnalysis:
     covers: str
     time_varying: object = None
     moving: object = None
+    margin: object = None
+    instead: str = ""
 
     @property
     def certificate(self):
@@ -112,6 +154,8 @@ class ControllerAnalysis:
             "verdict": self.verdict,
             "time_varying": None if self.time_varying is None else self.time_varying.summary(),
             "moving": None if self.moving is None else self.moving.summary(),
+            "margin": None if self.margin is None else self.margin.summary(),
+            "instead": self.instead or None,
         }
 
 
@@ -126,6 +170,7 @@ def analyze_controller(
     time_varying: bool = True,
     stability: str = "sweep",
     moving: bool | None = None,
+    limit: dict | None = None,
 ) -> ControllerAnalysis:
     """Nominal/robust stability and performance of ``K`` on ``problem``, and sampled stability.
 
@@ -154,6 +199,9 @@ def analyze_controller(
         the robot's state, :mod:`polyrob.analysis.lpv.moving`): ``None``
         computes it for small closed loops only (its ``AUTO_STATES``),
         ``False`` records that it was not asked for.
+    limit : dict, optional
+        The robot's performance limit (``PerformanceLimit.to_dict()``), quoted
+        by :attr:`ControllerAnalysis.instead` when it excludes μ < 1.
     """
     from polyrob.analysis.robust import nominal_performance, robperf, robstab, robstab_implied, sample_stability
 
@@ -181,7 +229,10 @@ def analyze_controller(
         mv = MovingRobotCertificate.not_computed("not asked for (--no-moving)")
     else:
         mv = moving_robot_certificate(problem, K, auto=moving is None)
-    return ControllerAnalysis(
+    from polyrob.analysis.margins import robust_margin
+
+    margin = None if rp.certificate.certified else robust_margin(rp.certificate)
+    analysis = ControllerAnalysis(
         robust_stability=rs,
         robust_performance=rp,
         nominal_performance=float(npf),
@@ -190,4 +241,8 @@ def analyze_controller(
         covers=str(covers),
         time_varying=tv,
         moving=mv,
+        margin=margin,
     )
+    if margin is None:
+        return analysis
+    return replace(analysis, instead=instead_line(problem, K, analysis, limit))

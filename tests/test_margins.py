@@ -1,0 +1,40 @@
+"""What a controller certifies when robust performance is not: the margin read from a proved mu level."""
+
+from __future__ import annotations
+
+import control
+import numpy as np
+import pytest
+
+from polyrob.analysis.certificate import certify_loop
+from polyrob.analysis.margins import robust_margin
+from polyrob.analysis.mu.between import LEVEL_MARGIN
+
+
+def _loop(gain: float, pole: float = -1.0):
+    """``P`` whose loop with ``K = -1`` is ``N = gain / (s - pole + 1)``."""
+    return control.ss([[pole]], [[gain, 1.0]], [[1.0], [1.0]], [[0.0, 0.0], [0.0, 0.0]])
+
+
+def test_margin_is_the_level_proved_at_every_frequency():
+    # N = 3/(s + 2): |N| peaks at omega = 0 with 1.5; one complex block, so mu = |N| exactly
+    cert = certify_loop(_loop(3.0), -1.0, [[1, 1]], n_u=1, n_y=1)
+    assert not cert.certified
+    m = robust_margin(cert)
+    assert m.proved and 1.5 <= m.level <= 1.5 * (1 + LEVEL_MARGIN) ** 2
+    assert m.fraction == pytest.approx(1 / m.level) and m.peak_omega == min(cert.mu.omega)  # |N| falls with omega
+    assert m.sentence().startswith("robust performance at level 1.5")
+
+
+def test_a_certified_loop_keeps_its_bound():
+    cert = certify_loop(_loop(1.0), -1.0, [[1, 1]], n_u=1, n_y=1)  # N = 1/(s + 2): mu 0.5
+    m = robust_margin(cert)
+    assert cert.certified and m.proved and m.level == cert.bound < 1
+    assert m.sentence().startswith("robust performance for every member")
+
+
+def test_no_margin_without_a_stable_nominal_loop():
+    # P's pole at +3 with K = -1: N = 1/(s - 2), unstable at Delta = 0: nothing is proved, whatever mu says
+    cert = certify_loop(_loop(1.0, pole=3.0), -1.0, [[1, 1]], n_u=1, n_y=1)
+    m = robust_margin(cert)
+    assert not m.proved and np.isnan(m.fraction) and "not proved stable" in m.reason
