@@ -279,6 +279,17 @@ def test_certificates_of_another_controller_are_not_used(tmp_path):
         write_report(tmp_path, certificates={"mu": {"peak_mu_upper": 2.43}})
 
 
+def test_what_a_run_certifies_instead_survives_a_rebuild(tmp_path):
+    """The run's line of what it certifies instead is saved beside its certificates and read back once."""
+    from polyrob.report.build import read_run_certificates, save_run_certificates
+
+    cert = Certificate(Status.VIOLATED, 2.1, 2.1, 2.0, None, Scope(frequencies="every frequency"))
+    line = "instead: robust performance at level 2.14 for 47 % of the parameter ranges; in the way: ..."
+    save_run_certificates(tmp_path, {FROZEN_ROW: cert}, "K.json", notes=(line, line))
+    certs, notes = read_run_certificates(tmp_path, "K.json")
+    assert certs[FROZEN_ROW]["status"] == "VIOLATED" and notes == [line]
+
+
 def test_cli_report_json_is_one_document(tmp_path, monkeypatch, capsys):
     """`polyrob report RUN_DIR --json` prints one JSON document naming the files it wrote."""
     from types import SimpleNamespace

@@ -160,6 +160,7 @@ def cmd_run(args) -> int:
             certificates=report_certificates(a),
             controller_file="K.json",
             controller_words=controller_words(design),
+            notes=(a.instead,) if a.instead else (),
         )
         doc["report"] = str(files.html)
         out.line(f"wrote {files.html}")

@@ -128,4 +128,4 @@ def load_run(
         else:
             notes.append(f"{controller} holds no decided certificate: no verdict")
     others = {f.stem[2:]: load_controller(f) for f in sorted(run.glob("K_*.json")) if f.name != controller}
-    return RunDirectory(run, problem, K, others, certs, tuple(notes))
+    return RunDirectory(run, problem, K, others, certs, tuple(dict.fromkeys(notes)))  # a rebuilt run keeps its notes once

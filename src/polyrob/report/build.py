@@ -204,17 +204,19 @@ def _paper_reference(robot):
     return {}
 
 
-def save_run_certificates(run_dir, certificates: dict, controller: str = "K.json") -> Path:
+def save_run_certificates(run_dir, certificates: dict, controller: str = "K.json", notes=()) -> Path:
     """Write ``run_dir/certificate.json``: the records of ``certificates`` for the controller file ``controller``.
 
-    ``{"format": RUN_CERTIFICATES_FORMAT, "controller": "K.json", "certificates": {name: record}}``,
-    records as :func:`~polyrob.report.certificates.certificate_record` makes them.
+    ``{"format": RUN_CERTIFICATES_FORMAT, "controller": "K.json", "certificates": {name: record},
+    "notes": [...]}``, records as :func:`~polyrob.report.certificates.certificate_record` makes them;
+    ``notes`` (e.g. what the controller certifies instead) are shown again when the report is rebuilt.
     """
     path = Path(run_dir) / RUN_CERTIFICATES
     doc = {
         "format": RUN_CERTIFICATES_FORMAT,
         "controller": str(controller),
         "certificates": {str(k): _strict(certificate_record(v)) for k, v in certificates.items()},
+        "notes": list(dict.fromkeys(str(n) for n in notes)),
     }
     atomic_write(path, lambda f: f.write(json.dumps(doc, indent=1, default=json_default, allow_nan=False)))
     return path
@@ -250,8 +252,11 @@ def read_run_certificates(run_dir, controller: str = "K.json") -> tuple[dict, li
     if doc.get("format") == RUN_CERTIFICATES_FORMAT:
         if doc.get("controller") != controller:
             return {}, [f"{path.name} holds the certificates of {doc.get('controller')}, not of {controller}: not used"]
+        saved_notes = [str(n) for n in doc.get("notes") or [] if isinstance(n, str)]
         doc = doc.get("certificates") or {}
-    certs, notes = {}, []
+    else:
+        saved_notes = []
+    certs, notes = {}, saved_notes
     for name, record in doc.items():
         if is_decided(record):
             certs[str(name)] = record
@@ -345,5 +350,5 @@ def write_run_report(
         problem_summary=problem_summary(problem, K, controller_words),
     )
     if certificates:
-        save_run_certificates(run, certificates, controller_file)
+        save_run_certificates(run, certificates, controller_file, notes)
     return files
