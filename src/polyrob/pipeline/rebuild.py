@@ -128,4 +128,5 @@ def load_run(
         else:
             notes.append(f"{controller} holds no decided certificate: no verdict")
     others = {f.stem[2:]: load_controller(f) for f in sorted(run.glob("K_*.json")) if f.name != controller}
-    return RunDirectory(run, problem, K, others, certs, tuple(dict.fromkeys(notes)))  # a rebuilt run keeps its notes once
+    # a rebuilt run keeps its notes once (those saved with its certificates are made again too)
+    return RunDirectory(run, problem, K, others, certs, tuple(dict.fromkeys(notes)))
