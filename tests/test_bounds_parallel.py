@@ -47,6 +47,36 @@ def test_workers_compute_what_one_process_computes_and_relay_errors():
         assert pool.fallback is None
 
 
+def test_off_a_terminal_a_long_map_logs_its_progress_with_an_eta(monkeypatch):
+    """tqdm prints nothing off a terminal: a pipe or a log file gets a line per interval instead."""
+    import logging
+
+    import polyrob.bounds.parallel as parallel
+
+    class Lines(logging.Handler):
+        def __init__(self):
+            super().__init__(logging.INFO)
+            self.lines = []
+
+        def emit(self, record):
+            self.lines.append(record.getMessage())
+
+    log, handler = logging.getLogger("polyrob"), Lines()
+    monkeypatch.setattr(parallel, "LOG_EVERY", 0.0)
+    monkeypatch.setattr(log, "level", logging.INFO)  # as the CLI sets it without --quiet
+    log.addHandler(handler)
+    try:
+        with WorkerPool(2, workers=1) as pool:
+            assert pool.map(scaled, range(4), progress=False, label="bounding") == [0, 2, 4, 6]
+        lines, handler.lines = handler.lines, []
+        with WorkerPool(2, workers=1) as pool:
+            pool.map(scaled, range(4), progress=True, label="bounding")  # the bar shows it: no lines
+    finally:
+        log.removeHandler(handler)
+    assert len(lines) == 3 and lines[0].startswith("bounding: 1 of 4 tasks (25 %) in ") and "s left" in lines[0]
+    assert handler.lines == []
+
+
 def test_a_state_that_cannot_be_pickled_runs_here_and_says_so():
     state = lambda: 2  # noqa: E731  (a closure cannot be sent to another process)
     with WorkerPool(state, workers=2) as pool:

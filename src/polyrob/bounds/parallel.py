@@ -31,13 +31,52 @@ Examples
 
 from __future__ import annotations
 
+import logging
 import pickle
+import time
 from collections import deque
 
 from polyrob.errors import ArgumentError, BoundsError
 from polyrob.workers import TERMINATE_GRACE, available_cores, init_worker, spawn_context, stop_processes
 
 __all__ = ["WorkerPool", "available_cores"]
+
+#: Seconds between two progress lines off a terminal (a report interval, not an algorithm switch).
+LOG_EVERY = 15.0
+
+
+class _Progress:
+    """A tqdm bar on a terminal; off one (tqdm prints nothing there), a ``polyrob`` log line every :data:`LOG_EVERY` s.
+
+    A bound of a six-joint arm takes minutes: a pipe or a log file must show that it advances, with an ETA.
+    """
+
+    def __init__(self, total: int, label: str, progress: bool):
+        from tqdm.auto import tqdm
+
+        self.bar = tqdm(total=total, desc=label, disable=not progress, leave=False)
+        self.total, self.label, self.done, self.log = total, label or "tasks", 0, not progress
+        self.t0 = self.last = time.perf_counter()
+
+    def update(self) -> None:
+        self.bar.update()
+        self.done += 1
+        now = time.perf_counter()
+        if self.log and now - self.last >= LOG_EVERY and self.done < self.total:
+            self.last = now
+            left = (self.total - self.done) * (now - self.t0) / self.done
+            logging.getLogger("polyrob").info(
+                "%s: %d of %d tasks (%.0f %%) in %.0f s, about %.0f s left",
+                self.label,
+                self.done,
+                self.total,
+                100.0 * self.done / self.total,
+                now - self.t0,
+                left,
+            )
+
+    def close(self) -> None:
+        self.bar.close()
 
 
 def _worker_main(conn, payload: bytes) -> None:
@@ -117,10 +156,8 @@ class WorkerPool:
 
         ``fn`` must be a module-level function (it is pickled by name).
         """
-        from tqdm.auto import tqdm
-
         items = list(items)
-        bar = tqdm(total=len(items), desc=label, disable=not progress, leave=False)
+        bar = _Progress(len(items), label, progress)
         try:
             if self.workers > 1 and len(items) > 1 and self._start():
                 return self._map_workers(fn, items, bar)
