@@ -30,6 +30,7 @@ __all__ = [
     "robot_from_args",
     "domain_from_args",
     "domain_options_given",
+    "apply_default_task",
     "hyperparameters_from_args",
     "to_json",
 ]
@@ -202,20 +203,73 @@ def add_domain_arguments(parser: argparse.ArgumentParser) -> None:
     t.add_argument("--pose", default=None, help="reference pose: an SRDF pose name (see `polyrob info`) or q1,q2,...")
     t.add_argument("--q-radius", default=None, help="positions within pose +- RADIUS (and the joint limits)")
     t.add_argument("--qddot-max", default=None, help="acceleration bound >= 0 (rad/s^2), e.g. 2 or 2,2,4")
+    t.add_argument(
+        "--torque-box",
+        action="store_true",
+        help="arms of 3+ joints: the URDF torque box without an inner layer instead of their default task "
+        "(±0.2 rad around the reference pose, |qdot| <= 0.5, |qddot| <= 2, computed torque, links ±10 %%)",
+    )
 
 
 def robot_from_args(args):
-    """The robot of the options: with ``--inner``/``--payload-*``/``--model-error``, its inner loop."""
+    """The robot of the options: with ``--inner``/``--payload-*``/``--model-error``, its inner loop.
+
+    An arm of :data:`polyrob.bounds.default_task.MIN_JOINTS` joints or more
+    given without any domain or inner-layer option gets its default task
+    (:func:`apply_default_task`): the options are filled in ``args`` and said
+    on the ``polyrob`` log (stderr).
+    """
     from polyrob.model.robots import load_robot
 
     lock = None if args.lock is None else [s.strip() for s in args.lock.split(",") if s.strip()]
-    inner, payload = inner_options(args)
     robot = load_robot(args.robot, lock=lock, armature=parse_armature(getattr(args, "armature", None)))
+    apply_default_task(robot, args)
+    inner, payload = inner_options(args)
     if inner is None:
         return robot
     from polyrob.model.inner import inner_loop
 
     return inner_loop(robot, inner["inner"], payload=payload, model_error=inner["model_error"])
+
+
+def apply_default_task(robot, args) -> bool:
+    """Fill ``args`` with the robot's default task (:mod:`polyrob.bounds.default_task`) when it applies.
+
+    It applies to a robot of ``MIN_JOINTS`` joints or more when no domain
+    option, no inner-layer/payload/model-error option, no ``--pldi``, no
+    ``--certify`` (interval arithmetic needs a torque box) and no
+    ``--torque-box`` is given.  Sets ``args.default_task`` to the task's
+    words (``None`` when it does not apply) and returns whether it applied.
+    """
+    import logging
+
+    from polyrob.bounds.default_task import DEFAULT_TASK, applies_to
+
+    args.default_task = None
+    given = (
+        domain_options_given(args)
+        or inner_options_given(args)
+        or any(getattr(args, k, None) for k in ("pldi", "certify", "torque_box"))
+    )
+    if given or not applies_to(robot.m):
+        return False
+    t = DEFAULT_TASK
+    args.q_radius, args.qdot_max, args.qddot_max = f"{t.q_radius!r}", f"{t.qdot_max!r}", f"{t.qddot_max!r}"
+    args.inner, args.model_error = t.inner, f"{100 * t.model_error!r}"
+    args.default_task = t.words()
+    logging.getLogger("polyrob").info(
+        f"default task of {robot.name} ({robot.m} joints, no domain given): {t.words()}; "
+        "--torque-box for the URDF torque box without an inner layer"
+    )
+    return True
+
+
+def inner_options_given(args) -> bool:
+    """Whether any of ``--inner`` (other than none), ``--payload-*``, ``--model-error`` is given."""
+    layer = getattr(args, "inner", None) or "none"
+    return layer != "none" or any(
+        getattr(args, k, None) is not None for k in ("payload_mass", "payload_com", "model_error")
+    )
 
 
 def inner_options(args):

@@ -18,6 +18,7 @@ from pathlib import PurePath
 
 from polyrob.errors import ArgumentError
 from polyrob.fleet.diagnosis import why_not_certified
+from polyrob.fleet.results import RobotResult, controller_data, controller_system  # noqa: F401 (re-exported)
 from polyrob.fleet.stages import design_stage, one_line, reduce_stage, validate_stage
 
 __all__ = ["Job", "Settings", "RobotResult", "run_job", "as_job"]
@@ -50,6 +51,19 @@ class Job:
         Joints to lock (default: the loader's).
     label : str, optional
         Name of the result (default the robot's); must be unique in a batch.
+    pose, q_radius, qddot_max : optional
+        A task domain (:meth:`polyrob.bounds.task_domain.TaskDomain.from_robot`;
+        ``qdot_max`` then bounds its velocities).  Without any domain field an
+        arm of 3+ joints gets its default task
+        (:mod:`polyrob.bounds.default_task`), the other robots the URDF torque box.
+    inner : str, optional
+        Inner layer (``"none"``, ``"gravity"``, ``"computed-torque"``).
+    model_error : float, optional
+        Fraction (not percent): the true link masses/inertias are the model's times ``1 -+ model_error``.
+    payload_mass, payload_com : str, optional
+        Payload range as the ``--payload-mass`` / ``--payload-com`` options take it.
+    torque_box : bool
+        The URDF torque box without an inner layer even for an arm (no default task).
     """
 
     robot: str
@@ -65,6 +79,14 @@ class Job:
     uncertainty: str = "auto"
     lock: tuple | None = None
     label: str | None = None
+    pose: object = None
+    q_radius: float | None = None
+    qddot_max: object = None
+    inner: str | None = None
+    model_error: float | None = None
+    payload_mass: str | None = None
+    payload_com: str | None = None
+    torque_box: bool = False
 
     @property
     def name(self) -> str:
@@ -159,120 +181,50 @@ class Settings:
         return dict(self.__dict__)
 
 
-@dataclass(frozen=True, eq=False)
-class RobotResult:
-    """What one job gave (or why it failed).
+_BOX_FIELDS = ("domain", "q_range", "u_max")
+_TASK_FIELDS = ("pose", "q_radius", "qddot_max")
+_INNER_FIELDS = ("inner", "model_error", "payload_mass", "payload_com")
 
-    ``ok`` is False when the job raised; then ``error`` is the exception
-    class name and ``message`` its one line, and the figures are ``None``.
-    ``status`` is the controller's :class:`~polyrob.analysis.certificate.Certificate`
-    status on the robot's problem (the analysis' certificate when it ran, the
-    design's otherwise: the same call), ``verdict`` its line; ``mu_upper`` is
-    the bound that status rests on, ``mu_lower`` the lower bound.  ``validation`` is the nonlinear simulation's
-    verdict line when it ran (``None`` otherwise).  ``reason`` says, for a
-    robot left without a certificate, what stands in the way: the
-    performance limit of its unstable poles at the weights used
-    (:mod:`polyrob.analysis.limits`), a model whose ``B = M^-1`` is not
-    positive definite (:func:`polyrob.plant.coverage.input_definiteness`),
-    or neither found (then μ ≥ 1 is the synthesis' best).
+
+def job_robot_and_domain(job: Job):
+    """The robot (its inner loop when the job has one) and the domain of ``job``; the default task when it applies.
+
+    Returns ``(robot, domain, default_task)``: ``default_task`` is the
+    :class:`~polyrob.bounds.default_task.DefaultTask` used, or ``None``.
     """
-
-    name: str
-    robot: str
-    ok: bool
-    error: str | None = None
-    message: str | None = None
-    joints: int | None = None
-    entries: int | None = None
-    parameters: int | None = None
-    model: str | None = None
-    enclosure: str | None = None
-    mu_upper: float | None = None
-    mu_lower: float | None = None
-    status: str | None = None
-    order: int | None = None
-    alpha: float | None = None
-    verdict: str | None = None
-    validation: str | None = None
-    reason: str | None = None
-    seconds: float = 0.0
-    timings: dict = field(default_factory=dict)
-    controller: dict | None = None
-    certificate: dict = field(default_factory=dict)
-    problem: dict = field(default_factory=dict)
-    details: dict = field(default_factory=dict)
-
-    @property
-    def certified(self) -> bool:
-        """Reads the status (decided in polyrob.analysis.certificate)."""
-        from polyrob.analysis.certificate import Status
-
-        return self.status is not None and Status(self.status).certified
-
-    def controller_system(self):
-        """The controller as a python-control system (``None`` for a failed job)."""
-        return None if self.controller is None else controller_system(self.controller)
-
-    def row(self) -> dict:
-        """The summary table's row (JSON-ready)."""
-        keys = (
-            "name",
-            "robot",
-            "ok",
-            "error",
-            "message",
-            "joints",
-            "entries",
-            "parameters",
-            "model",
-            "enclosure",
-            "mu_upper",
-            "mu_lower",
-            "status",
-            "order",
-            "alpha",
-            "verdict",
-            "validation",
-            "reason",
-        )
-        out = {k: getattr(self, k) for k in keys}
-        out["certified"] = self.certified
-        out["seconds"] = round(float(self.seconds), 2)
-        out["timings"] = {k: round(float(v), 2) for k, v in self.timings.items()}
-        return out
-
-
-def controller_data(K) -> dict:
-    """A controller as plain arrays (python-control systems do not pickle: they hold lambdas)."""
-    import control
-    import numpy as np
-
-    if isinstance(K, control.TransferFunction):
-        return {
-            "type": "tf",
-            "num": [[np.asarray(K.num[i][j], float) for j in range(K.ninputs)] for i in range(K.noutputs)],
-            "den": [[np.asarray(K.den[i][j], float) for j in range(K.ninputs)] for i in range(K.noutputs)],
-        }
-    K = control.ss(K)
-    return {"type": "ss", **{k: np.asarray(getattr(K, k), float) for k in "ABCD"}}
-
-
-def controller_system(data: dict):
-    """The python-control system of :func:`controller_data`."""
-    import control
-
-    if data["type"] == "tf":
-        return control.tf(data["num"], data["den"])
-    return control.ss(data["A"], data["B"], data["C"], data["D"])
-
-
-def _problem(job: Job, settings: Settings, timings: dict):
     import polyrob
+    from polyrob.bounds.default_task import DEFAULT_TASK, applies_to
     from polyrob.bounds.domain import Domain
-    from polyrob.fleet.autoweights import automatic_hyperparameters
-    from polyrob.pipeline import build_problem, default_hyperparameters
+    from polyrob.bounds.task_domain import TaskDomain
 
     robot = polyrob.load_robot(job.robot, lock=None if job.lock is None else list(job.lock))
+    given = any(getattr(job, k) is not None for k in _BOX_FIELDS + _TASK_FIELDS + _INNER_FIELDS + ("qdot_max",))
+    given = given or job.qdot_scale != 1.0 or job.u_scale != 1.0
+    task = None
+    if not (given or job.torque_box) and applies_to(robot.m):
+        task = DEFAULT_TASK
+        fields = {"q_radius": task.q_radius, "qdot_max": task.qdot_max, "qddot_max": task.qddot_max}
+        inner, error, payload = task.inner, task.model_error, None
+    else:
+        fields = {k: getattr(job, k) for k in _TASK_FIELDS}
+        inner, error = job.inner or "none", job.model_error or 0.0
+        payload = None
+        if job.payload_mass is not None:
+            from polyrob.model.payload import PayloadRange
+
+            payload = PayloadRange.parse(str(job.payload_mass), job.payload_com)
+    if inner != "none" or error or payload is not None:
+        from polyrob.model.inner import inner_loop
+
+        robot = inner_loop(robot, inner, payload=payload, model_error=float(error))
+    if task is not None or any(getattr(job, k) is not None for k in _TASK_FIELDS):
+        if any(getattr(job, k) is not None for k in _BOX_FIELDS):
+            raise ArgumentError(
+                f"job {job.name}: domain/q_range/u_max set a torque box, not with pose/q_radius/qddot_max"
+            )
+        if task is None:
+            fields["qdot_max"] = job.qdot_max
+        return robot, TaskDomain.from_robot(robot, **fields), task
     domain = Domain.from_robot(
         robot,
         job.domain,
@@ -282,6 +234,14 @@ def _problem(job: Job, settings: Settings, timings: dict):
         qdot_scale=job.qdot_scale,
         u_scale=job.u_scale,
     )
+    return robot, domain, None
+
+
+def _problem(job: Job, settings: Settings, timings: dict):
+    from polyrob.fleet.autoweights import automatic_hyperparameters
+    from polyrob.pipeline import build_problem, default_hyperparameters
+
+    robot, domain, _ = job_robot_and_domain(job)
     if job.auto_weights:
         h = automatic_hyperparameters(robot.m, domain, job.weights)
     else:
@@ -376,6 +336,9 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         parameters=int(problem.unc.n_params),
         model=problem.model,
         enclosure=problem.pldi.enclosure,
+        domain=problem.domain.name,
+        inner=problem.robot.words() if hasattr(problem.robot, "inner") else "none",
+        reflected_inertia=str(getattr(problem.robot, "reflected_inertia", "unknown")),
         mu_upper=float(cert.bound),
         mu_lower=float(cert.mu_lower),
         status=cert.status.value,

@@ -1,0 +1,102 @@
+"""The task an arm gets when the user states none: a region around its reference pose, rates, an inner layer.
+
+A robot of :data:`MIN_JOINTS` joints or more (the spatial arms: so101, ur5,
+ur10, z1, talos_left_arm, panda, xarm7, ...) given to ``synth``, ``analyze``,
+``run``, ``bounds``, ``info`` or ``batch`` without any domain or inner-layer
+option is posed the problem an arm engineer poses (issue 21):
+
+* a **task domain** (:class:`~polyrob.bounds.task_domain.TaskDomain`) around
+  the robot's reference pose (its SRDF's first ``group_state`` where
+  example-robot-data ships one, else the midpoint of the joint ranges),
+  ``|q - q_ref| <= 0.2 rad``, ``|qdot| <= 0.5 rad/s``,
+  ``|qddot| <= 2 rad/s^2`` (:data:`DEFAULT_TASK`), torques by inverse
+  dynamics;
+* a **computed-torque inner layer** ``u = M_hat(q) v + h_hat(q, qdot)``
+  computed from a model whose link masses and inertias may be off by
+  ``±10 %`` (all links by one factor: the true robot is bounded at both
+  ends of that range); reflected rotor inertia from the SRDF when it has
+  rotor data, and said when it has none.
+
+Robots with fewer joints (the paper's planar arms, ``double_pendulum``,
+``TwoDofs``) keep the URDF torque box and no inner layer, as the paper
+poses them; any domain or inner-layer option, a ``--pldi`` file or
+``--torque-box`` keeps today's behaviour for every robot.
+
+Examples
+--------
+>>> t = DefaultTask()
+>>> t.words()
+'task ±0.2 rad around the reference pose, |qdot| <= 0.5 rad/s, |qddot| <= 2 rad/s^2, inner layer computed-torque, link masses/inertias ±10 %'
+>>> applies_to(2), applies_to(6)
+(False, True)
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+__all__ = ["DefaultTask", "DEFAULT_TASK", "MIN_JOINTS", "applies_to", "default_task_domain", "default_task_robot"]
+
+#: Robots with at least this many joints get :data:`DEFAULT_TASK` when no domain is given.
+MIN_JOINTS = 3
+
+
+@dataclass(frozen=True)
+class DefaultTask:
+    """The stated task of an arm: radius around the reference pose, rate bounds, inner layer, model error.
+
+    Attributes
+    ----------
+    q_radius : float
+        rad around the reference pose (clipped to the joint limits).
+    qdot_max : float
+        rad/s on every joint.
+    qddot_max : float
+        rad/s^2 on every joint.
+    inner : str
+        The inner layer (:data:`polyrob.model.inner.INNER_LAYERS`).
+    model_error : float
+        The true link masses/inertias are the model's times ``1 -+ model_error``.
+    """
+
+    q_radius: float = 0.2
+    qdot_max: float = 0.5
+    qddot_max: float = 2.0
+    inner: str = "computed-torque"
+    model_error: float = 0.10
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def words(self) -> str:
+        """The task in one line (what ``synth`` prints when it poses it)."""
+        return (
+            f"task ±{self.q_radius:g} rad around the reference pose, |qdot| <= {self.qdot_max:g} rad/s, "
+            f"|qddot| <= {self.qddot_max:g} rad/s^2, inner layer {self.inner}"
+            + (f", link masses/inertias ±{100 * self.model_error:g} %" if self.model_error else "")
+        )
+
+
+#: The default task of every arm of :data:`MIN_JOINTS` joints or more.
+DEFAULT_TASK = DefaultTask()
+
+
+def applies_to(m: int) -> bool:
+    """Whether a robot of ``m`` joints gets the default task when no domain is given."""
+    return int(m) >= MIN_JOINTS
+
+
+def default_task_robot(robot, task: DefaultTask = DEFAULT_TASK):
+    """``robot`` closed by the task's inner layer (with its model error), or ``robot`` itself for ``"none"``."""
+    if task.inner == "none" and not task.model_error:
+        return robot
+    from polyrob.model.inner import inner_loop
+
+    return inner_loop(robot, task.inner, model_error=task.model_error)
+
+
+def default_task_domain(robot, task: DefaultTask = DEFAULT_TASK):
+    """The task domain of ``task`` around ``robot``'s reference pose (SRDF first pose, else the midpoint)."""
+    from polyrob.bounds.task_domain import TaskDomain
+
+    return TaskDomain.from_robot(robot, q_radius=task.q_radius, qdot_max=task.qdot_max, qddot_max=task.qddot_max)

@@ -1,0 +1,128 @@
+"""What one robot of a batch gave: :class:`RobotResult`, and the controller as plain arrays.
+
+The controller travels back from a worker as plain arrays
+(:func:`controller_data`), since python-control systems hold lambdas and do
+not pickle; :func:`controller_system` rebuilds it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+__all__ = ["RobotResult", "controller_data", "controller_system"]
+
+
+@dataclass(frozen=True, eq=False)
+class RobotResult:
+    """What one job gave (or why it failed).
+
+    ``ok`` is False when the job raised; then ``error`` is the exception
+    class name and ``message`` its one line, and the figures are ``None``.
+    ``status`` is the controller's :class:`~polyrob.analysis.certificate.Certificate`
+    status on the robot's problem (the analysis' certificate when it ran, the
+    design's otherwise: the same call), ``verdict`` its line; ``mu_upper`` is
+    the bound that status rests on, ``mu_lower`` the lower bound.  ``validation`` is the nonlinear simulation's
+    verdict line when it ran (``None`` otherwise).  ``reason`` says, for a
+    robot left without a certificate, what stands in the way: the
+    performance limit of its unstable poles at the weights used
+    (:mod:`polyrob.analysis.limits`), a model whose ``B = M^-1`` is not
+    positive definite (:func:`polyrob.plant.coverage.input_definiteness`),
+    or neither found (then μ ≥ 1 is the synthesis' best).  ``domain`` is the
+    domain's name (a task domain's says pose, radius and rate bounds),
+    ``inner`` the inner layer with its ranges (``"none"``), and
+    ``reflected_inertia`` whether and whence rotor inertia is in ``M(q)``.
+    """
+
+    name: str
+    robot: str
+    ok: bool
+    error: str | None = None
+    message: str | None = None
+    joints: int | None = None
+    entries: int | None = None
+    parameters: int | None = None
+    model: str | None = None
+    enclosure: str | None = None
+    domain: str | None = None
+    inner: str | None = None
+    reflected_inertia: str | None = None
+    mu_upper: float | None = None
+    mu_lower: float | None = None
+    status: str | None = None
+    order: int | None = None
+    alpha: float | None = None
+    verdict: str | None = None
+    validation: str | None = None
+    reason: str | None = None
+    seconds: float = 0.0
+    timings: dict = field(default_factory=dict)
+    controller: dict | None = None
+    certificate: dict = field(default_factory=dict)
+    problem: dict = field(default_factory=dict)
+    details: dict = field(default_factory=dict)
+
+    @property
+    def certified(self) -> bool:
+        """Reads the status (decided in polyrob.analysis.certificate)."""
+        from polyrob.analysis.certificate import Status
+
+        return self.status is not None and Status(self.status).certified
+
+    def controller_system(self):
+        """The controller as a python-control system (``None`` for a failed job)."""
+        return None if self.controller is None else controller_system(self.controller)
+
+    def row(self) -> dict:
+        """The summary table's row (JSON-ready)."""
+        keys = (
+            "name",
+            "robot",
+            "ok",
+            "error",
+            "message",
+            "joints",
+            "entries",
+            "parameters",
+            "model",
+            "enclosure",
+            "domain",
+            "inner",
+            "reflected_inertia",
+            "mu_upper",
+            "mu_lower",
+            "status",
+            "order",
+            "alpha",
+            "verdict",
+            "validation",
+            "reason",
+        )
+        out = {k: getattr(self, k) for k in keys}
+        out["certified"] = self.certified
+        out["seconds"] = round(float(self.seconds), 2)
+        out["timings"] = {k: round(float(v), 2) for k, v in self.timings.items()}
+        return out
+
+
+def controller_data(K) -> dict:
+    """A controller as plain arrays (python-control systems do not pickle: they hold lambdas)."""
+    import control
+    import numpy as np
+
+    if isinstance(K, control.TransferFunction):
+        return {
+            "type": "tf",
+            "num": [[np.asarray(K.num[i][j], float) for j in range(K.ninputs)] for i in range(K.noutputs)],
+            "den": [[np.asarray(K.den[i][j], float) for j in range(K.ninputs)] for i in range(K.noutputs)],
+        }
+    K = control.ss(K)
+    return {"type": "ss", **{k: np.asarray(getattr(K, k), float) for k in "ABCD"}}
+
+
+def controller_system(data: dict):
+    """The python-control system of :func:`controller_data`."""
+    import control
+
+    if data["type"] == "tf":
+        return control.tf(data["num"], data["den"])
+    return control.ss(data["A"], data["B"], data["C"], data["D"])

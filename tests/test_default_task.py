@@ -1,0 +1,93 @@
+"""The default task of an arm (polyrob.bounds.default_task): who gets it, what it is, how to leave it.
+
+A few seconds: no bounds are computed here (the CLI tests read ``info --json``).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import cached_robot
+
+from polyrob.bounds.default_task import DEFAULT_TASK, DefaultTask, applies_to, default_task_domain, default_task_robot
+from polyrob.bounds.domain import Domain
+from polyrob.bounds.task_domain import TaskDomain
+from polyrob.cli import main
+from polyrob.fleet.jobs import Job, job_robot_and_domain
+
+
+def _info(capsys, *argv):
+    code = main(["info", *argv, "--json"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    return json.loads(captured.out), captured.err
+
+
+def test_only_arms_of_three_joints_or_more_get_it():
+    assert not applies_to(1) and not applies_to(2) and applies_to(3) and applies_to(7)
+
+
+def test_the_default_task_is_a_task_domain_around_the_srdf_pose_with_computed_torque():
+    panda = cached_robot("panda")
+    arm = default_task_robot(panda)
+    dom = default_task_domain(arm)
+    assert isinstance(dom, TaskDomain) and dom.pose_source == "SRDF pose 'default'"
+    assert np.allclose(dom.q_upper - dom.pose, DEFAULT_TASK.q_radius)  # the pose is well inside panda's limits
+    assert np.allclose(dom.qdot_upper, DEFAULT_TASK.qdot_max) and np.allclose(dom.qddot_upper, DEFAULT_TASK.qddot_max)
+    assert arm.inner == "computed-torque" and arm.model_error == pytest.approx(DEFAULT_TASK.model_error)
+    assert "computed-torque" in arm.words() and "±10 %" in arm.words()
+
+
+def test_computed_torque_with_one_inertia_factor_leaves_b_equal_to_the_identity_over_the_factor():
+    # the true links are the model's times s: M = s M_hat, h = s h_hat (no damping, no armature on ur5),
+    # so qddot = v / s + (1/s - 1) M_hat^-1 h_hat: B = I / s exactly, A moves with the same 1/s (affine in it)
+    arm = default_task_robot(cached_robot("ur5"))
+    dom = default_task_domain(arm)
+    q, qd, u = dom.sample(16, method="uniform", seed=3)
+    for v in arm.variants():
+        s = 1.0 if v.scenario == "nominal" else float(v.scenario.split("x ")[-1])
+        A, B = v.jacobians_batch(q, qd, u)
+        assert np.allclose(B[:, 6:, :], np.eye(6) / s, atol=1e-9)
+        if s == 1.0:
+            assert np.allclose(A[:, 6:, :], 0.0, atol=1e-9)  # an exact model: a double integrator
+        else:
+            assert np.abs(A[:, 6:, :6]).max() > 1e-3  # the gravity mismatch stays
+
+
+def test_synth_options_pose_the_default_task_and_say_so(capsys):
+    doc, err = _info(capsys, "ur5")
+    assert "default task of ur5" in err and "--torque-box" in err
+    assert doc["domain"]["kind"] == "task"
+
+
+@pytest.mark.parametrize("argv", [["--torque-box"], ["--qdot-max", "1"], ["--inner", "gravity"]])
+def test_any_domain_or_inner_option_keeps_todays_behaviour(capsys, argv):
+    doc, err = _info(capsys, "ur5", *argv)
+    assert "default task" not in err
+    assert doc["domain"].get("kind", "box") != "task"
+
+
+def test_two_joint_robots_keep_the_torque_box(capsys):
+    doc, err = _info(capsys, "planar_2r")
+    assert "default task" not in err and doc["domain"].get("kind", "box") != "task"
+
+
+def test_fleet_jobs_use_the_same_default():
+    robot, dom, task = job_robot_and_domain(Job(robot="ur5"))
+    assert task == DEFAULT_TASK and isinstance(dom, TaskDomain) and robot.inner == "computed-torque"
+    robot, dom, task = job_robot_and_domain(Job(robot="planar_2r"))
+    assert task is None and isinstance(dom, Domain)
+    robot, dom, task = job_robot_and_domain(Job(robot="ur5", torque_box=True))
+    assert task is None and isinstance(dom, Domain) and not hasattr(robot, "inner")
+    robot, dom, task = job_robot_and_domain(Job(robot="ur5", q_radius=0.1, qddot_max=1.0, inner="gravity"))
+    assert task is None and isinstance(dom, TaskDomain) and robot.inner == "gravity"
+    assert np.allclose(dom.q_upper - dom.q_lower, 0.2)
+
+
+def test_a_task_words_say_every_figure():
+    words = DefaultTask(q_radius=0.1, qdot_max=1.0, qddot_max=3.0, inner="gravity", model_error=0.0).words()
+    assert (
+        words == "task ±0.1 rad around the reference pose, |qdot| <= 1 rad/s, |qddot| <= 3 rad/s^2, inner layer gravity"
+    )
