@@ -137,7 +137,12 @@ class InnerLoopRobot(Manipulator):
         if self.inner == "gravity":
             return u - self.model_robot.inverse_dynamics(q, zero, zero)
         h = self.model_robot.inverse_dynamics(q, qdot, zero)
-        return np.stack([np.linalg.solve(self.model_robot.mass_matrix(qk), r) for qk, r in zip(q, u - h)])
+        model, data = self.model_robot.model, self.model_robot._data
+        Mhat = np.empty((len(q), self.m, self.m))
+        for k, c in enumerate(dynamics.to_configuration(self.model_robot, q)):
+            Mhat[k] = pinocchio.crba(model, data, c)
+        Mhat = np.triu(Mhat) + np.swapaxes(np.triu(Mhat, 1), 1, 2)
+        return np.linalg.solve(Mhat, (u - h)[:, :, None])[:, :, 0]
 
     def mass_matrix(self, q) -> np.ndarray:
         """``(df/dv)^-1`` on the velocity rows: ``M(q)``, or ``M_hat^-1 M`` for computed torque."""
@@ -150,26 +155,34 @@ class InnerLoopRobot(Manipulator):
         """``A = df/dx + df/du du/dx`` (n, 2m, 2m) and ``B = df/du du/dv`` (n, 2m, m) of the inner loop."""
         q, qdot, v = _rows(q, qdot, v)
         m = self.m
-        A, B = self.true_robot.jacobians_batch(q, qdot, self.torque(q, qdot, v))
         if self.inner == "none":
-            return A, B
-        minv = B[:, m:, :].copy()
+            return self.true_robot.jacobians_batch(q, qdot, v)
         model_robot = self.model_robot
         model, data = model_robot.model, model_robot._data
         config = dynamics.to_configuration(model_robot, q)
+        n = len(q)
         if self.inner == "gravity":
-            for k in range(len(q)):
-                dg = pinocchio.computeGeneralizedGravityDerivatives(model, data, config[k])
-                A[k, m:, :m] += minv[k] @ dg
+            u = self.torque(q, qdot, v)
+            A, B = self.true_robot.jacobians_batch(q, qdot, u)
+            dg = np.empty((n, m, m))
+            for k in range(n):
+                dg[k] = pinocchio.computeGeneralizedGravityDerivatives(model, data, config[k])
+            A[:, m:, :m] += B[:, m:, :] @ dg
             return A, B
+        # computed torque: one RNEA-derivatives call per point gives du/dq, du/dqdot, M_hat and u itself
         qdot_c, v_c = np.ascontiguousarray(qdot), np.ascontiguousarray(v)
-        for k in range(len(q)):
-            du_dq, du_dv, Mhat = pinocchio.computeRNEADerivatives(model, data, config[k], qdot_c[k], v_c[k])
-            Mhat = np.triu(Mhat) + np.triu(Mhat, 1).T
-            du_dv = du_dv + np.diag(model_robot.damping)
-            A[k, m:, :m] += minv[k] @ du_dq
-            A[k, m:, m:] += minv[k] @ du_dv
-            B[k, m:, :] = minv[k] @ Mhat
+        du_dq, du_dv, Mhat, u = np.empty((n, m, m)), np.empty((n, m, m)), np.empty((n, m, m)), np.empty((n, m))
+        for k in range(n):
+            du_dq[k], du_dv[k], Mhat[k] = pinocchio.computeRNEADerivatives(model, data, config[k], qdot_c[k], v_c[k])
+            u[k] = data.tau
+        Mhat = np.triu(Mhat) + np.swapaxes(np.triu(Mhat, 1), 1, 2)
+        u += qdot * model_robot.damping
+        du_dv += np.diag(model_robot.damping)
+        A, B = self.true_robot.jacobians_batch(q, qdot, u)
+        minv = B[:, m:, :].copy()
+        A[:, m:, :m] += minv @ du_dq
+        A[:, m:, m:] += minv @ du_dv
+        B[:, m:, :] = minv @ Mhat
         return A, B
 
     # ------------------------------------------------------------------ the ranges
