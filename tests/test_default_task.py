@@ -91,3 +91,34 @@ def test_a_task_words_say_every_figure():
     assert (
         words == "task ±0.1 rad around the reference pose, |qdot| <= 1 rad/s, |qddot| <= 3 rad/s^2, inner layer gravity"
     )
+
+
+def test_batch_task_and_inner_options_reach_every_job():
+    from polyrob.cli import PolyrobParser
+    from polyrob.cli import batch as batch_cli
+    from polyrob.errors import ArgumentError
+
+    parser = PolyrobParser(prog="polyrob")
+    batch_cli.register(parser.add_subparsers(dest="command", required=True, parser_class=PolyrobParser))
+    argv = [
+        "batch",
+        "ur5",
+        "panda",
+        "--q-radius",
+        "0.1",
+        "--qddot-max",
+        "1",
+        "--inner",
+        "gravity",
+        "--model-error",
+        "5",
+    ]
+    jobs = batch_cli.jobs_from_args(parser.parse_args(argv))
+    assert [j["robot"] for j in jobs] == ["ur5", "panda"]
+    assert all(
+        (j["q_radius"], j["qddot_max"], j["inner"], j["model_error"]) == (0.1, 1.0, "gravity", 0.05) for j in jobs
+    )
+    assert "torque_box" not in jobs[0] and "pose" not in jobs[0]
+    assert batch_cli.jobs_from_args(parser.parse_args(["batch", "ur5", "--torque-box"]))[0]["torque_box"] is True
+    with pytest.raises(ArgumentError, match="--model-error"):
+        batch_cli.jobs_from_args(parser.parse_args(["batch", "ur5", "--model-error", "120"]))

@@ -413,3 +413,17 @@ def test_cli_validation_and_reduction_options_reach_the_settings():
     given = batch_cli.settings_from_args(parser.parse_args(args))
     assert (given["validate_move"], given["validate_budget"], given["reduce_max_order"]) == (0.0, 30.0, None)
     Settings(**given)  # every key is a field
+
+
+def test_a_task_job_with_an_inner_layer_says_domain_inner_layer_and_reflected_inertia(pendulums):
+    job = Job(robot=pendulums[0], q_radius=0.2, qdot_max=0.5, qddot_max=1.0, inner="gravity", model_error=0.1)
+    r = run_job(job, Settings(**dict(FAST, validate=False, analyze=False)))
+    assert r.ok, r.message
+    row = r.row()
+    assert row["domain"].startswith("task around") and "qddot ±1" in row["domain"]
+    assert row["inner"].startswith("inner layer: gravity") and "±10 %" in row["inner"]
+    assert row["reflected_inertia"].startswith("not modelled")
+    assert r.problem["domain"]["kind"] == "task" and "inner" in r.problem
+    # without a domain field a one-joint robot keeps the torque box and no inner layer
+    bare = run_job(Job(robot=pendulums[0]), Settings(**dict(FAST, validate=False, analyze=False)))
+    assert bare.row()["inner"] == "none" and not bare.row()["domain"].startswith("task")

@@ -14,9 +14,12 @@ from polyrob.cli.common import Output, add_output_flags
 from polyrob.cli.options import (
     int_at_least,
     nonnegative_float,
+    number,
+    parse_bound,
     parse_frequencies,
     parse_joint_values,
     parse_list,
+    parse_pose,
     positive_float,
 )
 from polyrob.errors import ArgumentError
@@ -52,6 +55,14 @@ def jobs_from_args(args) -> list:
         "auto_weights": not args.paper_weights,
         "bandwidth_scale": args.bandwidth_scale,
         "uncertainty": args.uncertainty,
+        "pose": parse_pose(args.pose),
+        "q_radius": parse_bound(args.q_radius, "--q-radius"),
+        "qddot_max": parse_joint_values(args.qddot_max, "--qddot-max", ranges=False),
+        "inner": args.inner,
+        "model_error": None if args.model_error is None else parse_percent(args.model_error),
+        "payload_mass": args.payload_mass,
+        "payload_com": args.payload_com,
+        "torque_box": args.torque_box or None,
     }
     common = {k: v for k, v in common.items() if v is not None}
     jobs = [dict(common, robot=n) for n in names]
@@ -61,6 +72,14 @@ def jobs_from_args(args) -> list:
     if not jobs:
         raise ArgumentError("give robots (e.g. `polyrob batch planar_2r panda`), --all-serial or --jobs FILE")
     return jobs
+
+
+def parse_percent(text: str) -> float:
+    """``--model-error PCT`` -> the fraction a job takes."""
+    p = number(text, "--model-error")
+    if not 0.0 <= p < 100.0:
+        raise ArgumentError(f"--model-error: give a percentage in [0, 100), got '{text}'")
+    return p / 100.0
 
 
 def settings_from_args(args) -> dict:
@@ -112,6 +131,7 @@ def cmd_batch(args) -> int:
         doc["files"] = res.files
     out.document(doc)
     out.line(f"{'robot':<22}{'joints':>7}{'params':>8}{'mu':>10}{'order':>7}{'alpha':>8}{'time s':>9}  result")
+    problem_lines = []
     for r in res.results:
         result = str(r.status) if r.ok else f"FAILED {r.error}: {r.message}"
         if r.ok and r.validation:
@@ -122,6 +142,14 @@ def cmd_batch(args) -> int:
             f"{r.name:<22}{_fmt(r.joints, 'd'):>7}{_fmt(r.parameters, 'd'):>8}{_fmt(r.mu_upper):>10}"
             f"{_fmt(r.order, 'd'):>7}{_fmt(r.alpha):>8}{r.seconds:>9.1f}  {result}"
         )
+        if r.ok:
+            problem_lines.append(
+                f"  {r.name}: domain {r.domain}; {r.inner}; reflected rotor inertia: {r.reflected_inertia}"
+            )
+    if problem_lines:
+        out.line("problems (domain; inner layer; reflected rotor inertia):")
+        for line in problem_lines:
+            out.line(line)
     out.line(
         f"{len(res.certified)} of {len(res.results)} certified, {len(res.failed)} failed, "
         f"{res.seconds:.1f} s on {res.executor}"
@@ -155,6 +183,20 @@ def register(sub) -> None:
     g.add_argument("--u-max", default=None, help="torque bound >= 0")
     g.add_argument("--qdot-scale", type=nonnegative_float, default=1.0, help="scale the velocity box")
     g.add_argument("--u-scale", type=nonnegative_float, default=1.0, help="scale the torque box")
+    t = p.add_argument_group(
+        "task and inner layer (every robot; without any domain option an arm of 3+ joints gets its default "
+        "task: +-0.2 rad around its reference pose, |qdot| <= 0.5, |qddot| <= 2, computed torque, links +-10 %%)"
+    )
+    t.add_argument("--pose", default=None, help="reference pose: an SRDF pose name or q1,q2,...")
+    t.add_argument("--q-radius", default=None, help="positions within pose +- RADIUS")
+    t.add_argument("--qddot-max", default=None, help="acceleration bound >= 0 (rad/s^2)")
+    t.add_argument("--inner", default=None, choices=("none", "gravity", "computed-torque"), help="inner layer")
+    t.add_argument("--model-error", default=None, help="PCT: true link masses/inertias = model's x (1 -+ PCT/100)")
+    t.add_argument("--payload-mass", default=None, help="payload at the tool flange, kg: LO:HI or M")
+    t.add_argument("--payload-com", default=None, help="payload COM offset box in the flange frame, m")
+    t.add_argument(
+        "--torque-box", action="store_true", help="the URDF torque box without an inner layer for every robot"
+    )
     g = p.add_argument_group("weights and model")
     g.add_argument(
         "--paper-weights",
