@@ -277,6 +277,17 @@ def test_a_solver_crash_is_a_solver_error(monkeypatch):
 
     monkeypatch.setattr(cp.Problem, "solve", crash)
     with pytest.raises(SolverError, match="boom"):
+        polyrob.lpvnorm(_oscillator, [np.array([0.0, 1.0])], solver="cvxpy")
+
+
+def test_a_crash_of_the_direct_solver_is_a_solver_error(monkeypatch):
+    import clarabel
+
+    def crash(*a, **k):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(clarabel, "DefaultSolver", crash)
+    with pytest.raises(SolverError, match="boom"):
         polyrob.lpvnorm(_oscillator, [np.array([0.0, 1.0])])
 
 
@@ -307,3 +318,62 @@ def test_lpvtools_lpv_analysis_demo_order_of_magnitude():
     slow, fast = (polyrob.lpvnorm(H, grid, [(-b, b)], basis) for b in (0.01, 0.2))
     assert slow.frozen_gamma == pytest.approx(0.0, abs=1e-9)
     assert 0.005 < slow.gamma <= 0.01 * (1 + 1e-6) and 0.1 < fast.gamma <= 0.2 * (1 + 1e-6)
+
+
+# --------------------------------------------------------------------------- the direct assembly (assemble.py)
+
+
+def test_direct_assembly_agrees_with_cvxpy(demo_slow):
+    """The conic data written directly (Clarabel) and cvxpy's canonicalisation give the same proved gamma."""
+    via_cvxpy = polyrob.lpvnorm(lpvtools_demo_loop(), GRID, [(-0.1, 0.1)], BASIS4, solver="cvxpy")
+    assert via_cvxpy.proved and via_cvxpy.gamma == pytest.approx(demo_slow.gamma, rel=2e-3)
+
+
+def test_svec_orders_of_the_two_solvers():
+    from polyrob.analysis.lpv.assemble import svec_index
+
+    r, c, w = svec_index(3, "scs")  # SCS: lower triangle by columns
+    assert list(zip(r.tolist(), c.tolist())) == [(0, 0), (1, 0), (2, 0), (1, 1), (2, 1), (2, 2)]
+    assert np.allclose(w, [1, np.sqrt(2), np.sqrt(2), 1, np.sqrt(2), 1])
+
+
+def test_scs_route_proves_or_says_not_proved():
+    r = polyrob.lpvnorm(_oscillator, [np.linspace(0.0, 1.0, 3)], solver="scs")
+    ref = polyrob.lpvnorm(_oscillator, [np.linspace(0.0, 1.0, 3)])
+    assert not r.proved or r.gamma >= ref.gamma * (1 - 1e-3)
+
+
+def test_restricted_x_is_a_smaller_search_never_below_the_full_one():
+    """x_factor: the basis functions after the first carry L^T Y_j L; the proof is the same re-check."""
+    sysf = lpvtools_demo_loop()
+    full = polyrob.lpvnorm(sysf, GRID, [(-0.1, 0.1)], BASIS2)
+    part = polyrob.lpvnorm(sysf, GRID, [(-0.1, 0.1)], BASIS2, x_factor=np.eye(4)[:2])
+    assert full.proved and part.proved
+    assert part.gamma >= full.gamma * (1 - 1e-3)
+    assert np.allclose(part.X[1][2:, :], 0.0) and np.allclose(part.X[2][:, 2:], 0.0)
+
+
+def test_rates_per_point_lie_between_frozen_and_the_global_box():
+    """rates_at(rho): a smaller rate box at each grid point (here 0 at the ends) gives no more than the global one."""
+    sysf = lpvtools_demo_loop()
+    box = [(-0.1, 0.1)]
+    glob = polyrob.lpvnorm(sysf, GRID, box, BASIS2)
+    local = polyrob.lpvnorm(sysf, GRID, box, BASIS2, rates_at=lambda r: [(-0.1 * (7 - r[0]) / 5, 0.0)])
+    assert local.proved and local.frozen_gamma * (1 - 1e-6) <= local.gamma <= glob.gamma * (1 + 1e-3)
+    assert "rates_at" in local.variation
+    with pytest.raises(ArgumentError, match="outside rate_bounds"):
+        polyrob.lpvnorm(sysf, GRID, box, BASIS2, rates_at=lambda r: [(-1.0, 1.0)])
+
+
+def test_fixed_level_with_maximised_margin_proves_that_level():
+    """conic_data(level=...): gamma fixed, margin maximised: a point inside the feasible set, proved <= level."""
+    from polyrob.analysis.lpv.assemble import solve_direct
+    from polyrob.analysis.lpv.check import grid_data
+
+    A, B, C, D = _oscillator(np.array([0.5]))
+    data = grid_data([A], [B], [C], [D])
+    _, g_opt, _ = solve_direct(data)
+    Xs, g, status = solve_direct(data, level=1.5 * g_opt)
+    assert g == 1.5 * g_opt and status == "solved"
+    proved, chk = proved_gamma(data, Xs, g_opt)
+    assert np.isfinite(proved) and proved <= 1.5 * g_opt and chk.lmi_margin > 0

@@ -124,3 +124,30 @@ def test_analyze_json_carries_the_moving_robot_verdict(tmp_path_factory, small_d
     assert mv["computed"] is False and mv["certified"] is False and mv["status"] is None
     assert mv["verdict"].startswith("moving robot: robust performance not computed (the closed loop has 10 states")
     assert "--moving" in mv["verdict"]
+
+
+def test_a_position_moves_at_its_velocity_at_each_grid_point(robot):
+    """kinematic_rates: dq2/dt = qdot2 exactly at a grid point (scaled like the velocity bound, divided by c)."""
+    from polyrob.analysis.lpv.robot import kinematic_rates
+
+    d = Domain.from_robot(robot, "paper")
+    model = scheduling(robot, d, points=(5, 3))
+    rates, _ = rate_bounds(model, d)
+    at = kinematic_rates(model, rates, 2.0)
+    box = at(np.array([0.3, -1.0, 4.0]))
+    assert box[0] == (2.0, 2.0) and box[1] == (rates[1][0] / 2, rates[1][1] / 2)
+    half, _ = rate_bounds(model, d, scale=0.5)
+    assert kinematic_rates(model, half)(np.array([0.3, -1.0, 4.0]))[0] == (2.0, 2.0)
+    assert kinematic_rates(model, half)(np.array([0.3, -1.0, -9.9561]))[0] == pytest.approx((-4.978, -4.978), rel=1e-3)
+
+
+def test_arbitrary_velocities_cover_more_than_bounded_ones(robot, small):
+    """velocities="arbitrary": X on (1, cos q2, sin q2) only, the velocities free: never below the bounded search."""
+    model = scheduling(robot, small, points=(4, 2))
+    system = closed_loop_system(model, pd_controller(), 0.5 * np.eye(2), None)
+    rates, _ = rate_bounds(model, small, scale=20.0)
+    bounded = moving_robot_gain(model, system, rates, velocities="bounded")
+    free = moving_robot_gain(model, system, rates, velocities="arbitrary")
+    assert bounded.proved and free.proved
+    assert free.n_basis == 3 and bounded.n_basis == 5
+    assert bounded.frozen_gamma * (1 - 1e-6) <= bounded.gamma <= free.gamma * (1 + 1e-3)

@@ -56,7 +56,8 @@ class GridData:
     G : ndarray
         ``(N, k, p)``: their gradients.
     nus : ndarray
-        ``(V, p)``: the vertices of the rate box (``[[0, ..., 0]]`` for a constant ``X``).
+        ``(V, p)``: the vertices of the rate box (``[[0, ..., 0]]`` for a constant ``X``),
+        or ``(N, V, p)``: a rate box per grid point (:meth:`rates`).
     points : ndarray
         ``(N, p)``: the grid points.
     """
@@ -69,6 +70,11 @@ class GridData:
     G: np.ndarray
     nus: np.ndarray
     points: np.ndarray
+
+    def rates(self) -> np.ndarray:
+        """The rate vertices at every grid point, ``(N, V, p)``."""
+        nus = np.asarray(self.nus, dtype=float)
+        return nus if nus.ndim == 3 else np.broadcast_to(nus, (self.A.shape[0],) + nus.shape)
 
 
 def grid_data(A, B, C, D, F=None, G=None, nus=None, points=None) -> GridData:
@@ -165,12 +171,13 @@ def brl_matrices(data: GridData, Xs, gamma: float):
     q = C.shape[1]
     k = Xs.shape[0]
     X, dX, scale, dscale = _x_values(data, Xs)
-    V = data.nus.shape[0]
+    nus = data.rates()
+    V = nus.shape[1]
     s = n + m + q
     M = np.zeros((N, V, s, s))
     XA = X @ A
     XB = X @ B
-    var = np.einsum("vp,apij->avij", data.nus, dX)
+    var = np.einsum("avp,apij->avij", nus, dX)
     M[:, :, :n, :n] = (XA + np.transpose(XA, (0, 2, 1)))[:, None] + var
     M[:, :, :n, n : n + m] = XB[:, None]
     M[:, :, n : n + m, :n] = np.transpose(XB, (0, 2, 1))[:, None]
@@ -183,7 +190,7 @@ def brl_matrices(data: GridData, Xs, gamma: float):
     nA = np.linalg.norm(A, axis=(1, 2))
     nB = np.linalg.norm(B, axis=(1, 2))
     prods = scale * (2 * nA + 2 * nB)  # |X| |A| and |X| |B| terms (Frobenius bounds |.| products)
-    rates = dscale @ np.abs(data.nus).T  # (N, V)
+    rates = np.einsum("ap,avp->av", dscale, np.abs(nus))  # (N, V)
     err = 8.0 * (s + k + 2) * _U * (prods[:, None] + rates + np.linalg.norm(M, axis=(2, 3)))
     return M, err, X, scale
 
@@ -216,7 +223,7 @@ def check_solution(data: GridData, Xs, gamma: float, slack: float = 0.0) -> LpvC
     lam = np.linalg.eigvalsh(M)[..., -1] + err  # (N, V)
     a, v = np.unravel_index(int(np.argmax(lam)), lam.shape)
     margin, pmin = float(-lam[a, v]), float(pos.min())
-    worst = (tuple(float(x) for x in data.points[a]), tuple(float(x) for x in data.nus[v]))
+    worst = (tuple(float(x) for x in data.points[a]), tuple(float(x) for x in data.rates()[a, v]))
     if pmin <= 0:
         at = tuple(float(x) for x in data.points[int(np.argmin(pos))])
         return LpvCheck(False, margin, pmin, *worst, reason=f"X(rho) not proved positive definite at rho = {at}")

@@ -143,7 +143,28 @@ def _basis_values(basis, points: np.ndarray):
     return F, G
 
 
-def evaluate(system, grid, rate_bounds=None, basis=None) -> Evaluated:
+def _rates_per_point(rates_at, points, rb, G) -> np.ndarray:
+    """``(N, V, p)`` rate vertices from ``rates_at(rho)``, each box inside ``rb`` (shorter lists padded)."""
+    p = points.shape[1]
+    per = []
+    for a, rho in enumerate(points):
+        try:
+            here = check_rate_bounds(rates_at(rho.copy()), p)
+        except ArgumentError as exc:
+            raise ArgumentError(f"rates_at(rho) at rho = {rho.tolist()}: {exc}") from exc
+        for i, ((lo, hi), (blo, bhi)) in enumerate(zip(here, rb)):
+            if lo < blo or hi > bhi:
+                raise ArgumentError(
+                    f"rates_at(rho) at rho = {rho.tolist()}: [{lo}, {hi}] for rho_{i + 1} is outside rate_bounds [{blo}, {bhi}]"
+                )
+            if not (np.isfinite(lo) and np.isfinite(hi)) and np.any(G[a, :, i] != 0):
+                raise ArgumentError(f"rates_at: the rate of rho_{i + 1} is unbounded, but the basis depends on it")
+        per.append(rate_vertices(here))
+    V = max(len(v) for v in per)
+    return np.array([np.vstack([v] + [v[-1:]] * (V - len(v))) for v in per])
+
+
+def evaluate(system, grid, rate_bounds=None, basis=None, rates_at=None) -> Evaluated:
     """Evaluate the system, basis and rate box on the tensor grid (after checking every input).
 
     Parameters
@@ -154,6 +175,10 @@ def evaluate(system, grid, rate_bounds=None, basis=None) -> Evaluated:
         One 1-D array of values per parameter.
     rate_bounds : sequence of (lo, hi) or None
     basis : sequence of (f, grad) or None
+    rates_at : callable, optional
+        ``rho -> p pairs (lo, hi)``: the rate box at each grid point, inside
+        ``rate_bounds`` (e.g. ``d q/dt = qdot`` exactly when ``qdot`` is a
+        parameter too).
 
     Returns
     -------
@@ -190,4 +215,5 @@ def evaluate(system, grid, rate_bounds=None, basis=None) -> Evaluated:
     for i, (rlo, rhi) in enumerate(rb):
         if not (np.isfinite(rlo) and np.isfinite(rhi)) and np.any(G[:, :, i] != 0):
             raise ArgumentError(f"the rate of rho_{i + 1} is unbounded, but the basis depends on it (nonzero gradient)")
-    return Evaluated(GridData(A, B, C, D, F, G, rate_vertices(rb), points), lo, hi, False)
+    nus = rate_vertices(rb) if rates_at is None else _rates_per_point(rates_at, points, rb, G)
+    return Evaluated(GridData(A, B, C, D, F, G, nus, points), lo, hi, False)

@@ -34,12 +34,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from polyrob.errors import NotApplicable, SolverError
+from polyrob.errors import ArgumentError, NotApplicable, SolverError
 
 __all__ = ["MovingRobotCertificate", "moving_robot_certificate", "moving_robot_gain", "MAX_STATES", "AUTO_STATES"]
 
 #: Largest closed loop (states) the moving-robot LMIs are built for.
 MAX_STATES = 40
+#: Largest ``X(rho)`` (scalar variables) searched with bounded accelerations by default (``velocities="auto"``).
+BOUNDED_VARIABLES = 600
 #: Largest closed loop computed by default (``moving=None``): measured cost in docs/certificates.md.
 AUTO_STATES = 8
 
@@ -48,8 +50,12 @@ def _rate_words(names, rates, source: str) -> str:
     parts = []
     for name, (_lo, hi) in zip(names, rates):
         dot = f"d{name}/dt"
-        parts.append(f"|{dot}| <= {hi:.4g}" if np.isfinite(hi) else f"{dot} arbitrary")
-    return ", ".join(parts) + (f" (accelerations {source})" if any(n.startswith("qdot") for n in names) else "")
+        if name.startswith("q") and not name.startswith("qdot") and f"qdot{name[1:]}" in names and np.isfinite(hi):
+            parts.append(f"{dot} = qdot{name[1:]} (|{dot}| <= {hi:.4g})")
+        else:
+            parts.append(f"|{dot}| <= {hi:.4g}" if np.isfinite(hi) else f"{dot} arbitrary")
+    bounded = any(n.startswith("qdot") and np.isfinite(r[1]) for n, r in zip(names, rates))
+    return ", ".join(parts) + (f" (accelerations {source})" if bounded else "")
 
 
 @dataclass(frozen=True, eq=False)
@@ -146,33 +152,58 @@ class MovingRobotCertificate:
         }
 
 
-def moving_robot_gain(model, system, rates, *, quadratic: bool = False):
+def _velocity_mode(velocities: str, model, n: int) -> str:
+    """``"bounded"`` or ``"arbitrary"`` (``"auto"``: bounded while the search has at most :data:`BOUNDED_VARIABLES` scalars)."""
+    if velocities not in ("auto", "bounded", "arbitrary"):
+        raise ArgumentError(f"velocities must be 'auto', 'bounded' or 'arbitrary' (got {velocities!r})")
+    if velocities != "auto":
+        return velocities
+    k = 1 + sum(2 if kind == "q" else 1 for kind in model.kinds)
+    return "bounded" if k * n * (n + 1) // 2 <= BOUNDED_VARIABLES else "arbitrary"
+
+
+def moving_robot_gain(model, system, rates, *, quadratic: bool = False, velocities: str = "bounded"):
     """:func:`polyrob.lpvnorm` of ``system`` on ``model``'s grid, conditioned (:func:`~polyrob.analysis.lpv.robot.conditioned`).
 
     ``rates`` with every bound infinite gives a constant ``X`` (arbitrarily
-    fast variation); otherwise ``X(rho)`` on :func:`~polyrob.analysis.lpv.robot.default_basis`.
-    A solver failure is returned as an unproved result, not raised.
+    fast variation).  Otherwise a position's rate is its velocity at each grid
+    point (:func:`~polyrob.analysis.lpv.robot.kinematic_rates`) and
+    ``velocities`` says how the velocities move: ``"bounded"`` (``X(rho)``
+    on :func:`~polyrob.analysis.lpv.robot.default_basis`, the accelerations
+    within ``rates``) or ``"arbitrary"`` (``X`` depends on the positions only,
+    ``1, cos q_i, sin q_i``: the velocities may vary arbitrarily fast, which
+    covers every acceleration bound, with fewer variables and LMIs).  A
+    solver failure is returned as an unproved result, not raised.
     """
     from polyrob.analysis.lpv.norm import lpvnorm
     from polyrob.analysis.lpv.result import LpvNormResult
-    from polyrob.analysis.lpv.robot import conditioned, default_basis
+    from polyrob.analysis.lpv.robot import conditioned, default_basis, kinematic_rates
 
     centre = np.array([0.5 * (a[0] + a[-1]) for a in model.axes])
-    system_c, c = conditioned(system, centre)
+    rates = list(rates)
+    basis = default_basis(model, quadratic=quadratic)
+    if velocities == "arbitrary":
+        basis = basis[: 1 + 2 * sum(kind == "q" for kind in model.kinds)]
+        rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
     fast = all(not np.isfinite(hi) for _, hi in rates)
-    basis = None if fast else default_basis(model, quadratic=quadratic)
-    scaled = None if fast else [(lo / c, hi / c) for lo, hi in rates]
+    c_sys = []
+    try:  # the Riccati-conditioned copy first: in the loop's own coordinates the solver stalls (docs/lpvnorm.md)
+        c_sys.append((*conditioned(system, centre), {"eps": 1e-4}))
+    except NotApplicable:
+        pass
+    c = conditioned_time_scale(system, centre)
 
     def time_scaled(rho):
         a, b, cc, d = system(rho)
         return a / c, b / c, cc, d
 
+    c_sys.append((time_scaled, c, {}))
     best = None
-    # the time-scaled loop first, then with a larger strictness margin (Clarabel can stall near the
-    # optimum), then the Riccati-conditioned copy: the first that proves a bound is kept
-    for sysf, options in ((time_scaled, {}), (time_scaled, {"eps": 1e-5}), (system_c, {})):
+    for sysf, cs, options in c_sys:
+        args = (None, None) if fast else ([(lo / cs, hi / cs) for lo, hi in rates], basis)
+        extra = {} if fast else {"rates_at": kinematic_rates(model, rates, cs)}
         try:
-            r = lpvnorm(sysf, list(model.axes), scaled, basis, **options)
+            r = lpvnorm(sysf, list(model.axes), *args, **options, **extra)
         except SolverError as exc:
             r = LpvNormResult(
                 float("inf"), False, float("inf"), float("nan"), "", f"on the grid of {model.n_points} points",
@@ -185,6 +216,13 @@ def moving_robot_gain(model, system, rates, *, quadratic: bool = False):
     return best
 
 
+def conditioned_time_scale(system, centre) -> float:
+    """The power of two near the geometric mean of the slowest and fastest pole at ``centre``."""
+    lam = np.abs(np.linalg.eigvals(system(np.asarray(centre, float))[0]))
+    lam = lam[lam > 0] if np.any(lam > 0) else np.ones(1)
+    return float(2.0 ** np.round(0.5 * np.log2(lam.min() * lam.max())))
+
+
 def moving_robot_certificate(
     problem,
     K,
@@ -194,6 +232,7 @@ def moving_robot_certificate(
     qddot_max=None,
     quadratic: bool = False,
     auto: bool = False,
+    velocities: str = "auto",
 ) -> MovingRobotCertificate:
     """The moving-robot certificate of ``K`` on ``problem`` (its robot, domain and weights).
 
@@ -213,6 +252,10 @@ def moving_robot_certificate(
     auto : bool
         Compute it only for a closed loop of at most :data:`AUTO_STATES`
         states (the default of ``analyze`` and ``run``); a larger one says why not.
+    velocities : {"auto", "bounded", "arbitrary"}
+        How the velocities may move (:func:`moving_robot_gain`); ``"auto"``:
+        bounded accelerations while ``X(rho)`` has at most
+        :data:`BOUNDED_VARIABLES` scalar variables, else arbitrary.
 
     Returns
     -------
@@ -241,7 +284,10 @@ def moving_robot_certificate(
             rates, source = [(-np.inf, np.inf)] * len(model.names), "unbounded"
         else:
             rates, source = rate_bounds(model, domain, qddot_max=qddot_max, scale=rate_scale)
-        result = moving_robot_gain(model, system, rates, quadratic=quadratic)
+        mode = _velocity_mode(velocities, model, n)
+        if mode == "arbitrary" and not np.isinf(rate_scale):
+            rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
+        result = moving_robot_gain(model, system, rates, quadratic=quadratic, velocities=mode)
     except NotApplicable as exc:
         return MovingRobotCertificate.not_computed(str(exc))
     base = problem.scope() if hasattr(problem, "scope") else Scope()

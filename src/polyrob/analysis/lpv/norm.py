@@ -40,6 +40,7 @@ import warnings
 
 import numpy as np
 
+from polyrob.analysis.lpv.assemble import solve_direct
 from polyrob.analysis.lpv.between import affine_terms, curvature_slack
 from polyrob.analysis.lpv.check import GridData, proved_gamma
 from polyrob.analysis.lpv.data import evaluate
@@ -49,7 +50,17 @@ from polyrob.errors import ArgumentError, SolverError
 __all__ = ["lpvnorm", "solve_lmis", "frozen_peak", "state_scaling", "orthonormal_basis"]
 
 #: Options of :func:`lpvnorm` and their defaults.
-OPTIONS = {"balance": True, "orthonormalize": True, "affine": False, "x_bounds": (1e-6, 1e6), "eps": 1e-7}
+OPTIONS = {
+    "balance": True,
+    "orthonormalize": True,
+    "affine": False,
+    "x_bounds": (1e-6, 1e6),
+    "eps": 1e-7,
+    "solver": "clarabel",
+    "x_factor": None,
+    "settings": None,
+    "rates_at": None,
+}
 
 
 def state_scaling(A: np.ndarray) -> np.ndarray:
@@ -117,8 +128,14 @@ def orthonormal_basis(F: np.ndarray) -> np.ndarray:
     return np.linalg.solve(R, np.eye(k)) * np.sqrt(N)
 
 
-def solve_lmis(data: GridData, *, x_bounds=(1e-6, 1e6), eps: float = 1e-7, curvature=None):
-    """Minimise ``gamma`` subject to the bounded-real LMIs at every grid point and rate vertex (cvxpy + Clarabel).
+def solve_lmis(data: GridData, *, x_bounds=(1e-6, 1e6), eps: float = 1e-7, curvature=None, solver="clarabel",
+               x_factor=None, settings=None):  # fmt: skip
+    """Minimise ``gamma`` subject to the bounded-real LMIs at every grid point and rate vertex.
+
+    ``solver="cvxpy"`` builds them with cvxpy (solved by Clarabel); otherwise
+    :func:`polyrob.analysis.lpv.assemble.solve_direct` (``x_factor`` and
+    ``settings`` are passed to it and ignored by the cvxpy route, which keeps
+    ``X_j`` full).
 
     Parameters
     ----------
@@ -144,6 +161,9 @@ def solve_lmis(data: GridData, *, x_bounds=(1e-6, 1e6), eps: float = 1e-7, curva
     SolverError
         cvxpy or Clarabel failed (not: the LMIs are infeasible, which is a status).
     """
+    if solver != "cvxpy":
+        return solve_direct(data, x_bounds=x_bounds, eps=eps, curvature=curvature, x_factor=x_factor,
+                            solver=solver, settings=settings)  # fmt: skip
     import cvxpy as cp
 
     A, B, C, D, F, G = data.A, data.B, data.C, data.D, data.F, data.G
@@ -159,7 +179,7 @@ def solve_lmis(data: GridData, *, x_bounds=(1e-6, 1e6), eps: float = 1e-7, curva
         X = sum(float(F[a, j]) * Z[j] for j in range(k))
         if a == 0 or not constant:
             cons += [X >> x_bounds[0] * eye_n, X << x_bounds[1] * eye_n]
-        for nu in data.nus:
+        for nu in data.rates()[a]:
             w = G[a] @ nu
             dX = sum(float(w[j]) * Z[j] for j in range(k) if w[j] != 0)
             XA = X @ A[a]
@@ -187,6 +207,28 @@ def solve_lmis(data: GridData, *, x_bounds=(1e-6, 1e6), eps: float = 1e-7, curva
         return None, float("inf"), status
     Xs = np.array([0.5 * (z.value + z.value.T) for z in Z])
     return Xs, float(g.value), status
+
+
+def _backed_off(cond, data, T, Zs, g_solver, opts, L, aff, notes):
+    """The solver's ``X`` if the re-check proves a level with it, else one from a fixed level above ``g_solver``.
+
+    Minimising ``gamma`` ends on the boundary of the feasible set, where a
+    stalled interior-point solver may return a point the float64 re-check
+    rejects; with ``gamma`` fixed at ``1.1`` (then ``1.5``) times its
+    optimum and the LMIs' margin maximised the point lies well inside.
+    """
+    check_data = GridData(cond.A, cond.B, cond.C, cond.D, data.F, data.G, data.nus, data.points)
+    if Zs is not None and np.isfinite(proved_gamma(check_data, np.einsum("jl,lab->jab", T, Zs), g_solver)[0]):
+        return Zs
+    for factor in (1.1, 1.5):
+        Z2, _, st = solve_direct(
+            cond, x_bounds=opts["x_bounds"], eps=opts["eps"], curvature=aff, x_factor=L,
+            solver=opts["solver"], settings=opts["settings"], level=factor * g_solver,
+        )  # fmt: skip
+        if Z2 is not None and np.isfinite(proved_gamma(check_data, np.einsum("jl,lab->jab", T, Z2), g_solver)[0]):
+            notes.append(f"X from the LMIs at gamma = {factor} x the solver's optimum, margin maximised ({st})")
+            return Z2
+    return Zs
 
 
 def frozen_peak(data: GridData) -> float:
@@ -246,7 +288,16 @@ def lpvnorm(system, grid, rate_bounds=None, basis=None, **options) -> LpvNormRes
         at the grid points) for a guarantee between the grid points (constant
         or affine ``X``, multi-convexity constraints added);
         ``x_bounds`` ((1e-6, 1e6)): bounds of ``X(rho)``'s eigenvalues in the
-        conditioned coordinates; ``eps`` (1e-7): strictness margin of the LMIs.
+        conditioned coordinates; ``eps`` (1e-7): strictness margin of the LMIs;
+        ``solver`` ("clarabel"): "clarabel" or "scs" on the conic data
+        assembled directly (:mod:`polyrob.analysis.lpv.assemble`), or
+        "cvxpy" (cvxpy + Clarabel, slower to build); ``settings`` (None):
+        the solver's settings; ``x_factor`` (None): an ``r x n`` matrix
+        ``L``, the basis functions after the first then carry ``L^T Y_j L``
+        (a smaller search, e.g. the states whose equations depend on ``rho``);
+        ``rates_at`` (None): ``rho -> p pairs (lo, hi)``, the rate box at
+        each grid point, inside ``rate_bounds`` (e.g. ``dq/dt = qdot``
+        exactly when both are parameters).
 
     Returns
     -------
@@ -277,7 +328,7 @@ def lpvnorm(system, grid, rate_bounds=None, basis=None, **options) -> LpvNormRes
     """
     t0 = time.perf_counter()
     opts = _options(options)
-    ev = evaluate(system, grid, rate_bounds, basis)
+    ev = evaluate(system, grid, rate_bounds, basis, opts["rates_at"])
     data = ev.data
     N, n = data.A.shape[:2]
     k = data.F.shape[1]
@@ -303,10 +354,14 @@ def lpvnorm(system, grid, rate_bounds=None, basis=None, **options) -> LpvNormRes
         if not aff.basis_affine:
             notes.append("the basis is not affine in rho: no guarantee between the grid points")
             aff = None
+    L = None if opts["x_factor"] is None else np.atleast_2d(np.asarray(opts["x_factor"], float)) * s[None, :]
     Zs, g_solver, status = solve_lmis(
-        cond, x_bounds=opts["x_bounds"], eps=opts["eps"], curvature=aff if aff is not None else None
-    )
+        cond, x_bounds=opts["x_bounds"], eps=opts["eps"], curvature=aff, x_factor=L,
+        solver=opts["solver"], settings=opts["settings"],
+    )  # fmt: skip
     gamma, chk, Xs_user, slack = float("inf"), None, (), 0.0
+    if opts["solver"] != "cvxpy" and np.isfinite(g_solver) and g_solver > 0:
+        Zs = _backed_off(cond, data, T, Zs, g_solver, opts, L, aff, notes)
     if Zs is not None:
         Xs = np.einsum("jl,lab->jab", T, Zs)  # back to the user's basis (balanced coordinates)
         check_data = GridData(cond.A, cond.B, cond.C, cond.D, data.F, data.G, data.nus, data.points)
@@ -326,6 +381,8 @@ def lpvnorm(system, grid, rate_bounds=None, basis=None, **options) -> LpvNormRes
     if rate_bounds is not None and not ev.constant_x:
         rb = [(float(lo), float(hi)) for lo, hi in rate_bounds]
         variation = rate_text(rb)
+        if opts["rates_at"] is not None:
+            variation += ", and at each grid point the rates rates_at(rho) gives"
         if not all(lo <= 0.0 <= hi for lo, hi in rb):
             notes.append(
                 "0 is outside the rate box: frozen_gamma is not a lower bound (constant rho is not admissible)"
@@ -350,7 +407,7 @@ def lpvnorm(system, grid, rate_bounds=None, basis=None, **options) -> LpvNormRes
         variation=variation,
         coverage=coverage,
         n_points=N,
-        n_rate_vertices=int(data.nus.shape[0]) if not ev.constant_x else 1,
+        n_rate_vertices=int(data.rates().shape[1]) if not ev.constant_x else 1,
         n_basis=k,
         n_states=n,
         solver_status=status,

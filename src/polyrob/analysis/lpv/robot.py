@@ -43,6 +43,7 @@ __all__ = [
     "scheduling",
     "rate_bounds",
     "closed_loop_system",
+    "kinematic_rates",
     "conditioned",
     "default_basis",
     "RATE_SAMPLES",
@@ -220,6 +221,47 @@ def rate_bounds(model: MovingRobotModel, domain, *, qddot_max=None, samples: int
     return rates, source
 
 
+def kinematic_rates(model: MovingRobotModel, rates, c: float = 1.0):
+    """``rho -> rate box at rho``: ``d q_j/dt = qdot_j`` exactly when ``qdot_j`` is a parameter too.
+
+    A position's rate is not free inside ``[-qdot_max, qdot_max]``: at a grid
+    point where ``qdot_j = v`` it is ``v`` (times the factor by which
+    ``rates`` scale the velocity bound, e.g. 0 for frozen).  The other
+    parameters keep ``rates``.  Everything is divided by the time scale ``c``
+    (:func:`conditioned`).
+
+    Parameters
+    ----------
+    model : MovingRobotModel
+    rates : sequence of (float, float)
+        From :func:`rate_bounds`.
+    c : float
+
+    Returns
+    -------
+    callable
+    """
+    where = {(kind, j): i for i, (kind, j) in enumerate(zip(model.kinds, model.joints))}
+    vmax = {j: float(np.abs(model.axes[i]).max()) for (kind, j), i in where.items() if kind == "qdot"}
+    plan = []
+    for i, (kind, j) in enumerate(zip(model.kinds, model.joints)):
+        lo, hi = rates[i]
+        exact = kind == "q" and ("qdot", j) in where and np.isfinite(hi) and vmax.get(j, 0.0) > 0
+        plan.append((where[("qdot", j)], hi / vmax[j]) if exact else None)
+
+    def at(rho):
+        out = []
+        for (lo, hi), how in zip(rates, plan):
+            if how is None:
+                out.append((lo / c, hi / c))
+            else:
+                v = min(max(rho[how[0]] * how[1], lo), hi) / c
+                out.append((v, v))
+        return out
+
+    return at
+
+
 def closed_loop_system(model: MovingRobotModel, K, W_S=None, W_T=None, W_KS=None):
     """``rho -> (A, B, C, D)``: the closed loop ``r -> z = [W_S e; W_T y; W_KS u]`` at the robot's state ``rho``.
 
@@ -238,38 +280,52 @@ def closed_loop_system(model: MovingRobotModel, K, W_S=None, W_T=None, W_KS=None
     return system
 
 
-def _brl_solution(A, B, C, D, gamma: float) -> np.ndarray:
-    """Stabilising solution of the bounded-real Riccati equation at level ``gamma`` (Hamiltonian, ordered Schur)."""
+def _brl_solution(A, B, C, D, gamma: float, delta: float = 1e-6) -> np.ndarray:
+    """A strictly feasible bounded-real Lyapunov matrix at level ``gamma`` (``X > 0``, LMI ``< 0``).
+
+    The stabilising solution of ``A^T X + X A + C^T C + delta I + (X B + C^T D) R^{-1} (B^T X + D^T C) = 0``,
+    ``R = gamma^2 I - D^T D`` (scipy's generalised-Schur Riccati solver, on
+    the power-of-two balanced copy of the states); ``delta > 0`` makes the
+    bounded-real LMI strict (without it the solution lies on its boundary).
+    """
     import scipy.linalg as sla
 
-    n = A.shape[0]
+    from polyrob.analysis.lpv.norm import state_scaling
+
+    s = state_scaling(A[None])
+    Ab, Bb, Cb = A / s[:, None] * s[None, :], B / s[:, None], C * s[None, :]
     R = gamma**2 * np.eye(B.shape[1]) - D.T @ D
-    Ri = np.linalg.inv(R)
-    Ab = A + B @ Ri @ D.T @ C
-    H = np.block([[Ab, B @ Ri @ B.T], [-C.T @ (np.eye(C.shape[0]) + D @ Ri @ D.T) @ C, -Ab.T]])
-    _, Z, sdim = sla.schur(H, sort="lhp")
-    if sdim != n:
-        raise NotApplicable(f"bounded-real Riccati: {sdim} stable eigenvalues of {2 * n}")
-    X = np.linalg.solve(Z[:n, :n].T, Z[n:, :n].T).T
-    return 0.5 * (X + X.T)
+    Q = Cb.T @ Cb
+    Q = Q + delta * max(1.0, float(np.abs(Q).max())) * np.eye(A.shape[0])
+    try:
+        Xb = sla.solve_continuous_are(Ab, Bb, Q, -R, s=Cb.T @ D)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise NotApplicable(f"bounded-real Riccati: {exc}") from exc
+    X = Xb / s[:, None] / s[None, :]
+    X = 0.5 * (X + X.T)
+    if not np.all(np.isfinite(X)) or np.linalg.eigvalsh(X)[0] <= 0:
+        raise NotApplicable("bounded-real Riccati: no positive definite solution")
+    return X
 
 
-def conditioned(system, centre, *, floor: float = 1e-8):
+def conditioned(system, centre, *, floor: float = 1e-12):
     """A time-scaled, similarity-transformed copy of ``system`` with the same induced L2 gain.
 
     Stiff closed loops (poles from 1e-3 to 1e4 rad/s) defeat the LMI solver.
     Time ``tau = c t`` (``c`` a power of two near the geometric mean of the
     slowest and the fastest pole at the centre) maps
     ``(A, B, C, D)`` to ``(A/c, B/c, C, D)`` and every rate to ``rate/c``;
-    the state similarity ``T = X0^{-1/2}`` with ``X0`` the bounded-real
-    Riccati solution at the centre point (level 1.5 times its H-infinity norm,
-    eigenvalues floored at ``floor`` times the largest) makes the Lyapunov
-    matrix there the identity.  Both leave the gain of every trajectory
-    unchanged; the proof of :func:`polyrob.lpvnorm` is made on the copy.
+    the state similarity ``T = X0^{-1/2}`` with ``X0`` a strict bounded-real
+    Lyapunov matrix at the centre point (:func:`_brl_solution`, level 1.5
+    times its H-infinity norm; eigenvalues floored at ``floor`` times the
+    largest) makes the Lyapunov matrix there a multiple of the identity.
+    Both leave the gain of every trajectory unchanged; the proof of
+    :func:`polyrob.lpvnorm` is made on the copy.
 
     Returns
     -------
     system_c : callable
+        With the attribute ``similarity``: ``T`` (``x = T x~``).
     c : float
         The time scale (rates are divided by it).
     """
@@ -281,15 +337,13 @@ def conditioned(system, centre, *, floor: float = 1e-8):
     lam = np.abs(np.linalg.eigvals(A))
     lam = lam[lam > 0] if np.any(lam > 0) else np.ones(1)
     c = float(2.0 ** np.round(0.5 * np.log2(lam.min() * lam.max())))
-    # the Riccati solution is the same up to a factor at any time scale; the fastest pole's is the best posed
-    c_ric = float(2.0 ** np.round(np.log2(lam.max())))
-    h = hinf_norm((A / c_ric, B / c_ric, C, D))
+    h = hinf_norm((A, B, C, D))
     if not np.isfinite(h):
         raise NotApplicable("the closed loop at the centre of the grid is unstable")
     try:
-        X0 = _brl_solution(A / c_ric, B / c_ric, C, D, 1.5 * max(h, 1e-6))
-    except NotApplicable:  # the Hamiltonian's stable subspace not found: the observability Gramian instead
-        X0 = sla.solve_continuous_lyapunov((A / c_ric).T, -C.T @ C)
+        X0 = _brl_solution(A, B, C, D, 1.5 * max(h, 1e-6))
+    except NotApplicable:  # no Riccati solution: the observability Gramian instead
+        X0 = sla.solve_continuous_lyapunov(A.T, -C.T @ C)
     w, V = np.linalg.eigh(0.5 * (X0 + X0.T))
     w = np.maximum(w, floor * w.max())
     T, Ti = (V * w**-0.5) @ V.T, (V * w**0.5) @ V.T
@@ -298,6 +352,7 @@ def conditioned(system, centre, *, floor: float = 1e-8):
         a, b, cc, d = system(rho)
         return Ti @ (a / c) @ T, Ti @ (b / c), cc @ T, d
 
+    system_c.similarity = T  # x = T x~: a Lyapunov matrix restricted to states S is (E_S T)^T Y (E_S T) here
     return system_c, c
 
 
