@@ -34,7 +34,7 @@ import scipy.sparse as sp
 
 from polyrob.errors import ArgumentError, SolverError
 
-__all__ = ["svec_index", "conic_data", "solve_direct", "SOLVERS"]
+__all__ = ["svec_index", "conic_data", "solve_direct", "backed_off", "SOLVERS"]
 
 #: Solvers :func:`solve_direct` drives through their own Python interfaces.
 SOLVERS = ("clarabel", "scs")
@@ -260,3 +260,50 @@ def solve_direct(data, *, x_bounds=(1e-6, 1e6), eps=1e-7, curvature=None, x_fact
     if level is not None:
         gamma = float(level)
     return 0.5 * (Zs + np.transpose(Zs, (0, 2, 1))), gamma, status.lower()
+
+
+def backed_off(cond, data, T, Zs, g_solver, opts, L, aff, notes):
+    """The solver's ``X`` if the re-check proves a level with it, else one from a fixed level above ``g_solver``.
+
+    Minimising ``gamma`` ends on the boundary of the feasible set, where a
+    stalled interior-point solver may return a point the float64 re-check
+    rejects; with ``gamma`` fixed at ``1.1`` (then ``1.5``) times its
+    optimum and the LMIs' margin maximised the point lies well inside.
+
+    Parameters
+    ----------
+    cond : GridData
+        The conditioned data the LMIs are written on (orthonormal basis ``F T``).
+    data : GridData
+        The same in the user's basis (for the re-check).
+    T : ndarray
+        The basis transform (``X_j = sum_l T_jl Z_l``).
+    Zs : ndarray or None
+        The solver's matrices in the conditioned basis.
+    g_solver : float
+    opts : dict
+        :func:`polyrob.lpvnorm`'s options.
+    L : ndarray or None
+        The ``x_factor`` in the conditioned coordinates.
+    aff : AffineTerms or None
+    notes : list of str
+        Appended to when the back-off gave the matrices.
+
+    Returns
+    -------
+    ndarray or None
+    """
+    from polyrob.analysis.lpv.check import GridData, proved_gamma
+
+    check_data = GridData(cond.A, cond.B, cond.C, cond.D, data.F, data.G, data.nus, data.points)
+    if Zs is not None and np.isfinite(proved_gamma(check_data, np.einsum("jl,lab->jab", T, Zs), g_solver)[0]):
+        return Zs
+    for factor in (1.1, 1.5):
+        Z2, _, st = solve_direct(
+            cond, x_bounds=opts["x_bounds"], eps=opts["eps"], curvature=aff, x_factor=L,
+            solver=opts["solver"], settings=opts["settings"], level=factor * g_solver,
+        )  # fmt: skip
+        if Z2 is not None and np.isfinite(proved_gamma(check_data, np.einsum("jl,lab->jab", T, Z2), g_solver)[0]):
+            notes.append(f"X from the LMIs at gamma = {factor} x the solver's optimum, margin maximised ({st})")
+            return Z2
+    return Zs

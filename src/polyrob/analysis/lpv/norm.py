@@ -40,7 +40,7 @@ import warnings
 
 import numpy as np
 
-from polyrob.analysis.lpv.assemble import solve_direct
+from polyrob.analysis.lpv.assemble import backed_off, solve_direct
 from polyrob.analysis.lpv.between import affine_terms, curvature_slack
 from polyrob.analysis.lpv.check import GridData, proved_gamma
 from polyrob.analysis.lpv.data import evaluate
@@ -209,28 +209,6 @@ def solve_lmis(data: GridData, *, x_bounds=(1e-6, 1e6), eps: float = 1e-7, curva
     return Xs, float(g.value), status
 
 
-def _backed_off(cond, data, T, Zs, g_solver, opts, L, aff, notes):
-    """The solver's ``X`` if the re-check proves a level with it, else one from a fixed level above ``g_solver``.
-
-    Minimising ``gamma`` ends on the boundary of the feasible set, where a
-    stalled interior-point solver may return a point the float64 re-check
-    rejects; with ``gamma`` fixed at ``1.1`` (then ``1.5``) times its
-    optimum and the LMIs' margin maximised the point lies well inside.
-    """
-    check_data = GridData(cond.A, cond.B, cond.C, cond.D, data.F, data.G, data.nus, data.points)
-    if Zs is not None and np.isfinite(proved_gamma(check_data, np.einsum("jl,lab->jab", T, Zs), g_solver)[0]):
-        return Zs
-    for factor in (1.1, 1.5):
-        Z2, _, st = solve_direct(
-            cond, x_bounds=opts["x_bounds"], eps=opts["eps"], curvature=aff, x_factor=L,
-            solver=opts["solver"], settings=opts["settings"], level=factor * g_solver,
-        )  # fmt: skip
-        if Z2 is not None and np.isfinite(proved_gamma(check_data, np.einsum("jl,lab->jab", T, Z2), g_solver)[0]):
-            notes.append(f"X from the LMIs at gamma = {factor} x the solver's optimum, margin maximised ({st})")
-            return Z2
-    return Zs
-
-
 def frozen_peak(data: GridData) -> float:
     """Largest LTI H-infinity norm over the grid points (``inf`` when one frozen system is unstable).
 
@@ -361,7 +339,7 @@ def lpvnorm(system, grid, rate_bounds=None, basis=None, **options) -> LpvNormRes
     )  # fmt: skip
     gamma, chk, Xs_user, slack = float("inf"), None, (), 0.0
     if opts["solver"] != "cvxpy" and np.isfinite(g_solver) and g_solver > 0:
-        Zs = _backed_off(cond, data, T, Zs, g_solver, opts, L, aff, notes)
+        Zs = backed_off(cond, data, T, Zs, g_solver, opts, L, aff, notes)
     if Zs is not None:
         Xs = np.einsum("jl,lab->jab", T, Zs)  # back to the user's basis (balanced coordinates)
         check_data = GridData(cond.A, cond.B, cond.C, cond.D, data.F, data.G, data.nus, data.points)
