@@ -122,3 +122,21 @@ def test_batch_task_and_inner_options_reach_every_job():
     assert batch_cli.jobs_from_args(parser.parse_args(["batch", "ur5", "--torque-box"]))[0]["torque_box"] is True
     with pytest.raises(ArgumentError, match="--model-error"):
         batch_cli.jobs_from_args(parser.parse_args(["batch", "ur5", "--model-error", "120"]))
+
+
+def test_the_model_coverage_of_an_inner_loop_is_measured_on_the_inner_loop_and_its_true_robots():
+    # the PLDI remembers the robot it was bounded for (an inner loop), so the uncertainty model's
+    # coverage check draws the inner loop's Jacobians, over its true robots, not the bare robot's
+    from polyrob import bound_pldi
+    from polyrob.model.inner import inner_loop
+    from polyrob.plant.coverage import coverage_fraction
+    from polyrob.plant.uncertainty import uncertain_plant
+
+    arm = inner_loop(cached_robot("planar_2r"), "computed-torque", model_error=0.1)
+    dom = TaskDomain.from_robot(arm, pose=[0.3, 1.2], q_radius=0.2, qdot_max=0.5, qddot_max=1.0)
+    pldi = bound_pldi(arm, dom, samples=64, coverage=0, progress=False, workers=1, screen=0, verify_rounds=0)
+    assert pldi.robot is arm
+    unc = uncertain_plant(pldi, model="box", coverage=500)
+    assert unc.coverage == 1.0
+    # the bare robot's Jacobians (no inner layer) are not those of this problem: far outside
+    assert coverage_fraction(unc, cached_robot("planar_2r"), dom, 200) < 0.5

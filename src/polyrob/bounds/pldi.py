@@ -293,6 +293,7 @@ def bound_pldi(
     result = PLDI(
         robot_name=robot.name,
         robot_source=robot.source,
+        source_robot=robot,
         domain=domain,
         nominal_point=point,
         A0=A0,

@@ -115,6 +115,7 @@ class PLDI:
     dropped_q: tuple[int, ...]
     info: dict = field(default_factory=dict)
     robot_locked: tuple[str, ...] | None = None
+    source_robot: object = field(default=None, repr=False, compare=False)
 
     # ------------------------------------------------------------------ views
     @property
@@ -123,7 +124,17 @@ class PLDI:
 
     @property
     def robot(self):
-        """The robot, loaded again from its source, with the same joints locked."""
+        """The robot the PLDI was computed for.
+
+        In the process that bounded it, the very object (an inner loop with
+        its true robots, an armature override); otherwise the robot of a task
+        domain, else the robot loaded again from its source, with the same
+        joints locked (a PLDI file does not record an inner layer).
+        """
+        if self.source_robot is not None:
+            return self.source_robot
+        if getattr(self.domain, "robot", None) is not None:
+            return self.domain.robot
         from polyrob.model.robots import load_robot
 
         source = self.robot_source if self.robot_source.endswith(".urdf") else self.robot_name

@@ -246,6 +246,7 @@ def apply_default_task(robot, args) -> bool:
     from polyrob.bounds.default_task import DEFAULT_TASK, applies_to
 
     args.default_task = None
+    args.bound_options = None
     given = (
         domain_options_given(args)
         or inner_options_given(args)
@@ -257,6 +258,7 @@ def apply_default_task(robot, args) -> bool:
     args.q_radius, args.qdot_max, args.qddot_max = f"{t.q_radius!r}", f"{t.qdot_max!r}", f"{t.qddot_max!r}"
     args.inner, args.model_error = t.inner, f"{100 * t.model_error!r}"
     args.default_task = t.words()
+    args.bound_options = t.bound_options
     logging.getLogger("polyrob").info(
         f"default task of {robot.name} ({robot.m} joints, no domain given): {t.words()}; "
         "--torque-box for the URDF torque box without an inner layer"

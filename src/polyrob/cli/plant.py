@@ -76,4 +76,5 @@ def problem_from_args(robot, args, out, *, hyperparameters=None, check=None):
         pldi=pldi,
         merge_symmetric=args.merge_symmetric,
         progress=out.progress,
+        bound_options=getattr(args, "bound_options", None),  # the default task's search effort (cli.common)
     )

@@ -241,7 +241,7 @@ def _problem(job: Job, settings: Settings, timings: dict):
     from polyrob.fleet.autoweights import automatic_hyperparameters
     from polyrob.pipeline import build_problem, default_hyperparameters
 
-    robot, domain, _ = job_robot_and_domain(job)
+    robot, domain, task = job_robot_and_domain(job)
     if job.auto_weights:
         h = automatic_hyperparameters(robot.m, domain, job.weights)
     else:
@@ -249,7 +249,7 @@ def _problem(job: Job, settings: Settings, timings: dict):
     if job.bandwidth_scale != 1.0:
         h = default_hyperparameters(robot.m, h, bandwidth_scale=job.bandwidth_scale)
     t0 = time.perf_counter()
-    options = {"workers": 1, **settings.bound_options}
+    options = {"workers": 1, **(task.bound_options if task is not None else {}), **settings.bound_options}
     problem = build_problem(
         robot, domain, hyperparameters=h, uncertainty=job.uncertainty, progress=False, bound_options=options
     )

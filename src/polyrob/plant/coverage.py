@@ -41,10 +41,20 @@ def coverage_fraction(unc: UncertainPlant, robot, domain, n: int = 2000, *, seed
     """Fraction of ``n`` fresh uniform points of ``domain`` whose Jacobians the model contains.
 
     The points are drawn with a seed of their own, not the PLDI's design.
+    For an inner loop (:mod:`polyrob.model.inner`) the points are shared
+    among its true robots (``robot.variants()``, each with the inputs of its
+    own inverse dynamics on a task domain), as the bounds were taken over them.
     """
-    q, qdot, u = domain.sample(int(n), method="uniform", seed=seed)
-    A, B = robot.jacobians_batch(q, qdot, u)
-    return float(model_contains(unc, A, B).mean())
+    from polyrob.bounds.search import Problem
+
+    problem = Problem(robot, domain)
+    share = max(1, int(n) // len(problem.variants))
+    inside = []
+    for i, (variant, dom) in enumerate(zip(problem.variants, problem.domains)):
+        q, qdot, u = dom.sample(share, method="uniform", seed=[seed, i] if i else seed)
+        A, B = variant.jacobians_batch(q, qdot, u)
+        inside.append(model_contains(unc, A, B))
+    return float(np.concatenate(inside).mean())
 
 
 def _box_points(pldi, n: int, rng):
