@@ -8,7 +8,13 @@ scheduled on the robot's state ``rho = (q_i that enter, qdot)``
 gain ``gamma`` (:func:`polyrob.lpvnorm`, parameter-dependent Lyapunov matrix
 ``X(rho)`` on :func:`~polyrob.analysis.lpv.robot.default_basis`) for every
 trajectory of ``rho`` in the domain whose rates stay within the bounds of
-:func:`~polyrob.analysis.lpv.robot.rate_bounds`.  Robust performance is
+:func:`~polyrob.analysis.lpv.robot.rate_bounds`, a position moving at its
+own velocity at every grid point (``dq_i/dt = qdot_i``,
+:func:`~polyrob.analysis.lpv.robot.kinematic_rates`).  For a large loop
+(``velocities="auto"``) ``X`` depends on the positions only and the
+velocities may vary arbitrarily fast: a set of trajectories that contains
+the bounded-acceleration one, searched with fewer variables and LMIs
+(:func:`moving_robot_gain`).  Robust performance is
 ``gamma < 1``; the status is decided by
 :func:`polyrob.analysis.certificate.decide_gridded_gain`: the LMIs hold at
 the grid's points, so a proved ``gamma < 1`` gives GRID_ONLY, not CERTIFIED
