@@ -140,3 +140,46 @@ def test_the_model_coverage_of_an_inner_loop_is_measured_on_the_inner_loop_and_i
     assert unc.coverage == 1.0
     # the bare robot's Jacobians (no inner layer) are not those of this problem: far outside
     assert coverage_fraction(unc, cached_robot("planar_2r"), dom, 200) < 0.5
+
+
+def _ct_pldi(error=0.1):
+    from polyrob import bound_pldi
+    from polyrob.model.inner import inner_loop
+
+    arm = inner_loop(cached_robot("planar_2r"), "computed-torque", model_error=error)
+    dom = TaskDomain.from_robot(arm, pose=[0.3, 1.2], q_radius=0.3, qdot_max=1.0, qddot_max=2.0)
+    return arm, dom, bound_pldi(arm, dom, samples=64, coverage=0, progress=False, workers=1, screen=0, verify_rounds=0)
+
+
+def test_the_inner_gain_model_holds_the_computed_torque_loop_with_one_parameter():
+    from polyrob.plant.coverage import coverage_fraction
+    from polyrob.plant.inner_gain import gain_range
+    from polyrob.plant.uncertainty import uncertain_plant
+
+    arm, dom, pldi = _ct_pldi(0.1)
+    unc = uncertain_plant(pldi, model="auto", coverage=600, volume_samples=0)
+    assert unc.model == "inner-gain" and unc.n_params == 1 and unc.coverage == 1.0
+    assert unc.block_structure[-1].tolist() == [-2, 0]  # eps, repeated on both joints
+    assert gain_range(0.1) == pytest.approx((1 / 1.1 - 1, 1 / 0.9 - 1))
+    # a computed-torque loop with a larger model error than the model was built for leaves it
+    wider = default_task_robot(cached_robot("planar_2r"), DefaultTask(model_error=0.3))
+    assert (
+        coverage_fraction(
+            unc, wider, TaskDomain.from_robot(wider, pose=[0.3, 1.2], q_radius=0.3, qdot_max=1.0, qddot_max=2.0), 600
+        )
+        < 0.9
+    )
+
+
+def test_auto_falls_back_to_axes_where_the_inner_gain_model_does_not_apply():
+    from polyrob import bound_pldi
+    from polyrob.model.inner import inner_loop
+    from polyrob.plant.inner_gain import applies
+    from polyrob.plant.uncertainty import uncertain_plant
+
+    assert "computed-torque" in applies(inner_loop(cached_robot("planar_2r"), "gravity", model_error=0.1))
+    assert "model error" in applies(inner_loop(cached_robot("planar_2r"), "computed-torque"))
+    arm = inner_loop(cached_robot("planar_2r"), "gravity", model_error=0.1)
+    dom = TaskDomain.from_robot(arm, pose=[0.3, 1.2], q_radius=0.3, qdot_max=1.0, qddot_max=2.0)
+    pldi = bound_pldi(arm, dom, samples=64, coverage=0, progress=False, workers=1, screen=0, verify_rounds=0)
+    assert uncertain_plant(pldi, model="auto", coverage=0, volume_samples=0).model != "inner-gain"

@@ -29,7 +29,7 @@ Examples
 >>> import polyrob
 >>> from polyrob.plant.models import MODELS, model_of
 >>> list(MODELS)
-['box', 'axes', 'lft', 'lft-torque', 'inertia']
+['box', 'axes', 'lft', 'lft-torque', 'inertia', 'inner-gain']
 >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
 >>> unc = MODELS["axes"].build(pldi)
 >>> model_of(unc).name, model_of(unc).enclosure(unc), unc.info["enclosure_inputs"]
@@ -54,6 +54,7 @@ __all__ = [
     "AxesModel",
     "InertiaLFTModel",
     "InertiaModel",
+    "InnerGainModel",
     "MODELS",
     "model_of",
     "enclosure_inputs",
@@ -265,6 +266,34 @@ class InertiaModel(UncertaintyModel):
         )
 
 
+class InnerGainModel(UncertaintyModel):
+    """Computed torque with one inertia factor: one repeated real gain and a residual (:mod:`polyrob.plant.inner_gain`)."""
+
+    name = "inner-gain"
+    options = ()
+    needs_robot = True
+    #: Why ``model="auto"`` takes this model when it applies.
+    applies = "a computed-torque inner loop whose model is off by one inertia factor: one gain parameter"
+
+    def build(self, pldi, **options):
+        from polyrob.plant.inner_gain import inner_gain_plant
+
+        return inner_gain_plant(pldi)
+
+    def contains(self, unc, A, B):
+        from polyrob.plant.axes import axes_contains
+
+        return axes_contains(unc, A, B)
+
+    def describe(self, unc):
+        lo, hi = unc.info["eps_range"]
+        size = int(unc.block_structure[0, 0]) if unc.block_structure[0, 1] > 0 else 0
+        return (
+            f"inner-gain: [A_low B_low] = [0 I] + eps [J I] of a computed-torque loop, eps in [{lo:.4g}, {hi:.4g}] "
+            f"one repeated real, J's spread a residual block of size {size} ({self.enclosure(unc)} enclosure)."
+        )
+
+
 #: The uncertainty models by name (``unc.model``).
 MODELS: dict[str, UncertaintyModel] = {
     model.name: model
@@ -274,6 +303,7 @@ MODELS: dict[str, UncertaintyModel] = {
         InertiaLFTModel("lft", "entries"),
         InertiaLFTModel("lft-torque", "torque"),
         InertiaModel(),
+        InnerGainModel(),
     )
 }
 
