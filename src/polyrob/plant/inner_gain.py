@@ -60,6 +60,50 @@ def gain_range(model_error: float) -> tuple[float, float]:
     return 1.0 / (1.0 + p) - 1.0, 1.0 / (1.0 - p) - 1.0
 
 
+def jacobian_range(pldi, robot, eps: float):
+    """Entry ranges ``(lo, hi)`` of ``J = d phi / dx`` over the PLDI's domain, in the PLDI's entry order.
+
+    ``J``'s entries are the PLDI entries of the one true robot with
+    ``eps = 1/s - 1`` (``s = 1 - p``: the largest gain) divided by ``eps``,
+    bounded by the same search as the PLDI (its sample count, one local
+    search per direction, one verification round).  The PLDI's own
+    intervals hold ``eps_k J`` of both true robots together, which loses
+    the sign of ``eps``: on a constant ``J_e = c`` they give ``[-0.82 c, c]``
+    at ``p = 0.1``.
+    """
+    from dataclasses import replace
+
+    from polyrob.bounds.pldi import bound_pldi
+
+    true = robot.with_true(None, None, 1.0 - robot.model_error)
+    domain = pldi.domain
+    if getattr(domain, "robot", None) is not None:
+        domain = replace(domain, robot=true)
+    samples = int((pldi.info or {}).get("samples", 256))
+    one = bound_pldi(
+        true,
+        domain,
+        samples=samples,
+        screen=0,
+        starts_per_direction=1,
+        verify_rounds=1,
+        coverage=0,
+        workers=1,
+        progress=False,
+    )
+    lo, hi = np.zeros(len(pldi.entries)), np.zeros(len(pldi.entries))
+    where = {name: i for i, name in enumerate(one.entries)}
+    one_lo, one_hi = np.asarray(one.lower, float), np.asarray(one.upper, float)
+    A0, B0 = one.A0, one.B0
+    for i, (mat, r, c) in enumerate(np.asarray(pldi.entry_index, int).reshape(-1, 3)):
+        name = pldi.entries[i]
+        if name in where:
+            lo[i], hi[i] = one_lo[where[name]], one_hi[where[name]]
+        else:  # constant for this true robot
+            lo[i] = hi[i] = (A0 if mat == 0 else B0)[r, c]
+    return lo / eps, hi / eps
+
+
 def inner_gain_plant(pldi, *, robot=None) -> UncertainPlant:
     """The ``inner-gain`` model of a PLDI of a computed-torque inner loop (see the module text).
 
@@ -82,10 +126,7 @@ def inner_gain_plant(pldi, *, robot=None) -> UncertainPlant:
     diag = isB & (lay[:, 1] - n == lay[:, 0])
     if np.any(isB & ~diag):
         raise NotApplicable("inner-gain: the PLDI's input matrix varies off its diagonal (not t I)")
-    # J_e from each true robot's interval: eps_hi > 0 keeps the order, eps_lo < 0 swaps it
-    j_lo = np.maximum(lo / e_hi, hi / e_lo)
-    j_hi = np.minimum(hi / e_hi, lo / e_lo)
-    j_lo, j_hi = np.minimum(j_lo, j_hi), np.maximum(j_lo, j_hi)
+    j_lo, j_hi = jacobian_range(pldi, robot, e_hi)
     d = np.where(isB, 1.0, 0.5 * (j_lo + j_hi))  # the direction [J_c I]
     j_rad = np.where(isB, 0.0, 0.5 * (j_hi - j_lo))
     eps_max = max(abs(e_lo), abs(e_hi))
