@@ -151,3 +151,27 @@ def test_arbitrary_velocities_cover_more_than_bounded_ones(robot, small):
     assert bounded.proved and free.proved
     assert free.n_basis == 3 and bounded.n_basis == 5
     assert bounded.frozen_gamma * (1 - 1e-6) <= bounded.gamma <= free.gamma * (1 + 1e-3)
+
+
+def test_conditioning_makes_a_strict_lyapunov_matrix_the_identity(robot):
+    """conditioned(): on the stiff 20-state tf3 x 4 loop (poles 1.9e-3 to 1.4e4 rad/s) X = c I proves 1.5 x its norm.
+
+    The former Riccati step failed on this loop (ordered Schur form: 19 stable eigenvalues of 40); the
+    strict solution (C'C + delta I) is the identity in the new coordinates, so the LMI solver starts well posed.
+    """
+    from polyrob.analysis.lpv.check import grid_data, proved_gamma
+    from polyrob.analysis.lpv.robot import conditioned
+    from polyrob.analysis.norms import hinf_norm
+    from polyrob.io.controller import load_controller
+
+    W_S, W_T = paper_weights(default_hyperparameters(2, bandwidth_scale=4.0))
+    K = load_controller("tests/fixtures/paper_2r_tf3_alpha4_K.json")
+    model = scheduling(robot, Domain.from_robot(robot, "paper"), points=(5, 3))
+    system = closed_loop_system(model, K, W_S, W_T)
+    centre = np.zeros(3)
+    system_c, c = conditioned(system, centre, method="riccati")
+    A, B, C, D = system_c(centre)
+    h = hinf_norm(system(centre))
+    assert h == pytest.approx(0.7211, abs=1e-3) and A.shape == (20, 20)
+    g, chk = proved_gamma(grid_data([A], [B], [C], [D]), [c * np.eye(20)], h)
+    assert chk.holds and h < g <= 2.0 * h  # 1.5 h, plus what the strictness term delta I costs

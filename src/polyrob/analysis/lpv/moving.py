@@ -193,7 +193,7 @@ def moving_robot_gain(model, system, rates, *, quadratic: bool = False, velociti
         rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
     fast = all(not np.isfinite(hi) for _, hi in rates)
     c_sys = []
-    try:  # the Riccati-conditioned copy first: in the loop's own coordinates the solver stalls (docs/lpvnorm.md)
+    try:  # the conditioned copy first: in the loop's own coordinates the solver stalls (docs/certificates.md)
         c_sys.append((*conditioned(system, centre), {"eps": 1e-4}))
     except NotApplicable:
         pass

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyrob.errors import NotApplicable
+from polyrob.errors import ArgumentError, NotApplicable
 
 __all__ = [
     "MovingRobotModel",
@@ -280,13 +280,21 @@ def closed_loop_system(model: MovingRobotModel, K, W_S=None, W_T=None, W_KS=None
     return system
 
 
-def _brl_solution(A, B, C, D, gamma: float, delta: float = 1e-6) -> np.ndarray:
-    """A strictly feasible bounded-real Lyapunov matrix at level ``gamma`` (``X > 0``, LMI ``< 0``).
+def _brl_solution(A, B, C, D, gamma: float, delta: float = 1e-6):
+    """A strictly feasible bounded-real Lyapunov matrix at level ``gamma``, on the balanced copy of the states.
 
-    The stabilising solution of ``A^T X + X A + C^T C + delta I + (X B + C^T D) R^{-1} (B^T X + D^T C) = 0``,
-    ``R = gamma^2 I - D^T D`` (scipy's generalised-Schur Riccati solver, on
-    the power-of-two balanced copy of the states); ``delta > 0`` makes the
+    The stabilising solution of ``A^T X + X A + C^T C + d I + (X B + C^T D) R^{-1} (B^T X + D^T C) = 0``,
+    ``R = gamma^2 I - D^T D``, ``d = delta max|C^T C|`` (scipy's
+    generalised-Schur Riccati solver), for the power-of-two balanced copy
+    ``(S^-1 A S, S^-1 B, C S)``, ``S = diag(s)``; ``d > 0`` makes the
     bounded-real LMI strict (without it the solution lies on its boundary).
+    It is returned in those coordinates: mapped back to the loop's own, its
+    eigenvalues would drown in rounding.
+
+    Returns
+    -------
+    Xb : ndarray
+    s : ndarray
     """
     import scipy.linalg as sla
 
@@ -301,24 +309,28 @@ def _brl_solution(A, B, C, D, gamma: float, delta: float = 1e-6) -> np.ndarray:
         Xb = sla.solve_continuous_are(Ab, Bb, Q, -R, s=Cb.T @ D)
     except (np.linalg.LinAlgError, ValueError) as exc:
         raise NotApplicable(f"bounded-real Riccati: {exc}") from exc
-    X = Xb / s[:, None] / s[None, :]
-    X = 0.5 * (X + X.T)
-    if not np.all(np.isfinite(X)) or np.linalg.eigvalsh(X)[0] <= 0:
+    Xb = 0.5 * (Xb + Xb.T)
+    if not np.all(np.isfinite(Xb)) or np.linalg.eigvalsh(Xb)[0] <= 0:
         raise NotApplicable("bounded-real Riccati: no positive definite solution")
-    return X
+    return Xb, s
 
 
-def conditioned(system, centre, *, floor: float = 1e-12):
+def conditioned(system, centre, *, floor: float = 1e-12, method: str = "gramian"):
     """A time-scaled, similarity-transformed copy of ``system`` with the same induced L2 gain.
 
     Stiff closed loops (poles from 1e-3 to 1e4 rad/s) defeat the LMI solver.
     Time ``tau = c t`` (``c`` a power of two near the geometric mean of the
     slowest and the fastest pole at the centre) maps
     ``(A, B, C, D)`` to ``(A/c, B/c, C, D)`` and every rate to ``rate/c``;
-    the state similarity ``T = X0^{-1/2}`` with ``X0`` a strict bounded-real
-    Lyapunov matrix at the centre point (:func:`_brl_solution`, level 1.5
-    times its H-infinity norm; eigenvalues floored at ``floor`` times the
-    largest) makes the Lyapunov matrix there a multiple of the identity.
+    the state similarity ``T = S Xb^{-1/2}`` makes ``Xb`` the identity:
+    ``method="gramian"`` (the default), the observability Gramian at the
+    centre point (``S = I``); ``method="riccati"``, a strict bounded-real
+    Lyapunov matrix at the centre of the power-of-two balanced copy
+    (``S``; :func:`_brl_solution`, level 1.5 times its H-infinity norm), so
+    that the Lyapunov matrix there is a multiple of the identity
+    (eigenvalues floored at ``floor`` times the largest).  On the 20-state
+    loop of docs/certificates.md the Gramian's coordinates gave the solver
+    the faster proof.
     Both leave the gain of every trajectory unchanged; the proof of
     :func:`polyrob.lpvnorm` is made on the copy.
 
@@ -340,13 +352,17 @@ def conditioned(system, centre, *, floor: float = 1e-12):
     h = hinf_norm((A, B, C, D))
     if not np.isfinite(h):
         raise NotApplicable("the closed loop at the centre of the grid is unstable")
-    try:
-        X0 = _brl_solution(A, B, C, D, 1.5 * max(h, 1e-6))
-    except NotApplicable:  # no Riccati solution: the observability Gramian instead
-        X0 = sla.solve_continuous_lyapunov(A.T, -C.T @ C)
-    w, V = np.linalg.eigh(0.5 * (X0 + X0.T))
+    s = np.ones(A.shape[0])
+    if method == "riccati":
+        Xb, s = _brl_solution(A, B, C, D, 1.5 * max(h, 1e-6))
+    elif method == "gramian":
+        Xb = sla.solve_continuous_lyapunov(A.T, -C.T @ C)
+    else:
+        raise ArgumentError(f"method must be 'gramian' or 'riccati' (got {method!r})")
+    w, V = np.linalg.eigh(0.5 * (Xb + Xb.T))
     w = np.maximum(w, floor * w.max())
-    T, Ti = (V * w**-0.5) @ V.T, (V * w**0.5) @ V.T
+    # x = S x_b (balanced), x_b = Xb^-1/2 x~: T = S Xb^-1/2
+    T, Ti = s[:, None] * ((V * w**-0.5) @ V.T), ((V * w**0.5) @ V.T) / s[None, :]
 
     def system_c(rho):
         a, b, cc, d = system(rho)
