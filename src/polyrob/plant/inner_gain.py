@@ -113,8 +113,12 @@ def inner_gain_plant(pldi, *, robot=None) -> UncertainPlant:
         Not a computed-torque loop with one inertia factor (:func:`applies`),
         or a PLDI whose input matrix varies off the diagonal.
     """
-    robot = pldi.robot if robot is None else robot
-    why = applies(robot)
+    if robot is None:  # an inner loop lives in the process that bounded it (a PLDI file records none)
+        robot = pldi.source_robot if pldi.source_robot is not None else getattr(pldi.domain, "robot", None)
+    why = applies(robot) if robot is not None else "inner-gain: no inner loop recorded with the PLDI"
+    if why:
+        raise NotApplicable(why)
+    why = None
     if why:
         raise NotApplicable(why)
     m = pldi.m
