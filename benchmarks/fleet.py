@@ -52,6 +52,10 @@ def _row(r) -> dict:
 
     return {
         "robot": r.name,
+        "domain": r.domain,
+        "inner": r.inner,
+        "reflected_inertia": r.reflected_inertia,
+        "status": r.status,
         "joints": r.joints,
         "entries": r.entries,
         "parameters": r.parameters,
@@ -88,6 +92,9 @@ def main(argv=None) -> int:
     p.add_argument("--alphas", default=None, help="factors of the bandwidth search (comma-separated)")
     p.add_argument("--uncertainty", default="auto")
     p.add_argument("--no-validate", action="store_true")
+    p.add_argument(
+        "--no-analysis", action="store_true", help="skip the mu analysis sweeps (the row: the synthesis certificate)"
+    )
     args = p.parse_args(argv)
     if args.all_serial:
         from polyrob.fleet import serial_arms
@@ -102,6 +109,7 @@ def main(argv=None) -> int:
         bound_options={} if args.samples is None else {"samples": args.samples},
         synthesis={} if args.max_iter is None else {"max_iter": args.max_iter},
         validate=not args.no_validate,
+        analyze=not args.no_analysis,
         search_bandwidth=args.max_bandwidth,
         alphas=None if args.alphas is None else tuple(float(a) for a in args.alphas.split(",")),
     )
