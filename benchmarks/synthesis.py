@@ -67,6 +67,7 @@ def bench_distillation() -> dict:
     t0 = time.perf_counter()
     res = musyn(P, DIST_BLK, n_u=2, n_y=2, omega=DIST_OMEGA, progress=False)
     out["polyrob"] = {
+        "status": _status(res),
         "peak_mu_certified": res.peak_mu,
         "peak_mu_lower": res.peak_mu_lower,
         "peak_mu_grid": res.info["grid_peak_mu"],
@@ -113,10 +114,10 @@ warnings.simplefilter("ignore")
 import polyrob, polyrob.plant.weights
 from polyrob.synthesis import musyn
 pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), progress=False)
-P = polyrob.generalized_plant(polyrob.uncertain_plant(pldi), *polyrob.plant.weights.paper_weights())
+P = polyrob.generalized_plant(polyrob.uncertain_plant(pldi, model="box"), *polyrob.plant.weights.paper_weights())
 t0 = time.perf_counter()
 r = musyn(P, structure="tf3", init="paper", starts=2, progress=False)
-print(json.dumps({"peak_mu_certified": r.peak_mu, "peak_mu_lower": r.peak_mu_lower, "order": r.order,
+print(json.dumps({"status": r.certificate.status.value, "peak_mu_certified": r.peak_mu, "peak_mu_lower": r.peak_mu_lower, "order": r.order,
                   "iterations": r.iterations, "init": "paper", "starts": 2,
                   "seconds": round(time.perf_counter() - t0, 2)}))
 """
@@ -142,8 +143,15 @@ def finish_fixed(proc, timeout):
     return json.loads(out.strip().splitlines()[-1])
 
 
+def _status(res):
+    """The certificate's status (docs/certificates.md), or None when the result carries none."""
+    cert = getattr(res, "certificate", None)
+    return None if cert is None else cert.status.value
+
+
 def summary(res, seconds=None) -> dict:
     return {
+        "status": _status(res),
         "peak_mu_certified": res.peak_mu,
         "peak_mu_lower": res.peak_mu_lower,
         "peak_frequency": res.peak_frequency,
@@ -159,7 +167,7 @@ def bench_paper(t_start: float, budget: float) -> dict:
     proc = start_fixed()  # runs on the other core meanwhile
     t0 = time.perf_counter()
     pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), progress=False)
-    unc = polyrob.uncertain_plant(pldi)
+    unc = polyrob.uncertain_plant(pldi, model="box")
     P = polyrob.generalized_plant(unc, *polyrob.plant.weights.paper_weights())
     out["plant_seconds"] = round(time.perf_counter() - t0, 2)
     # the paper's K*
@@ -193,7 +201,10 @@ def bench_paper(t_start: float, budget: float) -> dict:
     t0 = time.perf_counter()
     red = reduce_controller(P, best, tol=0.05)
     out["reduced"] = dict(
-        red.summary(), seconds=round(time.perf_counter() - t0, 2), reduced_from=best.info.get("method")
+        red.summary(),
+        status=_status(getattr(red, "result", None)),
+        seconds=round(time.perf_counter() - t0, 2),
+        reduced_from=best.info.get("method"),
     )
     # the largest bandwidth factor of the weights with certified mu < 1
     log("bandwidth scaling")
