@@ -34,7 +34,7 @@ from scipy import optimize
 from polyrob.errors import BoundsError, PolyrobError
 from polyrob.plant.lftplant import UncertainPlant
 
-__all__ = ["axes_plant", "axes_contains", "RESIDUAL_TOL"]
+__all__ = ["axes_plant", "axes_contains", "entry_layout", "full_block_gains", "RESIDUAL_TOL"]
 
 #: Default: keep directions until the residual gain is at most this fraction of the total.
 RESIDUAL_TOL = 0.1
@@ -90,14 +90,14 @@ def _solve_lp(c, G, g, n):
     return res
 
 
-def _layout(pldi):
+def entry_layout(pldi):
     """Index of the entries in the lower block rows of ``[A B]``: (row - m, column of [x; u])."""
     m = pldi.m
     idx = np.asarray(pldi.entry_index, int).reshape(-1, 3)
     return np.array([(r - m, c if mat == 0 else 2 * m + c) for mat, r, c in idx], int).reshape(-1, 2)
 
 
-def _full_block_gains(rho_mat):
+def full_block_gains(rho_mat):
     """``W_l`` (rows), ``W_r`` (cols) with ``‖diag(1/W_l) E diag(1/W_r)‖_F <= 1`` whenever ``|E| <= rho_mat``."""
     rows = np.flatnonzero(rho_mat.max(axis=1) > 0)
     cols = np.flatnonzero(rho_mat.max(axis=0) > 0)
@@ -171,7 +171,7 @@ def axes_plant(
     z_mid, z_rad = 0.5 * (z_lo + z_hi), 0.5 * (z_hi - z_lo)
     rho = np.maximum(np.abs(e_lo), np.abs(e_hi))
     centre = centre0 + b_r @ z_mid
-    lay = _layout(pldi)
+    lay = entry_layout(pldi)
     A0, B0 = np.asarray(pldi.A0, float), np.asarray(pldi.B0, float)
     AB = np.hstack([A0[m:], B0[m:]])
     AB[lay[:, 0], lay[:, 1]] = centre
@@ -184,7 +184,7 @@ def axes_plant(
     rho_mat = np.zeros((m, 3 * m))
     rho_mat[lay[:, 0], lay[:, 1]] = rho
     blocks_B, blocks_C, blk, names, ch_names, ch_param = [], [], [], [], [], []
-    rows, cols, a, b = _full_block_gains(rho_mat) if rho.max() > 0 else (np.zeros(0, int),) * 2 + (None, None)
+    rows, cols, a, b = full_block_gains(rho_mat) if rho.max() > 0 else (np.zeros(0, int),) * 2 + (None, None)
     size = max(len(rows), len(cols))
     if size:
         Bf = np.zeros((m, size))

@@ -34,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from polyrob.errors import NotApplicable
-from polyrob.plant.axes import _full_block_gains, _layout
+from polyrob.plant.axes import entry_layout, full_block_gains
 from polyrob.plant.lftplant import UncertainPlant
 
 __all__ = ["inner_gain_plant", "gain_range", "applies"]
@@ -123,7 +123,7 @@ def inner_gain_plant(pldi, *, robot=None) -> UncertainPlant:
         raise NotApplicable(why)
     m = pldi.m
     n = 2 * m
-    lay = _layout(pldi)
+    lay = entry_layout(pldi)
     lo, hi = np.asarray(pldi.lower, float), np.asarray(pldi.upper, float)
     e_lo, e_hi = gain_range(robot.model_error)
     isB = lay[:, 1] >= n
@@ -148,7 +148,7 @@ def inner_gain_plant(pldi, *, robot=None) -> UncertainPlant:
     rho_mat = np.zeros((m, 3 * m))
     rho_mat[lay[:, 0], lay[:, 1]] = rho
     blocks_B, blocks_C, blk, ch_names, ch_param = [], [], [], [], []
-    rows, cols, a, b = _full_block_gains(rho_mat) if rho.max() > 0 else (np.zeros(0, int),) * 2 + (None, None)
+    rows, cols, a, b = full_block_gains(rho_mat) if rho.max() > 0 else (np.zeros(0, int),) * 2 + (None, None)
     size = max(len(rows), len(cols))
     if size:
         Bf = np.zeros((m, size))
