@@ -224,11 +224,10 @@ def rate_bounds(model: MovingRobotModel, domain, *, qddot_max=None, samples: int
 def kinematic_rates(model: MovingRobotModel, rates, c: float = 1.0):
     """``rho -> rate box at rho``: ``d q_j/dt = qdot_j`` exactly when ``qdot_j`` is a parameter too.
 
-    A position's rate is not free inside ``[-qdot_max, qdot_max]``: at a grid
-    point where ``qdot_j = v`` it is ``v`` (times the factor by which
-    ``rates`` scale the velocity bound, e.g. 0 for frozen).  The other
-    parameters keep ``rates``.  Everything is divided by the time scale ``c``
-    (:func:`conditioned`).
+    At a grid point where ``qdot_j = v`` the rate of ``q_j`` is ``v`` (times the
+    factor by which ``rates`` scale the velocity bound, e.g. 0 for frozen), not
+    any value in ``±qdot_max``; the other parameters keep ``rates``; all
+    divided by the time scale ``c`` (:func:`conditioned`).
 
     Parameters
     ----------
@@ -328,9 +327,8 @@ def conditioned(system, centre, *, floor: float = 1e-12, method: str = "gramian"
     Lyapunov matrix at the centre of the power-of-two balanced copy
     (``S``; :func:`_brl_solution`, level 1.5 times its H-infinity norm), so
     that the Lyapunov matrix there is a multiple of the identity
-    (eigenvalues floored at ``floor`` times the largest).  On the 20-state
-    loop of docs/certificates.md the Gramian's coordinates gave the solver
-    the faster proof.
+    (eigenvalues floored at ``floor`` times the largest); the Gramian gave
+    the faster proof on the 20-state loop of docs/certificates.md.
     Both leave the gain of every trajectory unchanged; the proof of
     :func:`polyrob.lpvnorm` is made on the copy.
 
