@@ -90,7 +90,11 @@ class InterruptGuard:
         time.sleep(self.grace)
         os._exit(EXIT_INTERRUPTED)
 
-    def __exit__(self, *exc):
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is not None and issubclass(exc_type, KeyboardInterrupt):
+            # the main thread may see the KeyboardInterrupt before the watchdog reads the pipe:
+            # it is the interrupt all the same (and a second Ctrl-C must now be ignored)
+            self.interrupted.set()
         if getattr(self, "_previous_hook", None) is not None and not self.interrupted.is_set():
             sys.unraisablehook = self._previous_hook
         if self._fds is None:
