@@ -82,17 +82,18 @@ def make_uncertain_plant(pldi, uncertainty: str = "auto", *, merge_symmetric: bo
 
     ``model`` is the model actually built (what ``"auto"`` resolved to).  The
     build checks the model's coverage on fresh domain points (a minute on a
-    six-joint arm): a log line says so first.
+    six-joint arm): for three joints or more a log line says so first.
     """
     from polyrob.plant.uncertainty import uncertain_plant
 
     if uncertainty not in UNCERTAINTY_MODELS:
         raise ArgumentError(f"unknown uncertainty model {uncertainty!r}: use one of {', '.join(UNCERTAINTY_MODELS)}")
-    logging.getLogger("polyrob").info(
-        "uncertainty model '%s' of %s: building it and checking its coverage on fresh domain points",
-        uncertainty,
-        getattr(pldi, "robot_name", "the robot"),
-    )
+    if pldi.m >= 3:  # a minute and more on a spatial arm, instant on a planar pair: say it only where it is long
+        logging.getLogger("polyrob").info(
+            "uncertainty model '%s' of %s: building it and checking its coverage on fresh domain points",
+            uncertainty,
+            getattr(pldi, "robot_name", "the robot"),
+        )
     unc = uncertain_plant(pldi, model=uncertainty, merge_symmetric=merge_symmetric)
     return unc, str(unc.model)
 
