@@ -226,3 +226,21 @@ def test_paper_weights_from_the_weights_module_agree():
     for w in FREQS:
         np.testing.assert_allclose(WS(1j * w), W_S(1j * w), rtol=1e-3)  # 0.3333 vs 1/3
         np.testing.assert_allclose(WT(1j * w), W_T(1j * w), rtol=1e-12)
+
+
+def test_a_large_controller_feedthrough_is_a_well_posed_loop():
+    """python-control's rank test of [[I, -D22], [-D_K, I]] refuses a D_K of 1e14 although D22 = 0.
+
+    (A tf3 synthesis on paper_2r ended with "LFT not well-posed to working precision" this way.)
+    The loop equations solve ``I - D22 D_K = I``: polyrob closes the loop all the same.
+    """
+    from polyrob.plant.loops import lft
+
+    P = control.ss([[-1.0]], [[1.0, 1.0]], [[1.0], [1.0]], [[0.0, 0.0], [0.0, 0.0]])  # y = x, D22 = 0
+    K = control.ss([[-1.0]], [[1.0]], [[1.0]], [[1e14]])
+    with pytest.raises(ValueError, match="well-posed"):
+        P.lft(K, nu=1, ny=1)
+    N = lft(P, K, n_u=1, n_y=1)
+    # u = 1e14 y + xK: A_cl = [[-1 + 1e14, 1], [1, -1]]
+    np.testing.assert_allclose(N.A, [[-1.0 + 1e14, 1.0], [1.0, -1.0]])
+    np.testing.assert_allclose(N.B, [[1.0], [0.0]])

@@ -89,14 +89,15 @@ def lower_lft(P: control.StateSpace, K: control.StateSpace, n_u: int, n_y: int) 
         K = control.ss(K.A, K.B, K.C, K.D, dt=P.dt)
     try:
         N = P.lft(K, nu=n_u, ny=n_y)
-    except ValueError as exc:  # python-control's own rank test of the loop equations
-        raise PolyrobError(f"the lower LFT is ill posed: {exc}") from None
+        mats = (N.A, N.B, N.C, N.D)
+    except ValueError:
+        # python-control tests the rank of [[I, -D22], [-D_K, I]], whose tolerance grows with
+        # |D_K|: a fixed-structure controller with a large feedthrough fails it although
+        # I - D22 D_K (the matrix the loop equations solve, checked above) is well conditioned
+        mats = lower_lft_matrices(*(np.asarray(X, float) for X in (P.A, P.B, P.C, P.D, K.A, K.B, K.C, K.D)), n_u, n_y)
     states = list(P.state_labels) + [f"xK[{i}]" for i in range(K.nstates)]
     return control.ss(
-        N.A,
-        N.B,
-        N.C,
-        N.D,
+        *mats,
         inputs=P.input_labels[:nw],
         outputs=P.output_labels[:nz],
         states=states,
