@@ -51,7 +51,7 @@ def _light_problem(robot, domain, factor: float):
 def run(factor: float, spec: str, *, velocities: str, points, full: bool) -> dict:
     from polyrob import load_robot
     from polyrob.analysis.lpv.moving import moving_robot_certificate
-    from polyrob.bounds.domain import Domain
+    from polyrob.domains.torque_box import Domain
 
     robot = load_robot("paper_2r")
     domain = Domain.from_robot(robot, "paper")

@@ -21,9 +21,9 @@ import time
 
 def main(argv=None) -> int:
     import polyrob
+    from polyrob.analysis.certificate import certify_loop
     from polyrob.io.controller import load_controller
     from polyrob.pipeline.problem import build_problem, default_hyperparameters
-    from polyrob.analysis.certificate import certify_loop
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("robot", nargs="?")

@@ -43,10 +43,10 @@ warnings.simplefilter("ignore")
 
 import polyrob  # noqa: E402
 import polyrob.plant.weights  # noqa: E402
+from polyrob.analysis.certificate import certify_loop  # noqa: E402
 from polyrob.analysis.mu.bounds import mu_bounds  # noqa: E402
 from polyrob.examples import DISTILLATION_BLK as DIST_BLK  # noqa: E402
 from polyrob.examples import distillation_plant  # noqa: E402
-from polyrob.analysis.certificate import certify_loop  # noqa: E402
 from polyrob.synthesis import max_bandwidth_scaling, musyn, reduce_controller  # noqa: E402
 
 

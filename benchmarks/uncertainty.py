@@ -36,8 +36,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "src"))
 import polyrob  # noqa: E402
 import polyrob.analysis.limits  # noqa: E402
 from polyrob.analysis.robust import robperf  # noqa: E402
-from polyrob.pipeline import Problem, default_hyperparameters  # noqa: E402
 from polyrob.analysis.time_varying.certificate import time_varying_certificate  # noqa: E402
+from polyrob.pipeline import Problem, default_hyperparameters  # noqa: E402
 from polyrob.plant.coverage import det_b_range  # noqa: E402
 from polyrob.plant.generalized import generalized_plant, paper_controller  # noqa: E402
 from polyrob.plant.uncertainty import uncertain_plant  # noqa: E402

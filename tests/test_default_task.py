@@ -1,4 +1,4 @@
-"""The default task of an arm (polyrob.bounds.default_task): who gets it, what it is, how to leave it.
+"""The default task of an arm (polyrob.domains.default_task): who gets it, what it is, how to leave it.
 
 A few seconds: no bounds are computed here (the CLI tests read ``info --json``).
 """
@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from conftest import cached_robot
 
-from polyrob.bounds.default_task import DEFAULT_TASK, DefaultTask, applies_to, default_task_domain, default_task_robot
-from polyrob.bounds.domain import Domain
-from polyrob.bounds.task_domain import TaskDomain
 from polyrob.cli import main
+from polyrob.domains.default_task import DEFAULT_TASK, DefaultTask, applies_to, default_task_domain, default_task_robot
+from polyrob.domains.task import TaskDomain
+from polyrob.domains.torque_box import Domain
 from polyrob.fleet.jobs import Job, job_robot_and_domain
 
 
@@ -153,7 +153,7 @@ def _ct_pldi(error=0.1):
 
 def test_the_inner_gain_model_holds_the_computed_torque_loop_with_one_parameter():
     from polyrob.plant.coverage import coverage_fraction
-    from polyrob.plant.inner_gain import gain_range
+    from polyrob.plant.models.inner_gain import gain_range
     from polyrob.plant.uncertainty import uncertain_plant
 
     arm, dom, pldi = _ct_pldi(0.1)
@@ -174,7 +174,7 @@ def test_the_inner_gain_model_holds_the_computed_torque_loop_with_one_parameter(
 def test_auto_falls_back_to_axes_where_the_inner_gain_model_does_not_apply():
     from polyrob import bound_pldi
     from polyrob.model.inner import inner_loop
-    from polyrob.plant.inner_gain import applies
+    from polyrob.plant.models.inner_gain import applies
     from polyrob.plant.uncertainty import uncertain_plant
 
     assert "computed-torque" in applies(inner_loop(cached_robot("planar_2r"), "gravity", model_error=0.1))

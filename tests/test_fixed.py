@@ -18,8 +18,8 @@ from polyrob.analysis.mu.bounds import mu_bounds
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import PAPER_CONTROLLER, generalized_plant, lft, paper_controller
 from polyrob.plant.weights import paper_weights
-from polyrob.synthesis.fixed.synthesis import closed_loop_response, fixed_structure_musyn
 from polyrob.synthesis.fixed.structures import controller_structure
+from polyrob.synthesis.fixed.synthesis import closed_loop_response, fixed_structure_musyn
 
 #: certification grid shared by K* and the synthesised controller (coarse: fast)
 OMEGA = np.logspace(-3, 4, 36)

@@ -260,7 +260,7 @@ def test_local_pool_stops_running_workers_at_once_on_interrupt():
 
 def test_automatic_weights_are_the_papers_for_two_joints_on_its_domain():
     import polyrob
-    from polyrob.bounds.domain import Domain
+    from polyrob.domains.torque_box import Domain
 
     robot = polyrob.load_robot("paper_2r")
     domain = Domain.from_robot(robot, "paper")

@@ -1,4 +1,4 @@
-"""The ``inertia`` uncertainty model (polyrob.plant.inertia_plant, inertia_factors): M stays positive definite.
+"""The ``inertia`` uncertainty model (polyrob.plant.models.inertia_plant, inertia_factors): M stays positive definite.
 
 The six- and seven-joint arms are bounded quickly here (few samples, no
 refinement): the properties tested (definiteness of every member, the exact
@@ -14,11 +14,11 @@ import pytest
 from conftest import cached_robot
 
 from polyrob._threads import single_blas_thread
-from polyrob.bounds.domain import Domain
 from polyrob.bounds.pldi import bound_pldi
+from polyrob.domains.torque_box import Domain
 from polyrob.plant.coverage import coverage_fraction, input_definiteness
-from polyrob.plant.inertia_factors import factor_ranges, ldl
 from polyrob.plant.models import MODELS, model_of
+from polyrob.plant.models.inertia_factors import factor_ranges, ldl
 from polyrob.plant.uncertainty import uncertain_plant, upper_lft
 
 QUICK = {
@@ -180,7 +180,7 @@ def test_torque_jacobians_stand_in_survives_pickling():
     """The N PLDI's bounds workers unpickle it (a RecursionError in every worker before)."""
     import pickle
 
-    from polyrob.plant.inertia_lft import TorqueJacobians
+    from polyrob.plant.models.inertia_lft import TorqueJacobians
 
     copy = pickle.loads(pickle.dumps(TorqueJacobians(cached_robot("planar_2r"))))
     A, B = copy.jacobians([0.1, 0.2], [0.0, 0.0], [0.0, 0.0])

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from polyrob import bound_pldi, load_robot
-from polyrob.bounds.task_domain import TaskDomain
 from polyrob.cli import main
+from polyrob.domains.task import TaskDomain
 from polyrob.errors import ArgumentError, DomainError
 from polyrob.model.inner import inner_loop
 from polyrob.model.payload import PayloadRange

@@ -115,3 +115,16 @@ def test_cli_holds_no_numerical_code(numeric):
             else:
                 continue
             assert not any(n == numeric or n.startswith(numeric + ".") for n in names), f"{path.name} imports {numeric}"
+
+
+#: Most modules in one subpackage (``__init__`` not counted): above it, a topic wants a subpackage of its own.
+MAX_MODULES = 12
+
+
+def test_no_subpackage_holds_more_than_a_dozen_modules():
+    crowded = {}
+    for package in PACKAGE.rglob("__init__.py"):
+        modules = [m for m in package.parent.glob("*.py") if m.name != "__init__.py"]
+        if len(modules) > MAX_MODULES:
+            crowded[str(package.parent.relative_to(PACKAGE.parent))] = len(modules)
+    assert not crowded, f"subpackages with more than {MAX_MODULES} modules: {crowded}"

@@ -8,9 +8,9 @@ import control
 import numpy as np
 import pytest
 
-from polyrob.analysis.certificate import Certificate, Scope, decide_gain
 import polyrob
 from polyrob import Domain
+from polyrob.analysis.certificate import Certificate, Scope, decide_gain
 from polyrob.analysis.limits import performance_limit, pole_bound
 from polyrob.plant.weights import complementary_weight, paper_weights
 from polyrob.synthesis.bandwidth import max_bandwidth_scaling

@@ -7,9 +7,9 @@ import pytest
 from conftest import cached_robot
 
 from polyrob.errors import ArgumentError
-from polyrob.plant.box import box_plant
 from polyrob.plant.coverage import coverage_fraction, det_b_range, model_contains
-from polyrob.plant.inertia_lft import NotApplicable, affine_inertia
+from polyrob.plant.models.box import box_plant
+from polyrob.plant.models.inertia_lft import NotApplicable, affine_inertia
 from polyrob.plant.uncertainty import uncertain_plant, upper_lft
 
 
@@ -52,7 +52,7 @@ def test_default_model_is_the_tight_lft_on_the_paper_arm(pldi):
 
 def test_inertia_of_a_2r_is_affine_in_cos_q2():
     robot = cached_robot("paper_2r")
-    from polyrob.bounds.domain import Domain
+    from polyrob.domains.torque_box import Domain
 
     names, joints, kinds, M0, Mf, ranges = affine_inertia(robot, Domain.from_robot(robot, "paper"))
     a1, a2, a3 = 48.125, 13.125, 6.25
@@ -95,7 +95,7 @@ def test_lft_members_are_in_the_model_and_match_the_state_space(lft, axes, name)
 
 
 def test_lft_torque_variant_and_repeated_scalar(pldi):
-    from polyrob.plant.inertia_lft import inertia_lft_contains, inertia_lft_plant
+    from polyrob.plant.models.inertia_lft import inertia_lft_contains, inertia_lft_plant
 
     tq = inertia_lft_plant(pldi, a_part="torque", repeated=True)
     assert tq.parameter_names == ("n32", "n34", "n42", "n43", "cos(q2)")
@@ -177,7 +177,7 @@ def test_lft_does_not_apply_to_a_non_affine_inertia_and_auto_falls_back():
         velocity_limit=[1, 1],
         effort_limit=[1, 1],
     )
-    from polyrob.bounds.domain import Domain
+    from polyrob.domains.torque_box import Domain
 
     with pytest.raises(NotApplicable):
         affine_inertia(robot, Domain.from_robot(robot))
@@ -204,7 +204,7 @@ def test_the_residual_lps_fall_back_on_another_highs_method(pldi, axes, monkeypa
     """A HiGHS method that stops with "Not Set" (seen on z1) is retried with the next; the bounds are the same."""
     from scipy import optimize
 
-    import polyrob.plant.axes as axes_module
+    import polyrob.plant.models.axes as axes_module
 
     real, tried = optimize.linprog, []
 

@@ -19,7 +19,7 @@ import polyrob
 from polyrob.analysis.certificate import Status, decide_gridded_gain
 from polyrob.analysis.lpv.moving import MovingRobotCertificate, moving_robot_gain
 from polyrob.analysis.lpv.robot import closed_loop_system, rate_bounds, scheduling
-from polyrob.bounds.domain import Domain
+from polyrob.domains.torque_box import Domain
 from polyrob.pipeline import default_hyperparameters
 from polyrob.plant.generalized import loop_functions
 from polyrob.plant.weights import paper_weights

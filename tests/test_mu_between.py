@@ -6,8 +6,8 @@ import control
 import numpy as np
 import pytest
 
-from polyrob.analysis.mu.bounds import mu_bounds
 from polyrob.analysis.mu.between import crossing_frequencies, verify_between
+from polyrob.analysis.mu.bounds import mu_bounds
 
 
 def test_crossing_of_a_gain_level_is_where_the_magnitude_meets_it():

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from polyrob import bound_pldi, load_robot
-from polyrob.bounds.domain import Domain
 from polyrob.bounds.pldi_result import PLDI
-from polyrob.bounds.task_domain import TaskDomain, domain_from_dict
+from polyrob.domains.task import TaskDomain, domain_from_dict
+from polyrob.domains.torque_box import Domain
 from polyrob.errors import CertificationError, DomainError
 
 POSE, RADIUS, QDOT, QDDOT = [0.4, 1.2], 0.3, 0.5, 2.0

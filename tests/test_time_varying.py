@@ -12,9 +12,9 @@ from conftest import paper_pldi
 
 import polyrob
 from polyrob.analysis.robust import robstab
+from polyrob.analysis.time_varying.certificate import covers_nonlinear, time_varying_certificate
 from polyrob.cli import main
 from polyrob.pipeline import build_problem
-from polyrob.analysis.time_varying.certificate import covers_nonlinear, time_varying_certificate
 
 B1 = np.array([[0.0], [1.0]])
 

@@ -50,7 +50,7 @@ _LAZY = {
     "Robot": "polyrob.model.robots",
     "Manipulator": "polyrob.model.robots",
     "AnalyticRobot": "polyrob.model.analytic",
-    "Domain": "polyrob.bounds.domain",
+    "Domain": "polyrob.domains.torque_box",
     "PLDI": "polyrob.bounds.pldi",
     "bound_pldi": "polyrob.bounds.pldi",
     "UncertainPlant": "polyrob.plant.uncertainty",

@@ -1,6 +1,6 @@
 """The PLDI: every Jacobian the robot can have inside the domain, bounded.
 
-:func:`bound_pldi` takes a robot and a :class:`~polyrob.bounds.domain.Domain` and
+:func:`bound_pldi` takes a robot and a :class:`~polyrob.domains.torque_box.Domain` and
 returns a :class:`PLDI`: the nominal pair ``(A0, B0)`` at an equilibrium, the
 interval of every entry of ``A`` and ``B`` (the paper's eq. 9 table), the
 witnesses where each bound is attained, and a polytope (half-spaces, and
@@ -57,11 +57,11 @@ import time
 import numpy as np
 
 from polyrob.bounds import search
-from polyrob.bounds.domain import Domain
 from polyrob.bounds.parallel import WorkerPool, available_cores
 from polyrob.bounds.pldi_result import PLDI, entry_name
 from polyrob.bounds.polytope import COVERAGE_RTOL, VERTEX_MAX_DIM, Polytope, build_polytope, principal_directions
 from polyrob.bounds.supports import support_values
+from polyrob.domains.torque_box import Domain
 from polyrob.errors import ArgumentError, BoundsError, CertificationError
 
 __all__ = [
@@ -124,7 +124,7 @@ def bound_pldi(
     robot : Manipulator
     domain : Domain or TaskDomain, optional
         Defaults to ``Domain.from_robot(robot)``.  Over a
-        :class:`~polyrob.bounds.task_domain.TaskDomain` the search moves in
+        :class:`~polyrob.domains.task.TaskDomain` the search moves in
         ``(q, qdot, qddot)`` and evaluates the Jacobians at the torques of
         the inverse dynamics; the witnesses are given as ``(q, qdot, u)``.
     samples : int, optional

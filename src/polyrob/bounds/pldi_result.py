@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from polyrob.bounds.domain import Domain
 from polyrob.bounds.polytope import COVERAGE_RTOL, Polytope
-from polyrob.bounds.task_domain import domain_from_dict
+from polyrob.domains.task import domain_from_dict
+from polyrob.domains.torque_box import Domain
 from polyrob.errors import BoundsError, DomainError
 from polyrob.io.atomic import atomic_write, json_default
 

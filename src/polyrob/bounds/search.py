@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import qmc
 
-from polyrob.bounds.domain import Domain
 from polyrob.bounds.extremes import box_maximum, polynomial_coefficients
 from polyrob.bounds.witnesses import exact_witnesses
+from polyrob.domains.torque_box import Domain
 from polyrob.errors import BoundsError
 
 __all__ = [

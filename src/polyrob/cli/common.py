@@ -214,7 +214,7 @@ def add_domain_arguments(parser: argparse.ArgumentParser) -> None:
 def robot_from_args(args):
     """The robot of the options: with ``--inner``/``--payload-*``/``--model-error``, its inner loop.
 
-    An arm of :data:`polyrob.bounds.default_task.MIN_JOINTS` joints or more
+    An arm of :data:`polyrob.domains.default_task.MIN_JOINTS` joints or more
     given without any domain or inner-layer option gets its default task
     (:func:`apply_default_task`): the options are filled in ``args`` and said
     on the ``polyrob`` log (stderr).
@@ -233,7 +233,7 @@ def robot_from_args(args):
 
 
 def apply_default_task(robot, args) -> bool:
-    """Fill ``args`` with the robot's default task (:mod:`polyrob.bounds.default_task`) when it applies.
+    """Fill ``args`` with the robot's default task (:mod:`polyrob.domains.default_task`) when it applies.
 
     It applies to a robot of ``MIN_JOINTS`` joints or more when no domain
     option, no inner-layer/payload/model-error option, no ``--pldi``, no
@@ -243,7 +243,7 @@ def apply_default_task(robot, args) -> bool:
     """
     import logging
 
-    from polyrob.bounds.default_task import DEFAULT_TASK, applies_to
+    from polyrob.domains.default_task import DEFAULT_TASK, applies_to
 
     args.default_task = None
     args.bound_options = None
@@ -305,7 +305,7 @@ def task_options_given(args) -> bool:
 
 
 def domain_from_args(robot, args):
-    from polyrob.bounds.domain import Domain
+    from polyrob.domains.torque_box import Domain
 
     try:
         if task_options_given(args):
@@ -334,8 +334,8 @@ def domain_from_args(robot, args):
 
 
 def task_domain_from_args(robot, args):
-    """A :class:`~polyrob.bounds.task_domain.TaskDomain` from ``--pose``, ``--q-radius``, ``--qdot-max``, ``--qddot-max``."""
-    from polyrob.bounds.task_domain import TaskDomain
+    """A :class:`~polyrob.domains.task.TaskDomain` from ``--pose``, ``--q-radius``, ``--qdot-max``, ``--qddot-max``."""
+    from polyrob.domains.task import TaskDomain
 
     for option in ("domain", "q_range", "u_max"):
         if getattr(args, option, None) is not None:

@@ -88,8 +88,8 @@ def _export_pldi(args, info: dict):
 def _export_problem(args, info: dict, path, out):
     """The problem the controller file records, on the PLDI ``path`` (``None``: bounded again)."""
     import polyrob
-    from polyrob.bounds.domain import Domain
     from polyrob.bounds.pldi import PLDI
+    from polyrob.domains.torque_box import Domain
     from polyrob.pipeline.rebuild import rebuild_problem
 
     if path is not None:

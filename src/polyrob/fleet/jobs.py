@@ -52,10 +52,10 @@ class Job:
     label : str, optional
         Name of the result (default the robot's); must be unique in a batch.
     pose, q_radius, qddot_max : optional
-        A task domain (:meth:`polyrob.bounds.task_domain.TaskDomain.from_robot`;
+        A task domain (:meth:`polyrob.domains.task.TaskDomain.from_robot`;
         ``qdot_max`` then bounds its velocities).  Without any domain field an
         arm of 3+ joints gets its default task
-        (:mod:`polyrob.bounds.default_task`), the other robots the URDF torque box.
+        (:mod:`polyrob.domains.default_task`), the other robots the URDF torque box.
     inner : str, optional
         Inner layer (``"none"``, ``"gravity"``, ``"computed-torque"``).
     model_error : float, optional
@@ -190,12 +190,12 @@ def job_robot_and_domain(job: Job):
     """The robot (its inner loop when the job has one) and the domain of ``job``; the default task when it applies.
 
     Returns ``(robot, domain, default_task)``: ``default_task`` is the
-    :class:`~polyrob.bounds.default_task.DefaultTask` used, or ``None``.
+    :class:`~polyrob.domains.default_task.DefaultTask` used, or ``None``.
     """
     import polyrob
-    from polyrob.bounds.default_task import DEFAULT_TASK, applies_to
-    from polyrob.bounds.domain import Domain
-    from polyrob.bounds.task_domain import TaskDomain
+    from polyrob.domains.default_task import DEFAULT_TASK, applies_to
+    from polyrob.domains.task import TaskDomain
+    from polyrob.domains.torque_box import Domain
 
     robot = polyrob.load_robot(job.robot, lock=None if job.lock is None else list(job.lock))
     given = any(getattr(job, k) is not None for k in _BOX_FIELDS + _TASK_FIELDS + _INNER_FIELDS + ("qdot_max",))

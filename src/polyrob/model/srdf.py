@@ -5,7 +5,7 @@ next to ``<pkg>/urdf/<name>.urdf``).  Two of its elements matter here:
 
 * ``<group_state name="default">`` entries: named reference poses (panda
   ``default``, z1 ``home``, xarm7 ``home``, talos ``half_sitting``); the
-  centre of a task domain (:mod:`polyrob.bounds.task_domain`);
+  centre of a task domain (:mod:`polyrob.domains.task`);
 * ``<rotor_params>``: per joint a rotor inertia (``mass``) and a gear ratio.
   The motor's rotor turns ``n`` times faster than the joint, so it adds
   ``n^2 J_rotor`` (the reflected inertia) to the joint's diagonal of ``M(q)``;

@@ -274,8 +274,8 @@ def build_problem(
     if {len(v) for v in h.values()} != {robot.m}:
         raise ArgumentError(f"weight hyperparameters need {robot.m} values each (one per joint of {robot.name})")
     if pldi is None:
-        from polyrob.bounds.domain import Domain
         from polyrob.bounds.pldi import bound_pldi
+        from polyrob.domains.torque_box import Domain
 
         domain = Domain.from_robot(robot) if domain is None else domain
         options = {"coverage": 0, **(bound_options or {})}

@@ -7,14 +7,14 @@ these models of the set of Jacobians (docs/uncertainty.md):
 
 ``"box"``
     The paper's: one independent real parameter per varying entry, the
-    interval box (:mod:`polyrob.plant.box`).
+    interval box (:mod:`polyrob.plant.models.box`).
 ``"axes"``
     An oriented box in the principal directions of the Jacobian cloud plus
-    a norm-bounded residual block (:mod:`polyrob.plant.axes`); any robot.
+    a norm-bounded residual block (:mod:`polyrob.plant.models.axes`); any robot.
 ``"lft"``
     The inverse inertia as an exact LFT in the cos/sin of the joint angles
     it depends on, times a box on the torque-side Jacobian
-    (:mod:`polyrob.plant.inertia_lft`); robots whose inertia is affine in
+    (:mod:`polyrob.plant.models.inertia_lft`); robots whose inertia is affine in
     single-angle cos/sin terms (planar 2R arms, analytic or URDF).
 ``"lft-torque"``
     The same inverse inertia times a box on the torque-side Jacobian
@@ -26,7 +26,7 @@ these models of the set of Jacobians (docs/uncertainty.md):
     ``M(q)`` on the intervals of its ``L D Lᵀ`` factors (every member
     positive definite, so is every member's input matrix ``M⁻¹``, an exact
     LFT of them) times an ``axes`` model of the torque-side Jacobian
-    ``N = M(q) A_low`` (:mod:`polyrob.plant.inertia_plant`); any arm whose
+    ``N = M(q) A_low`` (:mod:`polyrob.plant.models.inertia_plant`); any arm whose
     ``B`` is ``[0; M(q)⁻¹]``.
 ``"auto"`` (default)
     ``lft`` where it applies, else ``axes`` (:data:`AUTO`); the choice and
@@ -64,9 +64,9 @@ from __future__ import annotations
 import numpy as np
 
 from polyrob.errors import ArgumentError, NotApplicable
-from polyrob.plant.box import SYMMETRY_RTOL
 from polyrob.plant.lftplant import MAX_CORNERS, UncertainPlant, upper_lft
 from polyrob.plant.models import MODELS, UncertaintyModel, model_of
+from polyrob.plant.models.box import SYMMETRY_RTOL
 
 __all__ = [
     "UncertainPlant",
@@ -137,7 +137,7 @@ def uncertain_plant(
         automatic choice.
     repeated : bool
         ``lft`` only: exact repeated scalars (``True``) or independent
-        rank-one pieces (``False``, default; see :func:`~polyrob.plant.inertia_lft.inertia_lft_plant`).
+        rank-one pieces (``False``, default; see :func:`~polyrob.plant.models.inertia_lft.inertia_lft_plant`).
     robot : Manipulator, optional
         For the ``lft`` model and the coverage check (default: loaded from the PLDI).
     coverage : int

@@ -36,8 +36,8 @@ from dataclasses import dataclass, field
 import control
 import numpy as np
 
-from polyrob.errors import PolyrobError
 from polyrob.analysis.mu.frequency import freqresp
+from polyrob.errors import PolyrobError
 from polyrob.plant.generalized import as_controller_ss
 from polyrob.plant.loops import lft, lower_lft
 

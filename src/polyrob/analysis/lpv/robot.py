@@ -20,7 +20,7 @@ f(q, qdot, u)``; :func:`rate_bounds`).
 Examples
 --------
 >>> import numpy as np, polyrob
->>> from polyrob.bounds.domain import Domain
+>>> from polyrob.domains.torque_box import Domain
 >>> robot = polyrob.load_robot("paper_2r")
 >>> model = scheduling(robot, Domain.from_robot(robot, "paper"), points=(5, 3))
 >>> model.names, [a.size for a in model.axes]

@@ -119,19 +119,19 @@ class UncertaintyModel(ABC):
 
 
 class BoxModel(UncertaintyModel):
-    """The paper's model: one independent real parameter per varying entry (:mod:`polyrob.plant.box`)."""
+    """The paper's model: one independent real parameter per varying entry (:mod:`polyrob.plant.models.box`)."""
 
     name = "box"
     options = ("nominal", "merge_symmetric")
     exclusive = {"merge_symmetric": False}
 
     def build(self, pldi, *, nominal: str = "pldi", merge_symmetric: bool = False) -> UncertainPlant:
-        from polyrob.plant.box import box_plant
+        from polyrob.plant.models.box import box_plant
 
         return box_plant(pldi, nominal=nominal, merge_symmetric=merge_symmetric)
 
     def contains(self, unc, A, B):
-        from polyrob.plant.box import box_contains
+        from polyrob.plant.models.box import box_contains
 
         return box_contains(unc, A, B)
 
@@ -145,7 +145,7 @@ class BoxModel(UncertaintyModel):
 
 
 class AxesModel(UncertaintyModel):
-    """An oriented box in the principal directions plus a residual block (:mod:`polyrob.plant.axes`)."""
+    """An oriented box in the principal directions plus a residual block (:mod:`polyrob.plant.models.axes`)."""
 
     name = "axes"
     options = ("nominal", "n_directions", "residual_tol")
@@ -154,13 +154,13 @@ class AxesModel(UncertaintyModel):
     def build(
         self, pldi, *, nominal: str = "pldi", n_directions: int | None = None, residual_tol: float | None = None
     ) -> UncertainPlant:
-        from polyrob.plant.axes import RESIDUAL_TOL, axes_plant
+        from polyrob.plant.models.axes import RESIDUAL_TOL, axes_plant
 
         tol = RESIDUAL_TOL if residual_tol is None else residual_tol
         return axes_plant(pldi, n_directions=n_directions, residual_tol=tol, nominal=nominal)
 
     def contains(self, unc, A, B):
-        from polyrob.plant.axes import axes_contains
+        from polyrob.plant.models.axes import axes_contains
 
         return axes_contains(unc, A, B)
 
@@ -176,7 +176,7 @@ class AxesModel(UncertaintyModel):
 class InertiaLFTModel(UncertaintyModel):
     """The inverse inertia as an exact LFT times a box on ``A`` (``lft``) or on ``N`` (``lft-torque``).
 
-    See :mod:`polyrob.plant.inertia_lft`; ``a_part`` is ``"entries"`` or ``"torque"``.
+    See :mod:`polyrob.plant.models.inertia_lft`; ``a_part`` is ``"entries"`` or ``"torque"``.
     """
 
     options = ("nominal", "repeated", "robot")
@@ -190,14 +190,14 @@ class InertiaLFTModel(UncertaintyModel):
     def build(
         self, pldi, *, nominal: str = "pldi", repeated: bool = False, robot=None, bound_options: dict | None = None
     ) -> UncertainPlant:
-        from polyrob.plant.inertia_lft import inertia_lft_plant
+        from polyrob.plant.models.inertia_lft import inertia_lft_plant
 
         return inertia_lft_plant(
             pldi, robot=robot, nominal=nominal, repeated=repeated, a_part=self.a_part, bound_options=bound_options
         )
 
     def contains(self, unc, A, B):
-        from polyrob.plant.inertia_lft import inertia_lft_contains
+        from polyrob.plant.models.inertia_lft import inertia_lft_contains
 
         return inertia_lft_contains(unc, A, B)
 
@@ -220,7 +220,7 @@ class InertiaLFTModel(UncertaintyModel):
 
 class InertiaModel(UncertaintyModel):
     """``M(q)`` on its ``L D Lᵀ`` factors (every member positive definite), ``M⁻¹`` an exact LFT of them,
-    times an ``axes`` model of the torque-side ``N = M(q) A_low`` (:mod:`polyrob.plant.inertia_plant`)."""
+    times an ``axes`` model of the torque-side ``N = M(q) A_low`` (:mod:`polyrob.plant.models.inertia_plant`)."""
 
     name = "inertia"
     options = ("nominal", "robot", "n_directions", "residual_tol")
@@ -237,7 +237,7 @@ class InertiaModel(UncertaintyModel):
         bound_options: dict | None = None,
         factor_options: dict | None = None,
     ) -> UncertainPlant:
-        from polyrob.plant.inertia_plant import inertia_plant
+        from polyrob.plant.models.inertia_plant import inertia_plant
 
         return inertia_plant(
             pldi,
@@ -250,7 +250,7 @@ class InertiaModel(UncertaintyModel):
         )
 
     def contains(self, unc, A, B):
-        from polyrob.plant.inertia_plant import inertia_contains
+        from polyrob.plant.models.inertia_plant import inertia_contains
 
         return inertia_contains(unc, A, B)
 
@@ -267,7 +267,7 @@ class InertiaModel(UncertaintyModel):
 
 
 class InnerGainModel(UncertaintyModel):
-    """Computed torque with one inertia factor: one repeated real gain and a residual (:mod:`polyrob.plant.inner_gain`)."""
+    """Computed torque with one inertia factor: one repeated real gain and a residual (:mod:`polyrob.plant.models.inner_gain`)."""
 
     name = "inner-gain"
     options = ()
@@ -276,12 +276,12 @@ class InnerGainModel(UncertaintyModel):
     applies = "a computed-torque inner loop whose model is off by one inertia factor: one gain parameter"
 
     def build(self, pldi, **options):
-        from polyrob.plant.inner_gain import inner_gain_plant
+        from polyrob.plant.models.inner_gain import inner_gain_plant
 
         return inner_gain_plant(pldi)
 
     def contains(self, unc, A, B):
-        from polyrob.plant.axes import axes_contains
+        from polyrob.plant.models.axes import axes_contains
 
         return axes_contains(unc, A, B)
 

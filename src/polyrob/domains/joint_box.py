@@ -1,7 +1,7 @@
 """The views every domain shares: a box over the joints' ``(q, qdot, third)``.
 
-:class:`~polyrob.bounds.domain.Domain` (``third`` = torques ``u``) and
-:class:`~polyrob.bounds.task_domain.TaskDomain` (``third`` = accelerations
+:class:`~polyrob.domains.torque_box.Domain` (``third`` = torques ``u``) and
+:class:`~polyrob.domains.task.TaskDomain` (``third`` = accelerations
 ``qddot``) inherit them, so the bounds search sees one interface.
 """
 

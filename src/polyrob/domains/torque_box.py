@@ -33,8 +33,8 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import qmc
 
-from polyrob.bounds.domain_spec import GROUP_TEXT, GROUPS, apply_spec, joint_range, read_spec
-from polyrob.bounds.joint_box import JointBox
+from polyrob.domains.joint_box import JointBox
+from polyrob.domains.spec import GROUP_TEXT, GROUPS, apply_spec, joint_range, read_spec
 from polyrob.errors import DomainError
 
 __all__ = ["Domain", "JointBox", "unit_design"]
@@ -116,7 +116,7 @@ class Domain(JointBox):
         """The torques ``u`` at box points ``(q, qdot, w)``: here ``w`` itself.
 
         The seam the bounds search evaluates the Jacobians through: a
-        :class:`~polyrob.bounds.task_domain.TaskDomain`'s third group is the
+        :class:`~polyrob.domains.task.TaskDomain`'s third group is the
         acceleration, mapped to ``u`` by inverse dynamics.
         """
         return np.atleast_2d(np.asarray(w, dtype=float))

@@ -1,6 +1,6 @@
 """A task domain: a region around a reference pose, velocity and acceleration bounds, torques by inverse dynamics.
 
-The torque box of :class:`~polyrob.bounds.domain.Domain` holds every torque
+The torque box of :class:`~polyrob.domains.torque_box.Domain` holds every torque
 the motors can give, at every position and velocity: far more than a task
 asks of the robot.  A task domain bounds what the trajectories do instead::
 
@@ -45,9 +45,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from polyrob.bounds.domain import Domain, unit_design
-from polyrob.bounds.domain_spec import joint_range
-from polyrob.bounds.joint_box import JointBox
+from polyrob.domains.joint_box import JointBox
+from polyrob.domains.spec import joint_range
+from polyrob.domains.torque_box import Domain, unit_design
 from polyrob.errors import DomainError
 
 __all__ = ["TaskDomain", "domain_from_dict"]

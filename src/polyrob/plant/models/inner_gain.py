@@ -25,8 +25,8 @@ of a 72-entry cloud (ur5) and a residual block larger than the cloud's
 spread (LP bounds over the polytope): μ about 10 where this model gives
 one direction and a residual of a few percent.
 
-The plant is ``axes``-shaped (``info`` keys of :func:`polyrob.plant.axes.axes_plant`),
-so membership is :func:`~polyrob.plant.axes.axes_contains`.
+The plant is ``axes``-shaped (``info`` keys of :func:`polyrob.plant.models.axes.axes_plant`),
+so membership is :func:`~polyrob.plant.models.axes.axes_contains`.
 """
 
 from __future__ import annotations
@@ -34,8 +34,8 @@ from __future__ import annotations
 import numpy as np
 
 from polyrob.errors import NotApplicable
-from polyrob.plant.axes import entry_layout, full_block_gains
 from polyrob.plant.lftplant import UncertainPlant
+from polyrob.plant.models.axes import entry_layout, full_block_gains
 
 __all__ = ["inner_gain_plant", "gain_range", "applies"]
 

@@ -25,7 +25,7 @@ and ``Lᵀ`` (a repeated real ``[-2, 0]``), each ``d_i`` once.  Its inverse
 Examples
 --------
 >>> import numpy as np, polyrob
->>> from polyrob.plant.inertia_factors import factor_ranges
+>>> from polyrob.plant.models.inertia_factors import factor_ranges
 >>> robot = polyrob.load_robot("planar_2r")
 >>> f = factor_ranges(robot, polyrob.Domain.from_robot(robot), samples=256)
 >>> f.names

@@ -47,7 +47,7 @@ conservative, since the two entries can no longer move independently.
 Examples
 --------
 >>> import polyrob
->>> from polyrob.plant.box import box_plant
+>>> from polyrob.plant.models.box import box_plant
 >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
 >>> unc = box_plant(pldi)
 >>> unc.parameter_names
@@ -131,7 +131,7 @@ def box_plant(pldi, *, nominal: str = "pldi", merge_symmetric: bool = False) -> 
     Examples
     --------
     >>> import polyrob
-    >>> from polyrob.plant.box import box_plant
+    >>> from polyrob.plant.models.box import box_plant
     >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
     >>> unc = box_plant(pldi, merge_symmetric=True)
     >>> unc.n_params, unc.n_delta, unc.merged

@@ -5,7 +5,7 @@ ur10, z1, talos_left_arm, panda, xarm7, ...) given to ``synth``, ``analyze``,
 ``run``, ``bounds``, ``info`` or ``batch`` without any domain or inner-layer
 option is posed the problem an arm engineer poses (issue 21):
 
-* a **task domain** (:class:`~polyrob.bounds.task_domain.TaskDomain`) around
+* a **task domain** (:class:`~polyrob.domains.task.TaskDomain`) around
   the robot's reference pose (its SRDF's first ``group_state`` where
   example-robot-data ships one, else the midpoint of the joint ranges),
   ``|q - q_ref| <= 0.2 rad``, ``|qdot| <= 0.5 rad/s``,
@@ -110,6 +110,6 @@ def default_task_robot(robot, task: DefaultTask = DEFAULT_TASK):
 
 def default_task_domain(robot, task: DefaultTask = DEFAULT_TASK):
     """The task domain of ``task`` around ``robot``'s reference pose (SRDF first pose, else the midpoint)."""
-    from polyrob.bounds.task_domain import TaskDomain
+    from polyrob.domains.task import TaskDomain
 
     return TaskDomain.from_robot(robot, q_radius=task.q_radius, qdot_max=task.qdot_max, qddot_max=task.qddot_max)

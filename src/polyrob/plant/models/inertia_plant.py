@@ -5,11 +5,11 @@ The arm's lower state rows are ``M(q) q̈-part = N(x, u) x + u``:
 Jacobian.  The model puts each factor on its own set:
 
 * ``M`` on the ``L D Lᵀ`` factors of the robot's inertia
-  (:mod:`polyrob.plant.inertia_factors`): every member is positive
+  (:mod:`polyrob.plant.models.inertia_factors`): every member is positive
   definite, so every member's input matrix ``B_low = M⁻¹`` is too (the
   ``axes`` model on ``[A B]`` has 33-100 % of its members with an
   indefinite ``B_low`` on the URDF arms), and ``M⁻¹`` is an exact LFT;
-* ``N`` on an ``axes`` model (:mod:`polyrob.plant.axes`) of a second PLDI,
+* ``N`` on an ``axes`` model (:mod:`polyrob.plant.models.axes`) of a second PLDI,
   the one of the torque-side Jacobians ``[0 I; N]``, ``[0; I]`` (the same
   sampled, searched and verified extreme search as the PLDI's).
 
@@ -21,7 +21,7 @@ motor model in front).
 Examples
 --------
 >>> import numpy as np, polyrob
->>> from polyrob.plant.inertia_plant import inertia_plant
+>>> from polyrob.plant.models.inertia_plant import inertia_plant
 >>> robot = polyrob.load_robot("paper_2r")
 >>> pldi = polyrob.bound_pldi(robot, samples=256, coverage=0, progress=False)
 >>> unc = inertia_plant(pldi)
@@ -39,10 +39,10 @@ import time
 import numpy as np
 
 from polyrob.errors import NotApplicable, PolyrobError
-from polyrob.plant.axes import RESIDUAL_TOL, axes_contains, axes_plant
-from polyrob.plant.inertia_factors import factor_ranges, inverse_channels
-from polyrob.plant.inertia_lft import TorqueJacobians
 from polyrob.plant.lftplant import UncertainPlant, weakest_enclosure
+from polyrob.plant.models.axes import RESIDUAL_TOL, axes_contains, axes_plant
+from polyrob.plant.models.inertia_factors import factor_ranges, inverse_channels
+from polyrob.plant.models.inertia_lft import TorqueJacobians
 
 __all__ = ["inertia_plant", "inertia_contains"]
 
@@ -86,12 +86,12 @@ def inertia_plant(
         Default: the PLDI's robot.
     nominal : {"pldi", "midpoint"}
     n_directions, residual_tol
-        Of the ``axes`` model of ``N`` (:func:`~polyrob.plant.axes.axes_plant`).
+        Of the ``axes`` model of ``N`` (:func:`~polyrob.plant.models.axes.axes_plant`).
     bound_options : dict, optional
         Passed to :func:`~polyrob.bounds.pldi.bound_pldi` when bounding ``N``
         (default: the PLDI's number of samples, no progress bars).
     factor_options : dict, optional
-        Passed to :func:`~polyrob.plant.inertia_factors.factor_ranges`.
+        Passed to :func:`~polyrob.plant.models.inertia_factors.factor_ranges`.
 
     Raises
     ------
