@@ -34,7 +34,7 @@ from scipy import optimize
 from polyrob.errors import BoundsError, PolyrobError
 from polyrob.plant.lftplant import UncertainPlant
 
-__all__ = ["axes_plant", "axes_contains", "entry_layout", "full_block_gains", "RESIDUAL_TOL"]
+__all__ = ["axes_plant", "axes_contains", "entry_layout", "residual_block", "RESIDUAL_TOL"]
 
 #: Default: keep directions until the residual gain is at most this fraction of the total.
 RESIDUAL_TOL = 0.1
@@ -97,14 +97,30 @@ def entry_layout(pldi):
     return np.array([(r - m, c if mat == 0 else 2 * m + c) for mat, r, c in idx], int).reshape(-1, 2)
 
 
-def full_block_gains(rho_mat):
-    """``W_l`` (rows), ``W_r`` (cols) with ``‖diag(1/W_l) E diag(1/W_r)‖_F <= 1`` whenever ``|E| <= rho_mat``."""
+def residual_block(lay, rho, m: int):
+    """The residual full complex block of per-entry radii ``rho`` (entries at ``lay``).
+
+    Returns ``(B_f, C_f, gains)``: ``B_f`` (``m x k``) and ``C_f`` (``k x 3m``)
+    carry the gains ``W_l``, ``W_r`` with ``‖diag(1/W_l) E diag(1/W_r)‖_F <= 1``
+    whenever ``|E| <= rho`` entrywise, so ``E = B_f Δ_f C_f`` with
+    ``‖Δ_f‖ <= 1`` covers every such ``E``; ``gains`` holds the rows, columns
+    and gains for the plant's ``info``.  ``B_f = C_f = None`` when every radius is 0.
+    """
+    rho_mat = np.zeros((m, 3 * m))
+    rho_mat[lay[:, 0], lay[:, 1]] = rho
     rows = np.flatnonzero(rho_mat.max(axis=1) > 0)
     cols = np.flatnonzero(rho_mat.max(axis=0) > 0)
+    size = max(len(rows), len(cols))
+    if not size:
+        return None, None, {"residual_rows": rows, "residual_cols": cols, "W_l": None, "W_r": None}
     R = rho_mat[np.ix_(rows, cols)]
     b = np.sqrt(R.max(axis=0))
     a = np.sqrt(len(rows) * ((R / b[None, :]) ** 2).sum(axis=1))
-    return rows, cols, a, b
+    Bf = np.zeros((m, size))
+    Bf[rows, np.arange(len(rows))] = a
+    Cf = np.zeros((size, 3 * m))
+    Cf[np.arange(len(cols)), cols] = b
+    return Bf, Cf, {"residual_rows": rows, "residual_cols": cols, "W_l": a, "W_r": b}
 
 
 def axes_plant(
@@ -181,16 +197,10 @@ def axes_plant(
     B_mid[m:] = AB[:, n:]
 
     # residual full block (first in Δ), then one repeated real scalar per direction
-    rho_mat = np.zeros((m, 3 * m))
-    rho_mat[lay[:, 0], lay[:, 1]] = rho
     blocks_B, blocks_C, blk, names, ch_names, ch_param = [], [], [], [], [], []
-    rows, cols, a, b = full_block_gains(rho_mat) if rho.max() > 0 else (np.zeros(0, int),) * 2 + (None, None)
-    size = max(len(rows), len(cols))
-    if size:
-        Bf = np.zeros((m, size))
-        Bf[rows, np.arange(len(rows))] = a
-        Cf = np.zeros((size, 3 * m))
-        Cf[np.arange(len(cols)), cols] = b
+    Bf, Cf, gains = residual_block(lay, rho, m)
+    if Bf is not None:
+        size = Bf.shape[1]
         blocks_B.append(Bf)
         blocks_C.append(Cf)
         blk.append([size, size])
@@ -247,10 +257,7 @@ def axes_plant(
             "W": W_r,
             "z_mid": z_mid,
             "z_rad": z_rad,
-            "residual_rows": rows,
-            "residual_cols": cols,
-            "W_l": a,
-            "W_r": b,
+            **gains,
             "layout": lay,
         },
         model="axes",

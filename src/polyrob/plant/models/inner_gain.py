@@ -35,7 +35,7 @@ import numpy as np
 
 from polyrob.errors import NotApplicable
 from polyrob.plant.lftplant import UncertainPlant
-from polyrob.plant.models.axes import entry_layout, full_block_gains
+from polyrob.plant.models.axes import entry_layout, residual_block
 
 __all__ = ["inner_gain_plant", "gain_range", "applies"]
 
@@ -145,16 +145,10 @@ def inner_gain_plant(pldi, *, robot=None) -> UncertainPlant:
     AB[lay[:, 0], lay[:, 1]] = centre
     A_mid, B_mid = A0.copy(), B0.copy()
     A_mid[m:], B_mid[m:] = AB[:, :n], AB[:, n:]
-    rho_mat = np.zeros((m, 3 * m))
-    rho_mat[lay[:, 0], lay[:, 1]] = rho
     blocks_B, blocks_C, blk, ch_names, ch_param = [], [], [], [], []
-    rows, cols, a, b = full_block_gains(rho_mat) if rho.max() > 0 else (np.zeros(0, int),) * 2 + (None, None)
-    size = max(len(rows), len(cols))
-    if size:
-        Bf = np.zeros((m, size))
-        Bf[rows, np.arange(len(rows))] = a
-        Cf = np.zeros((size, 3 * m))
-        Cf[np.arange(len(cols)), cols] = b
+    Bf, Cf, gains = residual_block(lay, rho, m)
+    if Bf is not None:
+        size = Bf.shape[1]
         blocks_B.append(Bf)
         blocks_C.append(Cf)
         blk.append([size, size])
@@ -205,10 +199,7 @@ def inner_gain_plant(pldi, *, robot=None) -> UncertainPlant:
             "W": W,
             "z_mid": np.array([eps_mid]),
             "z_rad": np.array([eps_rad]),
-            "residual_rows": rows,
-            "residual_cols": cols,
-            "W_l": a,
-            "W_r": b,
+            **gains,
             "layout": lay,
         },
         model="inner-gain",
