@@ -64,6 +64,23 @@ def test_a_failed_polytope_lp_is_a_bounds_error_naming_what_to_change(monkeypatc
         build_polytope(directions, values, 2 * k, cloud, scale, principal_directions(cloud, scale), rng)
 
 
+def test_an_entry_with_a_tiny_range_still_bounds_its_direction():
+    """ur10's task: an entry varying over 1e-12 of the others' range gave a column HiGHS rounds to 0.
+
+    The bounding-box LP was "unbounded" and the bound failed; scaled rows and columns keep it.
+    """
+    rng = np.random.default_rng(0)
+    k = 3
+    cloud = rng.uniform(-1, 1, (400, k)) * np.array([2.0, 1.0, 1e-12])
+    scale = np.ptp(cloud, axis=0)
+    directions = np.vstack([np.eye(k), -np.eye(k)])
+    values = np.r_[cloud.max(axis=0), -cloud.min(axis=0)]
+    poly = build_polytope(directions, values, 2 * k, cloud, scale, principal_directions(cloud, scale), rng)
+    assert poly.reduced_dim == 3 and len(poly.vertices) == 8
+    # the vertices are the box's corners, the tiny entry's included
+    np.testing.assert_allclose(np.sort(poly.vertices[:, 2]), np.repeat([cloud[:, 2].min(), cloud[:, 2].max()], 4))
+
+
 def test_a_volume_ratio_that_was_not_computed_says_so():
     # 30 independent entries: the interval box's section fills a vanishing part
     # of its bounding box, and 50 draws all miss it

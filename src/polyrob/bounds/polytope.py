@@ -200,9 +200,20 @@ def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200
         return Polytope(normals, offsets, None, centre, basis, 0, 0, "no entry varies: there is no volume to compare")
     box_rows = np.arange(len(normals)) < n_box
     # rows of entries that are constant over the cloud do not constrain z
-    # (their G row vanishes; their g is 0 up to rounding, possibly < 0)
-    moves = np.abs(G).max(axis=1) > 1e-12 * max(np.abs(G).max(), 1e-300)
+    # (their G row vanishes; their g is 0 up to rounding, possibly < 0).  The test is
+    # relative to each row's own scale: an entry whose range is 1e-12 of another's
+    # still bounds its principal direction (ur10's task: dropped, the LP was unbounded)
+    size = np.linalg.norm(normals * scale[None, :], axis=1)
+    moves = np.abs(G).max(axis=1) > 1e-9 * np.where(size > 0, size, 1.0)
     G, g, box_rows = G[moves], g[moves], box_rows[moves]
+    # rows and columns brought to unit size for the LPs (z = y / cols): HiGHS drops
+    # coefficients below 1e-9, and a principal direction along an entry whose range is
+    # 1e-12 of the others' has a column that small (ur10's task: "unbounded")
+    rows = np.abs(G).max(axis=1)
+    G, g = G / rows[:, None], g / rows
+    cols = np.abs(G[box_rows]).max(axis=0)
+    cols = np.where(cols > 0, cols, 1.0)
+    Gy = G / cols[None, :]
     # Bounding box, in z, of the interval box cut by the reduced subspace
     # (2r LPs): the volume estimate samples it.
     box_z = []
@@ -211,15 +222,15 @@ def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200
         for sgn in (1.0, -1.0):
             c = np.zeros(r)
             c[i] = sgn
-            res = optimize.linprog(c, A_ub=G[box_rows], b_ub=g[box_rows], bounds=[(None, None)] * r, method="highs")
+            res = optimize.linprog(c, A_ub=Gy[box_rows], b_ub=g[box_rows], bounds=[(None, None)] * r, method="highs")
             if res.status != 0:
                 raise BoundsError(_lp_failure(res, offsets))
-            bounds.append(res.x[i])
+            bounds.append(res.x[i] / cols[i])
         box_z.append(sorted(bounds))
     box_z = np.array(box_z)
     if r <= VERTEX_MAX_DIM:
-        vz = halfspace_vertices(G, g)
-        vertices = None if vz is None else centre + vz @ basis.T
+        vy = halfspace_vertices(Gy, g)
+        vertices = None if vy is None else centre + (vy / cols[None, :]) @ basis.T
     # Volume ratio against the interval box (lo <= centre + basis z <= hi), in z.
     z = box_z[:, 0] + rng.random((n_mc, r)) * (box_z[:, 1] - box_z[:, 0])
     in_poly = np.all(z @ G.T <= g + 1e-12, axis=1)
