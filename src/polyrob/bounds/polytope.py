@@ -27,6 +27,8 @@ from polyrob.errors import BoundsError
 __all__ = [
     "Polytope",
     "build_polytope",
+    "bounding_box",
+    "constraining_rows",
     "principal_directions",
     "box_corners",
     "halfspace_vertices",
@@ -184,6 +186,50 @@ def principal_directions(vals: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return vt[:r].T
 
 
+def constraining_rows(G, normals, scale) -> np.ndarray:
+    """Which rows of ``G z <= g`` constrain ``z`` (``G = normals @ basis``, entries of range ``scale``).
+
+    Rows of entries that are constant over the cloud do not (their ``G`` row
+    vanishes; their ``g`` is 0 up to rounding, possibly < 0).  The test is
+    relative to each row's own scale: an entry whose range is 1e-12 of another's
+    still bounds its principal direction.
+    """
+    size = np.linalg.norm(np.asarray(normals, float) * np.asarray(scale, float)[None, :], axis=1)
+    return (size > 0) & (np.abs(G).max(axis=1) > 1e-9 * np.where(size > 0, size, 1.0))
+
+
+def bounding_box(G, g, offsets=()) -> np.ndarray:
+    """The bounding box ``(r, 2)`` of ``{z : G z <= g}`` (bounded, rows that constrain), by 2r LPs (HiGHS).
+
+    The LPs run on rows and columns scaled to unit size: HiGHS drops
+    coefficients below 1e-9, and a principal direction along an entry whose
+    range is 1e-12 of the others' has a column that small (ur10's default task:
+    the LP was "unbounded").  ``offsets`` (the support values) only word the
+    error.
+
+    Raises
+    ------
+    BoundsError
+        An LP failed.
+    """
+    G, g = np.asarray(G, float), np.asarray(g, float)
+    rows = np.abs(G).max(axis=1)
+    G, g = G / rows[:, None], g / rows
+    cols = np.abs(G).max(axis=0)
+    cols = np.where(cols > 0, cols, 1.0)
+    Gy, r = G / cols[None, :], G.shape[1]
+    box = np.zeros((r, 2))
+    for i in range(r):
+        for j, sgn in enumerate((1.0, -1.0)):  # min, then max
+            c = np.zeros(r)
+            c[i] = sgn
+            res = optimize.linprog(c, A_ub=Gy, b_ub=g, bounds=[(None, None)] * r, method="highs")
+            if res.status != 0:
+                raise BoundsError(_lp_failure(res, np.asarray(offsets, float)))
+            box[i, j] = res.x[i] / cols[i]
+    return box
+
+
 def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200_000) -> Polytope:
     """Reduced coordinates, LP bounding box, interior point, vertices and volume ratio.
 
@@ -199,35 +245,16 @@ def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200
     if r == 0:
         return Polytope(normals, offsets, None, centre, basis, 0, 0, "no entry varies: there is no volume to compare")
     box_rows = np.arange(len(normals)) < n_box
-    # rows of entries that are constant over the cloud do not constrain z
-    # (their G row vanishes; their g is 0 up to rounding, possibly < 0).  The test is
-    # relative to each row's own scale: an entry whose range is 1e-12 of another's
-    # still bounds its principal direction (ur10's task: dropped, the LP was unbounded)
-    size = np.linalg.norm(normals * scale[None, :], axis=1)
-    moves = np.abs(G).max(axis=1) > 1e-9 * np.where(size > 0, size, 1.0)
+    moves = constraining_rows(G, normals, scale)
     G, g, box_rows = G[moves], g[moves], box_rows[moves]
-    # rows and columns brought to unit size for the LPs (z = y / cols): HiGHS drops
-    # coefficients below 1e-9, and a principal direction along an entry whose range is
-    # 1e-12 of the others' has a column that small (ur10's task: "unbounded")
+    # rows and columns brought to unit size (z = y / cols): see bounding_box
     rows = np.abs(G).max(axis=1)
     G, g = G / rows[:, None], g / rows
     cols = np.abs(G[box_rows]).max(axis=0)
     cols = np.where(cols > 0, cols, 1.0)
     Gy = G / cols[None, :]
-    # Bounding box, in z, of the interval box cut by the reduced subspace
-    # (2r LPs): the volume estimate samples it.
-    box_z = []
-    for i in range(r):
-        bounds = []
-        for sgn in (1.0, -1.0):
-            c = np.zeros(r)
-            c[i] = sgn
-            res = optimize.linprog(c, A_ub=Gy[box_rows], b_ub=g[box_rows], bounds=[(None, None)] * r, method="highs")
-            if res.status != 0:
-                raise BoundsError(_lp_failure(res, offsets))
-            bounds.append(res.x[i] / cols[i])
-        box_z.append(sorted(bounds))
-    box_z = np.array(box_z)
+    # Bounding box, in z, of the interval box cut by the reduced subspace: the volume estimate samples it
+    box_z = bounding_box(G[box_rows], g[box_rows], offsets)
     if r <= VERTEX_MAX_DIM:
         vy = halfspace_vertices(Gy, g)
         vertices = None if vy is None else centre + (vy / cols[None, :]) @ basis.T

@@ -59,24 +59,17 @@ def coverage_fraction(unc: UncertainPlant, robot, domain, n: int = 2000, *, seed
 
 def _box_points(pldi, n: int, rng):
     """Uniform points of the interval box in the polytope's reduced coordinates, and their entries."""
+    from polyrob.bounds.polytope import bounding_box, constraining_rows
+
     poly = pldi.polytope
     lo, hi = np.asarray(pldi.lower, float), np.asarray(pldi.upper, float)
     k = len(lo)
-    G = poly.normals[: 2 * k] @ poly.basis
-    g = poly.offsets[: 2 * k] - poly.normals[: 2 * k] @ poly.centre
-    from scipy import optimize
-
+    normals = poly.normals[: 2 * k]
+    G = normals @ poly.basis
+    g = poly.offsets[: 2 * k] - normals @ poly.centre
+    keep = constraining_rows(G, normals, hi - lo)  # as the polytope's own bounding box: the same LPs
     r = poly.basis.shape[1]
-    box_z = []
-    for i in range(r):
-        b = []
-        for sgn in (1.0, -1.0):
-            c = np.zeros(r)
-            c[i] = sgn
-            res = optimize.linprog(c, A_ub=G, b_ub=g, bounds=[(None, None)] * r, method="highs")
-            b.append(res.x[i])
-        box_z.append(sorted(b))
-    box_z = np.array(box_z)
+    box_z = bounding_box(G[keep], g[keep], poly.offsets)
     z = box_z[:, 0] + rng.random((n, r)) * (box_z[:, 1] - box_z[:, 0])
     p = poly.centre + z @ poly.basis.T
     in_box = np.all((p >= lo - 1e-12 * (1 + abs(lo))) & (p <= hi + 1e-12 * (1 + abs(hi))), axis=1)
