@@ -30,7 +30,7 @@ def test_a_certified_loop_keeps_its_bound():
     cert = certify_loop(_loop(1.0), -1.0, [[1, 1]], n_u=1, n_y=1)  # N = 1/(s + 2): mu 0.5
     m = robust_margin(cert)
     assert cert.certified and m.proved and m.level == cert.bound < 1
-    assert m.sentence().startswith("robust performance for every member")
+    assert m.sentence() == f"robust performance at level {m.level:.3g} for {100 / m.level:.0f} % of the parameter ranges"
 
 
 def test_no_margin_without_a_stable_nominal_loop():

@@ -36,14 +36,11 @@ def instead_line(problem, K, analysis, limit: dict | None = None) -> str:
 
     if analysis.certificate.certified:
         return ""
-    got = []
-    rs = analysis.robust_stability.certificate
-    if rs.certified:
-        got.append(f"robust stability CERTIFIED (mu <= {rs.bound:.3g} at every frequency)")
-    m = analysis.margin
-    if m is not None and m.proved:
-        got.append(f"robust performance at level {m.level:.3g} for {100 * m.fraction:.0f} % of the parameter ranges")
-    instead = "; ".join(got) or "nothing (no margin proved" + (f": {m.reason})" if m is not None else ")")
+    rs, m = analysis.robust_stability.certificate, analysis.margin
+    got = [rs.verdict] if rs.certified else []  # the words of its own certificate
+    if m is not None and (m.proved or not got):
+        got.append(m.sentence())
+    instead = "; ".join(got) or "no margin computed"
     w = float(analysis.certificate.mu.peak_upper_frequency) if analysis.certificate.mu is not None else np.nan
     label = dominant_weight(problem.P, K, w) if np.isfinite(w) else None
     way = (
