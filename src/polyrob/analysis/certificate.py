@@ -297,7 +297,7 @@ def certify_loop(
     """
     from polyrob.analysis.mu.blocks import as_block_structure
     from polyrob.analysis.mu.bounds import mu_bounds
-    from polyrob.analysis.mu.frequency import default_grid, response_error
+    from polyrob.analysis.mu.frequency import default_grid, needs_extended_precision
     from polyrob.analysis.stability import stability_verdict
     from polyrob.plant.loops import lft
 
@@ -319,9 +319,7 @@ def certify_loop(
     # double-precision responses of a badly conditioned realisation can be wrong in
     # every digit: a few frequencies are checked in 212-bit arithmetic, and the whole
     # sweep is evaluated there when double precision is off by more than 1e-6
-    pos = w[w > 0]
-    check = np.unique(np.quantile(pos, np.linspace(0, 1, 9))) if pos.size else np.array([1.0])
-    if "response_bits" not in mu_options and response_error(M, check, RESPONSE_BITS) > RESPONSE_TOL:
+    if "response_bits" not in mu_options and needs_extended_precision(M, w, RESPONSE_BITS, RESPONSE_TOL):
         mu_options["response_bits"] = RESPONSE_BITS
     mu_options.setdefault("progress", False)
     mu = mu_bounds(M, st, w, **mu_options)

@@ -92,7 +92,7 @@ def robust_margin(cert) -> RobustMargin:
     """
     from polyrob.analysis.certificate import RESPONSE_BITS, RESPONSE_TOL
     from polyrob.analysis.mu.between import verify_between
-    from polyrob.analysis.mu.frequency import response_error
+    from polyrob.analysis.mu.frequency import needs_extended_precision
 
     mu = cert.mu
     peak_omega = float(mu.peak_upper_frequency) if mu is not None else float("nan")
@@ -109,10 +109,7 @@ def robust_margin(cert) -> RobustMargin:
     if between is not None and between.holds:
         return RobustMargin(float(between.level), True, peak_omega)
     M = cert.closed_loop
-    pos = np.asarray(mu.omega, float)
-    pos = pos[pos > 0]
-    check = np.unique(np.quantile(pos, np.linspace(0, 1, 9))) if pos.size else np.array([1.0])
-    if response_error(M, check, RESPONSE_BITS) > RESPONSE_TOL:  # the Hamiltonian test runs in double precision
+    if needs_extended_precision(M, mu.omega, RESPONSE_BITS, RESPONSE_TOL):  # the Hamiltonian test runs in double
         return RobustMargin(float("nan"), False, peak_omega, "the loop's realisation needs extended precision")
     res = verify_between(M, mu)
     if not res.holds:

@@ -232,3 +232,16 @@ def response_error(sys, omega, bits: int = 212) -> float:
     with np.errstate(invalid="ignore"):
         diff = np.where(both_inf, 0.0, np.abs(Hd - He))
     return float(np.max(np.where(np.isfinite(diff), diff, np.inf), initial=0.0)) / scale
+
+
+def needs_extended_precision(sys, omega, bits: int = 212, tol: float = 1e-6) -> bool:
+    """Whether double precision is off by more than ``tol`` (relative) at nine frequencies spread over ``omega``.
+
+    The cheap test every certificate of a loop makes before it trusts
+    double-precision responses (:func:`response_error` at the grid's 0, 12.5,
+    ..., 100 % quantiles of its positive frequencies).
+    """
+    pos = np.asarray(omega, float)
+    pos = pos[pos > 0]
+    check = np.unique(np.quantile(pos, np.linspace(0, 1, 9))) if pos.size else np.array([1.0])
+    return response_error(sys, check, bits) > tol
