@@ -117,21 +117,19 @@ def robust_margin(cert) -> RobustMargin:
     return RobustMargin(float(res.level), True, peak_omega)
 
 
-def dominant_weight(P, K, omega: float) -> str | None:
+def dominant_weight(P, N, omega: float) -> str | None:
     """The weighted signal (a label of ``P.z_labels``) with the largest nominal gain at ``omega``.
 
-    The nominal closed loop ``w -> z`` at ``Δ = 0``: which performance demand
-    (``W_S`` on the error, ``W_T`` on the output, ...) is the hard one there.
-    ``None`` for a bare state space or an unstable nominal loop.
+    ``N = lft(P, K)`` is the loop at ``Δ = 0`` (a certificate's ``closed_loop``),
+    stable; its ``w -> z`` response says which performance demand (``W_S`` on
+    the error, ``W_T`` on the output, ...) is the hard one there.  ``None``
+    for a bare state space.
     """
     from polyrob.analysis.mu.frequency import freqresp
-    from polyrob.plant.loops import lft
 
-    labels = getattr(P, "z_labels", None)
-    if not labels or not np.isfinite(omega):
+    if not getattr(P, "z_labels", None) or not np.isfinite(omega):
         return None
-    N = lft(P, K)
     zs, ws = P.output_slices["z"], P.input_slices["w"]
-    H = np.asarray(freqresp(N[zs, ws], np.array([max(float(omega), 0.0)])))[..., 0]
+    H = np.asarray(freqresp(N[zs, ws], np.array([max(float(omega), 0.0)])))[0]  # (z, w) at omega
     gains = {lab: float(np.linalg.norm(H[rows], 2)) for lab, rows in P.z_slices.items()}
     return max(gains, key=gains.get)

@@ -22,7 +22,7 @@ __all__ = [
 ]
 
 
-def instead_line(problem, K, analysis, limit: dict | None = None) -> str:
+def instead_line(problem, analysis, limit: dict | None = None) -> str:
     """One line, when robust performance is not certified: what the controller certifies instead, and what stands in the way.
 
     Instead: robust stability when its own certificate holds, and the
@@ -34,15 +34,17 @@ def instead_line(problem, K, analysis, limit: dict | None = None) -> str:
     """
     from polyrob.analysis.margins import dominant_weight
 
-    if analysis.certificate.certified:
+    cert = analysis.certificate
+    if cert.certified:
         return ""
     rs, m = analysis.robust_stability.certificate, analysis.margin
     got = [rs.verdict] if rs.certified else []  # the words of its own certificate
     if m is not None and (m.proved or not got):
         got.append(m.sentence())
     instead = "; ".join(got) or "no margin computed"
-    w = float(analysis.certificate.mu.peak_upper_frequency) if analysis.certificate.mu is not None else np.nan
-    label = dominant_weight(problem.P, K, w) if np.isfinite(w) else None
+    w = float(cert.mu.peak_upper_frequency) if cert.mu is not None else np.nan
+    stable = cert.closed_loop is not None and cert.stable_at_delta0 is not None and cert.stable_at_delta0.stable
+    label = dominant_weight(problem.P, cert.closed_loop, w) if stable and np.isfinite(w) else None
     way = (
         "mu peaks " + ("as omega -> 0" if w == 0 else f"at {w:.3g} rad/s") + (f" ({label} dominates)" if label else "")
     )
@@ -242,4 +244,4 @@ def analyze_controller(
     )
     if margin is None:
         return analysis
-    return replace(analysis, instead=instead_line(problem, K, analysis, limit))
+    return replace(analysis, instead=instead_line(problem, analysis, limit))
