@@ -6,8 +6,9 @@ paper's K*), the weights at ``--bandwidth-scale FACTOR``:
 * ``moving``: :func:`polyrob.analysis.lpv.moving.moving_robot_certificate`
   (the linearised robot scheduled on ``(q2, qdot1, qdot2)``, ``dq2/dt =
   qdot2`` at every grid point, the velocities bounded by the domain's
-  accelerations or, for large loops, arbitrary: docs/certificates.md), its
-  proved gamma, status, frozen peak and seconds;
+  accelerations with ``X`` on the tensor basis, or arbitrary:
+  docs/certificates.md), its proved gamma (the larger of the search grid's
+  and the finer re-check grid's), status, frozen peak and seconds;
 * with ``--full``: also the frozen-robot μ and the arbitrarily fast verdict
   of :func:`polyrob.pipeline.analyze_controller` (the PLDI bounded on the
   paper's domain, ``lft`` model) -- minutes more per run.
@@ -16,6 +17,8 @@ Prints one JSON document (with the machine, the date and the load average).
 
     python benchmarks/moving_robot.py [--runs 4:tests/fixtures/paper_2r_tf3_alpha4_K.json,1:paper]
                                       [--velocities auto|bounded|arbitrary] [--points 5,3] [--full]
+                                      [--separable] [--recheck 9,5|none]
+    python benchmarks/moving_robot.py --slice 3.9564,9.9561 --harmonics 1,2 [--q-points 12] [--slice-rate 0]
 """
 
 from __future__ import annotations
@@ -48,7 +51,7 @@ def _light_problem(robot, domain, factor: float):
     return SimpleNamespace(robot=robot, domain=domain, P=SimpleNamespace(W_S=W_S, W_T=W_T, W_KS=None))
 
 
-def run(factor: float, spec: str, *, velocities: str, points, full: bool) -> dict:
+def run(factor: float, spec: str, *, velocities: str, points, full: bool, tensor: bool = True, recheck=(9, 5)) -> dict:
     from polyrob import load_robot
     from polyrob.analysis.lpv.moving import moving_robot_certificate
     from polyrob.domains.torque_box import Domain
@@ -58,13 +61,17 @@ def run(factor: float, spec: str, *, velocities: str, points, full: bool) -> dic
     K = _controller(spec)
     out = {"bandwidth_factor": factor, "controller": spec}
     t = time.perf_counter()
-    mv = moving_robot_certificate(_light_problem(robot, domain, factor), K, velocities=velocities, points=points)
+    problem = _light_problem(robot, domain, factor)
+    mv = moving_robot_certificate(problem, K, velocities=velocities, points=points, tensor=tensor, recheck=recheck)
     s = mv.summary()
     out["moving"] = {
         "verdict": mv.verdict,
         "status": s["status"],
         "gamma": s["gamma"],
+        "gamma_on_the_search_grid": None if mv.result is None or not mv.result.proved else mv.result.gamma,
+        "finer_grid": s["finer_grid"],
         "frozen_gamma": s["frozen_gamma"],
+        "basis": None if mv.result is None else mv.result.n_basis,
         "grid": s["grid"],
         "rates": s["rate_words"],
         "solver_status": None if mv.result is None else mv.result.solver_status,
@@ -86,14 +93,68 @@ def run(factor: float, spec: str, *, velocities: str, points, full: bool) -> dic
     return out
 
 
+def position_slice(factor: float, spec: str, velocity, harmonics: int, q_points: int, rate: float = 0.0) -> dict:
+    """The frozen loops along ``q2`` at one velocity: how well ``X(q2)`` on ``harmonics`` harmonics fits them.
+
+    :func:`polyrob.lpvnorm` on the loops at ``q2`` in ``q_points`` values of
+    ``[-pi, pi)``, ``qdot = velocity``, with ``|dq2/dt| <= rate`` (0: every
+    loop frozen) and ``X(q2)`` on ``1, cos k q2, sin k q2`` (``k <=
+    harmonics``).  With rate 0 no rate bound can give less on this slice, so
+    a value far above the frozen peak says the basis, not the rates, limits
+    the moving-robot bound.
+    """
+    import numpy as np
+
+    from polyrob import load_robot
+    from polyrob.analysis.lpv.norm import lpvnorm
+    from polyrob.analysis.lpv.robot import closed_loop_system, conditioned, scheduling
+    from polyrob.domains.torque_box import Domain
+
+    robot = load_robot("paper_2r")
+    domain = Domain.from_robot(robot, "paper")
+    P = _light_problem(robot, domain, factor).P
+    model = scheduling(robot, domain, points=(q_points + 1, 2))
+    system = closed_loop_system(model, _controller(spec), P.W_S, P.W_T, P.W_KS)
+    v = np.asarray(velocity, float)
+    sysc, c = conditioned(system, np.array([0.0, *v]))
+    basis = [(lambda r: 1.0, lambda r: np.zeros(1))]
+    for k in range(1, harmonics + 1):
+        basis.append((lambda r, k=k: np.cos(k * r[0]), lambda r, k=k: np.array([-k * np.sin(k * r[0])])))
+        basis.append((lambda r, k=k: np.sin(k * r[0]), lambda r, k=k: np.array([k * np.cos(k * r[0])])))
+    t = time.perf_counter()
+    rb = [(-rate / c, rate / c)]
+    r = lpvnorm(lambda rho: sysc(np.array([rho[0], *v])), [model.axes[0][:-1]], rb, basis, eps=1e-4)
+    return {
+        "bandwidth_factor": factor,
+        "controller": spec,
+        "qdot": v.tolist(),
+        "q2_points": q_points,
+        "harmonics": harmonics,
+        "q2_rate_bound": rate,
+        "gamma": r.gamma if r.proved else None,
+        "frozen_gamma": r.frozen_gamma,
+        "solver_status": r.solver_status,
+        "seconds": round(time.perf_counter() - t, 1),
+    }
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", default="4:tests/fixtures/paper_2r_tf3_alpha4_K.json")
     ap.add_argument("--velocities", default="auto", choices=["auto", "bounded", "arbitrary"])
     ap.add_argument("--points", default="5,3", help="grid points per position and per velocity parameter")
     ap.add_argument("--full", action="store_true", help="also the frozen-robot mu and the arbitrarily fast verdict")
+    ap.add_argument(
+        "--separable", action="store_true", help="X on 1, cos q2, sin q2, qdot1, qdot2 (not the tensor basis)"
+    )
+    ap.add_argument("--recheck", default="9,5", help="finer grid the X is re-checked on ('none': not re-checked)")
+    ap.add_argument("--slice", default=None, metavar="QDOT1,QDOT2", help="only position_slice() at this velocity")
+    ap.add_argument("--harmonics", default="1", help="--slice: comma-separated harmonic orders of X(q2)")
+    ap.add_argument("--q-points", type=int, default=12, help="--slice: points of q2 in [-pi, pi)")
+    ap.add_argument("--slice-rate", type=float, default=0.0, help="--slice: bound of |dq2/dt| (0: frozen loops)")
     args = ap.parse_args(argv)
     points = tuple(int(x) for x in args.points.split(","))
+    recheck = None if args.recheck == "none" else tuple(int(x) for x in args.recheck.split(","))
     doc = {
         "problem": "paper_2r --domain paper",
         "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
@@ -103,7 +164,22 @@ def main(argv=None) -> int:
     }
     for item in args.runs.split(","):
         factor, spec = item.split(":", 1)
-        doc["runs"].append(run(float(factor), spec, velocities=args.velocities, points=points, full=args.full))
+        if args.slice:
+            v = [float(x) for x in args.slice.split(",")]
+            for k in args.harmonics.split(","):
+                doc["runs"].append(position_slice(float(factor), spec, v, int(k), args.q_points, args.slice_rate))
+            continue
+        doc["runs"].append(
+            run(
+                float(factor),
+                spec,
+                velocities=args.velocities,
+                points=points,
+                full=args.full,
+                tensor=not args.separable,
+                recheck=recheck,
+            )  # fmt: skip
+        )
     doc["load_average_end"] = list(os.getloadavg())
     print(json.dumps(doc, indent=2, allow_nan=False))
     return 0

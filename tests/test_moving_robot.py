@@ -78,7 +78,7 @@ def test_moving_gain_lies_between_frozen_and_fast_and_grows_with_the_rate(robot,
     gammas = []
     for scale in (0.0, 20.0):
         rates, _ = rate_bounds(model, small, scale=scale)
-        r = moving_robot_gain(model, system, rates)
+        r = moving_robot_gain(model, system, rates, tensor=False)
         assert r.proved, r.reason
         gammas.append(r.gamma)
     fast = moving_robot_gain(model, system, [(-np.inf, np.inf)] * 3)
@@ -146,7 +146,7 @@ def test_arbitrary_velocities_cover_more_than_bounded_ones(robot, small):
     model = scheduling(robot, small, points=(4, 2))
     system = closed_loop_system(model, pd_controller(), 0.5 * np.eye(2), None)
     rates, _ = rate_bounds(model, small, scale=20.0)
-    bounded = moving_robot_gain(model, system, rates, velocities="bounded")
+    bounded = moving_robot_gain(model, system, rates, velocities="bounded", tensor=False)
     free = moving_robot_gain(model, system, rates, velocities="arbitrary")
     assert bounded.proved and free.proved
     assert free.n_basis == 3 and bounded.n_basis == 5
@@ -175,3 +175,53 @@ def test_conditioning_makes_a_strict_lyapunov_matrix_the_identity(robot):
     assert h == pytest.approx(0.7211, abs=1e-3) and A.shape == (20, 20)
     g, chk = proved_gamma(grid_data([A], [B], [C], [D]), [c * np.eye(20)], h)
     assert chk.holds and h < g <= 2.0 * h  # 1.5 h, plus what the strictness term delta I costs
+
+
+def test_a_bound_that_holds_only_at_the_grid_points_is_not_reported(robot, small):
+    """The tensor basis fits X to the grid: below the frozen peak on 4 x 3 x 3 points, broken between them.
+
+    The finer re-check (the same X at the 9 x 5 x 5 points of the box, float64) finds it: the certificate's
+    gamma is the finer grid's, above the coarse grid's and the frozen peak, and robust performance is not
+    certified (with the coarse figure alone it would have been GRID_ONLY).
+    """
+    from polyrob.analysis.lpv.moving import moving_robot_certificate
+
+    problem = NS(robot=robot, domain=small, P=NS(W_S=0.5 * np.eye(2), W_T=None, W_KS=None))
+    c = moving_robot_certificate(problem, pd_controller(), points=(4, 3), rate_scale=20.0, velocities="bounded")
+    assert c.result.proved and c.result.n_basis == 9 and c.finer["points"] == 225
+    assert c.result.gamma < 1 and c.result.gamma < c.frozen_gamma  # on the coarse grid alone
+    assert c.gamma == c.finer["gamma"] and c.gamma > max(1.0, c.result.gamma, c.frozen_gamma)
+    assert c.certificate.status is Status.NOT_CERTIFIED and not c.finer["holds_at_gamma"]
+    assert "re-checked at the 225 points of a finer grid" in c.certificate.scope.sentence()
+    assert "finer grid of 225 points" in c.details()
+
+
+def test_tensor_basis_has_the_velocity_part_per_position(robot):
+    """default_basis(tensor=True): {1, cos q2, sin q2} x {1, qdot1, qdot2}, gradients by the product rule."""
+    from polyrob.analysis.lpv.basis import basis_size, default_basis
+
+    model = scheduling(robot, Domain.from_robot(robot, "paper"), points=(5, 3))
+    basis = default_basis(model, tensor=True)
+    assert len(basis) == 9 == basis_size(model, tensor=True) and basis_size(model) == 5
+    rho, h = np.array([0.4, -1.2, 3.0]), 1e-6
+    values = [f(rho) for f, _ in basis]
+    assert values[-1] == pytest.approx(np.sin(0.4) * 3.0)  # sin q2 * qdot2
+    for f, g in basis:
+        num = [(f(rho + h * e) - f(rho - h * e)) / (2 * h) for e in np.eye(3)]
+        assert np.allclose(g(rho), num, atol=1e-8)
+
+
+def test_synth_moving_prints_and_returns_the_moving_verdict(robot, small, capsys):
+    """``synth --moving``: the option parses, and moving_check() prints the third verdict and returns its summary."""
+    from polyrob.cli import build_parser
+    from polyrob.cli.common import Output
+    from polyrob.cli.synth import moving_check
+
+    args = build_parser().parse_args(["synth", "paper_2r", "--moving", "--quiet"])
+    assert args.moving is True and build_parser().parse_args(["synth", "paper_2r"]).moving is False
+    problem = NS(robot=robot, domain=small, P=NS(W_S=0.5 * np.eye(2), W_T=None, W_KS=None))
+    doc = moving_check(problem, pd_controller(), Output(args, stages=1))
+    text = capsys.readouterr().out
+    assert doc["computed"] and doc["finer_grid"]["points"] == 225 and doc["gamma"] is not None
+    assert doc["verdict"] in text and "finer grid of 225 points" in text
+    assert doc["status"] in ("GRID_ONLY", "NOT_CERTIFIED") and doc["certified"] is False

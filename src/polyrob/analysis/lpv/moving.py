@@ -6,7 +6,7 @@ the weighted closed loop ``r -> z`` of :func:`~polyrob.analysis.lpv.robot.closed
 scheduled on the robot's state ``rho = (q_i that enter, qdot)``
 (:func:`~polyrob.analysis.lpv.robot.scheduling`), has a proved induced L2
 gain ``gamma`` (:func:`polyrob.lpvnorm`, parameter-dependent Lyapunov matrix
-``X(rho)`` on :func:`~polyrob.analysis.lpv.robot.default_basis`) for every
+``X(rho)`` on :func:`~polyrob.analysis.lpv.basis.default_basis`) for every
 trajectory of ``rho`` in the domain whose rates stay within the bounds of
 :func:`~polyrob.analysis.lpv.robot.rate_bounds`, a position moving at its
 own velocity at every grid point (``dq_i/dt = qdot_i``,
@@ -14,7 +14,10 @@ own velocity at every grid point (``dq_i/dt = qdot_i``,
 (``velocities="auto"``) ``X`` depends on the positions only and the
 velocities may vary arbitrarily fast: a set of trajectories that contains
 the bounded-acceleration one, searched with fewer variables and LMIs
-(:func:`moving_robot_gain`).  Robust performance is
+(:func:`moving_robot_gain`).  The returned ``X`` is re-checked at the
+points of a finer grid (:func:`~polyrob.analysis.lpv.basis.finer_recheck`)
+and ``gamma`` is the larger of the two grids' levels (a basis rich enough
+to follow the loops also fits the grid).  Robust performance is
 ``gamma < 1``; the status is decided by
 :func:`polyrob.analysis.certificate.decide_gridded_gain`: the LMIs hold at
 the grid's points, so a proved ``gamma < 1`` gives GRID_ONLY, not CERTIFIED
@@ -36,7 +39,7 @@ Examples
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -48,6 +51,8 @@ __all__ = ["MovingRobotCertificate", "moving_robot_certificate", "moving_robot_g
 MAX_STATES = 40
 #: Largest ``X(rho)`` (scalar variables) searched with bounded accelerations by default (``velocities="auto"``).
 BOUNDED_VARIABLES = 600
+#: The finer grid (points per position, per velocity) the returned ``X`` is re-checked on.
+RECHECK_POINTS = (9, 5)
 #: Largest closed loop computed by default (``moving=None``): measured cost in docs/certificates.md.
 AUTO_STATES = 8
 
@@ -81,6 +86,10 @@ class MovingRobotCertificate:
     result : LpvNormResult or None
     scope : Scope or None
     notes : tuple of str
+    finer : dict
+        The returned ``X`` re-checked on a finer grid
+        (:func:`~polyrob.analysis.lpv.basis.finer_recheck`: ``points``,
+        ``gamma``, ``holds_at_gamma``); empty when not re-checked.
     seconds : float
     """
 
@@ -96,6 +105,7 @@ class MovingRobotCertificate:
     result: object = None
     scope: object = None
     notes: tuple = ()
+    finer: dict = field(default_factory=dict)
     seconds: float = 0.0
 
     @classmethod
@@ -111,9 +121,9 @@ class MovingRobotCertificate:
         if not self.computed:
             return None
         r = self.result
-        proved = bool(r is not None and r.proved)
+        proved = bool(r is not None and r.proved and np.isfinite(self.gamma))
         between = proved and not str(r.coverage).startswith("on the grid")
-        why = "" if proved else (r.reason if r is not None else (self.notes[-1] if self.notes else ""))
+        why = "" if proved else (self.notes[-1] if self.notes else (r.reason if r is not None else ""))
         status, reasons = decide_gridded_gain(proved, self.gamma, between, why)
         scope = replace(self.scope or Scope(), kind="robust performance", frequencies="")
         return Certificate(status, float(self.gamma), float("nan"), float("nan"), None, scope, reasons)
@@ -134,6 +144,12 @@ class MovingRobotCertificate:
             f"frozen peak over the grid {self.frozen_gamma:.4g} (no rate bound gives less); "
             f"{self.grid_words}; {self.seconds:.0f} s"
         )
+        if self.finer.get("points"):
+            f = self.finer
+            lines.append(
+                f"the same X re-checked on a finer grid of {f['points']} points (sampled, not between them): "
+                + (f"bound {f['gamma']:.4g}" if np.isfinite(f["gamma"]) else f"no bound ({f.get('reason', '')})")
+            )
         return "\n".join(lines)
 
     def summary(self) -> dict:
@@ -153,41 +169,54 @@ class MovingRobotCertificate:
             "lpvnorm": None if self.result is None else self.result.summary(),
             "scope": None if cert is None else cert.scope.summary(),
             "notes": list(self.notes),
+            "finer_grid": {k: finite_or_none(v) if isinstance(v, float) else v for k, v in self.finer.items()},
             "seconds": round(float(self.seconds), 3),
             "verdict": self.verdict,
         }
 
 
-def _velocity_mode(velocities: str, model, n: int) -> str:
+def _velocity_mode(velocities: str, model, n: int, tensor: bool = True) -> str:
     """``"bounded"`` or ``"arbitrary"`` (``"auto"``: bounded while the search has at most :data:`BOUNDED_VARIABLES` scalars)."""
+    from polyrob.analysis.lpv.basis import basis_size
+
     if velocities not in ("auto", "bounded", "arbitrary"):
         raise ArgumentError(f"velocities must be 'auto', 'bounded' or 'arbitrary' (got {velocities!r})")
     if velocities != "auto":
         return velocities
-    k = 1 + sum(2 if kind == "q" else 1 for kind in model.kinds)
+    k = basis_size(model, tensor=tensor)
     return "bounded" if k * n * (n + 1) // 2 <= BOUNDED_VARIABLES else "arbitrary"
 
 
-def moving_robot_gain(model, system, rates, *, quadratic: bool = False, velocities: str = "bounded"):
+def moving_robot_gain(
+    model, system, rates, *, quadratic: bool = False, velocities: str = "bounded", tensor: bool = True
+):
     """:func:`polyrob.lpvnorm` of ``system`` on ``model``'s grid, conditioned (:func:`~polyrob.analysis.lpv.robot.conditioned`).
 
     ``rates`` with every bound infinite gives a constant ``X`` (arbitrarily
     fast variation).  Otherwise a position's rate is its velocity at each grid
     point (:func:`~polyrob.analysis.lpv.robot.kinematic_rates`) and
     ``velocities`` says how the velocities move: ``"bounded"`` (``X(rho)``
-    on :func:`~polyrob.analysis.lpv.robot.default_basis`, the accelerations
-    within ``rates``) or ``"arbitrary"`` (``X`` depends on the positions only,
-    ``1, cos q_i, sin q_i``: the velocities may vary arbitrarily fast, which
-    covers every acceleration bound, with fewer variables and LMIs).  A
-    solver failure is returned as an unproved result, not raised.
+    on :func:`~polyrob.analysis.lpv.basis.default_basis`, the tensor product
+    ``{1, cos q_i, sin q_i} x {1, qdot_j}`` unless ``tensor=False``, the
+    accelerations within ``rates``) or ``"arbitrary"`` (``X`` depends on the
+    positions only, ``1, cos q_i, sin q_i``: the velocities may vary
+    arbitrarily fast, which covers every acceleration bound, with fewer
+    variables and LMIs).  A solver failure is returned as an unproved
+    result, not raised.
     """
+    return _search(model, system, rates, quadratic=quadratic, velocities=velocities, tensor=tensor)[0]
+
+
+def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: bool):
+    """``(result, the system it was run on, its time scale, the basis or None, the rates)``."""
+    from polyrob.analysis.lpv.basis import default_basis
     from polyrob.analysis.lpv.norm import lpvnorm
     from polyrob.analysis.lpv.result import LpvNormResult
-    from polyrob.analysis.lpv.robot import conditioned, default_basis, kinematic_rates
+    from polyrob.analysis.lpv.robot import conditioned, kinematic_rates
 
     centre = np.array([0.5 * (a[0] + a[-1]) for a in model.axes])
     rates = list(rates)
-    basis = default_basis(model, quadratic=quadratic)
+    basis = default_basis(model, quadratic=quadratic, tensor=tensor)
     if velocities == "arbitrary":
         basis = basis[: 1 + 2 * sum(kind == "q" for kind in model.kinds)]
         rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
@@ -215,9 +244,9 @@ def moving_robot_gain(model, system, rates, *, quadratic: bool = False, velociti
                 float("inf"), False, float("inf"), float("nan"), "", f"on the grid of {model.n_points} points",
                 model.n_points, 0, 0, 0, "solver error", reason=str(exc),
             )  # fmt: skip
-        if best is None or r.gamma < best.gamma:
-            best = r
-        if best.proved:
+        if best is None or r.gamma < best[0].gamma:
+            best = (r, sysf, cs, None if fast else basis, rates)
+        if best[0].proved:
             break
     return best
 
@@ -239,6 +268,8 @@ def moving_robot_certificate(
     quadratic: bool = False,
     auto: bool = False,
     velocities: str = "auto",
+    tensor: bool = True,
+    recheck=RECHECK_POINTS,
 ) -> MovingRobotCertificate:
     """The moving-robot certificate of ``K`` on ``problem`` (its robot, domain and weights).
 
@@ -262,6 +293,12 @@ def moving_robot_certificate(
         How the velocities may move (:func:`moving_robot_gain`); ``"auto"``:
         bounded accelerations while ``X(rho)`` has at most
         :data:`BOUNDED_VARIABLES` scalar variables, else arbitrary.
+    tensor : bool
+        The tensor-product basis of ``X`` (:func:`~polyrob.analysis.lpv.basis.default_basis`).
+    recheck : (int, int) or None
+        The finer grid the returned ``X`` is re-checked on
+        (:func:`~polyrob.analysis.lpv.basis.finer_recheck`; sampled, the
+        status stays GRID_ONLY); ``None``: not re-checked.
 
     Returns
     -------
@@ -269,6 +306,7 @@ def moving_robot_certificate(
         ``computed=False`` (and why) when the domain or the loop is out of reach.
     """
     from polyrob.analysis.certificate import Scope
+    from polyrob.analysis.lpv.basis import finer_recheck
     from polyrob.analysis.lpv.robot import closed_loop_system, rate_bounds, scheduling
 
     t0 = time.perf_counter()
@@ -290,15 +328,19 @@ def moving_robot_certificate(
             rates, source = [(-np.inf, np.inf)] * len(model.names), "unbounded"
         else:
             rates, source = rate_bounds(model, domain, qddot_max=qddot_max, scale=rate_scale)
-        mode = _velocity_mode(velocities, model, n)
+        mode = _velocity_mode(velocities, model, n, tensor)
         if mode == "arbitrary" and not np.isinf(rate_scale):
             rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
-        result = moving_robot_gain(model, system, rates, quadratic=quadratic, velocities=mode)
+        result, sysf, cs, basis, used = _search(
+            model, system, rates, quadratic=quadratic, velocities=mode, tensor=tensor
+        )
+        finer = {} if recheck is None else finer_recheck(sysf, model, result, used, basis, points=recheck, c=cs)
     except NotApplicable as exc:
         return MovingRobotCertificate.not_computed(str(exc))
     base = problem.scope() if hasattr(problem, "scope") else Scope()
     words = _rate_words(model.names, rates, source)
-    notes = (f"on the grid of {model.words()}; not proved between the grid points",)
+    again = f" and the same X re-checked at the {finer['points']} points of a finer grid" if finer.get("points") else ""
+    notes = (f"on the grid of {model.words()}{again}; not proved between the grid points",)
     notes += (
         tuple(result.notes)
         + (
@@ -319,15 +361,22 @@ def moving_robot_certificate(
         vertices_from="",
         notes=notes,
     )
+    gamma, why = float(result.gamma), () if result.proved else (result.reason,)
+    if finer.get("points") and result.proved:  # the verdict rests on both grids: the finer one may be worse
+        gamma = max(gamma, float(finer["gamma"]))
+        if not np.isfinite(gamma):
+            why = (f"the X proved on the {model.n_points}-point grid fails on the finer grid of {finer['points']} "
+                   f"points: {finer.get('reason', '')}",)  # fmt: skip
     return MovingRobotCertificate(
         computed=True,
-        gamma=float(result.gamma),
+        gamma=gamma,
         frozen_gamma=float(result.frozen_gamma),
         rates=tuple(rates),
         rate_words=words,
         grid_words=model.words(),
         result=result,
         scope=scope,
-        notes=() if result.proved else (result.reason,),
+        notes=why,
+        finer=finer,
         seconds=time.perf_counter() - t0,
     )

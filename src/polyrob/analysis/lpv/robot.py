@@ -45,7 +45,6 @@ __all__ = [
     "closed_loop_system",
     "kinematic_rates",
     "conditioned",
-    "default_basis",
     "RATE_SAMPLES",
     "RATE_MARGIN",
 ]
@@ -368,33 +367,3 @@ def conditioned(system, centre, *, floor: float = 1e-12, method: str = "gramian"
 
     system_c.similarity = T  # x = T x~: a Lyapunov matrix restricted to states S is (E_S T)^T Y (E_S T) here
     return system_c, c
-
-
-def default_basis(model: MovingRobotModel, *, quadratic: bool = False):
-    """Basis of ``X(rho)``: ``1``, ``cos q_i``, ``sin q_i``, ``qdot_i`` (and their products with ``quadratic``).
-
-    Returns
-    -------
-    list of (f, grad)
-    """
-    p = len(model.names)
-
-    def unit(i, dv):
-        g = np.zeros(p)
-        g[i] = dv
-        return g
-
-    basis = [(lambda r: 1.0, lambda r: np.zeros(p))]
-    for i, kind in enumerate(model.kinds):
-        if kind == "q":
-            basis.append((lambda r, i=i: np.cos(r[i]), lambda r, i=i: unit(i, -np.sin(r[i]))))
-            basis.append((lambda r, i=i: np.sin(r[i]), lambda r, i=i: unit(i, np.cos(r[i]))))
-        else:
-            basis.append((lambda r, i=i: r[i], lambda r, i=i: unit(i, 1.0)))
-    if quadratic:
-        vel = [i for i, k in enumerate(model.kinds) if k == "qdot"]
-        for a in vel:
-            for b in vel:
-                if b >= a:
-                    basis.append((lambda r, a=a, b=b: r[a] * r[b], lambda r, a=a, b=b: unit(a, r[b]) + unit(b, r[a])))
-    return basis
