@@ -51,7 +51,9 @@ def _light_problem(robot, domain, factor: float):
     return SimpleNamespace(robot=robot, domain=domain, P=SimpleNamespace(W_S=W_S, W_T=W_T, W_KS=None))
 
 
-def run(factor: float, spec: str, *, velocities: str, points, full: bool, tensor: bool = True, recheck=(9, 5)) -> dict:
+def run(
+    factor: float, spec: str, *, velocities: str, points, full: bool, tensor: bool = True, recheck=(9, 5), harmonics=1
+) -> dict:
     from polyrob import load_robot
     from polyrob.analysis.lpv.moving import moving_robot_certificate
     from polyrob.domains.torque_box import Domain
@@ -62,7 +64,9 @@ def run(factor: float, spec: str, *, velocities: str, points, full: bool, tensor
     out = {"bandwidth_factor": factor, "controller": spec}
     t = time.perf_counter()
     problem = _light_problem(robot, domain, factor)
-    mv = moving_robot_certificate(problem, K, velocities=velocities, points=points, tensor=tensor, recheck=recheck)
+    mv = moving_robot_certificate(
+        problem, K, velocities=velocities, points=points, tensor=tensor, recheck=recheck, harmonics=harmonics
+    )
     s = mv.summary()
     out["moving"] = {
         "verdict": mv.verdict,
@@ -149,7 +153,7 @@ def main(argv=None) -> int:
     )
     ap.add_argument("--recheck", default="9,5", help="finer grid the X is re-checked on ('none': not re-checked)")
     ap.add_argument("--slice", default=None, metavar="QDOT1,QDOT2", help="only position_slice() at this velocity")
-    ap.add_argument("--harmonics", default="1", help="--slice: comma-separated harmonic orders of X(q2)")
+    ap.add_argument("--harmonics", default="1", help="harmonics of X in q2 (--slice: a comma-separated list)")
     ap.add_argument("--q-points", type=int, default=12, help="--slice: points of q2 in [-pi, pi)")
     ap.add_argument("--slice-rate", type=float, default=0.0, help="--slice: bound of |dq2/dt| (0: frozen loops)")
     args = ap.parse_args(argv)
@@ -178,7 +182,8 @@ def main(argv=None) -> int:
                 full=args.full,
                 tensor=not args.separable,
                 recheck=recheck,
-            )  # fmt: skip
+                harmonics=int(args.harmonics.split(",")[0]),
+            )
         )
     doc["load_average_end"] = list(os.getloadavg())
     print(json.dumps(doc, indent=2, allow_nan=False))

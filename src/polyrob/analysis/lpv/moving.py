@@ -175,7 +175,7 @@ class MovingRobotCertificate:
         }
 
 
-def _velocity_mode(velocities: str, model, n: int, tensor: bool = True) -> str:
+def _velocity_mode(velocities: str, model, n: int, tensor: bool = True, harmonics: int = 1) -> str:
     """``"bounded"`` or ``"arbitrary"`` (``"auto"``: bounded while the search has at most :data:`BOUNDED_VARIABLES` scalars)."""
     from polyrob.analysis.lpv.basis import basis_size
 
@@ -183,12 +183,19 @@ def _velocity_mode(velocities: str, model, n: int, tensor: bool = True) -> str:
         raise ArgumentError(f"velocities must be 'auto', 'bounded' or 'arbitrary' (got {velocities!r})")
     if velocities != "auto":
         return velocities
-    k = basis_size(model, tensor=tensor)
+    k = basis_size(model, tensor=tensor, harmonics=harmonics)
     return "bounded" if k * n * (n + 1) // 2 <= BOUNDED_VARIABLES else "arbitrary"
 
 
 def moving_robot_gain(
-    model, system, rates, *, quadratic: bool = False, velocities: str = "bounded", tensor: bool = True
+    model,
+    system,
+    rates,
+    *,
+    quadratic: bool = False,
+    velocities: str = "bounded",
+    tensor: bool = True,
+    harmonics: int = 1,
 ):
     """:func:`polyrob.lpvnorm` of ``system`` on ``model``'s grid, conditioned (:func:`~polyrob.analysis.lpv.robot.conditioned`).
 
@@ -202,12 +209,14 @@ def moving_robot_gain(
     positions only, ``1, cos q_i, sin q_i``: the velocities may vary
     arbitrarily fast, which covers every acceleration bound, with fewer
     variables and LMIs).  A solver failure is returned as an unproved
-    result, not raised.
+    result, not raised.  ``harmonics=K``: ``cos k q_i, sin k q_i`` for ``k <= K``.
     """
-    return _search(model, system, rates, quadratic=quadratic, velocities=velocities, tensor=tensor)[0]
+    return _search(
+        model, system, rates, quadratic=quadratic, velocities=velocities, tensor=tensor, harmonics=harmonics
+    )[0]
 
 
-def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: bool):
+def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: bool, harmonics: int = 1):
     """``(result, the system it was run on, its time scale, the basis or None, the rates)``."""
     from polyrob.analysis.lpv.basis import default_basis
     from polyrob.analysis.lpv.norm import lpvnorm
@@ -216,9 +225,9 @@ def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: b
 
     centre = np.array([0.5 * (a[0] + a[-1]) for a in model.axes])
     rates = list(rates)
-    basis = default_basis(model, quadratic=quadratic, tensor=tensor)
+    basis = default_basis(model, quadratic=quadratic, tensor=tensor, harmonics=harmonics)
     if velocities == "arbitrary":
-        basis = basis[: 1 + 2 * sum(kind == "q" for kind in model.kinds)]
+        basis = basis[: 1 + 2 * harmonics * sum(kind == "q" for kind in model.kinds)]
         rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
     fast = all(not np.isfinite(hi) for _, hi in rates)
     c_sys = []
@@ -269,6 +278,7 @@ def moving_robot_certificate(
     auto: bool = False,
     velocities: str = "auto",
     tensor: bool = True,
+    harmonics: int = 1,
     recheck=RECHECK_POINTS,
 ) -> MovingRobotCertificate:
     """The moving-robot certificate of ``K`` on ``problem`` (its robot, domain and weights).
@@ -295,6 +305,8 @@ def moving_robot_certificate(
         :data:`BOUNDED_VARIABLES` scalar variables, else arbitrary.
     tensor : bool
         The tensor-product basis of ``X`` (:func:`~polyrob.analysis.lpv.basis.default_basis`).
+    harmonics : int
+        ``cos k q_i, sin k q_i`` for ``k <= harmonics`` in that basis.
     recheck : (int, int) or None
         The finer grid the returned ``X`` is re-checked on
         (:func:`~polyrob.analysis.lpv.basis.finer_recheck`; sampled, the
@@ -328,11 +340,11 @@ def moving_robot_certificate(
             rates, source = [(-np.inf, np.inf)] * len(model.names), "unbounded"
         else:
             rates, source = rate_bounds(model, domain, qddot_max=qddot_max, scale=rate_scale)
-        mode = _velocity_mode(velocities, model, n, tensor)
+        mode = _velocity_mode(velocities, model, n, tensor, harmonics)
         if mode == "arbitrary" and not np.isinf(rate_scale):
             rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
         result, sysf, cs, basis, used = _search(
-            model, system, rates, quadratic=quadratic, velocities=mode, tensor=tensor
+            model, system, rates, quadratic=quadratic, velocities=mode, tensor=tensor, harmonics=harmonics
         )
         finer = {} if recheck is None else finer_recheck(sysf, model, result, used, basis, points=recheck, c=cs)
     except NotApplicable as exc:
