@@ -366,8 +366,8 @@ def add_weight_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--bandwidth-scale", type=positive_float, default=1.0, help="multiply wB and wBT")
 
 
-def hyperparameters_from_args(m: int, args) -> dict:
-    """The paper's weight hyperparameters with the per-channel overrides of the options."""
+def hyperparameters_from_args(m: int, args, domain=None) -> dict:
+    """The paper's weight hyperparameters with the options' overrides; on an arm's default task, the automatic ones."""
     from polyrob.pipeline.problem import default_hyperparameters
 
     overrides = {}
@@ -377,6 +377,11 @@ def hyperparameters_from_args(m: int, args) -> dict:
             if len(vals) not in (1, m):
                 raise ArgumentError(f"--{text}: give 1 or {m} values (one per joint), got {len(vals)}")
             overrides[key] = vals
+    if getattr(args, "default_task", None) and domain is not None:
+        from polyrob.fleet.autoweights import automatic_hyperparameters
+
+        h = automatic_hyperparameters(m, domain, overrides)
+        return default_hyperparameters(m, h, bandwidth_scale=args.bandwidth_scale)
     return default_hyperparameters(m, overrides, bandwidth_scale=args.bandwidth_scale)
 
 

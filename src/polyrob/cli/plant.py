@@ -46,7 +46,6 @@ def problem_from_args(robot, args, out, *, hyperparameters=None, check=None):
 
     if args.merge_symmetric and args.uncertainty != "box":
         raise ArgumentError("--merge-symmetric applies to the box model: add --uncertainty box")
-    h = hyperparameters_from_args(robot.m, args) if hyperparameters is None else hyperparameters
     pldi = domain = None
     if args.pldi:
         from polyrob.bounds.pldi import PLDI
@@ -58,6 +57,8 @@ def problem_from_args(robot, args, out, *, hyperparameters=None, check=None):
     else:
         domain = domain_from_args(robot, args)
         known_domain = domain
+    # an arm's default task brings its automatic weights (cli.common.hyperparameters_from_args)
+    h = hyperparameters_from_args(robot.m, args, known_domain) if hyperparameters is None else hyperparameters
     if check is not None:
         check(
             {

@@ -227,8 +227,9 @@ def add_synthesis_arguments(p) -> None:
     g.add_argument(
         "--init",
         default=None,
-        metavar="paper|FILE",
-        help="start from the paper's K* ('paper', fixed structures) or from a controller file (K.json, K.mat), "
+        metavar="paper|pid|FILE",
+        help="start from the paper's K* ('paper', fixed structures), from a per-joint PID tuned to the weights "
+        "('pid'; the default on an arm's default task) or from a controller file (K.json, K.mat), "
         "e.g. one designed at a nearby bandwidth",
     )
     g.add_argument("--reduce", action="store_true", help="reduce the full-order controller (balanced truncation)")

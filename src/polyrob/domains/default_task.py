@@ -57,6 +57,11 @@ class DefaultTask:
         The inner layer (:data:`polyrob.model.inner.INNER_LAYERS`).
     model_error : float
         The true link masses/inertias are the model's times ``1 -+ model_error``.
+
+    The weights are the automatic ones of the task
+    (:func:`polyrob.fleet.automatic_hyperparameters`), and the synthesis of a
+    computed-torque loop starts from a per-joint PID tuned to them
+    (:func:`polyrob.pipeline.design.with_default_start`).
     """
 
     q_radius: float = 0.2

@@ -27,7 +27,8 @@ def synthesis_options(
 ) -> dict:
     """``musyn`` keyword arguments from the plain synthesis choices.
 
-    ``init`` is ``"paper"`` (a fixed structure starts from the paper's K*) or
+    ``init`` is ``"paper"`` (a fixed structure starts from the paper's K*),
+    ``"pid"`` (the per-joint PID tuned to the weights, any structure) or
     the path of a controller file (``K.json``, ``K.mat``) that starts the
     synthesis, full order or fixed structure.  ``time_limit`` (seconds): no
     new iteration or start after it (``musyn``'s ``time_limit``).  ``target``:
@@ -57,6 +58,8 @@ def synthesis_options(
         if structure == "full":
             raise ArgumentError("--init paper starts a fixed structure (e.g. --structure tf3) from K*")
         options["init"] = "paper"
+    elif init == "pid":  # the per-joint PID tuned to the weights (polyrob.synthesis.pid_tuning)
+        options["initial_controller"] = "pid"
     elif init:
         # a controller file: a warm start (continuation from a nearby problem, MATLAB's musyn(P, K0))
         from polyrob.io.controller import controller_from_mapping, read_controller_file
@@ -152,6 +155,22 @@ def certify_design(problem, design: Design) -> Design:
     return design.certified_by(certify_loop(P, K, scope=problem.scope()))
 
 
+def with_default_start(problem, options: dict) -> dict:
+    """``options`` with the synthesis start of ``problem`` when none is given.
+
+    A computed-torque inner loop (an arm's default task) starts from the
+    per-joint PID tuned to the weights (``initial_controller="pid"``,
+    :mod:`polyrob.synthesis.pid_tuning`): its outer plant is a double
+    integrator per joint, and D-K from the unscaled H∞ controller stalls
+    there (docs/fleet.md).  Every other problem keeps its default start.
+    """
+    if getattr(problem.robot, "inner", None) != "computed-torque":
+        return options
+    if options.get("init") is not None or options.get("initial_controller") is not None:
+        return options
+    return {**options, "initial_controller": "pid"}
+
+
 def design_controller(
     problem, *, reduce: bool = False, reduce_max_order: int = 20, certify: bool = True, **options
 ) -> Design:
@@ -174,7 +193,7 @@ def design_controller(
 
     if reduce and reduce_max_order < 1:
         raise ArgumentError(f"reduce_max_order must be >= 1, got {reduce_max_order}")
-    result = musyn(problem.P, **options)
+    result = musyn(problem.P, **with_default_start(problem, options))
     notes = tuple(result.info.get("notes", [])) if isinstance(result.info, dict) else ()
     design = Design(controller=result.controller, result=result, reduced=None, record=_record(result, problem.P), notes=notes)
     if reduce and options.get("structure", "full") == "full":
@@ -212,7 +231,7 @@ def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None,
     from polyrob.plant.generalized import paper_controller
     from polyrob.synthesis import max_bandwidth_scaling
 
-    options = dict(options)
+    options = with_default_start(problem, dict(options))
     if options.get("init") == "paper":
         options.pop("init")  # K* starts the first synthesis only; later ones start from the nearest alpha's
         options["initial_controller"] = paper_controller()

@@ -121,7 +121,9 @@ def _default_synthesis(initial_controller=None, **musyn_options) -> Callable:
     from polyrob.synthesis.mu_synthesis import musyn
 
     def synthesize(P, K0):
-        return musyn(P, initial_controller=initial_controller if K0 is None else K0, **musyn_options)
+        # a PID start is re-tuned at every factor (its crossover follows the weights)
+        start = initial_controller if (K0 is None or initial_controller == "pid") else K0
+        return musyn(P, initial_controller=start, **musyn_options)
 
     return synthesize
 

@@ -165,10 +165,13 @@ def musyn(
         One line per iteration; default only on a terminal.
     target : float, optional
         Stop once the grid peak μ is below it.
-    initial_controller : LTI, optional
+    initial_controller : LTI or "pid", optional
         Start with a D-step on this controller instead of the unscaled H∞
         one; for a mixed problem the iteration then goes straight to D-G-K
-        steps (warm start, e.g. from a complex D-K result).
+        steps (warm start, e.g. from a complex D-K result).  ``"pid"``: the
+        per-joint PID tuned to ``P``'s weights
+        (:func:`polyrob.synthesis.pid_tuning.tuned_pid`), the start of an
+        arm behind computed torque; ``info["start"]`` says which start was used.
     mu_bound, d_fit, hinf_step : strategy objects, optional
         Replace :class:`MuUpperBound`, :class:`~polyrob.synthesis.scalings.dscale.LogMagnitudeFit`,
         :class:`HinfStep`.
@@ -224,6 +227,11 @@ def musyn(
     """
     t_start = time.perf_counter()
     deadline = None if time_limit is None else t_start + float(time_limit)
+    start_words = None
+    if isinstance(initial_controller, str) and initial_controller == "pid":
+        from polyrob.synthesis.pid_tuning import pid_start
+
+        initial_controller, start_words = pid_start(P)
     if not isinstance(structure, str):
         raise SynthesisError(f"unknown controller structure {structure!r}: give a string such as 'full' or 'tf3'")
     if structure != "full":
@@ -240,7 +248,7 @@ def musyn(
         if given:
             raise PolyrobError(f"options {given} apply to the full-order synthesis only, not to {structure!r}")
         # the fixed-structure solver validates the structure name (controller_structure)
-        return fixed_structure_musyn(
+        result = fixed_structure_musyn(
             P,
             blk,
             structure,
@@ -257,6 +265,9 @@ def musyn(
             certify_omega=certify_omega,
             **structure_options,
         )
+        if start_words:
+            result.info["start"] = start_words
+        return result
     if structure_options:
         raise PolyrobError(f"unexpected options for a full-order synthesis: {sorted(structure_options)}")
     opt = {
@@ -356,6 +367,7 @@ def musyn(
         "fallbacks": list(loop.failures) + list(getattr(getattr(loop.mu_bound, "sweep", None), "notes", [])),
         "timings": [h.seconds for h in hist],
         "stopped_by": loop.stopped_by,
+        "start": start_words or ("the given controller" if K0 is not None else "the unscaled H-infinity controller"),
         "omega": omega,
         "reference": (
             "P. M. Young, Controller design with real parametric uncertainty, IJC 65(3), 1996; "

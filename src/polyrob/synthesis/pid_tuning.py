@@ -1,0 +1,230 @@
+"""A per-joint PID tuned to the weights: the start an arm engineer would write down first.
+
+Behind a computed-torque inner layer the outer controller sees, per joint, a
+double integrator ``qddot_j = b_j v_j`` up to the model error (and, without an
+inner layer, ``b_j`` is the nominal ``M^-1`` diagonal).  The textbook
+controller for it is a PID with a filtered derivative, critically damped at a
+crossover ``ω_c``::
+
+    K_j(s) = (ω_c² + ω_c³/(k_i s) + 2 ω_c s/(s/(n_f ω_c) + 1)) / b_j
+
+:func:`tuned_pid` picks ``(ω_c, k_i, n_f)`` from a small candidate set placed
+by the weights (``ω_c`` a fraction of the smallest ``W_T`` bandwidth, which
+caps the loop's bandwidth) by the robust-performance μ upper bound of each
+candidate's closed loop on a coarse frequency grid, computed with AB13MD on a
+superset structure (``mussv(method="relaxed")``: a true upper bound at
+those frequencies, cheap enough to rank candidates).  The figure only ranks
+candidates: the controller is certified afterwards like any other
+(:func:`polyrob.analysis.certificate.certify_loop`).
+
+Why by hand: no maintained library tunes a PID against a structured singular
+value; MATLAB's ``systune`` does it by non-smooth optimisation, which
+:mod:`polyrob.synthesis.fixed` does here from this start.
+
+Full-order D-K started from the unscaled H∞ controller stalls on the
+computed-torque loops of 5-7 joint arms (panda's default task: grid μ 5.2 to
+6.3 after D-K, against 0.98 certified for this PID; docs/fleet.md), because
+its first controller is made for ``D = I`` on a structure whose repeated real
+block gets one scalar scaling in the fit.  Starting from this PID, the
+iteration keeps the best controller it sees, so it can only do better.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from dataclasses import dataclass, field
+
+import control
+import numpy as np
+
+from polyrob.errors import SynthesisError
+
+__all__ = ["TunedPID", "tuned_pid", "pid_start", "pid_controller", "CROSSOVER_FRACTIONS"]
+
+log = logging.getLogger("polyrob")
+
+#: ``ω_c`` candidates, as fractions of the smallest ``W_T`` bandwidth ``ω_BT``.
+CROSSOVER_FRACTIONS = (0.2, 0.3, 0.4, 0.55, 0.75)
+#: Integral ratios ``k_i`` (integral gain ``ω_c³ / k_i``) and derivative filters ``n_f``.
+INTEGRAL_RATIOS = (8.0, 16.0, 32.0)
+FILTER_RATIOS = (10.0, 20.0)
+
+
+@dataclass(frozen=True)
+class TunedPID:
+    """The PID :func:`tuned_pid` chose, and how.
+
+    Attributes
+    ----------
+    controller : control.StateSpace
+        Decentralised, order ``2 m``; inputs the errors ``e``, outputs ``u``.
+    crossover, integral_ratio, filter_ratio : float
+        ``ω_c`` (rad/s), ``k_i``, ``n_f`` of the module text.
+    input_gains : ndarray
+        ``b_j`` the gains were divided by (the nominal input matrix's diagonal).
+    grid_mu : float
+        The ranking figure: the largest μ upper bound over the coarse grid
+        (a search figure, not a certificate).
+    tried : tuple of (crossover, integral_ratio, filter_ratio, grid_mu)
+    """
+
+    controller: control.StateSpace = field(repr=False)
+    crossover: float
+    integral_ratio: float
+    filter_ratio: float
+    input_gains: np.ndarray = field(repr=False)
+    grid_mu: float
+    tried: tuple = field(default=(), repr=False)
+
+    def gains(self) -> np.ndarray:
+        """``(m, 4)``: ``Kp, Ki, Kd, τ`` per joint, in :class:`~polyrob.synthesis.fixed.pid.PIDStructure`'s order."""
+        return pid_gains(self.crossover, self.integral_ratio, self.filter_ratio, self.input_gains)
+
+    def words(self) -> str:
+        return (
+            f"per-joint PID critically damped at {self.crossover:.3g} rad/s "
+            f"(integral omega_c^3/{self.integral_ratio:g}, derivative filter at {self.filter_ratio:g} omega_c)"
+        )
+
+
+def pid_gains(crossover: float, integral_ratio: float, filter_ratio: float, input_gains) -> np.ndarray:
+    """``(m, 4)`` ``Kp, Ki, Kd, τ`` of the PID of the module text, divided by each joint's input gain."""
+    wc = float(crossover)
+    b = np.asarray(input_gains, float)
+    g = np.empty((b.size, 4))
+    g[:, 0] = wc**2 / b
+    g[:, 1] = wc**3 / float(integral_ratio) / b
+    g[:, 2] = 2.0 * wc / b
+    g[:, 3] = 1.0 / (float(filter_ratio) * wc)
+    return g
+
+
+def pid_controller(gains: np.ndarray) -> control.StateSpace:
+    """Decentralised PIDF ``Kp + Ki/s + Kd s/(τ s + 1)`` per joint (``gains`` as :func:`pid_gains`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> K = pid_controller(np.array([[4.0, 1.0, 4.0, 0.05]]))
+    >>> K.nstates
+    2
+    >>> s = 1j
+    >>> bool(np.isclose(K(s)[0, 0] if K(s).ndim == 2 else K(s), 4 + 1 / s + 4 * s / (0.05 * s + 1)))
+    True
+    """
+    from polyrob.synthesis.fixed.pid import PIDStructure
+
+    g = np.asarray(gains, float)
+    m = g.shape[0]
+    theta = g.copy()
+    theta[:, 3] = np.log(g[:, 3])
+    return control.ss(*PIDStructure(m, m).realization(theta.ravel()))
+
+
+def _input_gains(P) -> np.ndarray:
+    """``b_j``: the nominal input matrix's diagonal on the velocity rows (1 behind computed torque)."""
+    B = getattr(getattr(P, "uncertain", None), "B_nom", None)
+    m = int(P.n_u)
+    if B is None or np.shape(B) != (2 * m, m):
+        return np.ones(m)
+    b = np.diag(np.asarray(B, float)[m:])
+    if np.any(~np.isfinite(b)) or np.any(b <= 0):
+        raise SynthesisError("a PID start needs a positive nominal input gain on every joint")
+    return b
+
+
+def tuned_pid(
+    P, *, omega=None, crossovers=None, integral_ratios=INTEGRAL_RATIOS, filter_ratios=FILTER_RATIOS
+) -> TunedPID:
+    """The per-joint PID of the module text with the smallest coarse-grid μ on ``P``.
+
+    Parameters
+    ----------
+    P : GeneralizedPlant
+        From :func:`polyrob.plant.generalized.generalized_plant` (its weights
+        place the crossovers, its uncertain plant gives ``b_j``).
+    omega : array_like, optional
+        Ranking grid (default 25 points over the weights' decades).
+    crossovers : sequence of float, optional
+        ``ω_c`` candidates in rad/s (default :data:`CROSSOVER_FRACTIONS` of
+        the smallest ``ω_BT`` of the weights).
+
+    Raises
+    ------
+    SynthesisError
+        No candidate stabilises the nominal loop.
+    """
+    from polyrob.analysis.mu.blocks import as_block_structure
+    from polyrob.analysis.mu.bounds import mussv
+    from polyrob.analysis.mu.frequency import matrix_response
+    from polyrob.plant.loops import lower_lft_matrices
+
+    m = int(P.n_u)
+    b = _input_gains(P)
+    if crossovers is None:
+        wbt = _smallest_bandwidth(P)
+        crossovers = [f * wbt for f in CROSSOVER_FRACTIONS]
+    crossovers = [float(w) for w in crossovers]
+    if omega is None:
+        lo, hi = min(crossovers) / 1000.0, max(crossovers) * 100.0
+        omega = np.logspace(np.log10(lo), np.log10(hi), 25)
+    omega = np.asarray(omega, float)
+    st = as_block_structure(P.block_structure_rp)
+    A, B, C, D = (np.asarray(X, float) for X in (P.system.A, P.system.B, P.system.C, P.system.D))
+
+    def grid_mu(wc, ki, nf) -> float:
+        K = pid_controller(pid_gains(wc, ki, nf, b))
+        Ak, Bk, Ck, Dk = (np.asarray(X, float) for X in (K.A, K.B, K.C, K.D))
+        try:
+            Acl, Bcl, Ccl, Dcl = lower_lft_matrices(A, B, C, D, Ak, Bk, Ck, Dk, m, m)
+        except np.linalg.LinAlgError:
+            return np.inf
+        if np.max(np.linalg.eigvals(Acl).real) >= 0:
+            return np.inf
+        H = matrix_response(Acl, Bcl, Ccl, Dcl)(omega)
+        return max(mussv(H[k], st, method="relaxed", lower=False).upper for k in range(omega.size))
+
+    # crossover first (middle integral and filter), then the other two around the best crossover
+    tried = [(wc, 16.0, 20.0, grid_mu(wc, 16.0, 20.0)) for wc in crossovers]
+    wc_best = min(tried, key=lambda t: t[3])[0]
+    for ki, nf in itertools.product(integral_ratios, filter_ratios):
+        if (ki, nf) != (16.0, 20.0):
+            tried.append((wc_best, ki, nf, grid_mu(wc_best, ki, nf)))
+    wc, ki, nf, mu = min(tried, key=lambda t: t[3])
+    if not np.isfinite(mu):
+        raise SynthesisError(
+            f"no per-joint PID of crossover {min(crossovers):.3g}-{max(crossovers):.3g} rad/s stabilises the "
+            "nominal loop: give --init FILE or no --init"
+        )
+    return TunedPID(
+        controller=pid_controller(pid_gains(wc, ki, nf, b)),
+        crossover=wc,
+        integral_ratio=ki,
+        filter_ratio=nf,
+        input_gains=b,
+        grid_mu=float(mu),
+        tried=tuple(tried),
+    )
+
+
+def _smallest_bandwidth(P) -> float:
+    """The smallest ``W_T`` bandwidth ``ω_BT`` of the generalized plant (the zeros of ``(s + ω_BT)/(A_T s + ω_BT M_T)``)."""
+    W_T = getattr(P, "W_T", None)
+    if W_T is not None:
+        zeros = np.abs(np.concatenate([np.atleast_1d(control.ss(W_T[i, i]).zeros()) for i in range(W_T.ninputs)]))
+        zeros = zeros[np.isfinite(zeros) & (zeros > 0)]
+        if zeros.size:
+            return float(zeros.min())
+    raise SynthesisError("a PID start needs the generalized plant's W_T (its bandwidth places the crossover)")
+
+
+def pid_start(P):
+    """``musyn``'s ``initial_controller="pid"``: ``(controller, words)`` of :func:`tuned_pid` on ``P``."""
+    from polyrob.errors import PolyrobError
+
+    if isinstance(P, control.StateSpace):
+        raise PolyrobError("initial_controller='pid' needs a GeneralizedPlant (its weights place the crossover)")
+    tuned = tuned_pid(P)
+    log.info(f"musyn: start from a {tuned.words()}, coarse-grid mu {tuned.grid_mu:.4f}")
+    return tuned.controller, tuned.words()
