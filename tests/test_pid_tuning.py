@@ -1,0 +1,92 @@
+"""The per-joint PID start (polyrob.synthesis.pid_tuning) and where the pipeline uses it."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import control
+import numpy as np
+import pytest
+
+from polyrob.errors import PolyrobError
+from polyrob.synthesis.pid_tuning import CROSSOVER_FRACTIONS, pid_controller, pid_gains, tuned_pid
+
+
+@pytest.fixture(scope="module")
+def P(unc):
+    from polyrob.plant.generalized import generalized_plant
+    from polyrob.plant.weights import paper_weights
+
+    return generalized_plant(unc, *paper_weights())
+
+
+def test_gains_are_the_critically_damped_pid_of_a_double_integrator():
+    g = pid_gains(4.0, 16.0, 20.0, [1.0, 2.0])
+    # Kp = wc^2 / b, Ki = wc^3 / (k_i b), Kd = 2 wc / b, tau = 1 / (n_f wc)
+    assert g[0] == pytest.approx([16.0, 4.0, 8.0, 1 / 80])
+    assert g[1] == pytest.approx([8.0, 2.0, 4.0, 1 / 80])
+    # closed on 1/s^2 without the integral and the filter: s^2 + 2 wc s + wc^2 = (s + wc)^2
+    kp, _, kd, _ = g[0]
+    assert np.roots([1.0, kd, kp]) == pytest.approx([-4.0, -4.0])
+
+
+def test_controller_is_the_pid_formula_per_joint():
+    g = pid_gains(3.0, 8.0, 10.0, [0.5, 1.0])
+    K = pid_controller(g)
+    assert K.nstates == 4 and K.ninputs == K.noutputs == 2
+    for w in (0.1, 1.0, 30.0):
+        s = 1j * w
+        H = K(s)
+        for j in range(2):
+            kp, ki, kd, tau = g[j]
+            assert H[j, j] == pytest.approx(kp + ki / s + kd * s / (tau * s + 1), rel=1e-12)
+        assert H[0, 1] == 0 and H[1, 0] == 0
+
+
+def test_tuned_pid_takes_the_best_candidate_and_its_figure_is_an_upper_bound(P, unc):
+    from polyrob.analysis.mu.bounds import mussv
+    from polyrob.analysis.mu.frequency import matrix_response
+    from polyrob.plant.loops import lower_lft
+
+    omega = np.logspace(-2, 2, 9)
+    r = tuned_pid(P, omega=omega)
+    # crossovers placed by the smallest W_T bandwidth of the paper's weights (10 rad/s)
+    assert sorted({t[0] for t in r.tried}) == pytest.approx([f * 10.0 for f in CROSSOVER_FRACTIONS])
+    finite = [t for t in r.tried if np.isfinite(t[3])]
+    assert r.grid_mu == min(t[3] for t in finite)
+    assert (r.crossover, r.integral_ratio, r.filter_ratio) == min(finite, key=lambda t: t[3])[:3]
+    # the gains were divided by the nominal input gain b_j = B_nom[m + j, j]
+    b = np.diag(np.asarray(unc.B_nom)[2:])
+    assert r.input_gains == pytest.approx(b)
+    assert r.gains()[:, 0] == pytest.approx(r.crossover**2 / b)
+    # the ranking figure bounds mu from above at its frequencies
+    CL = lower_lft(P.system, r.controller, P.n_u, P.n_y)
+    H = matrix_response(CL.A, CL.B, CL.C, CL.D)(omega)
+    lower = max(mussv(H[k], P.block_structure_rp, lower=True).lower for k in range(omega.size))
+    assert lower <= r.grid_mu * (1 + 1e-6)
+    assert "per-joint PID critically damped" in r.words()
+
+
+def test_musyn_starts_from_the_tuned_pid_and_keeps_the_best(P, monkeypatch):
+    import polyrob.synthesis.pid_tuning as tuning
+    from polyrob.synthesis import musyn
+
+    monkeypatch.setattr(tuning, "CROSSOVER_FRACTIONS", (0.4,))  # one crossover: the path, not the search
+
+    res = musyn(P, initial_controller="pid", max_iter=1, progress=False, omega=np.logspace(-2, 2, 12))
+    assert res.info["start"].startswith("per-joint PID critically damped")
+    assert res.order == 2 * P.n_u  # one iteration: the PID itself
+    with pytest.raises(PolyrobError, match="GeneralizedPlant"):
+        musyn(control.ss(-1.0, 1.0, 1.0, 0.0), [[1, 1]], n_u=1, n_y=1, initial_controller="pid")
+
+
+def test_default_start_only_for_computed_torque_and_never_over_the_users():
+    from polyrob.pipeline.design import with_default_start
+
+    ct = SimpleNamespace(robot=SimpleNamespace(inner="computed-torque"))
+    assert with_default_start(ct, {"structure": "full"})["initial_controller"] == "pid"
+    assert with_default_start(ct, {"init": "paper"}) == {"init": "paper"}
+    assert with_default_start(ct, {"initial_controller": "K"}) == {"initial_controller": "K"}
+    for inner in ("gravity", "none", None):
+        plain = SimpleNamespace(robot=SimpleNamespace(inner=inner))
+        assert "initial_controller" not in with_default_start(plain, {"structure": "full"})
