@@ -183,3 +183,25 @@ def test_auto_falls_back_to_axes_where_the_inner_gain_model_does_not_apply():
     dom = TaskDomain.from_robot(arm, pose=[0.3, 1.2], q_radius=0.3, qdot_max=1.0, qddot_max=2.0)
     pldi = bound_pldi(arm, dom, samples=64, coverage=0, progress=False, workers=1, screen=0, verify_rounds=0)
     assert uncertain_plant(pldi, model="auto", coverage=0, volume_samples=0).model != "inner-gain"
+
+
+def test_the_default_task_brings_the_automatic_weights_of_its_domain_and_the_users_win():
+    from types import SimpleNamespace
+
+    from polyrob.cli.common import WEIGHT_OPTIONS, hyperparameters_from_args
+    from polyrob.fleet.autoweights import automatic_hyperparameters
+
+    robot = default_task_robot(cached_robot("ur5"))
+    domain = default_task_domain(robot)
+    args = SimpleNamespace(
+        default_task=DEFAULT_TASK.words(), bandwidth_scale=1.0, **{k: None for k, _ in WEIGHT_OPTIONS}
+    )
+    assert hyperparameters_from_args(6, args, domain) == automatic_hyperparameters(6, domain)
+    # level 2.5 / 1.998 on this task: omega_b of joint 1 is the paper's 0.5 times it
+    assert hyperparameters_from_args(6, args, domain)["omega_b"][0] == pytest.approx(0.5 * 2.5 / 1.998, rel=2e-3)
+    args.bandwidth_scale, args.M_s = 2.0, "2.5"
+    h = hyperparameters_from_args(6, args, domain)
+    assert h["omega_b"] == pytest.approx([2 * w for w in automatic_hyperparameters(6, domain)["omega_b"]])
+    assert h["M_s"] == (2.5,) * 6
+    args.default_task = None  # no default task: the paper's joint-1 weights on every joint
+    assert hyperparameters_from_args(6, args, domain)["omega_b"] == (1.0,) * 6
