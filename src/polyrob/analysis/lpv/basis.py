@@ -126,8 +126,9 @@ def finer_recheck(system, model, result, rates, basis, *, points=(9, 5), c: floa
         there: then ``reason``), ``holds_at_gamma`` (the search's level holds
         there too).
     """
-    from polyrob.analysis.lpv.check import check_solution, proved_gamma
+    from polyrob.analysis.lpv.check import GridData, check_solution, proved_gamma
     from polyrob.analysis.lpv.data import evaluate
+    from polyrob.analysis.lpv.norm import state_scaling
     from polyrob.analysis.lpv.robot import kinematic_rates
 
     if not result.proved or not result.X:
@@ -141,9 +142,15 @@ def finer_recheck(system, model, result, rates, basis, *, points=(9, 5), c: floa
     else:
         scaled = [(lo / c, hi / c) for lo, hi in rates]
         ev = evaluate(system, axes, scaled, basis, kinematic_rates(model, rates, c))
-    Xs = np.asarray(result.X, dtype=float)
-    at_level = check_solution(ev.data, Xs, result.gamma)
-    gamma, chk = proved_gamma(ev.data, Xs, result.gamma)
+    d = ev.data  # checked, like lpvnorm's own check, on power-of-two balanced states (exact: x = S x~)
+    sc = state_scaling(d.A)
+    data = GridData(
+        d.A / sc[None, :, None] * sc[None, None, :], d.B / sc[None, :, None], d.C * sc[None, None, :], d.D,
+        d.F, d.G, d.nus, d.points,
+    )  # fmt: skip
+    Xs = np.asarray(result.X, dtype=float) * sc[None, :, None] * sc[None, None, :]
+    at_level = check_solution(data, Xs, result.gamma)
+    gamma, chk = proved_gamma(data, Xs, result.gamma)
     out = {"points": int(ev.data.A.shape[0]), "gamma": float(gamma), "holds_at_gamma": bool(at_level.holds)}
     if not np.isfinite(gamma):
         out["reason"] = chk.reason
