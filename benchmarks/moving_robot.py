@@ -102,7 +102,7 @@ def position_slice(factor: float, spec: str, velocity, harmonics: int, q_points:
 
     :func:`polyrob.lpvnorm` on the loops at ``q2`` in ``q_points`` values of
     ``[-pi, pi)``, ``qdot = velocity``, with ``|dq2/dt| <= rate`` (0: every
-    loop frozen) and ``X(q2)`` on ``1, cos k q2, sin k q2`` (``k <=
+    loop frozen; negative: ``dq2/dt = qdot2`` exactly, as in the full search) and ``X(q2)`` on ``1, cos k q2, sin k q2`` (``k <=
     harmonics``).  With rate 0 no rate bound can give less on this slice, so
     a value far above the frozen peak says the basis, not the rates, limits
     the moving-robot bound.
@@ -126,7 +126,7 @@ def position_slice(factor: float, spec: str, velocity, harmonics: int, q_points:
         basis.append((lambda r, k=k: np.cos(k * r[0]), lambda r, k=k: np.array([-k * np.sin(k * r[0])])))
         basis.append((lambda r, k=k: np.sin(k * r[0]), lambda r, k=k: np.array([k * np.cos(k * r[0])])))
     t = time.perf_counter()
-    rb = [(-rate / c, rate / c)]
+    rb = [(-rate / c, rate / c)] if rate >= 0 else [(v[-1] / c, v[-1] / c)]  # rate < 0: dq2/dt = qdot2 exactly
     r = lpvnorm(lambda rho: sysc(np.array([rho[0], *v])), [model.axes[0][:-1]], rb, basis, eps=1e-4)
     return {
         "bandwidth_factor": factor,
@@ -134,7 +134,7 @@ def position_slice(factor: float, spec: str, velocity, harmonics: int, q_points:
         "qdot": v.tolist(),
         "q2_points": q_points,
         "harmonics": harmonics,
-        "q2_rate_bound": rate,
+        "q2_rate_bound": rate if rate >= 0 else "dq2/dt = qdot2",
         "gamma": r.gamma if r.proved else None,
         "frozen_gamma": r.frozen_gamma,
         "solver_status": r.solver_status,
@@ -155,7 +155,12 @@ def main(argv=None) -> int:
     ap.add_argument("--slice", default=None, metavar="QDOT1,QDOT2", help="only position_slice() at this velocity")
     ap.add_argument("--harmonics", default="1", help="harmonics of X in q2 (--slice: a comma-separated list)")
     ap.add_argument("--q-points", type=int, default=12, help="--slice: points of q2 in [-pi, pi)")
-    ap.add_argument("--slice-rate", type=float, default=0.0, help="--slice: bound of |dq2/dt| (0: frozen loops)")
+    ap.add_argument(
+        "--slice-rate",
+        type=float,
+        default=0.0,
+        help="--slice: bound of |dq2/dt| (0: frozen loops; -1: dq2/dt = qdot2 exactly)",
+    )
     args = ap.parse_args(argv)
     points = tuple(int(x) for x in args.points.split(","))
     recheck = None if args.recheck == "none" else tuple(int(x) for x in args.recheck.split(","))
