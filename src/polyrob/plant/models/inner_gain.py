@@ -118,9 +118,6 @@ def inner_gain_plant(pldi, *, robot=None) -> UncertainPlant:
     why = applies(robot) if robot is not None else "inner-gain: no inner loop recorded with the PLDI"
     if why:
         raise NotApplicable(why)
-    why = None
-    if why:
-        raise NotApplicable(why)
     m = pldi.m
     n = 2 * m
     lay = entry_layout(pldi)
