@@ -125,7 +125,11 @@ def main(argv=None) -> int:
     def show(r, done, total):
         print(
             f"[{done}/{total}] {r.name}: "
-            + (f"mu {r.mu_upper:.4g} ({r.seconds:.0f} s)" if r.ok else f"FAILED {r.error}: {r.message}"),
+            + (
+                f"{r.status} mu {r.mu_upper:.4g}, order {r.order}, alpha {r.alpha}, {r.validation} ({r.seconds:.0f} s)"
+                if r.ok
+                else f"FAILED {r.error}: {r.message}"
+            ),
             file=sys.stderr,
             flush=True,
         )
