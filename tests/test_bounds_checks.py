@@ -138,3 +138,35 @@ def test_every_certified_interval_is_covered_by_the_uncertain_plant(tmp_path):
     assert pldi.B_upper[1, 0] > pldi.B_lower[1, 0]
     I = 0.02 + 2 * 0.3**2  # about the axis: I_yy + m r^2
     assert pldi.B_lower[1, 0] <= 1 / I <= pldi.B_upper[1, 0]
+
+
+def roundoff_coupled_inertia(q):
+    """``M(q)`` whose off-diagonal is roundoff-sized (1e-12 of the diagonal), as ``M_hat^-1 M`` behind computed torque."""
+    M = np.zeros(q.shape[:1] + (2, 2))
+    M[:, 0, 0] = 1.0
+    M[:, 1, 1] = 2.0 + np.cos(q[:, 1])
+    M[:, 0, 1] = M[:, 1, 0] = 1e-12 * np.sin(q[:, 0])
+    return M
+
+
+def test_entries_varying_by_roundoff_of_their_matrix_are_constant():
+    """ur10's task: B = M_hat^-1 M = s I had off-diagonal entries spreading by 1e-12, so the inner-gain model
+    (B = t I) did not apply and the batch fell back on a model with dozens of real parameters."""
+    from polyrob.bounds.search import Problem, pilot
+
+    robot = AnalyticRobot(
+        name="roundoff",
+        joint_names=("a", "b"),
+        M=roundoff_coupled_inertia,
+        C=lambda q, qdot: np.zeros(q.shape + (2,)),
+        position_lower=[-3.0, -3.0],
+        position_upper=[3.0, 3.0],
+        velocity_limit=[1.0, 1.0],
+        effort_limit=[1.0, 1.0],
+    )
+    problem = Problem(robot, Domain.from_robot(robot))
+    _, varying = pilot(problem, seed=0, n=512)
+    entry = {tuple(int(x) for x in idx): bool(v) for idx, v in zip(problem.all_index, varying)}
+    assert entry[(1, 3, 1)]  # B[1, 1] = 1 / (2 + cos q2): varies
+    assert not entry[(1, 2, 1)] and not entry[(1, 3, 0)]  # B's off-diagonal: roundoff of its matrix
+    assert not entry[(1, 2, 0)]  # B[0, 0] = 1
