@@ -17,7 +17,7 @@ import pytest
 from polyrob.analysis.mu import upper as mu_upper
 from polyrob.analysis.mu.blocks import as_block_structure
 from polyrob.analysis.mu.bounds import mu_bounds, mussv, resolve_method
-from polyrob.analysis.mu.sweep import AB13MD_SAFETY_TIMEOUT, DESCENT_ABOVE, LARGE_AB13MD_TIMEOUT
+from polyrob.analysis.mu.sweep import AB13MD_SAFETY_TIMEOUT, DESCENT_ABOVE, LARGE_AB13MD_TIMEOUT, MANY_REAL_SCALARS
 
 #: seconds the stand-in below sleeps before each AB13MD call: above the old 1 s limit
 SLOW = 1.5
@@ -93,7 +93,8 @@ def test_default_limits_are_safety_nets_not_method_switches():
         ([[-1, 0], [1, 0]], "ab13md"),
         ([[-1, 0]] * 8, "ab13md"),  # all real: AB13MD however slow it is at some frequencies
         ([[-1, 0]] * 10 + [[2, 4]], "ab13md"),
-        ([[-1, 0]] * (DESCENT_ABOVE + 1), "ab13md"),  # large, but no repeated block
+        ([[-1, 0]] * MANY_REAL_SCALARS + [[6, 12]], "ab13md"),  # large, no repeated block, few real scalars
+        ([[-1, 0]] * (MANY_REAL_SCALARS + 1), "gradient"),  # an axes model's dozens: AB13MD takes seconds each
         ([[-2, 0], [1, 0]], "lmi"),
         ([[2, 0], [1, 1]], "lmi"),
         ([[-3, 0]] * (DESCENT_ABOVE // 3 + 1), "gradient"),

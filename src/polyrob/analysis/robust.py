@@ -159,9 +159,14 @@ def _inv(x) -> float:
     return float(np.inf) if x == 0 else 1.0 / float(x)
 
 
-def _analyse(kind, P, K, blk, omega, *, unc=None, scope=None, n_u=None, n_y=None, **mu_options) -> RobustnessResult:
-    """The certificate of ``lft(P, K)`` (:func:`~polyrob.analysis.certificate.certify_loop`) with the figures of a robustness result."""
-    cert = certify_loop(P, K, blk, omega, kind=kind, scope=scope, n_u=n_u, n_y=n_y, **mu_options)
+def _analyse(
+    kind, P, K, blk, omega, *, unc=None, scope=None, n_u=None, n_y=None, certificate=None, **mu_options
+) -> RobustnessResult:
+    """The certificate of ``lft(P, K)`` (:func:`~polyrob.analysis.certificate.certify_loop`, or ``certificate``
+    when it is that call's already) with the figures of a robustness result."""
+    cert = certificate
+    if cert is None:
+        cert = certify_loop(P, K, blk, omega, kind=kind, scope=scope, n_u=n_u, n_y=n_y, **mu_options)
     mu = cert.mu
     worst = np.asarray(mu.worst_delta)
     nominal = cert.stable_at_delta0
@@ -258,13 +263,17 @@ def robstab_implied(rp: RobustnessResult) -> RobustnessResult | None:
     )
 
 
-def robperf(P: GeneralizedPlant, K, omega=None, **mu_options) -> RobustnessResult:
+def robperf(P: GeneralizedPlant, K, omega=None, *, certificate=None, **mu_options) -> RobustnessResult:
     """Robust performance of ``lft(P, K)``: μ against uncertainty + performance block.
 
     Certified only when ``lft(P, K)`` is proved stable at ``Δ = 0`` and the
     peak μ upper bound on the grid is below 1 (main loop theorem).
+    ``certificate``: this loop's certificate already made by the same call
+    (:func:`polyrob.pipeline.analysis.reusable_certificate` checks that), used instead of a sweep.
     """
-    return _analyse("performance", P, K, P.block_structure_rp, omega, unc=P.uncertain, **mu_options)
+    return _analyse(
+        "performance", P, K, P.block_structure_rp, omega, unc=P.uncertain, certificate=certificate, **mu_options
+    )
 
 
 def loop_mu(P, K, blk, omega=None, *, n_u: int, n_y: int, kind: str = "performance", **mu_options) -> RobustnessResult:

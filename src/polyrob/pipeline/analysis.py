@@ -19,6 +19,7 @@ __all__ = [
     "frequency_grid",
     "controller_order",
     "instead_line",
+    "reusable_certificate",
 ]
 
 
@@ -54,6 +55,25 @@ def instead_line(problem, analysis, limit: dict | None = None) -> str:
         f"instead: {instead}; in the way: {way}; try --max-bandwidth (the largest bandwidth factor that "
         "certifies) or a smaller domain"
     )
+
+
+def reusable_certificate(cert, P, K, scope):
+    """``cert`` rescoped when it is ``certify_loop(P, K)``'s on the loop's own grid, else ``None``.
+
+    Same block structure and the same closed loop ``lft(P, K)`` (matrices
+    equal): a caller that would sweep that loop again decides this sweep instead.
+    """
+    from polyrob.analysis.certificate import rescoped
+    from polyrob.plant.loops import lft
+
+    if cert is None or not cert.default_grid or cert.mu is None or cert.closed_loop is None:
+        return None
+    if np.asarray(cert.mu.structure.matlab).tolist() != np.asarray(P.block_structure_rp).tolist():
+        return None
+    N = lft(P, K)
+    if any(not np.array_equal(np.asarray(getattr(N, x)), np.asarray(getattr(cert.closed_loop, x))) for x in "ABCD"):
+        return None
+    return rescoped(cert, scope)
 
 
 def frequency_grid(lo: float, hi: float, n: int):
@@ -170,6 +190,7 @@ def analyze_controller(
     stability: str = "sweep",
     moving: bool | None = None,
     limit: dict | None = None,
+    certificate=None,
 ) -> ControllerAnalysis:
     """Nominal/robust stability and performance of ``K`` on ``problem``, and sampled stability.
 
@@ -201,6 +222,10 @@ def analyze_controller(
     limit : dict, optional
         The robot's performance limit (``PerformanceLimit.to_dict()``), quoted
         by :attr:`ControllerAnalysis.instead` when it excludes μ < 1.
+    certificate : Certificate, optional
+        The robust-performance certificate of ``K`` on ``problem`` already
+        made (a design's): decided again instead of swept when it is of the
+        same closed loop on the loop's own grid (``omega`` not given).
     """
     from polyrob.analysis.robust import nominal_performance, robperf, robstab, robstab_implied, sample_stability
 
@@ -210,7 +235,8 @@ def analyze_controller(
     options = {"progress": progress, "scope": problem.scope()}
     if stability not in ("sweep", "implied"):
         raise ArgumentError(f"stability must be 'sweep' or 'implied', got {stability!r}")
-    rp = robperf(problem.P, K, omega, **options)
+    own = reusable_certificate(certificate, problem.P, K, problem.scope()) if omega is None else None
+    rp = robperf(problem.P, K, omega, certificate=own, **options)
     rs = robstab_implied(rp) if stability == "implied" else None
     if rs is None:
         rs = robstab(problem.P, K, omega, **options)

@@ -11,7 +11,15 @@ from dataclasses import dataclass, replace
 
 from polyrob.errors import ArgumentError
 
-__all__ = ["Design", "certify_design", "scaled_problem", "design_controller", "design_max_bandwidth", "reduce_design", "synthesis_options"]
+__all__ = [
+    "Design",
+    "certify_design",
+    "scaled_problem",
+    "design_controller",
+    "design_max_bandwidth",
+    "reduce_design",
+    "synthesis_options",
+]
 
 
 def synthesis_options(
@@ -134,25 +142,13 @@ def certify_design(problem, design: Design) -> Design:
     same closed loop and block structure) is decided again with the
     problem's scope instead of sweeping twice.
     """
-    import numpy as np
-
-    from polyrob.analysis.certificate import certify_loop, rescoped
-    from polyrob.plant.loops import lft
+    from polyrob.analysis.certificate import certify_loop
+    from polyrob.pipeline.analysis import reusable_certificate
 
     P, K = problem.P, design.controller
-    own = getattr(design.result, "certificate", None)
-    if design.reduced is None and own is not None and own.default_grid and own.mu is not None:
-        N = lft(P, K)
-        same = (
-            np.asarray(own.mu.structure.matlab).tolist() == np.asarray(P.block_structure_rp).tolist()
-            and own.closed_loop is not None
-            and all(
-                np.array_equal(np.asarray(getattr(N, x)), np.asarray(getattr(own.closed_loop, x))) for x in "ABCD"
-            )
-        )
-        if same:
-            return design.certified_by(rescoped(own, problem.scope()))
-    return design.certified_by(certify_loop(P, K, scope=problem.scope()))
+    own = getattr(design.result, "certificate", None) if design.reduced is None else None
+    cert = reusable_certificate(own, P, K, problem.scope())
+    return design.certified_by(cert if cert is not None else certify_loop(P, K, scope=problem.scope()))
 
 
 def with_default_start(problem, options: dict) -> dict:
@@ -162,13 +158,16 @@ def with_default_start(problem, options: dict) -> dict:
     per-joint PID tuned to the weights (``initial_controller="pid"``,
     :mod:`polyrob.synthesis.pid_tuning`): its outer plant is a double
     integrator per joint, and D-K from the unscaled H∞ controller stalls
-    there (docs/fleet.md).  Every other problem keeps its default start.
+    there (docs/fleet.md).  With it comes ``target=1`` unless a target is
+    given: a PID whose certificate is already below 1 is the answer (order
+    ``2 m``, what an arm engineer deploys) and no D-K step runs; otherwise
+    D-K goes on from it.  Every other problem keeps its default start.
     """
     if getattr(problem.robot, "inner", None) != "computed-torque":
         return options
     if options.get("init") is not None or options.get("initial_controller") is not None:
         return options
-    return {**options, "initial_controller": "pid"}
+    return {"target": 1.0, **options, "initial_controller": "pid"}
 
 
 def design_controller(
@@ -195,8 +194,10 @@ def design_controller(
         raise ArgumentError(f"reduce_max_order must be >= 1, got {reduce_max_order}")
     result = musyn(problem.P, **with_default_start(problem, options))
     notes = tuple(result.info.get("notes", [])) if isinstance(result.info, dict) else ()
-    design = Design(controller=result.controller, result=result, reduced=None, record=_record(result, problem.P), notes=notes)
-    if reduce and options.get("structure", "full") == "full":
+    design = Design(
+        controller=result.controller, result=result, reduced=None, record=_record(result, problem.P), notes=notes
+    )
+    if reduce and result.structure == "full":  # a certified PID start is returned as it is
         design = reduce_design(problem, design, reduce_max_order, certify=False)
     return certify_design(problem, design) if certify else design
 
@@ -232,6 +233,14 @@ def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None,
     from polyrob.synthesis import max_bandwidth_scaling
 
     options = with_default_start(problem, dict(options))
+    per_factor = "musyn"
+    if options.get("initial_controller") == "pid" and options.get("max_iter") is None:
+        # the PID tuned and certified at each factor, no D-K step: D-K at every factor of the scan
+        # costs minutes on a 6-7 joint arm (docs/fleet.md); --max-iter N asks for D-K steps again
+        options["max_iter"] = 1
+        per_factor = (
+            "the per-joint PID tuned to each factor's weights and certified (no D-K step; --max-iter adds them)"
+        )
     if options.get("init") == "paper":
         options.pop("init")  # K* starts the first synthesis only; later ones start from the nearest alpha's
         options["initial_controller"] = paper_controller()
@@ -245,7 +254,7 @@ def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None,
         options["floor"] = lambda alpha, h: problem.performance_limit(h).bound
     res = max_bandwidth_scaling(problem.unc, problem.hyperparameters, scale=tuple(scale), **options)
     cert = res.result.summary()
-    cert.update(bandwidth_scaling=res.summary())
+    cert.update(bandwidth_scaling={**res.summary(), "per_factor": per_factor})
     notes = tuple(res.result.info.get("notes", [])) if isinstance(res.result.info, dict) else ()
     design = Design(controller=res.result.controller, result=res.result, reduced=None, record=cert, notes=notes)
     return certify_design(scaled_problem(problem, res.hyperparameters), design), res

@@ -164,7 +164,7 @@ def musyn(
     progress : bool, optional
         One line per iteration; default only on a terminal.
     target : float, optional
-        Stop once the grid peak μ is below it.
+        Stop once the grid peak μ is below it (a PID start: its certificate).
     initial_controller : LTI or "pid", optional
         Start with a D-step on this controller instead of the unscaled H∞
         one; for a mixed problem the iteration then goes straight to D-G-K
@@ -231,7 +231,10 @@ def musyn(
     if isinstance(initial_controller, str) and initial_controller == "pid":
         from polyrob.synthesis.pid_tuning import pid_start
 
-        initial_controller, start_words = pid_start(P)
+        stop = {"target": target, "only": max_iter == 1 and structure == "full"} if structure in ("full", "pid") else {}
+        initial_controller, start_words, done = pid_start(P, certify_omega=certify_omega, **stop)
+        if done is not None:
+            return done
     if not isinstance(structure, str):
         raise SynthesisError(f"unknown controller structure {structure!r}: give a string such as 'full' or 'tf3'")
     if structure != "full":

@@ -45,6 +45,7 @@ from polyrob.analysis.mu.results import MuBoundsResult, MussvResult
 from polyrob.analysis.mu.sweep import (
     AB13MD_SAFETY_TIMEOUT,
     DESCENT_ABOVE,
+    MANY_REAL_SCALARS,
     relaxation_note,
     run_sweep,
 )
@@ -69,13 +70,15 @@ def resolve_method(st: BlockStructure, method: str) -> str:
     The choice depends on the structure alone, never on the matrix, the
     machine or the clock, so the same sweep gives the same figures anywhere:
     ``"auto"`` is AB13MD when the structure has no repeated scalar block
-    (real scalars and full complex blocks, AB13MD's domain), else the D-G LMI
-    up to :data:`DESCENT_ABOVE` padded channels and descent on the D-G
-    scalings above.
+    (real scalars and full complex blocks, AB13MD's domain) and at most
+    :data:`MANY_REAL_SCALARS` real scalars, else the D-G LMI up to
+    :data:`DESCENT_ABOVE` padded channels and descent on the D-G scalings
+    above (and with many real scalars).
     """
     if method == "auto":
         if not st.has_repeated:
-            return "ab13md"
+            many = sum(b.kind == "real" for b in st.blocks) > MANY_REAL_SCALARS
+            return "gradient" if many else "ab13md"
         return "gradient" if st.padded_size > DESCENT_ABOVE else "lmi"
     if method not in ("ab13md", "lmi", "gradient", "relaxed"):
         raise PolyrobError(f"method must be 'auto', 'ab13md', 'lmi', 'gradient' or 'relaxed', got {method!r}")
@@ -109,9 +112,7 @@ def mussv(
         D-G LMI solved by bisection with cvxpy (also repeated scalars), the
         same scalings found by descent (:class:`~polyrob.analysis.mu.gradient.GradientUpper`,
         fast on large repeated structures, re-certified exactly) or AB13MD on
-        a superset structure (``"relaxed"``).  ``"auto"`` picks AB13MD
-        whenever it applies, else the LMI up to :data:`DESCENT_ABOVE`
-        padded channels and the descent above.
+        a superset structure (``"relaxed"``).  ``"auto"``: :func:`resolve_method`.
     lower : bool
         Compute the lower bound and its worst perturbation.
     refine : bool
