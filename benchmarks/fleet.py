@@ -64,6 +64,8 @@ def _row(r) -> dict:
         "bound_s": secs("bounds"),
         "synthesis_s": secs("synthesis"),
         "analysis_s": secs("analysis"),
+        "reduction_s": secs("reduction"),
+        "validation_s": secs("validation"),
         "total_s": round(r.seconds, 2),
         "mu_upper": r.mu_upper,
         "mu_lower": r.mu_lower,

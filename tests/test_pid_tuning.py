@@ -73,9 +73,17 @@ def test_musyn_starts_from_the_tuned_pid_and_keeps_the_best(P, monkeypatch):
 
     monkeypatch.setattr(tuning, "CROSSOVER_FRACTIONS", (0.4,))  # one crossover: the path, not the search
 
-    res = musyn(P, initial_controller="pid", max_iter=1, progress=False, omega=np.logspace(-2, 2, 12))
+    w = np.logspace(-2, 2, 12)
+    res = musyn(P, initial_controller="pid", max_iter=1, progress=False, omega=w, certify_omega=w)
     assert res.info["start"].startswith("per-joint PID critically damped")
     assert res.order == 2 * P.n_u  # one iteration: the PID itself
+    # max_iter=1 is the start alone: no D-K step, the PID's own certificate
+    assert res.structure == "pid" and res.iterations == 0 and "max_iter=1" in res.info["stopped_by"]
+    from polyrob.analysis.certificate import certify_loop
+
+    cert = certify_loop(P, res.controller, None, w, sweep_unstable=False)
+    assert res.certificate.status is cert.status and res.certificate.bound == pytest.approx(cert.bound, rel=1e-12)
+    assert np.array_equal(res.controller.A, tuned_pid(P).controller.A)
     with pytest.raises(PolyrobError, match="GeneralizedPlant"):
         musyn(control.ss(-1.0, 1.0, 1.0, 0.0), [[1, 1]], n_u=1, n_y=1, initial_controller="pid")
 
@@ -90,3 +98,39 @@ def test_default_start_only_for_computed_torque_and_never_over_the_users():
     for inner in ("gravity", "none", None):
         plain = SimpleNamespace(robot=SimpleNamespace(inner=inner))
         assert "initial_controller" not in with_default_start(plain, {"structure": "full"})
+
+
+def _certificate(bound):
+    from polyrob.analysis.certificate import Certificate, Scope, decide_gain
+
+    return Certificate(decide_gain(True, bound, True)[0], bound, bound, 0.0, None, Scope())
+
+
+@pytest.mark.parametrize("bound, target, answered", [(0.8, 1.0, True), (0.95, 0.9, False), (1.2, 1.5, False)])
+def test_the_pid_start_answers_only_when_its_certificate_meets_the_target(P, monkeypatch, bound, target, answered):
+    """MATLAB's TargetPerf on the start: a PID certified below ``target`` is the result, no D-K step runs;
+    a certificate above the target, or not certified (mu >= 1), hands the PID to D-K."""
+    import polyrob.analysis.certificate as certificate
+    from polyrob.synthesis.pid_tuning import pid_start
+
+    monkeypatch.setattr(certificate, "certify_loop", lambda *a, **k: _certificate(bound))
+    K, words, done = pid_start(P, target=target)
+    assert K.nstates == 2 * P.n_u and words.startswith("per-joint PID")
+    if not answered:
+        assert done is None
+        return
+    assert done.controller is K and done.structure == "pid" and done.iterations == 0
+    assert done.certificate.certified and done.certificate.bound == bound
+    assert f"met the target {target:g}" in done.info["stopped_by"]
+    assert np.asarray(done.info["pid_gains"]).shape == (P.n_u, 4)
+    # without a target nothing is certified here: D-K's loop starts from the PID
+    monkeypatch.setattr(certificate, "certify_loop", lambda *a, **k: pytest.fail("certified without a target"))
+    assert pid_start(P)[2] is None
+
+
+def test_a_computed_torque_loop_gets_target_one_unless_one_is_given():
+    from polyrob.pipeline.design import with_default_start
+
+    ct = SimpleNamespace(robot=SimpleNamespace(inner="computed-torque"))
+    assert with_default_start(ct, {})["target"] == 1.0  # a certified PID is the answer
+    assert with_default_start(ct, {"target": 0.7})["target"] == 0.7  # the user's target wins

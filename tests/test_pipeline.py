@@ -203,3 +203,23 @@ def test_the_analysis_verdict_and_summary_read_the_one_certificate(status):
     # the word CERTIFIED is printed only for that status (NOT_CERTIFIED reads "NOT certified")
     assert ("CERTIFIED" in a.verdict) == (status is Status.CERTIFIED)
     assert "CERTIFIED" not in cert.details() or status is Status.CERTIFIED
+
+
+def test_a_certificate_is_reused_only_for_its_own_loop_on_its_own_grid(problem):
+    """The batch hands the design's certificate to the analysis; it is decided again (same figures, the
+    problem's scope) only when it is of the same closed loop on the loop's own grid, else swept anew."""
+    import numpy as np
+
+    from polyrob.analysis.certificate import certify_loop
+    from polyrob.pipeline.analysis import reusable_certificate
+    from polyrob.plant.generalized import paper_controller
+
+    P, K = problem.P, paper_controller()
+    own = certify_loop(P, K, scope=problem.scope())
+    again = reusable_certificate(own, P, K, problem.scope())
+    assert again is not None and again.status is own.status and again.bound == own.bound
+    assert again.scope.sentence() == own.scope.sentence() and again.mu is own.mu  # no new sweep
+    assert reusable_certificate(own, P, 1.01 * K, problem.scope()) is None  # another controller
+    on_a_grid = certify_loop(P, K, None, np.logspace(-1, 2, 7), scope=problem.scope())
+    assert reusable_certificate(on_a_grid, P, K, problem.scope()) is None  # not the loop's own grid
+    assert reusable_certificate(None, P, K, problem.scope()) is None
