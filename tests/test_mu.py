@@ -160,7 +160,7 @@ def test_real_only_bounds_bracket(seed):
 # ------------------------------------------------------- repeated scalars
 def test_repeated_complex_scalar_gives_spectral_radius():
     r = mussv((2 - 1j) * np.eye(3), [[3, 0]])
-    assert r.method == "lmi"
+    assert r.method == "gradient"  # "auto" on a repeated scalar: descent on the D-G scalings
     assert r.upper == pytest.approx(abs(2 - 1j), rel=1e-4)
     assert r.lower == pytest.approx(abs(2 - 1j), rel=1e-9)
     rng = np.random.default_rng(4)
@@ -389,9 +389,9 @@ def test_relaxed_repeated_scalars_bound_mu_from_above():
     assert relaxed.upper >= exact.lower and "relaxed structure" in relaxed.notes[0]
     # and it is a true bound of that superset: no larger than its unstructured norm
     assert relaxed.upper <= np.linalg.norm(M, 2) * (1 + 1e-9)
-    # method="auto": the exact LMI on a small structure, descent on the scalings above
-    # DESCENT_ABOVE channels (tests/test_mu_gradient.py checks its values)
-    assert mussv(M, blk, lower=False).method == "lmi"
+    # method="auto": descent on the scalings, the LMI's bound (tests/test_mu_gradient.py checks its values)
+    auto = mussv(M, blk, lower=False)
+    assert auto.method == "gradient" and auto.upper == pytest.approx(exact.upper, rel=1e-3)
     n_big = DESCENT_ABOVE // 3 + 1
     big = mussv(rng.normal(size=(3 * n_big, 3 * n_big)), [[-3, 0]] * n_big, lower=False)
     assert big.method == "gradient" and not big.notes
