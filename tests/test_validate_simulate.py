@@ -142,3 +142,23 @@ def test_time_budget_must_be_positive():
     robot, dom, K = _setup()
     with pytest.raises(polyrob.PolyrobError, match="time_budget"):
         simulate(robot, K, dom, step_reference([0.01, 0.0]), t_final=1.0, time_budget=0.0)
+
+
+def test_a_hold_start_keeps_the_true_robot_at_rest_behind_computed_torque():
+    """ur5 behind computed torque from a model 10 % off: the nominal input accelerates the true robot
+    at t = 0 by the gravity mismatch (the batch saw |qddot| > 2 rad/s^2 at t = 0 on so101); from the
+    input that holds it (a settled integral action) it stays at rest, with no controller at all."""
+    from polyrob.domains.task import TaskDomain
+    from polyrob.model.inner import inner_loop
+
+    arm = inner_loop(polyrob.load_robot("ur5"), "computed-torque", model_error=0.1)
+    dom = TaskDomain.from_robot(arm, q_radius=0.2, qdot_max=0.5, qddot_max=2.0)
+    q0 = 0.5 * (dom.q_lower + dom.q_upper)
+    K = np.zeros((arm.m, arm.m))
+    true = arm.drawn(np.random.default_rng(0))
+    assert true.scenario and np.abs(true.acceleration(q0, 0 * q0, 0 * q0)).max() > 0.5  # the model error pulls
+    held = simulate(arm, K, dom, q0, t_final=0.5, q0=q0, u_eq="hold")
+    assert held.info["u_eq_source"] == "the input holding q0 at rest"
+    assert np.abs(held.q - q0[:, None]).max() < 1e-6 and not held.left_domain
+    free = simulate(arm, K, dom, q0, t_final=0.5, q0=q0, u_eq=np.zeros(arm.m))
+    assert np.abs(free.q - q0[:, None]).max() > 1e-2

@@ -235,9 +235,12 @@ def simulate(
         continuous one.
     method, prewarp
         Discretisation (see :func:`polyrob.validate.discretize.discretize`).
-    u_eq : array_like, optional
+    u_eq : array_like or "hold", optional
         Torque added to the controller output (default: the PLDI's nominal
-        torque, else the gravity torque at the clipped ``q = 0``).
+        torque, else the gravity torque at the clipped ``q = 0``).  ``"hold"``:
+        the input that holds the simulated (true) robot at rest at ``q0``, as
+        a settled integral action leaves it before a move (behind an inner
+        layer with model error, the nominal input accelerates the true robot at t = 0).
     n_points : int
         Output samples of the continuous simulation.
     time_budget : float, optional
@@ -263,7 +266,8 @@ def simulate(
     ranged = getattr(robot, "payload", None) is not None or getattr(robot, "model_error", 0.0)
     if hasattr(robot, "drawn") and ranged and true_seed is not None:
         robot = robot.drawn(np.random.default_rng(true_seed))
-    dom, u_eq, u_source = _domain_and_offset(robot, domain, u_eq)
+    hold = isinstance(u_eq, str) and u_eq == "hold"
+    dom, u_eq, u_source = _domain_and_offset(robot, domain, None if hold else u_eq)
     if not isinstance(reference, Reference):
         reference = Reference("custom", function=reference) if callable(reference) else step_reference(reference)
     if q0 is None:
@@ -271,6 +275,8 @@ def simulate(
         q0 = np.asarray(point["q"], float) if point else np.clip(np.zeros(m), dom.q_lower, dom.q_upper)
     q0 = np.asarray(q0, float)
     qdot0 = np.zeros(m) if qdot0 is None else np.asarray(qdot0, float)
+    if hold:
+        u_eq, u_source = robot.inverse_dynamics(q0[None], 0 * q0[None], 0 * q0[None])[0], "the input holding q0 at rest"
     r_of_t = reference.bind(q0)
     if not t_final > 0:
         raise PolyrobError(f"t_final must be positive, got {t_final}")
