@@ -146,3 +146,22 @@ def test_validation_checks_the_accelerations_along_a_trajectory(robot, domain):
     assert domain_check(domain, robot, t, q.T, qd.T, u.T)[0] == ()
     exits, first, outside = domain_check(domain, robot, t, q.T, qd.T, robot.inverse_dynamics(q, qd, 2 * qdd).T)
     assert exits and all(e.startswith("qddot[") for e in exits) and 0 < outside < 1
+
+
+def test_an_srdf_pose_outside_a_range_by_whole_turns_is_the_same_configuration():
+    """kinova's SRDF poses give -pi/2 for a joint ranging over [0.33, 5.95]: the default task failed.
+    An angle moved by whole turns is the same configuration; one that no turn brings inside is refused."""
+    from polyrob.domains.task import _wrapped_into_range
+
+    robot = load_robot("kinova")
+    dom = TaskDomain.from_robot(robot, q_radius=0.2, qdot_max=0.5, qddot_max=2.0)
+    assert "2 pi" in dom.pose_source and "2 pi" in dom.name
+    assert np.all(dom.pose >= dom.q_lower) and np.all(dom.pose <= dom.q_upper)
+    raw = np.asarray(next(iter(robot.reference_poses.values())), float)
+    turns = np.round((dom.pose - raw) / (2 * np.pi))
+    np.testing.assert_allclose(dom.pose - raw, 2 * np.pi * turns, atol=1e-12)
+    assert np.any(turns != 0)
+    pose, wrapped = _wrapped_into_range([7.0, 0.5], np.array([-1.0, 0.0]), np.array([1.0, 1.0]), ("prismatic", "revolute"))
+    assert wrapped == [] and pose[0] == 7.0  # a prismatic joint is never wrapped
+    with pytest.raises(DomainError, match="outside its range"):
+        TaskDomain.from_robot(robot, pose=np.full(robot.m, 100.5), q_radius=0.2, qdot_max=0.5, qddot_max=2.0)

@@ -203,6 +203,9 @@ class TaskDomain(JointBox):
             raise DomainError(f"--pose: give {len(names)} finite positions (one per joint), got {pose.tolist()}")
         if source is None:
             source = "q = (" + ", ".join(f"{x:.4g}" for x in pose) + ")"
+        pose, wrapped = _wrapped_into_range(pose, box.q_lower, box.q_upper, getattr(robot, "joint_kinds", ()))
+        if wrapped:  # the same configuration (kinova's SRDF poses: -pi/2 for a joint ranging over [0.33, 5.95])
+            source += " (" + ", ".join(f"{names[j]} + {k:+d} x 2 pi" for j, k in wrapped) + ")"
         outside = (pose < box.q_lower - 1e-9) | (pose > box.q_upper + 1e-9)
         if outside.any():
             j = int(np.argmax(outside))
@@ -310,3 +313,21 @@ def domain_from_dict(data: Mapping, *, robot=None, source: str = "domain"):
     if isinstance(data, Mapping) and data.get("kind") == "task":
         return TaskDomain.from_dict(data, robot=robot, source=source)
     return Domain.from_dict(data, source=source)
+
+
+def _wrapped_into_range(pose, lower, upper, kinds):
+    """``pose`` with each angle outside its range moved by whole turns into it (revolute joints only).
+
+    Returns ``(pose, [(joint index, turns), ...])``; an angle that no whole
+    turn brings inside is left as it is (the caller refuses it).
+    """
+    pose = np.array(pose, dtype=float)
+    wrapped = []
+    for j, kind in enumerate(kinds or ()):
+        if kind not in ("revolute", "continuous") or lower[j] - 1e-9 <= pose[j] <= upper[j] + 1e-9:
+            continue
+        k = int(np.ceil((lower[j] - 1e-9 - pose[j]) / (2 * np.pi)))  # the fewest turns up to the lower limit
+        if pose[j] + 2 * np.pi * k <= upper[j] + 1e-9:
+            pose[j] += 2 * np.pi * k
+            wrapped.append((j, k))
+    return pose, wrapped
