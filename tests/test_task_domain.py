@@ -161,7 +161,9 @@ def test_an_srdf_pose_outside_a_range_by_whole_turns_is_the_same_configuration()
     turns = np.round((dom.pose - raw) / (2 * np.pi))
     np.testing.assert_allclose(dom.pose - raw, 2 * np.pi * turns, atol=1e-12)
     assert np.any(turns != 0)
-    pose, wrapped = _wrapped_into_range([7.0, 0.5], np.array([-1.0, 0.0]), np.array([1.0, 1.0]), ("prismatic", "revolute"))
+    pose, wrapped = _wrapped_into_range(
+        [7.0, 0.5], np.array([-1.0, 0.0]), np.array([1.0, 1.0]), ("prismatic", "revolute")
+    )
     assert wrapped == [] and pose[0] == 7.0  # a prismatic joint is never wrapped
     with pytest.raises(DomainError, match="outside its range"):
         TaskDomain.from_robot(robot, pose=np.full(robot.m, 100.5), q_radius=0.2, qdot_max=0.5, qddot_max=2.0)
