@@ -205,3 +205,17 @@ def test_the_default_task_brings_the_automatic_weights_of_its_domain_and_the_use
     assert h["M_s"] == (2.5,) * 6
     args.default_task = None  # no default task: the paper's joint-1 weights on every joint
     assert hyperparameters_from_args(6, args, domain)["omega_b"] == (1.0,) * 6
+
+
+def test_the_lft_model_refuses_an_inner_loop():
+    """talos' computed-torque loop (rotor inertia: inner-gain does not apply) fell to `lft`, a model of one
+    robot's M(q)^-1: coverage 1/3 of the loop's three true robots, so no bandwidth could certify it."""
+    from types import SimpleNamespace
+
+    from polyrob.errors import NotApplicable
+    from polyrob.model.inner import inner_loop
+    from polyrob.plant.models.inertia_lft import inertia_lft_plant
+
+    arm = inner_loop(cached_robot("planar_2r"), "computed-torque", model_error=0.1)
+    with pytest.raises(NotApplicable, match="inner closed loop"):
+        inertia_lft_plant(SimpleNamespace(robot=arm, domain=None), robot=arm)

@@ -185,11 +185,15 @@ def inertia_lft_plant(
     Raises
     ------
     NotApplicable
-        ``M(q)`` is not affine in single-angle cos/sin terms, or ``B`` is not ``[0; M^{-1}]``.
+        ``M(q)`` is not affine in single-angle cos/sin terms, ``B`` is not
+        ``[0; M^{-1}]``, or the robot is an inner closed loop.
     """
     from polyrob.bounds.pldi import bound_pldi, entry_name
 
     robot = pldi.robot if robot is None else robot
+    if getattr(robot, "inner", None) not in (None, "none"):
+        # the model is M(q)^-1 of one robot; an inner loop's PLDI spans several true robots (talos: coverage 1/3)
+        raise NotApplicable(f"{robot.name}: an inner closed loop ({robot.inner}), not the robot's own M(q)^-1")
     domain = pldi.domain
     m = robot.m
     n = 2 * m
