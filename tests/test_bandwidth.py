@@ -91,3 +91,37 @@ def test_a_grid_only_certificate_does_not_count():
     )
     assert 2 <= res.alpha < 2.02 and res.result.certificate.certified
     assert all(math.isinf(mu) for a, mu in res.history if a > 2)
+
+
+def test_a_search_time_limit_keeps_the_best_factor_so_far_and_says_so(monkeypatch):
+    """No new factor starts after the limit: the largest certified one found stands, the result says why the
+    search ended; none certified before the limit is a SynthesisError naming the limit."""
+    from types import SimpleNamespace
+
+    import polyrob.synthesis.bandwidth as bandwidth
+    from polyrob.analysis.certificate import Certificate, Scope, decide_gain
+    from polyrob.errors import SynthesisError
+    from polyrob.synthesis.bandwidth import max_bandwidth_scaling
+
+    clock = [0.0]  # a synthesis takes 1 s of this clock: the test does not depend on the machine's speed
+    monkeypatch.setattr(bandwidth, "time", SimpleNamespace(perf_counter=lambda: clock[0]))
+
+    def synthesis(P, K0):  # certified mu < 1 up to alpha = 4.8
+        clock[0] += 1.0
+        mu = 0.5 * P.alpha / 4 + 0.4
+        cert = Certificate(decide_gain(True, mu, True)[0], mu, mu, 0.0, None, Scope())
+        return SimpleNamespace(certificate=cert, controller=None, order=0)
+
+    plant = lambda a, h: SimpleNamespace(alpha=a)  # noqa: E731
+    full = max_bandwidth_scaling(None, synthesize=synthesis, plant=plant, progress=False)
+    assert full.stopped_by == "" and full.bracket[1] / full.bracket[0] - 1 <= 0.05 and len(full.history) == 8
+    clock[0] = 0.0
+    cut = max_bandwidth_scaling(None, synthesize=synthesis, plant=plant, progress=False, search_time_limit=5.5)
+    # 32, 16, 8 fail, 4 certifies, 5.66 fails, 4.76 certifies: then 5.5 s have passed
+    assert len(cut.history) == 6 and cut.alpha == pytest.approx(4.757, rel=1e-3) and cut.peak_mu < 1
+    assert cut.bracket[1] / cut.bracket[0] - 1 > 0.05
+    assert "time limit of 5.5 s, before alpha = 5.187" in cut.stopped_by
+    assert cut.summary()["stopped_by"] == cut.stopped_by
+    clock[0] = 0.0
+    with pytest.raises(SynthesisError, match="none certifies before the search's time limit of 2.5 s"):
+        max_bandwidth_scaling(None, synthesize=synthesis, plant=plant, progress=False, search_time_limit=2.5)

@@ -94,6 +94,7 @@ def settings_from_args(args) -> dict:
         "omega": parse_frequencies(args.omega),
         "search_bandwidth": args.max_bandwidth,
         "alphas": parse_list(args.alphas, "--alphas"),
+        "search_time_limit": args.search_time_limit or None,
         "analyze": not args.no_analysis,
         "mc": args.mc,
         "validate": not args.no_validate,
@@ -210,6 +211,13 @@ def register(sub) -> None:
         help="search the largest bandwidth factor with certified mu < 1 (a synthesis per factor)",
     )
     g.add_argument("--alphas", default=None, help="--max-bandwidth: comma-separated factors to scan")
+    g.add_argument(
+        "--search-time-limit",
+        type=nonnegative_float,
+        default=600.0,
+        metavar="SECONDS",
+        help="--max-bandwidth: no new factor of a robot's search starts after this (default 600; 0: none)",
+    )
     g.add_argument(
         "--uncertainty",
         default="auto",

@@ -138,6 +138,12 @@ class Settings:
         (:func:`polyrob.pipeline.design_max_bandwidth`) instead of one synthesis.
     alphas : tuple of float, optional
         The factors the search scans (default its own).
+    search_time_limit : float or None
+        Seconds of one robot's bandwidth search after which no new factor
+        starts (its best certified factor so far stands, and the row says the
+        search stopped); ``None``: no limit.  A batch is a shared budget: one
+        robot whose μ problem is slow (talos_left_arm's 72-parameter model)
+        should not hold a worker for an hour.
     analyze : bool
         μ analysis of the controller (robust stability/performance, sampling).
     mc : int
@@ -168,6 +174,7 @@ class Settings:
     omega: tuple | None = None
     search_bandwidth: bool = False
     alphas: tuple | None = None
+    search_time_limit: float | None = 600.0
     analyze: bool = True
     mc: int = 200
     validate: bool = True

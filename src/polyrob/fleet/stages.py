@@ -61,7 +61,11 @@ def design_stage(problem, settings, timings: dict, details: dict):
     t0 = time.perf_counter()
     skipped = search_skipped(problem, details) if settings.search_bandwidth else None
     if settings.search_bandwidth and skipped is None:
-        design, res = design_max_bandwidth(problem, alphas=settings.alphas, **options)
+        design, res = design_max_bandwidth(
+            problem, alphas=settings.alphas, search_time_limit=settings.search_time_limit, **options
+        )
+        if res.stopped_by:
+            details["bandwidth_search"] = f"stopped by {res.stopped_by}"
         alpha, hyper = float(res.alpha), res.hyperparameters
     else:
         design = design_controller(problem, **options)

@@ -66,6 +66,8 @@ class BandwidthScalingResult:
     excluded : list of (alpha, bound)
         Factors not synthesised because ``floor`` proved ``μ >= bound >= target``
         for every controller (see :mod:`polyrob.analysis.limits`).
+    stopped_by : str
+        Empty, or why the search ended before its bracket was narrowed to ``rtol``.
     """
 
     alpha: float
@@ -77,6 +79,7 @@ class BandwidthScalingResult:
     bracket: tuple = (math.nan, math.nan)
     seconds: float = 0.0
     excluded: list = ()
+    stopped_by: str = ""
 
     def summary(self) -> dict:
         """JSON-ready figures (the controller itself is in ``result``)."""
@@ -90,6 +93,7 @@ class BandwidthScalingResult:
             "history": [list(h) for h in self.history],
             "seconds": round(self.seconds, 2),
             "excluded_by_performance_limit": [list(e) for e in self.excluded],
+            "stopped_by": self.stopped_by or None,
         }
 
 
@@ -140,6 +144,7 @@ def max_bandwidth_scaling(
     plant: Callable | None = None,
     floor: Callable | None = None,
     progress: bool | None = None,
+    search_time_limit: float | None = None,
     **musyn_options,
 ) -> BandwidthScalingResult:
     """The largest factor α on the weights' bandwidths with a certified μ < ``target``.
@@ -173,6 +178,11 @@ def max_bandwidth_scaling(
     progress : bool, optional
         Progress bars of each synthesis (default: only on a terminal); one
         line per α goes to the ``polyrob`` logger whatever this says.
+    search_time_limit : float, optional
+        Seconds of the whole search after which no new factor starts (the
+        one running finishes): the largest certified factor so far is the
+        result, its ``bracket`` ending at the next factor not tried
+        (``stopped_by`` says so); none so far raises :class:`SynthesisError`.
 
     Returns
     -------
@@ -246,9 +256,22 @@ def max_bandwidth_scaling(
         log.info(f"bandwidth alpha = {alpha:.4g}: {status}{figure} ({time.perf_counter() - t0:.0f} s)")
         return mu
 
+    deadline = None if search_time_limit is None else t0 + float(search_time_limit)
+    stopped = ""
+
+    def out_of_time(next_alpha) -> bool:
+        nonlocal stopped
+        if deadline is None or time.perf_counter() < deadline:
+            return False
+        stopped = f"the search's time limit of {search_time_limit:g} s, before alpha = {next_alpha:.4g}"
+        log.info(f"bandwidth search stopped by {stopped}")
+        return True
+
     # scan from the largest α down: the first success is the largest on the grid
     ok = fail = None
     for alpha in grid[::-1]:
+        if history and out_of_time(alpha):
+            break
         if run(alpha) < target:
             ok = alpha
             break
@@ -259,6 +282,8 @@ def max_bandwidth_scaling(
         why = (
             "the performance limit of the robot's unstable poles excludes every factor (no synthesis ran)"
             if excluded and not history
+            else f"none certifies before {stopped}"
+            if stopped
             else "none certifies"
         )
         raise SynthesisError(
@@ -269,6 +294,8 @@ def max_bandwidth_scaling(
         lo, hi = ok, fail
         while hi / lo - 1 > rtol:
             mid = math.sqrt(lo * hi)
+            if out_of_time(mid):
+                break
             if run(mid) < target:
                 lo = mid
             else:
@@ -285,4 +312,5 @@ def max_bandwidth_scaling(
         bracket=(float(ok), math.inf if fail is None else float(fail)),
         seconds=time.perf_counter() - t0,
         excluded=excluded,
+        stopped_by=stopped,
     )
