@@ -110,9 +110,14 @@ def _certificate(bound):
 def test_the_pid_start_answers_only_when_its_certificate_meets_the_target(P, monkeypatch, bound, target, answered):
     """MATLAB's TargetPerf on the start: a PID certified below ``target`` is the result, no D-K step runs;
     a certificate above the target, or not certified (mu >= 1), hands the PID to D-K."""
+    import dataclasses
+
     import polyrob.analysis.certificate as certificate
+    import polyrob.synthesis.pid_tuning as tuning
     from polyrob.synthesis.pid_tuning import pid_start
 
+    real = tuning.tuned_pid(P, omega=np.logspace(-2, 2, 5))
+    monkeypatch.setattr(tuning, "tuned_pid", lambda P: dataclasses.replace(real, grid_mu=0.9 * bound))
     monkeypatch.setattr(certificate, "certify_loop", lambda *a, **k: _certificate(bound))
     K, words, done = pid_start(P, target=target)
     assert K.nstates == 2 * P.n_u and words.startswith("per-joint PID")
@@ -134,3 +139,16 @@ def test_a_computed_torque_loop_gets_target_one_unless_one_is_given():
     ct = SimpleNamespace(robot=SimpleNamespace(inner="computed-torque"))
     assert with_default_start(ct, {})["target"] == 1.0  # a certified PID is the answer
     assert with_default_start(ct, {"target": 0.7})["target"] == 0.7  # the user's target wins
+
+
+def test_a_search_screens_a_pid_whose_ranking_figure_is_already_above_one(P, monkeypatch):
+    """The bandwidth search's PID per factor: a ranking figure >= 1 is a SynthesisError (a failed factor in the
+    search's history) without a certificate; a target no ranking reaches hands the PID to D-K uncertified."""
+    import polyrob.analysis.certificate as certificate
+    from polyrob.errors import SynthesisError
+    from polyrob.synthesis.pid_tuning import pid_start
+
+    monkeypatch.setattr(certificate, "certify_loop", lambda *a, **k: pytest.fail("a screened PID was certified"))
+    with pytest.raises(SynthesisError, match=r"coarse-grid mu upper bound \d+\.\d+ >= 1: its certificate was not"):
+        pid_start(P, only=True, screen=1.0)  # the paper's 2R box problem: the PID's ranking is about 3.5
+    assert pid_start(P, target=1.0)[2] is None

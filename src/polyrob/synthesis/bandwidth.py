@@ -126,6 +126,12 @@ def _default_synthesis(initial_controller=None, **musyn_options) -> Callable:
 
     def synthesize(P, K0):
         # a PID start is re-tuned at every factor (its crossover follows the weights)
+        if initial_controller == "pid" and musyn_options.get("max_iter") == 1:
+            from polyrob.synthesis.pid_tuning import pid_start
+
+            # the PID alone at each factor; one whose ranking figure is >= 1 is not certified (screened)
+            options = {k: musyn_options[k] for k in ("certify_omega",) if k in musyn_options}
+            return pid_start(P, only=True, screen=musyn_options.get("target") or 1.0, **options)[2]
         start = initial_controller if (K0 is None or initial_controller == "pid") else K0
         return musyn(P, initial_controller=start, **musyn_options)
 

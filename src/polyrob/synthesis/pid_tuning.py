@@ -225,7 +225,15 @@ def _smallest_bandwidth(P) -> float:
     raise SynthesisError("a PID start needs the generalized plant's W_T (its bandwidth places the crossover)")
 
 
-def pid_start(P, *, target: float | None = None, only: bool = False, certify_omega=None, t_start: float | None = None):
+def pid_start(
+    P,
+    *,
+    target: float | None = None,
+    only: bool = False,
+    screen: float | None = None,
+    certify_omega=None,
+    t_start: float | None = None,
+):
     """``musyn``'s ``initial_controller="pid"``: ``(controller, words, result)``.
 
     ``result`` is ``None`` (D-K goes on from the tuned PID) unless the PID
@@ -235,6 +243,8 @@ def pid_start(P, *, target: float | None = None, only: bool = False, certify_ome
     certificate, not on a grid).  Then ``result`` is the
     :class:`~polyrob.synthesis.result.MusynResult` of the PID with that
     certificate and ``info["stopped_by"]`` says why no D-K step ran.
+    ``screen`` (a search over weights): a :class:`SynthesisError` instead
+    when the ranking's coarse-grid μ is already at least ``screen``.
     """
     import time
 
@@ -245,8 +255,14 @@ def pid_start(P, *, target: float | None = None, only: bool = False, certify_ome
     t0 = time.perf_counter() if t_start is None else t_start
     tuned = tuned_pid(P)
     log.info(f"musyn: start from a {tuned.words()}, coarse-grid mu {tuned.grid_mu:.4f}")
-    if not only and target is None:
-        return tuned.controller, tuned.words(), None
+    if screen is not None and tuned.grid_mu >= screen:
+        # a search's screen: the certificate would only confirm a failure (it has always been above the ranking)
+        raise SynthesisError(
+            f"the best per-joint PID's coarse-grid mu upper bound {tuned.grid_mu:.4f} >= {screen:g}: "
+            "its certificate was not computed (the search's screen)"
+        )
+    if (not only and target is None) or (not only and tuned.grid_mu >= target):
+        return tuned.controller, tuned.words(), None  # D-K goes on (a certificate could not meet the target)
     from polyrob.analysis.certificate import certify_loop
 
     cert = certify_loop(P, tuned.controller, None, certify_omega, sweep_unstable=False)
