@@ -28,6 +28,11 @@ scalars ``δ I_7``, a 6x18 and a 12x12 full complex block, 114 padded
 channels), bounded by descent on the D-G scalings (``method="gradient"``,
 what ``"auto"`` takes there) and by AB13MD on the relaxed superset structure
 (``method="relaxed"``); the D-G LMI is left out (not done in 6 minutes).
+
+With ``--choice`` (about 3 minutes: the bounds come first) only the loops
+behind ``method="auto"``'s choice (:func:`method_choice`): finger_edu's and
+talos_left_arm's default problems closed by their tuned PIDs, each method
+at 8 frequencies.
 """
 
 from __future__ import annotations
@@ -156,6 +161,43 @@ def large_repeated() -> dict:
     return out
 
 
+def method_choice(robots=("finger_edu", "talos_left_arm"), n: int = 8) -> dict:
+    """Each method on the robust-performance loop of a robot's default problem with its tuned PID.
+
+    The figures behind ``resolve_method``'s ``"auto"``: finger_edu's computed-torque loop (a repeated
+    real block of 3) for the LMI against descent, talos_left_arm's (72 real scalars: its model is
+    ``axes``) for AB13MD against descent; ``n`` frequencies from 0.01 to 1000 rad/s.
+    """
+    from threadpoolctl import threadpool_limits
+
+    from polyrob.analysis.mu.frequency import matrix_response
+    from polyrob.fleet.jobs import Settings, _problem, as_job
+    from polyrob.plant.loops import lower_lft_matrices
+    from polyrob.synthesis.pid_tuning import tuned_pid
+
+    out = []
+    for robot in robots:
+        problem = _problem(as_job(robot), Settings(), {})
+        P, st = problem.P, as_block_structure(problem.P.block_structure_rp)
+        K = tuned_pid(P).controller
+        mats = [np.asarray(X, float) for X in (P.system.A, P.system.B, P.system.C, P.system.D, K.A, K.B, K.C, K.D)]
+        Acl, Bcl, Ccl, Dcl = lower_lft_matrices(*mats, P.n_u, P.n_y)
+        w = np.logspace(-2, 3, n)
+        H = matrix_response(Acl, Bcl, Ccl, Dcl)(w)
+        methods = ("lmi", "gradient") if st.has_repeated else ("ab13md", "gradient")
+        row = {"robot": robot, "model": problem.model, "structure": str(st), "omega": w.tolist(), "methods": {}}
+        with threadpool_limits(1):
+            for method in methods:
+                ups, secs = [], []
+                for k in range(n):
+                    t0 = time.perf_counter()
+                    ups.append(mussv(H[k], st, method=method, lower=False).upper)
+                    secs.append(time.perf_counter() - t0)
+                row["methods"][method] = {"upper": ups, "seconds": secs}
+        out.append(row)
+    return {"method_choice": out}
+
+
 def main(large: bool = False) -> dict:
     report = {"problems": []}
     # (a) random mixed real/complex
@@ -192,6 +234,9 @@ if __name__ == "__main__":
     t0 = time.perf_counter()
     import sys
 
-    rep = main(large="--large" in sys.argv[1:])
+    if "--choice" in sys.argv[1:]:  # the default problems' loops (bounds first: about 2 minutes)
+        rep = method_choice()
+    else:
+        rep = main(large="--large" in sys.argv[1:])
     rep["total_seconds"] = time.perf_counter() - t0
     print(json.dumps(rep, indent=2))
