@@ -75,7 +75,7 @@ def resolve_method(st: BlockStructure, method: str) -> str:
     (``"lmi"``) gives the same bound on small structures at 10-400 times the
     cost (measured on finger_edu's computed-torque loop, a repeated real
     block of 3: 0.3-9.5 s per frequency against 0.02 s, and the LMI's bound
-    0-1.5 % higher where the solver stopped early), so it is asked for by name only.
+    0-1.5 % higher where the solver stopped early; ``benchmarks/mu.py --choice``), so it is asked for by name only.
     """
     if method == "auto":
         if not st.has_repeated:
