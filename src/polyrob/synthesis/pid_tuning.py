@@ -256,7 +256,7 @@ def pid_start(
     tuned = tuned_pid(P)
     log.info(f"musyn: start from a {tuned.words()}, coarse-grid mu {tuned.grid_mu:.4f}")
     if screen is not None and tuned.grid_mu >= screen:
-        # a search's screen: the certificate would only confirm a failure (it has always been above the ranking)
+        # a search's screen (a heuristic: the factor counts as not reached, never as refuted)
         raise SynthesisError(
             f"the best per-joint PID's coarse-grid mu upper bound {tuned.grid_mu:.4f} >= {screen:g}: "
             "its certificate was not computed (the search's screen)"
