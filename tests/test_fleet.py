@@ -427,3 +427,13 @@ def test_a_task_job_with_an_inner_layer_says_domain_inner_layer_and_reflected_in
     # without a domain field a one-joint robot keeps the torque box and no inner layer
     bare = run_job(Job(robot=pendulums[0]), Settings(**dict(FAST, validate=False, analyze=False)))
     assert bare.row()["inner"] == "none" and not bare.row()["domain"].startswith("task")
+
+
+def test_the_robots_with_the_most_joints_start_first_and_rows_keep_their_order():
+    """Longest-first scheduling (the batch of every serial arm went past 30 min with xarm7 and panda started
+    last); a robot that does not load counts as 0 joints and fails in its own job."""
+    from polyrob.fleet.batch import largest_first
+    from polyrob.fleet.jobs import as_job
+
+    jobs = [as_job(x) for x in ("planar_2r", "ur5", "no_such_robot", "so101", "TwoDofs")]
+    assert largest_first(jobs) == [1, 3, 0, 4, 2]
