@@ -150,7 +150,7 @@ def test_validation_checks_the_accelerations_along_a_trajectory(robot, domain):
 
 def test_an_srdf_pose_outside_a_range_by_whole_turns_is_the_same_configuration():
     """kinova's SRDF poses give -pi/2 for a joint ranging over [0.33, 5.95]: the default task failed.
-    An angle moved by whole turns is the same configuration; one that no turn brings inside is refused."""
+    An SRDF angle moved by whole turns is the same configuration; a pose the user gives is taken as given."""
     from polyrob.domains.task import _wrapped_into_range
 
     robot = load_robot("kinova")

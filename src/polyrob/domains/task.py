@@ -203,8 +203,12 @@ class TaskDomain(JointBox):
             raise DomainError(f"--pose: give {len(names)} finite positions (one per joint), got {pose.tolist()}")
         if source is None:
             source = "q = (" + ", ".join(f"{x:.4g}" for x in pose) + ")"
-        pose, wrapped = _wrapped_into_range(pose, box.q_lower, box.q_upper, getattr(robot, "joint_kinds", ()))
-        if wrapped:  # the same configuration (kinova's SRDF poses: -pi/2 for a joint ranging over [0.33, 5.95])
+        # an SRDF pose may name a revolute angle a whole turn away (kinova: -pi/2 for a joint ranging over
+        # [0.33, 5.95]): the same configuration; a pose given by the user must be inside as given
+        srdf = source.startswith("SRDF pose")
+        kinds = getattr(robot, "joint_kinds", ()) if srdf else ()
+        pose, wrapped = _wrapped_into_range(pose, box.q_lower, box.q_upper, kinds)
+        if wrapped:
             source += " (" + ", ".join(f"{names[j]} + {k:+d} x 2 pi" for j, k in wrapped) + ")"
         outside = (pose < box.q_lower - 1e-9) | (pose > box.q_upper + 1e-9)
         if outside.any():
