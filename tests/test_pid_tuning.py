@@ -126,7 +126,7 @@ def test_the_pid_start_answers_only_when_its_certificate_meets_the_target(P, mon
         return
     assert done.controller is K and done.structure == "pid" and done.iterations == 0
     assert done.certificate.certified and done.certificate.bound == bound
-    assert f"met the target {target:g}" in done.info["stopped_by"]
+    assert f"certificate, below the target {target:g}" in done.info["stopped_by"]
     assert np.asarray(done.info["pid_gains"]).shape == (P.n_u, 4)
     # without a target nothing is certified here: D-K's loop starts from the PID
     monkeypatch.setattr(certificate, "certify_loop", lambda *a, **k: pytest.fail("certified without a target"))

@@ -270,7 +270,7 @@ def pid_start(
     log.info(f"musyn: certificate of the PID start: {cert.status.value}, bound {cert.bound:.4g}")
     if not (only or met):
         return tuned.controller, tuned.words(), None
-    why = f"the PID start's certificate met the target {target:g}" if met else "max_iter=1: the start only"
+    why = f"the PID start's certificate, below the target {target:g}" if met else "max_iter=1: the start only"
     return tuned.controller, tuned.words(), start_result(tuned, cert, time.perf_counter() - t0, why)
 
 
