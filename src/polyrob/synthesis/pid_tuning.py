@@ -232,7 +232,6 @@ def pid_start(
     only: bool = False,
     screen: float | None = None,
     certify_omega=None,
-    t_start: float | None = None,
 ):
     """``musyn``'s ``initial_controller="pid"``: ``(controller, words, result)``.
 
@@ -252,7 +251,7 @@ def pid_start(
 
     if isinstance(P, control.StateSpace):
         raise PolyrobError("initial_controller='pid' needs a GeneralizedPlant (its weights place the crossover)")
-    t0 = time.perf_counter() if t_start is None else t_start
+    t0 = time.perf_counter()
     tuned = tuned_pid(P)
     log.info(f"musyn: start from a {tuned.words()}, coarse-grid mu {tuned.grid_mu:.4f}")
     if screen is not None and tuned.grid_mu >= screen:
@@ -262,7 +261,7 @@ def pid_start(
             "its certificate was not computed (the search's screen)"
         )
     if (not only and target is None) or (not only and tuned.grid_mu >= target):
-        return tuned.controller, tuned.words(), None  # D-K goes on (a certificate could not meet the target)
+        return tuned.controller, tuned.words(), None  # D-K goes on: the ranking already exceeds the target
     from polyrob.analysis.certificate import certify_loop
 
     cert = certify_loop(P, tuned.controller, None, certify_omega, sweep_unstable=False)

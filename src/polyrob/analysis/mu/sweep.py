@@ -23,9 +23,9 @@ __all__ = ["run_sweep", "relaxation_note", "DESCENT_ABOVE", "MANY_REAL_SCALARS",
 #: size: the D-G LMI of an 89-channel structure (ur5's axes model) takes minutes per frequency.
 DESCENT_ABOVE = 24
 #: ``method="auto"`` bounds a structure without repeated blocks by descent instead of AB13MD when it
-#: has more real scalar blocks than this: AB13MD's time grows with them (measured 7-35 s per
-#: frequency with 72, talos_left_arm's ``axes`` model, where descent took 0.7-1.4 s for the same
-#: bound to 4 digits; 0.05 s with 6, ur5's relaxed ``inner-gain`` structure; ``benchmarks/mu.py --choice``).
+#: has more real scalar blocks than this: AB13MD's time grows with them (seconds per frequency with
+#: 72, talos_left_arm's ``axes`` model, against about a second for descent at the same bound:
+#: ``benchmarks/mu.py --choice``; milliseconds with the 6 of an arm's relaxed ``inner-gain`` structure).
 MANY_REAL_SCALARS = 16
 #: Wall-clock seconds a cold AB13MD call of a sweep may take before it is taken for hung (default
 #: of :func:`mu_bounds`' ``ab13md_timeout`` and ``warm_timeout``).  A safety net, not a choice of
