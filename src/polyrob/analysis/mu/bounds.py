@@ -72,10 +72,9 @@ def resolve_method(st: BlockStructure, method: str) -> str:
     (real scalars and full complex blocks, AB13MD's domain) and at most
     :data:`MANY_REAL_SCALARS` real scalars, else descent on the D-G scalings
     (full scalings on repeated blocks, re-checked exactly).  The D-G LMI
-    (``"lmi"``) gives the same bound on small structures at 10-400 times the
-    cost (measured on finger_edu's computed-torque loop, a repeated real
-    block of 3: 0.3-9.5 s per frequency against 0.02 s, and the LMI's bound
-    0-1.5 % higher where the solver stopped early; ``benchmarks/mu.py --choice``), so it is asked for by name only.
+    (``"lmi"``) reaches the same bound on small structures at many times the
+    cost (``benchmarks/mu.py --choice`` times both on finger_edu's
+    computed-torque loop, a repeated real block of 3), so it is asked for by name only.
     """
     if method == "auto":
         if not st.has_repeated:
