@@ -2,8 +2,9 @@
 
 With computed torque ``u = M_hat(q) v + h_hat(q, qdot)`` computed from a
 model whose link masses and inertias are the true robot's divided by ``s``
-(all links by one factor, :mod:`polyrob.model.inner`; no reflected rotor
-inertia and no payload range), the true robot has ``M = s M_hat`` and
+(all links by one factor, :mod:`polyrob.model.inner`; no payload range;
+with reflected rotor inertia the loop is the LFT of
+:mod:`~polyrob.plant.models.inner_armature` instead), the true robot has ``M = s M_hat`` and
 ``h = s h_links + D qdot``, so the inner closed loop is exactly::
 
     qddot = t v + (t - 1) phi(q, qdot),     t = 1/s,  phi = M_hat^-1 h_links
@@ -48,10 +49,13 @@ def applies(robot) -> str | None:
         return "inner-gain: a payload range moves more than one inertia factor"
     if not getattr(robot, "model_error", 0.0):
         return "inner-gain: no model error (--model-error) to carry"
-    armature = getattr(getattr(robot.model_robot, "model", None), "armature", None)
-    if armature is not None and np.any(np.asarray(armature) != 0):
-        return "inner-gain: reflected rotor inertia is not scaled with the links (M != s M_hat)"
     return None
+
+
+def has_armature(robot) -> bool:
+    """Whether the inner loop's robot has reflected rotor inertia (then ``M = R + s L``, not ``s M_hat``)."""
+    armature = getattr(getattr(robot.model_robot, "model", None), "armature", None)
+    return armature is not None and bool(np.any(np.asarray(armature) != 0))
 
 
 def gain_range(model_error: float) -> tuple[float, float]:
@@ -118,6 +122,10 @@ def inner_gain_plant(pldi, *, robot=None) -> UncertainPlant:
     why = applies(robot) if robot is not None else "inner-gain: no inner loop recorded with the PLDI"
     if why:
         raise NotApplicable(why)
+    if has_armature(robot):  # M = R + s L: the exact LFT in one scalar with a fed-back factor
+        from polyrob.plant.models.inner_armature import inner_armature_plant
+
+        return inner_armature_plant(pldi, robot)
     m = pldi.m
     n = 2 * m
     lay = entry_layout(pldi)

@@ -1,0 +1,91 @@
+"""Computed torque with reflected rotor inertia (polyrob.plant.models.inner_armature): M = R + s L as an exact LFT.
+
+A planar 2R with armature behind a computed-torque layer whose link inertias
+are off by ±10 %: a few seconds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from polyrob import bound_pldi, load_robot
+from polyrob.domains.task import TaskDomain
+from polyrob.model.inner import inner_loop
+from polyrob.plant.coverage import coverage_fraction, model_contains
+from polyrob.plant.models.inner_armature import factor_loop
+from polyrob.plant.uncertainty import uncertain_plant
+
+ARMATURE = [0.4, 0.3]  # kg m^2: comparable to the links' own inertia, so G = M_hat^-1 L is far from I
+
+
+def _task(arm):
+    return TaskDomain.from_robot(arm, pose=[0.3, 1.2], q_radius=0.3, qdot_max=1.0, qddot_max=2.0)
+
+
+@pytest.fixture(scope="module")
+def problem():
+    arm = inner_loop(load_robot("planar_2r", armature=ARMATURE), "computed-torque", model_error=0.1)
+    dom = _task(arm)
+    pldi = bound_pldi(arm, dom, samples=64, coverage=0, progress=False, workers=1, screen=0, verify_rounds=0)
+    return arm, dom, uncertain_plant(pldi, model="auto", coverage=600, volume_samples=0)
+
+
+def test_auto_takes_the_one_scalar_lft_and_it_covers_every_true_robot(problem):
+    arm, dom, unc = problem
+    assert unc.model == "inner-gain" and unc.info["armature"] and unc.n_params == 1
+    assert unc.coverage == 1.0
+    assert unc.block_structure[-1].tolist() == [-2, 0]  # sigma, repeated on both joints
+    assert np.any(unc.D_vd != 0)  # G is fed back through sigma: not the one-gain model
+
+
+def test_the_factor_g_is_the_identity_less_the_models_inverse_inertia_times_the_armature(problem):
+    arm, dom, _ = problem
+    q, qdot, v = dom.sample(5, method="uniform", seed=1)
+    _, B = factor_loop(arm).jacobians_batch(q, qdot, v)
+    for k in range(5):
+        M_hat = arm.model_robot.mass_matrix(q[k])
+        assert B[k, 2:] == pytest.approx(np.eye(2) - np.linalg.solve(M_hat, np.diag(ARMATURE)), abs=1e-9)
+
+
+def test_a_true_robot_is_the_lft_at_its_own_factor_and_residual(problem):
+    arm, dom, unc = problem
+    info, p = unc.info, 0.1
+    rows, cols = info["residual_rows"], info["residual_cols"]
+    for s in (0.9, 0.96, 1.07):
+        true = arm.with_true(None, None, s)
+        q, qdot, qddot = dom.sample(3, method="uniform", seed=7)
+        v = true.inverse_dynamics(q, qdot, qddot)
+        A, B = true.jacobians_batch(q, qdot, v)
+        sigma = 1.0 - s
+        for k in range(3):
+            inverse = np.linalg.inv(B[k, 2:])
+            K = np.hstack([inverse @ A[k, 2:], np.eye(2) - inverse]) / sigma
+            E = K - info["K_centre"]
+            residual = E[np.ix_(rows, cols)] / info["W_l"][:, None] / info["W_r"][None, :]
+            assert np.linalg.norm(residual, 2) <= 1.0
+            square = np.zeros((unc.full_blocks[0],) * 2)
+            square[: len(rows), : len(cols)] = residual
+            A_lft, B_lft = unc.matrices_at(np.array([sigma / p]), residual=[square])
+            assert A_lft == pytest.approx(A[k], abs=1e-9) and B_lft == pytest.approx(B[k], abs=1e-9)
+        assert model_contains(unc, A, B).all()
+
+
+def test_members_of_the_lft_are_contained_and_a_larger_model_error_is_not(problem):
+    arm, _, unc = problem
+    rng = np.random.default_rng(0)
+    members = [unc.matrices_at(rng.uniform(-1, 1, 1), residual=unc.residual_samples(1, seed=i)[0]) for i in range(6)]
+    assert model_contains(unc, np.array([a for a, _ in members]), np.array([b for _, b in members])).all()
+    wider = inner_loop(load_robot("planar_2r", armature=ARMATURE), "computed-torque", model_error=0.3)
+    assert coverage_fraction(unc, wider, _task(wider), 300) < 0.9
+
+
+def test_a_torque_box_is_refused():
+    from polyrob.domains.torque_box import Domain
+    from polyrob.errors import NotApplicable
+    from polyrob.plant.models.inner_armature import inner_armature_plant
+
+    arm = inner_loop(load_robot("planar_2r", armature=ARMATURE), "computed-torque", model_error=0.1)
+    pldi = bound_pldi(arm, Domain.from_robot(arm), samples=16, coverage=0, progress=False, workers=1, screen=0)
+    with pytest.raises(NotApplicable, match="task domain"):
+        inner_armature_plant(pldi, arm)
