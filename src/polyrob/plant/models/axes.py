@@ -108,6 +108,11 @@ def residual_block(lay, rho, m: int):
     """
     rho_mat = np.zeros((m, 3 * m))
     rho_mat[lay[:, 0], lay[:, 1]] = rho
+    return residual_of_radii(rho_mat)
+
+
+def residual_of_radii(rho_mat):
+    """:func:`residual_block` of a matrix of entry radii (any shape: ``B_f`` has its rows, ``C_f`` its columns)."""
     rows = np.flatnonzero(rho_mat.max(axis=1) > 0)
     cols = np.flatnonzero(rho_mat.max(axis=0) > 0)
     size = max(len(rows), len(cols))
@@ -116,9 +121,9 @@ def residual_block(lay, rho, m: int):
     R = rho_mat[np.ix_(rows, cols)]
     b = np.sqrt(R.max(axis=0))
     a = np.sqrt(len(rows) * ((R / b[None, :]) ** 2).sum(axis=1))
-    Bf = np.zeros((m, size))
+    Bf = np.zeros((rho_mat.shape[0], size))
     Bf[rows, np.arange(len(rows))] = a
-    Cf = np.zeros((size, 3 * m))
+    Cf = np.zeros((size, rho_mat.shape[1]))
     Cf[np.arange(len(cols)), cols] = b
     return Bf, Cf, {"residual_rows": rows, "residual_cols": cols, "W_l": a, "W_r": b}
 

@@ -2,10 +2,8 @@
 
 With computed torque ``u = M_hat(q) v + h_hat(q, qdot)`` computed from a
 model whose link masses and inertias are the true robot's divided by ``s``
-(all links by one factor, :mod:`polyrob.model.inner`; no payload range;
-with reflected rotor inertia the loop is the LFT of
-:mod:`~polyrob.plant.models.inner_armature` instead), the true robot has ``M = s M_hat`` and
-``h = s h_links + D qdot``, so the inner closed loop is exactly::
+(all links by one factor, :mod:`polyrob.model.inner`), the true robot has
+``M = s M_hat`` and ``h = s h_links + D qdot``, so the inner closed loop is exactly::
 
     qddot = t v + (t - 1) phi(q, qdot),     t = 1/s,  phi = M_hat^-1 h_links
 
@@ -26,6 +24,10 @@ of a 72-entry cloud (ur5) and a residual block larger than the cloud's
 spread (LP bounds over the polytope): μ about 10 where this model gives
 one direction and a residual of a few percent.
 
+With reflected rotor inertia or a payload range ``M != s M_hat``: the
+model is then the LFT in the physical scalars of
+:mod:`~polyrob.plant.models.inner_factors` (the same name, ``inner-gain``).
+
 The plant is ``axes``-shaped (``info`` keys of :func:`polyrob.plant.models.axes.axes_plant`),
 so membership is :func:`~polyrob.plant.models.axes.axes_contains`.
 """
@@ -45,10 +47,8 @@ def applies(robot) -> str | None:
     """Why the model does not apply to ``robot`` (``None`` when it does)."""
     if getattr(robot, "inner", None) != "computed-torque":
         return "inner-gain: needs a computed-torque inner layer (--inner computed-torque)"
-    if getattr(robot, "payload", None) is not None:
-        return "inner-gain: a payload range moves more than one inertia factor"
-    if not getattr(robot, "model_error", 0.0):
-        return "inner-gain: no model error (--model-error) to carry"
+    if not getattr(robot, "model_error", 0.0) and getattr(robot, "payload", None) is None:
+        return "inner-gain: no model error (--model-error) or payload range to carry"
     return None
 
 
@@ -122,10 +122,10 @@ def inner_gain_plant(pldi, *, robot=None) -> UncertainPlant:
     why = applies(robot) if robot is not None else "inner-gain: no inner loop recorded with the PLDI"
     if why:
         raise NotApplicable(why)
-    if has_armature(robot):  # M = R + s L: the exact LFT in one scalar with a fed-back factor
-        from polyrob.plant.models.inner_armature import inner_armature_plant
+    if has_armature(robot) or robot.payload is not None:  # M != s M_hat: the LFT in the physical scalars
+        from polyrob.plant.models.inner_factors import inner_factors_plant
 
-        return inner_armature_plant(pldi, robot)
+        return inner_factors_plant(pldi, robot)
     m = pldi.m
     n = 2 * m
     lay = entry_layout(pldi)

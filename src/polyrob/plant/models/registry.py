@@ -281,22 +281,22 @@ class InnerGainModel(UncertaintyModel):
         return inner_gain_plant(pldi)
 
     def contains(self, unc, A, B):
-        if unc.info.get("armature"):
-            from polyrob.plant.models.inner_armature import inner_armature_contains
+        if "theta_range" in unc.info:
+            from polyrob.plant.models.inner_factors import inner_factors_contains
 
-            return inner_armature_contains(unc, A, B)
+            return inner_factors_contains(unc, A, B)
         from polyrob.plant.models.axes import axes_contains
 
         return axes_contains(unc, A, B)
 
     def describe(self, unc):
-        if unc.info.get("armature"):
-            lo, hi = unc.info["sigma_range"]
+        if "theta_range" in unc.info:
             size = int(unc.block_structure[0, 0]) if unc.block_structure[0, 1] > 0 else 0
+            ranges = ", ".join(f"{n} ±{r:.4g}" for n, r in zip(unc.info["factors"], unc.info["theta_range"]))
             return (
-                f"inner-gain (reflected rotor inertia): [A_low B_low] = (I - sigma G)^-1 [sigma J, I] of a "
-                f"computed-torque loop on M = R + s L, sigma = 1 - s in [{lo:.4g}, {hi:.4g}] one repeated real, "
-                f"the spread of [J G] a residual block of size {size} ({self.enclosure(unc)} enclosure)."
+                f"inner-gain: [A_low B_low] = (I - sum theta_k G_k)^-1 [sum theta_k J_k, I] of a computed-torque "
+                f"loop (rotor inertia or a payload: M != s M_hat), one repeated real per scalar ({ranges}), "
+                f"the spread of the factors [J_k G_k] a residual block of size {size} ({self.enclosure(unc)} enclosure)."
             )
         lo, hi = unc.info["eps_range"]
         size = int(unc.block_structure[0, 0]) if unc.block_structure[0, 1] > 0 else 0

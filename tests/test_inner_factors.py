@@ -1,4 +1,4 @@
-"""Computed torque with reflected rotor inertia (polyrob.plant.models.inner_armature): M = R + s L as an exact LFT.
+"""Computed torque with reflected rotor inertia (polyrob.plant.models.inner_factors): M = R + s L as an exact LFT.
 
 A planar 2R with armature behind a computed-torque layer whose link inertias
 are off by ±10 %: a few seconds.
@@ -13,7 +13,7 @@ from polyrob import bound_pldi, load_robot
 from polyrob.domains.task import TaskDomain
 from polyrob.model.inner import inner_loop
 from polyrob.plant.coverage import coverage_fraction, model_contains
-from polyrob.plant.models.inner_armature import factor_loop
+from polyrob.plant.models.inner_factors import factor_parameters
 from polyrob.plant.uncertainty import uncertain_plant
 
 ARMATURE = [0.4, 0.3]  # kg m^2: comparable to the links' own inertia, so G = M_hat^-1 L is far from I
@@ -33,7 +33,7 @@ def problem():
 
 def test_auto_takes_the_one_scalar_lft_and_it_covers_every_true_robot(problem):
     arm, dom, unc = problem
-    assert unc.model == "inner-gain" and unc.info["armature"] and unc.n_params == 1
+    assert unc.model == "inner-gain" and unc.info["factors"] == ("links",) and unc.n_params == 1
     assert unc.coverage == 1.0
     assert unc.block_structure[-1].tolist() == [-2, 0]  # sigma, repeated on both joints
     assert np.any(unc.D_vd != 0)  # G is fed back through sigma: not the one-gain model
@@ -42,7 +42,7 @@ def test_auto_takes_the_one_scalar_lft_and_it_covers_every_true_robot(problem):
 def test_the_factor_g_is_the_identity_less_the_models_inverse_inertia_times_the_armature(problem):
     arm, dom, _ = problem
     q, qdot, v = dom.sample(5, method="uniform", seed=1)
-    _, B = factor_loop(arm).jacobians_batch(q, qdot, v)
+    _, B = factor_parameters(arm)[0][2].jacobians_batch(q, qdot, v)
     for k in range(5):
         M_hat = arm.model_robot.mass_matrix(q[k])
         assert B[k, 2:] == pytest.approx(np.eye(2) - np.linalg.solve(M_hat, np.diag(ARMATURE)), abs=1e-9)
@@ -61,7 +61,7 @@ def test_a_true_robot_is_the_lft_at_its_own_factor_and_residual(problem):
         for k in range(3):
             inverse = np.linalg.inv(B[k, 2:])
             K = np.hstack([inverse @ A[k, 2:], np.eye(2) - inverse]) / sigma
-            E = K - info["K_centre"]
+            E = K - info["K_centres"][0]
             residual = E[np.ix_(rows, cols)] / info["W_l"][:, None] / info["W_r"][None, :]
             assert np.linalg.norm(residual, 2) <= 1.0
             square = np.zeros((unc.full_blocks[0],) * 2)
@@ -83,9 +83,57 @@ def test_members_of_the_lft_are_contained_and_a_larger_model_error_is_not(proble
 def test_a_torque_box_is_refused():
     from polyrob.domains.torque_box import Domain
     from polyrob.errors import NotApplicable
-    from polyrob.plant.models.inner_armature import inner_armature_plant
+    from polyrob.plant.models.inner_factors import inner_factors_plant
 
     arm = inner_loop(load_robot("planar_2r", armature=ARMATURE), "computed-torque", model_error=0.1)
     pldi = bound_pldi(arm, Domain.from_robot(arm), samples=16, coverage=0, progress=False, workers=1, screen=0)
     with pytest.raises(NotApplicable, match="task domain"):
-        inner_armature_plant(pldi, arm)
+        inner_factors_plant(pldi, arm)
+
+
+@pytest.fixture(scope="module")
+def with_payload_problem():
+    from polyrob.model.payload import PayloadRange
+
+    robot = load_robot("planar_2r", armature=ARMATURE)
+    arm = inner_loop(robot, "computed-torque", payload=PayloadRange(0.0, 2.0), model_error=0.1)
+    dom = _task(arm)
+    pldi = bound_pldi(arm, dom, samples=64, coverage=0, progress=False, workers=1, screen=0, verify_rounds=0)
+    return arm, dom, uncertain_plant(pldi, model="auto", coverage=600, volume_samples=0)
+
+
+def test_a_payload_mass_is_a_second_scalar_and_a_true_robot_is_the_lft_at_both(with_payload_problem):
+    arm, dom, unc = with_payload_problem
+    assert unc.info["factors"] == ("links", "payload") and unc.coverage == 1.0
+    assert unc.block_structure[-2:].tolist() == [[-2, 0], [-2, 0]]
+    assert unc.info["theta_range"].tolist() == [0.1, 1.0]  # the model carries the middle payload, 1 kg
+    loops = [loop for _, _, loop in factor_parameters(arm)]
+    info = unc.info
+    rows, cols = info["residual_rows"], info["residual_cols"]
+    q, qdot, qddot = dom.sample(3, method="uniform", seed=11)
+    for s, mass in ((0.93, 0.2), (1.08, 1.9)):
+        true = arm.with_true(mass, np.zeros(3), s)
+        A, B = true.jacobians_batch(q, qdot, true.inverse_dynamics(q, qdot, qddot))
+        # each factor at the same domain point, from its own true robot (no cross term between the scalars)
+        K = [
+            np.concatenate([a[:, 2:], b[:, 2:]], axis=2)
+            for a, b in (loop.jacobians_batch(q, qdot, loop.inverse_dynamics(q, qdot, qddot)) for loop in loops)
+        ]
+        for k in range(3):
+            E = np.vstack([K[j][k] - info["K_centres"][j] for j in range(2)])
+            residual = E[np.ix_(rows, cols)] / info["W_l"][:, None] / info["W_r"][None, :]
+            assert np.linalg.norm(residual, 2) <= 1.0
+            square = np.zeros((unc.full_blocks[0],) * 2)
+            square[: len(rows), : len(cols)] = residual
+            A_lft, B_lft = unc.matrices_at(np.array([(1.0 - s) / 0.1, mass - 1.0]), residual=[square])
+            assert A_lft == pytest.approx(A[k], abs=1e-8) and B_lft == pytest.approx(B[k], abs=1e-8)
+        assert model_contains(unc, A, B).all()
+
+
+def test_a_payload_whose_centre_of_mass_ranges_is_left_to_axes():
+    from polyrob.model.payload import PayloadRange
+
+    robot = load_robot("planar_2r", armature=ARMATURE)
+    arm = inner_loop(robot, "computed-torque", payload=PayloadRange.parse("0:2", "0.05,0,0"), model_error=0.1)
+    pldi = bound_pldi(arm, _task(arm), samples=32, coverage=0, progress=False, workers=1, screen=0, verify_rounds=0)
+    assert uncertain_plant(pldi, model="auto", coverage=0, volume_samples=0).model == "axes"
