@@ -42,8 +42,9 @@ def test_the_default_task_is_a_task_domain_around_the_srdf_pose_with_computed_to
 
 def test_computed_torque_with_one_inertia_factor_leaves_b_equal_to_the_identity_over_the_factor():
     # the true links are the model's times s: M = s M_hat, h = s h_hat (no damping, no armature on ur5),
-    # so qddot = v / s + (1/s - 1) M_hat^-1 h_hat: B = I / s exactly, A moves with the same 1/s (affine in it)
-    arm = default_task_robot(cached_robot("ur5"))
+    # so qddot = v / s + (1/s - 1) M_hat^-1 h_hat: B = I / s exactly, A moves with the same 1/s (affine in it);
+    # without the default payload (a payload moves M by another scalar: polyrob.plant.models.inner_factors)
+    arm = default_task_robot(cached_robot("ur5"), DefaultTask(payload_fraction=0.0))
     dom = default_task_domain(arm)
     q, qd, u = dom.sample(16, method="uniform", seed=3)
     for v in arm.variants():
@@ -87,10 +88,26 @@ def test_fleet_jobs_use_the_same_default():
 
 
 def test_a_task_words_say_every_figure():
-    words = DefaultTask(q_radius=0.1, qdot_max=1.0, qddot_max=3.0, inner="gravity", model_error=0.0).words()
-    assert (
-        words == "task ±0.1 rad around the reference pose, |qdot| <= 1 rad/s, |qddot| <= 3 rad/s^2, inner layer gravity"
+    task = DefaultTask(
+        q_radius=0.1, qdot_max=1.0, qddot_max=3.0, inner="gravity", model_error=0.0, payload_fraction=0.05
     )
+    assert task.words() == (
+        "task ±0.1 rad around the reference pose, |qdot| <= 1 rad/s, |qddot| <= 3 rad/s^2, inner layer gravity, "
+        "payload 0-5 % of the link mass at the flange"
+    )
+    assert "payload" not in DefaultTask(payload_fraction=0.0).words()
+
+
+def test_a_task_payload_is_a_mass_range_at_the_flange_scaled_by_the_arm():
+    ur5 = cached_robot("ur5")
+    task = DefaultTask(payload_fraction=0.05)
+    payload = task.payload_range(ur5)
+    total = sum(Y.mass for Y in ur5.model.inertias[1:])
+    assert (payload.mass_lower, payload.mass_upper) == (0.0, pytest.approx(0.05 * total))
+    assert payload.com_lower == payload.com_upper == (0.0, 0.0, 0.0) and payload.frame == "tool0"
+    arm = default_task_robot(ur5, task)
+    assert arm.payload == payload and len(arm.variants()) == 5  # nominal + {0, max} x {0.9, 1.1}
+    assert DEFAULT_TASK.payload_range(ur5) is None and default_task_robot(ur5).payload is None
 
 
 def test_batch_task_and_inner_options_reach_every_job():

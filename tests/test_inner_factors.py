@@ -48,27 +48,28 @@ def test_the_factor_g_is_the_identity_less_the_models_inverse_inertia_times_the_
         assert B[k, 2:] == pytest.approx(np.eye(2) - np.linalg.solve(M_hat, np.diag(ARMATURE)), abs=1e-9)
 
 
+def _lft_reproduces(unc, true, dom, theta, seed):
+    """The LFT at the true robot's ``theta`` and residual ``E = K_raw - sum theta_k K_k,c`` gives its Jacobians."""
+    info, m = unc.info, unc.m
+    rows, cols = info["residual_rows"], info["residual_cols"]
+    q, qdot, qddot = dom.sample(3, method="uniform", seed=seed)
+    A, B = true.jacobians_batch(q, qdot, true.inverse_dynamics(q, qdot, qddot))
+    for k in range(3):
+        inverse = np.linalg.inv(B[k, m:])
+        E = np.hstack([inverse @ A[k, m:], np.eye(m) - inverse]) - np.tensordot(theta, info["K_centres"], axes=1)
+        residual = E[np.ix_(rows, cols)] / info["W_l"][:, None] / info["W_r"][None, :]
+        assert np.linalg.norm(residual, 2) <= 1.0
+        square = np.zeros((unc.full_blocks[0],) * 2)
+        square[: len(rows), : len(cols)] = residual
+        A_lft, B_lft = unc.matrices_at(np.asarray(theta) / info["theta_range"], residual=[square])
+        assert A_lft == pytest.approx(A[k], abs=1e-9) and B_lft == pytest.approx(B[k], abs=1e-9)
+    assert model_contains(unc, A, B).all()
+
+
 def test_a_true_robot_is_the_lft_at_its_own_factor_and_residual(problem):
     arm, dom, unc = problem
-    info, p = unc.info, 0.1
-    rows, cols = info["residual_rows"], info["residual_cols"]
     for s in (0.9, 0.96, 1.07):
-        true = arm.with_true(None, None, s)
-        q, qdot, qddot = dom.sample(3, method="uniform", seed=7)
-        v = true.inverse_dynamics(q, qdot, qddot)
-        A, B = true.jacobians_batch(q, qdot, v)
-        sigma = 1.0 - s
-        for k in range(3):
-            inverse = np.linalg.inv(B[k, 2:])
-            K = np.hstack([inverse @ A[k, 2:], np.eye(2) - inverse]) / sigma
-            E = K - info["K_centres"][0]
-            residual = E[np.ix_(rows, cols)] / info["W_l"][:, None] / info["W_r"][None, :]
-            assert np.linalg.norm(residual, 2) <= 1.0
-            square = np.zeros((unc.full_blocks[0],) * 2)
-            square[: len(rows), : len(cols)] = residual
-            A_lft, B_lft = unc.matrices_at(np.array([sigma / p]), residual=[square])
-            assert A_lft == pytest.approx(A[k], abs=1e-9) and B_lft == pytest.approx(B[k], abs=1e-9)
-        assert model_contains(unc, A, B).all()
+        _lft_reproduces(unc, arm.with_true(None, None, s), dom, [1.0 - s], seed=7)
 
 
 def test_members_of_the_lft_are_contained_and_a_larger_model_error_is_not(problem):
@@ -107,27 +108,8 @@ def test_a_payload_mass_is_a_second_scalar_and_a_true_robot_is_the_lft_at_both(w
     assert unc.info["factors"] == ("links", "payload") and unc.coverage == 1.0
     assert unc.block_structure[-2:].tolist() == [[-2, 0], [-2, 0]]
     assert unc.info["theta_range"].tolist() == [0.1, 1.0]  # the model carries the middle payload, 1 kg
-    loops = [loop for _, _, loop in factor_parameters(arm)]
-    info = unc.info
-    rows, cols = info["residual_rows"], info["residual_cols"]
-    q, qdot, qddot = dom.sample(3, method="uniform", seed=11)
     for s, mass in ((0.93, 0.2), (1.08, 1.9)):
-        true = arm.with_true(mass, np.zeros(3), s)
-        A, B = true.jacobians_batch(q, qdot, true.inverse_dynamics(q, qdot, qddot))
-        # each factor at the same domain point, from its own true robot (no cross term between the scalars)
-        K = [
-            np.concatenate([a[:, 2:], b[:, 2:]], axis=2)
-            for a, b in (loop.jacobians_batch(q, qdot, loop.inverse_dynamics(q, qdot, qddot)) for loop in loops)
-        ]
-        for k in range(3):
-            E = np.vstack([K[j][k] - info["K_centres"][j] for j in range(2)])
-            residual = E[np.ix_(rows, cols)] / info["W_l"][:, None] / info["W_r"][None, :]
-            assert np.linalg.norm(residual, 2) <= 1.0
-            square = np.zeros((unc.full_blocks[0],) * 2)
-            square[: len(rows), : len(cols)] = residual
-            A_lft, B_lft = unc.matrices_at(np.array([(1.0 - s) / 0.1, mass - 1.0]), residual=[square])
-            assert A_lft == pytest.approx(A[k], abs=1e-8) and B_lft == pytest.approx(B[k], abs=1e-8)
-        assert model_contains(unc, A, B).all()
+        _lft_reproduces(unc, arm.with_true(mass, np.zeros(3), s), dom, [1.0 - s, mass - 1.0], seed=11)
 
 
 def test_a_payload_whose_centre_of_mass_ranges_is_left_to_axes():

@@ -257,6 +257,7 @@ def apply_default_task(robot, args) -> bool:
     t = DEFAULT_TASK
     args.q_radius, args.qdot_max, args.qddot_max = f"{t.q_radius!r}", f"{t.qdot_max!r}", f"{t.qddot_max!r}"
     args.inner, args.model_error = t.inner, f"{100 * t.model_error!r}"
+    args.payload_mass = t.payload_option(robot)
     args.default_task = t.words()
     args.bound_options = t.bound_options
     logging.getLogger("polyrob").info(

@@ -15,7 +15,14 @@ option is posed the problem an arm engineer poses (issue 21):
   computed from a model whose link masses and inertias may be off by
   ``±10 %`` (all links by one factor: the true robot is bounded at both
   ends of that range); reflected rotor inertia from the SRDF when it has
-  rotor data, and said when it has none.
+  rotor data, and said when it has none;
+* no payload by default: ``DefaultTask(payload_fraction=f)`` poses one
+  at the flange of 0 to ``f`` times the arm's link mass (an instrument,
+  changed between tasks; the model computes with the middle), which the
+  ``inner-gain`` model carries as one more scalar
+  (:mod:`polyrob.plant.models.inner_factors`).  It is not the default
+  because it costs the tuned PIDs their certificates on the 7-joint arms
+  (docs/fleet.md).
 
 Robots with fewer joints (the paper's planar arms, ``double_pendulum``,
 ``TwoDofs``) keep the URDF torque box and no inner layer, as the paper
@@ -57,6 +64,9 @@ class DefaultTask:
         The inner layer (:data:`polyrob.model.inner.INNER_LAYERS`).
     model_error : float
         The true link masses/inertias are the model's times ``1 -+ model_error``.
+    payload_fraction : float
+        The payload at the flange ranges from 0 to this fraction of the
+        arm's total link mass (0, the default: none).
 
     The weights are the automatic ones of the task
     (:func:`polyrob.fleet.automatic_hyperparameters`), and the synthesis of a
@@ -69,6 +79,26 @@ class DefaultTask:
     qddot_max: float = 2.0
     inner: str = "computed-torque"
     model_error: float = 0.10
+    payload_fraction: float = 0.0
+
+    def payload_range(self, robot):
+        """The :class:`~polyrob.model.payload.PayloadRange` of ``robot`` (a URDF robot), or ``None``.
+
+        The mass scales with the arm (an instrument of a few hundred grams on
+        a 17 kg arm, tens of grams on a hobby arm); the centre of mass sits
+        at the flange, so the payload moves the model by one scalar.
+        """
+        if not self.payload_fraction:
+            return None
+        from polyrob.model.payload import PayloadRange
+
+        mass = self.payload_fraction * sum(float(Y.mass) for Y in robot.model.inertias[1:])
+        return PayloadRange(0.0, mass).at(robot)
+
+    def payload_option(self, robot) -> str | None:
+        """:meth:`payload_range` as the ``--payload-mass`` option's ``LO:HI`` (``None``: no payload)."""
+        payload = self.payload_range(robot)
+        return None if payload is None else f"{payload.mass_lower!r}:{payload.mass_upper!r}"
 
     def to_dict(self) -> dict:
         return dict(asdict(self), bound_options=self.bound_options)
@@ -92,6 +122,11 @@ class DefaultTask:
             f"task ±{self.q_radius:g} rad around the reference pose, |qdot| <= {self.qdot_max:g} rad/s, "
             f"|qddot| <= {self.qddot_max:g} rad/s^2, inner layer {self.inner}"
             + (f", link masses/inertias ±{100 * self.model_error:g} %" if self.model_error else "")
+            + (
+                f", payload 0-{100 * self.payload_fraction:g} % of the link mass at the flange"
+                if self.payload_fraction
+                else ""
+            )
         )
 
 
@@ -105,12 +140,13 @@ def applies_to(m: int) -> bool:
 
 
 def default_task_robot(robot, task: DefaultTask = DEFAULT_TASK):
-    """``robot`` closed by the task's inner layer (with its model error), or ``robot`` itself for ``"none"``."""
-    if task.inner == "none" and not task.model_error:
+    """``robot`` closed by the task's inner layer (with its model error and payload), or ``robot`` itself."""
+    payload = task.payload_range(robot)
+    if task.inner == "none" and not task.model_error and payload is None:
         return robot
     from polyrob.model.inner import inner_loop
 
-    return inner_loop(robot, task.inner, model_error=task.model_error)
+    return inner_loop(robot, task.inner, payload=payload, model_error=task.model_error)
 
 
 def default_task_domain(robot, task: DefaultTask = DEFAULT_TASK):

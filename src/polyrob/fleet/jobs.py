@@ -211,7 +211,7 @@ def job_robot_and_domain(job: Job):
     if not (given or job.torque_box) and applies_to(robot.m):
         task = DEFAULT_TASK
         fields = {"q_radius": task.q_radius, "qdot_max": task.qdot_max, "qddot_max": task.qddot_max}
-        inner, error, payload = task.inner, task.model_error, None
+        inner, error, payload = task.inner, task.model_error, task.payload_range(robot)
     else:
         fields = {k: getattr(job, k) for k in _TASK_FIELDS}
         inner, error = job.inner or "none", job.model_error or 0.0

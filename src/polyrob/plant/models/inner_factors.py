@@ -24,16 +24,19 @@ back through them (``D_vd``).  Without armature and payload ``G = I`` and
 this is the one-gain model of :mod:`~polyrob.plant.models.inner_gain`; with
 them ``B_low`` is no multiple of ``I`` (talos' arm: ``G`` has eigenvalues
 from about 0 on the wrist to 0.9 on the shoulder).  The factors move over
-the domain: ``K_k = K_k,c + E_k``, the stacked ``E_k`` within the
-half-widths of their ranges carried by one full complex block (as ``axes``
-carries its residual), inside the ``theta`` loops.  Every true robot is
-then a member exactly (its ``theta``, its ``K`` less the centre).  ``K_k``
-does not depend on the ``theta``: a task domain fixes ``a``, so each
-factor's ranges come from one true robot that differs from the model in
-``theta_k`` alone, ``K_k = [B_low^-1 A_low, I - B_low^-1] / theta_k``,
-bounded by the PLDI's own search on that map (:class:`FactorLoop`).  A
-torque box (``a`` would depend on the ``theta``) and a payload whose centre
-of mass ranges (it enters as ``mass x offset``) are refused.
+the domain, ``K_k = K_k,c + E_k``: the loop is ``a = v + sum_k theta_k
+K_k,c [x; a] + E [x; a]`` with ``E = sum_k theta_k E_k`` within ``sum_k
+r_k |E_k|`` entrywise (``r_k`` the half range of ``theta_k``), carried by
+one full complex block as ``axes`` carries its residual.  Every true robot
+is then a member exactly (its ``theta``, and ``E`` its ``[B_low^-1 A_low, I
+- B_low^-1]`` less ``sum theta_k K_k,c``), and membership is convex in
+``theta``.  ``K_k`` does not depend on the ``theta``: a task domain fixes
+``a``, so each factor's ranges come from one true robot that differs from
+the model in ``theta_k`` alone, ``K_k = [B_low^-1 A_low, I - B_low^-1] /
+theta_k``, bounded by the PLDI's own search on that map
+(:class:`FactorLoop`).  A torque box (``a`` would depend on the ``theta``)
+and a payload whose centre of mass ranges (it enters as ``mass x
+offset``) are refused.
 
 Why by hand: MATLAB's ``uss`` would hold this LFT, but the factors and their
 ranges over a robot's task are polyrob's own.
@@ -41,7 +44,6 @@ ranges over a robot's task are polyrob's own.
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
@@ -151,20 +153,18 @@ def inner_factors_plant(pldi, robot) -> UncertainPlant:
     ranges = np.array([r for _, r, _ in params])
     if sum(r * np.max(np.abs(np.linalg.eigvals(K[:, n:]))) for r, K in zip(ranges, centres)) >= 1.0:
         raise NotApplicable("inner-gain: I - sum theta_k G_k may be singular inside the ranges")
-    Bf, Cf, gains = residual_of_radii(np.vstack(radii))
+    # the residual sum_k theta_k E_k, within sum_k r_k |E_k| entrywise, as one block outside the theta loops
+    spread = np.tensordot(ranges, np.array(radii), axes=1)
+    Bf, Cf, gains = residual_of_radii(spread)
     k, P = (0 if Bf is None else Bf.shape[1]), len(params)
-    # channels: the residual block, then each theta repeated m times (every w_k enters the accelerations)
+    # channels: the residual block, then each theta repeated m times; every channel enters the accelerations:
+    # a = u + sum_j d_j + B_f d_f, and every output reads [x; a]
     nd = k + P * m
+    to_a = np.hstack([Bf if k else np.zeros((m, 0)), np.tile(np.eye(m), P)])  # a = u + to_a d
     B_d = np.zeros((n, nd))
-    B_d[m:, k:] = np.tile(np.eye(m), P)
-    C_v, D_vu, D_vd = np.zeros((nd, n)), np.zeros((nd, m)), np.zeros((nd, nd))
-    if k:
-        C_v[:k], D_vu[:k], D_vd[:k, k:] = Cf[:, :n], Cf[:, n:], np.tile(Cf[:, n:], P)
-    for j, (r, K) in enumerate(zip(ranges, centres)):
-        rows = slice(k + j * m, k + (j + 1) * m)
-        C_v[rows], D_vu[rows], D_vd[rows, k:] = r * K[:, :n], r * K[:, n:], np.tile(r * K[:, n:], P)
-        if k:
-            D_vd[rows, :k] = r * Bf[j * m : (j + 1) * m]
+    B_d[m:] = to_a
+    reads = np.vstack(([Cf] if k else []) + [r * K for r, K in zip(ranges, centres)])
+    C_v, D_vu, D_vd = reads[:, :n], reads[:, n:], reads[:, n:] @ to_a
     A_mid = np.zeros((n, n))
     A_mid[:m, m:] = np.eye(m)
     B_mid = np.zeros((n, m))
@@ -199,8 +199,7 @@ def inner_factors_plant(pldi, robot) -> UncertainPlant:
             "factors": names,
             "theta_range": ranges,
             "K_centres": np.array(centres),
-            "K_radii": np.array(radii),
-            "residual_gain": float(np.linalg.norm(np.vstack(radii) * np.repeat(ranges, m)[:, None])),
+            "residual_gain": float(np.linalg.norm(spread)),
             "n_directions": P,
             **gains,
         },
@@ -209,81 +208,55 @@ def inner_factors_plant(pldi, robot) -> UncertainPlant:
 
 
 def _scaled_residual(unc: UncertainPlant, K_raw, theta, rtol: float) -> float:
-    """The smallest scaled norm of a residual ``S`` with ``sum theta_k E_k = K_raw - sum theta_k K_k,c``.
+    """The scaled norm of the residual ``K_raw - sum theta_k K_k,c`` (convex in ``theta``).
 
-    An entry that no residual reaches (outside the block's rows and columns)
-    must match: its mismatch, relative to ``rtol`` and divided by the largest
-    ``|theta_k|`` (so that, for one scalar, the whole is convex in
-    ``1/theta``), counts instead when it is larger.  The least-squares
-    ``S = C^+ R`` has the smallest spectral norm among all solutions (the
-    others add a part in ``C``'s null space, orthogonal to it).
+    An entry that the residual block does not reach must match: its
+    mismatch relative to ``rtol`` counts instead when it is larger.
     """
-    info, m = unc.info, unc.m
-    R = K_raw - np.tensordot(theta, info["K_centres"], axes=1)
+    info = unc.info
+    E = K_raw - np.tensordot(theta, info["K_centres"], axes=1)
     rows, cols = info["residual_rows"], info["residual_cols"]
-    if not np.any(theta):
-        return np.inf
-    scale = rtol * (1.0 + np.abs(K_raw).max()) * np.abs(theta).max()
-    rest = np.ones(R.shape[1], bool)
-    rest[cols] = False
-    mismatch = np.abs(R[:, rest]).max(initial=0.0)
+    reached = np.zeros(E.shape, bool)
+    reached[np.ix_(rows, cols)] = True
+    mismatch = np.abs(E[~reached]).max(initial=0.0) / (rtol * (1.0 + np.abs(K_raw).max()))
     if not len(rows):
-        return max(np.abs(R).max(), mismatch) / scale
-    C = np.zeros((m, len(rows)))  # joint row i of parameter j is stacked row j m + i
-    C[rows % m, np.arange(len(rows))] = theta[rows // m] * info["W_l"]
-    target = R[:, cols] / info["W_r"][None, :]
-    S = np.linalg.lstsq(C, target, rcond=None)[0]
-    mismatch = max(mismatch, np.abs((C @ S - target) * info["W_r"][None, :]).max())
-    return max(float(np.linalg.norm(S, 2)), mismatch / scale)
+        return mismatch
+    S = E[np.ix_(rows, cols)] / info["W_l"][:, None] / info["W_r"][None, :]
+    return max(float(np.linalg.norm(S, 2)), mismatch)
 
 
 def inner_factors_contains(unc: UncertainPlant, A, B, *, rtol: float = 1e-9) -> np.ndarray:
-    """Whether Jacobians lie in the set of :func:`inner_factors_plant` (a sufficient test).
+    """Whether Jacobians lie in the set of :func:`inner_factors_plant`.
 
-    A member has ``K_raw = [B_low^-1 A_low, I - B_low^-1] = sum theta_k K_k``
-    for its ``theta`` in the box: the smallest scaled residual over the
-    ``theta`` tried (the weighted least-squares fit of ``K_raw`` by the
-    centres, a grid with the box's corners, where the bounds' true robots
-    lie, then a local search; for one scalar a bounded search on each sign,
-    where the residual is convex in ``1/theta``) must be at most 1.
-    ``theta = 0`` (the model itself) is ``A_low = 0, B_low = I``.
+    A member has ``K_raw = [B_low^-1 A_low, I - B_low^-1] = sum theta_k
+    K_k,c + E`` for a ``theta`` in the box and a residual ``E`` the block
+    covers: the scaled norm of ``E`` is convex in ``theta``, so its minimum
+    over the box (a bounded search for one scalar; from the weighted
+    least-squares fit of ``K_raw`` by the centres, a local search for more)
+    must be at most 1.
     """
     A, B = np.asarray(A, float), np.asarray(B, float)
     if A.ndim == 2:
         A, B = A[None], B[None]
     m = unc.m
     r = np.asarray(unc.info["theta_range"], float)
-    P = len(r)
-    grid = np.array(list(itertools.product(*[np.linspace(-x, x, 5) for x in r])))
+    centres = unc.info["K_centres"].reshape(len(r), -1).T
     out = np.ones(len(A), bool)
     for i in range(len(A)):
         if not (np.allclose(A[i, :m], unc.A_mid[:m], atol=rtol) and np.allclose(B[i, :m], 0.0, atol=rtol)):
             out[i] = False
             continue
-        if np.allclose(A[i, m:], 0.0, atol=rtol) and np.allclose(B[i, m:], np.eye(m), atol=rtol):
-            continue  # theta = 0: the model robot itself
         inverse = np.linalg.inv(B[i, m:])
         K_raw = np.hstack([inverse @ A[i, m:], np.eye(m) - inverse])
 
         def f(theta, K_raw=K_raw):
-            return _scaled_residual(unc, K_raw, np.asarray(theta, float), rtol)
+            return _scaled_residual(unc, K_raw, np.atleast_1d(np.asarray(theta, float)), rtol)
 
-        if P == 1:
-            best = min(
-                minimize_scalar(lambda u, s=s: f([s * u]), bounds=(1e-12 * r[0], r[0]), method="bounded").fun
-                for s in (1.0, -1.0)
-            )
-        else:
-            # the start: K_raw ~ sum theta_k K_k,c by least squares, weighted by each entry's spread
-            # (exact where no residual reaches), then the grid's best if better, then a local search
-            weight = 1.0 / (np.tensordot(r, unc.info["K_radii"], axes=1).ravel() + 1e-9 * np.abs(K_raw).max())
-            basis = unc.info["K_centres"].reshape(P, -1).T * weight[:, None]
-            fitted = np.clip(np.linalg.lstsq(basis, K_raw.ravel() * weight, rcond=None)[0], -r, r)
-            candidates = [fitted, *grid]
-            values = [f(t) for t in candidates]
-            best = min(values)
-            if best > 1.0:
-                start = candidates[int(np.argmin(values))]
-                best = min(best, minimize(f, start, method="Nelder-Mead", bounds=list(zip(-r, r))).fun)
+        start = np.clip(np.linalg.lstsq(centres, K_raw.ravel(), rcond=None)[0], -r, r)
+        best = f(start)
+        if best > 1.0 and len(r) == 1:
+            best = min(best, minimize_scalar(f, bounds=(-r[0], r[0]), method="bounded").fun)
+        elif best > 1.0:
+            best = min(best, minimize(f, start, method="Nelder-Mead", bounds=list(zip(-r, r))).fun)
         out[i] = best <= 1.0 + 1e-7
     return out
