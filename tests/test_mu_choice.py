@@ -114,3 +114,25 @@ def test_sweeps_of_different_loops_on_one_structure_use_one_method():
     rng = np.random.default_rng(0)
     methods.add(mussv(rng.normal(size=(2, 2)) + 1j * rng.normal(size=(2, 2)), blk, lower=False).method)
     assert methods == {expected}
+
+
+def test_a_descent_that_stalls_is_answered_by_the_relaxed_ab13md_bound(monkeypatch):
+    """xarm7's PID loop: descent gave 1.08 where AB13MD on the relaxed structure proves 0.53 (the lower bound)."""
+    from polyrob.analysis.mu import sweep
+    from polyrob.analysis.mu.gradient import GradientUpper
+
+    sys = _loop(seed=5)
+    blk = [[-1, 0], [1, 1]]  # no repeated scalar: the relaxed structure is this one, AB13MD's bound the best
+    relaxed = mu_bounds(sys, blk, OMEGA, method="relaxed", progress=False, refine_peak=False)
+    real_call = GradientUpper.__call__
+
+    def stalled(self, Ms, x0=None):  # a true bound, three times too high
+        beta, D, G, x = real_call(self, Ms, x0)
+        return 3.0 * beta + 1.0, D, G, x
+
+    monkeypatch.setattr(GradientUpper, "__call__", stalled)
+    res = mu_bounds(sys, blk, OMEGA, method="gradient", progress=False, refine_peak=False)
+    assert res.upper == pytest.approx(relaxed.upper, rel=1e-6)
+    monkeypatch.setattr(sweep, "MANY_REAL_SCALARS", 0)  # one real scalar is too many now: AB13MD is not asked
+    stalled_only = mu_bounds(sys, blk, OMEGA, method="gradient", progress=False, refine_peak=False)
+    assert np.all(stalled_only.upper > 2.0 * relaxed.upper)
