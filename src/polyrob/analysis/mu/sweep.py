@@ -75,9 +75,9 @@ def run_sweep(
         # the safety net's fallback is fixed by the structure too: the LMI takes minutes on large ones
         fallback = (GradientUpper(st_up), "D-G descent") if large else (None, "D-G LMI")
         cold = mu_upper.TimedAb13md(st_up, cold_timeout, solver, rtol, fallback=fallback[0], fallback_name=fallback[1])
-    # descent can stall on a large, ill-conditioned response (xarm7's PID loop: 1.08 at 2154 rad/s where AB13MD
-    # on the relaxed structure proves 0.53, the lower bound): where the relaxed structure has few real scalars
-    # AB13MD is cheap, its scalings are admissible here, and it answers wherever descent leaves a gap
+    # descent can stall on a large, ill-conditioned response (xarm7's PID loops at high frequency, docs/mu.md):
+    # where the relaxed structure has few real scalars AB13MD is cheap, its scalings are admissible here, and
+    # it answers wherever descent leaves a gap above the lower bound
     second = None
     if meth == "gradient" and sum(b.kind == "real" for b in st_up.blocks) <= MANY_REAL_SCALARS:
         second = mu_upper.TimedAb13md(st_up, cold_timeout, solver, rtol, fallback=GradientUpper(st_up))
