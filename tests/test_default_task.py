@@ -70,6 +70,15 @@ def test_any_domain_or_inner_option_keeps_todays_behaviour(capsys, argv):
     assert doc["domain"].get("kind", "box") != "task"
 
 
+def test_a_payload_rides_on_the_default_task(capsys):
+    doc, err = _info(capsys, "ur5", "--payload-mass", "0:0.5")
+    assert "default task of ur5" in err and "payload 0:0.5 kg at the flange (given)" in err
+    assert doc["domain"]["kind"] == "task" and doc["inner"]["payload"]["mass"] == [0.0, 0.5]
+    robot, dom, task = job_robot_and_domain(Job(robot="ur5", payload_mass="0:0.5"))
+    assert task == DEFAULT_TASK and isinstance(dom, TaskDomain) and robot.inner == "computed-torque"
+    assert (robot.payload.mass_lower, robot.payload.mass_upper) == (0.0, 0.5) and robot.model_error == 0.1
+
+
 def test_two_joint_robots_keep_the_torque_box(capsys):
     doc, err = _info(capsys, "planar_2r")
     assert "default task" not in err and doc["domain"].get("kind", "box") != "task"

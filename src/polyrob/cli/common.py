@@ -257,22 +257,20 @@ def apply_default_task(robot, args) -> bool:
     t = DEFAULT_TASK
     args.q_radius, args.qdot_max, args.qddot_max = f"{t.q_radius!r}", f"{t.qdot_max!r}", f"{t.qddot_max!r}"
     args.inner, args.model_error = t.inner, f"{100 * t.model_error!r}"
-    args.payload_mass = t.payload_option(robot)
-    args.default_task = t.words()
+    user_payload = getattr(args, "payload_mass", None)  # a user's payload rides on the default task
+    args.payload_mass = user_payload or t.payload_option(robot)
+    args.default_task = t.words() + (f", payload {user_payload} kg at the flange (given)" if user_payload else "")
     args.bound_options = t.bound_options
     logging.getLogger("polyrob").info(
-        f"default task of {robot.name} ({robot.m} joints, no domain given): {t.words()}; "
+        f"default task of {robot.name} ({robot.m} joints, no domain given): {args.default_task}; "
         "--torque-box for the URDF torque box without an inner layer"
     )
     return True
 
 
 def inner_options_given(args) -> bool:
-    """Whether any of ``--inner`` (other than none), ``--payload-*``, ``--model-error`` is given."""
-    layer = getattr(args, "inner", None) or "none"
-    return layer != "none" or any(
-        getattr(args, k, None) is not None for k in ("payload_mass", "payload_com", "model_error")
-    )
+    """Whether ``--inner`` (other than none) or ``--model-error`` is given (a payload rides on the default task)."""
+    return (getattr(args, "inner", None) or "none") != "none" or getattr(args, "model_error", None) is not None
 
 
 def inner_options(args):

@@ -190,7 +190,6 @@ class Settings:
 
 _BOX_FIELDS = ("domain", "q_range", "u_max")
 _TASK_FIELDS = ("pose", "q_radius", "qddot_max")
-_INNER_FIELDS = ("inner", "model_error", "payload_mass", "payload_com")
 
 
 def job_robot_and_domain(job: Job):
@@ -205,21 +204,23 @@ def job_robot_and_domain(job: Job):
     from polyrob.domains.torque_box import Domain
 
     robot = polyrob.load_robot(job.robot, lock=None if job.lock is None else list(job.lock))
-    given = any(getattr(job, k) is not None for k in _BOX_FIELDS + _TASK_FIELDS + _INNER_FIELDS + ("qdot_max",))
-    given = given or job.qdot_scale != 1.0 or job.u_scale != 1.0
+    # a payload alone rides on the default task (an instrument on the arm's usual problem)
+    posed = _BOX_FIELDS + _TASK_FIELDS + ("inner", "model_error", "qdot_max")
+    given = any(getattr(job, k) is not None for k in posed) or job.qdot_scale != 1.0 or job.u_scale != 1.0
     task = None
+    payload = None
+    if job.payload_mass is not None:
+        from polyrob.model.payload import PayloadRange
+
+        payload = PayloadRange.parse(str(job.payload_mass), job.payload_com)
     if not (given or job.torque_box) and applies_to(robot.m):
         task = DEFAULT_TASK
         fields = {"q_radius": task.q_radius, "qdot_max": task.qdot_max, "qddot_max": task.qddot_max}
-        inner, error, payload = task.inner, task.model_error, task.payload_range(robot)
+        inner, error = task.inner, task.model_error
+        payload = payload or task.payload_range(robot)
     else:
         fields = {k: getattr(job, k) for k in _TASK_FIELDS}
         inner, error = job.inner or "none", job.model_error or 0.0
-        payload = None
-        if job.payload_mass is not None:
-            from polyrob.model.payload import PayloadRange
-
-            payload = PayloadRange.parse(str(job.payload_mass), job.payload_com)
     if inner != "none" or error or payload is not None:
         from polyrob.model.inner import inner_loop
 
