@@ -144,6 +144,11 @@ class Settings:
         search stopped); ``None``: no limit.  A batch is a shared budget: one
         robot whose μ problem is slow (talos_left_arm's 72-parameter model)
         should not hold a worker for an hour.
+    search_rtol : float
+        The search's bisection stops when the first factor that failed is
+        within this fraction above the last certified one (0.25: a batch
+        wants each robot's factor to within a quarter, not to 5 % as
+        ``synth --max-bandwidth`` does; each step is a tuned, certified PID).
     analyze : bool
         μ analysis of the controller (robust stability/performance, sampling).
     mc : int
@@ -175,6 +180,7 @@ class Settings:
     search_bandwidth: bool = False
     alphas: tuple | None = None
     search_time_limit: float | None = 600.0
+    search_rtol: float = 0.25
     analyze: bool = True
     mc: int = 200
     validate: bool = True

@@ -62,7 +62,11 @@ def design_stage(problem, settings, timings: dict, details: dict):
     skipped = search_skipped(problem, details) if settings.search_bandwidth else None
     if settings.search_bandwidth and skipped is None:
         design, res = design_max_bandwidth(
-            problem, alphas=settings.alphas, search_time_limit=settings.search_time_limit, **options
+            problem,
+            alphas=settings.alphas,
+            search_time_limit=settings.search_time_limit,
+            rtol=settings.search_rtol,
+            **options,
         )
         if res.stopped_by:
             details["bandwidth_search"] = f"stopped by {res.stopped_by}"

@@ -37,6 +37,8 @@ MANY_REAL_SCALARS = 16
 #: A descent bound more than this factor above the lower bound at a frequency is tried again by AB13MD on
 #: the relaxed structure (when that structure has at most :data:`MANY_REAL_SCALARS` real scalars).
 SECOND_BOUND_GAP = 1.02
+#: ... at the frequencies whose bound is at least this fraction of the sweep's peak (or at least 1).
+SECOND_BOUND_PEAK = 0.9
 #: Wall-clock seconds a cold AB13MD call of a sweep may take before it is taken for hung (default
 #: of :func:`mu_bounds`' ``ab13md_timeout`` and ``warm_timeout``).  A safety net, not a choice of
 #: method: it must never fire on a call that is merely slow or on a busy machine.  Slow calls do
@@ -143,7 +145,6 @@ def run_sweep(
             l2, d2 = lower_at(H[i], D=Ds[i])
             if l2 >= lo[i]:
                 lo[i], deltas[i] = l2, d2
-            up[i], Ds[i], Gs[i] = tightened(H[i], up[i], Ds[i], Gs[i], lo[i])
         extra = []
         can_eval = not is_frd or getattr(sys, "ifunc", None) is not None
         if refine_peak and can_eval and omega.size >= 3:
@@ -155,8 +156,7 @@ def run_sweep(
             res = []
             for k in range(w_new.size):
                 u = upper_at(Hn[k])
-                low = lower_at(Hn[k], refine=True, target=u[0], D=u[1])
-                res.append((tightened(Hn[k], *u, low[0]), low))
+                res.append((u, lower_at(Hn[k], refine=True, target=u[0], D=u[1])))
             omega = np.concatenate([omega, w_new])
             H = np.concatenate([H, Hn])
             up = np.concatenate([up, [r[0][0] for r in res]])
@@ -165,6 +165,17 @@ def run_sweep(
             Gs = np.concatenate([Gs, np.array([r[0][2] for r in res])])
             for k, r in enumerate(res):
                 deltas[omega.size - w_new.size + k] = r[1][1]
+        # AB13MD on the relaxed structure where descent left a gap, from the top down to where the bound
+        # matters (within SECOND_BOUND_PEAK of the peak, or at least 1): the peak and the decision
+        tried = set()
+        while second is not None:
+            level = min(SECOND_BOUND_PEAK * np.max(up[np.isfinite(up)], initial=0.0), 1.0)
+            todo = [i for i in range(up.size) if i not in tried and up[i] >= level and up[i] > SECOND_BOUND_GAP * lo[i]]
+            if not todo:
+                break
+            for i in todo:
+                tried.add(i)
+                up[i], Ds[i], Gs[i] = tightened(H[i], up[i], Ds[i], Gs[i], lo[i])
         # refine the lower bound where it matters: at its own and at the upper peak
         for i in {int(np.argmax(lo)), int(np.argmax(up))}:
             if lo[i] >= up[i] * (1 - 1e-7):
