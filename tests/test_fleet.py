@@ -437,3 +437,24 @@ def test_the_robots_with_the_most_joints_start_first_and_rows_keep_their_order()
 
     jobs = [as_job(x) for x in ("planar_2r", "ur5", "no_such_robot", "so101", "TwoDofs")]
     assert largest_first(jobs) == [1, 3, 0, 4, 2]
+
+
+def test_the_batch_search_bisects_to_its_own_tolerance_and_time_limit(monkeypatch):
+    """A batch wants each robot's bandwidth factor to 25 %, not to the 5 % of synth --max-bandwidth."""
+    from types import SimpleNamespace
+
+    import polyrob.pipeline
+    from polyrob.fleet import stages
+    from polyrob.fleet.jobs import Settings
+
+    seen = {}
+
+    def search(problem, **kwargs):
+        seen.update(kwargs)
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(polyrob.pipeline, "design_max_bandwidth", search)
+    monkeypatch.setattr(stages, "search_skipped", lambda problem, details: None)
+    with pytest.raises(RuntimeError, match="stop here"):
+        stages.design_stage(SimpleNamespace(), Settings(search_bandwidth=True), {}, {})
+    assert seen["rtol"] == 0.25 and seen["search_time_limit"] == 600.0
