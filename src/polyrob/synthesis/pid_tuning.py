@@ -24,7 +24,7 @@ value; MATLAB's ``systune`` does it by non-smooth optimisation, which
 
 Full-order D-K started from the unscaled H∞ controller stalls on the
 computed-torque loops of 5-7 joint arms (panda's default task: μ 5.25 after
-D-K, against 0.9863 certified for this PID; docs/fleet.md), because
+D-K, against 0.9643 certified for this PID; docs/fleet.md), because
 its first controller is made for ``D = I`` on a structure whose repeated real
 block gets one scalar scaling in the fit.  Starting from this PID, the
 iteration keeps the best controller it sees, so it can only do better.
