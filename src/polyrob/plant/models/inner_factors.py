@@ -44,7 +44,7 @@ ranges over a robot's task are polyrob's own.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
@@ -110,20 +110,9 @@ def factor_parameters(robot) -> list[tuple[str, float, FactorLoop]]:
 
 def _factor_range(pldi, factor: FactorLoop):
     """``(K_c, radii)``: the centre of the factor (``m x 3m``) and its entries' half-widths (``m x 3m``)."""
-    from polyrob.bounds.pldi import bound_pldi
+    from polyrob.plant.models.inner_gain import bound_one_robot
 
-    samples = int((pldi.info or {}).get("samples", 256))
-    one = bound_pldi(
-        factor,
-        replace(pldi.domain, robot=factor),
-        samples=samples,
-        screen=0,
-        starts_per_direction=1,
-        verify_rounds=1,
-        coverage=0,
-        workers=1,
-        progress=False,
-    )
+    one = bound_one_robot(factor, pldi)
     m = pldi.m
     K = np.hstack([np.asarray(one.A0, float)[m:], np.asarray(one.B0, float)[m:]])
     lay = entry_layout(one)
