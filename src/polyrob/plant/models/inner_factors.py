@@ -54,7 +54,7 @@ from polyrob.model.inner import InnerLoopRobot
 from polyrob.plant.lftplant import UncertainPlant
 from polyrob.plant.models.axes import entry_layout, residual_of_radii
 
-__all__ = ["FactorLoop", "factor_parameters", "inner_factors_plant", "inner_factors_contains"]
+__all__ = ["FactorLoop", "factor_parameters", "inner_factors_plant", "inner_factors_contains", "bound_one_robot"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -108,10 +108,35 @@ def factor_parameters(robot) -> list[tuple[str, float, FactorLoop]]:
     return out
 
 
+def bound_one_robot(robot, pldi):
+    """The PLDI of one true robot (or factor) over ``pldi``'s domain, with the effort of a model's own ranges.
+
+    The PLDI's sample count, one local search per direction, one verification
+    round; the model's coverage is checked afterwards on fresh points.
+    """
+    from dataclasses import replace
+
+    from polyrob.bounds.pldi import bound_pldi
+
+    domain = pldi.domain
+    if getattr(domain, "robot", None) is not None:
+        domain = replace(domain, robot=robot)
+    samples = int((pldi.info or {}).get("samples", 256))
+    return bound_pldi(
+        robot,
+        domain,
+        samples=samples,
+        screen=0,
+        starts_per_direction=1,
+        verify_rounds=1,
+        coverage=0,
+        workers=1,
+        progress=False,
+    )
+
+
 def _factor_range(pldi, factor: FactorLoop):
     """``(K_c, radii)``: the centre of the factor (``m x 3m``) and its entries' half-widths (``m x 3m``)."""
-    from polyrob.plant.models.inner_gain import bound_one_robot
-
     one = bound_one_robot(factor, pldi)
     m = pldi.m
     K = np.hstack([np.asarray(one.A0, float)[m:], np.asarray(one.B0, float)[m:]])

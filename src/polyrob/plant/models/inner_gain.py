@@ -64,33 +64,6 @@ def gain_range(model_error: float) -> tuple[float, float]:
     return 1.0 / (1.0 + p) - 1.0, 1.0 / (1.0 - p) - 1.0
 
 
-def bound_one_robot(robot, pldi):
-    """The PLDI of one true robot (or factor) over ``pldi``'s domain, with the effort of a model's own ranges.
-
-    The PLDI's sample count, one local search per direction, one verification
-    round; the model's coverage is checked afterwards on fresh points.
-    """
-    from dataclasses import replace
-
-    from polyrob.bounds.pldi import bound_pldi
-
-    domain = pldi.domain
-    if getattr(domain, "robot", None) is not None:
-        domain = replace(domain, robot=robot)
-    samples = int((pldi.info or {}).get("samples", 256))
-    return bound_pldi(
-        robot,
-        domain,
-        samples=samples,
-        screen=0,
-        starts_per_direction=1,
-        verify_rounds=1,
-        coverage=0,
-        workers=1,
-        progress=False,
-    )
-
-
 def jacobian_range(pldi, robot, eps: float):
     """Entry ranges ``(lo, hi)`` of ``J = d phi / dx`` over the PLDI's domain, in the PLDI's entry order.
 
@@ -102,6 +75,8 @@ def jacobian_range(pldi, robot, eps: float):
     the sign of ``eps``: on a constant ``J_e = c`` they give ``[-0.82 c, c]``
     at ``p = 0.1``.
     """
+    from polyrob.plant.models.inner_factors import bound_one_robot
+
     one = bound_one_robot(robot.with_true(None, None, 1.0 - robot.model_error), pldi)
     lo, hi = np.zeros(len(pldi.entries)), np.zeros(len(pldi.entries))
     where = {name: i for i, name in enumerate(one.entries)}
