@@ -221,17 +221,15 @@ def inner_factors_plant(pldi, robot) -> UncertainPlant:
     )
 
 
-def _scaled_residual(unc: UncertainPlant, K_raw, theta, rtol: float) -> float:
+def _scaled_residual(unc: UncertainPlant, K_raw, theta, rtol: float, reached) -> float:
     """The scaled norm of the residual ``K_raw - sum theta_k K_k,c`` (convex in ``theta``).
 
-    An entry that the residual block does not reach must match: its
-    mismatch relative to ``rtol`` counts instead when it is larger.
+    An entry that the residual block does not reach (``~reached``) must
+    match: its mismatch relative to ``rtol`` counts instead when it is larger.
     """
     info = unc.info
     E = K_raw - np.tensordot(theta, info["K_centres"], axes=1)
     rows, cols = info["residual_rows"], info["residual_cols"]
-    reached = np.zeros(E.shape, bool)
-    reached[np.ix_(rows, cols)] = True
     mismatch = np.abs(E[~reached]).max(initial=0.0) / (rtol * (1.0 + np.abs(K_raw).max()))
     if not len(rows):
         return mismatch
@@ -245,8 +243,8 @@ def inner_factors_contains(unc: UncertainPlant, A, B, *, rtol: float = 1e-9) -> 
     A member has ``K_raw = [B_low^-1 A_low, I - B_low^-1] = sum theta_k
     K_k,c + E`` for a ``theta`` in the box and a residual ``E`` the block
     covers: the scaled norm of ``E`` is convex in ``theta``, so its minimum
-    over the box (a bounded search for one scalar; from the weighted
-    least-squares fit of ``K_raw`` by the centres, a local search for more)
+    over the box (a bounded search for one scalar; from the least-squares
+    fit of ``K_raw`` by the centres, a local search for more)
     must be at most 1.
     """
     A, B = np.asarray(A, float), np.asarray(B, float)
@@ -255,6 +253,8 @@ def inner_factors_contains(unc: UncertainPlant, A, B, *, rtol: float = 1e-9) -> 
     m = unc.m
     r = np.asarray(unc.info["theta_range"], float)
     centres = unc.info["K_centres"].reshape(len(r), -1).T
+    reached = np.zeros(unc.info["K_centres"].shape[1:], bool)  # the entries the residual block carries
+    reached[np.ix_(unc.info["residual_rows"], unc.info["residual_cols"])] = True
     out = np.ones(len(A), bool)
     for i in range(len(A)):
         if not (np.allclose(A[i, :m], unc.A_mid[:m], atol=rtol) and np.allclose(B[i, :m], 0.0, atol=rtol)):
@@ -264,7 +264,7 @@ def inner_factors_contains(unc: UncertainPlant, A, B, *, rtol: float = 1e-9) -> 
         K_raw = np.hstack([inverse @ A[i, m:], np.eye(m) - inverse])
 
         def f(theta, K_raw=K_raw):
-            return _scaled_residual(unc, K_raw, np.atleast_1d(np.asarray(theta, float)), rtol)
+            return _scaled_residual(unc, K_raw, np.atleast_1d(np.asarray(theta, float)), rtol, reached)
 
         start = np.clip(np.linalg.lstsq(centres, K_raw.ravel(), rcond=None)[0], -r, r)
         best = f(start)
