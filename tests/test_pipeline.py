@@ -100,9 +100,21 @@ def test_controller_problem_differences_name_the_options(problem):
     assert "--uncertainty lft" in controller_differences(other, problem)[0]
     dom = dict(info["domain"], u={"joint1": [-5.0, 5.0], "joint2": info["domain"]["u"]["joint2"]})
     diffs = controller_differences(dict(info, domain=dom), problem)
-    assert any("--u-max=joint1=-5:5" in d for d in diffs)
+    assert any("--u-max=joint1=5" in d for d in diffs)
     with pytest.raises(ControllerFileError, match="robot 'planar_2r'"):
         check_controller_problem(dict(info, robot="planar_2r"), problem, "K.json")
+
+
+def test_task_domain_without_torque_box_matches_itself():
+    """A task domain has no torque box (u None on both sides) and is compared on its accelerations."""
+    joints = ["j1", "j2"]
+    task = {"joints": joints, "kind": "task", "q": {j: [-0.2, 0.2] for j in joints},
+            "qdot": {j: [-0.5, 0.5] for j in joints}, "qddot": {j: [-2.0, 2.0] for j in joints}}  # fmt: skip
+    info = {"robot": "r", "domain": task}
+    assert controller_differences(info, {"robot": "r", "domain": dict(task)}) == []
+    faster = dict(task, qddot={"j1": [-4.0, 4.0], "j2": [-2.0, 2.0]})
+    (diff,) = controller_differences(info, {"robot": "r", "domain": faster})
+    assert "--qddot-max=j1=2" in diff
 
 
 STABLE = SimpleNamespace(stable=True, unstable=False, verdict="stable")

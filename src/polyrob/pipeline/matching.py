@@ -23,7 +23,7 @@ from polyrob.io.controller import same_number
 __all__ = ["check_controller_problem", "check_controller_size", "controller_differences"]
 
 _WEIGHT_OPTIONS = {"omega_b": "--wb", "M_s": "--ms", "A_s": "--as", "omega_bt": "--wbt", "M_t": "--mt", "A_t": "--at"}
-_GROUP_OPTIONS = {"q": "--q-range", "qdot": "--qdot-max", "u": "--u-max"}
+_GROUP_OPTIONS = {"q": "--q-range", "qdot": "--qdot-max", "u": "--u-max", "qddot": "--qddot-max"}
 
 
 def _values(x) -> str:
@@ -38,9 +38,16 @@ def _domain_differences(saved: dict, given: dict) -> list[str]:
     for group, option in _GROUP_OPTIONS.items():
         for j in joints:
             a, b = saved.get(group, {}).get(j), given.get(group, {}).get(j)
+            if a is None and b is None:  # neither bounds it (a task domain has no torque box)
+                continue
             if a is None or b is None or not all(same_number(x, y) for x, y in zip(a, b)):
                 lo, hi = (a or [None, None])[:2]
-                hint = f"{option}={j}={lo:.6g}:{hi:.6g}" if lo is not None else option
+                if lo is None:
+                    hint = option
+                elif group != "q" and same_number(lo, -hi):  # the bound options take one magnitude per joint
+                    hint = f"{option}={j}={hi:.6g}"
+                else:
+                    hint = f"{option}={j}={lo:.6g}:{hi:.6g}"
                 out.append(f"domain {group} of {j} {a} (given {b}; {hint})")
     if out and saved.get("name") not in (None, "custom", given.get("name")):
         out.append(f"(the file's domain is named '{saved['name']}': try --domain {saved['name']})")
