@@ -69,7 +69,8 @@ def print_analysis(a, out) -> None:
         from polyrob.analysis.time_varying.certificate import covers_nonlinear
 
         out.line(tv.verdict)
-        out.line(f"which covers the robot: {covers_nonlinear(tv.method)}")
+        constants = mv is not None and getattr(mv, "decided", None) is not None
+        out.line(f"which covers the robot: {covers_nonlinear(tv.method, constants)}")
     out.line(a.verdict)
     out.line(a.certificate.details())
     if a.instead:  # not certified: what it certifies instead, and what stands in the way

@@ -281,10 +281,10 @@ def add_bandwidth_arguments(p) -> None:
 
 def moving_check(problem, K, out) -> dict:
     """``synth --moving``: the moving-robot certificate of the synthesised ``K``, printed; its summary."""
-    from polyrob.analysis.lpv.moving import moving_robot_certificate
+    from polyrob.analysis.lpv.constant import robot_in_motion_certificate
 
     out.stage("moving-robot certificate of the controller (rate-bounded LPV analysis, docs/certificates.md)")
-    mv = moving_robot_certificate(problem, K)
+    mv = robot_in_motion_certificate(problem, K)
     out.line(mv.verdict)
     if mv.computed:
         out.line(mv.details())

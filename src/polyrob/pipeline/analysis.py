@@ -248,12 +248,13 @@ def analyze_controller(
         from polyrob.analysis.time_varying.certificate import time_varying_certificate
 
         tv = time_varying_certificate(problem, K)
-    from polyrob.analysis.lpv.moving import MovingRobotCertificate, moving_robot_certificate
+    from polyrob.analysis.lpv.constant import robot_in_motion_certificate
+    from polyrob.analysis.lpv.moving import MovingRobotCertificate
 
     if moving is False:
         mv = MovingRobotCertificate.not_computed("not asked for (--no-moving)")
     else:
-        mv = moving_robot_certificate(problem, K, auto=moving is None)
+        mv = robot_in_motion_certificate(problem, K, auto=moving is None)
     from polyrob.analysis.margins import robust_margin
 
     margin = None if rp.certificate.certified else robust_margin(rp.certificate)

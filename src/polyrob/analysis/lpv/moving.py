@@ -91,6 +91,8 @@ class MovingRobotCertificate:
         (:func:`~polyrob.analysis.lpv.basis.finer_recheck`: ``points``,
         ``gamma``, ``holds_at_gamma``); empty when not re-checked.
     seconds : float
+    decided : Certificate or None
+        The certificate when another test decided it (μ, :mod:`polyrob.analysis.lpv.constant`).
     """
 
     #: The key of its figures in a run's certificate record (:mod:`polyrob.report.certificates`).
@@ -107,6 +109,7 @@ class MovingRobotCertificate:
     notes: tuple = ()
     finer: dict = field(default_factory=dict)
     seconds: float = 0.0
+    decided: object = None
 
     @classmethod
     def not_computed(cls, why: str) -> MovingRobotCertificate:
@@ -118,8 +121,8 @@ class MovingRobotCertificate:
         """The decided :class:`~polyrob.analysis.certificate.Certificate` (``None`` when not computed)."""
         from polyrob.analysis.certificate import Certificate, Scope, decide_gridded_gain
 
-        if not self.computed:
-            return None
+        if not self.computed or self.decided is not None:  # decided: a certificate made elsewhere (mu)
+            return self.decided
         r = self.result
         proved = bool(r is not None and r.proved and np.isfinite(self.gamma))
         between = proved and not str(r.coverage).startswith("on the grid")
@@ -140,6 +143,10 @@ class MovingRobotCertificate:
         if not self.computed:
             return ""
         lines = [f"covers: {self.certificate.scope.sentence()}"]
+        if self.decided is not None:
+            return "\n".join(
+                lines + [f"mu lower bound {self.frozen_gamma:.4g}; {self.grid_words}; {self.seconds:.0f} s"]
+            )
         lines.append(
             f"frozen peak over the grid {self.frozen_gamma:.4g} (no rate bound gives less); "
             f"{self.grid_words}; {self.seconds:.0f} s"

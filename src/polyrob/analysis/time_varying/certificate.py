@@ -47,8 +47,20 @@ __all__ = ["TimeVaryingCertificate", "time_varying_certificate", "covers_nonline
 MAX_SMALL_GAIN_STATES = 60
 
 
-def covers_nonlinear(method: str) -> str:
-    """The one sentence saying which verdict covers the moving nonlinear robot."""
+#: Added when the moving-robot verdict holds the model's physical constants fixed (:mod:`polyrob.analysis.lpv.constant`).
+COVERS_WITH_CONSTANTS = (
+    "The moving-robot verdict above covers the moving nonlinear robot in the same sense, with the model's "
+    "physical constants (masses) fixed and its state moving at any rate."
+)
+
+
+def covers_nonlinear(method: str, constants: bool = False) -> str:
+    """The sentence saying which verdicts cover the moving nonlinear robot (``constants``: the moving-robot verdict
+    of :mod:`polyrob.analysis.lpv.constant` was computed)."""
+    if constants:
+        return (
+            covers_nonlinear(method).replace("Only the time-varying", "The time-varying") + " " + COVERS_WITH_CONSTANTS
+        )
     if method == "scaled small gain":
         return (
             "Only the time-varying certificate (constant-D scaled small gain on the LFT model) covers the moving "

@@ -1,0 +1,230 @@
+"""The moving robot on a model of physical constants: the masses fixed, the state moving at any rate.
+
+The ``inner-gain`` models (:mod:`polyrob.plant.models.inner_gain`,
+:mod:`polyrob.plant.models.inner_factors`) write the Jacobians of a
+computed-torque loop as an LFT in *physical constants* -- the link-mass
+factor, a payload mass: real parameters that do not move while the robot
+does -- and carry every dependence on the robot's state ``(q, qdot, qddot)``
+in full complex residual blocks.  Scheduling on the state itself
+(:mod:`polyrob.analysis.lpv.robot`) is out of reach for an arm (14 state
+variables, and the torque varies in a task domain); the model's own
+parameters are not:
+
+* each real parameter stays a real block of μ, constant in time: μ's
+  frequency-dependent D-G scalings are valid for it;
+* each residual block is scaled by a constant ``d_i`` and merged with the
+  performance channels into *one* full block (a constant scalar commutes
+  with every time-varying block of norm at most one, so the small-gain
+  theorem holds for arbitrarily fast variation of the state dependence,
+  Shamma, IEEE TAC 39(4), 1994; a frequency-dependent scaling would not);
+  ``d`` comes from the constant-D small gain
+  (:func:`~polyrob.analysis.time_varying.smallgain.scaled_small_gain`) at
+  ``delta = 0`` -- any ``d`` gives a valid bound, a few multiples are tried;
+* μ of that structure below one at every frequency
+  (:func:`polyrob.analysis.certificate.certify_loop`, the frozen
+  certificate's machinery: upper bounds proved between the grid points) is,
+  by the main loop theorem, ``||D N(delta) D^-1||_inf < 1`` for every
+  constant ``delta``, hence robust performance for every constant value of
+  the parameters and every motion of the state inside the domain, at any
+  rate.
+
+This sits between the frozen robot (μ: constant parameters, constant
+state) and the time-varying certificate (every parameter arbitrarily fast,
+the masses too), and covers the robot in motion as the time-varying test
+does: as far as the model covers its Jacobians, while the state and the
+accelerations stay inside the domain the PLDI was bounded on.
+
+Examples
+--------
+>>> from types import SimpleNamespace
+>>> applies(SimpleNamespace(P=SimpleNamespace(uncertain=SimpleNamespace(model="lft"))))
+"the 'lft' model's parameters move with the robot's state (only the inner-gain models' are physical constants)"
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from polyrob.errors import PolyrobError
+
+__all__ = ["applies", "scaled_plant", "constant_parameter_certificate", "robot_in_motion_certificate"]
+
+#: Largest closed loop (states) analysed.
+MAX_STATES = 60
+#: Largest LFT loop computed by default (``analyze`` and ``run`` without ``--moving``).
+AUTO_STATES = 48
+#: Models whose real parameters are physical constants of the robot.
+CONSTANT_MODELS = ("inner-gain",)
+
+
+def applies(problem) -> str | None:
+    """Why the constant-parameter route does not apply to ``problem`` (``None`` when it does)."""
+    model = getattr(getattr(getattr(problem, "P", None), "uncertain", None), "model", "")
+    if model not in CONSTANT_MODELS:
+        return (
+            f"the {model!r} model's parameters move with the robot's state "
+            "(only the inner-gain models' are physical constants)"
+        )
+    return None
+
+
+def _channels(blk):
+    """``(real, full)``: per block, its ``d`` (input) and ``v`` (output) channel indices."""
+    from polyrob.analysis.mu.blocks import as_block_structure
+
+    real, full, a, b = [], [], 0, 0
+    for block in as_block_structure(blk).blocks:
+        ins, outs = np.arange(a, a + block.rows), np.arange(b, b + block.cols)
+        (real if block.kind == "real" else full).append((ins, outs))
+        a, b = a + block.rows, b + block.cols
+    return real, full
+
+
+def _scalings(P, K, real, full):
+    """Constant scalings ``d_i`` of the full blocks: the constant-D small gain of the loop at ``delta = 0``."""
+    from polyrob.analysis.time_varying.smallgain import scaled_small_gain
+    from polyrob.plant.generalized import lft
+
+    N = lft(P, K)
+    n_d = P.n_delta
+    ins = np.concatenate([i for i, _ in full] + [np.arange(n_d, n_d + P.n_w)])
+    outs = np.concatenate([o for _, o in full] + [np.arange(n_d, n_d + P.n_z)])
+    blk = [[len(i), len(o)] for i, o in full] + [[P.n_w, P.n_z]]
+    res = scaled_small_gain(N[outs.tolist(), ins.tolist()], blk)
+    if res.X_r is None:
+        return np.ones(len(full)), "the constant-D small gain at delta = 0 found no scaling: d = 1"
+    x, start, per = np.diag(res.X_r), 0, []
+    for i, _o in full + [(np.arange(P.n_w), None)]:
+        per.append(float(np.mean(x[start : start + len(i)])))
+        start += len(i)
+    d = np.sqrt(np.maximum(np.array(per[:-1]), 1e-300) / max(per[-1], 1e-300))
+    return d, f"the constant-D small gain at delta = 0 ({res.gamma:.4g})"
+
+
+def scaled_plant(P, d):
+    """``(plant, blk)``: ``P`` with the residual blocks scaled by ``d`` and merged with the performance block.
+
+    Inputs ``[d_real, d_full / d, w, u]``, outputs ``[v_real, d v_full, z, y]``;
+    ``blk``: the real blocks as they are, then one full block for the scaled
+    residual channels and the performance channels together -- one block, so
+    that no frequency-dependent scaling between them is searched (the
+    residual varies in time: only the constant ``d`` is valid for it).
+    """
+    import control
+
+    real, full = _channels(P.block_structure_rs)
+    sl_in, sl_out = P.input_slices, P.output_slices
+    rng = lambda sl: np.arange(sl.start, sl.stop)  # noqa: E731
+    ins = np.concatenate([i for i, _ in real] + [i for i, _ in full] + [rng(sl_in["w"]), rng(sl_in["u"])])
+    outs = np.concatenate([o for _, o in real] + [o for _, o in full] + [rng(sl_out["z"]), rng(sl_out["y"])])
+    n_ri, n_ro = sum(len(i) for i, _ in real), sum(len(o) for _, o in real)
+    s_in, s_out = np.ones(ins.size), np.ones(outs.size)
+    a, b = n_ri, n_ro
+    for (i, o), di in zip(full, np.asarray(d, float)):
+        s_in[a : a + len(i)], s_out[b : b + len(o)] = 1.0 / di, di
+        a, b = a + len(i), b + len(o)
+    sys = P.system
+    B = np.asarray(sys.B, float)[:, ins] * s_in[None, :]
+    C = np.asarray(sys.C, float)[outs] * s_out[:, None]
+    D = np.asarray(sys.D, float)[np.ix_(outs, ins)] * s_out[:, None] * s_in[None, :]
+    blk = [[-len(i), 0] for i, _ in real]
+    blk.append([sum(len(i) for i, _ in full) + P.n_w, sum(len(o) for _, o in full) + P.n_z])
+    return control.ss(np.asarray(sys.A, float), B, C, D), np.array(blk)
+
+
+def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0, 0.5, 2.0), **mu_options):
+    """The moving-robot certificate of ``K`` on an ``inner-gain`` problem: constants fixed, the state at any rate.
+
+    Parameters
+    ----------
+    problem : Problem
+        Its generalized plant's uncertainty model must be an inner-gain one (:func:`applies`).
+    K : LTI
+    auto : bool
+        Compute it only for a loop of at most :data:`AUTO_STATES` states.
+    tries : sequence of float
+        Multiples of the small-gain scaling ``d`` tried in turn until one certifies.
+    **mu_options
+        Passed to :func:`polyrob.analysis.certificate.certify_loop`.
+
+    Returns
+    -------
+    MovingRobotCertificate
+        ``computed=False`` (and why) when the route does not apply.
+    """
+    import control
+
+    from polyrob.analysis.certificate import Scope, certify_loop
+    from polyrob.analysis.lpv.moving import MovingRobotCertificate
+
+    t0 = time.perf_counter()
+    why = applies(problem)
+    if why:
+        return MovingRobotCertificate.not_computed(why)
+    P, m = problem.P, problem.P.n_u
+    real, full = _channels(P.block_structure_rs)
+    n = P.n_x + int(control.ss(K).nstates)
+    if not real:
+        return MovingRobotCertificate.not_computed("the model has no constant real parameter")
+    if n > MAX_STATES or (auto and n > AUTO_STATES):
+        return MovingRobotCertificate.not_computed(
+            f"the loop has {n} states (computed up to {AUTO_STATES if auto else MAX_STATES})"
+        )
+    base = problem.scope() if hasattr(problem, "scope") else Scope()
+    names = ", ".join(P.uncertain.parameter_names[: len(real)])
+    words = f"{names} constant (rate 0), the state (q, qdot, qddot) moving at any rate"
+    try:
+        d0, source = _scalings(P, K, real, full) if full else (np.ones(0), "no residual block")
+        best = None
+        for factor in tries:
+            plant, blk = scaled_plant(P, d0 * factor)
+            cert = certify_loop(plant, K, blk, n_u=m, n_y=m, scope=base, **mu_options)
+            if best is None or cert.bound < best[0].bound:
+                best = (cert, d0 * factor)
+            if cert.certified or not full:
+                break
+    except PolyrobError as exc:
+        return MovingRobotCertificate.not_computed(str(exc))
+    cert, d = best
+    notes = (
+        f"the residual blocks scaled by the constants d = {', '.join(f'{v:.4g}' for v in d)} "
+        f"({source}, times {d[0] / d0[0] if d.size and d0[0] else 1:.3g}), one full block with the performance "
+        "channels: a constant scaling commutes with a time-varying residual",
+        f"the constants {names} as real parameters of mu (constant in time: frequency-dependent D-G scalings)",
+    )
+    scope = replace(
+        cert.scope,
+        variation=f"the robot {base.robot} in motion inside the domain: {words}",
+        notes=notes + tuple(cert.scope.notes),
+    )
+    cert = replace(cert, scope=scope)
+    return MovingRobotCertificate(
+        computed=True,
+        gamma=float(cert.bound),
+        frozen_gamma=float(cert.mu_lower),
+        rates=tuple((0.0, 0.0) for _ in real),
+        rate_words=words,
+        grid_words=f"mu with {len(real)} constant real block(s) and one full block",
+        scope=scope,
+        decided=cert,
+        seconds=time.perf_counter() - t0,
+    )
+
+
+def robot_in_motion_certificate(problem, K, *, auto: bool = False, **options):
+    """The moving-robot certificate that fits ``problem``'s model.
+
+    An inner-gain model (physical constants and state-dependent residual
+    blocks): :func:`constant_parameter_certificate`.  Any other model: the
+    robot scheduled on its state with the domain's rates,
+    :func:`polyrob.analysis.lpv.moving.moving_robot_certificate` (``options``
+    go to it).
+    """
+    from polyrob.analysis.lpv.moving import moving_robot_certificate
+
+    if applies(problem) is None:
+        return constant_parameter_certificate(problem, K, auto=auto)
+    return moving_robot_certificate(problem, K, auto=auto, **options)

@@ -1,0 +1,133 @@
+"""The moving-robot certificate on an inner-gain model: the masses constant, the state moving at any rate (issue 19).
+
+``polyrob.analysis.lpv.constant`` keeps the model's physical constant (the
+link-mass factor ``eps``) a real block of μ and merges the residual blocks,
+scaled by a constant, with the performance channels into one full block.
+Checked here on the planar 2R with computed torque and a 10 % mass error:
+its figure lies between the frozen robot's μ and the arbitrarily fast
+small gain; the scaled loop's H-infinity norm at constant ``eps`` is below
+it (main loop theorem); a simulated time-varying residual (the state
+moving) with ``eps`` constant has an L2 gain below it; a model whose
+parameters move with the state is sent to the rate-bounded route.
+
+The controller ``tests/fixtures/planar_2r_ct_pid_K.json`` is ``polyrob synth
+planar_2r --inner computed-torque --model-error 10 --pose 0.4,0.3
+--q-radius 0.3 --qdot-max 0.5 --qddot-max 2 --structure pid -o ...``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import control
+import numpy as np
+import pytest
+
+from polyrob import load_robot
+from polyrob.analysis.lpv.constant import (
+    applies,
+    constant_parameter_certificate,
+    robot_in_motion_certificate,
+    scaled_plant,
+)
+from polyrob.analysis.norms import hinf_norm
+from polyrob.domains.task import TaskDomain
+from polyrob.io.controller import load_controller
+from polyrob.model.inner import inner_loop
+from polyrob.pipeline import build_problem
+from polyrob.plant.loops import lft
+
+FIXTURE = Path(__file__).parent / "fixtures" / "planar_2r_ct_pid_K.json"
+
+
+@pytest.fixture(scope="module")
+def problem():
+    arm = inner_loop(load_robot("planar_2r"), "computed-torque", model_error=0.1)
+    dom = TaskDomain.from_robot(arm, pose=[0.4, 0.3], q_radius=0.3, qdot_max=0.5, qddot_max=2.0)
+    return build_problem(arm, dom, progress=False, bound_options={"samples": 1024})
+
+
+@pytest.fixture(scope="module")
+def result(problem):
+    return constant_parameter_certificate(problem, load_controller(FIXTURE))
+
+
+def test_certified_between_the_frozen_and_the_arbitrarily_fast_figures(problem, result):
+    from polyrob.analysis.certificate import certify_loop
+    from polyrob.analysis.time_varying.smallgain import scaled_small_gain
+
+    K = load_controller(FIXTURE)
+    assert problem.P.uncertain.model == "inner-gain" and applies(problem) is None
+    cert = result.certificate
+    assert result.computed and cert.certified, result.verdict
+    assert cert.bound == pytest.approx(0.98, abs=0.03)
+    frozen = certify_loop(problem.P, K)  # every frozen robot: mu with the residual LTI too
+    assert frozen.certified and frozen.bound <= cert.bound
+    fast = scaled_small_gain(lft(problem.P, K), problem.P.block_structure_rp)  # the mass varying too
+    assert fast.gamma > 1.0 > cert.bound
+    assert "eps constant (rate 0), the state (q, qdot, qddot) moving at any rate" in result.verdict
+    assert "CERTIFIED: mu <=" in result.verdict and "in motion inside the domain" in cert.scope.sentence()
+
+
+def _scaled_loop(problem, result, delta):
+    """The loop ``[d_full; r] -> [v_full; z]`` (scaled) at constant ``eps = delta`` (normalised)."""
+    from polyrob.plant.lftplant import upper_lft_matrices
+
+    d = np.array([float(x) for x in result.scope.notes[0].split("d = ")[1].split(" ")[0].split(",")])
+    plant, blk = scaled_plant(problem.P, d)
+    m = problem.P.n_u
+    N = lft(plant, load_controller(FIXTURE), n_u=m, n_y=m)
+    r = -int(blk[0][0])
+    return upper_lft_matrices(N.A, N.B, N.C, N.D, delta * np.eye(r))
+
+
+def test_the_scaled_loop_at_each_constant_mass_is_below_the_bound(problem, result):
+    """Main loop theorem: mu < beta at every frequency gives ||D N(delta) D^-1||_inf <= beta for each constant delta."""
+    bound = result.certificate.bound
+    norms = [hinf_norm(_scaled_loop(problem, result, delta)) for delta in np.linspace(-1.0, 1.0, 9)]
+    assert max(norms) <= bound * (1 + 1e-6)
+    assert max(norms) > 0.9 * bound  # and the bound is not loose: 0.967 at eps's lower end against 0.98
+
+
+def test_a_time_varying_residual_at_constant_mass_keeps_the_gain_below_the_bound(problem, result):
+    """The state moving: a residual Delta(t) (norm one, switching every 50 ms) closed around the scaled loop."""
+    from scipy.integrate import solve_ivp
+
+    A, B, C, D = _scaled_loop(problem, result, -1.0)
+    n_f = B.shape[1] - problem.P.n_w  # residual channels (d side); v side
+    n_v = C.shape[0] - problem.P.n_z
+    rng = np.random.default_rng(3)
+    T, h = 4.0, 0.05
+    deltas = []
+    for _ in range(int(T / h) + 1):
+        U, _s, Vt = np.linalg.svd(rng.standard_normal((n_f, n_v)), full_matrices=False)
+        deltas.append(U @ Vt)  # norm one: the residual at its bound
+    assert np.abs(D[:n_v, :n_f]).max() < 1e-12  # no algebraic loop through the residual
+
+    def r_of(t):
+        return np.array([np.sin(3 * t + k) for k in range(problem.P.n_w)]) * (t < 2.0)
+
+    def rhs(t, x):
+        Dl = deltas[int(t / h)]
+        w = Dl @ (C[:n_v] @ x)
+        return A @ x + B[:, :n_f] @ w + B[:, n_f:] @ r_of(t)
+
+    ts = np.linspace(0.0, T, 4001)
+    sol = solve_ivp(rhs, (0.0, T), np.zeros(A.shape[0]), t_eval=ts, max_step=h / 4, rtol=1e-8, atol=1e-10)
+    z = np.array([C[n_v:] @ sol.y[:, k] + D[n_v:, n_f:] @ r_of(t) for k, t in enumerate(ts)])
+    r = np.array([r_of(t) for t in ts])
+    gain = np.sqrt(np.trapezoid(np.sum(z**2, axis=1), ts) / np.trapezoid(np.sum(r**2, axis=1), ts))
+    assert gain < result.certificate.bound
+
+
+def test_a_model_whose_parameters_move_goes_to_the_rate_bounded_route():
+    from types import SimpleNamespace
+
+    from polyrob.analysis.lpv.moving import MovingRobotCertificate
+
+    lft_problem = SimpleNamespace(P=SimpleNamespace(uncertain=SimpleNamespace(model="lft")))
+    assert "move with the robot's state" in applies(lft_problem)
+    out = constant_parameter_certificate(lft_problem, control.ss([], [], [], np.eye(2)))
+    assert isinstance(out, MovingRobotCertificate) and not out.computed
+    with pytest.raises(AttributeError):  # the other route reads the problem's robot and domain
+        robot_in_motion_certificate(lft_problem, control.ss([], [], [], np.eye(2)))
