@@ -131,3 +131,12 @@ def test_a_model_whose_parameters_move_goes_to_the_rate_bounded_route():
     assert isinstance(out, MovingRobotCertificate) and not out.computed
     with pytest.raises(AttributeError):  # the other route reads the problem's robot and domain
         robot_in_motion_certificate(lft_problem, control.ss([], [], [], np.eye(2)))
+
+
+def test_a_failed_test_is_not_certified_never_a_violation(problem):
+    """Half the PID's gain: mu of the scaled structure >= 1 says the test fails, not that a robot violates it."""
+    from polyrob.analysis.certificate import Status
+
+    weak = constant_parameter_certificate(problem, load_controller(FIXTURE) * 0.5, tries=(1.0,))
+    assert weak.certificate.status is Status.NOT_CERTIFIED
+    assert weak.frozen_gamma >= 1.0 and "this test cannot prove it" in weak.verdict
