@@ -125,3 +125,17 @@ def test_a_search_time_limit_keeps_the_best_factor_so_far_and_says_so(monkeypatc
     clock[0] = 0.0
     with pytest.raises(SynthesisError, match="none certifies before the search's time limit of 2.5 s"):
         max_bandwidth_scaling(None, synthesize=synthesis, plant=plant, progress=False, search_time_limit=2.5)
+
+
+def test_a_judge_ranks_the_factors_by_another_certificate():
+    """The moving-robot search: each factor's controller judged by a second, stricter certificate."""
+    judged = []
+
+    def judge(P, result):  # stricter: mu + alpha / 10 (e.g. the robot in motion)
+        judged.append(P.alpha)
+        return _result(result.peak_mu + P.alpha / 10, result.controller).certificate
+
+    res, calls = _search(lambda a: 0.5, alphas=(1, 2, 4, 8), rtol=0.01, judge=judge)
+    assert judged == [a for a, _ in calls]
+    assert 4 < res.alpha < 5 <= res.bracket[1] <= res.alpha * 1.01  # 0.5 + alpha / 10 < 1: alpha < 5
+    assert [mu for _, mu in res.history][:2] == [math.inf, pytest.approx(0.9)]

@@ -223,11 +223,16 @@ def reduce_design(
     return certify_design(problem, design) if certify else design
 
 
-def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None, limit=True, **options):
+def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None, limit=True, moving=False, **options):
     """The largest bandwidth factor with certified μ < 1; returns ``(Design, BandwidthScalingResult)``.
 
     With ``limit`` (default) a factor at which the robot's performance limit
-    already proves μ >= 1 for every controller is not synthesised.
+    already proves μ >= 1 for every controller is not synthesised.  With
+    ``moving`` a factor counts only when its controller also has the
+    moving-robot certificate of an inner-gain problem
+    (:func:`polyrob.analysis.lpv.constant.constant_parameter_certificate`:
+    the masses constant, the state at any rate), so the result is the
+    largest factor at which the robot in motion is certified.
     """
     from polyrob.plant.generalized import paper_controller
     from polyrob.synthesis import max_bandwidth_scaling
@@ -252,12 +257,30 @@ def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None,
     if limit:
         # a factor whose performance limit is >= 1 cannot certify: skip its synthesis
         options["floor"] = lambda alpha, h: problem.performance_limit(h).bound
+    if moving:
+        options["judge"] = _moving_judge(problem)
     res = max_bandwidth_scaling(problem.unc, problem.hyperparameters, scale=tuple(scale), **options)
     cert = res.result.summary()
     cert.update(bandwidth_scaling={**res.summary(), "per_factor": per_factor})
     notes = tuple(res.result.info.get("notes", [])) if isinstance(res.result.info, dict) else ()
     design = Design(controller=res.result.controller, result=res.result, reduced=None, record=cert, notes=notes)
     return certify_design(scaled_problem(problem, res.hyperparameters), design), res
+
+
+def _moving_judge(problem):
+    """``(P, result) -> Certificate``: the moving-robot certificate of the result's controller on ``P``."""
+    from polyrob.analysis.lpv.constant import applies, constant_parameter_certificate
+
+    why = applies(problem)
+    if why:
+        raise ArgumentError(f"a bandwidth search on the moving-robot certificate needs an inner-gain model: {why}")
+
+    def judge(P, result):
+        if not result.certificate.certified:  # the moving robot's test implies the frozen one's
+            return result.certificate
+        return constant_parameter_certificate(replace(problem, P=P), result.controller).certificate
+
+    return judge
 
 
 def scaled_problem(problem, hyperparameters: dict):

@@ -151,6 +151,7 @@ def max_bandwidth_scaling(
     floor: Callable | None = None,
     progress: bool | None = None,
     search_time_limit: float | None = None,
+    judge: Callable | None = None,
     **musyn_options,
 ) -> BandwidthScalingResult:
     """The largest factor α on the weights' bandwidths with a certified μ < ``target``.
@@ -189,6 +190,11 @@ def max_bandwidth_scaling(
         one running finishes): the largest certified factor so far is the
         result, its ``bracket`` ending at the next factor not tried
         (``stopped_by`` says so); none so far raises :class:`SynthesisError`.
+    judge : callable ``(P, result) -> Certificate``, optional
+        The certificate a factor is ranked by (default the synthesis
+        result's own, robust performance of the frozen robot); e.g. the
+        moving-robot certificate of the controller
+        (:func:`polyrob.pipeline.design.design_max_bandwidth`).
 
     Returns
     -------
@@ -246,10 +252,11 @@ def max_bandwidth_scaling(
         near = min(solved, key=lambda a: abs(math.log(a / alpha)), default=None)
         K0 = solved[near][0].controller if near is not None and solved[near][0] is not None else None
         try:
-            res = synthesize(plant(alpha, h), K0)
+            P = plant(alpha, h)
+            res = synthesize(P, K0)
             # the factor counts only when its certificate's status is CERTIFIED (mu < 1 at every
             # frequency, loop stable), never on a grid peak
-            cert = res.certificate
+            cert = res.certificate if judge is None else judge(P, res)
             mu = float(cert.bound) if cert.certified else math.inf
             status = cert.status
             evidence.append(f"{alpha:g}: {status} {float(cert.bound):.3f}")
