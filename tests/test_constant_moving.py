@@ -67,6 +67,9 @@ def test_certified_between_the_frozen_and_the_arbitrarily_fast_figures(problem, 
     assert fast.gamma > 1.0 > cert.bound
     assert "eps constant (rate 0), the state (q, qdot, qddot) moving at any rate" in result.verdict
     assert "CERTIFIED: mu <=" in result.verdict and "in motion inside the domain" in cert.scope.sentence()
+    s = result.summary()
+    assert s["certified"] and s["route"] == "mu, constant parameters" and s["mu_lower"] <= s["gamma"]
+    assert s["frozen_gamma"] is None  # not a frozen peak: the mu lower bound of the scaled structure
 
 
 def _scaled_loop(problem, result, delta):
