@@ -225,3 +225,15 @@ def test_synth_moving_prints_and_returns_the_moving_verdict(robot, small, capsys
     assert doc["computed"] and doc["finer_grid"]["points"] == 225 and doc["gamma"] is not None
     assert doc["verdict"] in text and "finer grid of 225 points" in text
     assert doc["status"] in ("GRID_ONLY", "NOT_CERTIFIED") and doc["certified"] is False
+
+
+def test_moving_harmonics_asks_for_the_bounded_search_with_more_harmonics():
+    """``--moving-harmonics 2`` (analyze, run, synth): bounded accelerations, X on the second harmonic, 9 x 3 points."""
+    from polyrob.cli import build_parser
+    from polyrob.cli.analyze import moving_options
+
+    for cmd in ("analyze", "run", "synth"):
+        extra = ["--controller", "K.json"] if cmd == "analyze" else []
+        args = build_parser().parse_args([cmd, "paper_2r", "--moving-harmonics", "2", *extra])
+        assert moving_options(args) == {"velocities": "bounded", "harmonics": 2, "points": (9, 3)}
+    assert moving_options(build_parser().parse_args(["run"])) is None

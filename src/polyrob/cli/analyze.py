@@ -107,7 +107,8 @@ def cmd_analyze(args) -> int:
         seed=args.seed,
         progress=out.progress,
         time_varying=args.time_varying,
-        moving=args.moving,
+        moving=True if args.moving_harmonics else args.moving,
+        moving_options=moving_options(args),
     )
     report = {
         "robot": robot.name,
@@ -138,6 +139,25 @@ def add_moving_argument(p) -> None:
         help="the moving-robot certificate (rate-bounded LPV analysis on the robot's state, rates from the "
         "domain); default: computed only for small closed loops (docs/certificates.md)",
     )
+    add_moving_harmonics_argument(p)
+
+
+def add_moving_harmonics_argument(p) -> None:
+    """``--moving-harmonics N`` (``analyze``, ``run`` and ``synth``)."""
+    p.add_argument(
+        "--moving-harmonics",
+        type=int_at_least(1),
+        default=None,
+        help="the rate-bounded search with bounded accelerations, X(rho) on cos k q, sin k q (k <= N) times "
+        "(1, qdot), on a 9 x 3 grid: N = 2 proves paper_2r's tf3 loop at x 4 on the grid (about an hour, "
+        "docs/certificates.md); implies --moving",
+    )
+
+
+def moving_options(args) -> dict | None:
+    """The moving-robot search's options from ``--moving-harmonics`` (``None``: the default search)."""
+    n = getattr(args, "moving_harmonics", None)
+    return None if n is None else {"velocities": "bounded", "harmonics": int(n), "points": (9, 3)}
 
 
 def register(sub) -> None:

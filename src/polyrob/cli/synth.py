@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from polyrob.cli.analyze import add_moving_harmonics_argument, moving_options
 from polyrob.cli.common import (
     Output,
     add_domain_arguments,
@@ -164,6 +165,7 @@ def cmd_synth(args) -> int:
     from polyrob.pipeline import design_controller
 
     check_output(args)
+    args.moving = bool(args.moving or args.moving_harmonics)
     if args.max_bandwidth:  # option errors before any work
         scale_names(args.scale_only), alphas_from_args(args.alphas)
     out = Output(args, stages=3 if args.moving else 2)
@@ -189,7 +191,7 @@ def cmd_synth(args) -> int:
         print_design(design, out)
         extra = None
     doc["synthesis"] = design.summary()
-    moving = moving_check(problem, design.controller, out) if args.moving else None
+    moving = moving_check(problem, design.controller, out, moving_options(args)) if args.moving else None
     if moving is not None:
         doc["moving"] = moving
     if args.output:
@@ -283,12 +285,12 @@ def add_bandwidth_arguments(p) -> None:
     )
 
 
-def moving_check(problem, K, out) -> dict:
+def moving_check(problem, K, out, options=None) -> dict:
     """``synth --moving``: the moving-robot certificate of the synthesised ``K``, printed; its summary."""
     from polyrob.analysis.lpv.constant import robot_in_motion_certificate
 
     out.stage("moving-robot certificate of the controller (rate-bounded LPV analysis, docs/certificates.md)")
-    mv = robot_in_motion_certificate(problem, K)
+    mv = robot_in_motion_certificate(problem, K, **(options or {}))
     out.line(mv.verdict)
     if mv.computed:
         out.line(mv.details())
@@ -307,4 +309,5 @@ def register(sub) -> None:
         "With --max-bandwidth on an inner-gain model (the arms' default task) a factor counts only when its "
         "controller has the moving-robot certificate too",
     )
+    add_moving_harmonics_argument(p)
     p.set_defaults(func=cmd_synth)

@@ -189,6 +189,7 @@ def analyze_controller(
     time_varying: bool = True,
     stability: str = "sweep",
     moving: bool | None = None,
+    moving_options: dict | None = None,
     limit: dict | None = None,
     certificate=None,
 ) -> ControllerAnalysis:
@@ -219,6 +220,10 @@ def analyze_controller(
         the robot's state, :mod:`polyrob.analysis.lpv.moving`): ``None``
         computes it for small closed loops only (its ``AUTO_STATES``),
         ``False`` records that it was not asked for.
+    moving_options : dict, optional
+        Options of the rate-bounded search
+        (:func:`~polyrob.analysis.lpv.moving.moving_robot_certificate`, e.g.
+        ``harmonics=2``); not used on an inner-gain model.
     limit : dict, optional
         The robot's performance limit (``PerformanceLimit.to_dict()``), quoted
         by :attr:`ControllerAnalysis.instead` when it excludes μ < 1.
@@ -254,7 +259,7 @@ def analyze_controller(
     if moving is False:
         mv = MovingRobotCertificate.not_computed("not asked for (--no-moving)")
     else:
-        mv = robot_in_motion_certificate(problem, K, auto=moving is None)
+        mv = robot_in_motion_certificate(problem, K, auto=moving is None, **(moving_options or {}))
     from polyrob.analysis.margins import robust_margin
 
     margin = None if rp.certificate.certified else robust_margin(rp.certificate)
