@@ -329,6 +329,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
             mc=settings.mc,
             progress=False,
             time_varying=False,
+            moving=False,  # minutes per arm (docs/certificates.md): `polyrob analyze ... --moving` computes it
             stability="implied",
             certificate=design.certificate,
         )
