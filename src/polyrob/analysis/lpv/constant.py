@@ -135,7 +135,7 @@ def scaled_plant(P, d):
     return control.ss(np.asarray(sys.A, float), B, C, D), np.array(blk)
 
 
-def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0, 0.5, 2.0), **mu_options):
+def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0, 1.05, 0.95), **mu_options):
     """The moving-robot certificate of ``K`` on an ``inner-gain`` problem: constants fixed, the state at any rate.
 
     Parameters
