@@ -143,3 +143,19 @@ def test_a_failed_test_is_not_certified_never_a_violation(problem):
     weak = constant_parameter_certificate(problem, load_controller(FIXTURE) * 0.5, tries=(1.0,))
     assert weak.certificate.status is Status.NOT_CERTIFIED
     assert weak.frozen_gamma >= 1.0 and "this test cannot prove it" in weak.verdict
+
+
+def test_the_bandwidth_search_on_the_moving_criterion_ranks_by_it(problem):
+    """``design_max_bandwidth(moving=True)``: the factor's figure is the moving robot's mu, not the frozen one's."""
+    from types import SimpleNamespace
+
+    from polyrob.errors import ArgumentError
+    from polyrob.pipeline.design import _moving_judge, design_max_bandwidth
+
+    frozen = design_max_bandwidth(problem, alphas=(4.0,), structure="pid", progress=False)[1]
+    moving = design_max_bandwidth(problem, moving=True, alphas=(4.0,), structure="pid", progress=False)[1]
+    assert frozen.alpha == moving.alpha == 4.0
+    assert frozen.peak_mu < moving.peak_mu < 1.0  # 0.66 and 0.82: the moving robot asks more
+    lft_problem = SimpleNamespace(P=SimpleNamespace(uncertain=SimpleNamespace(model="lft")))
+    with pytest.raises(ArgumentError, match="needs an inner-gain model"):
+        _moving_judge(lft_problem)
