@@ -152,10 +152,10 @@ def test_the_bandwidth_search_on_the_moving_criterion_ranks_by_it(problem):
     from polyrob.errors import ArgumentError
     from polyrob.pipeline.design import _moving_judge, design_max_bandwidth
 
-    frozen = design_max_bandwidth(problem, alphas=(4.0,), structure="pid", progress=False)[1]
     moving = design_max_bandwidth(problem, moving=True, alphas=(4.0,), structure="pid", progress=False)[1]
-    assert frozen.alpha == moving.alpha == 4.0
-    assert frozen.peak_mu < moving.peak_mu < 1.0  # 0.66 and 0.82: the moving robot asks more
+    frozen = moving.result.certificate  # the same controller's frozen-robot certificate
+    assert moving.alpha == 4.0 and frozen.certified
+    assert frozen.bound < moving.peak_mu < 1.0  # 0.66 and 0.82: the moving robot asks more
     lft_problem = SimpleNamespace(P=SimpleNamespace(uncertain=SimpleNamespace(model="lft")))
     with pytest.raises(ArgumentError, match="needs an inner-gain model"):
         _moving_judge(lft_problem)
