@@ -27,6 +27,7 @@ from polyrob import load_robot
 from polyrob.analysis.lpv.constant import (
     applies,
     constant_parameter_certificate,
+    residual_scalings,
     robot_in_motion_certificate,
     scaled_plant,
 )
@@ -76,8 +77,8 @@ def _scaled_loop(problem, result, delta):
     """The loop ``[d_full; r] -> [v_full; z]`` (scaled) at constant ``eps = delta`` (normalised)."""
     from polyrob.plant.lftplant import upper_lft_matrices
 
-    d = np.array([float(x) for x in result.scope.notes[0].split("d = ")[1].split(" ")[0].split(",")])
-    plant, blk = scaled_plant(problem.P, d)
+    assert "times 1)" in result.scope.notes[0]  # certified at the small gain's own scaling
+    plant, blk = scaled_plant(problem.P, residual_scalings(problem.P, load_controller(FIXTURE))[0])
     m = problem.P.n_u
     N = lft(plant, load_controller(FIXTURE), n_u=m, n_y=m)
     r = -int(blk[0][0])
@@ -126,7 +127,7 @@ def test_a_time_varying_residual_at_constant_mass_keeps_the_gain_below_the_bound
 def test_a_model_whose_parameters_move_goes_to_the_rate_bounded_route():
     from types import SimpleNamespace
 
-    from polyrob.analysis.lpv.moving import MovingRobotCertificate
+    from polyrob.analysis.lpv.moving_result import MovingRobotCertificate
 
     lft_problem = SimpleNamespace(P=SimpleNamespace(uncertain=SimpleNamespace(model="lft")))
     assert "move with the robot's state" in applies(lft_problem)
@@ -142,7 +143,7 @@ def test_a_failed_test_is_not_certified_never_a_violation(problem):
 
     weak = constant_parameter_certificate(problem, load_controller(FIXTURE) * 0.5, tries=(1.0,))
     assert weak.certificate.status is Status.NOT_CERTIFIED
-    assert weak.frozen_gamma >= 1.0 and "this test cannot prove it" in weak.verdict
+    assert weak.certificate.mu_lower >= 1.0 and "this test cannot prove it" in weak.verdict
 
 
 def test_the_bandwidth_search_on_the_moving_criterion_ranks_by_it(problem):
@@ -150,7 +151,7 @@ def test_the_bandwidth_search_on_the_moving_criterion_ranks_by_it(problem):
     from types import SimpleNamespace
 
     from polyrob.errors import ArgumentError
-    from polyrob.pipeline.design import _moving_judge, design_max_bandwidth
+    from polyrob.pipeline.design import design_max_bandwidth, moving_judge
 
     moving = design_max_bandwidth(problem, moving=True, alphas=(4.0,), structure="pid", progress=False)[1]
     frozen = moving.result.certificate  # the same controller's frozen-robot certificate
@@ -158,4 +159,4 @@ def test_the_bandwidth_search_on_the_moving_criterion_ranks_by_it(problem):
     assert frozen.bound < moving.peak_mu < 1.0  # 0.66 and 0.82: the moving robot asks more
     lft_problem = SimpleNamespace(P=SimpleNamespace(uncertain=SimpleNamespace(model="lft")))
     with pytest.raises(ArgumentError, match="needs an inner-gain model"):
-        _moving_judge(lft_problem)
+        moving_judge(lft_problem)

@@ -107,7 +107,7 @@ def cmd_analyze(args) -> int:
         seed=args.seed,
         progress=out.progress,
         time_varying=args.time_varying,
-        moving=True if args.moving_harmonics else args.moving,
+        moving=moving_asked(args),
         moving_options=moving_options(args),
     )
     report = {
@@ -152,6 +152,11 @@ def add_moving_harmonics_argument(p) -> None:
         "(1, qdot), on a 9 x 3 grid: N = 2 proves paper_2r's tf3 loop at x 4 on the grid (about an hour, "
         "docs/certificates.md); implies --moving",
     )
+
+
+def moving_asked(args) -> bool | None:
+    """``--moving`` / ``--no-moving`` / neither (``None``), ``--moving-harmonics`` counting as ``--moving``."""
+    return True if getattr(args, "moving_harmonics", None) else args.moving
 
 
 def moving_options(args) -> dict | None:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from polyrob.cli.analyze import add_moving_argument, moving_options, print_analysis
+from polyrob.cli.analyze import add_moving_argument, moving_asked, moving_options, print_analysis
 from polyrob.cli.common import Output, alphas_from_args, exit_status, robot_from_args, scale_names
 from polyrob.cli.options import int_at_least, parse_frequencies
 from polyrob.cli.plant import problem_from_args
@@ -131,7 +131,7 @@ def cmd_run(args) -> int:
         progress=out.progress,
         time_varying=args.time_varying,
         stability="sweep" if args.stability_sweep else "implied",
-        moving=True if args.moving_harmonics else args.moving,
+        moving=moving_asked(args),
         moving_options=moving_options(args),
         limit=None if args.max_bandwidth else limit,  # the limit printed above is factor 1's
     )

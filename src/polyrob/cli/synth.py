@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from polyrob.cli.analyze import add_moving_harmonics_argument, moving_options
+from polyrob.cli.analyze import add_moving_harmonics_argument, moving_asked, moving_options
 from polyrob.cli.common import (
     Output,
     add_domain_arguments,
@@ -165,7 +165,7 @@ def cmd_synth(args) -> int:
     from polyrob.pipeline import design_controller
 
     check_output(args)
-    args.moving = bool(args.moving or args.moving_harmonics)
+    args.moving = bool(moving_asked(args))
     if args.max_bandwidth:  # option errors before any work
         scale_names(args.scale_only), alphas_from_args(args.alphas)
     out = Output(args, stages=3 if args.moving else 2)

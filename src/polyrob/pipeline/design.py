@@ -262,7 +262,7 @@ def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None,
         # a factor whose performance limit is >= 1 cannot certify: skip its synthesis
         options["floor"] = lambda alpha, h: problem.performance_limit(h).bound
     if moving:
-        options["judge"] = _moving_judge(problem)
+        options["judge"] = moving_judge(problem)
         # the moving robot's test passes in a window of factors (so101: 16 and 32 fail, 22.6 passes,
         # docs/certificates.md): a quarter-octave scan from the top finds it where octaves step over it
         options.setdefault("alphas", MOVING_ALPHAS)
@@ -274,7 +274,7 @@ def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None,
     return certify_design(scaled_problem(problem, res.hyperparameters), design), res
 
 
-def _moving_judge(problem):
+def moving_judge(problem):
     """``(P, result) -> Certificate``: the moving-robot certificate of the result's controller on ``P``."""
     from polyrob.analysis.lpv.constant import applies, constant_parameter_certificate
 

@@ -50,7 +50,7 @@ import numpy as np
 
 from polyrob.errors import PolyrobError
 
-__all__ = ["applies", "scaled_plant", "constant_parameter_certificate", "robot_in_motion_certificate"]
+__all__ = ["applies", "residual_scalings", "scaled_plant", "constant_parameter_certificate", "robot_in_motion_certificate"]
 
 #: Largest closed loop (states) analysed.
 MAX_STATES = 60
@@ -83,11 +83,14 @@ def _channels(blk):
     return real, full
 
 
-def _scalings(P, K, real, full):
-    """Constant scalings ``d_i`` of the full blocks: the constant-D small gain of the loop at ``delta = 0``."""
+def residual_scalings(P, K):
+    """``(d, source)``: constant scalings ``d_i`` of the full blocks, the constant-D small gain of the loop at ``delta = 0``."""
     from polyrob.analysis.time_varying.smallgain import scaled_small_gain
     from polyrob.plant.generalized import lft
 
+    _real, full = _channels(P.block_structure_rs)
+    if not full:
+        return np.ones(0), "no residual block"
     N = lft(P, K)
     n_d = P.n_delta
     ins = np.concatenate([i for i, _ in full] + [np.arange(n_d, n_d + P.n_w)])
@@ -158,7 +161,7 @@ def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0
     import control
 
     from polyrob.analysis.certificate import Scope, Status, certify_loop
-    from polyrob.analysis.lpv.moving import MovingRobotCertificate
+    from polyrob.analysis.lpv.moving_result import MovingRobotCertificate
 
     t0 = time.perf_counter()
     why = applies(problem)
@@ -177,21 +180,21 @@ def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0
     names = ", ".join(P.uncertain.parameter_names[: len(real)])
     words = f"{names} constant (rate 0), the state (q, qdot, qddot) moving at any rate"
     try:
-        d0, source = _scalings(P, K, real, full) if full else (np.ones(0), "no residual block")
+        d0, source = residual_scalings(P, K)
         best = None
         for factor in tries:
             plant, blk = scaled_plant(P, d0 * factor)
             cert = certify_loop(plant, K, blk, n_u=m, n_y=m, scope=base, **mu_options)
             if best is None or cert.bound < best[0].bound:
-                best = (cert, d0 * factor)
+                best = (cert, factor)
             if cert.certified or not full:
                 break
     except PolyrobError as exc:
         return MovingRobotCertificate.not_computed(str(exc))
-    cert, d = best
+    cert, factor = best
     notes = (
-        f"the residual blocks scaled by the constants d = {', '.join(f'{v:.4g}' for v in d)} "
-        f"({source}, times {d[0] / d0[0] if d.size and d0[0] else 1:.3g}), one full block with the performance "
+        f"the residual blocks scaled by the constants d = {', '.join(f'{v:.4g}' for v in d0 * factor)} "
+        f"({source}, times {factor:.3g}), one full block with the performance "
         "channels: a constant scaling commutes with a time-varying residual",
         f"the constants {names} as real parameters of mu (constant in time: frequency-dependent D-G scalings)",
     )
@@ -210,7 +213,6 @@ def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0
     return MovingRobotCertificate(
         computed=True,
         gamma=float(cert.bound),
-        frozen_gamma=float(cert.mu_lower),
         rates=tuple((0.0, 0.0) for _ in real),
         rate_words=words,
         grid_words=f"mu with {len(real)} constant real block(s) and one full block",

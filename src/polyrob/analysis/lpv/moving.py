@@ -39,10 +39,11 @@ Examples
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 
+from polyrob.analysis.lpv.moving_result import MovingRobotCertificate, rate_words
 from polyrob.errors import ArgumentError, NotApplicable, SolverError
 
 __all__ = ["MovingRobotCertificate", "moving_robot_certificate", "moving_robot_gain", "MAX_STATES", "AUTO_STATES"]
@@ -55,133 +56,6 @@ BOUNDED_VARIABLES = 600
 RECHECK_POINTS = (9, 5)
 #: Largest closed loop computed by default (``moving=None``): measured cost in docs/certificates.md.
 AUTO_STATES = 8
-
-
-def _rate_words(names, rates, source: str) -> str:
-    parts = []
-    for name, (_lo, hi) in zip(names, rates):
-        dot = f"d{name}/dt"
-        if name.startswith("q") and not name.startswith("qdot") and f"qdot{name[1:]}" in names and np.isfinite(hi):
-            parts.append(f"{dot} = qdot{name[1:]} (|{dot}| <= {hi:.4g})")
-        else:
-            parts.append(f"|{dot}| <= {hi:.4g}" if np.isfinite(hi) else f"{dot} arbitrary")
-    bounded = any(n.startswith("qdot") and np.isfinite(r[1]) for n, r in zip(names, rates))
-    return ", ".join(parts) + (f" (accelerations {source})" if bounded else "")
-
-
-@dataclass(frozen=True, eq=False)
-class MovingRobotCertificate:
-    """Robust performance of the linearised robot moving within rate bounds.
-
-    Attributes
-    ----------
-    computed : bool
-    gamma : float
-        Proved bound of the ``r -> z`` induced L2 gain on the grid (``inf``: none).
-    frozen_gamma : float
-        Largest frozen (LTI) H-infinity norm over the grid points: no rate bound gives less.
-    rates : tuple of (float, float)
-    rate_words : str
-    grid_words : str
-    result : LpvNormResult or None
-    scope : Scope or None
-    notes : tuple of str
-    finer : dict
-        The returned ``X`` re-checked on a finer grid
-        (:func:`~polyrob.analysis.lpv.basis.finer_recheck`: ``points``,
-        ``gamma``, ``holds_at_gamma``); empty when not re-checked.
-    seconds : float
-    decided : Certificate or None
-        The certificate when another test decided it (μ, :mod:`polyrob.analysis.lpv.constant`).
-    """
-
-    #: The key of its figures in a run's certificate record (:mod:`polyrob.report.certificates`).
-    record_key = "moving"
-
-    computed: bool
-    gamma: float = float("inf")
-    frozen_gamma: float = float("nan")
-    rates: tuple = ()
-    rate_words: str = ""
-    grid_words: str = ""
-    result: object = None
-    scope: object = None
-    notes: tuple = ()
-    finer: dict = field(default_factory=dict)
-    seconds: float = 0.0
-    decided: object = None
-
-    @classmethod
-    def not_computed(cls, why: str) -> MovingRobotCertificate:
-        """A certificate that was not computed, and why."""
-        return cls(False, notes=(why,))
-
-    @property
-    def certificate(self):
-        """The decided :class:`~polyrob.analysis.certificate.Certificate` (``None`` when not computed)."""
-        from polyrob.analysis.certificate import Certificate, Scope, decide_gridded_gain
-
-        if not self.computed or self.decided is not None:  # decided: a certificate made elsewhere (mu)
-            return self.decided
-        r = self.result
-        proved = bool(r is not None and r.proved and np.isfinite(self.gamma))
-        between = proved and not str(r.coverage).startswith("on the grid")
-        why = "" if proved else (self.notes[-1] if self.notes else (r.reason if r is not None else ""))
-        status, reasons = decide_gridded_gain(proved, self.gamma, between, why)
-        scope = replace(self.scope or Scope(), kind="robust performance", frequencies="")
-        return Certificate(status, float(self.gamma), float("nan"), float("nan"), None, scope, reasons)
-
-    @property
-    def verdict(self) -> str:
-        """``moving robot with rates <= ...: robust performance ...``."""
-        if not self.computed:
-            return f"moving robot: robust performance not computed ({self.notes[0] if self.notes else 'not asked'})"
-        return f"moving robot with rates {self.rate_words}: {self.certificate.verdict}"
-
-    def details(self) -> str:
-        """What it covers, the frozen peak beside it."""
-        if not self.computed:
-            return ""
-        lines = [f"covers: {self.certificate.scope.sentence()}"]
-        if self.decided is not None:
-            return "\n".join(
-                lines + [f"mu lower bound {self.frozen_gamma:.4g}; {self.grid_words}; {self.seconds:.0f} s"]
-            )
-        lines.append(
-            f"frozen peak over the grid {self.frozen_gamma:.4g} (no rate bound gives less); "
-            f"{self.grid_words}; {self.seconds:.0f} s"
-        )
-        if self.finer.get("points"):
-            f = self.finer
-            lines.append(
-                f"the same X re-checked on a finer grid of {f['points']} points (sampled, not between them): "
-                + (f"bound {f['gamma']:.4g}" if np.isfinite(f["gamma"]) else f"no bound ({f.get('reason', '')})")
-            )
-        return "\n".join(lines)
-
-    def summary(self) -> dict:
-        """Strict JSON."""
-        from polyrob.analysis.scope import finite_or_none
-
-        cert = self.certificate
-        return {
-            "computed": self.computed,
-            "status": None if cert is None else cert.status.value,
-            "certified": bool(cert is not None and cert.certified),
-            "gamma": finite_or_none(self.gamma),
-            "frozen_gamma": None if self.decided is not None else finite_or_none(self.frozen_gamma),
-            "mu_lower": finite_or_none(self.frozen_gamma) if self.decided is not None else None,
-            "route": "mu, constant parameters" if self.decided is not None else "lpvnorm, the state's rates",
-            "rates": [[finite_or_none(lo), finite_or_none(hi)] for lo, hi in self.rates],
-            "rate_words": self.rate_words,
-            "grid": self.grid_words,
-            "lpvnorm": None if self.result is None else self.result.summary(),
-            "scope": None if cert is None else cert.scope.summary(),
-            "notes": list(self.notes),
-            "finer_grid": {k: finite_or_none(v) if isinstance(v, float) else v for k, v in self.finer.items()},
-            "seconds": round(float(self.seconds), 3),
-            "verdict": self.verdict,
-        }
 
 
 def _velocity_mode(velocities: str, model, n: int, tensor: bool = True, harmonics: int = 1) -> str:
@@ -359,7 +233,7 @@ def moving_robot_certificate(
     except NotApplicable as exc:
         return MovingRobotCertificate.not_computed(str(exc))
     base = problem.scope() if hasattr(problem, "scope") else Scope()
-    words = _rate_words(model.names, rates, source)
+    words = rate_words(model.names, rates, source)
     again = f" and the same X re-checked at the {finer['points']} points of a finer grid" if finer.get("points") else ""
     notes = (f"on the grid of {model.words()}{again}; not proved between the grid points",)
     notes += (
