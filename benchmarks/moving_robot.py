@@ -52,7 +52,16 @@ def _light_problem(robot, domain, factor: float):
 
 
 def run(
-    factor: float, spec: str, *, velocities: str, points, full: bool, tensor: bool = True, recheck=(9, 5), harmonics=1
+    factor: float,
+    spec: str,
+    *,
+    velocities: str,
+    points,
+    full: bool,
+    tensor: bool = True,
+    recheck=(9, 5),
+    harmonics=1,
+    save_x=None,
 ) -> dict:
     from polyrob import load_robot
     from polyrob.analysis.lpv.moving import moving_robot_certificate
@@ -68,6 +77,12 @@ def run(
         problem, K, velocities=velocities, points=points, tensor=tensor, recheck=recheck, harmonics=harmonics
     )
     s = mv.summary()
+    if save_x and mv.result is not None and mv.result.proved:
+        import numpy as np
+
+        # the proved X(rho) coefficients (coordinates of the search's conditioned loop), for checks between grid points
+        np.savez(save_x, X=np.array(mv.result.X), gamma=mv.result.gamma, factor=factor, harmonics=harmonics,
+                 points=np.array(points), notes=np.array(mv.result.notes, dtype=object))  # fmt: skip
     out["moving"] = {
         "verdict": mv.verdict,
         "status": s["status"],
@@ -161,6 +176,7 @@ def main(argv=None) -> int:
         default=0.0,
         help="--slice: bound of |dq2/dt| (0: frozen loops; -1: dq2/dt = qdot2 exactly)",
     )
+    ap.add_argument("--save-x", default=None, metavar="FILE.npz", help="save the proved X(rho) of the (last) run")
     args = ap.parse_args(argv)
     points = tuple(int(x) for x in args.points.split(","))
     recheck = None if args.recheck == "none" else tuple(int(x) for x in args.recheck.split(","))
@@ -188,6 +204,7 @@ def main(argv=None) -> int:
                 tensor=not args.separable,
                 recheck=recheck,
                 harmonics=int(args.harmonics.split(",")[0]),
+                save_x=args.save_x,
             )
         )
     doc["load_average_end"] = list(os.getloadavg())

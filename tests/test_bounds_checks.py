@@ -170,3 +170,19 @@ def test_entries_varying_by_roundoff_of_their_matrix_are_constant():
     assert entry[(1, 3, 1)]  # B[1, 1] = 1 / (2 + cos q2): varies
     assert not entry[(1, 2, 1)] and not entry[(1, 3, 0)]  # B's off-diagonal: roundoff of its matrix
     assert not entry[(1, 2, 0)]  # B[0, 0] = 1
+
+
+def test_behind_computed_torque_a_heavy_payload_is_no_inertia_that_is_not_positive_definite():
+    """``B_low = M^-1 M_hat`` is no inverse inertia: with a payload it is not symmetric, its symmetric part
+    indefinite where ``M`` and ``M_hat`` are both positive definite (ur10 with 0.57 kg hit this)."""
+    from polyrob.domains.task import TaskDomain
+    from polyrob.model.inner import inner_loop
+    from polyrob.model.payload import PayloadRange
+
+    arm = inner_loop(load_robot("planar_2r"), "computed-torque", payload=PayloadRange(0.0, 50.0))
+    dom = TaskDomain.from_robot(arm, pose=[0.3, 0.5], q_radius=0.3, qdot_max=1.0, qddot_max=2.0)
+    q = np.array([[0.3, 0.5]])
+    B = arm.with_true(0.0, np.zeros(3), 1.0).jacobians_batch(q, np.zeros((1, 2)), np.zeros((1, 2)))[1][0, 2:]
+    assert np.linalg.eigvalsh(0.5 * (B + B.T))[0] < 0  # the old check, on B, refused this robot
+    pldi = bound_pldi(arm, dom, samples=32, coverage=0, progress=False, workers=1, screen=0, verify_rounds=0)
+    assert np.all(np.isfinite(pldi.upper))

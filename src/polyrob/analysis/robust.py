@@ -176,7 +176,8 @@ def _analyse(
         # one δ per parameter: merged parameters occupy several channels
         delta = np.zeros(unc.n_params)
         for channel, param in enumerate(unc.channel_parameter):
-            delta[param] = diag[channel]
+            if param >= 0:  # -1: a channel of a full (residual) block, no parameter
+                delta[param] = diag[channel]
         nominal = stability_verdict(nominal_closed_loop(unc, K).system)
     return RobustnessResult(
         kind=kind,

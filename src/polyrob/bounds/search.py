@@ -145,7 +145,10 @@ def pilot(problem: Problem, seed, n=4096):
         except np.linalg.LinAlgError:  # an analytic M(q) that is singular somewhere
             A = B = None
         # a computed-torque factor's B is no inverse inertia; its robot's M was checked with its own loop's PLDI
-        if not getattr(robot, "jacobians_are_factors", False):
+        if getattr(robot, "inner", "none") == "computed-torque" and not getattr(robot, "jacobians_are_factors", False):
+            # B = M^-1 M_hat is no inverse inertia (not symmetric once a payload differs): check the true M itself
+            _check_true_mass_matrices(robot.true_robot, q)
+        elif not getattr(robot, "jacobians_are_factors", False):
             check_mass_matrices(robot, q, None if B is None else B[:, problem.m :, :])
         vals.append(problem.entries_from(A, B))
     vals = np.vstack(vals)
@@ -158,6 +161,16 @@ def pilot(problem: Problem, seed, n=4096):
     block = np.where(isA, scale[isA].max(initial=0.0), scale[~isA].max(initial=0.0))
     varying = spread > 1e-10 * np.maximum(1.0, block)
     return vals, varying
+
+
+def _check_true_mass_matrices(robot, q) -> None:
+    """:func:`check_mass_matrices` of ``robot`` (a URDF robot) at ``q``, from its own ``M(q)``."""
+    M = np.array([robot.mass_matrix(qi) for qi in q])
+    try:
+        minv = np.linalg.inv(M) if np.all(np.isfinite(M)) else None
+    except np.linalg.LinAlgError:
+        minv = None
+    check_mass_matrices(robot, q, minv)
 
 
 def check_mass_matrices(robot, q, minv=None) -> None:

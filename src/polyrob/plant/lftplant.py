@@ -271,7 +271,8 @@ class UncertainPlant:
         omitted), then ``diag(δ)`` over the real channels (a repeated parameter repeats)."""
         delta = self.check_delta(delta, strict=False)
         nd = self.n_delta
-        D = np.zeros((nd, nd), dtype=complex if residual is not None and np.iscomplexobj(residual) else float)
+        complex_ = residual is not None and any(np.iscomplexobj(R) for R in residual)  # blocks of several sizes
+        D = np.zeros((nd, nd), dtype=complex if complex_ else float)
         real = self.channel_parameter >= 0
         D[np.flatnonzero(real), np.flatnonzero(real)] = delta[self.channel_parameter[real]]
         if residual is not None:

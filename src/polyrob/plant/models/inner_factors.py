@@ -27,7 +27,9 @@ from about 0 on the wrist to 0.9 on the shoulder).  The factors move over
 the domain, ``K_k = K_k,c + E_k``: the loop is ``a = v + sum_k theta_k
 K_k,c [x; a] + E [x; a]`` with ``E = sum_k theta_k E_k`` within ``sum_k
 r_k |E_k|`` entrywise (``r_k`` the half range of ``theta_k``), carried by
-one full complex block as ``axes`` carries its residual.  Every true robot
+full complex blocks as ``axes`` carries its residual: one for the state
+columns ``J`` and one for the acceleration columns ``G``
+(:func:`residual_blocks`).  Every true robot
 is then a member exactly (its ``theta``, and ``E`` its ``[B_low^-1 A_low, I
 - B_low^-1]`` less ``sum theta_k K_k,c``), and membership is convex in
 ``theta``.  ``K_k`` does not depend on the ``theta``: a task domain fixes
@@ -54,7 +56,15 @@ from polyrob.model.inner import InnerLoopRobot
 from polyrob.plant.lftplant import UncertainPlant
 from polyrob.plant.models.axes import entry_layout, residual_of_radii
 
-__all__ = ["FactorLoop", "factor_parameters", "inner_factors_plant", "inner_factors_contains", "bound_one_robot"]
+__all__ = [
+    "FactorLoop",
+    "factor_parameters",
+    "inner_factors_plant",
+    "inner_factors_contains",
+    "bound_one_robot",
+    "residual_blocks",
+    "scaled_residuals",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -167,10 +177,13 @@ def inner_factors_plant(pldi, robot) -> UncertainPlant:
     ranges = np.array([r for _, r, _ in params])
     if sum(r * np.max(np.abs(np.linalg.eigvals(K[:, n:]))) for r, K in zip(ranges, centres)) >= 1.0:
         raise NotApplicable("inner-gain: I - sum theta_k G_k may be singular inside the ranges")
-    # the residual sum_k theta_k E_k, within sum_k r_k |E_k| entrywise, as one block outside the theta loops
+    # the residual sum_k theta_k E_k, within sum_k r_k |E_k| entrywise, as full blocks outside the theta loops
     spread = np.tensordot(ranges, np.array(radii), axes=1)
-    Bf, Cf, gains = residual_of_radii(spread)
-    k, P = (0 if Bf is None else Bf.shape[1]), len(params)
+    blocks = residual_blocks(spread, n)
+    sizes = [b["B"].shape[1] for b in blocks]
+    Bf = np.hstack([b["B"] for b in blocks]) if blocks else None
+    Cf = np.vstack([b["C"] for b in blocks]) if blocks else None
+    k, P = sum(sizes), len(params)
     # channels: the residual block, then each theta repeated m times; every channel enters the accelerations:
     # a = u + sum_j d_j + B_f d_f, and every output reads [x; a]
     nd = k + P * m
@@ -206,7 +219,7 @@ def inner_factors_plant(pldi, robot) -> UncertainPlant:
         channel_upper=None,
         nominal_delta=np.zeros(P),
         offset=np.zeros(P),
-        block_structure=np.array(([[k, k]] if k else []) + [[-m, 0]] * P, int).reshape(-1, 2),
+        block_structure=np.array([[size, size] for size in sizes] + [[-m, 0]] * P, int).reshape(-1, 2),
         info={
             "enclosure": "sampled",
             "enclosure_inputs": {"PLDI": pldi.enclosure, "factors": "sampled"},
@@ -215,26 +228,70 @@ def inner_factors_plant(pldi, robot) -> UncertainPlant:
             "K_centres": np.array(centres),
             "residual_gain": float(np.linalg.norm(spread)),
             "n_directions": P,
-            **gains,
+            "residual_blocks": [{key: b[key] for key in ("rows", "cols", "W_l", "W_r")} for b in blocks],
+            "residual_spread": spread,
         },
         model="inner-gain",
     )
 
 
-def _scaled_residual(unc: UncertainPlant, K_raw, theta, rtol: float, reached) -> float:
-    """The scaled norm of the residual ``K_raw - sum theta_k K_k,c`` (convex in ``theta``).
+def residual_blocks(spread: np.ndarray, n: int) -> list[dict]:
+    """The full blocks of a factor residual within ``spread`` (``m x 3m`` entry radii): ``B``, ``C``, ``rows``, ``cols``, ``W_l``, ``W_r``.
 
-    An entry that the residual block does not reach (``~reached``) must
+    One block for the state columns (``J``: stiffness and damping, per unit
+    of the factor) and one for the acceleration columns (``G``: a relative
+    gain, orders of magnitude smaller).  A single block bounds entry
+    ``(i, j)`` by ``W_l[i] W_r[j]``, a rank-one pattern: it would let the
+    ``G`` entries grow to the size of the ``J`` entries of their row, and
+    ``G`` is fed back through the model's static loop (``D_vd``): on so101
+    with a 3 % payload that alone gave μ 0.67 at every frequency and cost
+    every per-joint PID its certificate.  ``C`` reads the whole ``[x; a]``.
+    """
+    out = []
+    for cols in (np.arange(n), np.arange(n, spread.shape[1])):
+        Bf, Cf, gains = residual_of_radii(spread[:, cols])
+        if Bf is None:
+            continue
+        C = np.zeros((Cf.shape[0], spread.shape[1]))
+        C[:, cols] = Cf
+        out.append({"B": Bf, "C": C, "rows": gains["residual_rows"], "cols": cols[gains["residual_cols"]],
+                    "W_l": gains["W_l"], "W_r": gains["W_r"]})  # fmt: skip
+    return out
+
+
+def _reached(unc: UncertainPlant) -> np.ndarray:
+    """The entries of the factor that a residual block carries."""
+    reached = np.zeros(unc.info["K_centres"].shape[1:], bool)
+    for b in unc.info["residual_blocks"]:
+        reached[np.ix_(b["rows"], b["cols"])] = True
+    return reached
+
+
+def scaled_residuals(unc: UncertainPlant, E: np.ndarray) -> list[np.ndarray]:
+    """``E`` (``m x 3m``, a residual of the factor) as the square blocks of ``unc.full_blocks``, scaled by their weights.
+
+    ``unc.matrices_at(delta, residual=scaled_residuals(unc, E))`` is the
+    member with residual ``E``; it is in the set when each block's norm is
+    at most one.
+    """
+    out = []
+    for b, size in zip(unc.info["residual_blocks"], unc.full_blocks):
+        S = np.zeros((size, size))
+        S[: len(b["rows"]), : len(b["cols"])] = E[np.ix_(b["rows"], b["cols"])] / b["W_l"][:, None] / b["W_r"][None, :]
+        out.append(S)
+    return out
+
+
+def _scaled_residual(unc: UncertainPlant, K_raw, theta, rtol: float, reached) -> float:
+    """The largest scaled norm of the residual ``K_raw - sum theta_k K_k,c`` over its blocks (convex in ``theta``).
+
+    An entry that no residual block reaches (``~reached``) must
     match: its mismatch relative to ``rtol`` counts instead when it is larger.
     """
-    info = unc.info
-    E = K_raw - np.tensordot(theta, info["K_centres"], axes=1)
-    rows, cols = info["residual_rows"], info["residual_cols"]
+    E = K_raw - np.tensordot(theta, unc.info["K_centres"], axes=1)
     mismatch = np.abs(E[~reached]).max(initial=0.0) / (rtol * (1.0 + np.abs(K_raw).max()))
-    if not len(rows):
-        return mismatch
-    S = E[np.ix_(rows, cols)] / info["W_l"][:, None] / info["W_r"][None, :]
-    return max(float(np.linalg.norm(S, 2)), mismatch)
+    norms = [float(np.linalg.norm(S, 2)) for S in scaled_residuals(unc, E)]
+    return max([mismatch, *norms])
 
 
 def inner_factors_contains(unc: UncertainPlant, A, B, *, rtol: float = 1e-9) -> np.ndarray:
@@ -253,8 +310,7 @@ def inner_factors_contains(unc: UncertainPlant, A, B, *, rtol: float = 1e-9) -> 
     m = unc.m
     r = np.asarray(unc.info["theta_range"], float)
     centres = unc.info["K_centres"].reshape(len(r), -1).T
-    reached = np.zeros(unc.info["K_centres"].shape[1:], bool)  # the entries the residual block carries
-    reached[np.ix_(unc.info["residual_rows"], unc.info["residual_cols"])] = True
+    reached = _reached(unc)
     out = np.ones(len(A), bool)
     for i in range(len(A)):
         if not (np.allclose(A[i, :m], unc.A_mid[:m], atol=rtol) and np.allclose(B[i, :m], 0.0, atol=rtol)):
