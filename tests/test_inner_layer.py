@@ -178,6 +178,7 @@ def test_validation_simulates_a_true_robot_drawn_from_the_ranges(pendulum, inner
     assert sim.success and sim.stayed_in_domain, sim.domain_exits
     mass = float(sim.info["true_robot"].split()[1])
     assert 0.0 <= mass <= 0.1 and "links x" in sim.info["true_robot"] and sim.info["inner"] == inner
+    assert sim.summary()["true_robot"] == sim.info["true_robot"]  # what a fleet row's validation names
     assert np.all(np.isfinite(sim.info["motor_torque_peak"]))
     assert abs(sim.q[0, -1] - 0.5) < 0.1  # a plain PID, slow integral action: near the target, not settled
     nominal = simulate(arm, K, dom, smooth_reference([0.5, 0.35], 2.0), t_final=0.5, q0=[0.4, 0.3], true_seed=None)

@@ -344,6 +344,8 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
             details["validation"] = sim
             settled = "settled" if sim["settled"] else "NOT settled"
             validation = f"{settled}; {sim['verdict']}"
+            if sim.get("true_robot"):
+                validation += f"; true robot: {sim['true_robot']}"
         except Exception as exc:  # noqa: BLE001 - recorded: a failed simulation is a finding about this robot
             validation = f"simulation failed: {type(exc).__name__}: {one_line(exc)}"
         timings["validation"] = time.perf_counter() - t1
