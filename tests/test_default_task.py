@@ -116,10 +116,7 @@ def test_a_task_payload_is_a_mass_range_at_the_flange_scaled_by_the_arm():
     assert payload.com_lower == payload.com_upper == (0.0, 0.0, 0.0) and payload.frame == "tool0"
     arm = default_task_robot(ur5, task)
     assert arm.payload == payload and len(arm.variants()) == 5  # nominal + {0, max} x {0.9, 1.1}
-    # the default: an instrument of up to 1 % of the link mass (0.17 kg on ur5); 0 poses none
-    assert DEFAULT_TASK.payload_range(ur5).mass_upper == pytest.approx(0.01 * total)
-    assert default_task_robot(ur5).payload == DEFAULT_TASK.payload_range(ur5)
-    assert DefaultTask(payload_fraction=0.0).payload_range(ur5) is None
+    assert DEFAULT_TASK.payload_range(ur5) is None and default_task_robot(ur5).payload is None
 
 
 def test_batch_task_and_inner_options_reach_every_job():
