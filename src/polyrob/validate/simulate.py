@@ -163,8 +163,7 @@ class SimulationResult:
             "torque_within_limits": self.torque_within_limits,
             "success": bool(self.success),
             "verdict": self.verdict(),
-            # behind an inner layer: the true robot simulated (payload and link factor drawn from their ranges)
-            "true_robot": self.info.get("true_robot"),
+            "true_robot": self.info.get("true_robot"),  # behind an inner layer: payload, link factor drawn
             "joints": [
                 {k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in mt.__dict__.items()}
                 for mt in self.metrics
