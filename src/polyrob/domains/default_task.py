@@ -22,8 +22,9 @@ option is posed the problem an arm engineer poses (issue 21):
   ``inner-gain`` model carries as one more scalar
   (:mod:`polyrob.plant.models.inner_factors`).  It is not the default:
   with 1 % (0.17 kg on panda) the batch certified panda but not ur10
-  or xarm7 (GRID_ONLY), nor ur5 and z1 (a membership-test stall since
-  fixed, not re-run), and took longer than its 30 minutes (docs/fleet.md).
+  or xarm7 (GRID_ONLY), nor ur5 and z1 (a membership-test stall, since
+  fixed: with the fix both certify), and took longer than its 30 minutes
+  (docs/fleet.md).
 
 Robots with fewer joints (the paper's planar arms, ``double_pendulum``,
 ``TwoDofs``) keep the URDF torque box and no inner layer, as the paper
