@@ -144,11 +144,12 @@ def pilot(problem: Problem, seed, n=4096):
             A, B = robot.jacobians_batch(q, qdot, u)
         except np.linalg.LinAlgError:  # an analytic M(q) that is singular somewhere
             A = B = None
-        # a computed-torque factor's B is no inverse inertia; its robot's M was checked with its own loop's PLDI
-        if getattr(robot, "inner", "none") == "computed-torque" and not getattr(robot, "jacobians_are_factors", False):
+        if getattr(robot, "jacobians_are_factors", False):
+            pass  # a computed-torque factor's B is no inverse inertia; its robot's M was checked with its own loop's PLDI
+        elif getattr(robot, "inner", "none") == "computed-torque":
             # B = M^-1 M_hat is no inverse inertia (not symmetric once a payload differs): check the true M itself
             _check_true_mass_matrices(robot.true_robot, q)
-        elif not getattr(robot, "jacobians_are_factors", False):
+        else:
             check_mass_matrices(robot, q, None if B is None else B[:, problem.m :, :])
         vals.append(problem.entries_from(A, B))
     vals = np.vstack(vals)

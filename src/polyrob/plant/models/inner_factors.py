@@ -244,9 +244,9 @@ def residual_blocks(spread: np.ndarray, n: int) -> list[dict]:
     gain, orders of magnitude smaller).  A single block bounds entry
     ``(i, j)`` by ``W_l[i] W_r[j]``, a rank-one pattern: it would let the
     ``G`` entries grow to the size of the ``J`` entries of their row, and
-    ``G`` is fed back through the model's static loop (``D_vd``): on so101
-    with a 3 % payload that alone gave μ 0.67 at every frequency and cost
-    every per-joint PID its certificate.  ``C`` reads the whole ``[x; a]``.
+    ``G`` is fed back through the model's static loop (``D_vd``): with a
+    payload that cost every per-joint PID of so101 and panda its
+    certificate.  ``C`` reads the whole ``[x; a]``.
     """
     out = []
     for cols in (np.arange(n), np.arange(n, spread.shape[1])):
