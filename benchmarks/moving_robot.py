@@ -62,6 +62,7 @@ def run(
     recheck=(9, 5),
     harmonics=1,
     save_x=None,
+    level=None,
 ) -> dict:
     from polyrob import load_robot
     from polyrob.analysis.lpv.moving import moving_robot_certificate
@@ -74,8 +75,9 @@ def run(
     t = time.perf_counter()
     problem = _light_problem(robot, domain, factor)
     mv = moving_robot_certificate(
-        problem, K, velocities=velocities, points=points, tensor=tensor, recheck=recheck, harmonics=harmonics
-    )
+        problem, K, velocities=velocities, points=points, tensor=tensor, recheck=recheck, harmonics=harmonics,
+        level=level,
+    )  # fmt: skip
     s = mv.summary()
     if save_x and mv.result is not None and mv.result.proved:
         import numpy as np
@@ -177,6 +179,7 @@ def main(argv=None) -> int:
         help="--slice: bound of |dq2/dt| (0: frozen loops; -1: dq2/dt = qdot2 exactly)",
     )
     ap.add_argument("--save-x", default=None, metavar="FILE.npz", help="save the proved X(rho) of the (last) run")
+    ap.add_argument("--level", type=float, default=None, help="fix gamma there and maximise the LMIs' margin")
     args = ap.parse_args(argv)
     points = tuple(int(x) for x in args.points.split(","))
     recheck = None if args.recheck == "none" else tuple(int(x) for x in args.recheck.split(","))
@@ -205,6 +208,7 @@ def main(argv=None) -> int:
                 recheck=recheck,
                 harmonics=int(args.harmonics.split(",")[0]),
                 save_x=args.save_x,
+                level=args.level,
             )
         )
     doc["load_average_end"] = list(os.getloadavg())

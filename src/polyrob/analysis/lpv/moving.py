@@ -99,7 +99,7 @@ def moving_robot_gain(
     )[0]
 
 
-def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: bool, harmonics: int = 1):
+def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: bool, harmonics: int = 1, level=None):
     """``(result, the system it was run on, its time scale, the basis or None, the rates)``."""
     from polyrob.analysis.lpv.basis import default_basis
     from polyrob.analysis.lpv.norm import lpvnorm
@@ -115,7 +115,7 @@ def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: b
     fast = all(not np.isfinite(hi) for _, hi in rates)
     c_sys = []
     try:  # the conditioned copy first: in the loop's own coordinates the solver stalls (docs/certificates.md)
-        c_sys.append((*conditioned(system, centre), {"eps": 1e-4}))
+        c_sys.append((*conditioned(system, centre), {"eps": 1e-4, "level": level}))
     except NotApplicable:
         pass
     c = conditioned_time_scale(system, centre)
@@ -124,7 +124,7 @@ def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: b
         a, b, cc, d = system(rho)
         return a / c, b / c, cc, d
 
-    c_sys.append((time_scaled, c, {}))
+    c_sys.append((time_scaled, c, {"level": level}))
     best = None
     for sysf, cs, options in c_sys:
         args = (None, None) if fast else ([(lo / cs, hi / cs) for lo, hi in rates], basis)
@@ -163,6 +163,7 @@ def moving_robot_certificate(
     tensor: bool = True,
     harmonics: int = 1,
     recheck=RECHECK_POINTS,
+    level=None,
 ) -> MovingRobotCertificate:
     """The moving-robot certificate of ``K`` on ``problem`` (its robot, domain and weights).
 
@@ -194,6 +195,10 @@ def moving_robot_certificate(
         The finer grid the returned ``X`` is re-checked on
         (:func:`~polyrob.analysis.lpv.basis.finer_recheck`; sampled, the
         status stays GRID_ONLY); ``None``: not re-checked.
+    level : float, optional
+        Fix the solver's ``gamma`` there and maximise the LMIs' margin
+        (:func:`polyrob.lpvnorm`'s option): an ``X`` well inside the feasible
+        set, which a check between the grid points needs.
 
     Returns
     -------
@@ -227,8 +232,9 @@ def moving_robot_certificate(
         if mode == "arbitrary" and not np.isinf(rate_scale):
             rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
         result, sysf, cs, basis, used = _search(
-            model, system, rates, quadratic=quadratic, velocities=mode, tensor=tensor, harmonics=harmonics
-        )
+            model, system, rates, quadratic=quadratic, velocities=mode, tensor=tensor, harmonics=harmonics,
+            level=level,
+        )  # fmt: skip
         finer = {} if recheck is None else finer_recheck(sysf, model, result, used, basis, points=recheck, c=cs)
     except NotApplicable as exc:
         return MovingRobotCertificate.not_computed(str(exc))

@@ -60,6 +60,7 @@ OPTIONS = {
     "x_factor": None,
     "settings": None,
     "rates_at": None,
+    "level": None,
 }
 
 
@@ -129,13 +130,14 @@ def orthonormal_basis(F: np.ndarray) -> np.ndarray:
 
 
 def solve_lmis(data: GridData, *, x_bounds=(1e-6, 1e6), eps: float = 1e-7, curvature=None, solver="clarabel",
-               x_factor=None, settings=None):  # fmt: skip
+               x_factor=None, settings=None, level=None):  # fmt: skip
     """Minimise ``gamma`` subject to the bounded-real LMIs at every grid point and rate vertex.
 
     ``solver="cvxpy"`` builds them with cvxpy (solved by Clarabel); otherwise
     :func:`polyrob.analysis.lpv.assemble.solve_direct` (``x_factor`` and
     ``settings`` are passed to it and ignored by the cvxpy route, which keeps
-    ``X_j`` full).
+    ``X_j`` full); ``level``: ``gamma`` fixed there, the LMIs' margin maximised
+    (direct route only).
 
     Parameters
     ----------
@@ -163,7 +165,7 @@ def solve_lmis(data: GridData, *, x_bounds=(1e-6, 1e6), eps: float = 1e-7, curva
     """
     if solver != "cvxpy":
         return solve_direct(data, x_bounds=x_bounds, eps=eps, curvature=curvature, x_factor=x_factor,
-                            solver=solver, settings=settings)  # fmt: skip
+                            solver=solver, settings=settings, level=level)  # fmt: skip
     import cvxpy as cp
 
     A, B, C, D, F, G = data.A, data.B, data.C, data.D, data.F, data.G
@@ -210,16 +212,7 @@ def solve_lmis(data: GridData, *, x_bounds=(1e-6, 1e6), eps: float = 1e-7, curva
 
 
 def frozen_peak(data: GridData) -> float:
-    """Largest LTI H-infinity norm over the grid points (``inf`` when one frozen system is unstable).
-
-    Parameters
-    ----------
-    data : GridData
-
-    Returns
-    -------
-    float
-    """
+    """Largest LTI H-infinity norm over the grid points of ``data`` (``inf`` when one frozen system is unstable)."""
     from polyrob.analysis.norms import hinf_norm  # the project's one H∞ norm (inf when unstable)
 
     peak = 0.0
@@ -238,6 +231,8 @@ def _options(options: dict) -> dict:
     lo, hi = opts["x_bounds"]
     if not (0 < lo < hi):
         raise ArgumentError(f"lpvnorm: x_bounds must satisfy 0 < lo < hi (got {opts['x_bounds']})")
+    if opts["level"] is not None and (opts["solver"] == "cvxpy" or not opts["level"] > 0):
+        raise ArgumentError(f"lpvnorm: level must be positive, with solver 'clarabel' or 'scs' (got {opts['level']})")
     return opts
 
 
@@ -275,7 +270,9 @@ def lpvnorm(system, grid, rate_bounds=None, basis=None, **options) -> LpvNormRes
         (a smaller search, e.g. the states whose equations depend on ``rho``);
         ``rates_at`` (None): ``rho -> p pairs (lo, hi)``, the rate box at
         each grid point, inside ``rate_bounds`` (e.g. ``dq/dt = qdot``
-        exactly when both are parameters).
+        exactly when both are parameters); ``level`` (None): fix the solver's
+        ``gamma`` there and maximise the LMIs' margin (an ``X`` well inside
+        the feasible set, for a check between the grid points).
 
     Returns
     -------
@@ -335,10 +332,12 @@ def lpvnorm(system, grid, rate_bounds=None, basis=None, **options) -> LpvNormRes
     L = None if opts["x_factor"] is None else np.atleast_2d(np.asarray(opts["x_factor"], float)) * s[None, :]
     Zs, g_solver, status = solve_lmis(
         cond, x_bounds=opts["x_bounds"], eps=opts["eps"], curvature=aff, x_factor=L,
-        solver=opts["solver"], settings=opts["settings"],
+        solver=opts["solver"], settings=opts["settings"], level=opts["level"],
     )  # fmt: skip
     gamma, chk, Xs_user, slack = float("inf"), None, (), 0.0
-    if opts["solver"] != "cvxpy" and np.isfinite(g_solver) and g_solver > 0:
+    if opts["level"] is not None:
+        notes.append(f"X from the LMIs at gamma = {opts['level']:.6g} fixed, margin maximised")
+    elif opts["solver"] != "cvxpy" and np.isfinite(g_solver) and g_solver > 0:
         Zs = backed_off(cond, data, T, Zs, g_solver, opts, L, aff, notes)
     if Zs is not None:
         Xs = np.einsum("jl,lab->jab", T, Zs)  # back to the user's basis (balanced coordinates)
