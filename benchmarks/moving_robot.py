@@ -59,7 +59,7 @@ def run(
     points,
     full: bool,
     tensor: bool = True,
-    recheck=(9, 5),
+    recheck="auto",
     harmonics=1,
     save_x=None,
     level=None,
@@ -168,7 +168,9 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--separable", action="store_true", help="X on 1, cos q2, sin q2, qdot1, qdot2 (not the tensor basis)"
     )
-    ap.add_argument("--recheck", default="9,5", help="finer grid the X is re-checked on ('none': not re-checked)")
+    ap.add_argument(
+        "--recheck", default="auto", help="finer grid the X is re-checked on ('none': not re-checked; 'auto': 4 x, 2 x)"
+    )
     ap.add_argument("--slice", default=None, metavar="QDOT1,QDOT2", help="only position_slice() at this velocity")
     ap.add_argument("--harmonics", default="1", help="harmonics of X in q2 (--slice: a comma-separated list)")
     ap.add_argument("--q-points", type=int, default=12, help="--slice: points of q2 in [-pi, pi)")
@@ -182,7 +184,7 @@ def main(argv=None) -> int:
     ap.add_argument("--level", type=float, default=None, help="fix gamma there and maximise the LMIs' margin")
     args = ap.parse_args(argv)
     points = tuple(int(x) for x in args.points.split(","))
-    recheck = None if args.recheck == "none" else tuple(int(x) for x in args.recheck.split(","))
+    recheck = {"none": None, "auto": "auto"}.get(args.recheck) or tuple(int(x) for x in args.recheck.split(","))
     doc = {
         "problem": "paper_2r --domain paper",
         "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),

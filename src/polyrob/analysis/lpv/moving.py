@@ -52,8 +52,10 @@ __all__ = ["MovingRobotCertificate", "moving_robot_certificate", "moving_robot_g
 MAX_STATES = 40
 #: Largest ``X(rho)`` (scalar variables) searched with bounded accelerations by default (``velocities="auto"``).
 BOUNDED_VARIABLES = 600
-#: The finer grid (points per position, per velocity) the returned ``X`` is re-checked on.
-RECHECK_POINTS = (9, 5)
+#: The finer grid the returned ``X`` is re-checked on: this many times as many intervals per position, per
+#: velocity as the search's grid (every axis finer: a position grid of the search's size would leave its
+#: intervals unchecked, and the Jacobians vary most along the positions).
+RECHECK_REFINE = (4, 2)
 #: Largest closed loop computed by default (``moving=None``): measured cost in docs/certificates.md.
 AUTO_STATES = 8
 
@@ -162,8 +164,11 @@ def moving_robot_certificate(
     velocities: str = "auto",
     tensor: bool = True,
     harmonics: int = 1,
-    recheck=RECHECK_POINTS,
+    recheck="auto",
     level=None,
+    cells: bool = False,
+    cell_time_limit: float = 900.0,
+    progress: bool = False,
 ) -> MovingRobotCertificate:
     """The moving-robot certificate of ``K`` on ``problem`` (its robot, domain and weights).
 
@@ -191,14 +196,20 @@ def moving_robot_certificate(
         The tensor-product basis of ``X`` (:func:`~polyrob.analysis.lpv.basis.default_basis`).
     harmonics : int
         ``cos k q_i, sin k q_i`` for ``k <= harmonics`` in that basis.
-    recheck : (int, int) or None
-        The finer grid the returned ``X`` is re-checked on
-        (:func:`~polyrob.analysis.lpv.basis.finer_recheck`; sampled, the
-        status stays GRID_ONLY); ``None``: not re-checked.
+    recheck : "auto", (int, int) or None
+        The finer grid (points per position, per velocity) the returned ``X``
+        is re-checked on (:func:`~polyrob.analysis.lpv.basis.finer_recheck`;
+        sampled, the status stays GRID_ONLY); ``"auto"``: :data:`RECHECK_REFINE`
+        times the search grid's intervals (at least 5 points per velocity); ``None``: not re-checked.
     level : float, optional
         Fix the solver's ``gamma`` there and maximise the LMIs' margin
         (:func:`polyrob.lpvnorm`'s option): an ``X`` well inside the feasible
         set, which a check between the grid points needs.
+    cells : bool
+        Prove the returned ``X`` between the grid points, on cells covering the
+        whole box (:func:`~polyrob.analysis.lpv.cells.check_cells`, at ``level``
+        or else halfway from the grid's bound to 1), within ``cell_time_limit`` seconds
+        (``progress``: a bar); when it holds the status is CERTIFIED.
 
     Returns
     -------
@@ -235,13 +246,30 @@ def moving_robot_certificate(
             model, system, rates, quadratic=quadratic, velocities=mode, tensor=tensor, harmonics=harmonics,
             level=level,
         )  # fmt: skip
+        if isinstance(recheck, str):
+            recheck = (RECHECK_REFINE[0] * (points[0] - 1) + 1, max(5, RECHECK_REFINE[1] * (points[1] - 1) + 1))
         finer = {} if recheck is None else finer_recheck(sysf, model, result, used, basis, points=recheck, c=cs)
+        between = {}
+        g_grid = max(result.gamma, finer.get("gamma", result.gamma))
+        if cells and result.proved and g_grid < 1:
+            from polyrob.analysis.lpv.cells import check_cells
+
+            # the search's level, else halfway from the grid's bound to 1: room between the points, and a bound < 1
+            g_cells = float(level) if level is not None and level >= g_grid else 0.5 * (g_grid + 1.0)
+            between = check_cells(model, system, result.X, basis, used, g_cells, similarity=getattr(sysf, "similarity",
+                                  None), c=cs, time_limit=cell_time_limit, progress=progress).summary()  # fmt: skip
     except NotApplicable as exc:
         return MovingRobotCertificate.not_computed(str(exc))
     base = problem.scope() if hasattr(problem, "scope") else Scope()
     words = rate_words(model.names, rates, source)
     again = f" and the same X re-checked at the {finer['points']} points of a finer grid" if finer.get("points") else ""
-    notes = (f"on the grid of {model.words()}{again}; not proved between the grid points",)
+    if between.get("holds"):
+        notes = (f"the LMIs on the grid of {model.words()}{again}, and the same X proved between the grid points: "
+                 f"{between['cells']} cells covering the whole box (guaranteed enclosures of the Jacobians over each, "
+                 f"the robot's accelerations proved <= {', '.join(f'{a:.4g}' for a in between['accelerations'])})",)  # fmt: skip
+    else:
+        why_not = f" ({between['reason']})" if between else ""
+        notes = (f"on the grid of {model.words()}{again}; not proved between the grid points{why_not}",)
     notes += (
         tuple(result.notes)
         + (
@@ -258,7 +286,7 @@ def moving_robot_certificate(
         model="",
         coverage=None,
         coverage_points=0,
-        enclosure="sampled",
+        enclosure="proved" if between.get("holds") else "sampled",
         vertices_from="",
         notes=notes,
     )
@@ -268,6 +296,8 @@ def moving_robot_certificate(
         if not np.isfinite(gamma):
             why = (f"the X proved on the {model.n_points}-point grid fails on the finer grid of {finer['points']} "
                    f"points: {finer.get('reason', '')}",)  # fmt: skip
+    if between.get("holds"):
+        gamma = float(between["gamma"])  # proved on the whole box: the number the verdict rests on
     return MovingRobotCertificate(
         computed=True,
         gamma=gamma,
@@ -279,5 +309,6 @@ def moving_robot_certificate(
         scope=scope,
         notes=why,
         finer=finer,
+        cells=between,
         seconds=time.perf_counter() - t0,
     )

@@ -56,6 +56,9 @@ class MovingRobotCertificate:
         The returned ``X`` re-checked on a finer grid
         (:func:`~polyrob.analysis.lpv.basis.finer_recheck`: ``points``,
         ``gamma``, ``holds_at_gamma``); empty when not re-checked.
+    cells : dict
+        The same ``X`` proved between the grid points
+        (:meth:`polyrob.analysis.lpv.cells.CellCheck.summary`); empty when not tried.
     seconds : float
     decided : Certificate or None
         The certificate when another test decided it (μ, :mod:`polyrob.analysis.lpv.constant`).
@@ -74,6 +77,7 @@ class MovingRobotCertificate:
     scope: object = None
     notes: tuple = ()
     finer: dict = field(default_factory=dict)
+    cells: dict = field(default_factory=dict)
     seconds: float = 0.0
     decided: object = None
 
@@ -91,7 +95,7 @@ class MovingRobotCertificate:
             return self.decided
         r = self.result
         proved = bool(r is not None and r.proved and np.isfinite(self.gamma))
-        between = proved and not str(r.coverage).startswith("on the grid")
+        between = proved and (not str(r.coverage).startswith("on the grid") or bool(self.cells.get("holds")))
         why = "" if proved else (self.notes[-1] if self.notes else (r.reason if r is not None else ""))
         status, reasons = decide_gridded_gain(proved, self.gamma, between, why)
         scope = replace(self.scope or Scope(), kind="robust performance", frequencies="")
@@ -123,6 +127,13 @@ class MovingRobotCertificate:
                 f"the same X re-checked on a finer grid of {f['points']} points (sampled, not between them): "
                 + (f"bound {f['gamma']:.4g}" if np.isfinite(f["gamma"]) else f"no bound ({f.get('reason', '')})")
             )
+        if self.cells:
+            c = self.cells
+            lines.append(
+                f"between the grid points: proved at level {c['gamma']:.4g} on {c['cells']} cells ({c['seconds']:.0f} s)"
+                if c["holds"]
+                else f"between the grid points: not proved ({c['reason']})"
+            )
         return "\n".join(lines)
 
     def summary(self) -> dict:
@@ -145,6 +156,7 @@ class MovingRobotCertificate:
             "scope": None if cert is None else cert.scope.summary(),
             "notes": list(self.notes),
             "finer_grid": {k: finite_or_none(v) if isinstance(v, float) else v for k, v in self.finer.items()},
+            "cells": dict(self.cells),
             "seconds": round(float(self.seconds), 3),
             "verdict": self.verdict,
         }

@@ -271,10 +271,13 @@ def closed_loop_system(model: MovingRobotModel, K, W_S=None, W_T=None, W_KS=None
 
     Kmats = controller_mats(K, model.robot.m)
 
-    def system(rho):
-        mats = performance_vertices(vertex_set([model.plant(rho)]), Kmats, W_S, W_T, W_KS)
-        return tuple(x[0] for x in mats)
+    def of_plant(A, B):
+        return tuple(x[0] for x in performance_vertices(vertex_set([(A, B)]), Kmats, W_S, W_T, W_KS))
 
+    def system(rho):
+        return of_plant(*model.plant(rho))
+
+    system.of_plant = of_plant  # (A, B) of the robot -> the closed loop: affine (the check between points uses it)
     return system
 
 

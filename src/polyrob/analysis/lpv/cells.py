@@ -1,0 +1,422 @@
+"""Between the grid points of the moving robot: the bounded-real LMIs proved on every cell of the state box.
+
+The moving-robot search (:mod:`polyrob.analysis.lpv.moving`) proves its
+``X(rho)`` at grid points.  Here the same ``X`` is proved on the whole box of
+``rho`` by cells: for a cell with centre ``rho_c`` and every vertex ``nu`` of
+its rate box,
+
+.. math:: \\lambda_{max} M(\\rho, \\nu) \\le \\lambda_{max} M(\\rho_c, \\nu) + \\|M(\\rho, \\nu) - M(\\rho_c, \\nu)\\|
+
+for every ``rho`` in the cell, and the norm is bounded from guaranteed
+enclosures over the cell (:func:`polyrob.bounds.certified.analytic.analytic_jacobian_enclosure`
+for the robot's ``A, B``, :class:`~polyrob.bounds.certified.analytic.Jet`
+balls for the basis functions and their gradients):
+
+* the closed loop is affine in the robot's ``(A, B)``, so
+  ``A_cl(rho) = A_cl(rho_c) + sum_e t_e G_e`` with ``|t_e| <= r_e`` the
+  enclosure's distance from the centre value of entry ``e`` and ``G_e`` the
+  loop's response to a unit change of that entry;
+* ``||X A_cl - X_c A_c|| <= sum_e r_e ||X_c G_e|| + dX (||A_c|| + sum_e r_e ||G_e||)``
+  with ``dX = sum_j |f_j(rho) - f_j(rho_c)| ||X_j||`` (and likewise for
+  ``X B``, ``C``, ``D`` and the rate term ``sum_i nu_i dX/drho_i``, whose
+  ``nu_i = qdot_j`` for a position moves with the cell);
+* ``X(rho) > 0`` from ``lambda_min X_c - dX``.
+
+A cell that fails is bisected along the coordinate whose halves do best;
+the check holds when every leaf passes.  Each leaf also proves that the
+robot's accelerations there lie inside the rate bounds the ``X`` was built
+for, so the bound covers every trajectory of the linearised robot in the box
+(a sampled acceleration bound becomes a proved one, or the cell fails).
+
+Examples
+--------
+>>> c = CellCheck(True, 0.99, 120, 0.01, (1.0, 2.0), "", 3.0)
+>>> c.words()
+'proved on 120 cells covering the whole box at level 0.99 (accelerations proved <= 1, 2)'
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from polyrob.analysis.lpv.check import GridData, brl_matrices
+
+__all__ = ["CellCheck", "check_cells", "plant_enclosure"]
+
+_U = np.finfo(float).eps
+
+
+@dataclass(frozen=True)
+class CellCheck:
+    """The outcome of :func:`check_cells`.
+
+    Attributes
+    ----------
+    holds : bool
+        Every leaf cell passed: the LMIs hold on the whole box at ``gamma``.
+    gamma : float
+        The level checked.
+    n_cells : int
+        Leaf cells proved (all of them when ``holds``).
+    smallest_margin : float
+        Smallest proved margin ``-(lambda_max + bound)`` over the leaves.
+    accelerations : tuple of float
+        Proved bound of ``|qddot_j|`` over the box (the largest over the leaves).
+    reason : str
+        Why it does not hold.
+    seconds : float
+    """
+
+    holds: bool
+    gamma: float
+    n_cells: int
+    smallest_margin: float
+    accelerations: tuple
+    reason: str
+    seconds: float
+
+    def words(self) -> str:
+        if not self.holds:
+            return f"not proved between the grid points ({self.reason})"
+        acc = ", ".join(f"{a:.4g}" for a in self.accelerations)
+        return f"proved on {self.n_cells} cells covering the whole box at level {self.gamma:.4g}" + (
+            f" (accelerations proved <= {acc})" if acc else ""
+        )
+
+    def summary(self) -> dict:
+        from polyrob.analysis.scope import finite_or_none
+
+        return {
+            "holds": self.holds,
+            "gamma": finite_or_none(self.gamma),
+            "cells": self.n_cells,
+            "smallest_margin": finite_or_none(self.smallest_margin),
+            "accelerations": [finite_or_none(a) for a in self.accelerations],
+            "reason": self.reason,
+            "seconds": round(self.seconds, 1),
+        }
+
+
+def plant_enclosure(model):
+    """``(lo, hi) box of rho -> enclosure`` of the robot's ``A, B, qddot`` over it, or ``None`` when unavailable."""
+    from polyrob.model.analytic import AnalyticRobot
+
+    if not isinstance(model.robot, AnalyticRobot):
+        return None
+    from polyrob.bounds.certified.analytic import analytic_jacobian_enclosure
+
+    def enclose(lo, hi):
+        (ql, vl), (qh, vh) = model.state(lo), model.state(hi)
+        return analytic_jacobian_enclosure(model.robot, ql, qh, vl, vh, model.u)
+
+    return enclose
+
+
+def _basis_balls(basis, lo, hi):
+    """Enclosures ``(f_lo, f_hi) (k,)`` and ``(g_lo, g_hi) (k, p)`` of the basis and its gradients over a box."""
+    from flint import arb
+
+    from polyrob.bounds.certified.analytic import Jet
+    from polyrob.bounds.certified.balls import arb_lower, arb_upper, ball
+
+    p = len(lo)
+    unit = [tuple(arb(1.0 if i == j else 0.0) for j in range(p)) for i in range(p)]
+    rho = np.array([Jet(ball(lo[i], hi[i]), unit[i]) for i in range(p)], dtype=object)
+    k = len(basis)
+    f = np.zeros((2, k))
+    g = np.zeros((2, k, p))
+    for j, (fn, _) in enumerate(basis):
+        v = fn(rho)
+        if isinstance(v, Jet):
+            f[:, j] = arb_lower(v.value), arb_upper(v.value)
+            g[0, j] = [arb_lower(x) for x in v.grad]
+            g[1, j] = [arb_upper(x) for x in v.grad]
+        else:  # a constant function
+            f[:, j] = float(v)
+    return f, g
+
+
+def _dist(lo, hi, c):
+    """Largest distance of ``[lo, hi]`` from ``c``, rounded up."""
+    d = np.maximum(hi - c, c - lo)
+    return np.maximum(d, 0.0) * (1 + 4 * _U) + 4 * np.finfo(float).tiny
+
+
+class _Loop:
+    """The conditioned, balanced closed loop as an affine function of the robot's varying ``(A, B)`` entries."""
+
+    def __init__(self, of_plant, T, c, sc, A0, B0):
+        Ti = np.linalg.inv(T)
+        self.T, self.Ti, self.c, self.sc = T, Ti, c, sc
+        self.base = self._cond(*of_plant(A0, B0))
+        m2 = A0.shape[0]
+        m = m2 // 2
+        self.entries = [("A", i, j) for i in range(m, m2) for j in range(m2)] + [
+            ("B", i, j) for i in range(m, m2) for j in range(B0.shape[1])
+        ]
+        G = []
+        for kind, i, j in self.entries:
+            A1, B1 = A0.copy(), B0.copy()
+            (A1 if kind == "A" else B1)[i, j] += 1.0
+            one = self._cond(*of_plant(A1, B1))
+            A2, B2 = A0.copy(), B0.copy()
+            (A2 if kind == "A" else B2)[i, j] += 2.0
+            two = self._cond(*of_plant(A2, B2))
+            d1 = [x - y for x, y in zip(one, self.base)]
+            d2 = [x - y for x, y in zip(two, self.base)]
+            if any(np.abs(b - 2 * a).max() > 1e-8 * (1 + np.abs(b).max()) for a, b in zip(d1, d2)):
+                raise ValueError("the closed loop is not affine in the robot's Jacobians")
+            G.append(d1)
+        self.G = G
+        self.of_plant = of_plant
+        # x = T x~ with Ti only a float inverse of T: the loop certified is the one these matrices define
+        self.inverse_error = float(np.linalg.norm(Ti @ T - np.eye(T.shape[0]), 2))
+
+    def _cond(self, A, B, C, D):
+        A = self.Ti @ (A / self.c) @ self.T
+        B = self.Ti @ (B / self.c)
+        C = C @ self.T
+        s = self.sc
+        return A / s[:, None] * s[None, :], B / s[:, None], C * s[None, :], D
+
+    def at(self, Ap, Bp):
+        return self._cond(*self.of_plant(Ap, Bp))
+
+
+def _norms(stack) -> np.ndarray:
+    """Spectral norms of a stack of matrices (float SVD: the caller rounds the sum up)."""
+    return np.linalg.norm(stack, 2, axis=(-2, -1)) if len(stack) else np.zeros(0)
+
+
+def _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
+    """``(margin, why)`` of one cell: ``margin > 0`` proves it (dimensionless, at most 1)."""
+    ctr, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    Ap, Bp = model.plant(ctr)
+    enc = enclose(lo, hi)
+    A, B, C, D = loop.at(Ap, Bp)
+    n, m, q = A.shape[0], B.shape[1], C.shape[0]
+    s = n + m + q
+    mm = model.robot.m
+    xcol = [j if kind == "q" else mm + j for kind, j in zip(model.kinds, model.joints)]  # rho_i is x[xcol[i]]
+    # mean value form: P_e(rho) - P_e(rho_c) = sum_i delta_i dP_e/drho_i(xi), |delta_i| <= half_i
+    P = {"A": (Ap, enc.dA_lo, enc.dA_hi), "B": (Bp, enc.dB_lo, enc.dB_hi)}
+    dlo = np.array([[P[kd][1][i, j, x] for kd, i, j in loop.entries] for x in xcol])  # (p, E)
+    dhi = np.array([[P[kd][2][i, j, x] for kd, i, j in loop.entries] for x in xcol])
+    dmid, drad = 0.5 * (dlo + dhi), 0.5 * (dhi - dlo) * (1 + 4 * _U)
+    eps = 1e-13 * (1 + np.abs([P[kd][0][i, j] for kd, i, j in loop.entries]))  # the centre's own rounding
+    f_c = np.array([float(fn(ctr)) for fn, _ in basis])
+    g_c = np.array([np.asarray(gr(ctr), float) for _, gr in basis])
+    fb, gb = _basis_balls(basis, lo, hi)
+    df = _dist(fb[0], fb[1], f_c)  # |f_j(rho) - f_j(rho_c)|
+    dg = _dist(gb[0], gb[1], g_c)  # |df_j/drho_i (rho) - df_j/drho_i (rho_c)|, (k, p)
+    gmid, grad = 0.5 * (gb[0] + gb[1]), 0.5 * (gb[1] - gb[0]) * (1 + 4 * _U)  # df_j/drho_i over the cell
+    X = np.einsum("k,kij->ij", f_c, Xs)
+    Dx = np.einsum("kp,kij->pij", gmid, Xs)  # X(rho) - X_c = sum_i delta_i (Dx_i + sum_j grad_ji theta X_j)
+    # the change of M for a unit change of entry e at X_c (S_e), and of Z = [A B 0] (Z_e): M is affine in them
+    GA, GB, GC, GD = (np.array([g[t] for g in loop.G]) for t in range(4))
+    XA, XB = X @ GA, X @ GB
+    S, Z = np.zeros((len(GA), s, s)), np.zeros((len(GA), n, s))
+    S[:, :n, :n] = XA + np.transpose(XA, (0, 2, 1))
+    S[:, :n, n : n + m], S[:, n + m :, :n], S[:, n + m :, n : n + m] = XB, GC, GD
+    S[:, n : n + m, :n] = np.transpose(XB, (0, 2, 1))
+    S[:, :n, n + m :], S[:, n : n + m, n + m :] = np.transpose(GC, (0, 2, 1)), np.transpose(GD, (0, 2, 1))
+    Z[:, :, :n], Z[:, :, n : n + m] = GA, GB
+    Si, Zi = np.einsum("pe,eij->pij", dmid, S), np.einsum("pe,eij->pij", dmid, Z)  # along each rho_i
+    Zc = np.zeros((n, s))
+    Zc[:, :n], Zc[:, n : n + m] = A, B
+    rc = np.array(rates_at(ctr), float)  # (p, 2)
+    free = ~np.isfinite(rc).all(axis=1)  # a coordinate moving arbitrarily fast: X must not depend on it
+    if np.any(gb[:, :, free]):
+        return -1.0, "X depends on a parameter whose rate is unbounded"
+    rc[free] = 0.0
+    rl, rh = np.array(rates_at(lo), float), np.array(rates_at(hi), float)
+    rl[free], rh[free] = 0.0, 0.0
+    fixed = rc[:, 0] == rc[:, 1]  # a position's rate is its velocity: it moves over the cell
+    drate = np.where(fixed, np.maximum(np.abs(rl[:, 0] - rc[:, 0]), np.abs(rh[:, 0] - rc[:, 0])), 0.0)
+    nus = np.array(np.meshgrid(*[np.unique(x) for x in rc], indexing="ij")).reshape(len(lo), -1).T
+    data = GridData(A[None], B[None], C[None], D[None], f_c[None], g_c[None], nus[None], ctr[None])
+    M, err, _, scale = brl_matrices(data, Xs, gamma)
+    worst = np.inf
+    for v, nu in enumerate(nus):
+        # congruence by W = (-M_c)^(-1/2): M < 0 iff W M W < 0, and W M_c W = -I; each change is weighed by W,
+        # so directions where M_c is very negative absorb large changes (a plain norm bound would not)
+        mu, V = np.linalg.eigh(-M[0, v])
+        if mu[0] <= err[0, v]:
+            return -1.0, "LMI not negative at the cell's centre"
+        W = (V * mu**-0.5) @ V.T
+        WE, ZcW = W[:, :n], Zc @ W
+        lam = np.linalg.eigvalsh(W @ M[0, v] @ W)[-1] + (err[0, v] + 8 * s * _U * np.linalg.norm(M[0, v])) / mu[0]
+        nS, nSi = _norms(W @ S @ W), _norms(W @ Si @ W)
+        nZ, nZi = _norms(Z @ W), _norms(Zi @ W)
+        b_plant = half @ (nSi + drad @ nS) + eps @ nS
+        dZW = half @ (nZi + drad @ nZ) + eps @ nZ  # ||(Z(rho) - Z_c) W||
+        WX, WD = WE @ Xs, WE @ Dx  # (k, s, n), (p, s, n)
+        heX = _norms(WX @ ZcW + np.transpose(WX @ ZcW, (0, 2, 1)))
+        heD = _norms(WD @ ZcW + np.transpose(WD @ ZcW, (0, 2, 1)))
+        b_x = half @ (heD + grad.T @ heX) + 2 * (df @ _norms(WX)) * dZW
+        # the rate term's change: sum_i (nu_i d(df_j/drho_i) + dnu_i df_j/drho_i) X_j
+        c_rate = dg @ np.abs(nu) + (np.abs(g_c) + dg) @ drate
+        b_rate = c_rate @ _norms(WX @ WE.T)
+        nWE = _norms(WE[None])[0]
+        b_inv = 2 * loop.inverse_error * nWE**2 * _norms(X[None])[0] * (_norms(A[None])[0] + _norms(B[None])[0])
+        worst = min(worst, -(lam + (b_plant + b_x + b_rate + b_inv) * (1 + 1e-9)))  # float norms: a little up
+    lx, Vx = np.linalg.eigh(X)
+    if lx[0] <= 8.0 * (n + len(basis) + 2) * _U * scale[0]:
+        return -1.0, "X(rho) not positive definite at the cell's centre"
+    Wx = (Vx * lx**-0.5) @ Vx.T  # X(rho) > 0 iff I + Wx (X(rho) - X_c) Wx > 0
+    pos = 1.0 - df @ _norms(Wx @ Xs @ Wx) * (1 + 1e-9) - 8.0 * (n + len(basis) + 2) * _U * scale[0] / lx[0]
+    margin = min(worst, pos)
+    why = ""
+    if pos <= 0:
+        why = "X(rho) not proved positive definite there"
+    elif worst <= 0:
+        why = "LMI not proved negative there"
+    return float(margin), why
+
+
+def _bisect(queue, evaluate, lo, hi, width0, min_width):
+    """Split ``[lo, hi]`` along the coordinate whose worse half does best; queue both halves (evaluated)."""
+    best, rel = None, (hi - lo) / width0
+    for i in range(len(lo)):  # among the relatively widest coordinates, so that every one shrinks in turn
+        if hi[i] == lo[i] or rel[i] < min_width or rel[i] < 0.5 * rel.max():
+            continue
+        h1, l2 = hi.copy(), lo.copy()
+        h1[i] = l2[i] = 0.5 * (lo[i] + hi[i])
+        a, b = evaluate(lo, h1), evaluate(l2, hi)
+        if best is None or min(a[0], b[0]) > best[0]:
+            best = (min(a[0], b[0]), (lo, h1, a), (l2, hi, b))
+    if best is None:
+        return False
+    queue.extend(best[1:])
+    return True
+
+
+def _branch(boxes, evaluate, width0, *, min_width, max_boxes, deadline, bar=None):
+    """Branch and bound: ``(True, leaves' values, "")`` when every leaf has a positive margin, else ``(False, ..., why)``."""
+    queue, leaves = deque((lo, hi, None) for lo, hi in boxes), []
+    while queue:
+        lo, hi, known = queue.popleft()
+        value = known if known is not None else evaluate(lo, hi)
+        if value[0] > 0:
+            leaves.append(value)
+            if bar is not None:
+                bar.update(1)
+            continue
+        if len(leaves) + len(queue) >= max_boxes or time.perf_counter() > deadline:
+            return False, leaves, f"gave up after {len(leaves)} cells: {value[-1]} at rho in {_box(lo, hi)}"
+        if not _bisect(queue, evaluate, lo, hi, width0, min_width):
+            return False, leaves, f"{value[-1]} at rho in {_box(lo, hi)} (a cell at the smallest width)"
+        if bar is not None:
+            bar.total += 1
+            bar.refresh()
+    return True, leaves, ""
+
+
+def _accelerations(enclose, bounds):
+    """``box -> (relative margin, |qddot| bound, why)``: the robot's accelerations inside ``bounds`` there."""
+    fin = np.isfinite(bounds)
+
+    def evaluate(lo, hi):
+        enc = enclose(lo, hi)
+        qdd = np.maximum(np.abs(enc.qddot_lo), np.abs(enc.qddot_hi))
+        margin = float(np.min((bounds[fin] - qdd[fin]) / bounds[fin])) if np.any(fin) else 1.0
+        return margin, qdd, "the robot's accelerations may exceed the rate bounds"
+
+    return evaluate
+
+
+def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.0, cells=None, max_cells=200_000,
+                time_limit=900.0, min_width=1e-6, progress=False) -> CellCheck:  # fmt: skip
+    """Prove the bounded-real LMIs of ``X(rho) = sum_j f_j(rho) X_j`` at level ``gamma`` on the whole box of ``rho``.
+
+    Parameters
+    ----------
+    model : MovingRobotModel
+    system : callable
+        :func:`~polyrob.analysis.lpv.robot.closed_loop_system` (its ``of_plant``).
+    Xs : sequence of ndarray
+        ``X_j`` in the coordinates of the loop the search ran on, ``x = T x~``
+        and time scaled by ``c`` (:func:`~polyrob.analysis.lpv.robot.conditioned`).
+    basis : sequence of (f, grad)
+        The functions ``f_j``; each must evaluate on :class:`~polyrob.bounds.certified.analytic.Jet` arrays.
+    rates : sequence of (float, float)
+        The rate bounds in physical time (a position's rate is its velocity).
+    gamma : float
+    similarity : ndarray, optional
+        ``T`` (default: the identity).
+    c : float
+        The time scale.
+    cells : sequence of int, optional
+        Initial cells per coordinate (default: the model's grid).
+    max_cells, time_limit, min_width
+        Give up past that many cells, seconds, or a cell narrower than
+        ``min_width`` times its coordinate's range.
+    progress : bool
+        A tqdm bar (cells proved / cells known).
+
+    Returns
+    -------
+    CellCheck
+    """
+    from polyrob.analysis.lpv.norm import state_scaling
+    from polyrob.analysis.lpv.robot import kinematic_rates
+
+    t0 = time.perf_counter()
+    if basis is None:  # a constant X (arbitrarily fast variation)
+        basis = [(lambda r: 1.0, lambda r: np.zeros(len(model.names)))]
+    enclose = plant_enclosure(model)
+    if enclose is None:
+        return CellCheck(False, gamma, 0, -np.inf, (), f"no guaranteed enclosure for {model.robot.name}", 0.0)
+    lo0 = np.array([a[0] for a in model.axes], float)
+    hi0 = np.array([a[-1] for a in model.axes], float)
+    sizes = [a.size - 1 for a in model.axes] if cells is None else list(cells)
+    edges = [np.linspace(lo0[i], hi0[i], max(1, sizes[i]) + 1) for i in range(len(lo0))]
+    A0, B0 = model.plant(0.5 * (lo0 + hi0))
+    n = system.of_plant(A0, B0)[0].shape[0]
+    T = np.eye(n) if similarity is None else np.asarray(similarity, float)
+    loop = _Loop(system.of_plant, T, c, np.ones(n), A0, B0)
+    corners = np.array(np.meshgrid(*edges, indexing="ij")).reshape(len(lo0), -1).T
+    sc = state_scaling(np.array([loop.at(*model.plant(p))[0] for p in corners]))  # as the grid check balances
+    loop = _Loop(system.of_plant, T, c, sc, A0, B0)
+    Xs = np.asarray(Xs, float)
+    Xs = 0.5 * (Xs + np.transpose(Xs, (0, 2, 1))) * sc[None, :, None] * sc[None, None, :]
+    rates_at = kinematic_rates(model, rates, c)
+    acc_bounds = np.full(model.robot.m, np.inf)
+    for (_lo, hi), kind, j in zip(rates, model.kinds, model.joints):
+        if kind == "qdot":
+            acc_bounds[j] = hi
+    boxes = [
+        (np.array([e[k] for e, k in zip(edges, idx)]), np.array([e[k + 1] for e, k in zip(edges, idx)]))
+        for idx in np.ndindex(*[len(e) - 1 for e in edges])
+    ]
+    width0 = np.where(hi0 > lo0, hi0 - lo0, 1.0)
+    deadline = t0 + time_limit
+    opts = {"min_width": min_width, "max_boxes": max_cells, "deadline": deadline}
+    ok, leaves, why = _branch([(lo0, hi0)], _accelerations(enclose, acc_bounds), width0, **opts)
+    acc = tuple(float(a) for a in np.max([v[1] for v in leaves], axis=0)) if leaves else ()
+    if not ok:
+        return CellCheck(False, gamma, 0, -np.inf, acc, f"accelerations: {why}", time.perf_counter() - t0)
+
+    def evaluate(lo, hi):
+        return _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi)
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(boxes), desc="cells", unit="cell")
+    try:
+        ok, leaves, why = _branch(boxes, evaluate, width0, bar=bar, **opts)
+    finally:
+        if bar is not None:
+            bar.close()
+    smallest = min((v[0] for v in leaves), default=-np.inf)
+    return CellCheck(ok, gamma, len(leaves), smallest, acc, why, time.perf_counter() - t0)
+
+
+def _box(lo, hi) -> str:
+    return " x ".join(f"[{a:.4g}, {b:.4g}]" for a, b in zip(lo, hi))
