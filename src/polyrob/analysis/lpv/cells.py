@@ -246,7 +246,7 @@ def _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
         # so directions where M_c is very negative absorb large changes (a plain norm bound would not)
         mu, V = np.linalg.eigh(-M[0, v])
         if mu[0] <= err[0, v]:
-            return -1.0, "LMI not negative at the cell's centre"
+            return -np.inf, f"LMI not negative at rho = {tuple(round(float(x), 6) for x in ctr)}, a cell's centre"
         W = (V * mu**-0.5) @ V.T
         WE, ZcW = W[:, :n], Zc @ W
         lam = np.linalg.eigvalsh(W @ M[0, v] @ W)[-1] + (err[0, v] + 8 * s * _U * np.linalg.norm(M[0, v])) / mu[0]
@@ -266,7 +266,10 @@ def _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
         worst = min(worst, -(lam + (b_plant + b_x + b_rate + b_inv) * (1 + 1e-9)))  # float norms: a little up
     lx, Vx = np.linalg.eigh(X)
     if lx[0] <= 8.0 * (n + len(basis) + 2) * _U * scale[0]:
-        return -1.0, "X(rho) not positive definite at the cell's centre"
+        return (
+            -np.inf,
+            f"X(rho) not positive definite at rho = {tuple(round(float(x), 6) for x in ctr)}, a cell's centre",
+        )
     Wx = (Vx * lx**-0.5) @ Vx.T  # X(rho) > 0 iff I + Wx (X(rho) - X_c) Wx > 0
     pos = 1.0 - df @ _norms(Wx @ Xs @ Wx) * (1 + 1e-9) - 8.0 * (n + len(basis) + 2) * _U * scale[0] / lx[0]
     margin = min(worst, pos)
@@ -301,6 +304,8 @@ def _branch(boxes, evaluate, width0, *, min_width, max_boxes, deadline, bar=None
     while queue:
         lo, hi, known = queue.popleft()
         value = known if known is not None else evaluate(lo, hi)
+        if value[0] == -np.inf:  # a point where it fails: no need to look further
+            return False, leaves, value[-1]
         if value[0] > 0:
             leaves.append(value)
             if bar is not None:
@@ -316,11 +321,19 @@ def _branch(boxes, evaluate, width0, *, min_width, max_boxes, deadline, bar=None
     return True, leaves, ""
 
 
-def _accelerations(enclose, bounds):
+def _accelerations(model, enclose, bounds):
     """``box -> (relative margin, |qddot| bound, why)``: the robot's accelerations inside ``bounds`` there."""
     fin = np.isfinite(bounds)
 
     def evaluate(lo, hi):
+        q, qdot = model.state(0.5 * (lo + hi))
+        at_centre = np.abs(model.robot.acceleration(q, qdot, model.u))
+        if np.any(at_centre[fin] > bounds[fin]):
+            return (
+                -np.inf,
+                at_centre,
+                f"the robot's acceleration {at_centre} exceeds the rate bounds at rho = {0.5 * (lo + hi)}",
+            )
         enc = enclose(lo, hi)
         qdd = np.maximum(np.abs(enc.qddot_lo), np.abs(enc.qddot_hi))
         margin = float(np.min((bounds[fin] - qdd[fin]) / bounds[fin])) if np.any(fin) else 1.0
@@ -396,7 +409,7 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
     width0 = np.where(hi0 > lo0, hi0 - lo0, 1.0)
     deadline = t0 + time_limit
     opts = {"min_width": min_width, "max_boxes": max_cells, "deadline": deadline}
-    ok, leaves, why = _branch([(lo0, hi0)], _accelerations(enclose, acc_bounds), width0, **opts)
+    ok, leaves, why = _branch([(lo0, hi0)], _accelerations(model, enclose, acc_bounds), width0, **opts)
     acc = tuple(float(a) for a in np.max([v[1] for v in leaves], axis=0)) if leaves else ()
     if not ok:
         return CellCheck(False, gamma, 0, -np.inf, acc, f"accelerations: {why}", time.perf_counter() - t0)

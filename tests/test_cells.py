@@ -1,0 +1,105 @@
+"""The moving robot's LMIs proved between the grid points, by cells (polyrob.analysis.lpv.cells)."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from test_moving_robot import pd_controller
+
+import polyrob
+from polyrob.analysis.lpv.cells import CellCheck, check_cells
+from polyrob.analysis.lpv.check import GridData, brl_matrices
+from polyrob.analysis.lpv.moving import _search, moving_robot_certificate
+from polyrob.analysis.lpv.robot import closed_loop_system, kinematic_rates, rate_bounds, scheduling
+from polyrob.domains.torque_box import Domain
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return polyrob.load_robot("paper_2r")
+
+
+@pytest.fixture(scope="module")
+def tiny(robot):
+    """The paper's domain shrunk to q2 in +-0.05 and 1 % of its velocities: a loop that barely varies."""
+    d = Domain.from_robot(robot, "paper")
+    return d.with_bounds(q_lower=np.full(2, -0.05), q_upper=np.full(2, 0.05), qdot_lower=d.qdot_lower * 0.01,
+                         qdot_upper=d.qdot_upper * 0.01)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def searched(robot, tiny):
+    """``X(rho)`` at level 1.2 (margin maximised) on a 3 x 2 x 2 grid, accelerations bounded by twice the sampled peak."""
+    model = scheduling(robot, tiny, points=(3, 2))
+    system = closed_loop_system(model, pd_controller(), 0.5 * np.eye(2), None)
+    rates, _ = rate_bounds(model, tiny, scale=1.0)
+    rates = [(2 * lo, 2 * hi) if k == "qdot" else (lo, hi) for (lo, hi), k in zip(rates, model.kinds)]
+    r, sysf, c, basis, used = _search(model, system, rates, quadratic=False, velocities="bounded", tensor=True,
+                                      level=1.2)  # fmt: skip
+    assert r.proved and r.gamma < 1.2
+    return model, system, r, sysf, c, basis, used
+
+
+def _check(searched, gamma, **kw):
+    model, system, r, sysf, c, basis, used = searched
+    return check_cells(model, system, r.X, basis, kw.pop("rates", used), gamma, similarity=sysf.similarity, c=c,
+                       time_limit=60, **kw)  # fmt: skip
+
+
+def test_the_lmis_are_proved_on_cells_covering_the_box_and_hold_at_random_points(searched):
+    chk = _check(searched, 1.2)
+    assert chk.holds, chk.reason
+    assert chk.n_cells >= 4 and chk.smallest_margin > 0
+    # soundness: the same X, evaluated at random points of the box (none of them grid points), passes
+    model, system, r, sysf, c, basis, used = searched
+    rng = np.random.default_rng(0)
+    lo, hi = np.array([a[0] for a in model.axes]), np.array([a[-1] for a in model.axes])
+    rates_at = kinematic_rates(model, used, c)
+    for rho in rng.uniform(lo, hi, size=(200, 3)):
+        A, B, C, D = sysf(rho)
+        rc = np.array(rates_at(rho))
+        nus = np.array(np.meshgrid(*[np.unique(x) for x in rc], indexing="ij")).reshape(3, -1).T
+        F = np.array([[f(rho) for f, _ in basis]])
+        G = np.array([[g(rho) for _, g in basis]])
+        M, err, X, _ = brl_matrices(GridData(A[None], B[None], C[None], D[None], F, G, nus[None], rho[None]),
+                                    np.asarray(r.X), 1.2)  # fmt: skip
+        assert np.linalg.eigvalsh(M[0])[:, -1].max() < 0 and np.linalg.eigvalsh(X[0])[0] > 0
+
+
+def test_a_level_below_the_proved_one_is_refused_at_a_cell_centre(searched):
+    chk = _check(searched, 0.5 * searched[2].gamma)
+    assert not chk.holds and "a cell's centre" in chk.reason
+
+
+def test_a_sampled_acceleration_bound_below_the_robot_s_peak_is_caught(searched, robot):
+    # on this box the sampled peak x 1.05 misses the robot's largest |qddot1| (at qdot1 = 0, |q2|, |qdot2| maximal)
+    model, *_ = searched
+    sampled, _ = rate_bounds(model, Domain.from_robot(robot, "paper").with_bounds(
+        q_lower=np.full(2, -0.05), q_upper=np.full(2, 0.05), qdot_lower=model.axes[1][0] * np.array([1, 0]) +
+        model.axes[2][0] * np.array([0, 1]), qdot_upper=model.axes[1][-1] * np.array([1, 0]) +
+        model.axes[2][-1] * np.array([0, 1])))  # fmt: skip
+    peak = abs(robot.acceleration([0.0, -0.05], [0.0, model.axes[2][-1]], [0.0, 0.0])[0])
+    assert sampled[1][1] < peak  # the sampled bound is not a bound
+    chk = _check(searched, 1.2, rates=sampled, max_cells=300)
+    assert not chk.holds and "accelerations" in chk.reason
+
+
+def test_the_certificate_with_cells_is_certified_and_says_what_it_covers(robot, tiny):
+    problem = SimpleNamespace(robot=robot, domain=tiny, P=SimpleNamespace(W_S=0.4 * np.eye(2), W_T=None, W_KS=None))
+    model = scheduling(robot, tiny, points=(3, 2))
+    rates, _ = rate_bounds(model, tiny)
+    qddot_max = [2 * rates[1][1], 2 * rates[2][1]]
+    c = moving_robot_certificate(problem, pd_controller(), points=(3, 2), velocities="bounded", qddot_max=qddot_max,
+                                 level=0.9, cells=True)  # fmt: skip
+    assert c.cells["holds"], c.cells
+    cert = c.certificate
+    assert cert.status.value == "CERTIFIED" and cert.bound == pytest.approx(0.9)
+    assert "cells covering the whole box" in " ".join(cert.scope.notes)
+    assert "between the grid points: proved at level 0.9" in c.details()
+    plain = moving_robot_certificate(problem, pd_controller(), points=(3, 2), velocities="bounded",
+                                     qddot_max=qddot_max, level=0.9)  # fmt: skip
+    assert plain.certificate.status.value == "GRID_ONLY" and not plain.cells
+
+
+def test_cell_check_words():
+    assert "not proved between" in CellCheck(False, 1.0, 0, -1.0, (), "why", 0.0).words()
