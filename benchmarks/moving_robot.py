@@ -63,6 +63,8 @@ def run(
     harmonics=1,
     save_x=None,
     level=None,
+    cells=False,
+    cell_time_limit=900.0,
 ) -> dict:
     from polyrob import load_robot
     from polyrob.analysis.lpv.moving import moving_robot_certificate
@@ -76,7 +78,7 @@ def run(
     problem = _light_problem(robot, domain, factor)
     mv = moving_robot_certificate(
         problem, K, velocities=velocities, points=points, tensor=tensor, recheck=recheck, harmonics=harmonics,
-        level=level,
+        level=level, cells=cells, cell_time_limit=cell_time_limit, progress=cells,
     )  # fmt: skip
     s = mv.summary()
     if save_x and mv.result is not None and mv.result.proved:
@@ -95,6 +97,7 @@ def run(
         "basis": None if mv.result is None else mv.result.n_basis,
         "grid": s["grid"],
         "rates": s["rate_words"],
+        "cells": s["cells"],
         "solver_status": None if mv.result is None else mv.result.solver_status,
         "n_states": None if mv.result is None else mv.result.n_states,
         "seconds": round(time.perf_counter() - t, 1),
@@ -111,6 +114,48 @@ def run(
         tv = a.time_varying
         out["arbitrarily_fast"] = {"verdict": None if tv is None else tv.verdict}
         out["full_seconds"] = round(time.perf_counter() - t, 1)
+    return out
+
+
+def saved_x_between(factor: float, spec: str, path: str, *, recheck, cell_time_limit: float, level=None) -> dict:
+    """The ``X`` a run saved (``--save-x``) re-checked on a finer grid and proved on cells, without searching again.
+
+    The search's own coordinates are rebuilt as :func:`~polyrob.analysis.lpv.moving.moving_robot_certificate`
+    builds them (the conditioned loop at the grid's centre; the saved ``X`` lives there).
+    """
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from polyrob import load_robot
+    from polyrob.analysis.lpv.basis import default_basis, finer_recheck
+    from polyrob.analysis.lpv.cells import check_cells
+    from polyrob.analysis.lpv.robot import closed_loop_system, conditioned, rate_bounds, scheduling
+    from polyrob.domains.torque_box import Domain
+
+    saved = np.load(path, allow_pickle=True)
+    points, harmonics = tuple(int(x) for x in saved["points"]), int(saved["harmonics"])
+    robot = load_robot("paper_2r")
+    domain = Domain.from_robot(robot, "paper")
+    P = _light_problem(robot, domain, factor).P
+    model = scheduling(robot, domain, points=points)
+    system = closed_loop_system(model, _controller(spec), P.W_S, P.W_T, P.W_KS)
+    rates, source = rate_bounds(model, domain)
+    basis = default_basis(model, tensor=True, harmonics=harmonics)
+    sysf, c = conditioned(system, np.array([0.5 * (a[0] + a[-1]) for a in model.axes]))
+    result = SimpleNamespace(proved=True, X=saved["X"], gamma=float(saved["gamma"]))
+    out = {"bandwidth_factor": factor, "controller": spec, "saved": path, "search_grid": model.words(),
+           "gamma_saved": result.gamma, "rates": rates, "rates_source": source}  # fmt: skip
+    t = time.perf_counter()
+    out["search_grid_recheck"] = finer_recheck(sysf, model, result, rates, basis, points=points, c=c)
+    out["finer_grid"] = finer_recheck(sysf, model, result, rates, basis, points=recheck, c=c)
+    g = out["finer_grid"]["gamma"]
+    out["recheck_seconds"] = round(time.perf_counter() - t, 1)
+    if np.isfinite(g) and g < 1:
+        g_cells = float(level) if level is not None and level >= g else 0.5 * (g + 1.0)
+        chk = check_cells(model, system, saved["X"], basis, rates, g_cells, similarity=sysf.similarity, c=c,
+                          time_limit=cell_time_limit, progress=True)  # fmt: skip
+        out["cells"] = chk.summary()
     return out
 
 
@@ -182,6 +227,9 @@ def main(argv=None) -> int:
     )
     ap.add_argument("--save-x", default=None, metavar="FILE.npz", help="save the proved X(rho) of the (last) run")
     ap.add_argument("--level", type=float, default=None, help="fix gamma there and maximise the LMIs' margin")
+    ap.add_argument("--cells", action="store_true", help="prove the X between the grid points, on cells")
+    ap.add_argument("--cell-time-limit", type=float, default=900.0, help="seconds for --cells")
+    ap.add_argument("--load-x", default=None, metavar="FILE.npz", help="no search: the saved X, re-checked and --cells")
     args = ap.parse_args(argv)
     points = tuple(int(x) for x in args.points.split(","))
     recheck = {"none": None, "auto": "auto"}.get(args.recheck) or tuple(int(x) for x in args.recheck.split(","))
@@ -194,6 +242,10 @@ def main(argv=None) -> int:
     }
     for item in args.runs.split(","):
         factor, spec = item.split(":", 1)
+        if args.load_x:
+            doc["runs"].append(saved_x_between(float(factor), spec, args.load_x, recheck=recheck if recheck != "auto"
+                               else (33, 5), cell_time_limit=args.cell_time_limit, level=args.level))  # fmt: skip
+            continue
         if args.slice:
             v = [float(x) for x in args.slice.split(",")]
             for k in args.harmonics.split(","):
@@ -211,6 +263,8 @@ def main(argv=None) -> int:
                 harmonics=int(args.harmonics.split(",")[0]),
                 save_x=args.save_x,
                 level=args.level,
+                cells=args.cells,
+                cell_time_limit=args.cell_time_limit,
             )
         )
     doc["load_average_end"] = list(os.getloadavg())

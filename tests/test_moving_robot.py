@@ -180,7 +180,7 @@ def test_conditioning_makes_a_strict_lyapunov_matrix_the_identity(robot):
 def test_a_bound_that_holds_only_at_the_grid_points_is_not_reported(robot, small):
     """The tensor basis fits X to the grid: below the frozen peak on 4 x 3 x 3 points, broken between them.
 
-    The finer re-check (the same X at the 9 x 5 x 5 points of the box, float64) finds it: the certificate's
+    The finer re-check (the same X at the 13 x 5 x 5 points of the box: four times the search's intervals per position, float64) finds it: the certificate's
     gamma is the finer grid's, above the coarse grid's and the frozen peak, and robust performance is not
     certified (with the coarse figure alone it would have been GRID_ONLY).
     """
@@ -188,12 +188,12 @@ def test_a_bound_that_holds_only_at_the_grid_points_is_not_reported(robot, small
 
     problem = NS(robot=robot, domain=small, P=NS(W_S=0.5 * np.eye(2), W_T=None, W_KS=None))
     c = moving_robot_certificate(problem, pd_controller(), points=(4, 3), rate_scale=20.0, velocities="bounded")
-    assert c.result.proved and c.result.n_basis == 9 and c.finer["points"] == 225
+    assert c.result.proved and c.result.n_basis == 9 and c.finer["points"] == 325
     assert c.result.gamma < 1 and c.result.gamma < c.frozen_gamma  # on the coarse grid alone
     assert c.gamma == c.finer["gamma"] and c.gamma > max(1.0, c.result.gamma, c.frozen_gamma)
     assert c.certificate.status is Status.NOT_CERTIFIED and not c.finer["holds_at_gamma"]
-    assert "re-checked at the 225 points of a finer grid" in c.certificate.scope.sentence()
-    assert "finer grid of 225 points" in c.details()
+    assert "re-checked at the 325 points of a finer grid" in c.certificate.scope.sentence()
+    assert "finer grid of 325 points" in c.details()
 
 
 def test_tensor_basis_has_the_velocity_part_per_position(robot):
@@ -222,8 +222,8 @@ def test_synth_moving_prints_and_returns_the_moving_verdict(robot, small, capsys
     problem = NS(robot=robot, domain=small, P=NS(W_S=0.5 * np.eye(2), W_T=None, W_KS=None))
     doc = moving_check(problem, pd_controller(), Output(args, stages=1))
     text = capsys.readouterr().out
-    assert doc["computed"] and doc["finer_grid"]["points"] == 225 and doc["gamma"] is not None
-    assert doc["verdict"] in text and "finer grid of 225 points" in text
+    assert doc["computed"] and doc["finer_grid"]["points"] == 425 and doc["gamma"] is not None
+    assert doc["verdict"] in text and "finer grid of 425 points" in text
     assert doc["status"] in ("GRID_ONLY", "NOT_CERTIFIED") and doc["certified"] is False
 
 

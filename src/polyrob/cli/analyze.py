@@ -152,17 +152,26 @@ def add_moving_harmonics_argument(p) -> None:
         "(1, qdot), on a 9 x 3 grid: N = 2 proves paper_2r's tf3 loop at x 4 on the grid (about an hour, "
         "docs/certificates.md); implies --moving",
     )
+    p.add_argument(
+        "--moving-cells",
+        action="store_true",
+        help="prove the moving robot's Lyapunov matrix between the grid points too, on cells covering the state "
+        "box (an analytic robot such as paper_2r; CERTIFIED when it holds; up to 15 min); implies --moving",
+    )
 
 
 def moving_asked(args) -> bool | None:
-    """``--moving`` / ``--no-moving`` / neither (``None``), ``--moving-harmonics`` counting as ``--moving``."""
-    return True if getattr(args, "moving_harmonics", None) else args.moving
+    """``--moving`` / ``--no-moving`` / neither (``None``); ``--moving-harmonics`` and ``--moving-cells`` ask for it."""
+    return True if getattr(args, "moving_harmonics", None) or getattr(args, "moving_cells", False) else args.moving
 
 
 def moving_options(args) -> dict | None:
-    """The moving-robot search's options from ``--moving-harmonics`` (``None``: the default search)."""
+    """The moving-robot search's options from ``--moving-harmonics``, ``--moving-cells`` (``None``: the default)."""
     n = getattr(args, "moving_harmonics", None)
-    return None if n is None else {"velocities": "bounded", "harmonics": int(n), "points": (9, 3)}
+    out = {} if n is None else {"velocities": "bounded", "harmonics": int(n), "points": (9, 3)}
+    if getattr(args, "moving_cells", False):
+        out.update(cells=True, progress=True)
+    return out or None
 
 
 def register(sub) -> None:
