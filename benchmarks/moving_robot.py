@@ -65,6 +65,7 @@ def run(
     level=None,
     cells=False,
     cell_time_limit=900.0,
+    symmetric=False,
 ) -> dict:
     from polyrob import load_robot
     from polyrob.analysis.lpv.moving import moving_robot_certificate
@@ -78,14 +79,14 @@ def run(
     problem = _light_problem(robot, domain, factor)
     mv = moving_robot_certificate(
         problem, K, velocities=velocities, points=points, tensor=tensor, recheck=recheck, harmonics=harmonics,
-        level=level, cells=cells, cell_time_limit=cell_time_limit, progress=cells,
+        level=level, cells=cells, cell_time_limit=cell_time_limit, progress=cells, symmetric=symmetric,
     )  # fmt: skip
     s = mv.summary()
     if save_x and mv.result is not None and mv.result.proved:
         import numpy as np
 
         # the proved X(rho) coefficients (coordinates of the search's conditioned loop), for checks between grid points
-        np.savez(save_x, X=np.array(mv.result.X), gamma=mv.result.gamma, factor=factor, harmonics=harmonics,
+        np.savez(save_x, X=np.array(mv.result.X), gamma=mv.result.gamma, factor=factor, harmonics=harmonics, symmetric=symmetric,
                  points=np.array(points), notes=np.array(mv.result.notes, dtype=object))  # fmt: skip
     out["moving"] = {
         "verdict": mv.verdict,
@@ -128,9 +129,9 @@ def saved_x_between(factor: float, spec: str, path: str, *, recheck, cell_time_l
     import numpy as np
 
     from polyrob import load_robot
-    from polyrob.analysis.lpv.basis import default_basis, finer_recheck
+    from polyrob.analysis.lpv.basis import default_basis, even_functions, finer_recheck
     from polyrob.analysis.lpv.cells import check_cells
-    from polyrob.analysis.lpv.robot import closed_loop_system, conditioned, rate_bounds, scheduling
+    from polyrob.analysis.lpv.robot import closed_loop_system, conditioned, even_half, rate_bounds, scheduling
     from polyrob.domains.torque_box import Domain
 
     saved = np.load(path, allow_pickle=True)
@@ -142,6 +143,9 @@ def saved_x_between(factor: float, spec: str, path: str, *, recheck, cell_time_l
     system = closed_loop_system(model, _controller(spec), P.W_S, P.W_T, P.W_KS)
     rates, source = rate_bounds(model, domain)
     basis = default_basis(model, tensor=True, harmonics=harmonics)
+    if bool(saved.get("symmetric", False)):
+        model = even_half(model, system)
+        basis = even_functions(basis, [-a[-1] for a in model.axes], [a[-1] for a in model.axes])
     sysf, c = conditioned(system, np.array([0.5 * (a[0] + a[-1]) for a in model.axes]))
     result = SimpleNamespace(proved=True, X=saved["X"], gamma=float(saved["gamma"]))
     out = {"bandwidth_factor": factor, "controller": spec, "saved": path, "search_grid": model.words(),
@@ -228,6 +232,7 @@ def main(argv=None) -> int:
     ap.add_argument("--save-x", default=None, metavar="FILE.npz", help="save the proved X(rho) of the (last) run")
     ap.add_argument("--level", type=float, default=None, help="fix gamma there and maximise the LMIs' margin")
     ap.add_argument("--cells", action="store_true", help="prove the X between the grid points, on cells")
+    ap.add_argument("--symmetric", action="store_true", help="the half box and an even X (the loop is even in rho)")
     ap.add_argument("--cell-time-limit", type=float, default=900.0, help="seconds for --cells")
     ap.add_argument("--load-x", default=None, metavar="FILE.npz", help="no search: the saved X, re-checked and --cells")
     args = ap.parse_args(argv)
@@ -265,6 +270,7 @@ def main(argv=None) -> int:
                 level=args.level,
                 cells=args.cells,
                 cell_time_limit=args.cell_time_limit,
+                symmetric=args.symmetric,
             )
         )
     doc["load_average_end"] = list(os.getloadavg())

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["default_basis", "basis_size", "finer_recheck"]
+__all__ = ["default_basis", "basis_size", "finer_recheck", "even_functions"]
 
 
 def _unit(p: int, i: int, dv: float) -> np.ndarray:
@@ -89,6 +89,12 @@ def default_basis(model, *, quadratic: bool = False, tensor: bool = False, harmo
     if not tensor:
         return pos + vel
     return pos + [_product(f, g) for g in vel for f in pos]
+
+
+def even_functions(basis, lo, hi, samples: int = 8):
+    """The functions of ``basis`` that are even in ``rho`` (``f(-rho) = f(rho)`` at random points of the box)."""
+    pts = np.random.default_rng(1).uniform(lo, hi, size=(samples, len(lo)))
+    return [(f, g) for f, g in basis if all(abs(f(r) - f(-r)) <= 1e-12 * (1 + abs(f(r))) for r in pts)]
 
 
 def basis_size(model, *, quadratic: bool = False, tensor: bool = False, harmonics: int = 1) -> int:

@@ -103,7 +103,7 @@ def moving_robot_gain(
 
 def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: bool, harmonics: int = 1, level=None):
     """``(result, the system it was run on, its time scale, the basis or None, the rates)``."""
-    from polyrob.analysis.lpv.basis import default_basis
+    from polyrob.analysis.lpv.basis import default_basis, even_functions
     from polyrob.analysis.lpv.norm import lpvnorm
     from polyrob.analysis.lpv.result import LpvNormResult
     from polyrob.analysis.lpv.robot import conditioned, kinematic_rates
@@ -114,6 +114,8 @@ def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: b
     if velocities == "arbitrary":
         basis = basis[: 1 + 2 * harmonics * sum(kind == "q" for kind in model.kinds)]
         rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
+    if model.mirrored:  # an even X loses nothing when the loop is even: the average of X(rho) and X(-rho) works
+        basis = even_functions(basis, [-a[-1] for a in model.axes], [a[-1] for a in model.axes])
     fast = all(not np.isfinite(hi) for _, hi in rates)
     c_sys = []
     try:  # the conditioned copy first: in the loop's own coordinates the solver stalls (docs/certificates.md)
@@ -168,6 +170,7 @@ def moving_robot_certificate(
     level=None,
     cells: bool = False,
     cell_time_limit: float = 900.0,
+    symmetric: bool = False,
     progress: bool = False,
 ) -> MovingRobotCertificate:
     """The moving-robot certificate of ``K`` on ``problem`` (its robot, domain and weights).
@@ -210,6 +213,11 @@ def moving_robot_certificate(
         whole box (:func:`~polyrob.analysis.lpv.cells.check_cells`, at ``level``
         or else halfway from the grid's bound to 1), within ``cell_time_limit`` seconds
         (``progress``: a bar); when it holds the status is CERTIFIED.
+    symmetric : bool
+        When the loop is even in ``rho`` on a symmetric box, search and prove
+        on the half box with ``X`` on the even functions of the basis
+        (:func:`~polyrob.analysis.lpv.robot.even_half`): ``points[0]`` counts
+        the whole position axis, so the grid is as dense for half the points.
 
     Returns
     -------
@@ -218,7 +226,7 @@ def moving_robot_certificate(
     """
     from polyrob.analysis.certificate import Scope
     from polyrob.analysis.lpv.basis import finer_recheck
-    from polyrob.analysis.lpv.robot import closed_loop_system, rate_bounds, scheduling
+    from polyrob.analysis.lpv.robot import closed_loop_system, even_half, rate_bounds, scheduling
 
     t0 = time.perf_counter()
     domain, P = problem.domain, problem.P
@@ -227,6 +235,8 @@ def moving_robot_certificate(
     try:
         model = scheduling(problem.robot, domain, points=points)
         system = closed_loop_system(model, K, P.W_S, P.W_T, P.W_KS)
+        if symmetric:
+            model = even_half(model, system)
         n = system(np.array([a[0] for a in model.axes]))[0].shape[0]
         if n > MAX_STATES:
             raise NotApplicable(f"the closed loop has {n} states (the LMIs are built for {MAX_STATES}): reduce K")
