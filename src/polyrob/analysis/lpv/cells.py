@@ -193,7 +193,7 @@ def _norms(stack) -> np.ndarray:
 
 
 def _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
-    """``(margin, why)`` of one cell: ``margin > 0`` proves it (dimensionless, at most 1)."""
+    """``(margin, first-order bound per coordinate, why)`` of one cell: ``margin > 0`` proves it (at most 1)."""
     ctr, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
     Ap, Bp = model.plant(ctr)
     enc = enclose(lo, hi)
@@ -231,7 +231,7 @@ def _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
     rc = np.array(rates_at(ctr), float)  # (p, 2)
     free = ~np.isfinite(rc).all(axis=1)  # a coordinate moving arbitrarily fast: X must not depend on it
     if np.any(gb[:, :, free]):
-        return -1.0, "X depends on a parameter whose rate is unbounded"
+        return -np.inf, None, "X depends on a parameter whose rate is unbounded"
     rc[free] = 0.0
     rl, rh = np.array(rates_at(lo), float), np.array(rates_at(hi), float)
     rl[free], rh[free] = 0.0, 0.0
@@ -240,13 +240,13 @@ def _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
     nus = np.array(np.meshgrid(*[np.unique(x) for x in rc], indexing="ij")).reshape(len(lo), -1).T
     data = GridData(A[None], B[None], C[None], D[None], f_c[None], g_c[None], nus[None], ctr[None])
     M, err, _, scale = brl_matrices(data, Xs, gamma)
-    worst = np.inf
+    worst, contrib = np.inf, np.zeros(len(lo))
     for v, nu in enumerate(nus):
         # congruence by W = (-M_c)^(-1/2): M < 0 iff W M W < 0, and W M_c W = -I; each change is weighed by W,
         # so directions where M_c is very negative absorb large changes (a plain norm bound would not)
         mu, V = np.linalg.eigh(-M[0, v])
         if mu[0] <= err[0, v]:
-            return -np.inf, f"LMI not negative at rho = {tuple(round(float(x), 6) for x in ctr)}, a cell's centre"
+            return -np.inf, None, f"LMI not negative at rho = {tuple(round(float(x), 6) for x in ctr)}, a cell's centre"
         W = (V * mu**-0.5) @ V.T
         WE, ZcW = W[:, :n], Zc @ W
         lam = np.linalg.eigvalsh(W @ M[0, v] @ W)[-1] + (err[0, v] + 8 * s * _U * np.linalg.norm(M[0, v])) / mu[0]
@@ -264,6 +264,7 @@ def _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
         nWE = _norms(WE[None])[0]
         b_inv = 2 * loop.inverse_error * nWE**2 * _norms(X[None])[0] * (_norms(A[None])[0] + _norms(B[None])[0])
         worst = min(worst, -(lam + (b_plant + b_x + b_rate + b_inv) * (1 + 1e-9)))  # float norms: a little up
+        contrib = np.maximum(contrib, half * (nSi + drad @ nS + heD + grad.T @ heX))  # first order, per coordinate
     lx, Vx = np.linalg.eigh(X)
     if lx[0] <= 8.0 * (n + len(basis) + 2) * _U * scale[0]:
         return (
@@ -278,12 +279,23 @@ def _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
         why = "X(rho) not proved positive definite there"
     elif worst <= 0:
         why = "LMI not proved negative there"
-    return float(margin), why
+    return float(margin), contrib, why
 
 
-def _bisect(queue, evaluate, lo, hi, width0, min_width):
-    """Split ``[lo, hi]`` along the coordinate whose worse half does best; queue both halves (evaluated)."""
-    best, rel = None, (hi - lo) / width0
+def _bisect(queue, evaluate, lo, hi, width0, min_width, contrib=None):
+    """Split ``[lo, hi]``: along the coordinate of largest ``contrib`` when given, else the one whose worse half
+    does best (both halves evaluated); queue both halves."""
+    rel = (hi - lo) / width0
+    if contrib is not None:
+        ok = (hi > lo) & (rel >= min_width)
+        if not np.any(ok):
+            return False
+        i = int(np.argmax(np.where(ok, contrib, -np.inf)))
+        h1, l2 = hi.copy(), lo.copy()
+        h1[i] = l2[i] = 0.5 * (lo[i] + hi[i])
+        queue.extend([(lo, h1, None), (l2, hi, None)])
+        return True
+    best = None
     for i in range(len(lo)):  # among the relatively widest coordinates, so that every one shrinks in turn
         if hi[i] == lo[i] or rel[i] < min_width or rel[i] < 0.5 * rel.max():
             continue
@@ -298,7 +310,7 @@ def _bisect(queue, evaluate, lo, hi, width0, min_width):
     return True
 
 
-def _branch(boxes, evaluate, width0, *, min_width, max_boxes, deadline, bar=None):
+def _branch(boxes, evaluate, width0, *, min_width, max_boxes, deadline, bar=None, by_contribution=False):
     """Branch and bound: ``(True, leaves' values, "")`` when every leaf has a positive margin, else ``(False, ..., why)``."""
     queue, leaves = deque((lo, hi, None) for lo, hi in boxes), []
     while queue:
@@ -313,7 +325,7 @@ def _branch(boxes, evaluate, width0, *, min_width, max_boxes, deadline, bar=None
             continue
         if len(leaves) + len(queue) >= max_boxes or time.perf_counter() > deadline:
             return False, leaves, f"gave up after {len(leaves)} cells: {value[-1]} at rho in {_box(lo, hi)}"
-        if not _bisect(queue, evaluate, lo, hi, width0, min_width):
+        if not _bisect(queue, evaluate, lo, hi, width0, min_width, value[1] if by_contribution else None):
             return False, leaves, f"{value[-1]} at rho in {_box(lo, hi)} (a cell at the smallest width)"
         if bar is not None:
             bar.total += 1
@@ -423,7 +435,7 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
 
         bar = tqdm(total=len(boxes), desc="cells", unit="cell")
     try:
-        ok, leaves, why = _branch(boxes, evaluate, width0, bar=bar, **opts)
+        ok, leaves, why = _branch(boxes, evaluate, width0, bar=bar, by_contribution=True, **opts)
     finally:
         if bar is not None:
             bar.close()
