@@ -1,32 +1,38 @@
 """Between the grid points of the moving robot: the bounded-real LMIs proved on every cell of the state box.
 
 The moving-robot search (:mod:`polyrob.analysis.lpv.moving`) proves its
-``X(rho)`` at grid points.  Here the same ``X`` is proved on the whole box of
-``rho`` by cells: for a cell with centre ``rho_c`` and every vertex ``nu`` of
-its rate box,
+``X(rho) = sum_j f_j(rho) X_j`` at grid points only.  Here the same ``X`` is
+proved on the whole box of ``rho``, cell by cell.  For a cell with centre
+``rho_c``, every vertex ``nu`` of its rate box and ``W = (-M(rho_c, nu))^(-1/2)``
+(so that ``W M(rho_c) W = -I``), ``M(rho) < 0`` follows from
 
-.. math:: \\lambda_{max} M(\\rho, \\nu) \\le \\lambda_{max} M(\\rho_c, \\nu) + \\|M(\\rho, \\nu) - M(\\rho_c, \\nu)\\|
+.. math:: \\lambda_{max}(W M(\\rho_c) W) + \\|W (M(\\rho) - M(\\rho_c)) W\\| < 0,
 
-for every ``rho`` in the cell, and the norm is bounded from guaranteed
-enclosures over the cell (:func:`polyrob.bounds.certified.analytic.analytic_jacobian_enclosure`
-for the robot's ``A, B``, :class:`~polyrob.bounds.certified.analytic.Jet`
-balls for the basis functions and their gradients):
+and the norm is bounded from guaranteed enclosures over the cell:
 
-* the closed loop is affine in the robot's ``(A, B)``, so
-  ``A_cl(rho) = A_cl(rho_c) + sum_e t_e G_e`` with ``|t_e| <= r_e`` the
-  enclosure's distance from the centre value of entry ``e`` and ``G_e`` the
-  loop's response to a unit change of that entry;
-* ``||X A_cl - X_c A_c|| <= sum_e r_e ||X_c G_e|| + dX (||A_c|| + sum_e r_e ||G_e||)``
-  with ``dX = sum_j |f_j(rho) - f_j(rho_c)| ||X_j||`` (and likewise for
-  ``X B``, ``C``, ``D`` and the rate term ``sum_i nu_i dX/drho_i``, whose
-  ``nu_i = qdot_j`` for a position moves with the cell);
-* ``X(rho) > 0`` from ``lambda_min X_c - dX``.
+* the closed loop is affine in the robot's ``(A, B)`` (its response to a
+  unit change of entry ``e`` is ``G_e``; at ``X_c`` the LMI changes by
+  ``S_e``), and by the mean-value theorem ``P_e(rho) - P_e(rho_c) = sum_i
+  delta_i dP_e/drho_i(xi)`` with ``dP_e/drho_i`` enclosed over the cell
+  (:func:`polyrob.bounds.certified.analytic.analytic_jacobian_enclosure`,
+  second derivatives of ``qddot``): the first-order part moves all entries
+  together, ``sum_e mid(dP_e/drho_i) S_e``, and only the enclosure's radius
+  is taken entry by entry;
+* ``X(rho) - X_c`` likewise from the basis functions' gradients over the
+  cell (:class:`~polyrob.bounds.certified.analytic.Jet` balls), the rate
+  term ``sum_i nu_i dX/drho_i`` from their changes (a position's rate is its
+  velocity, so it moves with the cell), the cross terms to second order;
+* ``X(rho) > 0`` from ``||X_c^(-1/2) (X(rho) - X_c) X_c^(-1/2)|| < 1``.
 
-A cell that fails is bisected along the coordinate whose halves do best;
-the check holds when every leaf passes.  Each leaf also proves that the
-robot's accelerations there lie inside the rate bounds the ``X`` was built
-for, so the bound covers every trajectory of the linearised robot in the box
-(a sampled acceleration bound becomes a proved one, or the cell fails).
+Weighing every change by ``W`` is what makes this work on a stiff loop: the
+LMI matrix has entries of ``1e4`` next to a margin of ``1e-2``, and a plain
+norm bound would ask for cells a million times smaller.  A cell that fails is
+bisected along the coordinate with the largest first-order term; a point
+where the LMIs fail ends the search (the ``X`` does not hold there).  Before
+the cells, the robot's accelerations are proved inside the rate bounds the
+``X`` was built for (a sampled bound is not one: ``tests/test_cells.py``
+shows a box where the sampled peak times 1.05 is below the robot's), so the
+bound covers every trajectory of the linearised robot in the box.
 
 Examples
 --------
@@ -38,12 +44,13 @@ Examples
 from __future__ import annotations
 
 import time
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from polyrob.analysis.lpv.check import GridData, brl_matrices
+from polyrob.bounds.certified.analytic import distance_up, function_balls
+from polyrob.bounds.certified.boxes import prove_on_boxes
 
 __all__ = ["CellCheck", "check_cells", "plant_enclosure"]
 
@@ -116,36 +123,6 @@ def plant_enclosure(model):
     return enclose
 
 
-def _basis_balls(basis, lo, hi):
-    """Enclosures ``(f_lo, f_hi) (k,)`` and ``(g_lo, g_hi) (k, p)`` of the basis and its gradients over a box."""
-    from flint import arb
-
-    from polyrob.bounds.certified.analytic import Jet
-    from polyrob.bounds.certified.balls import arb_lower, arb_upper, ball
-
-    p = len(lo)
-    unit = [tuple(arb(1.0 if i == j else 0.0) for j in range(p)) for i in range(p)]
-    rho = np.array([Jet(ball(lo[i], hi[i]), unit[i]) for i in range(p)], dtype=object)
-    k = len(basis)
-    f = np.zeros((2, k))
-    g = np.zeros((2, k, p))
-    for j, (fn, _) in enumerate(basis):
-        v = fn(rho)
-        if isinstance(v, Jet):
-            f[:, j] = arb_lower(v.value), arb_upper(v.value)
-            g[0, j] = [arb_lower(x) for x in v.grad]
-            g[1, j] = [arb_upper(x) for x in v.grad]
-        else:  # a constant function
-            f[:, j] = float(v)
-    return f, g
-
-
-def _dist(lo, hi, c):
-    """Largest distance of ``[lo, hi]`` from ``c``, rounded up."""
-    d = np.maximum(hi - c, c - lo)
-    return np.maximum(d, 0.0) * (1 + 4 * _U) + 4 * np.finfo(float).tiny
-
-
 class _Loop:
     """The conditioned, balanced closed loop as an affine function of the robot's varying ``(A, B)`` entries."""
 
@@ -210,9 +187,9 @@ def _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
     eps = 1e-13 * (1 + np.abs([P[kd][0][i, j] for kd, i, j in loop.entries]))  # the centre's own rounding
     f_c = np.array([float(fn(ctr)) for fn, _ in basis])
     g_c = np.array([np.asarray(gr(ctr), float) for _, gr in basis])
-    fb, gb = _basis_balls(basis, lo, hi)
-    df = _dist(fb[0], fb[1], f_c)  # |f_j(rho) - f_j(rho_c)|
-    dg = _dist(gb[0], gb[1], g_c)  # |df_j/drho_i (rho) - df_j/drho_i (rho_c)|, (k, p)
+    fb, gb = function_balls(basis, lo, hi)
+    df = distance_up(fb[0], fb[1], f_c)  # |f_j(rho) - f_j(rho_c)|
+    dg = distance_up(gb[0], gb[1], g_c)  # |df_j/drho_i (rho) - df_j/drho_i (rho_c)|, (k, p)
     gmid, grad = 0.5 * (gb[0] + gb[1]), 0.5 * (gb[1] - gb[0]) * (1 + 4 * _U)  # df_j/drho_i over the cell
     X = np.einsum("k,kij->ij", f_c, Xs)
     Dx = np.einsum("kp,kij->pij", gmid, Xs)  # X(rho) - X_c = sum_i delta_i (Dx_i + sum_j grad_ji theta X_j)
@@ -257,12 +234,12 @@ def _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
         WX, WD = WE @ Xs, WE @ Dx  # (k, s, n), (p, s, n)
         heX = _norms(WX @ ZcW + np.transpose(WX @ ZcW, (0, 2, 1)))
         heD = _norms(WD @ ZcW + np.transpose(WD @ ZcW, (0, 2, 1)))
-        b_x = half @ (heD + grad.T @ heX) + 2 * (df @ _norms(WX)) * dZW
+        b_x = half @ (heD + grad.T @ heX) + 2 * (df @ _norms(WX)) * dZW + (1e-15 * (1 + np.abs(f_c))) @ heX
         # the rate term's change: sum_i (nu_i d(df_j/drho_i) + dnu_i df_j/drho_i) X_j
         c_rate = dg @ np.abs(nu) + (np.abs(g_c) + dg) @ drate
         b_rate = c_rate @ _norms(WX @ WE.T)
         nWE = _norms(WE[None])[0]
-        b_inv = 2 * loop.inverse_error * nWE**2 * _norms(X[None])[0] * (_norms(A[None])[0] + _norms(B[None])[0])
+        b_inv = 4 * loop.inverse_error * nWE**2 * _norms(X[None])[0] * (_norms(A[None])[0] + _norms(B[None])[0])
         worst = min(worst, -(lam + (b_plant + b_x + b_rate + b_inv) * (1 + 1e-9)))  # float norms: a little up
         contrib = np.maximum(contrib, half * (nSi + drad @ nS + heD + grad.T @ heX))  # first order, per coordinate
     lx, Vx = np.linalg.eigh(X)
@@ -280,57 +257,6 @@ def _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
     elif worst <= 0:
         why = "LMI not proved negative there"
     return float(margin), contrib, why
-
-
-def _bisect(queue, evaluate, lo, hi, width0, min_width, contrib=None):
-    """Split ``[lo, hi]``: along the coordinate of largest ``contrib`` when given, else the one whose worse half
-    does best (both halves evaluated); queue both halves."""
-    rel = (hi - lo) / width0
-    if contrib is not None:
-        ok = (hi > lo) & (rel >= min_width)
-        if not np.any(ok):
-            return False
-        i = int(np.argmax(np.where(ok, contrib, -np.inf)))
-        h1, l2 = hi.copy(), lo.copy()
-        h1[i] = l2[i] = 0.5 * (lo[i] + hi[i])
-        queue.extend([(lo, h1, None), (l2, hi, None)])
-        return True
-    best = None
-    for i in range(len(lo)):  # among the relatively widest coordinates, so that every one shrinks in turn
-        if hi[i] == lo[i] or rel[i] < min_width or rel[i] < 0.5 * rel.max():
-            continue
-        h1, l2 = hi.copy(), lo.copy()
-        h1[i] = l2[i] = 0.5 * (lo[i] + hi[i])
-        a, b = evaluate(lo, h1), evaluate(l2, hi)
-        if best is None or min(a[0], b[0]) > best[0]:
-            best = (min(a[0], b[0]), (lo, h1, a), (l2, hi, b))
-    if best is None:
-        return False
-    queue.extend(best[1:])
-    return True
-
-
-def _branch(boxes, evaluate, width0, *, min_width, max_boxes, deadline, bar=None, by_contribution=False):
-    """Branch and bound: ``(True, leaves' values, "")`` when every leaf has a positive margin, else ``(False, ..., why)``."""
-    queue, leaves = deque((lo, hi, None) for lo, hi in boxes), []
-    while queue:
-        lo, hi, known = queue.popleft()
-        value = known if known is not None else evaluate(lo, hi)
-        if value[0] == -np.inf:  # a point where it fails: no need to look further
-            return False, leaves, value[-1]
-        if value[0] > 0:
-            leaves.append(value)
-            if bar is not None:
-                bar.update(1)
-            continue
-        if len(leaves) + len(queue) >= max_boxes or time.perf_counter() > deadline:
-            return False, leaves, f"gave up after {len(leaves)} cells: {value[-1]} at rho in {_box(lo, hi)}"
-        if not _bisect(queue, evaluate, lo, hi, width0, min_width, value[1] if by_contribution else None):
-            return False, leaves, f"{value[-1]} at rho in {_box(lo, hi)} (a cell at the smallest width)"
-        if bar is not None:
-            bar.total += 1
-            bar.refresh()
-    return True, leaves, ""
 
 
 def _accelerations(model, enclose, bounds):
@@ -421,7 +347,7 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
     width0 = np.where(hi0 > lo0, hi0 - lo0, 1.0)
     deadline = t0 + time_limit
     opts = {"min_width": min_width, "max_boxes": max_cells, "deadline": deadline}
-    ok, leaves, why = _branch([(lo0, hi0)], _accelerations(model, enclose, acc_bounds), width0, **opts)
+    ok, leaves, why = prove_on_boxes([(lo0, hi0)], _accelerations(model, enclose, acc_bounds), width0, **opts)
     acc = tuple(float(a) for a in np.max([v[1] for v in leaves], axis=0)) if leaves else ()
     if not ok:
         return CellCheck(False, gamma, 0, -np.inf, acc, f"accelerations: {why}", time.perf_counter() - t0)
@@ -435,13 +361,9 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
 
         bar = tqdm(total=len(boxes), desc="cells", unit="cell")
     try:
-        ok, leaves, why = _branch(boxes, evaluate, width0, bar=bar, by_contribution=True, **opts)
+        ok, leaves, why = prove_on_boxes(boxes, evaluate, width0, bar=bar, by_contribution=True, **opts)
     finally:
         if bar is not None:
             bar.close()
     smallest = min((v[0] for v in leaves), default=-np.inf)
     return CellCheck(ok, gamma, len(leaves), smallest, acc, why, time.perf_counter() - t0)
-
-
-def _box(lo, hi) -> str:
-    return " x ".join(f"[{a:.4g}, {b:.4g}]" for a, b in zip(lo, hi))

@@ -39,7 +39,17 @@ from flint import arb
 from polyrob.bounds.certified.balls import arb_lower, arb_upper, ball
 from polyrob.errors import CertificationError, DomainError
 
-__all__ = ["Jet", "AnalyticEnclosure", "analytic_jacobian_enclosure", "interval_cos", "interval_sin"]
+__all__ = [
+    "Jet",
+    "AnalyticEnclosure",
+    "analytic_jacobian_enclosure",
+    "interval_cos",
+    "interval_sin",
+    "function_balls",
+    "distance_up",
+]
+
+_U = np.finfo(float).eps
 
 
 def _hull(values) -> arb:
@@ -266,3 +276,32 @@ def analytic_jacobian_enclosure(robot, q_lo, q_hi, qdot_lo, qdot_hi, u) -> Analy
     qlo = np.array([arb_lower(a.value) for a in acc])
     qhi = np.array([arb_upper(a.value) for a in acc])
     return AnalyticEnclosure(Alo, Ahi, Blo, Bhi, qlo, qhi, dA[0], dA[1], dB[0], dB[1])
+
+
+def function_balls(functions, lo, hi):
+    """Enclosures ``[f_lo, f_hi] (2, k)`` and ``[g_lo, g_hi] (2, k, p)`` of ``f_j`` and their gradients over a box.
+
+    ``functions``: pairs ``(f, grad)`` (only ``f`` is used: on :class:`Jet` balls, or a constant).
+    """
+
+    p = len(lo)
+    unit = [tuple(arb(1.0 if i == j else 0.0) for j in range(p)) for i in range(p)]
+    rho = np.array([Jet(ball(lo[i], hi[i]), unit[i]) for i in range(p)], dtype=object)
+    k = len(functions)
+    f = np.zeros((2, k))
+    g = np.zeros((2, k, p))
+    for j, (fn, _) in enumerate(functions):
+        v = fn(rho)
+        if isinstance(v, Jet):
+            f[:, j] = arb_lower(v.value), arb_upper(v.value)
+            g[0, j] = [arb_lower(x) for x in v.grad]
+            g[1, j] = [arb_upper(x) for x in v.grad]
+        else:  # a constant function
+            f[:, j] = float(v)
+    return f, g
+
+
+def distance_up(lo, hi, c):
+    """Largest distance of ``[lo, hi]`` from ``c``, rounded up."""
+    d = np.maximum(hi - c, c - lo)
+    return np.maximum(d, 0.0) * (1 + 4 * _U) + 4 * np.finfo(float).tiny
