@@ -147,13 +147,15 @@ def saved_x_between(factor: float, spec: str, path: str, *, recheck, cell_time_l
         model = even_half(model, system)
         basis = even_functions(basis, [-a[-1] for a in model.axes], [a[-1] for a in model.axes])
     sysf, c = conditioned(system, np.array([0.5 * (a[0] + a[-1]) for a in model.axes]))
-    result = SimpleNamespace(proved=True, X=saved["X"], gamma=float(saved["gamma"]))
+    result = SimpleNamespace(proved=True, X=tuple(saved["X"]), gamma=float(saved["gamma"]))
     out = {"bandwidth_factor": factor, "controller": spec, "saved": path, "search_grid": model.words(),
            "gamma_saved": result.gamma, "rates": rates, "rates_source": source}  # fmt: skip
     t = time.perf_counter()
     out["search_grid_recheck"] = finer_recheck(sysf, model, result, rates, basis, points=points, c=c)
     out["finer_grid"] = finer_recheck(sysf, model, result, rates, basis, points=recheck, c=c)
     g = out["finer_grid"]["gamma"]
+    for key in ("search_grid_recheck", "finer_grid"):  # strict JSON: no bound is null
+        out[key]["gamma"] = out[key]["gamma"] if np.isfinite(out[key]["gamma"]) else None
     out["recheck_seconds"] = round(time.perf_counter() - t, 1)
     if np.isfinite(g) and g < 1:
         g_cells = float(level) if level is not None and level >= g else 0.5 * (g + 1.0)

@@ -103,3 +103,23 @@ def test_the_certificate_with_cells_is_certified_and_says_what_it_covers(robot, 
 
 def test_cell_check_words():
     assert "not proved between" in CellCheck(False, 1.0, 0, -1.0, (), "why", 0.0).words()
+
+
+def test_the_half_box_of_an_even_loop_gives_the_same_verdict_with_half_the_points(robot, tiny):
+    from polyrob.analysis.lpv.robot import even_half
+    from polyrob.errors import NotApplicable
+
+    problem = SimpleNamespace(robot=robot, domain=tiny, P=SimpleNamespace(W_S=0.4 * np.eye(2), W_T=None, W_KS=None))
+    model = scheduling(robot, tiny, points=(5, 2))
+    system = closed_loop_system(model, pd_controller(), 0.4 * np.eye(2), None)
+    half = even_half(model, system)
+    assert half.mirrored and half.n_points * 5 == model.n_points * 3 and half.axes[0][0] == 0.0
+    assert "the other half by rho -> -rho" in half.words()
+    rates, _ = rate_bounds(model, tiny)
+    qddot_max = [2 * rates[1][1], 2 * rates[2][1]]
+    c = moving_robot_certificate(problem, pd_controller(), points=(5, 2), velocities="bounded", qddot_max=qddot_max,
+                                 level=0.9, cells=True, symmetric=True)  # fmt: skip
+    assert c.certificate.status.value == "CERTIFIED" and c.result.n_basis == 4  # 1, cos q2, sin q2 qdot1, sin q2 qdot2
+    lopsided = tiny.with_bounds(q_lower=np.array([-0.05, -0.05]), q_upper=np.array([0.05, 0.1]))
+    with pytest.raises(NotApplicable, match="not symmetric"):
+        even_half(scheduling(robot, lopsided, points=(5, 2)), system)

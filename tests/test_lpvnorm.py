@@ -377,3 +377,22 @@ def test_fixed_level_with_maximised_margin_proves_that_level():
     assert g == 1.5 * g_opt and status == "solved"
     proved, chk = proved_gamma(data, Xs, g_opt)
     assert np.isfinite(proved) and proved <= 1.5 * g_opt and chk.lmi_margin > 0
+
+
+def test_a_fixed_level_maximises_the_margin_and_still_proves_a_bound_below_it():
+    """``level``: gamma fixed, the LMIs' margin maximised -- the X proves a level at most ``level``, above the optimum."""
+    import polyrob
+    from polyrob.errors import ArgumentError
+
+    def system(rho):
+        A = np.array([[0.0, 1.0], [-2.0 - rho[0], -0.5]])
+        return A, np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]]), np.zeros((1, 1))
+
+    grid = [np.linspace(0.0, 1.0, 4)]
+    basis = [(lambda r: 1.0, lambda r: [0.0]), (lambda r: r[0], lambda r: [1.0])]
+    best = polyrob.lpvnorm(system, grid, [(-0.1, 0.1)], basis)
+    fixed = polyrob.lpvnorm(system, grid, [(-0.1, 0.1)], basis, level=2 * best.gamma)
+    assert fixed.proved and best.gamma * (1 - 1e-6) <= fixed.gamma <= 2 * best.gamma
+    assert any("margin maximised" in n for n in fixed.notes)
+    with pytest.raises(ArgumentError, match="level"):
+        polyrob.lpvnorm(system, grid, [(-0.1, 0.1)], basis, level=1.0, solver="cvxpy")
