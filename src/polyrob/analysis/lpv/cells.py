@@ -217,31 +217,34 @@ def _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
     nus = np.array(np.meshgrid(*[np.unique(x) for x in rc], indexing="ij")).reshape(len(lo), -1).T
     data = GridData(A[None], B[None], C[None], D[None], f_c[None], g_c[None], nus[None], ctr[None])
     M, err, _, scale = brl_matrices(data, Xs, gamma)
-    worst, contrib = np.inf, np.zeros(len(lo))
+    lam_v = np.linalg.eigvalsh(M[0])[:, -1] + err[0]
+    if np.any(lam_v >= 0):
+        return -np.inf, None, f"LMI not negative at rho = {tuple(round(float(x), 6) for x in ctr)}, a cell's centre"
+    # congruence by W = (-M_c)^(-1/2) at the rate box's centre (the mean of its vertices' M: negative too):
+    # M < 0 iff W M W < 0, and each change is weighed by W, so directions where M_c is very negative absorb
+    # large changes (a plain norm bound would not); one W serves every vertex, only the rate term depends on it
+    Mm = M[0].mean(axis=0)
+    mu, V = np.linalg.eigh(-Mm)
+    W = (V * mu**-0.5) @ V.T
+    WE, ZcW = W[:, :n], Zc @ W
+    nS, nSi = _norms(W @ S @ W), _norms(W @ Si @ W)
+    nZ, nZi = _norms(Z @ W), _norms(Zi @ W)
+    b_plant = half @ (nSi + drad @ nS) + eps @ nS
+    dZW = half @ (nZi + drad @ nZ) + eps @ nZ  # ||(Z(rho) - Z_c) W||
+    WX, WD = WE @ Xs, WE @ Dx  # (k, s, n), (p, s, n)
+    heX = _norms(WX @ ZcW + np.transpose(WX @ ZcW, (0, 2, 1)))
+    heD = _norms(WD @ ZcW + np.transpose(WD @ ZcW, (0, 2, 1)))
+    b_x = half @ (heD + grad.T @ heX) + 2 * (df @ _norms(WX)) * dZW + (1e-15 * (1 + np.abs(f_c))) @ heX
+    nWE = _norms(WE[None])[0]
+    b_inv = 4 * loop.inverse_error * nWE**2 * _norms(X[None])[0] * (_norms(A[None])[0] + _norms(B[None])[0])
+    nXE = _norms(WX @ WE.T)
+    worst = np.inf
     for v, nu in enumerate(nus):
-        # congruence by W = (-M_c)^(-1/2): M < 0 iff W M W < 0, and W M_c W = -I; each change is weighed by W,
-        # so directions where M_c is very negative absorb large changes (a plain norm bound would not)
-        mu, V = np.linalg.eigh(-M[0, v])
-        if mu[0] <= err[0, v]:
-            return -np.inf, None, f"LMI not negative at rho = {tuple(round(float(x), 6) for x in ctr)}, a cell's centre"
-        W = (V * mu**-0.5) @ V.T
-        WE, ZcW = W[:, :n], Zc @ W
         lam = np.linalg.eigvalsh(W @ M[0, v] @ W)[-1] + (err[0, v] + 8 * s * _U * np.linalg.norm(M[0, v])) / mu[0]
-        nS, nSi = _norms(W @ S @ W), _norms(W @ Si @ W)
-        nZ, nZi = _norms(Z @ W), _norms(Zi @ W)
-        b_plant = half @ (nSi + drad @ nS) + eps @ nS
-        dZW = half @ (nZi + drad @ nZ) + eps @ nZ  # ||(Z(rho) - Z_c) W||
-        WX, WD = WE @ Xs, WE @ Dx  # (k, s, n), (p, s, n)
-        heX = _norms(WX @ ZcW + np.transpose(WX @ ZcW, (0, 2, 1)))
-        heD = _norms(WD @ ZcW + np.transpose(WD @ ZcW, (0, 2, 1)))
-        b_x = half @ (heD + grad.T @ heX) + 2 * (df @ _norms(WX)) * dZW + (1e-15 * (1 + np.abs(f_c))) @ heX
         # the rate term's change: sum_i (nu_i d(df_j/drho_i) + dnu_i df_j/drho_i) X_j
-        c_rate = dg @ np.abs(nu) + (np.abs(g_c) + dg) @ drate
-        b_rate = c_rate @ _norms(WX @ WE.T)
-        nWE = _norms(WE[None])[0]
-        b_inv = 4 * loop.inverse_error * nWE**2 * _norms(X[None])[0] * (_norms(A[None])[0] + _norms(B[None])[0])
+        b_rate = (dg @ np.abs(nu) + (np.abs(g_c) + dg) @ drate) @ nXE
         worst = min(worst, -(lam + (b_plant + b_x + b_rate + b_inv) * (1 + 1e-9)))  # float norms: a little up
-        contrib = np.maximum(contrib, half * (nSi + drad @ nS + heD + grad.T @ heX))  # first order, per coordinate
+    contrib = half * (nSi + drad @ nS + heD + grad.T @ heX)  # first order, per coordinate
     lx, Vx = np.linalg.eigh(X)
     if lx[0] <= 8.0 * (n + len(basis) + 2) * _U * scale[0]:
         return (

@@ -76,8 +76,7 @@ def prove_on_boxes(boxes, evaluate, width0, *, min_width, max_boxes, deadline, b
         if not _bisect(queue, evaluate, lo, hi, width0, min_width, value[1] if by_contribution else None):
             return False, leaves, f"{value[-1]} at rho in {box_words(lo, hi)} (a cell at the smallest width)"
         if bar is not None:
-            bar.total += 1
-            bar.refresh()
+            bar.total += 1  # shown at the bar's next update (a refresh per split floods the terminal)
     return True, leaves, ""
 
 
