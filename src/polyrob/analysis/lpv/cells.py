@@ -76,6 +76,9 @@ class CellCheck:
     reason : str
         Why it does not hold.
     seconds : float
+    sensitivity : tuple of float
+        Per coordinate, the largest first-order change of the weighed LMI per
+        unit of cell width seen (a cell must be narrower than about its inverse).
     """
 
     holds: bool
@@ -85,6 +88,7 @@ class CellCheck:
     accelerations: tuple
     reason: str
     seconds: float
+    sensitivity: tuple = ()
 
     def words(self) -> str:
         if not self.holds:
@@ -104,6 +108,7 @@ class CellCheck:
             "smallest_margin": finite_or_none(self.smallest_margin),
             "accelerations": [finite_or_none(a) for a in self.accelerations],
             "reason": self.reason,
+            "sensitivity": [finite_or_none(x) for x in self.sensitivity],
             "seconds": round(self.seconds, 1),
         }
 
@@ -124,11 +129,13 @@ def plant_enclosure(model):
 
 
 class _Loop:
-    """The conditioned, balanced closed loop as an affine function of the robot's varying ``(A, B)`` entries."""
+    """The time-scaled, balanced closed loop as an affine function of the robot's varying ``(A, B)`` entries.
 
-    def __init__(self, of_plant, T, c, sc, A0, B0):
-        Ti = np.linalg.inv(T)
-        self.T, self.Ti, self.c, self.sc = T, Ti, c, sc
+    ``c`` and the balancing ``sc`` are powers of two: the loop's matrices are exact images of the robot's.
+    """
+
+    def __init__(self, of_plant, c, sc, A0, B0):
+        self.c, self.sc = c, sc
         self.base = self._cond(*of_plant(A0, B0))
         m2 = A0.shape[0]
         m = m2 // 2
@@ -150,14 +157,9 @@ class _Loop:
             G.append(d1)
         self.G = G
         self.of_plant = of_plant
-        # x = T x~ with Ti only a float inverse of T: the loop certified is the one these matrices define
-        self.inverse_error = float(np.linalg.norm(Ti @ T - np.eye(T.shape[0]), 2))
 
     def _cond(self, A, B, C, D):
-        A = self.Ti @ (A / self.c) @ self.T
-        B = self.Ti @ (B / self.c)
-        C = C @ self.T
-        s = self.sc
+        A, B, s = A / self.c, B / self.c, self.sc
         return A / s[:, None] * s[None, :], B / s[:, None], C * s[None, :], D
 
     def at(self, Ap, Bp):
@@ -217,34 +219,29 @@ def _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
     nus = np.array(np.meshgrid(*[np.unique(x) for x in rc], indexing="ij")).reshape(len(lo), -1).T
     data = GridData(A[None], B[None], C[None], D[None], f_c[None], g_c[None], nus[None], ctr[None])
     M, err, _, scale = brl_matrices(data, Xs, gamma)
-    lam_v = np.linalg.eigvalsh(M[0])[:, -1] + err[0]
-    if np.any(lam_v >= 0):
-        return -np.inf, None, f"LMI not negative at rho = {tuple(round(float(x), 6) for x in ctr)}, a cell's centre"
-    # congruence by W = (-M_c)^(-1/2) at the rate box's centre (the mean of its vertices' M: negative too):
-    # M < 0 iff W M W < 0, and each change is weighed by W, so directions where M_c is very negative absorb
-    # large changes (a plain norm bound would not); one W serves every vertex, only the rate term depends on it
-    Mm = M[0].mean(axis=0)
-    mu, V = np.linalg.eigh(-Mm)
-    W = (V * mu**-0.5) @ V.T
-    WE, ZcW = W[:, :n], Zc @ W
-    nS, nSi = _norms(W @ S @ W), _norms(W @ Si @ W)
-    nZ, nZi = _norms(Z @ W), _norms(Zi @ W)
-    b_plant = half @ (nSi + drad @ nS) + eps @ nS
-    dZW = half @ (nZi + drad @ nZ) + eps @ nZ  # ||(Z(rho) - Z_c) W||
-    WX, WD = WE @ Xs, WE @ Dx  # (k, s, n), (p, s, n)
-    heX = _norms(WX @ ZcW + np.transpose(WX @ ZcW, (0, 2, 1)))
-    heD = _norms(WD @ ZcW + np.transpose(WD @ ZcW, (0, 2, 1)))
-    b_x = half @ (heD + grad.T @ heX) + 2 * (df @ _norms(WX)) * dZW + (1e-15 * (1 + np.abs(f_c))) @ heX
-    nWE = _norms(WE[None])[0]
-    b_inv = 4 * loop.inverse_error * nWE**2 * _norms(X[None])[0] * (_norms(A[None])[0] + _norms(B[None])[0])
-    nXE = _norms(WX @ WE.T)
-    worst = np.inf
+    worst, contrib = np.inf, np.zeros(len(lo))
     for v, nu in enumerate(nus):
+        # congruence by W = (-M_c)^(-1/2): M < 0 iff W M W < 0, and W M_c W = -I; each change is weighed by W,
+        # so directions where M_c is very negative absorb large changes (a plain norm bound would not); one W per
+        # vertex (one W at the rate box's centre left margins of 1e-4 at the vertices of paper_2r's loop)
+        mu, V = np.linalg.eigh(-M[0, v])
+        if mu[0] <= err[0, v]:
+            return -np.inf, None, f"LMI not negative at rho = {tuple(round(float(x), 6) for x in ctr)}, a cell's centre"
+        W = (V * mu**-0.5) @ V.T
+        WE, ZcW = W[:, :n], Zc @ W
         lam = np.linalg.eigvalsh(W @ M[0, v] @ W)[-1] + (err[0, v] + 8 * s * _U * np.linalg.norm(M[0, v])) / mu[0]
+        nS, nSi = _norms(W @ S @ W), _norms(W @ Si @ W)
+        nZ, nZi = _norms(Z @ W), _norms(Zi @ W)
+        b_plant = half @ (nSi + drad @ nS) + eps @ nS
+        dZW = half @ (nZi + drad @ nZ) + eps @ nZ  # ||(Z(rho) - Z_c) W||
+        WX, WD = WE @ Xs, WE @ Dx  # (k, s, n), (p, s, n)
+        heX = _norms(WX @ ZcW + np.transpose(WX @ ZcW, (0, 2, 1)))
+        heD = _norms(WD @ ZcW + np.transpose(WD @ ZcW, (0, 2, 1)))
+        b_x = half @ (heD + grad.T @ heX) + 2 * (df @ _norms(WX)) * dZW + (1e-15 * (1 + np.abs(f_c))) @ heX
         # the rate term's change: sum_i (nu_i d(df_j/drho_i) + dnu_i df_j/drho_i) X_j
-        b_rate = (dg @ np.abs(nu) + (np.abs(g_c) + dg) @ drate) @ nXE
-        worst = min(worst, -(lam + (b_plant + b_x + b_rate + b_inv) * (1 + 1e-9)))  # float norms: a little up
-    contrib = half * (nSi + drad @ nS + heD + grad.T @ heX)  # first order, per coordinate
+        b_rate = (dg @ np.abs(nu) + (np.abs(g_c) + dg) @ drate) @ _norms(WX @ WE.T)
+        worst = min(worst, -(lam + (b_plant + b_x + b_rate) * (1 + 1e-9)))  # float norms: a little up
+        contrib = np.maximum(contrib, half * (nSi + drad @ nS + heD + grad.T @ heX))  # first order, per coordinate
     lx, Vx = np.linalg.eigh(X)
     if lx[0] <= 8.0 * (n + len(basis) + 2) * _U * scale[0]:
         return (
@@ -301,7 +298,7 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
         The rate bounds in physical time (a position's rate is its velocity).
     gamma : float
     similarity : ndarray, optional
-        ``T`` (default: the identity).
+        ``T`` (default: the identity); the check itself runs in the loop's own coordinates.
     c : float
         The time scale.
     cells : sequence of int, optional
@@ -331,12 +328,14 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
     edges = [np.linspace(lo0[i], hi0[i], max(1, sizes[i]) + 1) for i in range(len(lo0))]
     A0, B0 = model.plant(0.5 * (lo0 + hi0))
     n = system.of_plant(A0, B0)[0].shape[0]
-    T = np.eye(n) if similarity is None else np.asarray(similarity, float)
-    loop = _Loop(system.of_plant, T, c, np.ones(n), A0, B0)
+    loop = _Loop(system.of_plant, c, np.ones(n), A0, B0)
     corners = np.array(np.meshgrid(*edges, indexing="ij")).reshape(len(lo0), -1).T
     sc = state_scaling(np.array([loop.at(*model.plant(p))[0] for p in corners]))  # as the grid check balances
-    loop = _Loop(system.of_plant, T, c, sc, A0, B0)
-    Xs = np.asarray(Xs, float)
+    loop = _Loop(system.of_plant, c, sc, A0, B0)
+    # X back in the loop's own (time-scaled, balanced) coordinates, x = T x~: X = T^-T X~ T^-1.  The float
+    # product is a candidate like any other, and it is what the cells check: no inverse is trusted
+    Ti = np.eye(n) if similarity is None else np.linalg.inv(np.asarray(similarity, float))
+    Xs = np.einsum("ai,kab,bj->kij", Ti, np.asarray(Xs, float), Ti)
     Xs = 0.5 * (Xs + np.transpose(Xs, (0, 2, 1))) * sc[None, :, None] * sc[None, None, :]
     rates_at = kinematic_rates(model, rates, c)
     acc_bounds = np.full(model.robot.m, np.inf)
@@ -355,8 +354,13 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
     if not ok:
         return CellCheck(False, gamma, 0, -np.inf, acc, f"accelerations: {why}", time.perf_counter() - t0)
 
+    seen = np.zeros(len(lo0))
+
     def evaluate(lo, hi):
-        return _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi)
+        out = _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi)
+        if out[1] is not None:
+            seen[:] = np.maximum(seen, out[1] / np.where(hi > lo, hi - lo, np.inf))
+        return out
 
     bar = None
     if progress:
@@ -369,4 +373,6 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
         if bar is not None:
             bar.close()
     smallest = min((v[0] for v in leaves), default=-np.inf)
-    return CellCheck(ok, gamma, len(leaves), smallest, acc, why, time.perf_counter() - t0)
+    return CellCheck(
+        ok, gamma, len(leaves), smallest, acc, why, time.perf_counter() - t0, tuple(float(x) for x in seen)
+    )
