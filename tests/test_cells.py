@@ -123,3 +123,15 @@ def test_the_half_box_of_an_even_loop_gives_the_same_verdict_with_half_the_point
     lopsided = tiny.with_bounds(q_lower=np.array([-0.05, -0.05]), q_upper=np.array([0.05, 0.1]))
     with pytest.raises(NotApplicable, match="not symmetric"):
         even_half(scheduling(robot, lopsided, points=(5, 2)), system)
+
+
+def test_moving_cells_asks_for_the_moving_robot_and_its_cells():
+    from argparse import Namespace
+
+    from polyrob.cli.analyze import moving_asked, moving_options
+
+    args = Namespace(moving=None, moving_harmonics=None, moving_cells=True)
+    assert moving_asked(args) is True and moving_options(args) == {"cells": True, "progress": True}
+    both = Namespace(moving=None, moving_harmonics=2, moving_cells=True)
+    assert moving_options(both)["harmonics"] == 2 and moving_options(both)["cells"]
+    assert moving_options(Namespace(moving=True, moving_harmonics=None, moving_cells=False)) is None
