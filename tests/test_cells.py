@@ -15,14 +15,9 @@ from polyrob.domains.torque_box import Domain
 
 
 @pytest.fixture(scope="module")
-def robot():
-    return polyrob.load_robot("paper_2r")
-
-
-@pytest.fixture(scope="module")
 def tiny(robot):
     """The paper's domain shrunk to q2 in +-0.05 and 1 % of its velocities: a loop that barely varies."""
-    d = Domain.from_robot(robot, "paper")
+    d = Domain.from_robot(robot, "paper")  # the analytic 2R: its Jacobians have guaranteed enclosures
     return d.with_bounds(q_lower=np.full(2, -0.05), q_upper=np.full(2, 0.05), qdot_lower=d.qdot_lower * 0.01,
                          qdot_upper=d.qdot_upper * 0.01)  # fmt: skip
 
@@ -38,6 +33,11 @@ def searched(robot, tiny):
                                       level=1.2)  # fmt: skip
     assert r.proved and r.gamma < 1.2
     return model, system, r, sysf, c, basis, used
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return polyrob.load_robot("paper_2r")
 
 
 def _check(searched, gamma, **kw):
