@@ -136,7 +136,7 @@ class _Loop:
 
     def __init__(self, of_plant, c, sc, A0, B0):
         self.c, self.sc = c, sc
-        self.base = self._cond(*of_plant(A0, B0))
+        base = self._cond(*of_plant(A0, B0))
         m2 = A0.shape[0]
         m = m2 // 2
         self.entries = [("A", i, j) for i in range(m, m2) for j in range(m2)] + [
@@ -150,8 +150,8 @@ class _Loop:
             A2, B2 = A0.copy(), B0.copy()
             (A2 if kind == "A" else B2)[i, j] += 2.0
             two = self._cond(*of_plant(A2, B2))
-            d1 = [x - y for x, y in zip(one, self.base)]
-            d2 = [x - y for x, y in zip(two, self.base)]
+            d1 = [x - y for x, y in zip(one, base)]
+            d2 = [x - y for x, y in zip(two, base)]
             if any(np.abs(b - 2 * a).max() > 1e-8 * (1 + np.abs(b).max()) for a, b in zip(d1, d2)):
                 raise ValueError("the closed loop is not affine in the robot's Jacobians")
             G.append(d1)
@@ -325,13 +325,14 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
     lo0 = np.array([a[0] for a in model.axes], float)
     hi0 = np.array([a[-1] for a in model.axes], float)
     sizes = [a.size - 1 for a in model.axes] if cells is None else list(cells)
+    if model.mirrored:  # the cells cover the whole box: the proof does not lean on the (sampled) evenness
+        lo0[0], sizes[0] = -hi0[0], 2 * sizes[0]
     edges = [np.linspace(lo0[i], hi0[i], max(1, sizes[i]) + 1) for i in range(len(lo0))]
     A0, B0 = model.plant(0.5 * (lo0 + hi0))
-    n = system.of_plant(A0, B0)[0].shape[0]
-    loop = _Loop(system.of_plant, c, np.ones(n), A0, B0)
     corners = np.array(np.meshgrid(*edges, indexing="ij")).reshape(len(lo0), -1).T
-    sc = state_scaling(np.array([loop.at(*model.plant(p))[0] for p in corners]))  # as the grid check balances
+    sc = state_scaling(np.array([system.of_plant(*model.plant(p))[0] for p in corners]))  # as the grid check
     loop = _Loop(system.of_plant, c, sc, A0, B0)
+    n = sc.size
     # X back in the loop's own (time-scaled, balanced) coordinates, x = T x~: X = T^-T X~ T^-1.  The float
     # product is a candidate like any other, and it is what the cells check: no inverse is trusted
     Ti = np.eye(n) if similarity is None else np.linalg.inv(np.asarray(similarity, float))

@@ -259,7 +259,7 @@ def moving_robot_certificate(
         if isinstance(recheck, str):
             recheck = (RECHECK_REFINE[0] * (points[0] - 1) + 1, max(5, RECHECK_REFINE[1] * (points[1] - 1) + 1))
         finer = {} if recheck is None else finer_recheck(sysf, model, result, used, basis, points=recheck, c=cs)
-        between = {}
+        between = None
         g_grid = max(result.gamma, finer.get("gamma", result.gamma))
         if cells and result.proved and g_grid < 1:
             from polyrob.analysis.lpv.cells import check_cells
@@ -267,18 +267,18 @@ def moving_robot_certificate(
             # the search's level, else halfway from the grid's bound to 1: room between the points, and a bound < 1
             g_cells = float(level) if level is not None and level >= g_grid else 0.5 * (g_grid + 1.0)
             between = check_cells(model, system, result.X, basis, used, g_cells, similarity=getattr(sysf, "similarity",
-                                  None), c=cs, time_limit=cell_time_limit, progress=progress).summary()  # fmt: skip
+                                  None), c=cs, time_limit=cell_time_limit, progress=progress)  # fmt: skip
     except NotApplicable as exc:
         return MovingRobotCertificate.not_computed(str(exc))
     base = problem.scope() if hasattr(problem, "scope") else Scope()
     words = rate_words(model.names, rates, source)
     again = f" and the same X re-checked at the {finer['points']} points of a finer grid" if finer.get("points") else ""
-    if between.get("holds"):
-        notes = (f"the LMIs on the grid of {model.words()}{again}, and the same X proved between the grid points: "
-                 f"{between['cells']} cells covering the whole box (guaranteed enclosures of the Jacobians over each, "
-                 f"the robot's accelerations proved <= {', '.join(f'{a:.4g}' for a in between['accelerations'])})",)  # fmt: skip
+    proved_between = between is not None and between.holds
+    if proved_between:
+        notes = (f"the LMIs on the grid of {model.words()}{again}, and the same X between the grid points: "
+                 f"{between.words()} (guaranteed enclosures of the Jacobians over each cell)",)  # fmt: skip
     else:
-        why_not = f" ({between['reason']})" if between else ""
+        why_not = f" ({between.reason})" if between is not None else ""
         notes = (f"on the grid of {model.words()}{again}; not proved between the grid points{why_not}",)
     notes += (
         tuple(result.notes)
@@ -296,7 +296,7 @@ def moving_robot_certificate(
         model="",
         coverage=None,
         coverage_points=0,
-        enclosure="proved" if between.get("holds") else "sampled",
+        enclosure="proved" if proved_between else "sampled",
         vertices_from="",
         notes=notes,
     )
@@ -306,8 +306,8 @@ def moving_robot_certificate(
         if not np.isfinite(gamma):
             why = (f"the X proved on the {model.n_points}-point grid fails on the finer grid of {finer['points']} "
                    f"points: {finer.get('reason', '')}",)  # fmt: skip
-    if between.get("holds"):
-        gamma = float(between["gamma"])  # proved on the whole box: the number the verdict rests on
+    if proved_between:
+        gamma = float(between.gamma)  # proved on the whole box: the number the verdict rests on
     return MovingRobotCertificate(
         computed=True,
         gamma=gamma,
@@ -319,6 +319,6 @@ def moving_robot_certificate(
         scope=scope,
         notes=why,
         finer=finer,
-        cells=between,
+        cells={} if between is None else between.summary(),
         seconds=time.perf_counter() - t0,
     )
