@@ -40,6 +40,7 @@ from scipy.linalg import matrix_balance
 
 from polyrob.analysis.mu.blocks import as_block_structure
 from polyrob.analysis.mu.frequency import matrix_response
+from polyrob.analysis.mu.radius import covering_radius
 
 __all__ = ["BetweenGridResult", "verify_between", "with_between", "crossing_frequencies"]
 
@@ -97,8 +98,8 @@ class BetweenGridResult:
         """One clause for a verdict."""
         if self.holds:
             return (
-                f"mu <= {self.level:.4g} at every frequency (the grid's D-G scalings verified between "
-                f"its points by Hamiltonian tests, {self.points_added} point{'' if self.points_added == 1 else 's'} added)"
+                f"mu <= {self.level:.4g} at every frequency (the grid's D-G scalings verified between its points by "
+                f"Hamiltonian tests and perturbation bounds, {self.points_added} point{'' if self.points_added == 1 else 's'} added)"
             )
         return f"not verified between the grid points: {self.reason}"
 
@@ -219,6 +220,7 @@ def verify_between(
     (True, True)
     """
     from polyrob.analysis.mu.bounds import mussv
+    from polyrob.analysis.mu.sweep import MANY_REAL_SCALARS
 
     t0 = time.perf_counter()
     st = as_block_structure(mu.structure)
@@ -228,6 +230,7 @@ def verify_between(
     adaptive = level is None
     beta = float(mu.peak_upper) * (1.0 + LEVEL_MARGIN) if adaptive else float(level)
     how = method or (mu.method if mu.method in ("ab13md", "lmi", "gradient") else "auto")
+    few_reals = sum(b.kind == "real" for b in st.relaxed().blocks) <= MANY_REAL_SCALARS
     w = np.asarray(mu.omega, float)
     scalings = [(mu.D[i], mu.G[i]) for i in range(len(w))]
     peak, added = float(np.max(mu.upper)), 0
@@ -252,6 +255,22 @@ def verify_between(
             memo[key] = (scaled, cross)
         return memo[key]
 
+    def radius(scaling, at) -> float:
+        key = ("radius", at, beta)
+        if key not in memo:
+            Dh, G = scaling
+            Di = np.linalg.inv(Dh)
+            Gt = Di @ G @ Di
+            memo[key] = covering_radius(A, B, C, D, Dh, (Gt + Gt.conj().T) / 2, beta, at)
+        return memo[key]
+
+    def near_enough(ends, lo, hi) -> bool:
+        """The ends' perturbation radii (:mod:`~polyrob.analysis.mu.radius`) reach across ``[lo, hi]``."""
+        if not np.isfinite(hi):
+            return False
+        reach = sum(radius(pg, at) for at, pg in ends if np.isfinite(at))
+        return reach >= hi - lo
+
     def covers(scaling, at, lo, hi) -> bool:
         """The scalings found at ``at`` keep ``Φ`` negative definite on ``[lo, hi]``."""
         scaled, cross = crossings_of(scaling, at)
@@ -267,6 +286,11 @@ def verify_between(
         M = _at(A, B, C, D, x)
         ec, er = st.embeddings()
         r = mussv(M[np.ix_(ec, er)], st, method=how, lower=False)
+        if how == "gradient" and few_reals:
+            # descent can stall where the sweep's own second bound answered (sweep.py): the relaxed
+            # structure's AB13MD scalings are admissible too, and the smaller bound is kept
+            r2 = mussv(M[np.ix_(ec, er)], st, method="relaxed", lower=False)
+            r = r2 if r2.upper < r.upper else r
         return float(r.upper), (r.D, r.G)
 
     # intervals [w_i, w_{i+1}], [0, w_0] if the grid starts above 0, and [w_last, inf);
@@ -289,7 +313,7 @@ def verify_between(
     while stack:
         lo, hi, ends = stack.pop()
         try:
-            covered = any(covers(pg, at, lo, hi) for at, pg in ends)
+            covered = near_enough(ends, lo, hi) or any(covers(pg, at, lo, hi) for at, pg in ends)
         except _Unreliable:
             why = (
                 f"the Hamiltonian test is not reliable on this loop's realisation (it passed [{lo:.4g}, {hi:.4g}] "

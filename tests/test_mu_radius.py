@@ -1,0 +1,65 @@
+"""How far a grid point's scalings certify a level (polyrob.analysis.mu.radius), and the check that uses it."""
+
+from __future__ import annotations
+
+import control
+import numpy as np
+import pytest
+
+import polyrob.analysis.mu.between as between
+from polyrob.analysis.mu.bounds import mu_bounds
+from polyrob.analysis.mu.radius import covering_radius
+
+
+def _sigma(A, B, C, D, w):
+    return np.linalg.norm(C @ np.linalg.solve(1j * w * np.eye(A.shape[0]) - A, B) + D, 2)
+
+
+def test_first_order_radius_stops_before_the_crossing():
+    """|1/(jω + 1)| = 0.8 at ω = 0.75: from ω = 2 the radius must stay short of 1.25, and be positive."""
+    A, B, C, D = -np.eye(1), np.ones((1, 1)), np.ones((1, 1)), np.zeros((1, 1))
+    r = covering_radius(A, B, C, D, np.eye(1), np.zeros((1, 1)), 0.8, 2.0)
+    assert 0.05 < r < 2.0 - 0.75
+    assert covering_radius(A, B, C, D, np.eye(1), np.zeros((1, 1)), 0.8, 0.5) == 0.0  # |M| = 0.894 > 0.8 there
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_radius_is_sound_on_random_scaled_loops(seed):
+    """Inside the radius the scaled test holds at every sampled frequency (D scalings spanning decades)."""
+    rng = np.random.default_rng(seed)
+    n, k = 6, 3
+    A = rng.standard_normal((n, n))
+    A -= (np.max(np.linalg.eigvals(A).real) + 0.3) * np.eye(n)
+    B, C, D = rng.standard_normal((n, k)), rng.standard_normal((k, n)), 0.1 * rng.standard_normal((k, k))
+    Dh = np.diag(10.0 ** rng.uniform(-3, 0, k))
+    Di = np.linalg.inv(Dh)
+    w0 = float(rng.uniform(0.0, 3.0))
+    level = 1.05 * max(_sigma(A, B @ Di, Dh @ C, Dh @ D @ Di, w) for w in np.linspace(max(w0 - 5, 0), w0 + 5, 400))
+    r = covering_radius(A, B, C, D, Dh, np.zeros((k, k)), level, w0)
+    assert r > 0
+    for w in np.linspace(max(w0 - r, 0.0), w0 + r, 101):
+        assert _sigma(A, B @ Di, Dh @ C, Dh @ D @ Di, w) < level
+
+
+def test_check_without_hamiltonian_still_covers_smooth_loops_and_finds_resonances(monkeypatch):
+    """Where the Hamiltonian test does not apply (Φ(∞) singular: ``None``), the radii carry the check alone.
+
+    The Hamiltonian answers once, for the scalings of the grid's last point (the interval up to
+    infinity, which no radius reaches, is the first one taken); every other call says ``None``.
+    """
+    original, calls = between.crossing_frequencies, []
+
+    def only_the_first(*args):
+        calls.append(1)
+        return original(*args) if len(calls) == 1 else None
+
+    monkeypatch.setattr(between, "crossing_frequencies", only_the_first)
+    smooth = control.tf([1], [1, 1])
+    ok = between.verify_between(smooth, mu_bounds(smooth, [[1, 1]], progress=False))
+    assert ok.holds and ok.level >= 1.0 and "perturbation bounds" in ok.sentence()
+    assert len(calls) > 1 and ok.points_added > 1
+    calls.clear()
+    sharp = control.tf([1], [1, 0.02, 1])  # peak 50 near 1 rad/s, between the coarse points
+    coarse = mu_bounds(sharp, [[1, 1]], [0.1, 0.5, 2.0, 10.0], refine_peak=False, progress=False)
+    miss = between.verify_between(sharp, coarse, level=1.4)
+    assert not miss.holds
