@@ -116,7 +116,10 @@ def test_a_task_payload_is_a_mass_range_at_the_flange_scaled_by_the_arm():
     assert payload.com_lower == payload.com_upper == (0.0, 0.0, 0.0) and payload.frame == "tool0"
     arm = default_task_robot(ur5, task)
     assert arm.payload == payload and len(arm.variants()) == 5  # nominal + {0, max} x {0.9, 1.1}
-    assert DEFAULT_TASK.payload_range(ur5) is None and default_task_robot(ur5).payload is None
+    # the default task carries 1 % of the arm's link mass; a task without one says so
+    assert DEFAULT_TASK.payload_range(ur5).mass_upper == pytest.approx(0.01 * total)
+    assert default_task_robot(ur5).payload == DEFAULT_TASK.payload_range(ur5)
+    assert DefaultTask(payload_fraction=0.0).payload_range(ur5) is None
 
 
 def test_batch_task_and_inner_options_reach_every_job():

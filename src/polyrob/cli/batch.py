@@ -186,7 +186,7 @@ def register(sub) -> None:
     g.add_argument("--u-scale", type=nonnegative_float, default=1.0, help="scale the torque box")
     t = p.add_argument_group(
         "task and inner layer (every robot; without any domain option an arm of 3+ joints gets its default "
-        "task: +-0.2 rad around its reference pose, |qdot| <= 0.5, |qddot| <= 2, computed torque, links +-10 %%)"
+        "task: +-0.2 rad around its reference pose, |qdot| <= 0.5, |qddot| <= 2, computed torque, links +-10 %%, payload 0-1 %% of the link mass)"
     )
     t.add_argument("--pose", default=None, help="reference pose: an SRDF pose name or q1,q2,...")
     t.add_argument("--q-radius", default=None, help="positions within pose +- RADIUS")

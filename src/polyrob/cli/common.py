@@ -207,7 +207,7 @@ def add_domain_arguments(parser: argparse.ArgumentParser) -> None:
         "--torque-box",
         action="store_true",
         help="arms of 3+ joints: the URDF torque box without an inner layer instead of their default task "
-        "(±0.2 rad around the reference pose, |qdot| <= 0.5, |qddot| <= 2, computed torque, links ±10 %%)",
+        "(±0.2 rad around the reference pose, |qdot| <= 0.5, |qddot| <= 2, computed torque, links ±10 %%, payload 0-1 %% of the link mass)",
     )
 
 

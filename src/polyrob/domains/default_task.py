@@ -16,15 +16,14 @@ option is posed the problem an arm engineer poses (issue 21):
   ``±10 %`` (all links by one factor: the true robot is bounded at both
   ends of that range); reflected rotor inertia from the SRDF when it has
   rotor data, and said when it has none;
-* no payload by default: ``DefaultTask(payload_fraction=f)`` poses one
-  at the flange of 0 to ``f`` times the arm's link mass (an instrument,
-  changed between tasks; the model computes with the middle), which the
-  ``inner-gain`` model carries as one more scalar
-  (:mod:`polyrob.plant.models.inner_factors`).  It is not the default:
-  with 1 % (0.17 kg on panda) the batch certified panda but not ur10
-  or xarm7 (GRID_ONLY), nor ur5 and z1 (a membership-test stall, since
-  fixed: with the fix both certify), and took longer than its 30 minutes
-  (docs/fleet.md).
+* a **payload** at the flange of 0 to 1 % of the arm's link mass
+  (:attr:`DefaultTask.payload_fraction`: an instrument, changed between
+  tasks; 0.17 kg on panda and ur5, 0.29 kg on ur10, 0.10 kg on xarm7,
+  80 g on talos' arm, 47 g on z1, 5 g on so101), its centre of mass at the
+  flange; the inner layer's model computes with the middle of the range,
+  and the ``inner-gain`` model carries the mass as one more repeated
+  scalar (:mod:`polyrob.plant.models.inner_factors`).
+  ``DefaultTask(payload_fraction=0)`` poses the task without one.
 
 Robots with fewer joints (the paper's planar arms, ``double_pendulum``,
 ``TwoDofs``) keep the URDF torque box and no inner layer, as the paper
@@ -35,7 +34,7 @@ Examples
 --------
 >>> t = DefaultTask()
 >>> t.words()
-'task ±0.2 rad around the reference pose, |qdot| <= 0.5 rad/s, |qddot| <= 2 rad/s^2, inner layer computed-torque, link masses/inertias ±10 %'
+'task ±0.2 rad around the reference pose, |qdot| <= 0.5 rad/s, |qddot| <= 2 rad/s^2, inner layer computed-torque, link masses/inertias ±10 %, payload 0-1 % of the link mass at the flange'
 >>> applies_to(2), applies_to(6)
 (False, True)
 """
@@ -81,7 +80,7 @@ class DefaultTask:
     qddot_max: float = 2.0
     inner: str = "computed-torque"
     model_error: float = 0.10
-    payload_fraction: float = 0.0
+    payload_fraction: float = 0.01
 
     def payload_range(self, robot):
         """The :class:`~polyrob.model.payload.PayloadRange` of ``robot`` (a URDF robot), or ``None``.
