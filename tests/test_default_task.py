@@ -73,6 +73,7 @@ def test_any_domain_or_inner_option_keeps_todays_behaviour(capsys, argv):
 def test_a_payload_rides_on_the_default_task(capsys):
     doc, err = _info(capsys, "ur5", "--payload-mass", "0:0.5")
     assert "default task of ur5" in err and "payload 0:0.5 kg at the flange (given)" in err
+    assert "% of the link mass" not in err  # the given range replaces the task's own
     assert doc["domain"]["kind"] == "task" and doc["inner"]["payload"]["mass"] == [0.0, 0.5]
     robot, dom, task = job_robot_and_domain(Job(robot="ur5", payload_mass="0:0.5"))
     assert task == DEFAULT_TASK and isinstance(dom, TaskDomain) and robot.inner == "computed-torque"

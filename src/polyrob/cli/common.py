@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import replace
 
 from polyrob.cli.options import (
     nonnegative_float,
@@ -259,7 +260,8 @@ def apply_default_task(robot, args) -> bool:
     args.inner, args.model_error = t.inner, f"{100 * t.model_error!r}"
     user_payload = getattr(args, "payload_mass", None)  # a user's payload rides on the default task
     args.payload_mass = user_payload or t.payload_option(robot)
-    args.default_task = t.words() + (f", payload {user_payload} kg at the flange (given)" if user_payload else "")
+    given_words = f", payload {user_payload} kg at the flange (given)"  # instead of the task's own
+    args.default_task = replace(t, payload_fraction=0.0).words() + given_words if user_payload else t.words()
     args.bound_options = t.bound_options
     logging.getLogger("polyrob").info(
         f"default task of {robot.name} ({robot.m} joints, no domain given): {args.default_task}; "
