@@ -18,9 +18,9 @@ def _sigma(A, B, C, D, w):
 def test_first_order_radius_stops_before_the_crossing():
     """|1/(jω + 1)| = 0.8 at ω = 0.75: from ω = 2 the radius must stay short of 1.25, and be positive."""
     A, B, C, D = -np.eye(1), np.ones((1, 1)), np.ones((1, 1)), np.zeros((1, 1))
-    r = covering_radius(A, B, C, D, np.eye(1), np.zeros((1, 1)), 0.8, 2.0)
+    r = covering_radius(A, B, C, D, np.zeros((1, 1)), 0.8, 2.0)
     assert 0.05 < r < 2.0 - 0.75
-    assert covering_radius(A, B, C, D, np.eye(1), np.zeros((1, 1)), 0.8, 0.5) == 0.0  # |M| = 0.894 > 0.8 there
+    assert covering_radius(A, B, C, D, np.zeros((1, 1)), 0.8, 0.5) == 0.0  # |M| = 0.894 > 0.8 there
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -35,7 +35,7 @@ def test_radius_is_sound_on_random_scaled_loops(seed):
     Di = np.linalg.inv(Dh)
     w0 = float(rng.uniform(0.0, 3.0))
     level = 1.05 * max(_sigma(A, B @ Di, Dh @ C, Dh @ D @ Di, w) for w in np.linspace(max(w0 - 5, 0), w0 + 5, 400))
-    r = covering_radius(A, B, C, D, Dh, np.zeros((k, k)), level, w0)
+    r = covering_radius(A, B @ Di, Dh @ C, Dh @ D @ Di, np.zeros((k, k)), level, w0)
     assert r > 0
     for w in np.linspace(max(w0 - r, 0.0), w0 + r, 101):
         assert _sigma(A, B @ Di, Dh @ C, Dh @ D @ Di, w) < level

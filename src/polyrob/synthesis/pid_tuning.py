@@ -159,7 +159,7 @@ def tuned_pid(
     from polyrob.analysis.mu.blocks import as_block_structure
     from polyrob.analysis.mu.bounds import mussv
     from polyrob.analysis.mu.frequency import matrix_response
-    from polyrob.analysis.mu.sweep import MANY_REAL_SCALARS
+    from polyrob.analysis.mu.sweep import relaxed_is_cheap
     from polyrob.plant.loops import lower_lft_matrices
 
     m = int(P.n_u)
@@ -175,8 +175,7 @@ def tuned_pid(
     st = as_block_structure(P.block_structure_rp)
     # AB13MD on the relaxed structure ranks in milliseconds, unless it has many real scalars
     # (an axes model's dozens): then descent on the D-G scalings, 10-30 times faster there
-    many = sum(b.kind == "real" for b in st.relaxed().blocks) > MANY_REAL_SCALARS
-    method = "gradient" if many else "relaxed"
+    method = "relaxed" if relaxed_is_cheap(st) else "gradient"
     A, B, C, D = (np.asarray(X, float) for X in (P.system.A, P.system.B, P.system.C, P.system.D))
 
     def grid_mu(wc, ki, nf) -> float:

@@ -220,7 +220,7 @@ def verify_between(
     (True, True)
     """
     from polyrob.analysis.mu.bounds import mussv
-    from polyrob.analysis.mu.sweep import MANY_REAL_SCALARS
+    from polyrob.analysis.mu.sweep import relaxed_is_cheap
 
     t0 = time.perf_counter()
     st = as_block_structure(mu.structure)
@@ -230,7 +230,7 @@ def verify_between(
     adaptive = level is None
     beta = float(mu.peak_upper) * (1.0 + LEVEL_MARGIN) if adaptive else float(level)
     how = method or (mu.method if mu.method in ("ab13md", "lmi", "gradient") else "auto")
-    few_reals = sum(b.kind == "real" for b in st.relaxed().blocks) <= MANY_REAL_SCALARS
+    second = how == "gradient" and relaxed_is_cheap(st)
     w = np.asarray(mu.omega, float)
     scalings = [(mu.D[i], mu.G[i]) for i in range(len(w))]
     peak, added = float(np.max(mu.upper)), 0
@@ -240,17 +240,23 @@ def verify_between(
             beta, holds, peak, intervals, added, failed_at, reason, round(time.perf_counter() - t0, 3)
         )
 
-    memo = {}  # (frequency of the scalings, level) -> (normalised loop, crossings): each end serves two intervals
+    memo = {}  # per end (each serves two intervals): its normalised loop, crossings and radius at the level
+
+    def normalised(scaling, at):
+        """``D M D^-1`` with ``P = I`` and ``G~ = D^-1 G D^-1`` (terms of one size; ``P`` can span 16 decades)."""
+        key = ("loop", at)
+        if key not in memo:
+            Dh, G = scaling
+            Di = np.linalg.inv(Dh)
+            Gt = Di @ G @ Di
+            memo[key] = (A, B @ Di, Dh @ C, Dh @ D @ Di, np.eye(len(Dh)), (Gt + Gt.conj().T) / 2)
+        return memo[key]
 
     def crossings_of(scaling, at):
         key = (at, beta)
         if key not in memo:
-            # Φ ≺ 0 iff D^-1 Φ D^-1 ≺ 0: the test runs on D M D^-1 with P = I and G~ = D^-1 G D^-1,
-            # whose terms are of one size (P itself can span 16 decades)
-            Dh, G = scaling
-            Di = np.linalg.inv(Dh)
-            Gt = Di @ G @ Di
-            scaled = (A, B @ Di, Dh @ C, Dh @ D @ Di, np.eye(len(Dh)), (Gt + Gt.conj().T) / 2, beta)
+            # Φ ≺ 0 iff D^-1 Φ D^-1 ≺ 0: the test runs on the normalised loop
+            scaled = normalised(scaling, at) + (beta,)
             cross = crossing_frequencies(*scaled) if _negative_at(*scaled, at) else None
             memo[key] = (scaled, cross)
         return memo[key]
@@ -258,10 +264,8 @@ def verify_between(
     def radius(scaling, at) -> float:
         key = ("radius", at, beta)
         if key not in memo:
-            Dh, G = scaling
-            Di = np.linalg.inv(Dh)
-            Gt = Di @ G @ Di
-            memo[key] = covering_radius(A, B, C, D, Dh, (Gt + Gt.conj().T) / 2, beta, at)
+            An, Bn, Cn, Dn, _, Gt = normalised(scaling, at)
+            memo[key] = covering_radius(An, Bn, Cn, Dn, Gt, beta, at)
         return memo[key]
 
     def near_enough(ends, lo, hi) -> bool:
@@ -286,7 +290,7 @@ def verify_between(
         M = _at(A, B, C, D, x)
         ec, er = st.embeddings()
         r = mussv(M[np.ix_(ec, er)], st, method=how, lower=False)
-        if how == "gradient" and few_reals:
+        if second:
             # descent can stall where the sweep's own second bound answered (sweep.py): the relaxed
             # structure's AB13MD scalings are admissible too, and the smaller bound is kept
             r2 = mussv(M[np.ix_(ec, er)], st, method="relaxed", lower=False)

@@ -29,7 +29,7 @@ Examples
 --------
 >>> import numpy as np
 >>> A, B, C, D = -np.eye(1), np.ones((1, 1)), np.ones((1, 1)), np.zeros((1, 1))
->>> r = covering_radius(A, B, C, D, np.eye(1), np.zeros((1, 1)), 2.0, 0.0)  # |1/(jw + 1)| <= 1 < 2
+>>> r = covering_radius(A, B, C, D, np.zeros((1, 1)), 2.0, 0.0)  # |1/(jw + 1)| <= 1 < 2
 >>> 0.1 < r < 1.0
 True
 """
@@ -44,15 +44,16 @@ __all__ = ["covering_radius"]
 MARGIN_SHARE = 0.5
 
 
-def covering_radius(A, B, C, D, Dh, Gt, level: float, w: float) -> float:
+def covering_radius(A, B, C, D, Gt, level: float, w: float) -> float:
     """``ρ >= 0``: the scaled test ``Φ~ ≺ 0`` at ``level`` holds for every ``ω >= 0`` with ``|ω - w| <= ρ``.
 
     Parameters
     ----------
     A, B, C, D : ndarray
-        The padded square ``M(s)`` (``A`` stable).
-    Dh, Gt : ndarray
-        The scalings: ``D`` (the square root of ``P``) and ``G~ = D^-1 G D^-1`` (Hermitian).
+        The scaled square ``M~(s) = D M(s) D^-1`` (``A`` stable), ``D`` the
+        square root of the scalings' ``P``.
+    Gt : ndarray
+        ``G~ = D^-1 G D^-1`` (Hermitian).
     level : float
         ``β``.
     w : float
@@ -64,15 +65,12 @@ def covering_radius(A, B, C, D, Dh, Gt, level: float, w: float) -> float:
         0 when ``Φ~(w)`` itself is not negative definite.
     """
     n = A.shape[0]
-    Di = np.linalg.inv(Dh)
-    Bs, Cs, Ds = B @ Di, Dh @ C, Dh @ D @ Di
     if n == 0:  # a static M does not move with ω
-        M = Ds
-        return np.inf if _largest(M, Gt, level) < 0 else 0.0
+        return np.inf if _largest(D, Gt, level) < 0 else 0.0
     Z = 1j * float(w) * np.eye(n) - A
-    RB = np.linalg.solve(Z, Bs)
-    CR = np.linalg.solve(Z.T, Cs.T).T
-    M = CR @ Bs + Ds
+    RB = np.linalg.solve(Z, B)
+    CR = np.linalg.solve(Z.T, C.T).T
+    M = CR @ B + D
     lam = _largest(M, Gt, level)
     if not lam < 0:
         return 0.0

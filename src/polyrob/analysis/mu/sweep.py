@@ -22,6 +22,7 @@ __all__ = [
     "relaxation_note",
     "DESCENT_ABOVE",
     "MANY_REAL_SCALARS",
+    "relaxed_is_cheap",
     "AB13MD_SAFETY_TIMEOUT",
     "LARGE_AB13MD_TIMEOUT",
 ]
@@ -50,6 +51,11 @@ AB13MD_SAFETY_TIMEOUT = 300.0
 #: (measured: AB13MD on ur5's relaxed structure 26-37 s per frequency; on a random matrix against
 #: a 114-channel structure 196 s on a busy machine).
 LARGE_AB13MD_TIMEOUT = 1200.0
+
+
+def relaxed_is_cheap(st: BlockStructure) -> bool:
+    """Whether AB13MD on ``st``'s relaxed structure is cheap: at most :data:`MANY_REAL_SCALARS` real scalars."""
+    return sum(b.kind == "real" for b in st.relaxed().blocks) <= MANY_REAL_SCALARS
 
 
 def relaxation_note(st: BlockStructure) -> str:
@@ -81,7 +87,7 @@ def run_sweep(
     # where the relaxed structure has few real scalars AB13MD is cheap, its scalings are admissible here, and
     # it answers wherever descent leaves a gap above the lower bound
     second = None
-    if meth == "gradient" and sum(b.kind == "real" for b in st_up.blocks) <= MANY_REAL_SCALARS:
+    if meth == "gradient" and relaxed_is_cheap(st):
         second = mu_upper.TimedAb13md(st_up, cold_timeout, solver, rtol, fallback=GradientUpper(st_up))
     guard = None
     if warm_start and meth in ("ab13md", "relaxed"):
