@@ -6,8 +6,8 @@ a Hamiltonian test.  That test needs ``Φ(∞)`` nonsingular, which scalings
 found at a low frequency often break (they scale the blocks that do not
 matter there down by six or seven decades, and the feedthrough then makes
 ``Φ(∞)`` singular), so the flat low-frequency end of a loop with many
-blocks was split until the check gave up (xarm7 with a payload: 200 points
-added near 1e-4 rad/s, docs/fleet.md).  There ``M(jω)`` hardly moves, and
+blocks was split until the check gave up (xarm7 and talos_left_arm with a
+payload were GRID_ONLY for this reason, docs/fleet.md).  There ``M(jω)`` hardly moves, and
 a bound on how much it moves covers the interval directly.
 
 With ``Z = jω_e I - A``, ``R = Z^-1`` and the scaled ``M~ = D M D^-1``,
