@@ -168,30 +168,40 @@ def _quadratic_maximum(b, Q, t_active, faces: bool, ascents: int):
         best_t = np.take_along_axis(t.reshape(N, D, n, m), j[..., None, None], axis=2)[:, :, 0]
         return best, best_t
     # Faces with free coordinates: the stationary point in the free
-    # coordinates, if it lies inside the face.
-    for pattern in patterns[has_free]:
-        free = (pattern == 0) & t_active
-        F = np.flatnonzero(free)
-        fixed = ~free
-        t = np.broadcast_to(pattern[None, None, :], (N, D, m)).copy()
-        QFF = np.moveaxis(Q[:, F][:, :, F], 3, 1)  # (N, D, f, f)
-        rhs = -np.moveaxis(b[:, F], 2, 1)  # (N, D, f)
-        if fixed.any():
-            Qf = np.moveaxis(Q[:, F][:, :, fixed], 3, 1)
-            rhs = rhs - 2 * np.einsum("ndij,ndj->ndi", Qf, t[:, :, fixed])
-        with np.errstate(all="ignore"):
-            det_ok = np.abs(np.linalg.det(QFF)) > 1e-300
-            sol = np.zeros_like(rhs)
-            if det_ok.any():
-                sol[det_ok] = np.linalg.solve(2 * QFF[det_ok], rhs[det_ok][..., None])[..., 0]
-        inside = det_ok & np.all(np.abs(sol) <= 1.0, axis=-1)
-        tf = t[:, :, F]
-        tf[inside] = sol[inside]
-        t[:, :, F] = tf
-        val = np.where(inside, _quadratic_value(b, Q, t), -np.inf)
-        better = val > best
-        best = np.where(better, val, best)
-        best_t[better] = t[better]
+    # coordinates, if it lies inside the face.  All faces with the same number
+    # of free coordinates are solved in one batch (m batches instead of 3^m
+    # face by face: ~100 times faster for one polynomial at m = 7).
+    faces_free = patterns[has_free]
+    n_free = np.sum((faces_free == 0) & t_active, axis=1)
+    for f in np.unique(n_free):
+        best, best_t = _free_face_maxima(b, Q, faces_free[n_free == f], t_active, best, best_t)
+    return best, best_t
+
+
+def _free_face_maxima(b, Q, patterns, t_active, best, best_t):
+    """Update ``best`` with the interior stationary points of faces that have the same number of free coordinates."""
+    N, m, D = b.shape
+    free = (patterns == 0) & t_active  # (S, m)
+    F = np.array([np.flatnonzero(row) for row in free])  # (S, f): equal counts
+    # stationarity in the free coordinates: 2 Q_FF t_F = -(b + 2 Q t_fixed)_F, t_fixed = the pattern
+    rhs = -b[:, None] - 2 * np.einsum("nijd,sj->nsid", Q, patterns, optimize=True)  # (N, S, m, D)
+    rhs = np.moveaxis(np.take_along_axis(rhs, F[None, :, :, None], axis=2), 3, 2)  # (N, S, D, f)
+    QFF = np.moveaxis(Q[:, F[:, :, None], F[:, None, :]], 4, 2)  # (N, S, D, f, f)
+    with np.errstate(all="ignore"):
+        det_ok = np.abs(np.linalg.det(QFF)) > 1e-300
+        sol = np.zeros_like(rhs)
+        if det_ok.any():
+            sol[det_ok] = np.linalg.solve(2 * QFF[det_ok], rhs[det_ok][..., None])[..., 0]
+    inside = det_ok & np.all(np.abs(sol) <= 1.0, axis=-1)  # (N, S, D)
+    t = np.broadcast_to(patterns[None, :, None, :], (N, len(patterns), D, m)).copy()
+    np.put_along_axis(t, np.broadcast_to(F[None, :, None, :], sol.shape), sol, axis=3)
+    val = np.einsum("nmd,nsdm->nsd", b, t) + np.einsum("nijd,nsdi,nsdj->nsd", Q, t, t, optimize=True)
+    val = np.where(inside, val, -np.inf)
+    s = np.argmax(val, axis=1)  # (N, D)
+    top = np.take_along_axis(val, s[:, None], axis=1)[:, 0]
+    better = top > best
+    best = np.where(better, top, best)
+    best_t[better] = np.take_along_axis(t, s[:, None, :, None], axis=1)[:, 0][better]
     return best, best_t
 
 
@@ -205,8 +215,9 @@ def box_maximum(c, a, b, Q, t_active, u_active, *, exact: bool | None = None, as
     t_active, u_active : (m,) bool
         Coordinates that may move (a zero-width range is pinned at 0).
     exact : bool, optional
-        Enumerate all ``3^m`` faces of the velocity box (exact; about 1 ms per
-        polynomial for m = 7).  Otherwise the ``2^m`` vertices are evaluated
+        Enumerate all ``3^m`` faces of the velocity box (exact; batched by
+        the number of free coordinates, so its memory grows with ``N D
+        3^m``).  Otherwise the ``2^m`` vertices are evaluated
         and coordinate ascent runs from the best ``ascents`` of them (a lower
         bound that is attained).  Default: exact for
         ``m <= FACE_ENUMERATION_MAX_JOINTS``.

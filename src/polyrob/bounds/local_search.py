@@ -46,7 +46,27 @@ def cross_seed(
 
 
 def _local_search(problem: Problem, d, value, index, x0, free, maxiter, coarse=False):
-    """L-BFGS-B on ``d . p`` over the free coordinates of ``x0`` (central-difference gradients)."""
+    """L-BFGS-B on ``d . p`` over the free coordinates of ``x0``, best of the variants.
+
+    With several variants (the true robots of an inner loop) the search
+    follows the one that is largest at its start, a smooth function, instead
+    of their maximum (kinked where they cross, and one Jacobian per variant
+    per evaluation); where another variant is larger at the end, it goes on
+    from there with that one.
+    """
+    x = x0
+    best, variant = problem.best_variant(x0, index, d)
+    for _ in range(len(problem.variants)):
+        x = _variant_search(problem, d, value, index, x, free, maxiter, coarse, variant)
+        best, following = problem.best_variant(x, index, d)
+        if following == variant:
+            break
+        variant = following
+    return best, x
+
+
+def _variant_search(problem: Problem, d, value, index, x0, free, maxiter, coarse, variant):
+    """L-BFGS-B on one variant's ``d . p`` (central-difference gradients): the point reached."""
     m = problem.m
     lo, hi = problem.lo, problem.hi
     span = np.where(hi > lo, hi - lo, 1.0)
@@ -64,7 +84,7 @@ def _local_search(problem: Problem, d, value, index, x0, free, maxiter, coarse=F
         pts[1 + np.arange(nfree), pos] += h
         pts[1 + nfree + np.arange(nfree), pos] -= h
         pts = np.clip(pts, lo, hi)
-        vals = problem.along(pts[:, :m], pts[:, m : 2 * m], pts[:, 2 * m :], index, d)
+        vals = problem.along(pts[:, :m], pts[:, m : 2 * m], pts[:, 2 * m :], index, d, variant)
         dh = pts[1 + np.arange(nfree), pos] - pts[1 + nfree + np.arange(nfree), pos]
         grad = (vals[1 : 1 + nfree] - vals[1 + nfree :]) / np.where(dh > 0, dh, 1.0)
         return -vals[0] / scale, -grad / scale
@@ -82,7 +102,7 @@ def _local_search(problem: Problem, d, value, index, x0, free, maxiter, coarse=F
     )
     x = x0.copy()
     x[free] = np.clip(res.x, lo[free], hi[free])
-    return float(problem.along(x[None, :m], x[None, m : 2 * m], x[None, 2 * m :], index, d)[0]), x
+    return x
 
 
 def _exact_inner(problem: Problem, d, index, x):

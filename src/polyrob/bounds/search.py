@@ -63,9 +63,19 @@ class Problem:
         A, B = robot.jacobians_batch(q, qdot, domain.inputs(q, qdot, w))
         return self.entries_from(A, B, index)
 
-    def along(self, q, qdot, w, index, d) -> np.ndarray:
-        """``max`` over the variants of the entries times ``d`` (k,) or (k, D): (n,) or (n, D)."""
+    def along(self, q, qdot, w, index, d, variant: int | None = None) -> np.ndarray:
+        """``max`` over the variants (or of one ``variant``) of the entries times ``d`` (k,) or (k, D): (n,) or (n, D)."""
+        if variant is not None:
+            return self.entries_at(q, qdot, w, index, variant) @ d
         return np.max([self.entries_at(q, qdot, w, index, i) @ d for i in range(len(self.variants))], axis=0)
+
+    def best_variant(self, x, index, d) -> tuple[float, int]:
+        """The largest ``d . p`` over the variants at one point ``x = (q, qdot, w)``, and the variant attaining it."""
+        m = self.m
+        vals = [float(self.along(x[None, :m], x[None, m : 2 * m], x[None, 2 * m :], index, d, i)[0])
+                for i in range(len(self.variants))]  # fmt: skip
+        i = int(np.argmax(vals))
+        return vals[i], i
 
     def entries_from(self, A, B, index=None) -> np.ndarray:
         """Entries (n, k) of given Jacobians ``A`` (n, 2m, 2m), ``B`` (n, 2m, m)."""
@@ -277,11 +287,14 @@ def _screen_task(problem: Problem, item):
         step = rng.standard_normal(base.shape) * sigma * (problem.hi - problem.lo)
         x = np.clip(base + step, problem.lo, problem.hi)
         q, qdot, u = x[:, :m], x[:, m : 2 * m], x[:, 2 * m :]
-    v = np.full((len(q), len(directions)), -np.inf)
-    for i in range(len(problem.variants)):
-        e = problem.entries_at(q, qdot, u, index, i)
-        v[:, axis] = np.maximum(v[:, axis], e[:, col] * coef)
-        v[:, other] = np.maximum(v[:, other], e @ directions[other].T)
+    v = np.empty((len(q), len(directions)))
+    # one Jacobian per point, of the variants (an inner loop's true robots) in turn: the screen
+    # looks for positions, and theirs peak where the robot's do (the same arm, masses within a few %)
+    V = len(problem.variants)
+    for i in range(V):
+        e = problem.entries_at(q[i::V], qdot[i::V], u[i::V], index, i)
+        v[i::V, axis] = e[:, col] * coef
+        v[i::V, other] = e @ directions[other].T
     arg = np.argmax(v, axis=0)
     return v[arg, np.arange(len(directions))], q[arg]
 

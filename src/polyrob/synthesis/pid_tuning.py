@@ -68,6 +68,9 @@ class TunedPID:
         The ranking figure: the largest μ upper bound over the coarse grid
         (a search figure, not a certificate).
     tried : tuple of (crossover, integral_ratio, filter_ratio, grid_mu)
+        Every candidate's figure; a candidate dropped once it could no longer
+        be the best has the figure of the frequency where it was dropped (a
+        lower bound of its own figure, at least the best's).
     """
 
     controller: control.StateSpace = field(repr=False)
@@ -178,6 +181,12 @@ def tuned_pid(
     method = "relaxed" if relaxed_is_cheap(st) else "gradient"
     A, B, C, D = (np.asarray(X, float) for X in (P.system.A, P.system.B, P.system.C, P.system.D))
 
+    # frequencies in the order of the best candidate's figures, largest first: a candidate is dropped at
+    # the first frequency where it is already no better than the best (its figure is then that one,
+    # a lower bound of its own), so only the winner's figure is computed at every frequency
+    order = np.arange(omega.size)
+    best = [np.inf]
+
     def grid_mu(wc, ki, nf) -> float:
         K = pid_controller(pid_gains(wc, ki, nf, b))
         Ak, Bk, Ck, Dk = (np.asarray(X, float) for X in (K.A, K.B, K.C, K.D))
@@ -188,7 +197,14 @@ def tuned_pid(
         if np.max(np.linalg.eigvals(Acl).real) >= 0:
             return np.inf
         H = matrix_response(Acl, Bcl, Ccl, Dcl)(omega)
-        return max(mussv(H[k], st, method=method, lower=False).upper for k in range(omega.size))
+        values = np.full(omega.size, -np.inf)
+        for k in order:
+            values[k] = mussv(H[k], st, method=method, lower=False).upper
+            if values[k] >= best[0]:
+                return float(values[k])
+        best[0] = float(values.max())
+        order[:] = np.argsort(-values, kind="stable")
+        return best[0]
 
     # crossover first (middle integral and filter), then the other two around the best crossover
     tried = [(wc, 16.0, 20.0, grid_mu(wc, 16.0, 20.0)) for wc in crossovers]

@@ -123,7 +123,8 @@ def bound_one_robot(robot, pldi):
     """The PLDI of one true robot (or factor) over ``pldi``'s domain, with the effort of a model's own ranges.
 
     The PLDI's sample count, one local search per direction, one verification
-    round; the model's coverage is checked afterwards on fresh points.
+    round; the model's coverage is checked afterwards on fresh points.  On
+    as many workers as the PLDI had (one inside a fleet's job).
     """
     from dataclasses import replace
 
@@ -133,6 +134,7 @@ def bound_one_robot(robot, pldi):
     if getattr(domain, "robot", None) is not None:
         domain = replace(domain, robot=robot)
     samples = int((pldi.info or {}).get("samples", 256))
+    workers = (pldi.info or {}).get("workers")
     return bound_pldi(
         robot,
         domain,
@@ -141,7 +143,7 @@ def bound_one_robot(robot, pldi):
         starts_per_direction=1,
         verify_rounds=1,
         coverage=0,
-        workers=1,
+        workers=int(workers) if workers else 1,
         progress=False,
     )
 
