@@ -139,3 +139,27 @@ def test_a_judge_ranks_the_factors_by_another_certificate():
     assert judged == [a for a, _ in calls]
     assert 4 < res.alpha < 5 <= res.bracket[1] <= res.alpha * 1.01  # 0.5 + alpha / 10 < 1: alpha < 5
     assert [mu for _, mu in res.history][:2] == [math.inf, pytest.approx(0.9)]
+
+
+def test_the_scan_stops_once_the_failed_factors_figures_grow_as_the_factor_falls():
+    # mu = 1 + 1/alpha: 1.03 at 32, 1.06 at 16, 1.125 at 8 -- two rises in a row, so 4 and below are not tried
+    with pytest.raises(SynthesisError, match=r"stop rule, before alpha = 4: the mu figures grew .*1\.12 at 8") as err:
+        _search(lambda a: 1 + 1 / a)
+    assert "none certifies before the scan's stop rule" in str(err.value)
+    _, calls = _search(lambda a: 1 + 1 / a if a > 0.5 else 0.9, stop_after_rises=0)
+    assert [a for a, _ in calls][:3] == [32, 16, 8] and 0.5 in [a for a, _ in calls]
+
+
+def test_the_stop_rule_reads_a_screen_figure_and_keeps_a_minimum_that_certifies():
+    def mu(a):
+        if a > 8:  # a PID screen: its coarse-grid figure, no certificate
+            exc = SynthesisError("screened")
+            exc.figure = 1 + 1 / a
+            raise exc
+        return 0.8 if a <= 8 else 2.0
+
+    # the figures 1.03, 1.06 rose once only before 8 certified: no stop
+    res, calls = _search(mu, rtol=0.5)
+    assert res.alpha == 8 and [a for a, _ in calls][:3] == [32, 16, 8]
+    with pytest.raises(SynthesisError, match=r"32: synthesis failed \(screen 1\.031\).* 8: NOT_CERTIFIED 3\.000$"):
+        _search(lambda a: mu(a) if a > 8 else 3.0)

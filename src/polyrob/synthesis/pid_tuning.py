@@ -271,10 +271,12 @@ def pid_start(
     log.info(f"musyn: start from a {tuned.words()}, coarse-grid mu {tuned.grid_mu:.4f}")
     if screen is not None and tuned.grid_mu >= screen:
         # a search's screen (a heuristic: the factor counts as not reached, never as refuted)
-        raise SynthesisError(
+        exc = SynthesisError(
             f"the best per-joint PID's coarse-grid mu upper bound {tuned.grid_mu:.4f} >= {screen:g}: "
             "its certificate was not computed (the search's screen)"
         )
+        exc.figure = tuned.grid_mu  # the search's stop rule reads it (polyrob.synthesis.bandwidth)
+        raise exc
     if (not only and target is None) or (not only and tuned.grid_mu >= target):
         return tuned.controller, tuned.words(), None  # D-K goes on: the ranking already exceeds the target
     from polyrob.analysis.certificate import certify_loop
