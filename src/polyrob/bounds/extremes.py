@@ -114,31 +114,29 @@ def _patterns(m: int, faces: bool) -> np.ndarray:
     return np.array(list(itertools.product(levels, repeat=m)), dtype=float)
 
 
-def _quadratic_value(b, Q, t):
-    """``b.t + t'Qt`` for ``b`` (N, m, D), ``Q`` (N, m, m, D), ``t`` (N, D, m): (N, D)."""
-    return np.einsum("nmd,ndm->nd", b, t) + np.einsum("nijd,ndi,ndj->nd", Q, t, t)
-
-
 def _coordinate_ascent(b, Q, t, t_active, sweeps: int = 4):
-    """Exact maximisation along one coordinate at a time, from given points.
+    """Exact maximisation along one coordinate at a time, from given points ``t`` (N, D, S, m).
 
     With too many joints to enumerate faces, an interior maximum (negative
     curvature along a velocity) is reached this way; each step maximises the
-    one-dimensional quadratic exactly, so the value never decreases.
+    one-dimensional quadratic exactly, so the value never decreases.  ``S``
+    starts per polynomial share its coefficients (not copied per start).
+    Returns the values (N, D, S) and the points.
     """
     t = t.copy()
     diag = np.moveaxis(np.diagonal(Q, axis1=1, axis2=2), 2, 1)  # (N, m, D)
     for _ in range(sweeps):
         for i in np.flatnonzero(t_active):
             # p(t_i) = Q_ii t_i^2 + beta t_i + const, beta = b_i + 2 sum_{j != i} Q_ij t_j
-            beta = b[:, i] + 2 * np.einsum("njd,ndj->nd", Q[:, i], t) - 2 * diag[:, i] * t[:, :, i]
-            qii = diag[:, i]
+            qii = diag[:, i][..., None]  # (N, D, 1)
+            beta = b[:, i][..., None] + 2 * np.einsum("njd,ndsj->nds", Q[:, i], t) - 2 * qii * t[..., i]
             with np.errstate(divide="ignore", invalid="ignore"):
                 stat = np.where(qii < 0, -beta / (2 * qii), 0.0)
             cands = np.stack([-np.ones_like(beta), np.ones_like(beta), np.clip(stat, -1, 1)])
             vals = qii * cands**2 + beta * cands
-            t[:, :, i] = np.take_along_axis(cands, np.argmax(vals, axis=0)[None], axis=0)[0]
-    return _quadratic_value(b, Q, t), t
+            t[..., i] = np.take_along_axis(cands, np.argmax(vals, axis=0)[None], axis=0)[0]
+    value = np.einsum("nmd,ndsm->nds", b, t) + np.einsum("nijd,ndsi,ndsj->nds", Q, t, t, optimize=True)
+    return value, t
 
 
 def _quadratic_maximum(b, Q, t_active, faces: bool, ascents: int):
@@ -159,13 +157,11 @@ def _quadratic_maximum(b, Q, t_active, faces: bool, ascents: int):
         # at a coordinatewise maximum that is not the box's in ~15 % of the
         # panda's (position, entry) pairs; a few starts close most of these gaps.
         n = min(ascents, len(V))
-        top = np.argsort(-vals, axis=1)[:, :n]  # (N, n, D)
-        t0 = np.moveaxis(V[top], 1, 2).reshape(N, D * n, m)  # start j of polynomial d at d * n + j
-        rep = lambda x: np.repeat(x, n, axis=-1)  # noqa: E731
-        val, t = _coordinate_ascent(rep(b), rep(Q), t0, t_active)
-        j = np.argmax(val.reshape(N, D, n), axis=2)
-        best = np.take_along_axis(val.reshape(N, D, n), j[..., None], axis=2)[..., 0]
-        best_t = np.take_along_axis(t.reshape(N, D, n, m), j[..., None, None], axis=2)[:, :, 0]
+        top = np.argpartition(-vals, n - 1, axis=1)[:, :n] if n < len(V) else np.argsort(-vals, axis=1)  # (N, n, D)
+        val, t = _coordinate_ascent(b, Q, np.moveaxis(V[top], 1, 2), t_active)  # starts (N, D, n, m)
+        j = np.argmax(val, axis=2)
+        best = np.take_along_axis(val, j[..., None], axis=2)[..., 0]
+        best_t = np.take_along_axis(t, j[..., None, None], axis=2)[:, :, 0]
         return best, best_t
     # Faces with free coordinates: the stationary point in the free
     # coordinates, if it lies inside the face.  All faces with the same number
