@@ -58,13 +58,42 @@ def test_tuned_pid_takes_the_best_candidate_and_its_figure_is_an_upper_bound(P, 
     # the gains were divided by the nominal input gain b_j = B_nom[m + j, j]
     b = np.diag(np.asarray(unc.B_nom)[2:])
     assert r.input_gains == pytest.approx(b)
-    assert r.gains()[:, 0] == pytest.approx(r.crossover**2 / b)
+    assert r.gains()[:, 0] == pytest.approx(r.crossovers() ** 2 / b)
     # the ranking figure bounds mu from above at its frequencies
     CL = lower_lft(P.system, r.controller, P.n_u, P.n_y)
     H = matrix_response(CL.A, CL.B, CL.C, CL.D)(omega)
     lower = max(mussv(H[k], P.block_structure_rp, lower=True).lower for k in range(omega.size))
     assert lower <= r.grid_mu * (1 + 1e-6)
     assert "per-joint PID critically damped" in r.words()
+
+
+def test_per_joint_crossovers_only_lower_the_figure_and_the_figure_is_the_controllers(P):
+    from polyrob.analysis.mu.bounds import mussv
+    from polyrob.analysis.mu.frequency import matrix_response
+    from polyrob.plant.loops import lower_lft
+    from polyrob.synthesis.pid_tuning import JOINT_SCALES
+
+    omega = np.logspace(-2, 2, 9)
+    common = tuned_pid(P, omega=omega, refine_window=None)
+    assert common.joint_scales == (1.0, 1.0)
+    r = tuned_pid(P, omega=omega, refine_window=(0.0, np.inf))  # always search the joints' factors
+    assert r.grid_mu <= common.grid_mu
+    assert (r.crossover, r.integral_ratio, r.filter_ratio) == (
+        common.crossover,
+        common.integral_ratio,
+        common.filter_ratio,
+    )
+    # each factor is a product of the tried ones (two sweeps at most)
+    allowed = {1.0, *JOINT_SCALES, *(a * b for a in JOINT_SCALES for b in JOINT_SCALES)}
+    assert all(min(abs(s - a) for a in allowed) < 1e-12 for s in r.joint_scales)
+    assert r.crossovers() == pytest.approx(r.crossover * np.array(r.joint_scales))
+    # the figure is the returned controller's own, recomputed
+    CL = lower_lft(P.system, r.controller, P.n_u, P.n_y)
+    H = matrix_response(CL.A, CL.B, CL.C, CL.D)(omega)
+    upper = max(mussv(H[k], P.block_structure_rp, method="relaxed", lower=False).upper for k in range(omega.size))
+    assert upper == pytest.approx(r.grid_mu, rel=1e-9)
+    if r.joint_scales != (1.0, 1.0):
+        assert r.grid_mu < common.grid_mu and "per joint" in r.words()
 
 
 def test_musyn_starts_from_the_tuned_pid_and_keeps_the_best(P, monkeypatch):
