@@ -39,6 +39,8 @@ __all__ = ["polynomial_coefficients", "box_maximum", "evaluate_polynomial"]
 
 #: Up to this many joints the faces of the velocity box are enumerated (3^m).
 FACE_ENUMERATION_MAX_JOINTS = 4
+#: Elements (positions x polynomials x faces x joints) of one batch of the face enumeration.
+FACE_BATCH_ELEMENTS = 2_000_000
 
 
 def _design(m: int):
@@ -170,7 +172,11 @@ def _quadratic_maximum(b, Q, t_active, faces: bool, ascents: int):
     faces_free = patterns[has_free]
     n_free = np.sum((faces_free == 0) & t_active, axis=1)
     for f in np.unique(n_free):
-        best, best_t = _free_face_maxima(b, Q, faces_free[n_free == f], t_active, best, best_t)
+        faces = faces_free[n_free == f]
+        step = max(1, int(FACE_BATCH_ELEMENTS // (len(faces) * D * m)))  # bounded memory for many polynomials
+        for lo in range(0, N, step):
+            sl = slice(lo, lo + step)
+            best[sl], best_t[sl] = _free_face_maxima(b[sl], Q[sl], faces, t_active, best[sl], best_t[sl])
     return best, best_t
 
 
@@ -212,8 +218,8 @@ def box_maximum(c, a, b, Q, t_active, u_active, *, exact: bool | None = None, as
         Coordinates that may move (a zero-width range is pinned at 0).
     exact : bool, optional
         Enumerate all ``3^m`` faces of the velocity box (exact; batched by
-        the number of free coordinates, so its memory grows with ``N D
-        3^m``).  Otherwise the ``2^m`` vertices are evaluated
+        the number of free coordinates, in batches of bounded memory).
+        Otherwise the ``2^m`` vertices are evaluated
         and coordinate ascent runs from the best ``ascents`` of them (a lower
         bound that is attained).  Default: exact for
         ``m <= FACE_ENUMERATION_MAX_JOINTS``.
