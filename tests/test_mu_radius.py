@@ -57,6 +57,8 @@ def test_check_without_hamiltonian_still_covers_smooth_loops_and_finds_resonance
     smooth = control.tf([1], [1, 1])
     ok = between.verify_between(smooth, mu_bounds(smooth, [[1, 1]], progress=False))
     assert ok.holds and ok.level >= 1.0 and "perturbation bounds" in ok.sentence()
+    assert 0 < ok.by_radius < ok.intervals  # the interval up to infinity: the Hamiltonian's
+    assert "Hamiltonian tests and perturbation bounds" in ok.sentence()
     assert len(calls) > 1 and ok.points_added > 1
     calls.clear()
     sharp = control.tf([1], [1, 0.02, 1])  # peak 50 near 1 rad/s, between the coarse points

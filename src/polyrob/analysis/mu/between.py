@@ -83,6 +83,9 @@ class BetweenGridResult:
     reason : str
         Why it does not hold (empty when it does).
     seconds : float
+    by_radius : int
+        Of the intervals covered, those covered by the ends' perturbation
+        radii (:mod:`~polyrob.analysis.mu.radius`); the others by Hamiltonian tests.
     """
 
     level: float
@@ -93,13 +96,17 @@ class BetweenGridResult:
     failed_at: float | None
     reason: str
     seconds: float
+    by_radius: int = 0
 
     def sentence(self) -> str:
         """One clause for a verdict."""
         if self.holds:
+            tests = [name for name, n in (("Hamiltonian tests", self.intervals - self.by_radius),
+                                          ("perturbation bounds", self.by_radius)) if n]  # fmt: skip
             return (
                 f"mu <= {self.level:.4g} at every frequency (the grid's D-G scalings verified between its points by "
-                f"Hamiltonian tests and perturbation bounds, {self.points_added} point{'' if self.points_added == 1 else 's'} added)"
+                f"{' and '.join(tests) or 'Hamiltonian tests'}, "
+                f"{self.points_added} point{'' if self.points_added == 1 else 's'} added)"
             )
         return f"not verified between the grid points: {self.reason}"
 
@@ -234,10 +241,11 @@ def verify_between(
     w = np.asarray(mu.omega, float)
     scalings = [(mu.D[i], mu.G[i]) for i in range(len(w))]
     peak, added = float(np.max(mu.upper)), 0
+    by_radius = 0  # intervals the perturbation radii covered
 
     def result(holds, failed_at=None, reason="", intervals=0):
         return BetweenGridResult(
-            beta, holds, peak, intervals, added, failed_at, reason, round(time.perf_counter() - t0, 3)
+            beta, holds, peak, intervals, added, failed_at, reason, round(time.perf_counter() - t0, 3), by_radius
         )
 
     memo = {}  # per end (each serves two intervals): its normalised loop, crossings and radius at the level
@@ -317,7 +325,9 @@ def verify_between(
     while stack:
         lo, hi, ends = stack.pop()
         try:
-            covered = near_enough(ends, lo, hi) or any(covers(pg, at, lo, hi) for at, pg in ends)
+            near = near_enough(ends, lo, hi)
+            by_radius += near
+            covered = near or any(covers(pg, at, lo, hi) for at, pg in ends)
         except _Unreliable:
             why = (
                 f"the Hamiltonian test is not reliable on this loop's realisation (it passed [{lo:.4g}, {hi:.4g}] "
