@@ -200,9 +200,10 @@ def max_bandwidth_scaling(
         The scan down stops, none certified yet, once the figures of the
         failed factors (the certificate's bound, or a PID screen's coarse-grid
         μ) grew at this many consecutive steps down: past the minimum of a
-        U-shaped μ(α), smaller factors only do worse (ur10 with a payload:
-        1.39 at 4, 1.67 at 1, 9.7 at 0.25).  A heuristic, and the error says
-        it stopped there; 0 scans the whole grid.
+        U-shaped μ(α), smaller factors only do worse (a robot whose tuned
+        PIDs all fail used to spend the search's whole time limit below it,
+        docs/fleet.md).  A heuristic, and the error says it stopped there;
+        0 scans the whole grid.
 
     Returns
     -------
@@ -267,23 +268,18 @@ def max_bandwidth_scaling(
             cert = res.certificate if judge is None else judge(P, res)
             mu = float(cert.bound) if cert.certified else math.inf
             status = cert.status
+            figure = None if cert.certified else float(cert.bound)
             evidence.append(f"{alpha:g}: {status} {float(cert.bound):.3f}")
         except SynthesisError as exc:
             res, mu, status = None, math.inf, f"synthesis failed ({exc})"
             figure = getattr(exc, "figure", None)  # a PID screen's coarse-grid mu, when it has one
-            evidence.append(f"{alpha:g}: synthesis failed" + (f" (screen {figure:.3f})" if figure else ""))
-            if figure:
-                figures.append((float(alpha), float(figure)))
-            history.append((float(alpha), mu))
-            solved[alpha] = (res, mu, h)
-            log.info(f"bandwidth alpha = {alpha:.4g}: {status} ({time.perf_counter() - t0:.0f} s)")
-            return mu
-        if not cert.certified:
-            figures.append((float(alpha), float(cert.bound)))
+            evidence.append(f"{alpha:g}: synthesis failed" + (f" (screen {figure:.3f})" if figure is not None else ""))
+        if figure is not None:
+            figures.append((float(alpha), float(figure)))
         history.append((float(alpha), mu))
         solved[alpha] = (res, mu, h)
-        figure = f", mu <= {mu:.4f} at every frequency" if math.isfinite(mu) else ""
-        log.info(f"bandwidth alpha = {alpha:.4g}: {status}{figure} ({time.perf_counter() - t0:.0f} s)")
+        shown = f", mu <= {mu:.4f} at every frequency" if math.isfinite(mu) else ""
+        log.info(f"bandwidth alpha = {alpha:.4g}: {status}{shown} ({time.perf_counter() - t0:.0f} s)")
         return mu
 
     deadline = None if search_time_limit is None else t0 + float(search_time_limit)

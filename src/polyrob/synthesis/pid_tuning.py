@@ -61,8 +61,8 @@ INTEGRAL_RATIOS = (8.0, 16.0, 32.0)
 FILTER_RATIOS = (10.0, 20.0)
 #: Factors on one joint's crossover tried, joint by joint, when the common crossover ranks in
 #: ``refine_window``: the joints of an arm see different model errors (a payload weighs on the wrist's
-#: small inertia, the shoulder's is large), so one crossover for all is rarely the best (ur10 at factor
-#: 32 with a payload: coarse-grid mu 1.227 common, 0.908 with the shoulders x 0.5, two wrist joints x 2-2.8).
+#: small inertia, the shoulder's is large), so one crossover for all is not always enough (ur10 with a
+#: payload is certified only with a crossover per joint, docs/fleet.md).
 JOINT_SCALES = (0.5, 0.7, 1.4, 2.0, 2.8)
 JOINT_SWEEPS = 2
 
@@ -191,7 +191,7 @@ def tuned_pid(
         the smallest ``ω_BT`` of the weights).
     refine_window : (float, float), optional
         When the best common crossover's figure lies in ``[lo, hi)`` (not
-        good enough, not hopeless: ur10's 1.227 became 0.875), each joint's
+        good enough, not hopeless), each joint's
         crossover is scaled by :data:`JOINT_SCALES` in turn, keeping what
         lowers the figure, for up to :data:`JOINT_SWEEPS` sweeps while a
         sweep gains 2 % (``None``: never; each candidate costs up to a
