@@ -83,3 +83,48 @@ def test_with_between_extends_a_certificate_and_skips_a_peak_above_one():
     above = control.tf([2.0], [1, 1])
     sweep = with_between(above, mu_bounds(above, [[1, 1]], [0.1, 1.0, 10.0], refine_peak=False, progress=False))
     assert not sweep.between.holds and "not below 1" in sweep.between.reason and sweep.upper_everywhere is None
+
+
+def _slow_pole_loop(tiny: float = 0.0):
+    """A 2x2 loop with a PID-like near-cancelled pole-zero pair at 1e-10 rad/s: flat from there to ~1e-4 rad/s.
+
+    ``tiny`` puts ``tiny s / (s + 1e-6)`` in the (0, 1) entry, which is otherwise zero.
+    """
+    s = control.tf("s")
+    lag = (s + 1.00000001e-10) / (s + 1e-10)
+    rows = [[0.5 * lag / (s + 1), tiny * s / (s + 1e-6)], [0.1 + 0 * s, 0.3 / (s / 10 + 1)]]
+    num = [[r.num[0][0] for r in row] for row in rows]
+    den = [[r.den[0][0] for r in row] for row in rows]
+    return control.ss(control.tf(num, den))
+
+
+def test_flat_ends_are_thinned_to_a_point_per_decade_and_the_level_is_unchanged():
+    from polyrob.analysis.mu.frequency import default_grid, thin_flat_ends
+
+    M = _slow_pole_loop()
+    full = default_grid(M, per_decade=12)
+    thin = thin_flat_ends(M, full)
+    assert np.all(np.isin(thin, full)) and thin[0] == full[0] and thin[-1] == full[-1]
+    # below 1e-5 rad/s the response is flat to 1e-4 of each entry: about one point per decade is left there
+    assert np.sum(thin < 1e-5) <= 8 < np.sum(full < 1e-5) // 8
+    assert np.array_equal(thin[thin > 1e-3], full[full > 1e-3])  # where the loop moves, every point is kept
+    blk = [[1, 1], [1, 1]]
+    levels = []
+    for grid in (full, thin):
+        sweep = mu_bounds(M, blk, grid, progress=False)
+        check = verify_between(M, sweep)
+        assert check.holds, check.reason
+        levels.append(check.level)
+    assert levels[1] == pytest.approx(levels[0], rel=1e-6)
+
+
+def test_a_small_entry_that_moves_keeps_its_points():
+    """The flatness is judged per entry on its own scale: 1e-8 s/(s + 1e-6) is not flat near 1e-6 rad/s."""
+    from polyrob.analysis.mu.frequency import default_grid, thin_flat_ends
+
+    M = _slow_pole_loop(tiny=1e-8)
+    full = default_grid(M, per_decade=12)
+    thin = thin_flat_ends(M, full)
+    near = (full > 1e-7) & (full < 1e-5)
+    assert np.array_equal(thin[(thin > 1e-7) & (thin < 1e-5)], full[near])
+    assert len(thin) < len(full)  # the decades below 1e-8 are still thinned

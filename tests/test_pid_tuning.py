@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from polyrob.errors import PolyrobError
-from polyrob.synthesis.pid_tuning import CROSSOVER_FRACTIONS, pid_controller, pid_gains, tuned_pid
+from polyrob.synthesis.pid_tuning import CROSSOVER_FRACTIONS, MIN_GAIN, pid_controller, pid_gains, tuned_pid
 
 
 @pytest.fixture(scope="module")
@@ -53,8 +53,10 @@ def test_tuned_pid_takes_the_best_candidate_and_its_figure_is_an_upper_bound(P, 
     # crossovers placed by the smallest W_T bandwidth of the paper's weights (10 rad/s)
     assert sorted({t[0] for t in r.tried}) == pytest.approx([f * 10.0 for f in CROSSOVER_FRACTIONS])
     finite = [t for t in r.tried if np.isfinite(t[3])]
-    assert r.grid_mu == min(t[3] for t in finite)
-    assert (r.crossover, r.integral_ratio, r.filter_ratio) == min(finite, key=lambda t: t[3])[:3]
+    # the chosen row's figure; a row dropped early is at least 1 - MIN_GAIN of the best at its time
+    chosen = [t for t in finite if t[:3] == (r.crossover, r.integral_ratio, r.filter_ratio)]
+    assert r.grid_mu in [t[3] for t in chosen]
+    assert min(t[3] for t in finite) >= (1 - MIN_GAIN) * r.grid_mu
     # the gains were divided by the nominal input gain b_j = B_nom[m + j, j]
     b = np.diag(np.asarray(unc.B_nom)[2:])
     assert r.input_gains == pytest.approx(b)

@@ -274,7 +274,8 @@ def certify_loop(
     omega : array_like, optional
         Frequencies; default the loop's own grid
         (:func:`polyrob.analysis.mu.frequency.default_grid` with
-        :data:`POINTS_PER_DECADE`), so that every caller certifies one
+        :data:`POINTS_PER_DECADE`, thinned where the response is flat at
+        either end, :data:`FLAT_RTOL`), so that every caller certifies one
         controller on the same grid.  ω = 0 is added for
         real blocks (real μ is discontinuous there).
     n_u, n_y : int, optional
@@ -297,7 +298,7 @@ def certify_loop(
     """
     from polyrob.analysis.mu.blocks import as_block_structure
     from polyrob.analysis.mu.bounds import mu_bounds
-    from polyrob.analysis.mu.frequency import default_grid, needs_extended_precision
+    from polyrob.analysis.mu.frequency import default_grid, needs_extended_precision, thin_flat_ends
     from polyrob.analysis.stability import stability_verdict
     from polyrob.plant.loops import lft
 
@@ -313,7 +314,10 @@ def certify_loop(
         status, reasons = decide_mu(stability, np.inf, np.nan, None)
         return Certificate(status, np.inf, np.inf, np.nan, stability, base, reasons, None, N)
     st = as_block_structure(blk)
-    w = default_grid(M, per_decade=POINTS_PER_DECADE) if omega is None else np.asarray(omega, dtype=float).ravel()
+    if omega is None:
+        w = thin_flat_ends(M, default_grid(M, per_decade=POINTS_PER_DECADE), FLAT_RTOL)
+    else:
+        w = np.asarray(omega, dtype=float).ravel()
     if st.has_real:
         w = np.union1d(w, [0.0])
     # double-precision responses of a badly conditioned realisation can be wrong in
@@ -387,6 +391,10 @@ def certificate_of_sweep(
 #: time, not of soundness: a peak between two points is found there (measured on the paper's K* loop:
 #: 12 per decade gives the same peak as 40, in 19 s instead of 62 s).
 POINTS_PER_DECADE = 12
+#: Where the loop's response has settled at either end of that grid (every entry within this fraction of
+#: its largest magnitude), one point per decade is kept (:func:`~polyrob.analysis.mu.frequency.thin_flat_ends`):
+#: a PID's near-cancelled integrator pole stretches the grid over decades where nothing happens.
+FLAT_RTOL = 1e-4
 
 #: Extended precision of the response check, and the relative error above which it is used for the whole sweep.
 RESPONSE_BITS, RESPONSE_TOL = 212, 1e-6

@@ -50,6 +50,7 @@ __all__ = [
     "pid_controller",
     "CROSSOVER_FRACTIONS",
     "JOINT_SCALES",
+    "MIN_GAIN",
 ]
 
 log = logging.getLogger("polyrob")
@@ -65,6 +66,9 @@ FILTER_RATIOS = (10.0, 20.0)
 #: payload is certified only with a crossover per joint, docs/fleet.md).
 JOINT_SCALES = (0.5, 0.7, 1.4, 2.0, 2.8)
 JOINT_SWEEPS = 2
+#: A candidate replaces the best only when its figure is lower by this fraction: the ranking is
+#: coarse anyway, and each new best costs a μ bound at every frequency of the grid.
+MIN_GAIN = 0.01
 
 
 @dataclass(frozen=True)
@@ -84,8 +88,9 @@ class TunedPID:
         (a search figure, not a certificate).
     tried : tuple of (crossover, integral_ratio, filter_ratio, grid_mu, joint_scales)
         Every candidate's figure; a candidate dropped once it could no longer
-        be the best has the figure of the frequency where it was dropped (a
-        lower bound of its own figure, at least the best's).
+        beat the best by :data:`MIN_GAIN` has the figure of the frequency
+        where it was dropped (a lower bound of its own figure, at least
+        ``1 - MIN_GAIN`` times the best's at the time).
     joint_scales : tuple of float
         Each joint's crossover is ``crossover`` times its scale (all 1 unless
         the per-joint search improved the figure).
@@ -202,6 +207,7 @@ def tuned_pid(
     SynthesisError
         No candidate stabilises the nominal loop.
     """
+
     from polyrob.analysis.mu.blocks import as_block_structure
     from polyrob.analysis.mu.bounds import mussv
     from polyrob.analysis.mu.frequency import matrix_response
@@ -219,59 +225,70 @@ def tuned_pid(
         omega = np.logspace(np.log10(lo), np.log10(hi), 25)
     omega = np.asarray(omega, float)
     st = as_block_structure(P.block_structure_rp)
-    # AB13MD on the relaxed structure ranks in milliseconds, unless it has many real scalars
-    # (an axes model's dozens): then descent on the D-G scalings, 10-30 times faster there
+    # AB13MD on the relaxed structure, unless it has many real scalars (an axes model's dozens):
+    # then descent on the D-G scalings, 10-30 times faster there
     method = "relaxed" if relaxed_is_cheap(st) else "gradient"
     A, B, C, D = (np.asarray(X, float) for X in (P.system.A, P.system.B, P.system.C, P.system.D))
 
     # frequencies in the order of the best candidate's figures, largest first: a candidate is dropped at
-    # the first frequency where it is already no better than the best (its figure is then that one,
-    # a lower bound of its own), so only the winner's figure is computed at every frequency
+    # the first frequency where it is not better than the best by MIN_GAIN (its figure is then that one,
+    # a lower bound of its own), so only a candidate that becomes the best is evaluated everywhere
     order = np.arange(omega.size)
-    best = [np.inf]
+    best = {"figure": np.inf, "row": None}
+    tried: list = []
 
-    def grid_mu(wc, ki, nf, scales=1.0) -> float:
+    def rank(wc, ki, nf, scales=(1.0,) * m) -> bool:
+        """Append the candidate's row to ``tried``; whether it became the best."""
+        figure, complete = np.inf, False
         K = pid_controller(pid_gains(wc * np.asarray(scales, float), ki, nf, b))
         Ak, Bk, Ck, Dk = (np.asarray(X, float) for X in (K.A, K.B, K.C, K.D))
         try:
             Acl, Bcl, Ccl, Dcl = lower_lft_matrices(A, B, C, D, Ak, Bk, Ck, Dk, m, m)
         except np.linalg.LinAlgError:
-            return np.inf
-        if np.max(np.linalg.eigvals(Acl).real) >= 0:
-            return np.inf
-        H = matrix_response(Acl, Bcl, Ccl, Dcl)(omega)
-        values = np.full(omega.size, -np.inf)
-        for k in order:
-            values[k] = mussv(H[k], st, method=method, lower=False).upper
-            if values[k] >= best[0]:
-                return float(values[k])
-        best[0] = float(values.max())
-        order[:] = np.argsort(-values, kind="stable")
-        return best[0]
+            Acl = None
+        if Acl is not None and np.max(np.linalg.eigvals(Acl).real) < 0:
+            H = matrix_response(Acl, Bcl, Ccl, Dcl)(omega)
+            bar = best["figure"] * (1.0 - MIN_GAIN)
+            values = np.full(omega.size, -np.inf)
+            for k in order:
+                values[k] = mussv(H[k], st, method=method, lower=False).upper
+                if values[k] >= bar:
+                    break
+            else:
+                complete = True
+            figure = float(values.max())
+            if complete:
+                order[:] = np.argsort(-values, kind="stable")
+        tried.append((wc, ki, nf, figure, tuple(scales)))
+        if complete:
+            best.update(figure=figure, row=tried[-1])
+        return complete
 
     # crossover first (middle integral and filter), then the other two around the best crossover
-    ones = (1.0,) * m
-    tried = [(wc, 16.0, 20.0, grid_mu(wc, 16.0, 20.0), ones) for wc in crossovers]
-    wc_best = min(tried, key=lambda t: t[3])[0]
-    for ki, nf in itertools.product(integral_ratios, filter_ratios):
-        if (ki, nf) != (16.0, 20.0):
-            tried.append((wc_best, ki, nf, grid_mu(wc_best, ki, nf), ones))
-    wc, ki, nf, mu, scales = min(tried, key=lambda t: t[3])
+    for wc in crossovers:
+        rank(wc, 16.0, 20.0)
+    if best["row"] is not None:
+        wc_best = best["row"][0]
+        for ki, nf in itertools.product(integral_ratios, filter_ratios):
+            if (ki, nf) != (16.0, 20.0):
+                rank(wc_best, ki, nf)
+    mu = best["figure"]
     if refine_window is not None and refine_window[0] <= mu < refine_window[1] and m > 1:
+        wc, ki, nf, _, scales = best["row"]
         for _ in range(JOINT_SWEEPS):
-            before = mu
+            before = best["figure"]
             for j, f in itertools.product(range(m), JOINT_SCALES):
-                trial = tuple(float(x * f) if i == j else x for i, x in enumerate(scales))
-                tried.append((wc, ki, nf, grid_mu(wc, ki, nf, trial), trial))
-                if tried[-1][3] < mu:
-                    mu, scales = tried[-1][3], trial
-            if mu > 0.98 * before:
+                scales = best["row"][4]
+                rank(wc, ki, nf, tuple(float(x * f) if i == j else x for i, x in enumerate(scales)))
+            if best["figure"] > 0.98 * before:
                 break
+        mu = best["figure"]
     if not np.isfinite(mu):
         raise SynthesisError(
             f"no per-joint PID of crossover {min(crossovers):.3g}-{max(crossovers):.3g} rad/s stabilises the "
             "nominal loop: give --init FILE or no --init"
         )
+    wc, ki, nf, mu, scales = best["row"]
     return TunedPID(
         controller=pid_controller(pid_gains(wc * np.asarray(scales), ki, nf, b)),
         crossover=wc,

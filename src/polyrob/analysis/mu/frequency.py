@@ -2,6 +2,8 @@
 
 :func:`default_grid` places a log grid over a system's poles and zeros (and
 inserts their natural frequencies, so a resonance is bracketed);
+:func:`thin_flat_ends` keeps one point per decade where the response has
+settled to its value at the grid's first (or last) point;
 :func:`refine_peaks` searches the upper bound's largest local maxima between
 grid points.  Two evaluations of ``C (jωI - A)^{-1} B + D``, for two uses:
 
@@ -22,6 +24,7 @@ import numpy as np
 __all__ = [
     "is_discrete",
     "default_grid",
+    "thin_flat_ends",
     "freqresp",
     "freqresp_extended",
     "matrix_response",
@@ -63,6 +66,54 @@ def default_grid(sys, per_decade: int = 40) -> np.ndarray:
     if is_discrete(sys):
         w = w[w < np.pi / sys.dt]
     return w
+
+
+def thin_flat_ends(sys, omega: np.ndarray, rtol: float = 1e-4) -> np.ndarray:
+    """``omega`` with one point per decade where the response is flat at either end.
+
+    The poles-and-zeros span of :func:`default_grid` reaches a decade past the
+    slowest and the fastest feature; a loop with a near-cancelled slow pole
+    (a PID's integrator, a slow weight) then has a grid that sweeps decades
+    where ``M(jω)`` equals its value at the first point.  Points of the
+    leading run where every entry differs from its value at the first point
+    by at most ``rtol`` times that entry's largest magnitude on the grid
+    (the entry's own scale, as μ's scalings may weigh a small entry up),
+    and likewise of the trailing run against the last point, are thinned to
+    the first point of each decade (the run's ends are kept).
+
+    A placement choice only: a sweep checked between its points
+    (:func:`polyrob.analysis.mu.between.verify_between`) splits any interval
+    it cannot cover, so a thinned stretch costs time there, never soundness.
+    A response with an infinite entry (a pole on the grid) returns ``omega``.
+
+    Examples
+    --------
+    >>> import control
+    >>> loop = control.tf([1.0, 1.0001e-10], [1.0, 1e-10]) * control.tf([1.0], [1.0, 1.0])
+    >>> w = default_grid(loop, per_decade=12)
+    >>> thinned = thin_flat_ends(loop, w)
+    >>> len(w), len(thinned), float(thinned[0]), float(thinned[-1])
+    (146, 76, 1e-11, 10.0)
+    """
+    w = np.asarray(omega, dtype=float)
+    if w.size < 3:
+        return w
+    H = freqresp(sys, w).reshape(w.size, -1)
+    if not np.all(np.isfinite(H)):
+        return w
+    scale = rtol * np.abs(H).max(axis=0)
+    keep = np.ones(w.size, dtype=bool)
+    for order in (np.arange(w.size), np.arange(w.size)[::-1]):
+        moved = np.any(np.abs(H[order] - H[order[0]]) > scale, axis=1)
+        run = int(np.argmax(moved)) if moved.any() else w.size  # flat points before the first that moved
+        if run < 3:
+            continue
+        idx = np.sort(order[:run])
+        decade = np.floor(np.log10(np.maximum(w[idx], np.finfo(float).tiny)))
+        first_of_decade = np.concatenate(([True], np.diff(decade) > 0))
+        first_of_decade[[0, -1]] = True
+        keep[idx[~first_of_decade]] = False
+    return w[keep]
 
 
 def freqresp(sys, omega: np.ndarray, *, bits: int | None = None) -> np.ndarray:
