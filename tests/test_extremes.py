@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from polyrob.bounds.extremes import box_maximum, evaluate_polynomial, polynomial_coefficients
+from polyrob.bounds.extremes import box_maximum, box_upper_bound, evaluate_polynomial, polynomial_coefficients
 
 
 def random_polynomials(rng, N, m, D):
@@ -100,3 +100,37 @@ def test_linear_polynomials_are_maximised_at_a_vertex():
     value, t, _ = box_maximum(c, a, b, Q, np.ones(6, bool), np.ones(6, bool))
     np.testing.assert_allclose(value, c + np.abs(a).sum(axis=1) + np.abs(b).sum(axis=1))
     assert np.all(np.abs(t) == 1.0)
+
+
+@pytest.mark.parametrize("m", [2, 3])
+def test_cheap_upper_bound_is_above_the_exact_maximum_and_tight_on_linear_parts(m):
+    rng = np.random.default_rng(10 + m)
+    c, a, b, Q = random_polynomials(rng, 6, m, 5)
+    t_active, u_active = np.array([True] * (m - 1) + [False]), np.ones(m, bool)
+    exact, _, _ = box_maximum(c, a, b, Q, t_active, u_active, exact=True)
+    bound = box_upper_bound(c, a, b, Q, t_active, u_active)
+    assert np.all(bound >= exact - 1e-12)
+    linear = box_upper_bound(c, a, b, 0 * Q, t_active, u_active)  # no quadratic part: the bound is the maximum
+    np.testing.assert_allclose(linear, box_maximum(c, a, b, 0 * Q, t_active, u_active, exact=True)[0], atol=1e-12)
+
+
+def test_inner_maxima_with_a_floor_keeps_every_value_above_it():
+    """The verification's pruning: values above the floor are the maxima; the rest are bounds at most the floor."""
+    from polyrob import load_robot
+    from polyrob.bounds import search
+    from polyrob.bounds.parallel import WorkerPool
+    from polyrob.domains.torque_box import Domain
+
+    robot = load_robot("planar_2r")
+    problem = search.Problem(robot, Domain.from_robot(robot))
+    q = problem.domain.sample(64, seed=3)[0]
+    directions = np.vstack([np.eye(len(problem.all_index)), -np.eye(len(problem.all_index))])
+    with WorkerPool(problem, workers=1) as pool:
+        full, dep = search.inner_maxima(problem, q, directions, problem.all_index, False, pool)
+        floor = np.quantile(full, 0.9, axis=0)
+        pruned, dep2 = search.inner_maxima(problem, q, directions, problem.all_index, False, pool, floor=floor)
+    above = full > floor
+    assert above.any() and (~above).any()
+    np.testing.assert_allclose(pruned[above], full[above], rtol=1e-12, atol=1e-12)
+    assert np.all(pruned[~above] <= floor[None, :].repeat(len(q), 0)[~above] + 1e-12)
+    assert np.all(pruned >= full - 1e-12) and np.array_equal(dep, dep2)

@@ -12,8 +12,11 @@ How the bounds are found (``enclosure = "sampled"``):
 2. the remaining positions are sampled with a scrambled Sobol' design plus the
    corners of their box; for each position the extremes over the
    velocity/torque box are computed exactly, or attained and nearly always
-   exact beyond four joints (:mod:`polyrob.bounds.extremes`); the first
-   samples also check that ``M(q)`` is positive definite;
+   exact beyond four joints (:mod:`polyrob.bounds.extremes`), on the first
+   true robot of an inner loop's several (the same arm, masses a few %
+   apart: their peaks lie at the same positions; every true robot is taken
+   from step 4 on); the first samples also check that ``M(q)`` is positive
+   definite;
 3. a dense uniform screen of the whole domain (one Jacobian per point) adds
    starts near narrow peaks the design straddles;
 4. each extreme is searched by L-BFGS-B over positions, velocities and torques
@@ -21,7 +24,8 @@ How the bounds are found (``enclosure = "sampled"``):
    points, then from the other directions' witnesses where these are higher
    (the entries share their sharp peaks, near singular mass matrices), then
    from a second screen drawn around all witnesses; fresh designs verify the
-   result; the widening all this brought is reported;
+   result (every true robot; a position whose cheap upper bound cannot beat
+   a support value is not maximised); the widening all this brought is reported;
 5. the support values along ``+-e_i`` (the intervals) and along the principal
    directions of the Jacobian cloud give the polytope's half-spaces;
    linear programs (HiGHS) give its bounding box, an interior point and,

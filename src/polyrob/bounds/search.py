@@ -1,4 +1,4 @@
-"""Finding the extremes of the Jacobian entries: sampling, exact inner maxima, screens.
+"""Finding the extremes of the Jacobian entries: sampling, exact inner maxima, start positions.
 
 Used by :func:`polyrob.bounds.pldi.bound_pldi` (see there for the method);
 the local search from the starts found here is :mod:`polyrob.bounds.local_search`.
@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import qmc
 
-from polyrob.bounds.extremes import box_maximum, polynomial_coefficients
+from polyrob.bounds.extremes import box_maximum, box_upper_bound, polynomial_coefficients
 from polyrob.bounds.witnesses import exact_witnesses
 from polyrob.domains.torque_box import Domain
 from polyrob.errors import BoundsError
@@ -24,7 +24,6 @@ __all__ = [
     "pilot",
     "check_mass_matrices",
     "inner_maxima",
-    "screen",
     "support_pass",
     "landscape_peaks",
     "exact_witnesses",
@@ -235,9 +234,9 @@ DEPENDENCE_RTOL = 1e-10
 
 
 def _inner_task(problem: Problem, item):
-    q, directions, index = item
+    q, directions, index, floor, variants = item
     out = []
-    for i in range(len(problem.variants)):
+    for i in range(variants):
         c, a, b, Q = polynomial_coefficients(
             lambda qq, qd, uu, i=i: problem.entries_at(qq, qd, uu, index, i),
             q,
@@ -248,93 +247,50 @@ def _inner_task(problem: Problem, item):
         )
         Dt = directions.T  # (k, D)
         c, a, b, Q = c @ Dt, a @ Dt, b @ Dt, Q @ Dt
-        val, _, _ = box_maximum(c, a, b, Q, problem.t_scale > 0, problem.u_scale > 0)
+        t_active, u_active = problem.t_scale > 0, problem.u_scale > 0
+        if floor is None:
+            val, _, _ = box_maximum(c, a, b, Q, t_active, u_active)
+        else:  # the maximum only where the cheap bound exceeds the floor
+            val = box_upper_bound(c, a, b, Q, t_active, u_active)
+            n, d = np.nonzero(val > floor)
+            if n.size:
+                sub = (c[n, d], a[n, :, d], b[n, :, d], Q[n, :, :, d])
+                val[n, d] = box_maximum(*(x[..., None] for x in sub), t_active, u_active)[0][:, 0]
         size = np.abs(c).max(axis=0)
         dep = np.vstack([np.abs(b).max(axis=0) + np.abs(Q).max(axis=(0, 2)), np.abs(a).max(axis=0)])  # (2m, D)
         out.append((val, dep, size))
     return tuple(np.max([o[j] for o in out], axis=0) for j in range(3))
 
 
-def inner_maxima(problem: Problem, q, directions, index, progress, pool):
+def inner_maxima(problem: Problem, q, directions, index, progress, pool, floor=None, variants=None):
     """Max over the velocity/torque box of ``d . p`` at every position and direction.
+
+    ``variants``: the first that many true robots (default all); the
+    design's landscape is drawn on the first alone (:func:`support_pass`).
+
+    ``floor`` (D,): only values above it are wanted (a verification looks
+    for positions that beat the support values); a position whose cheap
+    upper bound (:func:`~polyrob.bounds.extremes.box_upper_bound`) is at
+    most the floor keeps that bound instead of its maximum.
 
     Returns
     -------
     vals : ndarray (N, D)
         Attained values (vertices and coordinate ascent beyond four joints,
-        see :func:`polyrob.bounds.extremes.box_maximum`).
+        see :func:`polyrob.bounds.extremes.box_maximum`), or the upper bound
+        at most ``floor``.
     depends : ndarray (D, 2m) bool
         Which velocities and torques each direction depends on at all.
     """
     chunks = np.array_split(np.arange(len(q)), max(1, int(np.ceil(len(q) / 128))))
-    results = pool.map(_inner_task, [(q[c], directions, index) for c in chunks], progress=progress, label="bounding")
+    variants = len(problem.variants) if variants is None else int(variants)
+    items = [(q[c], directions, index, floor, variants) for c in chunks]
+    results = pool.map(_inner_task, items, progress=progress, label="bounding")
     vals = np.vstack([r[0] for r in results])
     size = np.max([r[2] for r in results], axis=0)
     dep = np.max([r[1] for r in results], axis=0)
     depends = (dep > DEPENDENCE_RTOL * np.maximum(size + dep.max(axis=0), 1e-300)).T
     return vals, depends
-
-
-def _screen_task(problem: Problem, item):
-    b, seed, directions, index, axis, other, col, coef, around = item
-    m, n = problem.m, SCREEN_BATCH
-    if around is None:
-        q, qdot, u = problem.domain.split(problem.domain.sample_box(n, method="uniform", seed=[seed, b]))
-    else:
-        rng = np.random.default_rng([seed, b])
-        base = around[rng.integers(len(around), size=n)]
-        sigma = np.exp(rng.uniform(np.log(0.03), np.log(0.3), size=(n, 1)))
-        step = rng.standard_normal(base.shape) * sigma * (problem.hi - problem.lo)
-        x = np.clip(base + step, problem.lo, problem.hi)
-        q, qdot, u = x[:, :m], x[:, m : 2 * m], x[:, 2 * m :]
-    v = np.empty((len(q), len(directions)))
-    # one Jacobian per point, of the variants (an inner loop's true robots) in turn: the screen
-    # looks for positions, and theirs peak where the robot's do (the same arm, masses within a few %)
-    V = len(problem.variants)
-    for i in range(V):
-        e = problem.entries_at(q[i::V], qdot[i::V], u[i::V], index, i)
-        v[i::V, axis] = e[:, col] * coef
-        v[i::V, other] = e @ directions[other].T
-    arg = np.argmax(v, axis=0)
-    return v[arg, np.arange(len(directions))], q[arg]
-
-
-#: Points per screening batch; each batch gives its best point per direction.
-SCREEN_BATCH = 16384
-
-
-def screen(problem: Problem, directions, index, n: int, per_direction: int, seed, pool, around=None):
-    """The best positions of ``n`` random points of the domain, per direction.
-
-    One Jacobian per point (no inner maximisation) makes this ~40 times
-    cheaper per position than :func:`inner_maxima`: a dense, coarse look for
-    narrow peaks (near-singular mass matrices) that the position design
-    straddles.  Each batch of 16,384 points gives its best point; the
-    ``per_direction`` best batches' points are returned, positions (D, s, m).
-
-    Parameters
-    ----------
-    around : ndarray (w, 3m), optional
-        Draw the points near these (the witnesses found so far) instead of
-        uniformly: each point is a random one of them plus a normal step of
-        3-30 % of the domain's width (log-uniform), clipped into the domain.
-        The peaks of the entries gather where the mass matrix is nearly
-        singular, so the witnesses of all directions mark where to look.
-    """
-    m = problem.m
-    batches = max(per_direction, int(np.ceil(n / SCREEN_BATCH)))
-    # directions along one entry (the intervals) need a column, not a product
-    nonzero = directions != 0
-    axis = np.flatnonzero(nonzero.sum(axis=1) == 1)
-    other = np.setdiff1d(np.arange(len(directions)), axis)
-    col = np.argmax(nonzero[axis], axis=1)
-    coef = directions[axis, col]
-    items = [(b, seed, directions, index, axis, other, col, coef, around) for b in range(batches)]
-    out = pool.map(_screen_task, items, label="screening")
-    vals = np.array([o[0] for o in out])  # (batches, D)
-    pos = np.array([o[1] for o in out])  # (batches, D, m)
-    top = np.argsort(-vals, axis=0)[:per_direction]  # (s, D)
-    return np.moveaxis(pos[top, np.arange(len(directions))[None]], 0, 1).reshape(len(directions), -1, m)
 
 
 def support_pass(problem: Problem, q, directions, index, progress, pool, n_starts: int = 8, extra=None):
@@ -358,7 +314,10 @@ def support_pass(problem: Problem, q, directions, index, progress, pool, n_start
     depends : ndarray (D, 2m) bool
         Which velocities and torques each direction depends on at all.
     """
-    vals, depends = inner_maxima(problem, q, directions, index, progress, pool)
+    # the landscape of the first true robot alone: an inner loop's true robots are the same arm with
+    # masses a few % apart, their peaks lie at the same positions, and the starts' exact witnesses, the
+    # local searches and the verification take every true robot (five times fewer Jacobians here)
+    vals, depends = inner_maxima(problem, q, directions, index, progress, pool, variants=1)
     positions = q[landscape_peaks(problem, q, vals, n_starts)]  # (D, S, m)
     if extra is not None:
         positions = np.concatenate([positions, extra], axis=1)

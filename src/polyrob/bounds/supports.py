@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from polyrob.bounds import local_search, search
+from polyrob.bounds import local_search, screens, search
 
 __all__ = ["support_values"]
 
@@ -41,7 +41,7 @@ def support_values(
     if k:
         # a dense uniform screen of the whole domain adds start positions
         # near narrow peaks that the position design straddles
-        extra = search.screen(problem, directions, index, screen, screen_starts, seed, pool) if screen else None
+        extra = screens.screen(problem, directions, index, screen, screen_starts, seed, pool) if screen else None
         stages["screen"] = time.perf_counter() - t0
         values, starts, depends = search.support_pass(
             problem, q, directions, index, progress, pool, starts_per_direction, extra
@@ -65,7 +65,7 @@ def support_values(
         t1 = time.perf_counter()
         if screen:
             # a second screen, around the witnesses of every direction
-            near = search.screen(problem, directions, index, screen, screen_starts, seed + 1, pool, witnesses)
+            near = screens.screen(problem, directions, index, screen, screen_starts, seed + 1, pool, witnesses)
             starts, _ = search.exact_witnesses(problem, near, directions, index, pool)
             starts = np.concatenate([witnesses[:, None], starts], axis=1)
             values, witnesses = local_search.refine(
@@ -78,7 +78,9 @@ def support_values(
         # any support value; where it does, refine again from its witness.
         for rounds in range(1, verify_rounds + 1):
             q_new = search.position_design(problem, samples, dropped, seed + 7919 * rounds)
-            v_new, _ = search.inner_maxima(problem, q_new, directions, index, progress, pool)
+            # only what beats a support value is wanted: positions whose cheap bound cannot are skipped
+            # (their bound stands in for the landscape of a beaten direction, below its support value)
+            v_new, _ = search.inner_maxima(problem, q_new, directions, index, progress, pool, floor=values)
             beaten = np.flatnonzero(v_new.max(axis=0) > values + 1e-9 * (1.0 + np.abs(values)))
             if not beaten.size:
                 break
