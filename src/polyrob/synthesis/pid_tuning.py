@@ -207,7 +207,6 @@ def tuned_pid(
     SynthesisError
         No candidate stabilises the nominal loop.
     """
-
     from polyrob.analysis.mu.blocks import as_block_structure
     from polyrob.analysis.mu.bounds import mussv
     from polyrob.analysis.mu.frequency import matrix_response
@@ -237,8 +236,8 @@ def tuned_pid(
     best = {"figure": np.inf, "row": None}
     tried: list = []
 
-    def rank(wc, ki, nf, scales=(1.0,) * m) -> bool:
-        """Append the candidate's row to ``tried``; whether it became the best."""
+    def rank(wc, ki, nf, scales=(1.0,) * m) -> None:
+        """Append the candidate's row to ``tried``; make it the best when it ran to the end."""
         figure, complete = np.inf, False
         K = pid_controller(pid_gains(wc * np.asarray(scales, float), ki, nf, b))
         Ak, Bk, Ck, Dk = (np.asarray(X, float) for X in (K.A, K.B, K.C, K.D))
@@ -262,7 +261,6 @@ def tuned_pid(
         tried.append((wc, ki, nf, figure, tuple(scales)))
         if complete:
             best.update(figure=figure, row=tried[-1])
-        return complete
 
     # crossover first (middle integral and filter), then the other two around the best crossover
     for wc in crossovers:
@@ -274,7 +272,7 @@ def tuned_pid(
                 rank(wc_best, ki, nf)
     mu = best["figure"]
     if refine_window is not None and refine_window[0] <= mu < refine_window[1] and m > 1:
-        wc, ki, nf, _, scales = best["row"]
+        wc, ki, nf = best["row"][:3]
         for _ in range(JOINT_SWEEPS):
             before = best["figure"]
             for j, f in itertools.product(range(m), JOINT_SCALES):
