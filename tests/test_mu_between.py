@@ -128,3 +128,21 @@ def test_a_small_entry_that_moves_keeps_its_points():
     near = (full > 1e-7) & (full < 1e-5)
     assert np.array_equal(thin[(thin > 1e-7) & (thin < 1e-5)], full[near])
     assert len(thin) < len(full)  # the decades below 1e-8 are still thinned
+
+
+def test_a_certificate_on_its_default_grid_skips_the_flat_decades_and_proves_the_same_bound():
+    from polyrob.analysis.certificate import POINTS_PER_DECADE, certify_loop
+    from polyrob.analysis.mu.frequency import default_grid
+
+    M = _slow_pole_loop()
+    # P with P11 = M and no control channel used (K = 0): the closed loop is M itself
+    A, B, C, D = (np.asarray(x) for x in control.ssdata(M))
+    P = control.ss(A, np.hstack([B, np.zeros((A.shape[0], 1))]), np.vstack([C, np.zeros((1, A.shape[0]))]),
+                   np.block([[D, np.zeros((2, 1))], [np.zeros((1, 3))]]))  # fmt: skip
+    blk = [[1, 1], [1, 1]]
+    full = default_grid(M, per_decade=POINTS_PER_DECADE)
+    thinned = certify_loop(P, 0.0, blk, n_u=1, n_y=1)
+    everywhere = certify_loop(P, 0.0, blk, full, n_u=1, n_y=1)
+    assert thinned.certified and everywhere.certified
+    assert len(thinned.mu.omega) < 0.6 * len(full) and thinned.default_grid
+    assert thinned.bound == pytest.approx(everywhere.bound, rel=1e-9)
