@@ -233,8 +233,11 @@ def tuned_pid(
     # the first frequency where it is not better than the best by MIN_GAIN (its figure is then that one,
     # a lower bound of its own), so only a candidate that becomes the best is evaluated everywhere
     order = np.arange(omega.size)
-    best = {"figure": np.inf, "row": None}
     tried: list = []
+    bests: list = []  # the rows that became the best, in turn: the last is the best
+
+    def best_figure() -> float:
+        return bests[-1][3] if bests else np.inf
 
     def rank(wc, ki, nf, scales=(1.0,) * m) -> None:
         """Append the candidate's row to ``tried``; make it the best when it ran to the end."""
@@ -247,7 +250,7 @@ def tuned_pid(
             Acl = None
         if Acl is not None and np.max(np.linalg.eigvals(Acl).real) < 0:
             H = matrix_response(Acl, Bcl, Ccl, Dcl)(omega)
-            bar = best["figure"] * (1.0 - MIN_GAIN)
+            bar = best_figure() * (1.0 - MIN_GAIN)
             values = np.full(omega.size, -np.inf)
             for k in order:
                 values[k] = mussv(H[k], st, method=method, lower=False).upper
@@ -260,33 +263,33 @@ def tuned_pid(
                 order[:] = np.argsort(-values, kind="stable")
         tried.append((wc, ki, nf, figure, tuple(scales)))
         if complete:
-            best.update(figure=figure, row=tried[-1])
+            bests.append(tried[-1])
 
     # crossover first (middle integral and filter), then the other two around the best crossover
     for wc in crossovers:
         rank(wc, 16.0, 20.0)
-    if best["row"] is not None:
-        wc_best = best["row"][0]
+    if bests:
+        wc_best = bests[-1][0]
         for ki, nf in itertools.product(integral_ratios, filter_ratios):
             if (ki, nf) != (16.0, 20.0):
                 rank(wc_best, ki, nf)
-    mu = best["figure"]
+    mu = best_figure()
     if refine_window is not None and refine_window[0] <= mu < refine_window[1] and m > 1:
-        wc, ki, nf = best["row"][:3]
+        wc, ki, nf = bests[-1][:3]
         for _ in range(JOINT_SWEEPS):
-            before = best["figure"]
+            before = best_figure()
             for j, f in itertools.product(range(m), JOINT_SCALES):
-                scales = best["row"][4]
+                scales = bests[-1][4]
                 rank(wc, ki, nf, tuple(float(x * f) if i == j else x for i, x in enumerate(scales)))
-            if best["figure"] > 0.98 * before:
+            if best_figure() > 0.98 * before:
                 break
-        mu = best["figure"]
+        mu = best_figure()
     if not np.isfinite(mu):
         raise SynthesisError(
             f"no per-joint PID of crossover {min(crossovers):.3g}-{max(crossovers):.3g} rad/s stabilises the "
             "nominal loop: give --init FILE or no --init"
         )
-    wc, ki, nf, mu, scales = best["row"]
+    wc, ki, nf, mu, scales = bests[-1]
     return TunedPID(
         controller=pid_controller(pid_gains(wc * np.asarray(scales), ki, nf, b)),
         crossover=wc,

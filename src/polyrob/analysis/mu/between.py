@@ -281,7 +281,7 @@ def verify_between(
         if not np.isfinite(hi):
             return False
         reach = sum(radius(pg, at) for at, pg in ends if np.isfinite(at))
-        return reach >= hi - lo
+        return bool(reach >= hi - lo)
 
     def covers(scaling, at, lo, hi) -> bool:
         """The scalings found at ``at`` keep ``Φ`` negative definite on ``[lo, hi]``."""
