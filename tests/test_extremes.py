@@ -134,3 +134,24 @@ def test_inner_maxima_with_a_floor_keeps_every_value_above_it():
     np.testing.assert_allclose(pruned[above], full[above], rtol=1e-12, atol=1e-12)
     assert np.all(pruned[~above] <= floor[None, :].repeat(len(q), 0)[~above] + 1e-12)
     assert np.all(pruned >= full - 1e-12) and np.array_equal(dep, dep2)
+
+
+def test_inner_maxima_top_only_finds_each_direction_s_largest_value_exactly():
+    """The design pass with one start per direction: the column maxima and their attainment are the full pass's."""
+    from polyrob import load_robot
+    from polyrob.bounds import search
+    from polyrob.bounds.parallel import WorkerPool
+    from polyrob.domains.torque_box import Domain
+
+    robot = load_robot("planar_2r")
+    problem = search.Problem(robot, Domain.from_robot(robot))
+    q = problem.domain.sample(300, seed=4)[0]  # three chunks of positions
+    directions = np.vstack([np.eye(len(problem.all_index)), -np.eye(len(problem.all_index))])
+    with WorkerPool(problem, workers=1) as pool:
+        full, dep = search.inner_maxima(problem, q, directions, problem.all_index, False, pool)
+        top, dep2 = search.inner_maxima(problem, q, directions, problem.all_index, False, pool, top_only=True)
+    np.testing.assert_allclose(top.max(axis=0), full.max(axis=0), rtol=1e-12, atol=1e-12)
+    best = np.argmax(top, axis=0)  # the start the landscape gives: a position that attains the maximum
+    np.testing.assert_allclose(full[best, np.arange(full.shape[1])], full.max(axis=0), rtol=1e-12, atol=1e-12)
+    assert np.all(top >= full - 1e-12) and np.array_equal(dep, dep2)
+    assert np.any(top > full + 1e-9)  # some positions were pruned: they keep their upper bound

@@ -429,14 +429,18 @@ def test_a_task_job_with_an_inner_layer_says_domain_inner_layer_and_reflected_in
     assert bare.row()["inner"] == "none" and not bare.row()["domain"].startswith("task")
 
 
-def test_the_robots_with_the_most_joints_start_first_and_rows_keep_their_order():
+def test_the_robots_with_the_most_work_start_first_and_rows_keep_their_order():
     """Longest-first scheduling (the batch of every serial arm went past 30 min with xarm7 and panda started
-    last); a robot that does not load counts as 0 joints and fails in its own job."""
-    from polyrob.fleet.batch import largest_first
-    from polyrob.fleet.jobs import as_job
+    last, then with planar_2r's D-K search started last); a robot that does not load counts as 0 and fails
+    in its own job."""
+    from polyrob.fleet.batch import DK_SEARCH_WORK_PER_JOINT, longest_first
+    from polyrob.fleet.jobs import Settings, as_job
 
     jobs = [as_job(x) for x in ("planar_2r", "ur5", "no_such_robot", "so101", "TwoDofs")]
-    assert largest_first(jobs) == [1, 3, 0, 4, 2]
+    assert longest_first(jobs) == [1, 3, 0, 4, 2]  # joints: 6, 5, 2, 2, 0
+    # a bandwidth search: the 2-joint torque boxes search with D-K (2 x 3 = 6), the arms a PID per factor
+    assert DK_SEARCH_WORK_PER_JOINT == 3
+    assert longest_first(jobs, Settings(search_bandwidth=True)) == [0, 1, 4, 3, 2]
 
 
 def test_the_batch_search_bisects_to_its_own_tolerance_and_time_limit(monkeypatch):

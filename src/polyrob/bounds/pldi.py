@@ -115,6 +115,7 @@ def bound_pldi(
     screen: int | None = None,
     screen_starts: int = 4,
     coverage: int = 10_000,
+    describe_polytope: bool = True,
     certify: bool = False,
     certify_options: dict | None = None,
     seed: int = 0,
@@ -155,6 +156,9 @@ def bound_pldi(
         Starts per direction each screen gives.
     coverage : int
         Fresh random points for the coverage check (0 to skip).
+    describe_polytope : bool
+        The polytope's vertices and volume ratio (LPs, sampling); ``False``
+        keeps its half-spaces alone (an uncertainty model's factor loops).
     certify : bool
         Replace the intervals by a guaranteed enclosure (interval arithmetic).
     certify_options : dict, optional
@@ -263,7 +267,7 @@ def bound_pldi(
     width = upper - lower
     refinement = np.where(sampled_width > 0, width / np.where(sampled_width > 0, sampled_width, 1) - 1.0, 0.0)
 
-    polytope = build_polytope(directions, values, 2 * k, cloud, scale, axes, rng)
+    polytope = build_polytope(directions, values, 2 * k, cloud, scale, axes, rng, describe=describe_polytope)
 
     # full matrices of bounds (constant entries from any point of the domain)
     A_any, B_any = robot.jacobians_batch(*domain.sample(1, method="uniform", seed=seed))

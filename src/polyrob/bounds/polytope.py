@@ -230,11 +230,12 @@ def bounding_box(G, g, offsets=()) -> np.ndarray:
     return box
 
 
-def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200_000) -> Polytope:
+def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200_000, describe=True) -> Polytope:
     """Reduced coordinates, LP bounding box, interior point, vertices and volume ratio.
 
     ``basis_n`` are the principal axes of the normalised ``cloud``
-    (:func:`principal_directions`).
+    (:func:`principal_directions`).  ``describe=False``: the half-spaces and
+    reduced coordinates alone (no LPs, vertices or volume).
     """
     centre = cloud.mean(axis=0)
     basis = basis_n * scale[:, None]  # p = centre + basis @ z
@@ -244,6 +245,8 @@ def build_polytope(normals, offsets, n_box, cloud, scale, basis_n, rng, n_mc=200
     vertices = None
     if r == 0:
         return Polytope(normals, offsets, None, centre, basis, 0, 0, "no entry varies: there is no volume to compare")
+    if not describe:
+        return Polytope(normals, offsets, None, centre, basis, 0, 0, "vertices and volume ratio not asked for")
     box_rows = np.arange(len(normals)) < n_box
     moves = constraining_rows(G, normals, scale)
     G, g, box_rows = G[moves], g[moves], box_rows[moves]

@@ -234,7 +234,7 @@ DEPENDENCE_RTOL = 1e-10
 
 
 def _inner_task(problem: Problem, item):
-    q, directions, index, floor, variants = item
+    q, directions, index, floor, variants, top_only = item
     out = []
     for i in range(variants):
         c, a, b, Q = polynomial_coefficients(
@@ -248,11 +248,17 @@ def _inner_task(problem: Problem, item):
         Dt = directions.T  # (k, D)
         c, a, b, Q = c @ Dt, a @ Dt, b @ Dt, Q @ Dt
         t_active, u_active = problem.t_scale > 0, problem.u_scale > 0
-        if floor is None:
+        if floor is None and not top_only:
             val, _, _ = box_maximum(c, a, b, Q, t_active, u_active)
         else:  # the maximum only where the cheap bound exceeds the floor
             val = box_upper_bound(c, a, b, Q, t_active, u_active)
-            n, d = np.nonzero(val > floor)
+            low = floor
+            if floor is None:  # the chunk's best upper bound, maximised, is attained: a floor of its maximum
+                d = np.arange(val.shape[1])
+                n = np.argmax(val, axis=0)
+                sub = (c[n, d], a[n, :, d], b[n, :, d], Q[n, :, :, d])
+                low = val[n, d] = box_maximum(*(x[..., None] for x in sub), t_active, u_active)[0][:, 0]
+            n, d = np.nonzero(val > low)
             if n.size:
                 sub = (c[n, d], a[n, :, d], b[n, :, d], Q[n, :, :, d])
                 val[n, d] = box_maximum(*(x[..., None] for x in sub), t_active, u_active)[0][:, 0]
@@ -262,11 +268,15 @@ def _inner_task(problem: Problem, item):
     return tuple(np.max([o[j] for o in out], axis=0) for j in range(3))
 
 
-def inner_maxima(problem: Problem, q, directions, index, progress, pool, floor=None, variants=None):
+def inner_maxima(problem: Problem, q, directions, index, progress, pool, floor=None, variants=None, top_only=False):
     """Max over the velocity/torque box of ``d . p`` at every position and direction.
 
     ``variants``: the first that many true robots (default all); the
     design's landscape is drawn on the first alone (:func:`support_pass`).
+
+    ``top_only``: only the largest value per direction is wanted exactly
+    (one start per direction): each chunk of positions maximises its best
+    upper bound first and uses that value as the floor below.
 
     ``floor`` (D,): only values above it are wanted (a verification looks
     for positions that beat the support values); a position whose cheap
@@ -284,7 +294,7 @@ def inner_maxima(problem: Problem, q, directions, index, progress, pool, floor=N
     """
     chunks = np.array_split(np.arange(len(q)), max(1, int(np.ceil(len(q) / 128))))
     variants = len(problem.variants) if variants is None else int(variants)
-    items = [(q[c], directions, index, floor, variants) for c in chunks]
+    items = [(q[c], directions, index, floor, variants, top_only) for c in chunks]
     results = pool.map(_inner_task, items, progress=progress, label="bounding")
     vals = np.vstack([r[0] for r in results])
     size = np.max([r[2] for r in results], axis=0)
@@ -317,7 +327,9 @@ def support_pass(problem: Problem, q, directions, index, progress, pool, n_start
     # the landscape of the first true robot alone: an inner loop's true robots are the same arm with
     # masses a few % apart, their peaks lie at the same positions, and the starts' exact witnesses, the
     # local searches and the verification take every true robot (five times fewer Jacobians here)
-    vals, depends = inner_maxima(problem, q, directions, index, progress, pool, variants=1)
+    # with one start per direction the landscape's highest peak is its largest value: the positions below
+    # a floor attained in their chunk keep their upper bound (a model's factor loops: half their bounds' time)
+    vals, depends = inner_maxima(problem, q, directions, index, progress, pool, variants=1, top_only=n_starts == 1)
     positions = q[landscape_peaks(problem, q, vals, n_starts)]  # (D, S, m)
     if extra is not None:
         positions = np.concatenate([positions, extra], axis=1)

@@ -224,7 +224,7 @@ def run_batch(
     results: list = [None] * len(jobs)
     files: dict = {}
     t0 = time.perf_counter()
-    order = largest_first(jobs)  # rows stay in the jobs' order; only the start order changes
+    order = longest_first(jobs, settings)  # rows stay in the jobs' order; only the start order changes
     calls = [(jobs[i], settings) for i in order]
     for done, (k, ok, value) in enumerate(executor.run(run_job, calls), start=1):
         i = order[k]
@@ -240,24 +240,37 @@ def run_batch(
     return BatchResult(results=tuple(results), settings=settings, executor=where, seconds=seconds, files=files)
 
 
-def largest_first(jobs) -> list:
-    """Indices of ``jobs``, the robots with the most joints first (ties in the given order).
+#: A D-K bandwidth search costs about this many times a PID search per joint: planar_2r's whole job took
+#: 243-289 s, a 6-joint arm's (bounds and a tuned PID per factor) 232-367 s (docs/fleet.md, 2026-11-27).
+DK_SEARCH_WORK_PER_JOINT = 3
+
+
+def longest_first(jobs, settings: Settings | None = None) -> list:
+    """Indices of ``jobs``, the longest expected first (ties in the given order).
 
     Longest-processing-time-first scheduling: the cost of a robot grows with
     its joints (bounds, μ sweeps), and starting the long ones first keeps a
     worker from taking a 7-joint arm last while the other idles.  A robot
-    that does not load counts as 0 joints (it fails at once in its job).
+    whose synthesis is D-K (no computed-torque inner layer) in a bandwidth
+    search counts :data:`DK_SEARCH_WORK_PER_JOINT` times its joints (the
+    second run of the batch of every serial arm had planar_2r start last and
+    run alone).  A robot that does not load counts as 0 (it fails at once in
+    its job).
     """
-    import polyrob
+    from polyrob.fleet.jobs import job_robot_and_domain
 
-    def joints(job) -> int:
+    search = settings is not None and settings.search_bandwidth
+
+    def work(job) -> int:
         try:
-            return int(polyrob.load_robot(job.robot, lock=None if job.lock is None else list(job.lock)).m)
+            robot = job_robot_and_domain(job)[0]
         except Exception:  # noqa: BLE001 - the job itself reports why the robot does not load
             return 0
+        dk = getattr(robot, "inner", None) != "computed-torque"  # pipeline.design.with_default_start
+        return int(robot.m) * (DK_SEARCH_WORK_PER_JOINT if dk and search else 1)
 
-    m = [joints(job) for job in jobs]
-    return sorted(range(len(jobs)), key=lambda i: -m[i])
+    w = [work(job) for job in jobs]
+    return sorted(range(len(jobs)), key=lambda i: -w[i])
 
 
 def serial_arms() -> tuple:

@@ -123,7 +123,8 @@ def bound_one_robot(robot, pldi):
     """The PLDI of one true robot (or factor) over ``pldi``'s domain, with the effort of a model's own ranges.
 
     The PLDI's sample count, one local search per direction, one verification
-    round; the model's coverage is checked afterwards on fresh points.  On
+    round, the intervals (no polytope vertices or volume); the model's
+    coverage is checked afterwards on fresh points.  On
     as many workers as the PLDI had (one inside a fleet's job).
     """
     from dataclasses import replace
@@ -143,6 +144,7 @@ def bound_one_robot(robot, pldi):
         starts_per_direction=1,
         verify_rounds=1,
         coverage=0,
+        describe_polytope=False,
         workers=int(workers) if workers else 1,
         progress=False,
     )
