@@ -13,8 +13,9 @@ left.  What they have in common lives here, once:
 * :func:`init_worker`: what a worker does first.  It ignores SIGINT (a
   terminal sends Ctrl-C to the whole process group; the parent handles it and
   stops the workers), keeps the default SIGTERM (a terminated worker ends at
-  once, without a traceback), limits BLAS to one thread (many small problems:
-  more threads only spin-wait), and exits quietly as soon as its parent is
+  once, without a traceback), limits BLAS to one thread, also in the BLAS
+  copies it loads later (many small problems: more threads only spin-wait,
+  beside the other workers), and exits quietly as soon as its parent is
   gone (a parent killed by SIGTERM or SIGKILL runs no clean-up; an orphaned
   worker would finish its task and then print a BrokenPipeError traceback
   when it sends the result).
@@ -76,11 +77,11 @@ def init_worker() -> None:
     one thread, and a daemon thread that ends the process quietly when its
     parent is gone.
     """
-    from polyrob._threads import single_blas_thread
+    from polyrob._threads import single_blas_thread_for_life
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # even if the parent's SIGTERM was ignored
-    single_blas_thread()  # applied now, for the worker's life
+    single_blas_thread_for_life()  # also the BLAS copies the worker loads later
     _exit_with_parent()
 
 

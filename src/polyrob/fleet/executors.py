@@ -10,9 +10,10 @@ function (it is pickled by name), here :func:`polyrob.fleet.jobs.run_job`.
   with the ``spawn`` start method (fresh interpreters: nothing inherited, no
   forked locks).  Each worker is set up by :func:`polyrob.workers.init_worker`:
   it ignores SIGINT (the parent handles Ctrl-C, a terminal sends it to the
-  whole process group), limits BLAS to one thread (threadpoolctl, in the
-  worker; nothing in ``os.environ``) and exits quietly when the parent is
-  gone.  On KeyboardInterrupt or any error the queued calls are cancelled and
+  whole process group), limits BLAS to one thread (threadpoolctl, and
+  the OpenBLAS/OpenMP variables in the worker's own environment for the
+  copies it loads later; the caller's is untouched) and exits quietly when
+  the parent is gone.  On KeyboardInterrupt or any error the queued calls are cancelled and
   the workers terminated before the exception goes on.  With one worker the
   calls run in the calling process.
 * :class:`DaskExecutor`: :class:`distributed.Client` on a scheduler address
