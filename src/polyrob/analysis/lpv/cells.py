@@ -246,6 +246,7 @@ def _cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
     if lx[0] <= 8.0 * (n + len(basis) + 2) * _U * scale[0]:
         return (
             -np.inf,
+            None,
             f"X(rho) not positive definite at rho = {tuple(round(float(x), 6) for x in ctr)}, a cell's centre",
         )
     Wx = (Vx * lx**-0.5) @ Vx.T  # X(rho) > 0 iff I + Wx (X(rho) - X_c) Wx > 0
