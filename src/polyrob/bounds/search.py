@@ -328,7 +328,7 @@ def support_pass(problem: Problem, q, directions, index, progress, pool, n_start
     # masses a few % apart, their peaks lie at the same positions, and the starts' exact witnesses, the
     # local searches and the verification take every true robot (five times fewer Jacobians here)
     # with one start per direction the landscape's highest peak is its largest value: the positions below
-    # a floor attained in their chunk keep their upper bound (a model's factor loops: half their bounds' time)
+    # a floor attained in their chunk keep their upper bound (these maxima were most of the pass's time)
     vals, depends = inner_maxima(problem, q, directions, index, progress, pool, variants=1, top_only=n_starts == 1)
     positions = q[landscape_peaks(problem, q, vals, n_starts)]  # (D, S, m)
     if extra is not None:
