@@ -37,33 +37,11 @@ import numpy as np
 
 
 def _setup(path: str, factor: float, controller: str):
-    from moving_robot import _controller, _light_problem
+    from moving_robot import saved_search
 
-    from polyrob import load_robot
-    from polyrob.analysis.lpv.basis import default_basis, even_functions
-    from polyrob.analysis.lpv.robot import (
-        closed_loop_system,
-        conditioned,
-        even_half,
-        kinematic_rates,
-        rate_bounds,
-        scheduling,
-    )
-    from polyrob.domains.torque_box import Domain
+    from polyrob.analysis.lpv.robot import kinematic_rates
 
-    saved = np.load(path, allow_pickle=True)
-    points, harmonics = tuple(int(x) for x in saved["points"]), int(saved["harmonics"])
-    robot = load_robot("paper_2r")
-    domain = Domain.from_robot(robot, "paper")
-    P = _light_problem(robot, domain, factor).P
-    model = scheduling(robot, domain, points=points)
-    system = closed_loop_system(model, _controller(controller), P.W_S, P.W_T, P.W_KS)
-    rates, _ = rate_bounds(model, domain)
-    basis = default_basis(model, tensor=True, harmonics=harmonics)
-    if bool(saved.get("symmetric", False)):  # as benchmarks/moving_robot.py saved it
-        model = even_half(model, system)
-        basis = even_functions(basis, [-a[-1] for a in model.axes], [a[-1] for a in model.axes])
-    sysf, c = conditioned(system, np.array([0.5 * (a[0] + a[-1]) for a in model.axes]))
+    saved, model, _, sysf, c, basis, rates, _ = saved_search(factor, controller, path)
     return model, sysf, basis, kinematic_rates(model, rates, c), np.asarray(saved["X"], float)
 
 

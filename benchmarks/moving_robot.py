@@ -118,19 +118,16 @@ def run(
     return out
 
 
-def saved_x_between(factor: float, spec: str, path: str, *, recheck, cell_time_limit: float, level=None) -> dict:
-    """The ``X`` a run saved (``--save-x``) re-checked on a finer grid and proved on cells, without searching again.
+def saved_search(factor: float, spec: str, path: str):
+    """The search's own setting for an ``X`` a run saved (``--save-x``): ``(saved, model, system, sysf, c, basis, rates, source)``.
 
-    The search's own coordinates are rebuilt as :func:`~polyrob.analysis.lpv.moving.moving_robot_certificate`
+    The coordinates are rebuilt as :func:`~polyrob.analysis.lpv.moving.moving_robot_certificate`
     builds them (the conditioned loop at the grid's centre; the saved ``X`` lives there).
     """
-    from types import SimpleNamespace
-
     import numpy as np
 
     from polyrob import load_robot
-    from polyrob.analysis.lpv.basis import default_basis, even_functions, finer_recheck
-    from polyrob.analysis.lpv.cells import check_cells
+    from polyrob.analysis.lpv.basis import default_basis, even_functions
     from polyrob.analysis.lpv.robot import closed_loop_system, conditioned, even_half, rate_bounds, scheduling
     from polyrob.domains.torque_box import Domain
 
@@ -147,6 +144,20 @@ def saved_x_between(factor: float, spec: str, path: str, *, recheck, cell_time_l
         model = even_half(model, system)
         basis = even_functions(basis, [-a[-1] for a in model.axes], [a[-1] for a in model.axes])
     sysf, c = conditioned(system, np.array([0.5 * (a[0] + a[-1]) for a in model.axes]))
+    return saved, model, system, sysf, c, basis, rates, source
+
+
+def saved_x_between(factor: float, spec: str, path: str, *, recheck, cell_time_limit: float, level=None) -> dict:
+    """The ``X`` a run saved (``--save-x``) re-checked on a finer grid and proved on cells, without searching again."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from polyrob.analysis.lpv.basis import finer_recheck
+    from polyrob.analysis.lpv.cells import check_cells
+
+    saved, model, system, sysf, c, basis, rates, source = saved_search(factor, spec, path)
+    points = tuple(int(x) for x in saved["points"])
     result = SimpleNamespace(proved=True, X=tuple(saved["X"]), gamma=float(saved["gamma"]))
     out = {"bandwidth_factor": factor, "controller": spec, "saved": path, "search_grid": model.words(),
            "gamma_saved": result.gamma, "rates": rates, "rates_source": source}  # fmt: skip
