@@ -258,6 +258,7 @@ def longest_first(jobs, settings: Settings | None = None) -> list:
     its job).
     """
     from polyrob.fleet.jobs import job_robot_and_domain
+    from polyrob.pipeline.design import starts_from_tuned_pid
 
     search = settings is not None and settings.search_bandwidth
 
@@ -266,7 +267,7 @@ def longest_first(jobs, settings: Settings | None = None) -> list:
             robot = job_robot_and_domain(job)[0]
         except Exception:  # noqa: BLE001 - the job itself reports why the robot does not load
             return 0
-        dk = getattr(robot, "inner", None) != "computed-torque"  # pipeline.design.with_default_start
+        dk = not starts_from_tuned_pid(robot)
         return int(robot.m) * (DK_SEARCH_WORK_PER_JOINT if dk and search else 1)
 
     w = [work(job) for job in jobs]

@@ -19,6 +19,7 @@ __all__ = [
     "design_max_bandwidth",
     "reduce_design",
     "synthesis_options",
+    "starts_from_tuned_pid",
 ]
 
 
@@ -151,6 +152,11 @@ def certify_design(problem, design: Design) -> Design:
     return design.certified_by(cert if cert is not None else certify_loop(P, K, scope=problem.scope()))
 
 
+def starts_from_tuned_pid(robot) -> bool:
+    """Whether ``robot``'s synthesis starts from the per-joint PID tuned to the weights (:func:`with_default_start`)."""
+    return getattr(robot, "inner", None) == "computed-torque"
+
+
 def with_default_start(problem, options: dict) -> dict:
     """``options`` with the synthesis start of ``problem`` when none is given.
 
@@ -163,7 +169,7 @@ def with_default_start(problem, options: dict) -> dict:
     ``2 m``, what an arm engineer deploys) and no D-K step runs; otherwise
     D-K goes on from it.  Every other problem keeps its default start.
     """
-    if getattr(problem.robot, "inner", None) != "computed-torque":
+    if not starts_from_tuned_pid(problem.robot):
         return options
     if options.get("init") is not None or options.get("initial_controller") is not None:
         return options
