@@ -135,3 +135,56 @@ def test_moving_cells_asks_for_the_moving_robot_and_its_cells():
     both = Namespace(moving=None, moving_harmonics=2, moving_cells=True)
     assert moving_options(both)["harmonics"] == 2 and moving_options(both)["cells"]
     assert moving_options(Namespace(moving=True, moving_harmonics=None, moving_cells=False)) is None
+
+
+def _setting(searched):
+    from polyrob.analysis.lpv.cells import cell_setting
+
+    model, system, r, sysf, c, basis, used = searched
+    return cell_setting(model, system, r.X, basis, used, similarity=sysf.similarity, c=c)
+
+
+def _lmi(st, model, gamma, rho, nu):
+    """The bounded-real matrix of the loop at ``rho`` with the rates ``nu`` (the loop's own coordinates)."""
+    A, B, C, D = st.loop.at(*model.plant(rho))
+    F = np.array([[f(rho) for f, _ in st.basis]])
+    G = np.array([[g(rho) for _, g in st.basis]])
+    return brl_matrices(GridData(A[None], B[None], C[None], D[None], F, G, nu[None, None], rho[None]), st.Xs,
+                        gamma)[0][0, 0]  # fmt: skip
+
+
+def test_the_second_order_expansion_bounds_the_lmi_over_a_cell_and_its_error_shrinks_as_h_squared(searched):
+    from polyrob.analysis.lpv.cells.second_order import expansions
+
+    st, model = _setting(searched), searched[0]
+    exact, _ = st.rate_plan
+    S = np.zeros((3, 3))
+    for i, how in enumerate(exact):
+        if how is not None:
+            S[i, how[0]] = how[1]
+    assert S[0, 2] > 0  # the rate of q2 is qdot2: the expansion must carry it
+    lo0, hi0 = st.boxes[0]
+    ctr, half = 0.5 * (lo0 + hi0), 0.5 * (hi0 - lo0)
+    rng = np.random.default_rng(3)
+    worst = []
+    for scale in (1.0, 0.5):
+        lo, hi = ctr - scale * half, ctr + scale * half
+        ex, _, why = expansions(st.loop, model, st.enclose, st.basis, st.Xs, st.rate_plan, st.fixed, 1.2, lo, hi)
+        assert not why and len(ex) == 4  # one per vertex of (d qdot1/dt, d qdot2/dt)
+        h, seen = scale * half, 0.0
+        for e in ex:
+            # the centre derivative is the whole LMI's: central differences of W L W
+            for a in range(3):
+                t = 1e-6 * np.eye(3)[a]
+                fd = e.W @ (_lmi(st, model, 1.2, ctr + t, e.nu + S @ t) - _lmi(st, model, 1.2, ctr - t, e.nu - S @ t)) @ e.W
+                assert np.abs(fd / 2e-6 - e.D[a]).max() <= 1e-4 * (1 + np.abs(e.D[a]).max())
+            bound = e.allowance + 0.5 * h @ e.K @ h
+            for rho in rng.uniform(lo, hi, size=(40, 3)):
+                d = rho - ctr
+                R = e.W @ _lmi(st, model, 1.2, rho, e.nu + S @ d) @ e.W - e.WLW - np.einsum("a,aij->ij", d, e.D)
+                r = np.linalg.norm(R, 2)
+                assert r <= bound
+                seen = max(seen, r)
+        worst.append(seen)
+    # the remainder is of second order: halving the cell quarters it (a wrong first derivative would halve it)
+    assert 0.15 < worst[1] / worst[0] < 0.35

@@ -38,17 +38,8 @@ import numpy as np
 
 from polyrob.errors import ArgumentError, NotApplicable
 
-__all__ = [
-    "MovingRobotModel",
-    "scheduling",
-    "rate_bounds",
-    "closed_loop_system",
-    "kinematic_rates",
-    "conditioned",
-    "even_half",
-    "RATE_SAMPLES",
-    "RATE_MARGIN",
-]
+__all__ = ["MovingRobotModel", "scheduling", "rate_bounds", "closed_loop_system", "kinematic_rates", "conditioned",
+           "even_half", "RATE_SAMPLES", "RATE_MARGIN"]  # fmt: skip
 
 #: Domain points the acceleration bounds are sampled on (Sobol, plus the grid's corners).
 RATE_SAMPLES = 4096
@@ -285,6 +276,7 @@ def kinematic_rates(model: MovingRobotModel, rates, c: float = 1.0):
                 out.append((v, v))
         return out
 
+    at.exact = [None if how is None else (how[0], how[1] / c) for how in plan]  # rate = slope * rho_w: the cells
     return at
 
 

@@ -6,9 +6,10 @@ An :class:`~polyrob.model.analytic.AnalyticRobot` is given by numpy callables
 derivatives -- they return enclosures of ``M``, ``C``, ``g`` and of their
 derivatives over the whole box at once, and Gaussian elimination on those
 encloses ``qddot = M^-1 (u - C qdot - g - D qdot)``, its derivatives (the
-rows of ``A = df/dx``) and ``M^-1`` (``B``).  Written here because no
-maintained Python library does interval forward-mode differentiation of
-user callables (``arb`` does balls, not derivatives; the Pinocchio route of
+rows of ``A = df/dx``) and ``M^-1`` (``B``); with ``order=3`` also the
+second derivatives of ``A`` and ``B``.  Written here because no maintained
+Python library does interval forward-mode differentiation of user callables
+(``arb`` does balls, not derivatives; the Pinocchio route of
 :func:`~polyrob.bounds.certified.enclosure.certified_jacobian_bounds` needs a
 URDF, and the paper's 2R exists only as formulas).
 
@@ -30,6 +31,8 @@ True
 
 from __future__ import annotations
 
+import functools
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -86,59 +89,105 @@ def _arb(x) -> arb:
     return x if isinstance(x, arb) else arb(float(x))
 
 
+@functools.cache
+def _sym(k: int, r: int):
+    """The sorted index ``r``-tuples of ``range(k)`` in lexicographic order and their positions, shape ``(k,) * r``.
+
+    The layout of a symmetric tensor stored once per entry (``Jet.third``: ``r = 3``):
+    ``flat[pos]`` is the full tensor.
+    """
+    t = tuple(itertools.combinations_with_replacement(range(k), r))
+    pos = np.empty((k,) * r, dtype=np.intp)
+    for n, idx in enumerate(t):
+        for perm in itertools.permutations(idx):
+            pos[perm] = n
+    return t, pos
+
+
 class Jet:
     """A ball ``value``, the balls ``grad`` of its first and ``hess`` of its second derivatives (forward mode).
 
     Supports ``+ - * /``, ``cos`` and ``sin`` (which numpy calls for object
     arrays), with floats and ints on either side.  ``hess`` is a tuple of rows.
+    ``third`` is None (not tracked) or the third derivatives ``T[a, b, c]``
+    for ``a <= b <= c`` in lexicographic order, a flat tuple (read one with
+    :meth:`d3`); an operation tracks it when every Jet operand does.
     """
 
-    __slots__ = ("value", "grad", "hess")
+    __slots__ = ("value", "grad", "hess", "third")
 
-    def __init__(self, value, grad, hess=None):
+    def __init__(self, value, grad, hess=None, third=None):
         self.value = _arb(value)
         self.grad = tuple(grad)
         k = len(self.grad)
         self.hess = tuple(tuple(r) for r in hess) if hess is not None else ((arb(0),) * k,) * k
+        self.third = tuple(third) if third is not None else None
 
     @staticmethod
-    def _lift(other, k):
+    def _lift(other, k, third=False):
         if isinstance(other, Jet):
             return other
+        if third:  # a constant inside third-order arithmetic: zero third derivatives
+            z = arb(0)
+            return Jet(_arb(other), (z,) * k, None, (z,) * len(_sym(k, 3)[0]))
         return Jet(_arb(other), (arb(0),) * k)
 
-    def _chain(self, f0, f1, f2):
-        """``phi(self)`` from ``phi``'s value ``f0`` and derivatives ``f1, f2`` at the ball."""
+    def _up(self, other):
+        return self._lift(other, len(self.grad), self.third is not None)
+
+    def d3(self, a, b, c):
+        """The ball of ``d^3 / dx_a dx_b dx_c`` (any order of the indices)."""
+        return self.third[_sym(len(self.grad), 3)[1][a, b, c]]
+
+    def _chain(self, f0, f1, f2, f3=None):
+        """``phi(self)`` from ``phi``'s value ``f0`` and derivatives ``f1, f2, f3`` at the ball."""
         g, H = self.grad, self.hess
         k = len(g)
-        return Jet(f0, tuple(f1 * a for a in g), tuple(tuple(f1 * H[i][j] + f2 * g[i] * g[j] for j in range(k))
-                                                      for i in range(k)))  # fmt: skip
+        H2 = tuple(tuple(f1 * H[i][j] + f2 * g[i] * g[j] for j in range(k)) for i in range(k))
+        if self.third is None:
+            return Jet(f0, tuple(f1 * a for a in g), H2)
+        T = tuple(
+            f1 * t + f2 * (g[a] * H[b][c] + g[b] * H[a][c] + g[c] * H[a][b]) + f3 * g[a] * g[b] * g[c]
+            for (a, b, c), t in zip(_sym(k, 3)[0], self.third)
+        )
+        return Jet(f0, tuple(f1 * a for a in g), H2, T)
 
     def __add__(self, other):
-        o = self._lift(other, len(self.grad))
+        o = self._up(other)
         H = tuple(tuple(a + b for a, b in zip(r, t)) for r, t in zip(self.hess, o.hess))
-        return Jet(self.value + o.value, tuple(a + b for a, b in zip(self.grad, o.grad)), H)
+        T = None if self.third is None or o.third is None else tuple(a + b for a, b in zip(self.third, o.third))
+        return Jet(self.value + o.value, tuple(a + b for a, b in zip(self.grad, o.grad)), H, T)
 
     __radd__ = __add__
 
     def __neg__(self):
-        return Jet(-self.value, tuple(-a for a in self.grad), tuple(tuple(-a for a in r) for r in self.hess))
+        T = None if self.third is None else tuple(-a for a in self.third)
+        return Jet(-self.value, tuple(-a for a in self.grad), tuple(tuple(-a for a in r) for r in self.hess), T)
 
     def __sub__(self, other):
-        return self + (-self._lift(other, len(self.grad)))
+        return self + (-self._up(other))
 
     def __rsub__(self, other):
-        return self._lift(other, len(self.grad)) - self
+        return self._up(other) - self
 
     def __mul__(self, other):
-        o = self._lift(other, len(self.grad))
+        o = self._up(other)
         a, b, ga, gb = self.value, o.value, self.grad, o.grad
         k = len(ga)
+        Ha, Hb = self.hess, o.hess
         H = tuple(
-            tuple(a * o.hess[i][j] + b * self.hess[i][j] + ga[i] * gb[j] + gb[i] * ga[j] for j in range(k))
-            for i in range(k)
+            tuple(a * Hb[i][j] + b * Ha[i][j] + ga[i] * gb[j] + gb[i] * ga[j] for j in range(k)) for i in range(k)
         )
-        return Jet(a * b, tuple(a * y + b * x for x, y in zip(ga, gb)), H)
+        if self.third is None or o.third is None:
+            return Jet(a * b, tuple(a * y + b * x for x, y in zip(ga, gb)), H)
+        if o is not other:  # a constant c: (c u)_abc = c u_abc, the other seven terms are exact zeros
+            return Jet(a * b, tuple(a * y + b * x for x, y in zip(ga, gb)), H, tuple(b * t for t in self.third))
+        T = tuple(
+            a * w + b * t + ga[i] * Hb[j][l] + ga[j] * Hb[i][l] + ga[l] * Hb[i][j]
+            + gb[l] * Ha[i][j] + gb[j] * Ha[i][l] + gb[i] * Ha[j][l]
+            for (i, j, l), t, w in zip(_sym(k, 3)[0], self.third, o.third)
+        )  # fmt: skip
+        return Jet(a * b, tuple(a * y + b * x for x, y in zip(ga, gb)), H, T)
 
     __rmul__ = __mul__
 
@@ -146,21 +195,22 @@ class Jet:
         if not (self.value > 0 or self.value < 0):
             raise CertificationError("division by a ball that contains 0 (the box is too large to enclose)")
         inv = 1 / self.value
-        return self._chain(inv, -inv * inv, 2 * inv * inv * inv)
+        f3 = None if self.third is None else -6 * inv * inv * inv * inv
+        return self._chain(inv, -inv * inv, 2 * inv * inv * inv, f3)
 
     def __truediv__(self, other):
-        return self * self._lift(other, len(self.grad)).reciprocal()
+        return self * self._up(other).reciprocal()
 
     def __rtruediv__(self, other):
-        return self._lift(other, len(self.grad)) * self.reciprocal()
+        return self._up(other) * self.reciprocal()
 
     def cos(self):
         c, s = interval_cos(self.value), interval_sin(self.value)
-        return self._chain(c, -s, -c)
+        return self._chain(c, -s, -c, s)
 
     def sin(self):
         c, s = interval_cos(self.value), interval_sin(self.value)
-        return self._chain(s, c, -s)
+        return self._chain(s, c, -s, -c)
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,7 +219,10 @@ class AnalyticEnclosure:
 
     ``dA_lo <= dA <= dA_hi`` ``(2m, 2m, 2m)`` and ``dB_lo <= dB <= dB_hi``
     ``(2m, m, 2m)`` bound the derivatives ``dA[r, c] / dx_l``, ``dB[r, c] / dx_l``
-    (``x = (q, qdot)``) over the box: what a mean-value form needs.
+    (``x = (q, qdot)``) over the box: what a mean-value form needs.  With
+    ``order=3``, ``d2A_lo <= d2A <= d2A_hi`` ``(2m, 2m, 2m, 2m)`` and
+    ``d2B_lo <= d2B <= d2B_hi`` ``(2m, m, 2m, 2m)`` bound
+    ``d^2 A[r, c] / dx_l1 dx_l2`` and ``d^2 B[r, c] / dx_l1 dx_l2`` (None otherwise).
     """
 
     A_lo: np.ndarray
@@ -182,6 +235,10 @@ class AnalyticEnclosure:
     dA_hi: np.ndarray = None
     dB_lo: np.ndarray = None
     dB_hi: np.ndarray = None
+    d2A_lo: np.ndarray = None
+    d2A_hi: np.ndarray = None
+    d2B_lo: np.ndarray = None
+    d2B_hi: np.ndarray = None
 
 
 def _solve(M, b):
@@ -206,7 +263,7 @@ def _solve(M, b):
     return x
 
 
-def analytic_jacobian_enclosure(robot, q_lo, q_hi, qdot_lo, qdot_hi, u) -> AnalyticEnclosure:
+def analytic_jacobian_enclosure(robot, q_lo, q_hi, qdot_lo, qdot_hi, u, order=2) -> AnalyticEnclosure:
     """Guaranteed bounds of ``A = df/dx``, ``B = df/du`` and ``qddot`` of ``robot`` over a box, at a fixed torque.
 
     Parameters
@@ -218,6 +275,9 @@ def analytic_jacobian_enclosure(robot, q_lo, q_hi, qdot_lo, qdot_hi, u) -> Analy
         The box (``lo == hi`` allowed).
     u : array_like, shape (m,)
         The torque.
+    order : {2, 3}
+        3 also tracks third derivatives, for ``d2A`` and ``d2B`` (about
+        twice the cost for two joints).
 
     Returns
     -------
@@ -239,26 +299,30 @@ def analytic_jacobian_enclosure(robot, q_lo, q_hi, qdot_lo, qdot_hi, u) -> Analy
         or np.any(box[2] > box[3])
     ):
         raise DomainError(f"analytic_jacobian_enclosure: a box of {m} finite values per bound, lo <= hi")
+    if order not in (2, 3):
+        raise DomainError(f"analytic_jacobian_enclosure: order must be 2 or 3, not {order!r}")
     ql, qh, vl, vh, uu = box
     k = 2 * m
+    t3 = order == 3
     unit = [tuple(arb(1.0 if i == j else 0.0) for j in range(k)) for i in range(k)]
-    q = np.array([[Jet(ball(ql[i], qh[i]), unit[i]) for i in range(m)]], dtype=object)
-    qd = np.array([[Jet(ball(vl[i], vh[i]), unit[m + i]) for i in range(m)]], dtype=object)
+    z3 = (arb(0),) * len(_sym(k, 3)[0]) if t3 else None
+    q = np.array([[Jet(ball(ql[i], qh[i]), unit[i], None, z3) for i in range(m)]], dtype=object)
+    qd = np.array([[Jet(ball(vl[i], vh[i]), unit[m + i], None, z3) for i in range(m)]], dtype=object)
     try:
         Mq = robot.M(q)[0]
         Cq = robot.C(q, qd)[0]
         gq = robot.g(q)[0] if robot.g is not None else [0.0] * m
     except (TypeError, ValueError, AttributeError) as exc:
         raise CertificationError(f"{robot.name}: its M, C, g do not evaluate on balls ({exc})") from exc
-    lift = [[Jet._lift(Mq[i][j], k) for j in range(m)] for i in range(m)]
+    lift = [[Jet._lift(Mq[i][j], k, t3) for j in range(m)] for i in range(m)]
     rhs = []
     for i in range(m):
-        s = Jet._lift(float(uu[i]), k) - float(robot.damping[i]) * qd[0][i] - gq[i]
+        s = Jet._lift(float(uu[i]), k, t3) - float(robot.damping[i]) * qd[0][i] - gq[i]
         for j in range(m):
             s = s - Cq[i][j] * qd[0][j]
         rhs.append(s)
     acc = _solve(lift, rhs)
-    Minv_cols = [_solve(lift, [Jet._lift(1.0 if i == j else 0.0, k) for i in range(m)]) for j in range(m)]
+    Minv_cols = [_solve(lift, [Jet._lift(1.0 if i == j else 0.0, k, t3) for i in range(m)]) for j in range(m)]
     Alo, Ahi = np.zeros((k, k)), np.zeros((k, k))
     Alo[:m, m:] = Ahi[:m, m:] = np.eye(m)
     Blo, Bhi = np.zeros((k, m)), np.zeros((k, m))
@@ -275,30 +339,59 @@ def analytic_jacobian_enclosure(robot, q_lo, q_hi, qdot_lo, qdot_hi, u) -> Analy
                 dB[:, m + i, j, l] = arb_lower(y.grad[l]), arb_upper(y.grad[l])
     qlo = np.array([arb_lower(a.value) for a in acc])
     qhi = np.array([arb_upper(a.value) for a in acc])
-    return AnalyticEnclosure(Alo, Ahi, Blo, Bhi, qlo, qhi, dA[0], dA[1], dB[0], dB[1])
+    if not t3:
+        return AnalyticEnclosure(Alo, Ahi, Blo, Bhi, qlo, qhi, dA[0], dA[1], dB[0], dB[1])
+    # d2A[m+i, c, l1, l2] = d^3 qddot_i / dx_c dx_l1 dx_l2 and the Hessians of B are symmetric: each
+    # distinct entry is converted once (conversions are a good part of the cost)
+    pos3, (pairs, pos2) = _sym(k, 3)[1], _sym(k, 2)
+    d2A, d2B = np.zeros((2, k, k, k, k)), np.zeros((2, k, m, k, k))
+    for i in range(m):
+        T = acc[i].third
+        d2A[:, m + i] = np.array([[arb_lower(t) for t in T], [arb_upper(t) for t in T]])[:, pos3]
+        for j in range(m):
+            up = [Minv_cols[j][i].hess[a][b] for a, b in pairs]
+            d2B[:, m + i, j] = np.array([[arb_lower(t) for t in up], [arb_upper(t) for t in up]])[:, pos2]
+    return AnalyticEnclosure(Alo, Ahi, Blo, Bhi, qlo, qhi, dA[0], dA[1], dB[0], dB[1], d2A[0], d2A[1], d2B[0], d2B[1])
 
 
-def function_balls(functions, lo, hi):
+def function_balls(functions, lo, hi, order=1):
     """Enclosures ``[f_lo, f_hi] (2, k)`` and ``[g_lo, g_hi] (2, k, p)`` of ``f_j`` and their gradients over a box.
 
     ``functions``: pairs ``(f, grad)`` (only ``f`` is used: on :class:`Jet` balls, or a constant).
+    ``order=2`` also returns the Hessians' enclosures ``[h_lo, h_hi] (2, k, p, p)``
+    as a third element, ``order=3`` the third derivatives' ``(2, k, p, p, p)`` as a fourth.
     """
 
+    if order not in (1, 2, 3):
+        raise DomainError(f"function_balls: order must be 1, 2 or 3, not {order!r}")
     p = len(lo)
     unit = [tuple(arb(1.0 if i == j else 0.0) for j in range(p)) for i in range(p)]
-    rho = np.array([Jet(ball(lo[i], hi[i]), unit[i]) for i in range(p)], dtype=object)
+    zero3 = (arb(0),) * len(_sym(p, 3)[0]) if order == 3 else None
+    rho = np.array([Jet(ball(lo[i], hi[i]), unit[i], None, zero3) for i in range(p)], dtype=object)
     k = len(functions)
     f = np.zeros((2, k))
     g = np.zeros((2, k, p))
+    pairs, pos2 = _sym(p, 2) if order >= 2 else ((), None)
+    triples, pos3 = _sym(p, 3) if order == 3 else ((), None)
+    hu = np.zeros((2, k, len(pairs))) if order >= 2 else None  # the Hessians are symmetric: a triangle each
+    tu = np.zeros((2, k, len(triples))) if order == 3 else None
     for j, (fn, _) in enumerate(functions):
         v = fn(rho)
         if isinstance(v, Jet):
             f[:, j] = arb_lower(v.value), arb_upper(v.value)
             g[0, j] = [arb_lower(x) for x in v.grad]
             g[1, j] = [arb_upper(x) for x in v.grad]
+            if hu is not None:
+                hu[0, j] = [arb_lower(v.hess[a][b]) for a, b in pairs]
+                hu[1, j] = [arb_upper(v.hess[a][b]) for a, b in pairs]
+            if tu is not None:
+                tu[0, j] = [arb_lower(x) for x in v.third]
+                tu[1, j] = [arb_upper(x) for x in v.third]
         else:  # a constant function
             f[:, j] = float(v)
-    return f, g
+    if hu is None:
+        return f, g
+    return (f, g, hu[:, :, pos2]) if tu is None else (f, g, hu[:, :, pos2], tu[:, :, pos3])
 
 
 def distance_up(lo, hi, c):

@@ -1,0 +1,261 @@
+"""Between the grid points of the moving robot: the bounded-real LMIs proved on every cell of the state box.
+
+The moving-robot search (:mod:`polyrob.analysis.lpv.moving`) proves its
+``X(rho) = sum_j f_j(rho) X_j`` at grid points only.  Here the same ``X`` is
+proved on the whole box of ``rho``, cell by cell.  For a cell with centre
+``rho_c``, every vertex ``nu`` of its rate box and ``W = (-M(rho_c, nu))^(-1/2)``
+(so that ``W M(rho_c) W = -I``), ``M(rho) < 0`` follows from
+
+.. math:: \\lambda_{max}(W M(\\rho_c) W) + \\|W (M(\\rho) - M(\\rho_c)) W\\| < 0,
+
+and the norm is bounded from guaranteed enclosures over the cell:
+
+* the closed loop is affine in the robot's ``(A, B)`` (its response to a
+  unit change of entry ``e`` is ``G_e``; at ``X_c`` the LMI changes by
+  ``S_e``), and by the mean-value theorem ``P_e(rho) - P_e(rho_c) = sum_i
+  delta_i dP_e/drho_i(xi)`` with ``dP_e/drho_i`` enclosed over the cell
+  (:func:`polyrob.bounds.certified.analytic.analytic_jacobian_enclosure`,
+  second derivatives of ``qddot``): the first-order part moves all entries
+  together, ``sum_e mid(dP_e/drho_i) S_e``, and only the enclosure's radius
+  is taken entry by entry;
+* ``X(rho) - X_c`` likewise from the basis functions' gradients over the
+  cell (:class:`~polyrob.bounds.certified.analytic.Jet` balls), the rate
+  term ``sum_i nu_i dX/drho_i`` from their changes (a position's rate is its
+  velocity, so it moves with the cell), the cross terms to second order;
+* ``X(rho) > 0`` from ``||X_c^(-1/2) (X(rho) - X_c) X_c^(-1/2)|| < 1``.
+
+Weighing every change by ``W`` is what makes this work on a stiff loop: the
+LMI matrix has entries of ``1e4`` next to a margin of ``1e-2``, and a plain
+norm bound would ask for cells a million times smaller.  A cell that fails is
+bisected along the coordinate with the largest first-order term; a point
+where the LMIs fail ends the search (the ``X`` does not hold there).  Before
+the cells, the robot's accelerations are proved inside the rate bounds the
+``X`` was built for (a sampled bound is not one: ``tests/test_cells.py``
+shows a box where the sampled peak times 1.05 is below the robot's), so the
+bound covers every trajectory of the linearised robot in the box.
+
+The default cell test is of second order (:mod:`~polyrob.analysis.lpv.cells.second_order`):
+the first derivative of the whole LMI at the centre, the affine part checked
+at the cell's vertices, the curvature enclosed over the cell; the first-order
+test described above remains as ``order=1``.
+
+Examples
+--------
+>>> c = CellCheck(True, 0.99, 120, 0.01, (1.0, 2.0), "", 3.0)
+>>> c.words()
+'proved on 120 cells covering the whole box at level 0.99 (accelerations proved <= 1, 2)'
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from polyrob.analysis.lpv.cells.first_order import first_order_cell
+from polyrob.analysis.lpv.cells.loop import AffineLoop, acceleration_check, plant_enclosure
+from polyrob.analysis.lpv.cells.second_order import fixed_terms, second_order_cell
+from polyrob.bounds.certified.boxes import prove_on_boxes
+
+__all__ = ["CellCheck", "CellSetting", "cell_setting", "check_cells", "plant_enclosure"]
+
+
+@dataclass(frozen=True)
+class CellCheck:
+    """The outcome of :func:`check_cells`.
+
+    Attributes
+    ----------
+    holds : bool
+        Every leaf cell passed: the LMIs hold on the whole box at ``gamma``.
+    gamma : float
+        The level checked.
+    n_cells : int
+        Leaf cells proved (all of them when ``holds``).
+    smallest_margin : float
+        Smallest proved margin ``-(lambda_max + bound)`` over the leaves.
+    accelerations : tuple of float
+        Proved bound of ``|qddot_j|`` over the box (the largest over the leaves).
+    reason : str
+        Why it does not hold.
+    seconds : float
+    sensitivity : tuple of float
+        Per coordinate, the largest first-order change of the weighed LMI per
+        unit of cell width seen (a cell must be narrower than about its inverse).
+    """
+
+    holds: bool
+    gamma: float
+    n_cells: int
+    smallest_margin: float
+    accelerations: tuple
+    reason: str
+    seconds: float
+    sensitivity: tuple = ()
+
+    def words(self) -> str:
+        if not self.holds:
+            return f"not proved between the grid points ({self.reason})"
+        acc = ", ".join(f"{a:.4g}" for a in self.accelerations)
+        return f"proved on {self.n_cells} cells covering the whole box at level {self.gamma:.4g}" + (
+            f" (accelerations proved <= {acc})" if acc else ""
+        )
+
+    def summary(self) -> dict:
+        from polyrob.analysis.scope import finite_or_none
+
+        return {
+            "holds": self.holds,
+            "gamma": finite_or_none(self.gamma),
+            "cells": self.n_cells,
+            "smallest_margin": finite_or_none(self.smallest_margin),
+            "accelerations": [finite_or_none(a) for a in self.accelerations],
+            "reason": self.reason,
+            "sensitivity": [finite_or_none(x) for x in self.sensitivity],
+            "seconds": round(self.seconds, 1),
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class CellSetting:
+    """What every cell of one check shares: the loop, ``X_j`` in its coordinates, the rates, the initial cells."""
+
+    loop: AffineLoop
+    Xs: np.ndarray
+    basis: list
+    rates_at: object
+    rate_plan: tuple
+    enclose: object
+    boxes: list
+    lo: np.ndarray
+    hi: np.ndarray
+    fixed: dict
+
+
+def cell_setting(model, system, Xs, basis, rates, *, similarity=None, c=1.0, cells=None) -> CellSetting:
+    """The :class:`CellSetting` of :func:`check_cells` (same arguments); ``enclose`` is ``None`` without enclosures."""
+    from polyrob.analysis.lpv.norm import state_scaling
+    from polyrob.analysis.lpv.robot import kinematic_rates
+
+    if basis is None:  # a constant X (arbitrarily fast variation)
+        basis = [(lambda r: 1.0, lambda r: np.zeros(len(model.names)))]
+    enclose = plant_enclosure(model)
+    lo0 = np.array([a[0] for a in model.axes], float)
+    hi0 = np.array([a[-1] for a in model.axes], float)
+    sizes = [a.size - 1 for a in model.axes] if cells is None else list(cells)
+    if model.mirrored:  # the cells cover the whole box: the proof does not lean on the (sampled) evenness
+        lo0[0], sizes[0] = -hi0[0], 2 * sizes[0]
+    edges = [np.linspace(lo0[i], hi0[i], max(1, sizes[i]) + 1) for i in range(len(lo0))]
+    A0, B0 = model.plant(0.5 * (lo0 + hi0))
+    corners = np.array(np.meshgrid(*edges, indexing="ij")).reshape(len(lo0), -1).T
+    sc = state_scaling(np.array([system.of_plant(*model.plant(p))[0] for p in corners]))  # as the grid check
+    loop = AffineLoop(system.of_plant, c, sc, A0, B0)
+    n = sc.size
+    # X back in the loop's own (time-scaled, balanced) coordinates, x = T x~: X = T^-T X~ T^-1.  The float
+    # product is a candidate like any other, and it is what the cells check: no inverse is trusted
+    Ti = np.eye(n) if similarity is None else np.linalg.inv(np.asarray(similarity, float))
+    Xs = np.einsum("ai,kab,bj->kij", Ti, np.asarray(Xs, float), Ti)
+    Xs = 0.5 * (Xs + np.transpose(Xs, (0, 2, 1))) * sc[None, :, None] * sc[None, None, :]
+    # a power-of-two diagonal congruence that brings X's diagonal near 1 (exact): the rounding allowances are
+    # relative to |X| |A|, and an X with entries from 1e1 to 1e7 left 0.35 of a cell's margin to them (paper_2r x4)
+    mid = 0.5 * (lo0 + hi0)
+    dX = np.diag(np.einsum("k,kij->ij", np.array([float(f(mid)) for f, _ in basis]), Xs))
+    if np.all(dX > 0) and np.all(np.isfinite(dX)):
+        d = 2.0 ** np.round(-0.5 * np.log2(dX))
+        sc, Xs = sc * d, Xs * d[None, :, None] * d[None, None, :]
+        loop = AffineLoop(system.of_plant, c, sc, A0, B0)
+    rates_at = kinematic_rates(model, rates, c)
+    boxes = [
+        (np.array([e[k] for e, k in zip(edges, idx)]), np.array([e[k + 1] for e, k in zip(edges, idx)]))
+        for idx in np.ndindex(*[len(e) - 1 for e in edges])
+    ]
+    plan = (rates_at.exact, np.array(rates, float) / c)
+    _, B, C, _ = loop.at(A0, B0)
+    fixed = fixed_terms(loop, Xs, n, B.shape[1], C.shape[0])
+    return CellSetting(loop, Xs, basis, rates_at, plan, enclose, boxes, lo0, hi0, fixed)
+
+
+def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.0, cells=None, max_cells=200_000,
+                time_limit=900.0, min_width=1e-6, progress=False, order=2) -> CellCheck:  # fmt: skip
+    """Prove the bounded-real LMIs of ``X(rho) = sum_j f_j(rho) X_j`` at level ``gamma`` on the whole box of ``rho``.
+
+    Parameters
+    ----------
+    model : MovingRobotModel
+    system : callable
+        :func:`~polyrob.analysis.lpv.robot.closed_loop_system` (its ``of_plant``).
+    Xs : sequence of ndarray
+        ``X_j`` in the coordinates of the loop the search ran on, ``x = T x~``
+        and time scaled by ``c`` (:func:`~polyrob.analysis.lpv.robot.conditioned`).
+    basis : sequence of (f, grad)
+        The functions ``f_j``; each must evaluate on :class:`~polyrob.bounds.certified.analytic.Jet` arrays.
+    rates : sequence of (float, float)
+        The rate bounds in physical time (a position's rate is its velocity).
+    gamma : float
+    similarity : ndarray, optional
+        ``T`` (default: the identity); the check itself runs in the loop's own coordinates.
+    c : float
+        The time scale.
+    cells : sequence of int, optional
+        Initial cells per coordinate (default: the model's grid).
+    max_cells, time_limit, min_width
+        Give up past that many cells, seconds, or a cell narrower than
+        ``min_width`` times its coordinate's range.
+    progress : bool
+        A tqdm bar (cells proved / cells known).
+    order : {1, 2}
+        The cell test: 2 (default) expands the LMI to second order about each
+        cell's centre (:mod:`~polyrob.analysis.lpv.cells.second_order`), 1
+        bounds its change by first-order parts (:mod:`~polyrob.analysis.lpv.cells.first_order`).
+
+    Returns
+    -------
+    CellCheck
+    """
+    t0 = time.perf_counter()
+    st = cell_setting(model, system, Xs, basis, rates, similarity=similarity, c=c, cells=cells)
+    if st.enclose is None:
+        return CellCheck(False, gamma, 0, -np.inf, (), f"no guaranteed enclosure for {model.robot.name}", 0.0)
+    loop, Xs, basis, rates_at, enclose, boxes, lo0, hi0 = (st.loop, st.Xs, st.basis, st.rates_at, st.enclose,
+                                                          st.boxes, st.lo, st.hi)  # fmt: skip
+    acc_bounds = np.full(model.robot.m, np.inf)
+    for (_lo, hi), kind, j in zip(rates, model.kinds, model.joints):
+        if kind == "qdot":
+            acc_bounds[j] = hi
+    width0 = np.where(hi0 > lo0, hi0 - lo0, 1.0)
+    deadline = t0 + time_limit
+    opts = {"min_width": min_width, "max_boxes": max_cells, "deadline": deadline}
+    ok, leaves, why = prove_on_boxes([(lo0, hi0)], acceleration_check(model, enclose, acc_bounds), width0, **opts)
+    acc = tuple(float(a) for a in np.max([v[1] for v in leaves], axis=0)) if leaves else ()
+    if not ok:
+        return CellCheck(False, gamma, 0, -np.inf, acc, f"accelerations: {why}", time.perf_counter() - t0)
+
+    seen = np.zeros(len(lo0))
+    if order == 2:
+
+        def cell_test(*args):
+            return second_order_cell(*args[:5], st.rate_plan, st.fixed, *args[6:])
+    else:
+        cell_test = first_order_cell
+
+    def evaluate(lo, hi):
+        out = cell_test(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi)
+        if out[1] is not None:
+            seen[:] = np.maximum(seen, out[1] / np.where(hi > lo, hi - lo, np.inf))
+        return out
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(boxes), desc="cells", unit="cell")
+    try:
+        ok, leaves, why = prove_on_boxes(boxes, evaluate, width0, bar=bar, by_contribution=True, **opts)
+    finally:
+        if bar is not None:
+            bar.close()
+    smallest = min((v[0] for v in leaves), default=-np.inf)
+    return CellCheck(
+        ok, gamma, len(leaves), smallest, acc, why, time.perf_counter() - t0, tuple(float(x) for x in seen)
+    )
