@@ -123,6 +123,11 @@ def test_the_half_box_of_an_even_loop_gives_the_same_verdict_with_half_the_point
     lopsided = tiny.with_bounds(q_lower=np.array([-0.05, -0.05]), q_upper=np.array([0.05, 0.1]))
     with pytest.raises(NotApplicable, match="not symmetric"):
         even_half(scheduling(robot, lopsided, points=(5, 2)), system)
+    # "auto" (what --moving-cells asks for): the half box when the loop is even, else the whole box
+    whole = moving_robot_certificate(SimpleNamespace(robot=robot, domain=lopsided, P=problem.P), pd_controller(),
+                                     points=(3, 2), velocities="bounded", qddot_max=qddot_max, level=0.9,
+                                     symmetric="auto", recheck=None)  # fmt: skip
+    assert whole.computed and "the other half" not in whole.grid_words
 
 
 def test_moving_cells_asks_for_the_moving_robot_and_its_cells():
@@ -131,9 +136,11 @@ def test_moving_cells_asks_for_the_moving_robot_and_its_cells():
     from polyrob.cli.analyze import moving_asked, moving_options
 
     args = Namespace(moving=None, moving_harmonics=None, moving_cells=True)
-    assert moving_asked(args) is True and moving_options(args) == {"cells": True, "progress": True}
+    assert moving_asked(args) is True
+    assert moving_options(args) == {"cells": True, "progress": True, "level": 0.95, "symmetric": "auto"}
     both = Namespace(moving=None, moving_harmonics=2, moving_cells=True)
     assert moving_options(both)["harmonics"] == 2 and moving_options(both)["cells"]
+    assert moving_options(both)["points"] == (17, 3)  # the half box of an even loop: as many points as (9, 3)
     assert moving_options(Namespace(moving=True, moving_harmonics=None, moving_cells=False)) is None
 
 

@@ -161,6 +161,11 @@ def add_moving_harmonics_argument(p) -> None:
     )
 
 
+#: The level at which ``--moving-cells`` asks the search to maximise the LMIs' margin (the cells then check
+#: halfway from the grid's bound to 1).
+MOVING_CELLS_LEVEL = 0.95
+
+
 def moving_asked(args) -> bool | None:
     """``--moving`` / ``--no-moving`` / neither (``None``); ``--moving-harmonics`` and ``--moving-cells`` ask for it."""
     return True if getattr(args, "moving_harmonics", None) or getattr(args, "moving_cells", False) else args.moving
@@ -171,7 +176,11 @@ def moving_options(args) -> dict | None:
     n = getattr(args, "moving_harmonics", None)
     out = {} if n is None else {"velocities": "bounded", "harmonics": int(n), "points": (9, 3)}
     if getattr(args, "moving_cells", False):
-        out.update(cells=True, progress=True)
+        # cells need an X with room between the points: its margin maximised at a level, q2 every pi/8 (the
+        # half box of an even loop holds as many points as the whole one at (9, 3)); docs/certificates.md
+        out.update(cells=True, progress=True, level=MOVING_CELLS_LEVEL, symmetric="auto")
+        if n is not None:
+            out["points"] = (17, 3)
     return out or None
 
 

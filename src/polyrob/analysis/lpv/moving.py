@@ -213,11 +213,12 @@ def moving_robot_certificate(
         whole box (:func:`~polyrob.analysis.lpv.cells.check_cells`, at ``level``
         or else halfway from the grid's bound to 1), within ``cell_time_limit`` seconds
         (``progress``: a bar); when it holds the status is CERTIFIED.
-    symmetric : bool
+    symmetric : bool or "auto"
         When the loop is even in ``rho`` on a symmetric box, search and prove
         on the half box with ``X`` on the even functions of the basis
         (:func:`~polyrob.analysis.lpv.robot.even_half`): ``points[0]`` counts
         the whole position axis, so the grid is as dense for half the points.
+        ``"auto"``: the half box when the loop is even, else the whole box.
 
     Returns
     -------
@@ -236,7 +237,11 @@ def moving_robot_certificate(
         model = scheduling(problem.robot, domain, points=points)
         system = closed_loop_system(model, K, P.W_S, P.W_T, P.W_KS)
         if symmetric:
-            model = even_half(model, system)
+            try:
+                model = even_half(model, system)
+            except NotApplicable:
+                if symmetric != "auto":
+                    raise
         n = system(np.array([a[0] for a in model.axes]))[0].shape[0]
         if n > MAX_STATES:
             raise NotApplicable(f"the closed loop has {n} states (the LMIs are built for {MAX_STATES}): reduce K")

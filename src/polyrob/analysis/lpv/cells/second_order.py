@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyrob.analysis.lpv.cells.loop import spectral_norms
+from polyrob.analysis.lpv.cells.loop import symmetric_norms
 from polyrob.analysis.lpv.check import GridData, brl_matrices
 from polyrob.bounds.certified.analytic import function_balls
 
@@ -221,14 +221,14 @@ def expansions(loop, model, enclose, basis, Xs, rate_plan, fixed, gamma, lo, hi)
             return [], None, f"LMI not negative at rho = {tuple(round(float(x), 6) for x in ctr)}, a cell's centre"
         W = (V * mu**-0.5) @ V.T
         WGW = W @ G @ W
-        nG = spectral_norms(WGW) * (1 + 1e-9)
+        nG = symmetric_norms(WGW) * (1 + 1e-9)
         gmid, grad_rad = 0.5 * (grad[0] + grad[1]), _up(0.5 * (grad[1] - grad[0]))
         hmid, hrad = 0.5 * (hess[0] + hess[1]), _up(0.5 * (hess[1] - hess[0]))
         Dw = np.einsum("ta,tij->aij", gmid, WGW)
         # rounding: W G W (2 s u |W|^2 |G|), the sums over t, eigenvalues; |W|^2 = 1 / mu_min
         fl = 4 * (len(G) + 2 * s) * _U / mu[0]
         d_err = grad_rad.T @ nG + fl * (np.abs(gmid).T @ nGf)
-        K = spectral_norms(np.einsum("tab,tij->abij", hmid, WGW).reshape(p * p, s, s)).reshape(p, p) * (1 + 1e-9)
+        K = symmetric_norms(np.einsum("tab,tij->abij", hmid, WGW).reshape(p * p, s, s)).reshape(p, p) * (1 + 1e-9)
         K = K + np.einsum("tab,t->ab", hrad, nG) + fl * np.einsum("tab,t->ab", np.abs(hmid), nGf)
         # the float G_t against the exact ones, times how far s_t moves over the cell
         ds = np.maximum(np.abs(grad[0]), np.abs(grad[1])) @ h + 0.5 * np.einsum("tab,a,b->t", np.maximum(
@@ -251,7 +251,7 @@ def second_order_cell(loop, model, enclose, basis, Xs, rate_plan, fixed, gamma, 
             T = e.WLW + np.einsum("a,aij->ij", np.array(sigma) * h, e.D)
             top = max(top, np.linalg.eigvalsh(T)[-1] + 8 * T.shape[0] * _U * np.linalg.norm(T))
         worst = min(worst, -(top + e.allowance + 0.5 * h @ e.K @ h))
-        contrib = np.maximum(contrib, h * (spectral_norms(e.D) + e.K @ h))
+        contrib = np.maximum(contrib, h * (symmetric_norms(e.D) + e.K @ h))
     pos = _positive_margin(Xs, fixed["nX"], *fcs, h)
     margin = min(worst, pos)
     if pos == -np.inf:
@@ -275,12 +275,12 @@ def _positive_margin(Xs, nX, fc, gc, Hcell, h) -> float:
         return -np.inf
     Wx = (Vx * lx**-0.5) @ Vx.T
     WXW = Wx @ Xs @ Wx
-    nW = spectral_norms(WXW) * (1 + 1e-9)
+    nW = symmetric_norms(WXW) * (1 + 1e-9)
     fl = 4 * (k + 2 * n) * _U / lx[0]  # forming Wx X_j Wx and the sums, |Wx|^2 = 1 / lambda_min
     gmid, grad_rad = 0.5 * (gc[0] + gc[1]), _up(0.5 * (gc[1] - gc[0]))
     hmid, hrad = 0.5 * (Hcell[0] + Hcell[1]), _up(0.5 * (Hcell[1] - Hcell[0]))
     Dx = np.einsum("ja,jrs->ars", gmid, WXW)
-    Kx = spectral_norms(np.einsum("jab,jrs->abrs", hmid, WXW).reshape(p * p, n, n)).reshape(p, p) * (1 + 1e-9)
+    Kx = symmetric_norms(np.einsum("jab,jrs->abrs", hmid, WXW).reshape(p * p, n, n)).reshape(p, p) * (1 + 1e-9)
     Kx = Kx + np.einsum("jab,j->ab", hrad, nW) + fl * np.einsum("jab,j->ab", np.abs(hmid), nX)
     allowance = tol / lx[0] + h @ (grad_rad.T @ nW + fl * (np.abs(gmid).T @ nX)) + 0.5 * h @ Kx @ h
     low = np.inf
