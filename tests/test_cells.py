@@ -195,3 +195,10 @@ def test_the_second_order_expansion_bounds_the_lmi_over_a_cell_and_its_error_shr
         worst.append(seen)
     # the remainder is of second order: halving the cell quarters it (a wrong first derivative would halve it)
     assert 0.15 < worst[1] / worst[0] < 0.35
+
+
+def test_the_second_order_test_sees_the_whole_derivative_where_the_first_adds_its_parts(searched):
+    first, second = _check(searched, 1.2, order=1), _check(searched, 1.2, order=2)
+    assert first.holds and second.holds
+    # the parts of the LMI's derivative (plant, X, rates) bounded apart exceed the whole matrix's derivative
+    assert all(a < b for a, b in zip(second.sensitivity, first.sensitivity))

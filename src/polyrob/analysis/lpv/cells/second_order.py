@@ -239,26 +239,31 @@ def expansions(loop, model, enclose, basis, Xs, rate_plan, fixed, gamma, lo, hi)
 
 
 def second_order_cell(loop, model, enclose, basis, Xs, rate_plan, fixed, gamma, lo, hi):
-    """``(margin, contribution per coordinate, why)`` of one cell: ``margin > 0`` proves it (arguments: :func:`expansions`)."""
+    """``(margin, contribution per coordinate, first-order change per unit width, why)`` of one cell.
+
+    ``margin > 0`` proves it; the contribution (first and second order) chooses the coordinate to bisect;
+    arguments: :func:`expansions`.
+    """
     h, p = 0.5 * (hi - lo), len(lo)
     ex, fcs, why = expansions(loop, model, enclose, basis, Xs, rate_plan, fixed, gamma, lo, hi)
     if why:
         return -np.inf, None, why
-    worst, contrib = np.inf, np.zeros(p)
+    worst, contrib, slope = np.inf, np.zeros(p), np.zeros(p)
     for e in ex:
         top = -np.inf
         for sigma in itertools.product((-1.0, 1.0), repeat=p):  # lambda_max of the affine part: convex in delta
             T = e.WLW + np.einsum("a,aij->ij", np.array(sigma) * h, e.D)
             top = max(top, np.linalg.eigvalsh(T)[-1] + 8 * T.shape[0] * _U * np.linalg.norm(T))
         worst = min(worst, -(top + e.allowance + 0.5 * h @ e.K @ h))
-        contrib = np.maximum(contrib, h * (symmetric_norms(e.D) + e.K @ h))
+        nD = symmetric_norms(e.D)
+        contrib, slope = np.maximum(contrib, h * (nD + e.K @ h)), np.maximum(slope, 0.5 * nD)
     pos = _positive_margin(Xs, fixed["nX"], *fcs, h)
     margin = min(worst, pos)
     if pos == -np.inf:
         where = tuple(round(float(x), 6) for x in 0.5 * (lo + hi))
         return -np.inf, None, f"X(rho) not positive definite at rho = {where}, a cell's centre"
     why = "X(rho) not proved positive definite there" if pos <= 0 else "LMI not proved negative there" if worst <= 0 else ""
-    return float(margin), contrib, why
+    return float(margin), contrib, slope, why
 
 
 def _positive_margin(Xs, nX, fc, gc, Hcell, h) -> float:
