@@ -156,7 +156,7 @@ def add_moving_harmonics_argument(p) -> None:
         "--moving-cells",
         action="store_true",
         help="prove the moving robot's Lyapunov matrix between the grid points too, on cells covering the state "
-        "box (an analytic robot such as paper_2r; the moving-robot verdict then covers the whole box; up to 15 min); "
+        "box (an analytic robot such as paper_2r; the moving-robot verdict then covers the whole box; the cells up to 30 min); "
         "implies --moving",
     )
 

@@ -169,7 +169,7 @@ def moving_robot_certificate(
     recheck="auto",
     level=None,
     cells: bool = False,
-    cell_time_limit: float = 900.0,
+    cell_time_limit: float = 1800.0,
     symmetric: bool = False,
     progress: bool = False,
 ) -> MovingRobotCertificate:
