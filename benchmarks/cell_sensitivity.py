@@ -16,12 +16,15 @@ the box and every rate vertex, by central differences of the exact
 
 Large ``split_q2`` beside a small ``N`` means the parts cancel (``X`` follows
 the loop), so a cell test that norms them separately overstates the change.
+``expansion``: what the second-order cell test
+(:mod:`polyrob.analysis.lpv.cells.second_order`) proves on cells of four
+sizes about the first centre: guaranteed bounds, not differences.
 
     python benchmarks/moving_robot.py --runs 4:tests/fixtures/paper_2r_tf3_alpha4_K.json --velocities bounded \\
         --harmonics 2 --points 17,3 --symmetric --level 0.95 --save-x x4s.npz
     python benchmarks/cell_sensitivity.py x4s.npz [--gamma 0.98] [--centres 12]
 
-Prints one JSON document.  Pointwise derivatives: no bound over a cell.
+Prints one JSON document.  Pointwise derivatives (``rows``) bound nothing over a cell; ``expansion`` does.
 """
 
 from __future__ import annotations
@@ -94,6 +97,7 @@ def measure(path: str, gamma: float, centres: int, factor: float, controller: st
                          "K_q2": [round(x, 2) for x in K]})  # fmt: skip
     ok = [r for r in rows if r["lmi_negative"]]
     return {
+        "expansion": expansion_bounds(path, gamma, factor, controller, rhos[0]),
         "centres": len(rhos),
         "rate_vertices": len(rows) // len(rhos),
         "lmi_not_negative": len(rows) - len(ok),
@@ -102,6 +106,34 @@ def measure(path: str, gamma: float, centres: int, factor: float, controller: st
         "largest_K_q2": float(np.max([r["K_q2"][0] for r in ok])),
         "rows": rows,
     }
+
+
+def expansion_bounds(path: str, gamma: float, factor: float, controller: str, centre) -> list:
+    """What the second-order cell test bounds on cells of several widths about ``centre`` (guaranteed, not sampled).
+
+    Per cell: the largest ``||D_a||`` over the rate vertices (the whole LMI's derivative at the centre), the
+    diagonal of the curvature bound ``K`` (largest over the vertices), the rounding allowance, and the margin
+    the test proves (> 0: the cell holds).
+    """
+    from moving_robot import saved_search
+
+    from polyrob.analysis.lpv.cells import cell_setting
+    from polyrob.analysis.lpv.cells.second_order import expansions, second_order_cell
+
+    saved, model, system, sysf, c, basis, rates, _ = saved_search(factor, controller, path)
+    st = cell_setting(model, system, saved["X"], basis, rates, similarity=sysf.similarity, c=c)
+    out = []
+    for h in ([0.1, 0.5, 1.0], [0.05, 0.25, 0.5], [0.02, 0.5, 1.0], [0.01, 0.05, 0.1]):
+        h = np.array(h)
+        lo, hi = np.maximum(centre - h, st.lo), np.minimum(centre + h, st.hi)
+        args = (st.loop, model, st.enclose, st.basis, st.Xs, st.rate_plan, st.fixed, gamma, lo, hi)
+        ex, _, why = expansions(*args)
+        out.append({"half_widths": h.tolist(), "why": why,
+                    "D": np.max([[np.linalg.norm(d, 2) for d in e.D] for e in ex], axis=0).round(3).tolist(),
+                    "K_diagonal": np.max([np.diag(e.K) for e in ex], axis=0).round(2).tolist(),
+                    "allowance": round(max(e.allowance for e in ex), 5),
+                    "margin": round(float(second_order_cell(*args)[0]), 4)})  # fmt: skip
+    return out
 
 
 def main() -> None:
