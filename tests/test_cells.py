@@ -202,3 +202,10 @@ def test_the_second_order_test_sees_the_whole_derivative_where_the_first_adds_it
     assert first.holds and second.holds
     # the parts of the LMI's derivative (plant, X, rates) bounded apart exceed the whole matrix's derivative
     assert all(a < b for a, b in zip(second.sensitivity, first.sensitivity))
+
+
+def test_an_unknown_cell_order_is_refused(searched):
+    from polyrob.errors import ArgumentError
+
+    with pytest.raises(ArgumentError, match="order must be 1 or 2"):
+        _check(searched, 1.2, order=3)

@@ -4,40 +4,27 @@ The moving-robot search (:mod:`polyrob.analysis.lpv.moving`) proves its
 ``X(rho) = sum_j f_j(rho) X_j`` at grid points only.  Here the same ``X`` is
 proved on the whole box of ``rho``, cell by cell.  For a cell with centre
 ``rho_c``, every vertex ``nu`` of its rate box and ``W = (-M(rho_c, nu))^(-1/2)``
-(so that ``W M(rho_c) W = -I``), ``M(rho) < 0`` follows from
+(so that ``W M(rho_c) W = -I``), ``M(rho) < 0`` on the cell follows from a
+bound of ``W (M(rho) - M(rho_c)) W`` built from guaranteed enclosures of the
+robot's Jacobians and of the basis functions over the cell:
 
-.. math:: \\lambda_{max}(W M(\\rho_c) W) + \\|W (M(\\rho) - M(\\rho_c)) W\\| < 0,
-
-and the norm is bounded from guaranteed enclosures over the cell:
-
-* the closed loop is affine in the robot's ``(A, B)`` (its response to a
-  unit change of entry ``e`` is ``G_e``; at ``X_c`` the LMI changes by
-  ``S_e``), and by the mean-value theorem ``P_e(rho) - P_e(rho_c) = sum_i
-  delta_i dP_e/drho_i(xi)`` with ``dP_e/drho_i`` enclosed over the cell
-  (:func:`polyrob.bounds.certified.analytic.analytic_jacobian_enclosure`,
-  second derivatives of ``qddot``): the first-order part moves all entries
-  together, ``sum_e mid(dP_e/drho_i) S_e``, and only the enclosure's radius
-  is taken entry by entry;
-* ``X(rho) - X_c`` likewise from the basis functions' gradients over the
-  cell (:class:`~polyrob.bounds.certified.analytic.Jet` balls), the rate
-  term ``sum_i nu_i dX/drho_i`` from their changes (a position's rate is its
-  velocity, so it moves with the cell), the cross terms to second order;
-* ``X(rho) > 0`` from ``||X_c^(-1/2) (X(rho) - X_c) X_c^(-1/2)|| < 1``.
+* ``order=2`` (default, :mod:`~polyrob.analysis.lpv.cells.second_order`):
+  the whole matrix's derivative at the centre, the affine part checked at the
+  cell's vertices, the curvature enclosed over the cell (the dynamics' third
+  derivatives);
+* ``order=1`` (:mod:`~polyrob.analysis.lpv.cells.first_order`): the change's
+  parts (plant, ``X``, rates) bounded apart by the mean-value theorem; where
+  ``X`` follows the loop the parts cancel and this bound cannot see it.
 
 Weighing every change by ``W`` is what makes this work on a stiff loop: the
 LMI matrix has entries of ``1e4`` next to a margin of ``1e-2``, and a plain
 norm bound would ask for cells a million times smaller.  A cell that fails is
-bisected along the coordinate with the largest first-order term; a point
-where the LMIs fail ends the search (the ``X`` does not hold there).  Before
-the cells, the robot's accelerations are proved inside the rate bounds the
-``X`` was built for (a sampled bound is not one: ``tests/test_cells.py``
-shows a box where the sampled peak times 1.05 is below the robot's), so the
-bound covers every trajectory of the linearised robot in the box.
-
-The default cell test is of second order (:mod:`~polyrob.analysis.lpv.cells.second_order`):
-the first derivative of the whole LMI at the centre, the affine part checked
-at the cell's vertices, the curvature enclosed over the cell; the first-order
-test described above remains as ``order=1``.
+bisected along the coordinate with the largest term; a point where the LMIs
+fail ends the search (the ``X`` does not hold there).  Before the cells, the
+robot's accelerations are proved inside the rate bounds the ``X`` was built
+for (a sampled bound is not one: ``tests/test_cells.py`` shows a box where
+the sampled peak times 1.05 is below the robot's), so the bound covers every
+trajectory of the linearised robot in the box.
 
 Examples
 --------
@@ -57,6 +44,7 @@ from polyrob.analysis.lpv.cells.first_order import first_order_cell
 from polyrob.analysis.lpv.cells.loop import AffineLoop, acceleration_check, plant_enclosure
 from polyrob.analysis.lpv.cells.second_order import fixed_terms, second_order_cell
 from polyrob.bounds.certified.boxes import prove_on_boxes
+from polyrob.errors import ArgumentError
 
 __all__ = ["CellCheck", "CellSetting", "cell_setting", "check_cells", "plant_enclosure"]
 
@@ -215,6 +203,8 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
     -------
     CellCheck
     """
+    if order not in (1, 2):
+        raise ArgumentError(f"check_cells: order must be 1 or 2, not {order!r}")
     t0 = time.perf_counter()
     st = cell_setting(model, system, Xs, basis, rates, similarity=similarity, c=c, cells=cells)
     if st.enclose is None:
@@ -234,15 +224,14 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
         return CellCheck(False, gamma, 0, -np.inf, acc, f"accelerations: {why}", time.perf_counter() - t0)
 
     seen = np.zeros(len(lo0))
-    if order == 2:
 
-        def cell_test(*args):
-            return second_order_cell(*args[:5], st.rate_plan, st.fixed, *args[6:])
-    else:
-        cell_test = first_order_cell
+    def cell_test(lo, hi):
+        if order == 2:
+            return second_order_cell(loop, model, enclose, basis, Xs, st.rate_plan, st.fixed, gamma, lo, hi)
+        return first_order_cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi)
 
     def evaluate(lo, hi):
-        out = cell_test(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi)
+        out = cell_test(lo, hi)
         if len(out) == 4:  # the second-order test reports the whole LMI's derivative at the centre itself
             seen[:] = np.maximum(seen, out[2])
         elif out[1] is not None:

@@ -103,10 +103,10 @@ def fixed_terms(loop, Xs, n: int, m: int, q: int) -> dict:
     Q[:, :n, n + m :], Q[:, n : n + m, n + m :] = np.swapaxes(GC, 1, 2), np.swapaxes(GD, 1, 2)
     nX = np.linalg.norm(Xs, axis=(1, 2))
     err_xe = 4 * n * _U * nX[:, None] * np.linalg.norm(Ze, axis=(1, 2))[None, :]  # float X_j Z_e, both blocks
-    return {"Ze": Ze, "G_xe": G_xe.reshape(-1, s, s), "R": R, "Q": Q, "nX": nX, "err_xe": err_xe.reshape(-1)}
+    return {"G_xe": G_xe.reshape(-1, s, s), "R": R, "Q": Q, "nX": nX, "err_xe": err_xe.reshape(-1)}
 
 
-def _robot_terms(loop, model, enc, xcol):
+def _robot_terms(loop, enc, xcol):
     """Entry values ``(2, E)``, gradients ``(2, E, p)`` and (with third order) Hessians ``(2, E, p, p)``, as intervals."""
     src = {"A": (enc.A_lo, enc.A_hi, enc.dA_lo, enc.dA_hi, enc.d2A_lo, enc.d2A_hi),
            "B": (enc.B_lo, enc.B_hi, enc.dB_lo, enc.dB_hi, enc.d2B_lo, enc.d2B_hi)}  # fmt: skip
@@ -156,8 +156,8 @@ def expansions(loop, model, enclose, basis, Xs, rate_plan, fixed, gamma, lo, hi)
     n, m, q = A.shape[0], B.shape[1], C.shape[0]
     s = n + m + q
     xcol = [j if kind == "q" else model.robot.m + j for kind, j in zip(model.kinds, model.joints)]
-    Pc, dPc, _ = _robot_terms(loop, model, enclose(ctr, ctr, 2), xcol)
-    Pcell, dPcell, d2Pcell = _robot_terms(loop, model, enclose(lo, hi, 3), xcol)
+    Pc, dPc, _ = _robot_terms(loop, enclose(ctr, ctr, 2), xcol)
+    Pcell, dPcell, d2Pcell = _robot_terms(loop, enclose(lo, hi, 3), xcol)
     fc, gc, Hc = function_balls(basis, ctr, ctr, order=2)
     fcell, gcell, Hcell, Tcell = function_balls(basis, lo, hi, order=3)
     free = [not np.all(np.isfinite(b)) for b in box]  # a rate without bound: X must not depend on that parameter
