@@ -232,10 +232,8 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
 
     def evaluate(lo, hi):
         out = cell_test(lo, hi)
-        if len(out) == 4:  # the second-order test reports the whole LMI's derivative at the centre itself
+        if out[1] is not None:  # (margin, contribution, first-order change per unit width, why)
             seen[:] = np.maximum(seen, out[2])
-        elif out[1] is not None:
-            seen[:] = np.maximum(seen, out[1] / np.where(hi > lo, hi - lo, np.inf))
         return out
 
     bar = None

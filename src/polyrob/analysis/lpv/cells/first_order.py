@@ -19,7 +19,10 @@ _U = np.finfo(float).eps
 
 
 def first_order_cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
-    """``(margin, first-order bound per coordinate, why)`` of one cell: ``margin > 0`` proves it (at most 1)."""
+    """``(margin, first-order bound per coordinate, the same per unit width, why)`` of one cell.
+
+    ``margin > 0`` proves it (at most 1).
+    """
     ctr, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
     Ap, Bp = model.plant(ctr)
     enc = enclose(lo, hi)
@@ -104,4 +107,4 @@ def first_order_cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
         why = "X(rho) not proved positive definite there"
     elif worst <= 0:
         why = "LMI not proved negative there"
-    return float(margin), contrib, why
+    return float(margin), contrib, contrib / np.where(hi > lo, hi - lo, np.inf), why

@@ -76,8 +76,8 @@ def spectral_norms(stack) -> np.ndarray:
 
 
 def symmetric_norms(stack) -> np.ndarray:
-    """Spectral norms of a stack of symmetric matrices: largest ``|eigenvalue|`` (float, about 3 times
-    cheaper than an SVD; the caller rounds the sum up)."""
+    """Spectral norms of a stack of symmetric matrices: largest ``|eigenvalue|`` (float, cheaper than an
+    SVD; the caller rounds the sum up)."""
     if not len(stack):
         return np.zeros(0)
     return np.abs(np.linalg.eigvalsh(stack)[..., [0, -1]]).max(axis=-1)

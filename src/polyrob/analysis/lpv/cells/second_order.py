@@ -23,7 +23,9 @@ largest eigenvalue of the affine part is convex in ``delta``: it is checked
 at the ``2^p`` vertices of the cell.  Every derivative is an outward-rounded
 ball (:func:`~polyrob.bounds.certified.analytic.analytic_jacobian_enclosure`
 with ``order=3``, :func:`~polyrob.bounds.certified.analytic.function_balls`),
-every float product has a rounding allowance.
+every float product has a rounding allowance.  The interval products are
+vectorised numpy written here: ``flint.arb`` balls are scalars, and a cell
+needs some ten thousand of them.
 
 Examples
 --------
@@ -172,9 +174,8 @@ def expansions(loop, model, enclose, basis, Xs, rate_plan, fixed, gamma, lo, hi)
         if how is not None:
             S[i, how[0]] = how[1]
     # the scalar functions' gradients at the centre and Hessians over the cell, as intervals; f_j Delta P_e first
-    k1 = lambda x: x[:, None, None]  # noqa: E731 - (k,) against (E, p)
     grad_fe = interval_sum(
-        interval_product((k1(fc[0]), k1(fc[1])), (dPc[0][None], dPc[1][None])),
+        interval_product((fc[0][:, None, None], fc[1][:, None, None]), (dPc[0][None], dPc[1][None])),
         interval_product((gc[0][:, None], gc[1][:, None]), (dP_c[0][None, :, None], dP_c[1][None, :, None])),
     )
     hess_fe = interval_sum(
@@ -183,7 +184,7 @@ def expansions(loop, model, enclose, basis, Xs, rate_plan, fixed, gamma, lo, hi)
                          (dPcell[0][None, :, None, :], dPcell[1][None, :, None, :])),
         interval_product((gcell[0][:, None, None, :], gcell[1][:, None, None, :]),
                          (dPcell[0][None, :, :, None], dPcell[1][None, :, :, None])),
-        interval_product((k1(fcell[0])[..., None], k1(fcell[1])[..., None]), (d2Pcell[0][None], d2Pcell[1][None])),
+        interval_product((fcell[0][:, None, None, None], fcell[1][:, None, None, None]), (d2Pcell[0][None], d2Pcell[1][None])),
     )  # fmt: skip
     val_fe = np.maximum(np.abs(fc).max(axis=0)[:, None] * np.maximum(np.abs(dP_c[0]), np.abs(dP_c[1]))[None], 0.0)
     vertices = [np.array(v) for v in itertools.product(*[[0.0] if how is not None or f else sorted({b[0], b[1]})
@@ -195,6 +196,8 @@ def expansions(loop, model, enclose, basis, Xs, rate_plan, fixed, gamma, lo, hi)
     nGf = np.linalg.norm(G, axis=(1, 2))
     gerr = np.concatenate([4 * n * _U * fixed["nX"] * np.linalg.norm(Zc), fixed["err_xe"], np.zeros(k + E)])
     dist_c = np.maximum(np.abs(dP_c[0]), np.abs(dP_c[1]))
+    # sum_i dnu_i/drho_a d2f_j/drho_i drho_b: the same at every rate vertex
+    SH = _sum_axis(interval_product((S[None, :, :, None], S[None, :, :, None]), (Hcell[0][:, :, None, :], Hcell[1][:, :, None, :])), 1)  # fmt: skip
     out = []
     for vert in vertices:
         nu_c = vert + S @ ctr  # the rates at the centre (exact ones from the velocity)
@@ -202,7 +205,6 @@ def expansions(loop, model, enclose, basis, Xs, rate_plan, fixed, gamma, lo, hi)
         # r_j = sum_i nu_i df_j/drho_i: gradient at the centre, Hessian over the cell (third derivatives of f)
         grad_r = interval_sum(_sum_axis(interval_product((gc[0][:, :, None], gc[1][:, :, None]), (S[None], S[None])), 1),
                               _sum_axis(interval_product((Hc[0], Hc[1]), (nu_c[None, :, None], nu_c[None, :, None])), 1))  # fmt: skip
-        SH = _sum_axis(interval_product((S[None, :, :, None], S[None, :, :, None]), (Hcell[0][:, :, None, :], Hcell[1][:, :, None, :])), 1)  # fmt: skip
         hess_r = interval_sum(SH, (np.swapaxes(SH[0], 1, 2), np.swapaxes(SH[1], 1, 2)),
                               _sum_axis(interval_product((nu_box[0][None, :, None, None], nu_box[1][None, :, None, None]),
                                                          (Tcell[0], Tcell[1])), 1))  # fmt: skip
