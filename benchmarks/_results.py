@@ -46,6 +46,11 @@ def commit() -> str | None:
     return head + ("+dirty" if dirty else "")
 
 
+def stamp() -> str:
+    """Now in UTC as ``20261127T083807``: a record id that a later record of the same file does not repeat."""
+    return _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%S")
+
+
 def new_record(record_id: str, title: str, figure: str, *, table: dict | None = None, data=None) -> dict:
     """A record measured now: this command line, today's date, this machine and commit."""
     record = {

@@ -35,6 +35,8 @@ import os
 import platform
 import sys
 
+from _results import append_record, new_record, stamp
+
 
 def _jobs(text: str) -> list:
     jobs = []
@@ -96,6 +98,11 @@ def main(argv=None) -> int:
     p.add_argument("--no-validate", action="store_true")
     p.add_argument(
         "--no-analysis", action="store_true", help="skip the mu analysis sweeps (the row: the synthesis certificate)"
+    )
+    p.add_argument(
+        "--results",
+        default=None,
+        help="also append the batch as a record to this results file (e.g. benchmarks/results/fleet.json)",
     )
     args = p.parse_args(argv)
     if args.all_serial:
@@ -161,7 +168,39 @@ def main(argv=None) -> int:
         }
     doc["load_average_at_end"] = os.getloadavg()
     print(json.dumps(doc, indent=1, default=str))
+    if args.results:
+        append_record(args.results, "fleet", "benchmarks/fleet.py", fleet_record(doc))
     return 0
+
+
+def fleet_record(doc: dict) -> dict:
+    """The batch's results-file record: the robots' table and the count certified, with the command and machine."""
+    rows = doc["robots"]
+    certified = sum(bool(r["certified"]) for r in rows)
+    columns = ["robot", "model (real scalars)", "status", "μ at every frequency", "factor α", "order", "validation"]
+    columns += ["bounds s", "robot s"]
+    table = [
+        [
+            r["robot"],
+            f"{r['model']} ({r['parameters']})" if r["model"] else "–",
+            r["status"] or f"FAILED: {r['error']}",
+            "–" if r["mu_upper"] is None else f"{r['mu_upper']:.4f}",
+            "–" if r["alpha"] is None else f"{r['alpha']:.4g}",
+            "–" if r["order"] is None else str(r["order"]),
+            r["validation"] or "–",
+            "–" if r["bound_s"] is None else f"{r['bound_s']:.0f}",
+            f"{r['total_s']:.0f}",
+        ]
+        for r in rows
+    ]
+    figure = f"{certified} of {len(rows)} robots CERTIFIED; {doc['batch_seconds']:.0f} s"
+    return new_record(
+        "batch-" + stamp(),
+        "Batch of " + ", ".join(r["robot"] for r in rows),
+        figure,
+        table={"columns": columns, "rows": table},
+        data=doc,
+    )
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Wall time and outcome of the main job, ``polyrob run`` (README's first command), as JSON.
 
-    python benchmarks/main_job.py [--output-dir DIR] [--repeat N]
+    python benchmarks/main_job.py [--output-dir DIR] [--repeat N] [--results benchmarks/results/main_job.json]
 
 Runs ``polyrob run --json`` (no robot: the main job, see
 ``polyrob.cli.run.MAIN_JOB``) as a user would, in a fresh process, and
@@ -9,6 +9,8 @@ when ``--output-dir`` is given.  Prints one JSON document: per command the
 wall-clock seconds, the exit status, the certificate's status and bound, the
 controller's order, and the machine (cores, load average before the run):
 a figure measured on a loaded machine says so.  The install is not timed.
+``--results PATH`` also appends the runs as one record to a results file
+(``benchmarks/results/main_job.json``: the docs' figures are generated from it).
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+from _results import append_record, new_record, stamp
 
 
 def _run(cmd: list[str]) -> dict:
@@ -50,6 +54,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--output-dir", default=None, help="also time `polyrob run -o DIR` (validation and report)")
     ap.add_argument("--repeat", type=int, default=1, help="runs of each command")
+    ap.add_argument("--results", default=None, help="also append a record to this results file")
     args = ap.parse_args()
     base = [sys.executable, "-m", "polyrob.cli", "run", "--json", "--quiet"]
     runs = [_run(base) for _ in range(args.repeat)]
@@ -57,19 +62,25 @@ def main() -> None:
         for k in range(args.repeat):
             target = Path(args.output_dir) / f"run{k}" if args.repeat > 1 else Path(args.output_dir)
             runs.append(_run(base + ["-o", str(target)]))
-    print(
-        json.dumps(
-            {
-                "machine": {
-                    "cores": os.cpu_count(),
-                    "python": platform.python_version(),
-                    "platform": platform.platform(),
-                },
-                "runs": runs,
-            },
-            indent=1,
-        )
-    )
+    doc = {
+        "machine": {
+            "cores": os.cpu_count(),
+            "python": platform.python_version(),
+            "platform": platform.platform(),
+        },
+        "runs": runs,
+    }
+    print(json.dumps(doc, indent=1))
+    if args.results:
+        append_record(args.results, "main_job", "benchmarks/main_job.py", main_job_record(doc))
+
+
+def main_job_record(doc: dict) -> dict:
+    """The runs as one results-file record: the first run's verdict, every run's seconds."""
+    first = doc["runs"][0]
+    seconds = ", ".join(f"{r['seconds']:g} s" + (" (with -o)" if " -o " in r["command"] else "") for r in doc["runs"])
+    figure = f"{first.get('status')}, mu <= {first.get('bound')}, controller of order {first.get('controller_order')}; {seconds}"
+    return new_record("main-job-" + stamp(), "The main job: polyrob run (no robot)", figure, data=doc)
 
 
 if __name__ == "__main__":

@@ -26,6 +26,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from _results import append_record, new_record, stamp
+
 README = Path(__file__).resolve().parents[1] / "README.md"
 
 
@@ -66,6 +68,7 @@ def main() -> None:
     ap.add_argument("--skip", nargs="*", default=[], help="leave out commands containing any of these words")
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per command")
     ap.add_argument("--workdir", default=None, help="where the commands run (default: a temporary folder)")
+    ap.add_argument("--results", default=None, help="also append a record to this results file")
     args = ap.parse_args()
     commands = [c for c in readme_commands() if not any(w in c for w in args.skip)]
     with tempfile.TemporaryDirectory() as tmp:
@@ -75,7 +78,17 @@ def main() -> None:
         for c in commands:
             results.append(run(c, cwd, args.timeout))
             print(f"{results[-1]['seconds']:8.1f} s  exit {results[-1]['exit_status']}  {c}", file=sys.stderr)
-    print(json.dumps({"cores": os.cpu_count(), "skipped": args.skip, "commands": results}, indent=1))
+    doc = {"cores": os.cpu_count(), "skipped": args.skip, "commands": results}
+    print(json.dumps(doc, indent=1))
+    if args.results:
+        table = {
+            "columns": ["command", "seconds", "exit status", "last line"],
+            "rows": [[r["command"], f"{r['seconds']:g}", str(r["exit_status"]), r["last_line"][:120]] for r in results],
+        }
+        record = new_record(
+            "commands-" + stamp(), "Wall time of each README command", f"{len(results)} commands", table=table, data=doc
+        )
+        append_record(args.results, "readme_commands", "benchmarks/readme_commands.py", record)
 
 
 if __name__ == "__main__":

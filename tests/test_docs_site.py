@@ -1,0 +1,155 @@
+"""The docs site builds with warnings as errors, and its measured figures come from benchmarks/results/*.json."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+REQUIRED = {"id", "title", "figure", "command", "date", "machine", "commit", "transcribed"}
+
+
+def _load(name: str, path: Path):
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+hooks = _load("docs_hooks", ROOT / "docs" / "hooks.py")
+results_lib = _load("bench_results", ROOT / "benchmarks" / "_results.py")
+
+
+@pytest.mark.timeout(300)  # about 15 s on an idle 2-core machine; the limit only guards against a hang
+def test_the_site_builds_with_warnings_as_errors(tmp_path):
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mkdocs",
+            "build",
+            "--strict",
+            "-f",
+            str(ROOT / "mkdocs.yml"),
+            "-d",
+            str(tmp_path / "site"),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0 and "WARNING" not in proc.stderr, proc.stderr[-3000:]
+    site = tmp_path / "site"
+    reference = (site / "reference" / "polyrob" / "index.html").read_text()
+    assert "polyrob.model.robots.load_robot" in reference and "polyrob.synthesis.musyn" in reference
+    fleet = (site / "fleet" / "index.html").read_text()
+    # the fleet's table is generated from benchmarks/results/fleet.json, with its command and date
+    assert "<table>" in fleet and "0.6874" in fleet and "Measured with" in fleet
+    assert "&lt;!-- results" not in fleet and "<!-- results" not in fleet
+
+
+def _records():
+    for path in sorted(RESULTS.glob("*.json")):
+        for record in json.loads(path.read_text())["records"]:
+            yield path.stem, record
+
+
+def test_every_results_record_says_what_command_when_where_and_which_commit():
+    records = list(_records())
+    assert len(records) >= 10
+    for name, r in records:
+        assert REQUIRED <= set(r), (name, r.get("id"), REQUIRED - set(r))
+        assert re.fullmatch(r"\d{4}-\d{2}-\d{2}", r["date"]), (name, r["id"])
+        assert r["commit"] or r.get("documented_at"), (name, r["id"])
+        if r["transcribed"]:
+            assert r["source"].startswith("transcribed from "), (name, r["id"])
+    ids = [(n, r["id"]) for n, r in records]
+    assert len(ids) == len(set(ids))
+
+
+def test_every_results_marker_of_the_docs_names_an_existing_record():
+    known = {(n, r["id"]) for n, r in _records()}
+    files = {n for n, _ in known}
+    marks = []
+    for page in (ROOT / "docs").rglob("*.md"):
+        marks += hooks._RESULTS_MARK.findall(page.read_text())
+    assert marks
+    for name, record_id in marks:
+        assert name in files and (not record_id or (name, record_id) in known), (name, record_id)
+
+
+def test_a_record_becomes_its_table_and_one_line_of_provenance(tmp_path, monkeypatch):
+    monkeypatch.setattr(hooks, "RESULTS", tmp_path)
+    record = {
+        "id": "r1",
+        "title": "T",
+        "figure": "CERTIFIED, mu <= 0.9",
+        "command": "python benchmarks/x.py",
+        "date": "2026-11-27",
+        "machine": "2-core x86_64",
+        "commit": "abc1234",
+        "transcribed": True,
+        "table": {"columns": ["robot", "mu"], "rows": [["ur5", "0.66|0.67"]]},
+    }
+    (tmp_path / "x.json").write_text(json.dumps({"benchmark": "x", "records": [record]}))
+    text = hooks.on_page_markdown("a\n<!-- results: x r1 -->\nb", None, None, None)
+    assert "| robot | mu |\n| --- | --- |\n| ur5 | 0.66\\|0.67 |" in text
+    assert (
+        "*Measured with `python benchmarks/x.py`, 2026-11-27, 2-core x86_64 (transcribed from the earlier docs).*"
+        in text
+    )
+    assert "abc1234" not in text  # the commit stays in the JSON
+    with pytest.raises(KeyError, match="no record with id 'r2'"):
+        hooks.results_markdown("x", "r2")
+
+
+def test_a_benchmark_appends_a_record_with_its_date_machine_and_commit(tmp_path, monkeypatch):
+    monkeypatch.setattr(sys, "argv", [str(ROOT / "benchmarks" / "main_job.py"), "--repeat", "1"])
+    record = results_lib.new_record("main-job", "The main job", "CERTIFIED", data={"runs": []})
+    assert record["command"] == "python benchmarks/main_job.py --repeat 1" and record["transcribed"] is False
+    assert re.fullmatch(r"\d{4}-\d{2}-\d{2}", record["date"]) and "core" in record["machine"]
+    assert record["commit"] is None or re.fullmatch(r"[0-9a-f]{7,40}(\+dirty)?", record["commit"])
+    path = tmp_path / "main_job.json"
+    results_lib.append_record(path, "main_job", "benchmarks/main_job.py", record)
+    results_lib.append_record(path, "main_job", "benchmarks/main_job.py", dict(record, id="second"))
+    doc = json.loads(path.read_text())
+    assert doc["benchmark"] == "main_job" and [r["id"] for r in doc["records"]] == ["main-job", "second"]
+
+
+def test_the_benchmarks_turn_their_json_into_records(monkeypatch):
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    fleet, main_job = (
+        _load("bench_fleet", ROOT / "benchmarks" / "fleet.py"),
+        _load("bench_main", ROOT / "benchmarks" / "main_job.py"),
+    )
+    row = dict(
+        robot="ur5", model="inner-gain", parameters=2, status="CERTIFIED", mu_upper=0.66521, alpha=32.0, order=12
+    )
+    row.update(validation="settled, inside", bound_s=108.2, total_s=183.4, certified=True, error=None)
+    failed = dict(row, robot="TwoDofs", model=None, status=None, mu_upper=None, alpha=None, order=None, certified=False)
+    failed.update(validation=None, bound_s=None, total_s=5.0, error="PerformanceLimit: >= 1")
+    record = fleet.fleet_record({"robots": [row, failed], "batch_seconds": 1154.4})
+    assert record["figure"] == "1 of 2 robots CERTIFIED; 1154 s" and record["id"].startswith("batch-")
+    assert record["table"]["rows"] == [
+        ["ur5", "inner-gain (2)", "CERTIFIED", "0.6652", "32", "12", "settled, inside", "108", "183"],
+        ["TwoDofs", "–", "FAILED: PerformanceLimit: >= 1", "–", "–", "–", "–", "–", "5"],
+    ]
+    runs = [
+        {
+            "command": "run --json --quiet",
+            "seconds": 69.0,
+            "status": "CERTIFIED",
+            "bound": 0.9449,
+            "controller_order": 8,
+        },
+        {"command": "run --json --quiet -o out", "seconds": 89.0},
+    ]
+    record = main_job.main_job_record({"runs": runs})
+    assert record["figure"] == "CERTIFIED, mu <= 0.9449, controller of order 8; 69 s, 89 s (with -o)"
