@@ -16,7 +16,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
-_RESULTS_MARK = re.compile(r"<!-- results: ([\w.-]+)(?: ([\w.-]+))? -->")
+_RESULTS_MARK = re.compile(r"^<!-- results: ([\w.-]+)(?: ([\w.-]+))? -->$", re.M)
 
 
 def api_markdown() -> str:
