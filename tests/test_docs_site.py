@@ -153,3 +153,20 @@ def test_the_benchmarks_turn_their_json_into_records(monkeypatch):
     ]
     record = main_job.main_job_record({"runs": runs})
     assert record["figure"] == "CERTIFIED, mu <= 0.9449, controller of order 8; 69 s, 89 s (with -o)"
+
+
+def test_the_how_to_commands_parse_as_written():
+    """Every `polyrob` command of the how-to pages' ```bash blocks parses with the CLI (SystemExit(2) otherwise)."""
+    import shlex
+
+    from polyrob.cli import build_parser
+
+    commands = []
+    for page in sorted((ROOT / "docs" / "howto").glob("*.md")):
+        for block in re.findall(r"```bash\n(.*?)```", page.read_text(), flags=re.S):
+            for line in block.splitlines():
+                line = line.split("  #")[0].strip()
+                commands += [p.strip() for p in line.split("&&") if p.strip().startswith("polyrob ")]
+    assert len(commands) >= 20
+    for command in commands:
+        assert callable(build_parser().parse_args(shlex.split(command)[1:]).func), command
