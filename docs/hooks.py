@@ -50,6 +50,8 @@ def record_markdown(record: dict) -> str:
     if record.get("figure") is not None:
         out.append(f"Figure: {_cell(record['figure'])}\n")
     where = f"`{record['command']}`, {record['date']}, {record['machine']}"
+    if record.get("note"):
+        where += f"; {record['note']}"
     if record.get("transcribed"):
         where += " (transcribed from the earlier docs)"
     out.append(f"*Measured with {where}.*\n")
