@@ -79,3 +79,20 @@ def append_record(path: str | Path, benchmark: str, script: str, record: dict) -
     tmp.write_text(json.dumps(doc, indent=1, ensure_ascii=False) + "\n")
     tmp.replace(path)
     return path
+
+
+def add_results_option(parser) -> None:
+    """``--results PATH``: also append the script's JSON as a record of that results file."""
+    parser.add_argument(
+        "--results",
+        default=None,
+        metavar="PATH",
+        help="also append this run as a record to a results file (benchmarks/results/NAME.json)",
+    )
+
+
+def save_run(path: str | None, benchmark: str, title: str, figure: str, doc: dict, table: dict | None = None) -> None:
+    """Append ``doc`` (the script's printed JSON) as a record of ``path``; nothing when ``path`` is None."""
+    if path:
+        record = new_record(f"{benchmark}-{stamp()}", title, figure, table=table, data=doc)
+        append_record(path, benchmark, "benchmarks/" + Path(sys.argv[0]).name, record)

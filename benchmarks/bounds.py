@@ -20,6 +20,7 @@ import platform
 import time
 
 import numpy as np
+from _results import add_results_option, save_run
 
 from polyrob import Domain, bound_pldi, load_robot
 
@@ -53,6 +54,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", default="planar_2r,ur5,panda")
     parser.add_argument("--panda-factor", type=float, default=10.0)
+    add_results_option(parser)
     args = parser.parse_args()
     results = []
     for name in args.robots.split(","):
@@ -94,20 +96,19 @@ def main():
             }
         results.append(rec)
         print(json.dumps(rec), flush=True) if os.environ.get("POLYROB_BENCH_STREAM") else None
-    print(
-        json.dumps(
-            {
-                "benchmark": "bounds",
-                "machine": {
-                    "processor": platform.processor() or platform.machine(),
-                    "cores": os.cpu_count(),
-                    "python": platform.python_version(),
-                },
-                "results": results,
-            },
-            indent=2,
-        )
+    doc = {
+        "benchmark": "bounds",
+        "machine": {
+            "processor": platform.processor() or platform.machine(),
+            "cores": os.cpu_count(),
+            "python": platform.python_version(),
+        },
+        "results": results,
+    }
+    save_run(
+        args.results, "bounds", "Bounding the Jacobians against uniform sampling", "the script's JSON in data", doc
     )
+    print(json.dumps(doc, indent=2))
 
 
 if __name__ == "__main__":

@@ -21,6 +21,7 @@ import time
 
 import numpy as np
 import pinocchio
+from _results import add_results_option, save_run
 
 from polyrob import Domain, load_robot
 
@@ -65,6 +66,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=20000)
     parser.add_argument("--repeats", type=int, default=5)
+    add_results_option(parser)
     args = parser.parse_args()
     results = []
     for name, extra in (("planar_2r", {}), ("ur5", {}), ("panda", {})):
@@ -89,18 +91,23 @@ def main():
                 "batched_over_finite_differences": round(batched / fd, 2),
             }
         )
+    doc = {
+        "benchmark": "jacobians",
+        "machine": {
+            "processor": platform.processor() or platform.machine(),
+            "cores": os.cpu_count(),
+            "python": platform.python_version(),
+            "pinocchio": pinocchio.__version__,
+        },
+        "results": results,
+    }
+    ratios = ", ".join(f"{r['robot']} {r['batched_over_finite_differences']}x" for r in results if "robot" in r)
+    save_run(
+        args.results, "jacobians", "Jacobian samples per second", f"batched over finite differences: {ratios}", doc
+    )
     print(
         json.dumps(
-            {
-                "benchmark": "jacobians",
-                "machine": {
-                    "processor": platform.processor() or platform.machine(),
-                    "cores": os.cpu_count(),
-                    "python": platform.python_version(),
-                    "pinocchio": pinocchio.__version__,
-                },
-                "results": results,
-            },
+            doc,
             indent=2,
         )
     )

@@ -31,6 +31,8 @@ import platform
 import time
 from types import SimpleNamespace
 
+from _results import add_results_option, save_run
+
 
 def _controller(spec: str):
     if spec == "paper":
@@ -248,6 +250,7 @@ def main(argv=None) -> int:
     ap.add_argument("--symmetric", action="store_true", help="the half box and an even X (the loop is even in rho)")
     ap.add_argument("--cell-time-limit", type=float, default=900.0, help="seconds for --cells")
     ap.add_argument("--load-x", default=None, metavar="FILE.npz", help="no search: the saved X, re-checked and --cells")
+    add_results_option(ap)
     args = ap.parse_args(argv)
     points = tuple(int(x) for x in args.points.split(","))
     recheck = {"none": None, "auto": "auto"}.get(args.recheck) or tuple(int(x) for x in args.recheck.split(","))
@@ -287,6 +290,7 @@ def main(argv=None) -> int:
             )
         )
     doc["load_average_end"] = list(os.getloadavg())
+    save_run(args.results, "moving_robot", "The moving robot's certificate", "the script's JSON in data", doc)
     print(json.dumps(doc, indent=2, allow_nan=False))
     return 0
 

@@ -20,12 +20,15 @@ import platform
 import sys
 import time
 
+from _results import add_results_option, save_run
+
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--alphas", default="1,0.7,0.5,0.35,0.25,0.125")
     ap.add_argument("--which", default="auto")
     ap.add_argument("--max-iter", type=int, default=150)
+    add_results_option(ap)
     args = ap.parse_args(argv)
 
     from polyrob import bound_pldi, load_robot
@@ -85,6 +88,14 @@ def main(argv=None) -> int:
             break
     out["largest_alpha_certified"] = None if best is None else best["alpha"]
     out["seconds"] = round(time.perf_counter() - t0, 2)
+    figure = f"largest factor with time-varying robust performance: {out['largest_alpha_certified']}"
+    save_run(
+        args.results,
+        "time_varying",
+        "Time-varying certificates per bandwidth factor",
+        figure,
+        json.loads(json.dumps(out, default=float)),
+    )
     print(json.dumps(out, indent=1, default=float))
     return 0
 

@@ -33,6 +33,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "src"))
 
+from _results import add_results_option, save_run  # noqa: E402
+
 import polyrob  # noqa: E402
 import polyrob.analysis.limits  # noqa: E402
 from polyrob.analysis.robust import robperf  # noqa: E402
@@ -78,6 +80,7 @@ def main(argv=None):
     ap.add_argument("--samples", type=int, default=256, help="PLDI design size (the tests' 256)")
     ap.add_argument("--bandwidth-scale", type=float, default=1.0, help="multiply omega_b and omega_bt")
     ap.add_argument("--no-time-varying", action="store_true")
+    add_results_option(ap)
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     robot = polyrob.load_robot("paper_2r")
@@ -149,6 +152,7 @@ def main(argv=None):
             k: {name: _time_varying(prob, K) for name, prob in problems.items()} for k, K in controllers.items()
         }
     out["seconds_total"] = round(time.perf_counter() - t0, 1)
+    save_run(args.results, "uncertainty", "Uncertainty models side by side", "the script's JSON in data", out)
     print(json.dumps(out, indent=2))
 
 
