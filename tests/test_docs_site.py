@@ -170,3 +170,11 @@ def test_the_how_to_commands_parse_as_written():
     assert len(commands) >= 20
     for command in commands:
         assert callable(build_parser().parse_args(shlex.split(command)[1:]).func), command
+
+
+def test_the_generated_tables_show_no_commit_hash():
+    """The commit stays in the record's fields; what a page shows (title, figure, table, conditions) names none."""
+    for path in sorted(RESULTS.glob("*.json")):
+        text = hooks.results_markdown(path.stem)
+        hashes = [h for h in re.findall(r"\b[0-9a-f]{7,40}\b", text) if re.search(r"\d", h) and re.search(r"[a-f]", h)]
+        assert hashes == [], (path.name, hashes)
