@@ -47,7 +47,21 @@ import numpy as np
 
 from polyrob.errors import ArgumentError
 
-__all__ = ["PerformanceLimit", "performance_limit", "pole_bound"]
+__all__ = ["PerformanceLimit", "performance_limit", "pole_bound", "marginal_tolerance"]
+
+
+def marginal_tolerance(A) -> float:
+    """The real part below which an eigenvalue of ``A`` is 0 to the precision of ``A``.
+
+    ``sqrt(eps) * max(1, ‖A‖_F)``: round-off of size ``eps ‖A‖`` in a
+    double eigenvalue at 0 (a double integrator: a joint without gravity or
+    stiffness) splits it into ``±sqrt(eps ‖A‖)``, e.g. ``±1.1e-9`` rad/s;
+    such a pole is marginal, not unstable.
+
+    >>> f"{marginal_tolerance(np.eye(2)):.3g}"  # sqrt(eps) * sqrt(2)
+    '2.11e-08'
+    """
+    return float(np.sqrt(np.finfo(float).eps) * max(1.0, np.linalg.norm(A)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,11 +159,17 @@ def pole_bound(A: np.ndarray, W_T, m: int) -> tuple[float, complex | None, np.nd
 
     >>> pole_bound(np.array([[0.0, 1.0], [1.0, 0.0]]), 2.0, 1)[:2]
     (2.0, (1+0j))
+
+    A double integrator computed with round-off (poles ``±1.14e-9``) has no
+    unstable pole: its poles are 0 to the precision of ``A``.
+
+    >>> pole_bound(np.array([[0.0, 1.0], [1.3e-18, 0.0]]), 2.0, 1)[:2]
+    (0.0, None)
     """
     weight = W_T if isinstance(W_T, _WeightAt) else _WeightAt(W_T, m)
     ev, V = np.linalg.eig(A)
     best, pole, direction = 0.0, None, None
-    for j in np.flatnonzero(ev.real > 1e-9 * max(1.0, np.abs(ev).max())):
+    for j in np.flatnonzero(ev.real > marginal_tolerance(A)):
         y = V[:m, j]
         ny = np.linalg.norm(y)
         if ny == 0:  # a pole not seen at the output cannot constrain T

@@ -187,10 +187,13 @@ class PLDI:
 
     def table(self) -> str:
         """The paper-style table: entry, lower, upper, nominal, enclosure."""
+        from polyrob.report.numbers import zero_round_off
+
         rows = [f"{'entry':<8}{'lower':>14}{'upper':>14}{'nominal':>14}  enclosure"]
-        for name, lo, hi, nom in zip(self.entries, self.lower, self.upper, self.nominal):
-            # "+ 0.0" prints a negative zero as 0
-            rows.append(f"{name:<8}{lo + 0.0:>14.6g}{hi + 0.0:>14.6g}{nom + 0.0:>14.6g}  {self.enclosure}")
+        # round-off (e.g. a nominal -1.944e-42 of an entry that is 0 there) prints as 0
+        figures = zero_round_off(np.column_stack([self.lower, self.upper, self.nominal]))
+        for name, (lo, hi, nom) in zip(self.entries, figures):
+            rows.append(f"{name:<8}{lo:>14.6g}{hi:>14.6g}{nom:>14.6g}  {self.enclosure}")
         return "\n".join(rows)
 
     # ------------------------------------------------------------------ files

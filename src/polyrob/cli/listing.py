@@ -40,7 +40,7 @@ def cmd_robots(args) -> int:
 
 
 def cmd_info(args) -> int:
-    from polyrob.pipeline.reports import format_matrix, robot_report
+    from polyrob.pipeline.reports import robot_report
 
     out = Output(args)
     robot = robot_from_args(args)
@@ -72,8 +72,43 @@ def cmd_info(args) -> int:
     print(domain.table())
     neutral = info["neutral"]
     q = ", ".join(f"{x:.5g}" for x in neutral["q"])
-    print(f"\nat q = [{q}]:\nM(q) =\n{format_matrix(neutral['M'])}\nB(q) =\n{format_matrix(neutral['B'])}")
+    print(f"\nat q = [{q}] (q = 0 clipped into the domain), at rest:")
+    for line in mass_matrix_lines(robot, neutral):
+        print(line)
     return 0
+
+
+def mass_matrix_lines(robot, neutral: dict) -> list[str]:
+    """Which ``M`` and ``B`` ``info`` prints, in words, then the matrices.
+
+    With a computed-torque inner layer the outer controller commands
+    accelerations ``v``; the mass matrix of the loop it sees is
+    ``M_hat(q)^-1 M(q)``, the identity for the nominal robot.  Printing that
+    alone as "M(q)" hides the robot's own, so both are printed, each named.
+    """
+    from polyrob.pipeline.reports import format_matrix
+
+    inner = getattr(robot, "inner", "none")
+    true_robot = getattr(robot, "true_robot", None)
+    if inner == "computed-torque" and true_robot is not None:
+        which = "the nominal robot" if robot.scenario == "nominal" else robot.scenario
+        return [
+            f"M(q) of the robot ({robot.name}, {which}; the physical mass matrix) =",
+            format_matrix(neutral["M_robot"]),
+            "inner layer computed-torque: u = M_hat(q) v + h_hat(q, qdot), so the outer controller sees the "
+            "normalised mass matrix M_hat(q)^-1 M(q), the identity I for the nominal robot (the payload range and "
+            "the model error are what keeps it from I over the domain):",
+            format_matrix(neutral["M"]),
+            "B(q) of the loop the controller sees (input v, the commanded acceleration) =",
+            format_matrix(neutral["B"]),
+        ]
+    layer = "" if inner == "none" else f" (inner layer {inner}: the input is v, u = g_hat(q) + v)"
+    return [
+        f"M(q) of the robot ({robot.name}; the physical mass matrix) =",
+        format_matrix(neutral["M"]),
+        f"B(q) of the plant{layer} =",
+        format_matrix(neutral["B"]),
+    ]
 
 
 def register(sub) -> None:

@@ -55,11 +55,17 @@ def check_output(args) -> None:
 
 def print_design(design, out) -> None:
     r = design.result
+    from polyrob.report.numbers import NO_HINF_STEP, gamma_text
+
     gam = list(r.gamma_history)
-    out.line(f"{'iter':>4}  {'peak mu (upper)':>16}  {'gamma':>10}")
+    out.line(f"{'iter':>4}  {'peak mu (upper)':>16}  {'gamma':>14}")
     for i, mu in enumerate(r.mu_history):
-        g = f"{gam[i]:.4g}" if i < len(gam) else "-"
-        out.line(f"{i + 1:>4}  {mu:>16.5g}  {g:>10}")
+        out.line(f"{i + 1:>4}  {mu:>16.5g}  {gamma_text(gam[i]) if i < len(gam) else NO_HINF_STEP:>14}")
+    if any(gamma_text(g) == NO_HINF_STEP for g in gam[: len(r.mu_history)]):
+        out.line(
+            f"({NO_HINF_STEP}: that controller was not made by an H-inf K-step (the start controller, a tuned "
+            "PID or a reduced one), so it has no gamma)"
+        )
     out.line(
         f"controller: {r.structure}, order {r.order}; peak mu in [{r.peak_mu_lower:.4g}, {r.peak_mu:.4g}] "
         f"(bounds on the frequency grid) at {r.peak_frequency:.4g} rad/s ({r.iterations} iterations, {r.seconds:.1f} s)"

@@ -15,8 +15,10 @@ __all__ = ["robot_report", "pldi_report", "model_report", "format_matrix"]
 
 
 def format_matrix(rows, precision: int = 5) -> str:
-    """A plain-text matrix of a list of lists (``numpy``-like, without numpy)."""
-    cells = [[f"{float(x) + 0.0:.{precision}g}" for x in row] for row in rows]
+    """A plain-text matrix of a list of lists; round-off (below 1e-10 of the largest entry) prints as 0."""
+    from polyrob.report.numbers import zero_round_off
+
+    cells = [[f"{x:.{precision}g}" for x in row] for row in zero_round_off(rows).tolist()]
     width = max((len(c) for row in cells for c in row), default=1)
     return "\n".join("[" + " ".join(c.rjust(width) for c in row) + "]" for row in cells)
 
@@ -31,6 +33,10 @@ def robot_report(robot, domain) -> dict:
     info = robot.describe()
     info["domain"] = domain.to_dict()
     info["neutral"] = {"q": q0.tolist(), "M": M.tolist(), "B": B.tolist()}
+    true_robot = getattr(robot, "true_robot", None)
+    if getattr(robot, "inner", "none") == "computed-torque" and true_robot is not None:
+        # "M" is what the outer controller sees (M_hat^-1 M, the identity when nominal); this is the robot's own
+        info["neutral"]["M_robot"] = true_robot.mass_matrix(q0).tolist()
     return info
 
 

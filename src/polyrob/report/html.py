@@ -40,6 +40,7 @@ from polyrob.report.certificates import (
     frozen_status,
     is_decided,
 )
+from polyrob.report.numbers import zero_round_off
 from polyrob.report.page import Page, cell, is_missing
 
 __all__ = ["ReportFiles", "write_report"]
@@ -237,7 +238,12 @@ def write_report(
         doc.para(f"Enclosure: {pldi.enclosure}; {coverage}domain '{pldi.domain.name}'.")
         doc.table(
             ["entry", "lower", "upper", "nominal"],
-            [(n, lo, hi, nm) for n, lo, hi, nm in zip(pldi.entries, pldi.lower, pldi.upper, pldi.nominal)],
+            [
+                (n, *figures)
+                for n, figures in zip(
+                    pldi.entries, zero_round_off(np.column_stack([pldi.lower, pldi.upper, pldi.nominal])).tolist()
+                )
+            ],
         )
     if unc is not None:
         fig(

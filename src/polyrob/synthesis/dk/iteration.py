@@ -54,6 +54,7 @@ from polyrob.analysis.norms import hinf_norm_estimate
 from polyrob.analysis.stability import stability_screen
 from polyrob.errors import PolyrobError, SynthesisError
 from polyrob.plant.generalized import lower_lft_matrices
+from polyrob.report.numbers import gamma_text
 from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound, resonances
 from polyrob.synthesis.dk.strategies import HinfStep, MuUpperBound
 from polyrob.synthesis.scalings.data import ScalingData, Scalings, complexified, scaling_data
@@ -271,12 +272,12 @@ class DKIteration:
                 best = min(best, peak)
                 prev = peak
                 bar.update(1)
-                bar.set_postfix(mu=f"{peak:.4f}", best=f"{best:.4f}", gamma=f"{gamma:.4g}", nK=K.nstates)
+                bar.set_postfix(mu=f"{peak:.4f}", best=f"{best:.4f}", gamma=gamma_text(gamma), nK=K.nstates)
                 bound = "mixed " if phase == "DG" else "complex " if st.has_real else ""
                 # one line per iteration on the polyrob logger, terminal or not (grid peak: a search figure)
                 log.info(
                     f"musyn iter {it + 1:2d}: grid peak mu {peak:.4f} {bound}(best {best:.4f}), "
-                    f"gamma {gamma:.4g}, K order {K.nstates}, D/G orders {orders}, "
+                    f"gamma {gamma_text(gamma)}, K order {K.nstates}, D/G orders {orders}, "
                     f"{sum(rec.seconds.values()):.1f} s, {time.perf_counter() - t_run:.0f} s in all"
                 )
                 if it + 1 >= self.max_iter:
