@@ -81,20 +81,21 @@ def test_robots_all_says_what_a_refused_urdf_lacks(tmp_path, capfd, monkeypatch)
     assert "KeyError" not in out
 
 
-def test_info_prints_a_locked_mimic_joint_prominently(tmp_path, capfd):
+def test_info_refuses_a_mimic_joint_then_prints_it_locked_as_asked(tmp_path, capfd):
     from test_robots import _MIMIC
 
     path = tmp_path / "mimic.urdf"
     path.write_text(_MIMIC)
     code, out, err = run(capfd, "info", str(path))
-    assert code == 0
+    assert code == 2 and out == ""
+    assert err.strip().endswith("give --lock j3 to run on the robot with 'j3' fixed at its neutral position (or --lock j3,j2 to fix both)")
+    assert len(err.strip().splitlines()) == 1
+    code, out, err = run(capfd, "info", str(path), "--lock", "j3")
+    assert code == 0 and err == ""
     header = out.splitlines()[:5]
     assert header[2] == "locked  j3"
-    assert (
-        header[3].startswith("NOTE    mimic joint 'j3' follows actuated joint 'j2'") and "locked at q = 0" in header[3]
-    )
-    assert "mimic joint 'j3'" in err  # the warning every command shows on stderr
-    code, out, _ = run(capfd, "info", str(path), "--json")
+    assert header[3].startswith("NOTE    mimic joint 'j3' follows actuated joint 'j2'") and "locked as asked" in header[3]
+    code, out, _ = run(capfd, "info", str(path), "--lock", "j3", "--json")
     assert json.loads(out)["notes"][0].startswith("mimic joint 'j3' follows actuated joint 'j2'")
 
 

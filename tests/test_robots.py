@@ -93,8 +93,10 @@ def test_lock_by_name_and_unknown_joint():
     assert robot.m == 6 and "panda_joint7" not in robot.joint_names
     with pytest.raises(RobotError, match="cannot lock nope"):
         load_robot("panda", lock=["nope"])
-    # lock=[] keeps finger 1 (prismatic); finger 2 mimics it and stays locked
-    robot = load_robot("panda", lock=[])
+    # lock=[] keeps finger 1 (prismatic), which finger 2 mimics: refused with the lock that runs
+    with pytest.raises(RobotError, match="give --lock panda_finger_joint2 to run on the robot with"):
+        load_robot("panda", lock=[])
+    robot = load_robot("panda", lock=["panda_finger_joint2"])
     assert robot.m == 8 and robot.joint_kinds[-1] == "prismatic"
     assert robot.locked == ("panda_finger_joint2",)
 
@@ -301,16 +303,43 @@ def urdf_log():
     log.removeHandler(handler)
 
 
-def test_a_mimic_joint_locked_is_noted_and_warned(write_urdf, urdf_log):
+def test_a_mimic_joint_of_an_actuated_joint_is_refused_with_the_lock_that_runs(write_urdf, urdf_log, capfd):
+    """Pinocchio's derivatives refuse mimic joints: no silent lock (another robot), one line with the option."""
     path = write_urdf(_MIMIC)
-    robot = load_robot(str(path))
+    with pytest.raises(RobotError) as info:
+        load_robot(str(path))
+    assert str(info.value) == (
+        f"{path}: joint 'j3' mimics actuated joint 'j2' (q = -1 * q_j2 + 0.5) and polyrob cannot model mimic "
+        "joints: give --lock j3 to run on the robot with 'j3' fixed at its neutral position (or --lock j3,j2 to fix both)"
+    )
+    assert capfd.readouterr().err == ""
+    # locked as asked: named in the robot's notes (every result), no warning
+    robot = load_robot(str(path), lock=["j3"])
     assert robot.joint_names == ("j1", "j2") and robot.locked == ("j3",)
     (note,) = robot.notes
-    assert "mimic joint 'j3' follows actuated joint 'j2' (q = -1 * q_j2 + 0.5)" in note
-    assert "locked at q = 0" in note and "polyrob does not model mimic joints" in note
-    assert any(note in r.getMessage() for r in urdf_log.records)
+    assert note == (
+        "mimic joint 'j3' follows actuated joint 'j2' (q = -1 * q_j2 + 0.5) in the URDF; it is locked as asked "
+        "(lock/--lock) at q = 0, so every result is for the robot with 'j3' fixed while 'j2' moves"
+    )
+    assert not urdf_log.records
     described = robot.describe()
     assert described["locked"] == ["j3"] and described["notes"] == [note]
+    assert load_robot(str(path), lock=["j2", "j3"]).joint_names == ("j1",)
+
+
+def test_an_inertial_without_inertia_is_refused(write_urdf, capfd):
+    """urdfdom reads it as a point mass and says so on stderr only: refused in one line naming the link."""
+    text = urdf_text(["base", "l1", "l2"], [("j1", "revolute", "base", "l1"), ("j2", "revolute", "l1", "l2")])
+    link = '<link name="l2"><inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/>'
+    assert link in text
+    path = write_urdf(text.replace(link, '<link name="l2"><inertial><mass value="1"/>'))
+    with pytest.raises(RobotError) as info:
+        load_robot(str(path))
+    assert str(info.value) == (
+        f"{path}: link 'l2' has an <inertial> without <inertia> (it would be read as a point mass): add "
+        '<inertia ixx="..." iyy="..." izz="..." ixy="0" ixz="0" iyz="0"/> (kg m^2, about its centre of mass)'
+    )
+    assert capfd.readouterr().err == ""  # nothing from urdfdom's C++ parser
 
 
 def test_a_mimic_joint_of_a_locked_gripper_is_noted_without_a_warning(urdf_log):

@@ -33,8 +33,6 @@ def cmd_robots(args) -> int:
     for r in rows:
         joints = "-" if r["m"] is None else str(r["m"])
         notes = r.get("refused") or (f"locked: {', '.join(r['locked'])}" if r["locked"] else "")
-        if any("polyrob does not model" in n for n in r.get("notes", ())):
-            notes += " (NOTE: a mimic joint is locked, see polyrob info)"
         out.line(f"{r['name']:<28}{joints:>7}  {r['origin']:<20} {notes}")
     return 0
 

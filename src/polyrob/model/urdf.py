@@ -8,10 +8,11 @@ joints is left and that the inertial data are physical
 checked (:mod:`polyrob.model.urdf_checks`) before Pinocchio's C++ parser
 sees it: an unexpanded xacro file or a missing attribute is one line in words.
 
-Mimic joints are not modelled: a follower is locked at its neutral position
-and :attr:`Robot.notes` says so (``polyrob info`` prints it; a warning on the
-``polyrob`` logger, shown on stderr by every command, when the joint it
-follows is actuated).
+Mimic joints are not modelled (Pinocchio reads them, but its dynamics
+derivatives refuse them).  The follower of a locked joint (a gripper's second
+finger) is locked with it; the follower of an actuated joint is refused with
+the ``--lock`` option that fixes it, and once locked on purpose
+:attr:`Robot.notes` names it (``polyrob info`` and every result print it).
 
 Examples
 --------
@@ -24,7 +25,6 @@ Examples
 from __future__ import annotations
 
 import functools
-import logging
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -140,7 +140,8 @@ def load_urdf(path: str | Path, *, name: str | None = None, lock=None, armature=
                 f"{path}: cannot lock {', '.join(unknown)}: no such movable joint "
                 f"(movable joints: {', '.join(model.names[1:])})"
             )
-    # Mimic joints follow another joint: they are not actuated; lock them too.
+    _refuse_followed_mimics(path, joints, lock_names)
+    # Mimic joints of locked joints (a gripper's second finger) follow them: lock them too.
     lock_names += [j for j, info in joints.items() if info["mimic"] and j not in lock_names]
     lock_ids = [model.getJointId(j) for j in lock_names if model.existJointName(j)]
     notes = []
@@ -188,9 +189,6 @@ def load_urdf(path: str | Path, *, name: str | None = None, lock=None, armature=
             model.rotorInertia[k], model.rotorGearRatio[k] = srdf_data.rotors[jname]
     centre = np.where(np.isfinite(lower) & np.isfinite(upper), np.clip(0.0, lower, upper), 0.0)
     poses = srdf.reference_poses(srdf_data, names, centre)
-    for text, warn in notes:  # only for a robot that loads: a refused one says why
-        if warn:
-            logging.getLogger(__name__).warning("%s: %s", path, text)
     return Robot(
         name=name or path.stem,
         source=str(path),
@@ -203,7 +201,7 @@ def load_urdf(path: str | Path, *, name: str | None = None, lock=None, armature=
         effort_limit=effort,
         damping=damping,
         locked=tuple(lock_names),
-        notes=tuple(text for text, _ in notes),
+        notes=tuple(notes),
         armature=np.array(reflected, float),
         reflected_inertia=reflected_source,
         srdf=None if srdf_path is None else str(srdf_path),
@@ -211,8 +209,34 @@ def load_urdf(path: str | Path, *, name: str | None = None, lock=None, armature=
     )
 
 
-def _mimic_notes(model, joints, lock_names, reference) -> list[tuple[str, bool]]:
-    """One note per mimic joint locked, with whether to warn: the joint it follows stays actuated."""
+def _refuse_followed_mimics(path: Path, joints: dict, lock_names: list) -> None:
+    """Refuse a mimic joint that follows an actuated joint, unless it is locked on purpose (``lock``).
+
+    Pinocchio reads ``<mimic>`` (``buildModelFromUrdf(..., mimic=True)``), but
+    its dynamics derivatives, which the bounds need, refuse mimic joints; so
+    polyrob cannot model one.  Locking it silently would certify another
+    robot: the user chooses, with the option the message gives.
+    """
+    followed = [
+        (j, info["mimic"])
+        for j, info in joints.items()
+        if info["mimic"] and j not in lock_names and info["mimic"][0] in joints and info["mimic"][0] not in lock_names
+    ]
+    if not followed:
+        return
+    jname, (leader, factor, offset) = followed[0]
+    mimics = [j for j, _ in followed]
+    option = ",".join(dict.fromkeys([*lock_names, *mimics]))
+    both = ",".join(dict.fromkeys([*lock_names, *mimics, *(m[0] for _, m in followed)]))
+    raise RobotError(
+        f"{path}: joint '{jname}' mimics actuated joint '{leader}' (q = {factor:g} * q_{leader} + {offset:g}) and "
+        f"polyrob cannot model mimic joints: give --lock {option} to run on the robot with "
+        f"{', '.join(repr(j) for j in mimics)} fixed at its neutral position (or --lock {both} to fix both)"
+    )
+
+
+def _mimic_notes(model, joints, lock_names, reference) -> list[str]:
+    """One note per mimic joint locked: what it follows and where it is fixed."""
     notes = []
     for jname in lock_names:
         mimic = joints.get(jname, {}).get("mimic")
@@ -224,14 +248,14 @@ def _mimic_notes(model, joints, lock_names, reference) -> list[tuple[str, bool]]
         leader, factor, offset = mimic
         if leader in lock_names or leader not in joints:
             why = "locked too" if leader in lock_names else "not a movable joint"
-            notes.append((f"mimic joint '{jname}' (follows '{leader}', {why}) is locked at q = {value:.4g}", False))
+            notes.append(f"mimic joint '{jname}' (follows '{leader}', {why}) is locked at q = {value:.4g}")
             continue
         note = (
             f"mimic joint '{jname}' follows actuated joint '{leader}' (q = {factor:g} * q_{leader} + {offset:g}) "
-            f"in the URDF, but polyrob does not model mimic joints: it is locked at q = {value:.4g}, so every "
-            f"result is for the robot with '{jname}' fixed; lock '{leader}' too (--lock) or remove the <mimic>"
+            f"in the URDF; it is locked as asked (lock/--lock) at q = {value:.4g}, so every result is for the "
+            f"robot with '{jname}' fixed while '{leader}' moves"
         )
-        notes.append((note, True))
+        notes.append(note)
     return notes
 
 

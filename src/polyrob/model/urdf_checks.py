@@ -78,6 +78,12 @@ def check_structure(path, root) -> None:
         mass = link.find("inertial/mass")
         if mass is not None and mass.get("value") is None:
             raise bad(f"link '{name}': <mass> has no value attribute")
+        if link.find("inertial") is not None and link.find("inertial/inertia") is None:
+            # a parser reads it as a point mass (urdfdom says so on stderr only): the dynamics would be another robot's
+            raise RobotError(
+                f"{path}: link '{name}' has an <inertial> without <inertia> (it would be read as a point mass): add "
+                '<inertia ixx="..." iyy="..." izz="..." ixy="0" ixz="0" iyz="0"/> (kg m^2, about its centre of mass)'
+            )
     for k, joint in enumerate(root.findall("joint"), 1):
         name = joint.get("name")
         if not name:
