@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 import polyrob
-from polyrob.analysis.certificate import Certificate, Scope, Status
+from polyrob.analysis.certificate import ARBITRARY, Certificate, Scope, Status
 from polyrob.io.controller import load_controller, save_controller
 from polyrob.report.certificates import FROZEN_ROW, TIME_VARYING_ROW
-from polyrob.report.html import write_report
+from polyrob.report.html import ReportOptions, write_report
 from polyrob.validate.monte_carlo import monte_carlo
 from polyrob.validate.simulate import simulate, step_reference
 
@@ -55,9 +55,9 @@ def _check_links(run: Path, page: str, pattern: str):
 
 
 def _verdict(page: str) -> str:
-    """The verdict at the top: the first paragraph after the title."""
-    m = re.search(r"</h1>\s*<p id='verdict'[^>]*>verdict: ([A-Z_]+)</p>", page)
-    assert m, "no verdict at the top of the page"
+    """The status of the verdict at the top (the first paragraph after the title), which names its certificate."""
+    m = re.search(r"</h1>\s*<p id='verdict'[^>]*>Frozen robot, robust (?:performance|stability): ([A-Z_]+)\b", page)
+    assert m, "no verdict naming the frozen-robot certificate at the top of the page"
     return m.group(1)
 
 
@@ -89,15 +89,14 @@ def test_report_references_existing_valid_pngs(tmp_path):
     inside = simulate(robot, K, dom, step_reference([0.005, -0.002]), t_final=4.0)
     outside = simulate(robot, K, dom, step_reference([0.2, -0.1]), t_final=1.0)
     w = np.logspace(-2, 2, 5)
-    files = write_report(
-        tmp_path,
+    options = ReportOptions(
         robot_name="paper_2r",
         pldi=pldi,
         unc=unc,
         controller=K,
         controllers={"other": 0.5 * K},
         monte_carlo=mc,
-        simulations=[inside, outside],
+        simulations=(inside, outside),
         certificates={
             FROZEN_ROW: Certificate(
                 Status.NOT_CERTIFIED, 2.43, 2.43, 2.3, None, Scope(frequencies="the grid"), ("mu not below 1",)
@@ -109,6 +108,7 @@ def test_report_references_existing_valid_pngs(tmp_path):
         discretization={"rate_hz": 1000.0, "min_word_length_bits": 24, "spectral_radius": 0.99999997},
         mu_curves={"robust performance": (w, 2 * np.ones(5), 1.9 * np.ones(5))},
     )
+    files = write_report(tmp_path, options)
     page = files.html.read_text()
     refs = _check_links(tmp_path, page, r"<img src='([^']+)'")
     assert set(refs) == {f"figures/{p.name}" for p in files.figures}
@@ -129,7 +129,7 @@ def test_report_references_existing_valid_pngs(tmp_path):
     val = json.loads(files.validation.read_text())
     assert [s["stayed_in_domain"] for s in val["simulations"]] == [True, False]
     # rewriting replaces the files atomically: no temporary files left
-    write_report(tmp_path, robot_name="paper_2r", simulations=[inside])
+    write_report(tmp_path, ReportOptions(robot_name="paper_2r", simulations=(inside,)))
     assert not list(tmp_path.rglob("*.tmp"))
 
 
@@ -193,9 +193,12 @@ def test_run_report_shows_the_certificates_and_rebuilds_them(tmp_path, monkeypat
     rows = _certificate_rows(page)
     assert [r[0] for r in rows] == [FROZEN_ROW, f"{TIME_VARYING_ROW} ({tv.method})"]
     assert [r[1] for r in rows] == [a.certificate.status.value, tv.certificate.status.value]
-    assert [r[3] for r in rows] == [a.certificate.scope.sentence(), tv.certificate.scope.sentence()]
-    assert float(rows[0][2]) == pytest.approx(a.certificate.bound, rel=1e-4)
-    assert rows[1][2] == (f"{tv.gamma:.5g}" if np.isfinite(tv.gamma) else "no finite bound")
+    assert [r[4] for r in rows] == [a.certificate.scope.sentence(), tv.certificate.scope.sentence()]
+    assert float(rows[0][3]) == pytest.approx(a.certificate.bound, rel=1e-4)
+    assert rows[1][3] == (f"{tv.gamma:.5g}" if np.isfinite(tv.gamma) else "no finite bound")
+    # every row in plain words: what its status says about which robot
+    assert rows[0][2].startswith(("Proved: every frozen robot", "Not proved", "Disproved"))
+    assert "varying arbitrarily fast" in rows[1][2]
     assert a.certificate.status.value in [s.value for s in Status]
     _check_links(tmp_path, page, r"<img src='([^']+)'")
     _check_links(tmp_path, files.markdown.read_text(), r"!\[[^\]]*\]\(([^)]+)\)")
@@ -276,7 +279,7 @@ def test_certificates_of_another_controller_are_not_used(tmp_path):
     certs, notes = read_run_certificates(tmp_path, "K_other.json")
     assert certs == {} and "not of K_other.json" in notes[0]
     with pytest.raises(polyrob.PolyrobError, match="no decided status"):
-        write_report(tmp_path, certificates={"mu": {"peak_mu_upper": 2.43}})
+        write_report(tmp_path, ReportOptions(certificates={"mu": {"peak_mu_upper": 2.43}}))
 
 
 def test_what_a_run_certifies_instead_survives_a_rebuild(tmp_path):
@@ -319,7 +322,11 @@ def test_cli_report_json_is_one_document(tmp_path, monkeypatch, capsys):
     assert main(["report", str(tmp_path), "--json", "--quiet"]) == 1  # exit 0 only for CERTIFIED
     doc = json.loads(capsys.readouterr().out)
     assert doc["html"] == str(tmp_path / "report.html") and doc["figures"] == [str(tmp_path / "figures" / "mu.png")]
-    assert doc["status"] == "GRID_ONLY" and doc["certified"] is False and doc["verdict"] == "verdict: GRID_ONLY"
+    assert doc["status"] == "GRID_ONLY" and doc["certified"] is False
+    assert doc["verdict"] == (
+        "Frozen robot, robust performance: GRID_ONLY, mu < 1 on the frequency grid only (peak 0.9), "
+        "not proved between its points"
+    )
     assert doc["certificates"][0]["status"] == "GRID_ONLY"
 
 
@@ -338,9 +345,114 @@ def test_certificate_sweep_is_stored_and_plotted(tmp_path):
     certs, _ = read_run_certificates(tmp_path)
     back = certificate_sweep(certs[FROZEN_ROW])
     assert np.array_equal(back[0], w) and np.isnan(back[1][2]) and back[1][0] == 1.5  # inf stored as null
-    files = write_report(tmp_path, certificates=certs)
+    files = write_report(tmp_path, ReportOptions(certificates=certs))
     page = files.html.read_text()
     assert "figures/mu.png" in page and "the value at ω = 0 is the point at the left edge" in page
     # a certificate without a sweep (a gain) has none
     gain = Certificate(Status.NOT_CERTIFIED, float("inf"), float("nan"), float("nan"), None, Scope(), ("no P",))
     assert "sweep" not in certificate_record(gain) and certificate_sweep(gain) is None
+
+
+def _first_screen(page: str) -> str:
+    """What a reader sees before the first section heading: the verdict, deployment and the problem."""
+    return page.split("<h2>", 1)[0]
+
+
+def test_the_headline_names_its_certificate_and_every_row_reads_in_words(tmp_path):
+    """A CERTIFIED headline above a NOT_CERTIFIED row says which certificate it is, and names the others."""
+    frozen = Certificate(
+        Status.CERTIFIED, 0.9449, 0.94, 0.93, None, Scope(frequencies="every frequency"), mu=SimpleMu()
+    )
+    fast = Certificate(
+        Status.NOT_CERTIFIED,
+        5.76,
+        float("nan"),
+        float("nan"),
+        None,
+        Scope(variation=ARBITRARY),
+        ("performance: scaled small gain 5.76 >= 1",),
+    )
+    grid = Certificate(Status.GRID_ONLY, 0.96, 0.96, 0.9, None, Scope(kind="robust stability"), ("gave up",))
+    certs = {FROZEN_ROW: frozen, f"{TIME_VARYING_ROW} (scaled small gain)": fast, "robust stability": grid}
+    page = write_report(tmp_path, ReportOptions(certificates=certs)).html.read_text()
+    top = _first_screen(page)
+    assert "<p id='verdict'>Frozen robot, robust performance: CERTIFIED, mu &lt;= 0.9449 at every frequency</p>" in top
+    assert (
+        "Other certificates (table below): arbitrarily fast variation (scaled small gain): NOT_CERTIFIED; "
+        "robust stability: GRID_ONLY." in top
+    )
+    rows = _certificate_rows(page)
+    assert [r[1] for r in rows] == ["CERTIFIED", "NOT_CERTIFIED", "GRID_ONLY"]
+    assert [r[2] for r in rows] == [
+        "Proved: every frozen robot of the set meets the performance weights (mu <= 0.9449 at every frequency)",
+        "Not proved either way: it is not shown that the robot with its parameters varying arbitrarily fast in the "
+        "set meets the performance weights (performance: scaled small gain 5.76 >= 1)",
+        "Not proved: every frozen robot of the set is stable at the frequencies of the grid (peak mu 0.96), "
+        "but nothing is shown between them",
+    ]
+
+
+class SimpleMu:
+    """A sweep's shape (the report plots it)."""
+
+    omega = np.array([0.1, 1.0])
+    upper = np.array([0.9, 0.94])
+    lower = np.array([0.8, 0.93])
+
+
+def test_deployment_blockers_are_on_the_first_screen(tmp_path):
+    """The word length (39 bits, an appendix figure) and the sample rate, called out before any section."""
+    disc = {
+        "rate_hz": 1000.0,
+        "discrete_loop_stable": True,
+        "mu_continuous_grid": 0.9352,
+        "mu_discrete_grid": 0.9352,
+        "min_rate_hz": 19.11,
+        "min_word_length_bits": 39,
+        "sections": 16,
+    }
+    cert = Certificate(Status.CERTIFIED, 0.9449, 0.94, 0.93, None, Scope(frequencies="every frequency"))
+    page = write_report(tmp_path, ReportOptions(certificates={FROZEN_ROW: cert}, discretization=disc)).html.read_text()
+    top = _first_screen(page)
+    assert "<p id='deployment' class='bad'>Deployment: run the controller at 1000 Hz" in top
+    assert "the lowest rate keeping mu within 5 % of it: 19.11 Hz" in top
+    assert "BLOCKER: its 16 second-order sections need 39-bit fixed-point coefficients, more than a 32-bit word" in top
+    # a controller that fits a 32-bit word is no blocker; an unstable sampled loop is
+    fits = write_report(tmp_path, ReportOptions(discretization=dict(disc, min_word_length_bits=24))).html.read_text()
+    assert "<p id='deployment'>Deployment:" in fits and "they fit a 32-bit word" in fits and "BLOCKER" not in fits
+    unstable = write_report(tmp_path, ReportOptions(discretization=dict(disc, discrete_loop_stable=False)))
+    assert "BLOCKER: sampled at 1000 Hz the discretised loop is unstable" in unstable.html.read_text()
+
+
+def test_the_paper_controller_is_compared_only_on_the_papers_problem():
+    from types import SimpleNamespace
+
+    from polyrob.report.build import _paper_reference
+
+    paper = polyrob.load_robot("paper_2r")
+    assert list(_paper_reference(SimpleNamespace(robot=paper, domain=polyrob.Domain.from_robot(paper)))) == ["paper K*"]
+    smaller = polyrob.Domain.from_robot(paper, qdot_scale=0.5)
+    assert _paper_reference(SimpleNamespace(robot=paper, domain=smaller)) == {}
+    twin = polyrob.load_robot("planar_2r")  # the physical twin, on its own domain (the main job's)
+    assert _paper_reference(SimpleNamespace(robot=twin, domain=polyrob.Domain.from_robot(twin))) == {}
+
+
+def test_torques_are_plotted_on_their_own_scale(tmp_path, monkeypatch):
+    """Torques of about 1 N m against +-100 N m limits: the axis fits the torques, the limits are named."""
+    from polyrob.report import plots
+
+    figs = []
+    save = plots.save_figure
+    monkeypatch.setattr(plots, "save_figure", lambda fig, path: figs.append(fig) or save(fig, path))
+    robot = polyrob.load_robot("planar_2r")
+    sim = simulate(
+        robot, polyrob.paper_controller(), polyrob.Domain.from_robot(robot), step_reference([5e-4, -2e-4]), t_final=1.0
+    )
+    peak = float(np.abs(sim.u).max())
+    assert {mt.effort_limit for mt in sim.metrics} == {100.0} and peak < 20
+    plots.plot_tracking([sim], tmp_path / "tracking.png")
+    torque = figs[0].axes[-1]
+    assert torque.get_ylim()[1] < 2 * peak and not any(line.get_ydata()[0] == 100.0 for line in torque.lines)
+    assert "limits ±100 N·m off scale" in torque.get_title()
+    # torques near their limit: the limit lines are drawn
+    assert plots.limits_on_scale([100.0], [[60.0, -90.0]]) == ([100.0], [])

@@ -30,7 +30,7 @@ def cmd_report(args) -> int:
     from polyrob.analysis.certificate import Status
     from polyrob.pipeline.rebuild import load_run
     from polyrob.report.build import write_run_report
-    from polyrob.report.certificates import certificate_rows, frozen_status
+    from polyrob.report.certificates import certificate_rows, frozen_status, headline
 
     out = Output(args, stages=2)
     out.stage(f"report: reading {args.run_dir} and rebuilding its problem")
@@ -55,7 +55,7 @@ def cmd_report(args) -> int:
         "figures": [str(f) for f in files.figures],
         "status": status,
         "certified": status is not None and Status(status).certified,
-        "verdict": f"verdict: {status or 'none (no frozen-robot certificate in the files)'}",
+        "verdict": headline(run.certificates) or "verdict: none (no frozen-robot certificate in the files)",
         "certificates": [
             {"name": name, "status": st, "bound": bound, "covers": covers}
             for name, st, bound, covers in certificate_rows(run.certificates)

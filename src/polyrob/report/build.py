@@ -28,7 +28,7 @@ import numpy as np
 from polyrob.errors import PolyrobError
 from polyrob.io.atomic import atomic_write, json_default
 from polyrob.report.certificates import certificate_record, is_decided
-from polyrob.report.html import ReportFiles, write_report
+from polyrob.report.html import ReportFiles, ReportOptions, write_report
 
 __all__ = [
     "Validation",
@@ -195,13 +195,30 @@ def validate_controller(
     return Validation(monte_carlo=mc_res, simulations=sims, discretization=disc, mu_curves=curves, notes=tuple(notes))
 
 
-def _paper_reference(robot):
-    """The paper's K* for comparison, for the paper's 2R arm and its URDF twin."""
-    if robot.name in ("paper_2r", "planar_2r"):
-        from polyrob.plant.generalized import paper_controller
+def _paper_reference(problem) -> dict:
+    """The paper's K* for comparison, only on the paper's problem: ``paper_2r`` on the paper's domain.
 
-        return {"paper K*": paper_controller()}
-    return {}
+    On any other robot or domain K* was not designed for the plant shown, so
+    comparing with it says nothing.
+    """
+    from polyrob.model.analytic import PAPER_DOMAIN
+
+    robot, domain = problem.robot, getattr(problem, "domain", None) or problem.pldi.domain
+    if robot.name != "paper_2r":
+        return {}
+    try:
+        same = all(
+            np.allclose(getattr(domain, f"{group}_lower"), np.asarray(PAPER_DOMAIN[group])[:, 0])
+            and np.allclose(getattr(domain, f"{group}_upper"), np.asarray(PAPER_DOMAIN[group])[:, 1])
+            for group in ("q", "qdot", "u")
+        )
+    except (AttributeError, ValueError):  # a task domain: no torque box, not the paper's
+        return {}
+    if not same:
+        return {}
+    from polyrob.plant.generalized import paper_controller
+
+    return {"paper K*": paper_controller()}
 
 
 def save_run_certificates(run_dir, certificates: dict, controller: str = "K.json", notes=()) -> Path:
@@ -315,7 +332,7 @@ def write_run_report(
         :func:`polyrob.report.html.write_report`); saved to
         ``DIR/certificate.json`` for ``controller_file`` once the report is written.
     controllers : dict, optional
-        More controllers for the comparison figure (the paper's K* is added for its arm).
+        More controllers for the comparison figure (the paper's K* is added on the paper's problem only).
     controller_file : str
         The controller file in ``DIR`` the certificates are of.
     notes : sequence of str
@@ -332,23 +349,23 @@ def write_run_report(
     if not (run / "pldi.json").exists():
         problem.pldi.save(run / "pldi.json")
     val = validate_controller(problem, K, **options)
-    comp = {**_paper_reference(problem.robot), **(controllers or {})}
-    files = write_report(
-        run,
+    comp = {**_paper_reference(problem), **(controllers or {})}
+    options = ReportOptions(
         title=title,
         robot_name=problem.robot.name,
         pldi=problem.pldi,
         unc=problem.unc,
         controller=K,
         controllers=comp,
-        certificates=certificates,
+        certificates=dict(certificates or {}),
         monte_carlo=val.monte_carlo,
-        simulations=val.simulations,
+        simulations=tuple(val.simulations),
         discretization=val.discretization,
         mu_curves=val.mu_curves,
         notes=tuple(notes) + tuple(val.notes),
         problem_summary=problem_summary(problem, K, controller_words),
     )
+    files = write_report(run, options)
     if certificates:
         save_run_certificates(run, certificates, controller_file, notes)
     return files

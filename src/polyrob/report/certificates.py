@@ -17,6 +17,10 @@ Examples
 [('frozen robot (μ)', 'GRID_ONLY', 0.9, 'for constant parameters (every frozen robot of the set), on the grid')]
 >>> frozen_status({FROZEN_ROW: certificate_record(c)})
 'GRID_ONLY'
+>>> headline({FROZEN_ROW: c})
+'Frozen robot, robust performance: GRID_ONLY, mu < 1 on the frequency grid only (peak 0.9), not proved between its points'
+>>> plain_words(c)
+'Not proved: every frozen robot of the set meets the performance weights at the frequencies of the grid (peak mu 0.9), but nothing is shown between them'
 """
 
 from __future__ import annotations
@@ -26,9 +30,11 @@ from dataclasses import fields
 
 import numpy as np
 
-from polyrob.analysis.certificate import FROZEN, Scope, Status
+from polyrob.analysis.certificate import ARBITRARY, FROZEN, Scope, Status
 
 __all__ = [
+    "headline",
+    "plain_words",
     "FROZEN_ROW",
     "TIME_VARYING_ROW",
     "MOVING_ROW",
@@ -142,3 +148,88 @@ def certificate_rows(records: dict) -> list[tuple]:
         rec = certificate_record(cert)
         rows.append((str(name), str(rec["status"]), _bound(rec.get("bound")), str(rec.get("covers") or "not stated")))
     return rows
+
+
+# ---------------------------------------------------------------------- in words
+# How a reader reads a record: what it is about, and what its status means.  The
+# status is the one polyrob.analysis.certificate decided; these only word it.
+
+#: Who a certificate is about, by its scope's variation: (short subject of the headline, subject of a sentence).
+_SUBJECTS = {
+    FROZEN: ("Frozen robot", "every frozen robot of the set"),
+    ARBITRARY: ("Arbitrarily fast variation", "the robot with its parameters varying arbitrarily fast in the set"),
+}
+
+#: What holds when a certificate of each kind holds.
+_PROPERTIES = {
+    "robust performance": "meets the performance weights",
+    "robust stability": "is stable",
+}
+
+
+def _subject(scope: dict) -> tuple[str, str]:
+    variation = str(scope.get("variation") or "")
+    if variation in _SUBJECTS:
+        return _SUBJECTS[variation]
+    return "Moving robot", f"the moving robot ({variation})" if variation else "the robot"
+
+
+def _figure(record: dict) -> str:
+    """What the status rests on, e.g. ``mu <= 0.9449 at every frequency`` (the verdict's own words)."""
+    verdict = str(record.get("verdict") or "")
+    kind = str((record.get("scope") or {}).get("kind") or "")
+    head = f"{kind} {record['status']}"
+    if record["status"] == Status.CERTIFIED.value and verdict.startswith(head + ": "):
+        return verdict[len(head) + 2 :]
+    bound = _bound(record.get("bound"))
+    return "" if bound is None else f"bound {bound:.4g}"
+
+
+def _reason(record: dict) -> str:
+    reasons = record.get("reasons") or []
+    return str(reasons[0]) if reasons else ""
+
+
+def headline(records: dict) -> str | None:
+    """The report's first line: which certificate it is, its status and what it rests on (``None``: no frozen one).
+
+    It is the frozen robot's robust-performance certificate (:func:`frozen_status`), named as such, e.g.
+    ``Frozen robot, robust performance: CERTIFIED, mu <= 0.9449 at every frequency``.
+    """
+    frozen = [r for r in map(certificate_record, records.values()) if is_frozen(r)]
+    if not frozen:
+        return None
+    perf = [r for r in frozen if r["scope"].get("kind") == "robust performance"]
+    record = (perf or frozen)[0]
+    status = record["status"]
+    short, _ = _subject(record["scope"])
+    kind = record["scope"].get("kind") or "certificate"
+    if status == Status.CERTIFIED.value:
+        tail = _figure(record)
+    elif status == Status.GRID_ONLY.value:
+        grid = _bound(record.get("mu_upper_grid"))
+        peak = f" (peak {grid:.4g})" if grid is not None else ""
+        tail = f"mu < 1 on the frequency grid only{peak}, not proved between its points"
+    elif status == Status.VIOLATED.value:
+        tail = "disproved" + (f": {_reason(record)}" if _reason(record) else "")
+    else:
+        tail = "not proved either way" + (f": {_reason(record)}" if _reason(record) else "")
+    return f"{short}, {kind}: {status}" + (f", {tail}" if tail else "")
+
+
+def plain_words(record) -> str:
+    """What a record's status says about the robot, in one sentence (the table's "in plain words" column)."""
+    record = certificate_record(record)
+    scope = record.get("scope") or {}
+    _, who = _subject(scope)
+    holds = _PROPERTIES.get(scope.get("kind"), "meets the certificate's property")
+    status, reason, figure = record["status"], _reason(record), _figure(record)
+    if status == Status.CERTIFIED.value:
+        return f"Proved: {who} {holds}" + (f" ({figure})" if figure else "")
+    if status == Status.GRID_ONLY.value:
+        grid = _bound(record.get("mu_upper_grid"))
+        peak = f" (peak mu {grid:.4g})" if grid is not None else ""
+        return f"Not proved: {who} {holds} at the frequencies of the grid{peak}, but nothing is shown between them"
+    if status == Status.VIOLATED.value:
+        return f"Disproved: not every robot of the set {holds}" + (f" ({reason})" if reason else "")
+    return f"Not proved either way: it is not shown that {who} {holds}" + (f" ({reason})" if reason else "")

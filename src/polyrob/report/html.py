@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import datetime
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -38,12 +38,15 @@ from polyrob.report.certificates import (
     certificate_rows,
     certificate_sweep,
     frozen_status,
+    headline,
     is_decided,
+    plain_words,
 )
 from polyrob.report.numbers import zero_round_off
 from polyrob.report.page import Page, cell, is_missing
 
-__all__ = ["ReportFiles", "write_report"]
+__all__ = ["ReportFiles", "ReportOptions", "write_report", "deployment_line"]
+
 
 @dataclass(frozen=True)
 class ReportFiles:
@@ -55,8 +58,8 @@ class ReportFiles:
     figures: tuple
 
 
-def _certificates(doc, certificates, problem_summary=None) -> dict:
-    """The verdict, the problem and the certificate table at the top; returns the records shown."""
+def _certificates(doc, certificates, problem_summary=None, deployment: str | None = None) -> dict:
+    """The verdict, deployment, the problem and the certificate table at the top; returns the records shown."""
     records = {str(k): certificate_record(v) for k, v in (certificates or {}).items()}
     undecided = [k for k, r in records.items() if not is_decided(r)]
     if undecided:
@@ -65,21 +68,87 @@ def _certificates(doc, certificates, problem_summary=None) -> dict:
     if status is None:
         doc.para("verdict: none (no frozen-robot certificate was given)", bad=True, ident="verdict")
     else:
-        doc.para(f"verdict: {status}", bad=not (status and Status(status).certified), ident="verdict")
+        doc.para(headline(records), bad=not Status(status).certified, ident="verdict")
+        others = [f"{name}: {st}" for name, st, _, _ in certificate_rows(records)[1:]]
+        if others:
+            doc.para("Other certificates (table below): " + "; ".join(others) + ".")
+    if deployment:
+        doc.para(deployment, bad=deployment_blocked(deployment), ident="deployment")
     if problem_summary:  # what was certified, for what motion, with what controller
         doc.table(["problem", "as posed"], [(k, str(v)) for k, v in problem_summary.items()], ident="problem", left=(0, 1))
     doc.heading("Certificates")
     if not records:
         doc.para("No certificate was given.")
         return records
-    rows = [(name, st, cell(bound, "no finite bound"), covers) for name, st, bound, covers in certificate_rows(records)]
+    rows = [
+        (name, st, plain_words(records[name]), cell(bound, "no finite bound"), covers)
+        for name, st, bound, covers in certificate_rows(records)
+    ]
     bad = [k for k, row in enumerate(rows) if row[1] != Status.CERTIFIED.value]
-    header = ["certificate", "status", "bound", "what it covers"]
-    doc.table(header, rows, bad_rows=bad, ident="certificates", left=(0, 1, 3), classes={1: "status", 3: "text"})
+    header = ["certificate", "status", "in plain words", "bound", "what it covers"]
+    doc.table(
+        header, rows, bad_rows=bad, ident="certificates", left=(0, 1, 2, 4), classes={1: "status", 2: "text", 4: "text"}
+    )
     for name, rec in records.items():
         if rec.get("verdict"):
             doc.para(f"{name}: {rec['verdict']}")
     return records
+
+
+#: Coefficient words a controller fits in: the widths of common fixed-point datapaths.
+_WORDS_BITS = (16, 32)
+
+
+def deployment_line(discretization: dict | None) -> str | None:
+    """``Deployment: ...``: the sample rate and the coefficient word length in plain words (``None``: not analysed).
+
+    >>> print(deployment_line({"rate_hz": 1000.0, "discrete_loop_stable": True, "min_rate_hz": 19.11,
+    ...                        "mu_continuous_grid": 0.9352, "mu_discrete_grid": 0.9352,
+    ...                        "min_word_length_bits": 39, "sections": 16}))
+    Deployment: run the controller at 1000 Hz: sampled there the loop is stable, mu 0.9352 on the grid (continuous 0.9352); the lowest rate keeping mu within 5 % of it: 19.11 Hz; BLOCKER: its 16 second-order sections need 39-bit fixed-point coefficients, more than a 32-bit word: run it in double-precision floating point (64-bit), or check a shorter word on the target.
+    """
+    d = discretization or {}
+    rate = d.get("rate_hz")
+    if is_missing(rate):
+        return None
+    parts = []
+    mu_c, mu_d = d.get("mu_continuous_grid"), d.get("mu_discrete_grid")
+    lowest = d.get("min_rate_hz")
+    lowest = "" if is_missing(lowest) else f"; the lowest rate keeping mu within 5 % of it: {lowest:.4g} Hz"
+    if d.get("discrete_loop_stable") is False:
+        parts.append(f"BLOCKER: sampled at {rate:.4g} Hz the discretised loop is unstable: sample faster{lowest}")
+    elif not (is_missing(mu_c) or is_missing(mu_d)) and mu_d > 1.05 * mu_c:
+        parts.append(
+            f"BLOCKER: sampled at {rate:.4g} Hz mu rises to {mu_d:.4g} (continuous {mu_c:.4g}, more than 5 %): "
+            f"sample faster{lowest}"
+        )
+    else:
+        mu = "" if is_missing(mu_d) else f", mu {mu_d:.4g} on the grid" + (
+            "" if is_missing(mu_c) else f" (continuous {mu_c:.4g})"
+        )
+        parts.append(f"run the controller at {rate:.4g} Hz: sampled there the loop is stable{mu}{lowest}")
+    if "min_word_length_bits" in d:
+        bits, sections = d.get("min_word_length_bits"), d.get("sections")
+        what = f"its {sections} second-order sections" if not is_missing(sections) else "the controller"
+        if is_missing(bits):
+            parts.append(
+                f"BLOCKER: no fixed-point word length searched keeps {what} stable with mu within 5 %: "
+                "run it in double-precision floating point (64-bit) and check it on the target"
+            )
+        elif bits > _WORDS_BITS[-1]:
+            parts.append(
+                f"BLOCKER: {what} need {bits}-bit fixed-point coefficients, more than a {_WORDS_BITS[-1]}-bit word: "
+                "run it in double-precision floating point (64-bit), or check a shorter word on the target"
+            )
+        else:
+            word = next(w for w in _WORDS_BITS if bits <= w)
+            parts.append(f"{what} need {bits}-bit fixed-point coefficients: they fit a {word}-bit word")
+    return "Deployment: " + "; ".join(parts) + "."
+
+
+def deployment_blocked(line: str | None) -> bool:
+    """Whether the deployment line names a blocker."""
+    return bool(line) and "BLOCKER" in line
 
 
 #: Words for a discretisation figure that no rate or word length reached.
@@ -92,28 +161,12 @@ _NOT_FOUND = {
 }
 
 
-def write_report(
-    run_dir,
-    *,
-    title: str | None = None,
-    robot_name: str = "",
-    pldi=None,
-    unc=None,
-    controller=None,
-    controllers: dict | None = None,
-    certificates: dict | None = None,
-    monte_carlo=None,
-    simulations=(),
-    discretization: dict | None = None,
-    mu_curves: dict | None = None,
-    notes=(),
-    problem_summary: dict | None = None,
-) -> ReportFiles:
-    """Write ``report.html``, ``report.md``, ``figures/`` and ``validation.json`` into ``run_dir``.
+@dataclass(frozen=True, eq=False)
+class ReportOptions:
+    """What a report shows; every part is optional (a part not given is left out or named in words).
 
-    Parameters
+    Attributes
     ----------
-    run_dir : path
     title, robot_name : str
     pldi : PLDI, optional
         Its interval table (the paper's eq. 9) goes into the report.
@@ -121,34 +174,68 @@ def write_report(
         For the Bode magnitude of the PLDI's plants (paper Fig. 3).
     controller : LTI, optional
         The run's controller (shown in the controller comparison).
-    controllers : dict, optional
-        More controllers to compare, ``{name: K}`` (paper Fig. 5).
-    certificates : dict, optional
+    controllers : dict
+        More controllers to compare, ``{name: K}`` (paper Fig. 5; the paper's
+        K* only on the paper's problem, see :mod:`polyrob.report.build`).
+    certificates : dict
         ``{name: certificate}``: a :class:`~polyrob.analysis.certificate.Certificate`,
         a ``TimeVaryingCertificate`` or a stored record
         (:func:`~polyrob.report.certificates.certificate_record`), e.g.
         ``{FROZEN_ROW: analysis.certificate, TIME_VARYING_ROW: analysis.time_varying}``;
-        the page opens with the frozen-robot certificate's status.  A record
+        the page opens with the frozen-robot certificate, named.  A record
         without a decided status is refused (``ArgumentError``).
     monte_carlo : MonteCarloResult, optional
         S and T against the weight shapes (paper Fig. 4) and step responses.
-    simulations : sequence of SimulationResult
+    simulations : tuple of SimulationResult
         Nonlinear closed-loop runs; one that left the domain is shown in red.
     discretization : dict, optional
-        Plain figures of the discretisation/quantisation analysis.
+        Plain figures of the discretisation/quantisation analysis; the sample
+        rate and word length are called out on the first screen ("Deployment:").
     mu_curves : dict, optional
         ``{name: (omega, upper, lower)}`` for the μ plot, after the sweep each
         certificate was decided on (its whole grid, ω = 0 included when swept).
-    notes : sequence of str
+    notes : tuple of str
         Extra remarks (fallbacks, approximations) printed under the summary.
     problem_summary : dict, optional
         ``{"robot": ..., "domain": ..., "controller": ...}``: the lines under
         the certificates (what was certified, for what motion, with what).
+    """
+
+    title: str | None = None
+    robot_name: str = ""
+    pldi: object = None
+    unc: object = None
+    controller: object = None
+    controllers: dict = field(default_factory=dict)
+    certificates: dict = field(default_factory=dict)
+    monte_carlo: object = None
+    simulations: tuple = ()
+    discretization: dict | None = None
+    mu_curves: dict | None = None
+    notes: tuple = ()
+    problem_summary: dict | None = None
+
+
+def write_report(run_dir, options: ReportOptions = ReportOptions()) -> ReportFiles:
+    """Write ``report.html``, ``report.md``, ``figures/`` and ``validation.json`` into ``run_dir``.
+
+    Parameters
+    ----------
+    run_dir : path
+    options : ReportOptions
+        What the report shows.
 
     Returns
     -------
     ReportFiles
     """
+    if not isinstance(options, ReportOptions):
+        raise ArgumentError(f"write_report takes a ReportOptions, got {type(options).__name__}")
+    o = options
+    title, robot_name, pldi, unc = o.title, o.robot_name, o.pldi, o.unc
+    controller, controllers, certificates, monte_carlo = o.controller, o.controllers, o.certificates, o.monte_carlo
+    simulations, discretization, mu_curves, notes = o.simulations, o.discretization, o.mu_curves, o.notes
+    problem_summary = o.problem_summary
     run = Path(run_dir)
     figdir = run / "figures"
     figdir.mkdir(parents=True, exist_ok=True)
@@ -162,7 +249,7 @@ def write_report(
         figures.append(path)
         doc.figure(f"figures/{name}", caption)
 
-    records = _certificates(doc, certificates, problem_summary)
+    records = _certificates(doc, certificates, problem_summary, deployment_line(discretization))
     validation["certificates"] = records
     if problem_summary:
         validation["problem"] = {k: str(v) for k, v in problem_summary.items()}
@@ -279,7 +366,8 @@ def write_report(
         fig(
             "controllers.png",
             lambda p: plots.plot_controllers(comp, p, kinds=kinds),
-            "Magnitude of each controller entry (paper Fig. 5)",
+            "Magnitude of each controller entry"
+            + (" against the paper's K* (paper Fig. 5)" if any("paper" in str(k) for k in comp) else ""),
         )
     curves = {f"certificate: {k}": sw for k, sw in ((k, certificate_sweep(r)) for k, r in records.items()) if sw}
     curves.update(mu_curves or {})

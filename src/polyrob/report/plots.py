@@ -28,6 +28,7 @@ __all__ = [
     "plot_tracking",
     "save_figure",
     "joint_units",
+    "limits_on_scale",
 ]
 
 DPI = 100
@@ -249,6 +250,24 @@ def plot_mu(curves: dict, path, *, title: str = "μ bounds over frequency") -> P
     return save_figure(fig, path)
 
 
+#: A limit line is drawn when the data reach at least this fraction of it; else it is named in words.
+LIMIT_SCALE = 0.2
+
+
+def limits_on_scale(limits, values) -> tuple[list, list]:
+    """``(drawn, named)``: the limits the data come within :data:`LIMIT_SCALE` of, and the others.
+
+    A limit 100 times the largest value would flatten the data to a line at 0:
+    it is named in words instead of drawn.
+
+    >>> limits_on_scale([12.0, 87.0], [[1.0, -7.0], [3.0, 0.5]])
+    ([12.0], [87.0])
+    """
+    peak = float(np.nanmax(np.abs(values))) if np.size(values) else 0.0
+    drawn = [lim for lim in limits if peak >= LIMIT_SCALE * lim]
+    return drawn, [lim for lim in limits if lim not in drawn]
+
+
 def plot_tracking(sims, path, *, joint_names=None, kinds=None) -> Path:
     """Joint positions against references and efforts against limits; domain exits in red."""
     sims = list(sims)
@@ -269,11 +288,17 @@ def plot_tracking(sims, path, *, joint_names=None, kinds=None) -> Path:
         ax = axes[m, c]
         for j in range(m):
             ax.plot(sim.t, sim.u[j], lw=1.0, label=f"u{j + 1}")
-        lims = [mt.effort_limit for mt in sim.metrics if np.isfinite(mt.effort_limit)]
-        for lim in set(lims):
+        lims = sorted({mt.effort_limit for mt in sim.metrics if np.isfinite(mt.effort_limit)})
+        shown, off_scale = limits_on_scale(lims, sim.u)
+        for lim in shown:
             ax.axhline(lim, color="r", lw=0.6)
             ax.axhline(-lim, color="r", lw=0.6)
-        _labels(ax, "t (s)", effort, "efforts (red: limits)")
+        title = "efforts" + (" (red: limits)" if shown else "")
+        if off_scale:  # named, not drawn: a line far above the data would flatten them to 0
+            peak = float(np.nanmax(np.abs(sim.u))) if np.size(sim.u) else 0.0
+            text = ", ".join(f"±{lim:.4g}" for lim in off_scale)
+            title += f"; limits {text} {eff[0]} off scale (peak {100 * peak / min(off_scale):.2g} % of {min(off_scale):.4g})"
+        _labels(ax, "t (s)", effort, title)
         ax.grid(True, lw=0.3)
         ax.legend(fontsize=7)
         title = f"{label}: " + ("LEFT THE DOMAIN" if sim.left_domain else "inside the domain")
