@@ -34,6 +34,7 @@ from polyrob.analysis.certificate import ARBITRARY, FROZEN, Scope, Status
 
 __all__ = [
     "headline",
+    "headline_name",
     "plain_words",
     "FROZEN_ROW",
     "TIME_VARYING_ROW",
@@ -128,9 +129,8 @@ def is_frozen(record) -> bool:
 
 def frozen_status(records: dict) -> str | None:
     """The report's verdict: the status of the frozen robot's robust-performance certificate (``None``: none given)."""
-    frozen = [r for r in map(certificate_record, records.values()) if is_frozen(r)]
-    perf = [r for r in frozen if r["scope"].get("kind") == "robust performance"]
-    return (perf or frozen)[0]["status"] if frozen else None
+    name = headline_name(records)
+    return None if name is None else certificate_record(records[name])["status"]
 
 
 def _bound(x) -> float | None:
@@ -190,17 +190,23 @@ def _reason(record: dict) -> str:
     return str(reasons[0]) if reasons else ""
 
 
+def headline_name(records: dict) -> str | None:
+    """The name of the certificate the report opens with: the frozen robot's robust performance (else any frozen one)."""
+    frozen = {k: r for k, r in ((k, certificate_record(v)) for k, v in records.items()) if is_frozen(r)}
+    perf = [k for k, r in frozen.items() if r["scope"].get("kind") == "robust performance"]
+    return (perf or list(frozen) or [None])[0]
+
+
 def headline(records: dict) -> str | None:
     """The report's first line: which certificate it is, its status and what it rests on (``None``: no frozen one).
 
     It is the frozen robot's robust-performance certificate (:func:`frozen_status`), named as such, e.g.
     ``Frozen robot, robust performance: CERTIFIED, mu <= 0.9449 at every frequency``.
     """
-    frozen = [r for r in map(certificate_record, records.values()) if is_frozen(r)]
-    if not frozen:
+    name = headline_name(records)
+    if name is None:
         return None
-    perf = [r for r in frozen if r["scope"].get("kind") == "robust performance"]
-    record = (perf or frozen)[0]
+    record = certificate_record(records[name])
     status = record["status"]
     short, _ = _subject(record["scope"])
     kind = record["scope"].get("kind") or "certificate"

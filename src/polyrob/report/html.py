@@ -39,6 +39,7 @@ from polyrob.report.certificates import (
     certificate_sweep,
     frozen_status,
     headline,
+    headline_name,
     is_decided,
     plain_words,
 )
@@ -69,7 +70,8 @@ def _certificates(doc, certificates, problem_summary=None, deployment: str | Non
         doc.para("verdict: none (no frozen-robot certificate was given)", bad=True, ident="verdict")
     else:
         doc.para(headline(records), bad=not Status(status).certified, ident="verdict")
-        others = [f"{name}: {st}" for name, st, _, _ in certificate_rows(records)[1:]]
+        shown = headline_name(records)
+        others = [f"{name}: {st}" for name, st, _, _ in certificate_rows(records) if name != shown]
         if others:
             doc.para("Other certificates (table below): " + "; ".join(others) + ".")
     if deployment:
@@ -249,8 +251,11 @@ def write_report(run_dir, options: ReportOptions = ReportOptions()) -> ReportFil
         figures.append(path)
         doc.figure(f"figures/{name}", caption)
 
-    records = _certificates(doc, certificates, problem_summary, deployment_line(discretization))
+    deployment = deployment_line(discretization)
+    records = _certificates(doc, certificates, problem_summary, deployment)
     validation["certificates"] = records
+    if deployment:
+        validation["deployment"] = deployment
     if problem_summary:
         validation["problem"] = {k: str(v) for k, v in problem_summary.items()}
     kinds = getattr(getattr(pldi, "robot", None), "joint_kinds", None)
