@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 
-from polyrob.cli.common import Output, add_output_flags
+from polyrob.cli.common import Output, add_output_flags, add_robot_uncertainty_arguments
 from polyrob.cli.options import (
     int_at_least,
     nonnegative_float,
@@ -24,7 +24,7 @@ from polyrob.cli.options import (
 )
 from polyrob.errors import ArgumentError
 
-__all__ = ["register", "jobs_from_args", "settings_from_args"]
+__all__ = ["register", "jobs_from_args", "settings_from_args", "refuse_robot_uncertainty"]
 
 
 def _jobs_file(path: str) -> list:
@@ -74,6 +74,18 @@ def jobs_from_args(args) -> list:
     return jobs
 
 
+def refuse_robot_uncertainty(args, jobs) -> None:
+    """``--robot-uncertainty``/``--link-error``: checked against every job's robot, then refused (not yet certified)."""
+    if getattr(args, "robot_uncertainty", None) is None and getattr(args, "link_error", None) is None:
+        return
+    from polyrob.cli.common import refuse_uncertified, robot_uncertainty_from_args
+    from polyrob.model.robots import load_robot
+
+    specs = [robot_uncertainty_from_args(args, load_robot(j["robot"])) for j in jobs if isinstance(j.get("robot"), str)]
+    if specs:
+        refuse_uncertified(specs[0], args)
+
+
 def parse_percent(text: str) -> float:
     """``--model-error PCT`` -> the fraction a job takes."""
     p = number(text, "--model-error")
@@ -119,6 +131,7 @@ def cmd_batch(args) -> int:
 
         check_output_path(Path(args.output) / "summary.json", "-o")
     jobs = jobs_from_args(args)
+    refuse_robot_uncertainty(args, jobs)
     options = settings_from_args(args)
     if args.workers < 1:
         raise ArgumentError(f"-j must be >= 1, got {args.workers}")
@@ -195,6 +208,7 @@ def register(sub) -> None:
     t.add_argument("--model-error", default=None, help="PCT: true link masses/inertias = model's x (1 -+ PCT/100)")
     t.add_argument("--payload-mass", default=None, help="payload at the tool flange, kg: LO:HI or M")
     t.add_argument("--payload-com", default=None, help="payload COM offset box in the flange frame, m")
+    add_robot_uncertainty_arguments(t)
     t.add_argument(
         "--torque-box", action="store_true", help="the URDF torque box without an inner layer for every robot"
     )
