@@ -47,11 +47,11 @@ from polyrob.domains.default_task import DEFAULT_TASK, default_task_domain, defa
 from polyrob.fleet.autoweights import automatic_hyperparameters  # noqa: E402
 from polyrob.model.inner import inner_loop  # noqa: E402
 from polyrob.model.payload import PAYLOAD_RADIUS, PayloadRange  # noqa: E402
-from polyrob.model.true_robots import draw_true_robot  # noqa: E402
-from polyrob.model.uncertainty_spec import PayloadBody, RobotUncertainty  # noqa: E402
 from polyrob.pipeline.problem import default_hyperparameters  # noqa: E402
 from polyrob.plant.weights import paper_weights  # noqa: E402
 from polyrob.synthesis.pid_tuning import pid_controller, pid_gains  # noqa: E402
+from polyrob.uncertainty_set.draw import draw_true_robot  # noqa: E402
+from polyrob.uncertainty_set.spec import PayloadBody, RobotUncertainty  # noqa: E402
 
 OMEGA = np.logspace(-3, 4, 120)
 

@@ -13,8 +13,8 @@ from conftest import cached_robot
 from polyrob.cli import main
 from polyrob.errors import ArgumentError
 from polyrob.model.payload import PayloadRange, flange_frame
-from polyrob.model.true_robots import TrueRobot, common_factor_covers, draw_true_robot, draw_true_robots
-from polyrob.model.uncertainty_spec import (
+from polyrob.uncertainty_set.draw import TrueRobot, common_factor_covers, draw_true_robot, draw_true_robots
+from polyrob.uncertainty_set.spec import (
     PARAMETER_NAMES,
     LinkInterval,
     RobotUncertainty,

@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import json
 
-from polyrob.cli.common import Output, add_output_flags, add_robot_uncertainty_arguments
+from polyrob.cli.common import Output, add_output_flags
 from polyrob.cli.options import (
+    add_robot_uncertainty_arguments,
     int_at_least,
     nonnegative_float,
     number,
@@ -78,7 +79,7 @@ def refuse_robot_uncertainty(args, jobs) -> None:
     """``--robot-uncertainty``/``--link-error``: checked against every job's robot, then refused (not yet certified)."""
     if getattr(args, "robot_uncertainty", None) is None and getattr(args, "link_error", None) is None:
         return
-    from polyrob.cli.common import refuse_uncertified, robot_uncertainty_from_args
+    from polyrob.cli.options import refuse_uncertified, robot_uncertainty_from_args
     from polyrob.model.robots import load_robot
 
     specs = [robot_uncertainty_from_args(args, load_robot(j["robot"])) for j in jobs if isinstance(j.get("robot"), str)]

@@ -9,6 +9,7 @@ import sys
 from dataclasses import replace
 
 from polyrob.cli.options import (
+    add_robot_uncertainty_arguments,
     nonnegative_float,
     number,
     parse_armature,
@@ -17,6 +18,8 @@ from polyrob.cli.options import (
     parse_list,
     parse_pose,
     positive_float,
+    refuse_uncertified,
+    robot_uncertainty_from_args,
 )
 from polyrob.errors import ArgumentError, DomainError
 
@@ -186,59 +189,6 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
         help="PCT in [0, 100): the true link masses/inertias are the model's times 1 -+ PCT/100 (default 0)",
     )
     add_robot_uncertainty_arguments(g)
-
-
-def add_robot_uncertainty_arguments(group) -> None:
-    """``--robot-uncertainty FILE`` and ``--link-error P``: the per-link set of issue 38 (validated, not yet certified)."""
-    group.add_argument(
-        "--robot-uncertainty",
-        default=None,
-        metavar="FILE",
-        help="a robot-uncertainty file (YAML/JSON: per-link parameter errors, a payload body, joint friction; "
-        "examples/uncertainty/panda.yaml): checked, then refused, as no certificate covers it yet",
-    )
-    group.add_argument(
-        "--link-error",
-        default=None,
-        metavar="P",
-        help="each link's mass, first moment and inertia within ±P %% independently (checked, then refused: "
-        "not yet certified; --model-error is the certified common factor)",
-    )
-
-
-def robot_uncertainty_from_args(args, robot):
-    """The :class:`~polyrob.model.uncertainty_spec.RobotUncertainty` of the options bound to ``robot``, or ``None``.
-
-    ``--link-error P`` sets (or, with a file, replaces) the file's per-link
-    percentage.  Every refusal is one :class:`ArgumentError` line.
-    """
-    path, pct = getattr(args, "robot_uncertainty", None), getattr(args, "link_error", None)
-    if path is None and pct is None:
-        return None
-    from polyrob.model.uncertainty_spec import RobotUncertainty
-
-    spec = RobotUncertainty() if path is None else RobotUncertainty.from_file(path)
-    if pct is not None:
-        p = number(pct, "--link-error")
-        if not 0.0 <= p < 100.0:
-            raise ArgumentError(f"--link-error: give a percentage in [0, 100), got '{pct}'")
-        spec = replace(spec, link_error=p / 100.0)
-    try:
-        return spec.bound(robot)
-    except ArgumentError as exc:
-        where = f"--robot-uncertainty {path}" if path is not None else "--link-error"
-        raise ArgumentError(f"{where}: {str(exc).removeprefix('robot uncertainty: ')}") from None
-
-
-def refuse_uncertified(spec, args) -> None:
-    """Refuse a valid per-link set in one line: no certificate covers it yet, and say what one does cover."""
-    path = getattr(args, "robot_uncertainty", None)
-    where = f"--robot-uncertainty {path}" if path is not None else f"--link-error {args.link_error}"
-    raise ArgumentError(
-        f"{where} ({spec.words()}): not yet certified: polyrob's certificates cover one factor on all links "
-        "(--model-error PCT) and a payload range at the flange (--payload-mass, --payload-com), not this "
-        "per-link set (issue 38)"
-    )
 
 
 def add_domain_arguments(parser: argparse.ArgumentParser) -> None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from dataclasses import replace
 
 from polyrob.errors import ArgumentError
 
@@ -24,6 +25,9 @@ __all__ = [
     "parse_pose",
     "parse_bound",
     "parse_interval",
+    "add_robot_uncertainty_arguments",
+    "robot_uncertainty_from_args",
+    "refuse_uncertified",
 ]
 
 
@@ -178,6 +182,66 @@ def parse_frequencies(text: str | None):
     if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi and n >= 2):
         raise ArgumentError(f"--omega: need finite 0 < LO < HI and N >= 2, got '{text}'")
     return lo, hi, n
+
+
+# --------------------------------------------------------------------------- the robot-uncertainty set
+# No certified model uses the per-link set yet (the certificates cover one factor on all links,
+# polyrob.model.inner): a command given --robot-uncertainty or --link-error checks the set against
+# the robot, then refuses it in one line that echoes it and says what a certificate does cover,
+# rather than certify another set than the one asked for.
+
+
+def add_robot_uncertainty_arguments(group) -> None:
+    """``--robot-uncertainty FILE`` and ``--link-error P``: the per-link set of issue 38 (validated, not yet certified)."""
+    group.add_argument(
+        "--robot-uncertainty",
+        default=None,
+        metavar="FILE",
+        help="a robot-uncertainty file (YAML/JSON: per-link parameter errors, a payload body, joint friction; "
+        "examples/uncertainty/panda.yaml): checked, then refused, as no certificate covers it yet",
+    )
+    group.add_argument(
+        "--link-error",
+        default=None,
+        metavar="P",
+        help="each link's mass, first moment and inertia within ±P %% independently (checked, then refused: "
+        "not yet certified; --model-error is the certified common factor)",
+    )
+
+
+def robot_uncertainty_from_args(args, robot):
+    """The :class:`~polyrob.uncertainty_set.spec.RobotUncertainty` of the options bound to ``robot``, or ``None``.
+
+    ``--link-error P`` sets (or, with a file, replaces) the file's per-link
+    percentage.  Every refusal is one :class:`ArgumentError` line.
+    """
+    path, pct = getattr(args, "robot_uncertainty", None), getattr(args, "link_error", None)
+    if path is None and pct is None:
+        return None
+    from polyrob.uncertainty_set.spec import RobotUncertainty
+
+    spec = RobotUncertainty() if path is None else RobotUncertainty.from_file(path)
+    if pct is not None:
+        p = number(pct, "--link-error")
+        if not 0.0 <= p < 100.0:
+            raise ArgumentError(f"--link-error: give a percentage in [0, 100), got '{pct}'")
+        spec = replace(spec, link_error=p / 100.0)
+    try:
+        return spec.bound(robot)
+    except ArgumentError as exc:
+        where = f"--robot-uncertainty {path}" if path is not None else "--link-error"
+        raise ArgumentError(f"{where}: {str(exc).removeprefix('robot uncertainty: ')}") from None
+
+
+def refuse_uncertified(spec, args) -> None:
+    """Refuse a valid per-link set in one line: no certificate covers it yet, and say what one does cover."""
+    path = getattr(args, "robot_uncertainty", None)
+    where = f"--robot-uncertainty {path}" if path is not None else f"--link-error {args.link_error}"
+    raise ArgumentError(
+        f"{where} ({spec.words()}): not yet certified: polyrob's certificates cover one factor on all links "
+        "(--model-error PCT) and a payload range at the flange (--payload-mass, --payload-com), not this "
+        "per-link set (issue 38)"
+    )
 
 
 # --------------------------------------------------------------------------- argparse types

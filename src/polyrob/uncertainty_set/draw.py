@@ -1,4 +1,4 @@
-"""True robots drawn at random inside a :class:`~polyrob.model.uncertainty_spec.RobotUncertainty`.
+"""True robots drawn at random inside a :class:`~polyrob.uncertainty_set.spec.RobotUncertainty`.
 
 :func:`draw_true_robot` gives one :class:`TrueRobot`: every link's
 parameters drawn independently (the factor form: ``m``, ``h = m c`` and
@@ -19,7 +19,7 @@ Examples
 --------
 >>> import numpy as np
 >>> from polyrob import load_robot
->>> from polyrob.model.uncertainty_spec import RobotUncertainty
+>>> from polyrob.uncertainty_set.spec import RobotUncertainty
 >>> ur5 = load_robot("ur5")
 >>> spec = RobotUncertainty(link_error=0.1).bound(ur5)
 >>> true = draw_true_robot(ur5, spec, np.random.default_rng(0))
@@ -35,7 +35,7 @@ import numpy as np
 import pinocchio
 
 from polyrob.errors import ArgumentError
-from polyrob.model.uncertainty_spec import (
+from polyrob.uncertainty_set.spec import (
     RobotUncertainty,
     link_names,
     physically_consistent,

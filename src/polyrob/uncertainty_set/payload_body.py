@@ -1,0 +1,183 @@
+"""A payload as a rigid body at the flange (mass range, centre-of-mass box or ball, inertia), and rated payloads.
+
+The flange is :func:`polyrob.model.payload.flange_frame`: the robot's
+``tool0`` / ``flange`` / ``panda_link8`` / ... frame when it is fixed to the
+last joint, else the last joint's own frame; the centre of mass is given in
+its axes, from its origin.
+
+Examples
+--------
+>>> body = PayloadBody(0.0, 1.5, com_radius=0.1)
+>>> body.farthest(), body.contains([0.0, 0.06, 0.08]), body.contains([0.1, 0.1, 0.0])
+(0.1, True, False)
+>>> RATED_PAYLOAD["ur5"].kg
+5.0
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from polyrob.uncertainty_set.checks import fail, finite, pair, vector3
+
+__all__ = ["PayloadBody", "RatedPayload", "RATED_PAYLOAD"]
+
+
+@dataclass(frozen=True)
+class RatedPayload:
+    """A vendor's rated payload (kg) and where the figure comes from; ``kg`` is ``None`` when unknown."""
+
+    kg: float | None
+    source: str
+
+
+#: The rated payload of the arms polyrob ships by name.
+RATED_PAYLOAD = {
+    "panda": RatedPayload(3.0, "Franka Emika Panda datasheet: 3 kg"),
+    "ur5": RatedPayload(5.0, "Universal Robots UR5: 5 kg"),
+    "ur10": RatedPayload(10.0, "Universal Robots UR10: 10 kg"),
+    "xarm7": RatedPayload(3.5, "UFACTORY xArm 7: 3.5 kg"),
+    "z1": RatedPayload(3.0, "Unitree Z1 specification page (dev-z1.cn.unitree.com): payload >= 3 kg"),
+    "talos_left_arm": RatedPayload(6.0, "TALOS, Stasse et al., Humanoids 2017: 6 kg per outstretched arm"),
+    "kinova": RatedPayload(
+        None,
+        "unknown: polyrob's kinova is example-robot-data's Jaco2 j2s6s200, not a Gen3 (4 kg); no Jaco2 figure checked",
+    ),
+    "so101": RatedPayload(None, "unknown: the SO-101's makers state no rated payload"),
+}
+
+
+@dataclass(frozen=True)
+class PayloadBody:
+    """A payload as a rigid body at the flange.
+
+    Attributes
+    ----------
+    mass_lower, mass_upper : float
+        kg, ``0 <= lower <= upper``.
+    com_lower, com_upper : tuple of 3 floats
+        The centre-of-mass box in the flange frame (m), when ``com_radius`` is ``None``.
+    com_centre : tuple of 3 floats
+        The ball's centre (m, flange frame), when ``com_radius`` is given.
+    com_radius : float or None
+        The centre of mass lies in the ball ``|c - com_centre| <= com_radius``.
+    solid : str
+        ``"sphere"`` or ``"box"``: the payload's inertia is that of a uniform solid of ``size``.
+    size : tuple
+        The sphere's radius (one number) or the box's edges ``(a, b, c)`` along the flange axes (m).
+    frame : str
+        The flange frame's name, set by :meth:`RobotUncertainty.bound` (``""``: not bound to a robot).
+    """
+
+    mass_lower: float
+    mass_upper: float
+    com_lower: tuple = (0.0, 0.0, 0.0)
+    com_upper: tuple = (0.0, 0.0, 0.0)
+    com_centre: tuple = (0.0, 0.0, 0.0)
+    com_radius: float | None = None
+    solid: str = "sphere"
+    size: tuple = (0.03,)
+    frame: str = ""
+
+    def __post_init__(self):
+        lo, hi = pair([self.mass_lower, self.mass_upper], "payload.mass", nonnegative=True)
+        object.__setattr__(self, "mass_lower", lo)
+        object.__setattr__(self, "mass_upper", hi)
+        lower, upper = vector3(self.com_lower, "payload.com_box"), vector3(self.com_upper, "payload.com_box")
+        for a, b in zip(lower, upper):
+            pair([a, b], "payload.com_box")
+        object.__setattr__(self, "com_lower", lower)
+        object.__setattr__(self, "com_upper", upper)
+        object.__setattr__(self, "com_centre", vector3(self.com_centre, "payload.com_ball.centre"))
+        if self.com_radius is not None:
+            r = finite(self.com_radius, "payload.com_ball.radius")
+            if r < 0:
+                fail(f"payload.com_ball.radius: must be >= 0, got {r:g}")
+            object.__setattr__(self, "com_radius", r)
+        if self.solid not in ("sphere", "box"):
+            fail(f"payload.inertia: give solid_sphere: R or solid_box: [A, B, C], got {self.solid!r}")
+        size = tuple(finite(v, f"payload.inertia.solid_{self.solid}") for v in np.ravel(self.size))
+        if len(size) != (1 if self.solid == "sphere" else 3) or any(v < 0 for v in size):
+            fail(f"payload.inertia.solid_{self.solid}: give {'R' if self.solid == 'sphere' else '[A, B, C]'} >= 0 (m)")
+        object.__setattr__(self, "size", size)
+
+    def farthest(self) -> float:
+        """The largest distance (m) of a centre of mass of the set from the flange's origin."""
+        if self.com_radius is not None:
+            return float(np.linalg.norm(self.com_centre)) + self.com_radius
+        corners = np.maximum(np.abs(self.com_lower), np.abs(self.com_upper))
+        return float(np.linalg.norm(corners))
+
+    def contains(self, com, tol: float = 1e-12) -> bool:
+        """Whether ``com`` (flange frame, m) lies in the centre-of-mass set."""
+        c = np.asarray(com, float)
+        if self.com_radius is not None:
+            return bool(np.linalg.norm(c - self.com_centre) <= self.com_radius + tol)
+        return bool(np.all(c >= np.array(self.com_lower) - tol) and np.all(c <= np.array(self.com_upper) + tol))
+
+    def rotational_inertia(self, mass: float) -> np.ndarray:
+        """The 3x3 inertia (kg m^2) about the centre of mass, flange axes, of the solid with ``mass``."""
+        if self.solid == "sphere":
+            return 0.4 * mass * self.size[0] ** 2 * np.eye(3)
+        a, b, c = self.size
+        return mass / 12.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
+
+    def draw(self, rng) -> tuple[float, np.ndarray]:
+        """``(mass, com)``: the mass uniform in its range, the centre of mass uniform in its box or ball."""
+        mass = float(rng.uniform(self.mass_lower, self.mass_upper))
+        if self.com_radius is None:
+            return mass, rng.uniform(self.com_lower, self.com_upper)
+        direction = rng.normal(size=3)
+        direction /= np.linalg.norm(direction) or 1.0
+        radius = self.com_radius * rng.uniform() ** (1.0 / 3.0)  # uniform in the ball's volume
+        return mass, np.array(self.com_centre) + radius * direction
+
+    def words(self) -> str:
+        where = f" of {self.frame}" if self.frame else " of the flange"
+        if self.com_radius is not None:
+            centre = "the origin" if not any(self.com_centre) else f"({', '.join(f'{v:g}' for v in self.com_centre)})"
+            com = f"centre of mass within {self.com_radius:g} m of {centre}{where}"
+        else:
+            box = ", ".join(f"{a:g}:{b:g}" for a, b in zip(self.com_lower, self.com_upper))
+            com = f"centre of mass in [{box}] m{where}"
+        solid = f"solid sphere r {self.size[0]:g} m" if self.solid == "sphere" else f"solid box {self.size} m"
+        return f"payload {self.mass_lower:g}-{self.mass_upper:g} kg, {com}, {solid}"
+
+    def to_dict(self) -> dict:
+        out = {"mass": [self.mass_lower, self.mass_upper]}
+        if self.com_radius is not None:
+            out["com_ball"] = {"centre": list(self.com_centre), "radius": self.com_radius}
+        else:
+            out["com_box"] = {"lower": list(self.com_lower), "upper": list(self.com_upper)}
+        out["inertia"] = {f"solid_{self.solid}": self.size[0] if self.solid == "sphere" else list(self.size)}
+        return out
+
+    @classmethod
+    def from_dict(cls, doc) -> PayloadBody:
+        if not isinstance(doc, dict):
+            fail(f"payload: give a mapping with mass, com_box or com_ball, inertia; got {doc!r}")
+        unknown = set(doc) - {"mass", "com_box", "com_ball", "inertia"}
+        if unknown:
+            fail(f"payload: unknown key(s) {', '.join(sorted(unknown))}: use mass, com_box, com_ball, inertia")
+        if "mass" not in doc:
+            fail("payload: give its mass range, mass: [LO, HI] (kg)")
+        lo, hi = pair(doc["mass"], "payload.mass", nonnegative=True)
+        kwargs = {}
+        if "com_box" in doc and "com_ball" in doc:
+            fail("payload: give com_box or com_ball, not both")
+        if "com_box" in doc:
+            box = doc["com_box"] or {}
+            kwargs.update(com_lower=box.get("lower"), com_upper=box.get("upper"))
+        if "com_ball" in doc:
+            ball = doc["com_ball"] or {}
+            kwargs.update(com_centre=ball.get("centre", [0.0, 0.0, 0.0]), com_radius=ball.get("radius"))
+            if kwargs["com_radius"] is None:
+                fail("payload.com_ball: give its radius (m)")
+        inertia = doc.get("inertia") or {"solid_sphere": 0.03}
+        if not isinstance(inertia, dict) or len(inertia) != 1:
+            fail("payload.inertia: give one of solid_sphere: R or solid_box: [A, B, C] (m)")
+        ((key, size),) = inertia.items()
+        kwargs.update(solid=str(key).removeprefix("solid_"), size=size)
+        return cls(lo, hi, **kwargs)
