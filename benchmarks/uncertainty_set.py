@@ -12,7 +12,8 @@ For each robot, controller and set, ``--robots-per-set`` true robots are
 drawn; each one's inner loop is linearised (exact Jacobians) at rest at the
 reference pose and at one point drawn uniformly from the task box
 (``|q - q_ref| <= 0.2``, ``|qdot| <= 0.5``, ``|qddot| <= 2``), closed with
-the controller on ``e = r - q``, and the row counts the unstable loops, the
+the controller on ``e = r - q``, and the row counts (also for the issue's
+set's two halves alone: the per-link errors, the payload) the unstable loops, the
 largest real part of their poles, and the mixed-sensitivity norm
 ``max_ω σ̄([W_S S; W_T T])`` of the stable ones (the task's automatic
 weights; a stand-in for the certificate's weighted norm, not the same
@@ -158,27 +159,37 @@ def measure(name: str, n: int, fractions, files, seed: int) -> dict:
     # (a) the project's set: one factor on all links, payload 0-1 % of the link mass at the flange
     common = default_task_robot(robot, DEFAULT_TASK)
     common_loops = [common.drawn(rng) for _ in range(n)]
-    # (b) issue 38's set, the inner layer on the nominal links and the middle payload (0.75 kg at the flange)
-    spec = issue_set().bound(robot)
-    model = inner_loop(robot, "computed-torque", payload=PayloadRange(spec.payload.mass_lower, spec.payload.mass_upper))
-    issue_loops = []
-    for _ in range(n):
-        true = draw_true_robot(robot, spec, rng)
-        issue_loops.append(replace(model, true_robot=true.robot, scenario=true.words(), _scenarios=()))
+    # (b) issue 38's set, the inner layer on the nominal links and the middle payload (0.75 kg at the flange);
+    # and its two halves, to tell which one moves the loops: the links alone, the payload alone
+    sets = {
+        "issue_set": issue_set(),
+        "issue_links_only": RobotUncertainty(link_error=0.10),
+        "issue_payload_only": replace(issue_set(), link_error=None),
+    }
+    drawn_sets, words = {}, {}
+    for key, raw in sets.items():
+        spec = raw.bound(robot)
+        words[key] = spec.words()
+        payload = None if spec.payload is None else PayloadRange(spec.payload.mass_lower, spec.payload.mass_upper)
+        model = inner_loop(robot, "computed-torque", payload=payload)
+        drawn_sets[key] = []
+        for _ in range(n):
+            true = draw_true_robot(robot, spec, rng)
+            drawn_sets[key].append(replace(model, true_robot=true.robot, scenario=true.words(), _scenarios=()))
+    nominal_model = inner_loop(robot, "computed-torque").with_true(0.0, np.zeros(3), 1.0)
     rows = {}
-    for key, (K, words) in controllers_for(robot, domain, h, fractions, files).items():
-        nominal = frozen_row([model.with_true(0.75, np.zeros(3), 1.0)], K, WS, WT, rng, domain)
+    for key, (K, words_k) in controllers_for(robot, domain, h, fractions, files).items():
+        nominal = frozen_row([nominal_model], K, WS, WT, rng, domain)
         rows[key] = {
-            "controller": words,
+            "controller": words_k,
             "nominal_stable": nominal["unstable"] == 0,
             "common_factor_set": frozen_row(common_loops, K, WS, WT, rng, domain),
-            "issue_set": frozen_row(issue_loops, K, WS, WT, rng, domain),
+            **{name: frozen_row(loops, K, WS, WT, rng, domain) for name, loops in drawn_sets.items()},
         }
     return {
         "robot": name,
         "true_robots_per_set": n,
-        "common_factor_set": common.words(),
-        "issue_set": spec.words(),
+        "sets": {"common_factor_set": common.words(), **words},
         "omega_bt": [round(float(x), 4) for x in h["omega_bt"]],
         "rows": rows,
     }
