@@ -204,7 +204,8 @@ def add_robot_uncertainty_arguments(group) -> None:
         "--link-error",
         default=None,
         metavar="P",
-        help="each link's mass, first moment and inertia within ±P %% independently (checked, then refused: "
+        help="each link's mass, first moment and inertia about its centre of mass within ±P %% independently "
+        "(checked, then refused: "
         "not yet certified; --model-error is the certified common factor)",
     )
 
