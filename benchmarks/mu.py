@@ -40,6 +40,7 @@ from __future__ import annotations
 import json
 import time
 import warnings
+from pathlib import Path
 
 import control
 import cvxpy as cp
@@ -229,14 +230,38 @@ def main(large: bool = False) -> dict:
     return report
 
 
+def mu_figure(report: dict) -> str:
+    """One line of the report: each problem's peak upper bound per method that gives one over the whole grid."""
+    if "method_choice" in report:
+        return f"method choice on {len(report['method_choice'])} loops (timings in data)"
+    parts = []
+    for problem in report["problems"]:
+        peaks = [
+            f"{name} {m['peak_upper']:.4g}"
+            for name, m in problem["methods"].items()
+            if isinstance(m, dict) and isinstance(m.get("peak_upper"), (int, float))
+        ]
+        name = problem.get("problem") or problem.get("name", "?")
+        parts.append(f"{name}: " + (", ".join(peaks) or "see data"))
+    return "; ".join(parts) + f"; {report['total_seconds']:.0f} s in all"
+
+
 if __name__ == "__main__":
-    warnings.simplefilter("ignore")  # cvxpy's "solution may be inaccurate" chatter
-    t0 = time.perf_counter()
+    import argparse
     import sys
 
-    if "--choice" in sys.argv[1:]:  # the default problems' loops (bounds first: about 2 minutes)
-        rep = method_choice()
-    else:
-        rep = main(large="--large" in sys.argv[1:])
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from _results import add_results_option, save_run
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--large", action="store_true", help="also the problem of ur5's size (slow: minutes)")
+    ap.add_argument("--choice", action="store_true", help="only the loops behind method='auto' (about 3 min)")
+    add_results_option(ap)
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")  # cvxpy's "solution may be inaccurate" chatter
+    t0 = time.perf_counter()
+    rep = method_choice() if args.choice else main(large=args.large)
     rep["total_seconds"] = time.perf_counter() - t0
+    rep = json.loads(json.dumps(rep, default=float))
+    save_run(args.results, "mu", "Time per frequency point and bound reached, mu bounds", mu_figure(rep), rep)
     print(json.dumps(rep, indent=2))

@@ -221,12 +221,32 @@ def bench_paper(t_start: float, budget: float) -> dict:
     return out
 
 
-def main():
+def synthesis_figure(doc: dict) -> str:
+    """One line of the document: each method's certified peak μ (the record's data holds the rest)."""
+    parts = []
+    for problem in ("distillation", "paper_2r"):
+        for method, res in doc.get(problem, {}).items():
+            if isinstance(res, dict) and isinstance(res.get("peak_mu_certified"), (int, float)):
+                parts.append(f"{problem} {method} {res['peak_mu_certified']:.4g}")
+    return "certified peak mu: " + (", ".join(parts) or "none") + f"; {doc['total_seconds']:.0f} s in all"
+
+
+def main(argv=None):
+    import argparse
+
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from _results import add_results_option, save_run
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_results_option(ap)
+    args = ap.parse_args(argv)
     t_start = time.perf_counter()
     doc = {"machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]}}
     doc["distillation"] = bench_distillation()
     doc["paper_2r"] = bench_paper(t_start, budget=30 * 60)
     doc["total_seconds"] = round(time.perf_counter() - t_start, 1)
+    doc = json.loads(json.dumps(doc, default=float))
+    save_run(args.results, "synthesis", "mu-synthesis methods side by side", synthesis_figure(doc), doc)
     print(json.dumps(doc, indent=2, default=float))
 
 
