@@ -178,3 +178,98 @@ def test_the_generated_tables_show_no_commit_hash():
         text = hooks.results_markdown(path.stem)
         hashes = [h for h in re.findall(r"\b[0-9a-f]{7,40}\b", text) if re.search(r"\d", h) and re.search(r"[a-f]", h)]
         assert hashes == [], (path.name, hashes)
+
+
+# A measured time in a table cell: a number followed by " s", "min" or "GB" ("2.9 s", "4 min 59 s", "3.1 GB").
+MEASURED_TIME = re.compile(r"\d\s?(?:s|min|GB)\b")
+# The tables the docs may write by hand: definitions (what a status, field, option or stage means), never a
+# measurement.  A new hand-written table must be a results record shown by a marker, or a definition added here.
+DEFINITION_TABLES = {
+    ("api.md", "| function | returns |"),
+    ("certificates.md", "| status | meaning |"),
+    ("certificates.md", "| field | what it says |"),
+    ("certificates.md", "| | μ with constant parameters | quadratic stability / performance |"),
+    ("certificates.md", "| certificate | what it covers | set | status when proved < 1 | code |"),
+    ("howto/your_robot.md", "| you have | give |"),
+    ("howto/your_robot.md", "| option | meaning |"),
+    ("index.md", "| you want to | read |"),
+    ("method.md", "| stage | computed by | what it guarantees |"),
+    ("mu.md", "| figure | what it is |"),
+    ("paper_2r.md", "| model | what it is | Coriolis matrix |"),
+    ("reference/results.md", "| field | meaning |"),
+    ("robots.md", "| URDF joint | what polyrob does |"),
+    ("uncertainty.md", "| model | parameters (paper_2r) | what moves together | applies to |"),
+}
+
+
+def _tables(markdown: str):
+    """``(line number, rows)`` of every Markdown table outside code fences (a header row, then ``|---``)."""
+    lines, in_code, k = markdown.splitlines(), False, 0
+    while k < len(lines):
+        if lines[k].startswith("```"):
+            in_code = not in_code
+        elif not in_code and lines[k].startswith("|") and k + 1 < len(lines) and re.match(r"\|\s*:?-{3}", lines[k + 1]):
+            start = k
+            while k < len(lines) and lines[k].startswith("|"):
+                k += 1
+            yield start + 1, lines[start:k]
+            continue
+        k += 1
+
+
+def _hand_written_tables():
+    for page in sorted((ROOT / "docs").rglob("*.md")):
+        for line, rows in _tables(page.read_text()):
+            yield page.relative_to(ROOT / "docs").as_posix(), line, rows
+
+
+def test_the_table_reader_finds_a_measured_time_only_in_tables():
+    page = "a 0.5 s delay in prose\n\n| run | time |\n| --- | ---: |\n| x | 4 min 59 s |\n\n```\n| a | 9 s |\n|---|---|\n```\n"
+    found = list(_tables(page))
+    assert [line for line, _ in found] == [3]
+    assert [row for _, rows in found for row in rows if MEASURED_TIME.search(row)] == ["| x | 4 min 59 s |"]
+    assert not MEASURED_TIME.search("| ur5 | 5.63 rad/s | sigma 3 |")
+    # the generated tables do carry measured times, so the rule below is not vacuous
+    generated = "\n".join(hooks.results_markdown(path.stem) for path in sorted(RESULTS.glob("*.json")))
+    assert any(MEASURED_TIME.search(row) for _, rows in _tables(generated) for row in rows)
+
+
+def test_no_hand_written_table_of_the_docs_holds_a_measured_time():
+    """A table with timings (or sizes) is a measurement: it comes from benchmarks/results/*.json via a marker."""
+    offending = [
+        f"{page}:{line}: {row[:80]}"
+        for page, line, rows in _hand_written_tables()
+        for row in rows
+        if MEASURED_TIME.search(row)
+    ]
+    assert offending == [], "move these tables into a results record and show them with <!-- results: NAME ID -->"
+
+
+def test_every_hand_written_table_of_the_docs_is_a_definition():
+    """Measured tables (μ values, bounds, ratios, times) are generated; only the listed definition tables are not."""
+    found = {(page, " ".join(rows[0].split())) for page, _, rows in _hand_written_tables()}
+    assert found - DEFINITION_TABLES == set(), "a new hand-written table: generate it, or list it as a definition"
+
+
+def test_mu_and_synthesis_benchmarks_record_their_figure(monkeypatch):
+    """benchmarks/mu.py and synthesis.py take --results; their record's figure is read from their JSON."""
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    mu = _load("bench_mu", ROOT / "benchmarks" / "mu.py")
+    report = {
+        "problems": [
+            {"problem": "distillation_rp", "methods": {"polyrob_ab13md": {"peak_upper": 5.7726}, "dkpy": "absent"}}
+        ],
+        "total_seconds": 17.2,
+    }
+    assert mu.mu_figure(report) == "distillation_rp: polyrob_ab13md 5.773; 17 s in all"
+    synthesis = _load("bench_synthesis", ROOT / "benchmarks" / "synthesis.py")
+    doc = {"distillation": {"polyrob": {"peak_mu_certified": 1.0123}, "dkpy": "not installed"}, "total_seconds": 961.0}
+    assert synthesis.synthesis_figure(doc) == "certified peak mu: distillation polyrob 1.012; 961 s in all"
+    for script in ("mu.py", "synthesis.py"):
+        text = (ROOT / "benchmarks" / script).read_text()
+        assert "add_results_option(ap)" in text and "save_run(args.results" in text, script
+
+
+def test_every_results_file_is_shown_on_the_benchmarks_page():
+    shown = {name for name, _ in hooks._RESULTS_MARK.findall((ROOT / "docs" / "benchmarks.md").read_text())}
+    assert {path.stem for path in RESULTS.glob("*.json")} <= shown
