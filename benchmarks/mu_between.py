@@ -18,6 +18,16 @@ import platform
 import sys
 import time
 
+from _results import add_results_option, save_run
+
+
+def between_figure(out: dict) -> str:
+    """One line of the JSON: the grid peak and the level verified at every frequency (or why none)."""
+    head = f"{out['robot']}: grid peak {out['grid_peak_mu_upper']:.4g}"
+    if out["verified_every_frequency"]:
+        return f"{head}; mu <= {out['level']:.4g} at every frequency, {out['points_added']} points added"
+    return f"{head}; not verified between the points: {out['reason']}"
+
 
 def main(argv=None) -> int:
     import polyrob
@@ -32,6 +42,7 @@ def main(argv=None) -> int:
     p.add_argument("--uncertainty", default="auto")
     p.add_argument("--bandwidth-scale", type=float, default=1.0)
     p.add_argument("--batch-dir", default=None, help="a robot folder of `polyrob batch -o`: its problem and controller")
+    add_results_option(p)
     args = p.parse_args(argv)
     if args.batch_dir:
         with open(os.path.join(args.batch_dir, "certificate.json")) as fh:
@@ -72,7 +83,9 @@ def main(argv=None) -> int:
         "certificate_seconds": round(time.perf_counter() - t0, 1),
         "bounds_seconds": round(t_bounds, 1),
     }
-    print(json.dumps(out, indent=1, default=float))
+    out = json.loads(json.dumps(out, default=float))
+    save_run(args.results, "mu_between", "The check between the grid points", between_figure(out), out)
+    print(json.dumps(out, indent=1))
     return 0
 
 

@@ -21,12 +21,29 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _results import add_results_option, save_run
+
+
+def validation_figure(out: dict) -> str:
+    """One line of the JSON: the lowest rates and the shortest word lengths."""
+    rates = ", ".join(
+        f"{method} {out[f'min_rate_{method}'].get('min_rate_hz')} Hz"
+        for method in ("tustin", "zoh")
+        if f"min_rate_{method}" in out
+    )
+    words = ", ".join(
+        f"{out[key]['min_word_length']} bits at {out[key]['rate_hz']:g} Hz"
+        for key in ("word_length_at_min_rate", "word_length_at_rate")
+        if key in out
+    )
+    return f"continuous mu {out['mu_continuous_grid']:.4g}; lowest rate {rates}; word length {words}"
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--rate", type=float, default=1000.0)
     ap.add_argument("--grid", type=int, default=30)
+    add_results_option(ap)
     args = ap.parse_args()
 
     import polyrob
@@ -84,6 +101,8 @@ def main() -> None:
         py = sos.run(np.vstack([np.ones(1000), np.zeros(1000)])).T
         out["c_vs_python_max_rel_diff"] = float(np.max(np.abs(c_out - py) / np.maximum(1, np.abs(py))))
     out["seconds_total"] = round(time.perf_counter() - t0, 1)
+    out = json.loads(json.dumps(out, default=float))
+    save_run(args.results, "validation", "Sample rate and word length of the paper's K*", validation_figure(out), out)
     print(json.dumps(out, indent=1))
 
 
