@@ -36,11 +36,16 @@ def _cell(value) -> str:
     return text.replace("|", "\\|").replace("\n", " ")
 
 
+def _text(value) -> str:
+    """A plain-text field (title, figure, note): the paper's "K*" is a star, not the start of emphasis."""
+    return _cell(value).replace("*", "\\*")
+
+
 def record_markdown(record: dict) -> str:
     """A record as its table (or its figure) followed by one line: command, date, machine, source."""
     out = []
     if record.get("title"):
-        out.append(f"**{record['title']}**\n")
+        out.append(f"**{_text(record['title'])}**\n")
     table = record.get("table")
     if table:
         out.append("| " + " | ".join(_cell(c) for c in table["columns"]) + " |")
@@ -48,10 +53,10 @@ def record_markdown(record: dict) -> str:
         out.extend("| " + " | ".join(_cell(c) for c in row) + " |" for row in table["rows"])
         out.append("")
     if record.get("figure") is not None:
-        out.append(f"Figure: {_cell(record['figure'])}\n")
+        out.append(f"Figure: {_text(record['figure'])}\n")
     where = f"`{record['command']}`, {record['date']}, {record['machine']}"
     if record.get("note"):
-        where += f"; {record['note']}"
+        where += f"; {_text(record['note'])}"
     if record.get("transcribed"):
         where += " (transcribed from the earlier docs)"
     out.append(f"*Measured with {where}.*\n")
