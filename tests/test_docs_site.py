@@ -251,8 +251,8 @@ def test_every_hand_written_table_of_the_docs_is_a_definition():
     assert found - DEFINITION_TABLES == set(), "a new hand-written table: generate it, or list it as a definition"
 
 
-def test_mu_and_synthesis_benchmarks_record_their_figure(monkeypatch):
-    """benchmarks/mu.py and synthesis.py take --results; their record's figure is read from their JSON."""
+def test_the_benchmarks_record_the_figure_their_json_gives(monkeypatch):
+    """mu.py, synthesis.py, validation.py, mu_between.py and box_maximum.py (--results): the record's one-line figure."""
     monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
     mu = _load("bench_mu", ROOT / "benchmarks" / "mu.py")
     report = {
@@ -265,11 +265,41 @@ def test_mu_and_synthesis_benchmarks_record_their_figure(monkeypatch):
     synthesis = _load("bench_synthesis", ROOT / "benchmarks" / "synthesis.py")
     doc = {"distillation": {"polyrob": {"peak_mu_certified": 1.0123}, "dkpy": "not installed"}, "total_seconds": 961.0}
     assert synthesis.synthesis_figure(doc) == "certified peak mu: distillation polyrob 1.012; 961 s in all"
-    for script in ("mu.py", "synthesis.py"):
-        text = (ROOT / "benchmarks" / script).read_text()
-        assert "add_results_option(ap)" in text and "save_run(args.results" in text, script
+    validation = _load("bench_validation", ROOT / "benchmarks" / "validation.py")
+    out = {
+        "mu_continuous_grid": 2.0716,
+        "min_rate_tustin": {"min_rate_hz": 67.0},
+        "min_rate_zoh": {"min_rate_hz": 299.0},
+        "word_length_at_min_rate": {"min_word_length": 18, "rate_hz": 67.0},
+        "word_length_at_rate": {"min_word_length": 26, "rate_hz": 1000.0},
+    }
+    assert validation.validation_figure(out) == (
+        "continuous mu 2.072; lowest rate tustin 67.0 Hz, zoh 299.0 Hz; word length 18 bits at 67 Hz, 26 bits at 1000 Hz"
+    )
+    between = _load("bench_mu_between", ROOT / "benchmarks" / "mu_between.py")
+    out = dict(robot="paper_2r", grid_peak_mu_upper=0.78321, verified_every_frequency=True, level=0.79102)
+    assert between.between_figure(dict(out, points_added=66)) == (
+        "paper_2r: grid peak 0.7832; mu <= 0.791 at every frequency, 66 points added"
+    )
+    assert between.between_figure(dict(out, verified_every_frequency=False, reason="200 points added")) == (
+        "paper_2r: grid peak 0.7832; not verified between the points: 200 points added"
+    )
+    box = _load("bench_box_maximum", ROOT / "benchmarks" / "box_maximum.py")
+    out = dict(fraction_exact_quadratic_pairs=0.927, fraction_exact_all_pairs=0.984, largest_relative_shortfall=0.0091)
+    out.update(ms_per_polynomial_exact_faces=0.21, ms_per_polynomial_vertices_ascent=0.002)
+    assert box.box_maximum_figure(out) == (
+        "exact for 92.7 % of the pairs quadratic in the velocities, 98.4 % of all, at worst 0.91 % below; "
+        "0.21 ms per polynomial (faces) against 0.002 ms (vertices and ascent)"
+    )
 
 
 def test_every_results_file_is_shown_on_the_benchmarks_page():
     shown = {name for name, _ in hooks._RESULTS_MARK.findall((ROOT / "docs" / "benchmarks.md").read_text())}
     assert {path.stem for path in RESULTS.glob("*.json")} <= shown
+
+
+def test_a_star_in_a_title_or_figure_is_not_emphasis():
+    text = hooks.record_markdown(
+        {"title": "The paper's K* on the box", "figure": "K* VIOLATED", "command": "c", "date": "d", "machine": "m"}
+    )
+    assert "**The paper's K\\* on the box**" in text and "Figure: K\\* VIOLATED" in text
