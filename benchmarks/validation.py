@@ -24,15 +24,19 @@ import numpy as np
 from _results import add_results_option, save_run
 
 
+def _hz(rate) -> str:
+    return "none found" if rate is None else f"{rate:.0f} Hz"
+
+
 def validation_figure(out: dict) -> str:
     """One line of the JSON: the lowest rates and the shortest word lengths."""
     rates = ", ".join(
-        f"{method} {out[f'min_rate_{method}'].get('min_rate_hz')} Hz"
+        f"{method} {_hz(out[f'min_rate_{method}'].get('min_rate_hz'))}"
         for method in ("tustin", "zoh")
         if f"min_rate_{method}" in out
     )
     words = ", ".join(
-        f"{out[key]['min_word_length']} bits at {out[key]['rate_hz']:g} Hz"
+        f"{out[key]['min_word_length']} bits at {_hz(out[key]['rate_hz'])}"
         for key in ("word_length_at_min_rate", "word_length_at_rate")
         if key in out
     )

@@ -268,13 +268,13 @@ def test_the_benchmarks_record_the_figure_their_json_gives(monkeypatch):
     validation = _load("bench_validation", ROOT / "benchmarks" / "validation.py")
     out = {
         "mu_continuous_grid": 2.0716,
-        "min_rate_tustin": {"min_rate_hz": 67.0},
-        "min_rate_zoh": {"min_rate_hz": 299.0},
-        "word_length_at_min_rate": {"min_word_length": 18, "rate_hz": 67.0},
+        "min_rate_tustin": {"min_rate_hz": 67.0149773281274},
+        "min_rate_zoh": {"min_rate_hz": None},
+        "word_length_at_min_rate": {"min_word_length": 18, "rate_hz": 67.0149773281274},
         "word_length_at_rate": {"min_word_length": 26, "rate_hz": 1000.0},
     }
     assert validation.validation_figure(out) == (
-        "continuous mu 2.072; lowest rate tustin 67.0 Hz, zoh 299.0 Hz; word length 18 bits at 67 Hz, 26 bits at 1000 Hz"
+        "continuous mu 2.072; lowest rate tustin 67 Hz, zoh none found; word length 18 bits at 67 Hz, 26 bits at 1000 Hz"
     )
     between = _load("bench_mu_between", ROOT / "benchmarks" / "mu_between.py")
     out = dict(robot="paper_2r", grid_peak_mu_upper=0.78321, verified_every_frequency=True, level=0.79102)
