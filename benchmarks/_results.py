@@ -6,7 +6,7 @@ PATH``) instead of a person copying it into prose.  A file is
 ``{"benchmark": NAME, "script": ..., "records": [...]}``; a record has
 ``id``, ``title``, ``command``, ``date`` (UTC, ISO), ``machine``,
 ``commit`` (``git rev-parse --short HEAD`` of the measured tree, ``+dirty``
-when it had changes), ``figure`` (a short text) and optionally ``table``
+when it had changes outside ``benchmarks/results/``), ``figure`` (a short text) and optionally ``table``
 (``{"columns": [...], "rows": [[...]]}``) and ``data`` (the script's own
 JSON).
 """
@@ -36,7 +36,18 @@ def commit() -> str | None:
             ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
         ).stdout.strip()
         dirty = subprocess.run(
-            ["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no"],
+            # a results file appended by an earlier run is not a change to the measured code
+            [
+                "git",
+                "-C",
+                str(ROOT),
+                "status",
+                "--porcelain",
+                "--untracked-files=no",
+                "--",
+                ".",
+                ":!benchmarks/results",
+            ],
             capture_output=True,
             text=True,
             check=True,

@@ -31,14 +31,21 @@ def api_markdown() -> str:
     return "\n".join(blocks)
 
 
+def _outside_code(text: str, escape) -> str:
+    """``escape`` applied to the parts of ``text`` outside its code spans (inside them Markdown reads text as is)."""
+    parts = text.split("`")
+    return "`".join(part if k % 2 else escape(part) for k, part in enumerate(parts))
+
+
 def _cell(value) -> str:
-    text = "" if value is None else str(value)
-    return text.replace("|", "\\|").replace("\n", " ")
+    """A table cell: one line, ``|`` escaped (a code span keeps its pipes: the table does not split there)."""
+    text = "" if value is None else str(value).replace("\n", " ")
+    return _outside_code(text, lambda part: part.replace("|", "\\|"))
 
 
 def _text(value) -> str:
     """A plain-text field (title, figure, note): the paper's "K*" is a star, not the start of emphasis."""
-    return _cell(value).replace("*", "\\*")
+    return _outside_code(_cell(value), lambda part: part.replace("*", "\\*"))
 
 
 def record_markdown(record: dict) -> str:

@@ -298,8 +298,11 @@ def test_every_results_file_is_shown_on_the_benchmarks_page():
     assert {path.stem for path in RESULTS.glob("*.json")} <= shown
 
 
-def test_a_star_in_a_title_or_figure_is_not_emphasis():
+def test_a_star_or_a_pipe_in_a_record_is_text():
     text = hooks.record_markdown(
         {"title": "The paper's K* on the box", "figure": "K* VIOLATED", "command": "c", "date": "d", "machine": "m"}
     )
     assert "**The paper's K\\* on the box**" in text and "Figure: K\\* VIOLATED" in text
+    # a code span keeps its pipes and stars as written (Markdown's tables do not split a cell there)
+    assert hooks._cell("`|drho/dt| <= 0.1` a|b") == "`|drho/dt| <= 0.1` a\\|b"
+    assert hooks._text("`K*` or K*") == "`K*` or K\\*"
