@@ -33,8 +33,24 @@ from scipy import optimize
 
 from polyrob.errors import BoundsError, PolyrobError
 from polyrob.plant.lftplant import UncertainPlant
+from polyrob.plant.models.assembly import (
+    Channels,
+    at_pldi_nominal,
+    check_nominal,
+    into_accelerations,
+    model_plant,
+    normalised,
+)
 
-__all__ = ["axes_plant", "axes_contains", "entry_layout", "residual_block", "RESIDUAL_TOL"]
+__all__ = [
+    "axes_plant",
+    "axes_contains",
+    "entry_layout",
+    "residual_block",
+    "centred_matrices",
+    "AxesChannels",
+    "RESIDUAL_TOL",
+]
 
 #: Default: keep directions until the residual gain is at most this fraction of the total.
 RESIDUAL_TOL = 0.1
@@ -128,6 +144,66 @@ def residual_of_radii(rho_mat):
     return Bf, Cf, {"residual_rows": rows, "residual_cols": cols, "W_l": a, "W_r": b}
 
 
+def centred_matrices(pldi, lay, centre):
+    """``(A_mid, B_mid)``: the PLDI's nominal pair with its varying entries (at ``lay``) set to ``centre``."""
+    m = pldi.m
+    A0, B0 = np.asarray(pldi.A0, float), np.asarray(pldi.B0, float)
+    AB = np.hstack([A0[m:], B0[m:]])
+    AB[lay[:, 0], lay[:, 1]] = centre
+    A_mid, B_mid = A0.copy(), B0.copy()
+    A_mid[m:], B_mid[m:] = AB[:, : 2 * m], AB[:, 2 * m :]
+    return A_mid, B_mid
+
+
+class AxesChannels:
+    """The ``Δ`` channels of an ``axes``-shaped plant, in order: the residual full block, then the directions.
+
+    Each direction moves the lower rows of ``[A B]`` by a matrix of rank
+    ``r`` (both rows in general): one real scalar repeated ``r`` times.
+    """
+
+    def __init__(self, lay, m: int):
+        self.lay, self.m = lay, m
+        self._B, self._C, self._blocks, self._names, self._parameter = [], [], [], [], []
+
+    def _add(self, B, C, block, name: str, parameter: int) -> None:
+        size = B.shape[1]
+        self._B.append(B)
+        self._C.append(C)
+        self._blocks.append(block)
+        self._names += [f"{name}#{i}" for i in range(size)]
+        self._parameter += [parameter] * size
+
+    def residual(self, rho) -> dict:
+        """Add the full block of per-entry radii ``rho`` (none when every radius is 0); its gains for ``info``."""
+        Bf, Cf, gains = residual_block(self.lay, rho, self.m)
+        if Bf is not None:
+            self._add(Bf, Cf, [Bf.shape[1], Bf.shape[1]], "res", -1)
+        return gains
+
+    def direction(self, entries, name: str, parameter: int) -> None:
+        """Add a repeated real scalar moving the varying entries by ``entries`` (its half-width included)."""
+        E = np.zeros((self.m, 3 * self.m))
+        E[self.lay[:, 0], self.lay[:, 1]] = entries
+        U, s, Vt = np.linalg.svd(E)
+        rank = int(np.sum(s > 1e-12 * max(s[0], 1e-300)))
+        self._add(U[:, :rank] * s[:rank], Vt[:rank], [-rank, 0], name, parameter)
+
+    def channels(self) -> Channels:
+        """The channels added so far, as :func:`~polyrob.plant.models.assembly.model_plant` takes them."""
+        m = self.m
+        B_low = np.hstack(self._B) if self._B else np.zeros((m, 0))
+        C_vu = np.vstack(self._C) if self._C else np.zeros((0, 3 * m))
+        return Channels(
+            into_accelerations(m) @ B_low,
+            C_vu[:, : 2 * m],
+            C_vu[:, 2 * m :],
+            self._blocks,
+            self._names,
+            self._parameter,
+        )
+
+
 def axes_plant(
     pldi, *, n_directions: int | None = None, residual_tol: float = RESIDUAL_TOL, nominal: str = "pldi"
 ) -> UncertainPlant:
@@ -148,11 +224,9 @@ def axes_plant(
     PolyrobError
         ``n_directions`` out of range, unknown nominal.
     """
-    if nominal not in ("pldi", "midpoint"):
-        raise PolyrobError(f"unknown nominal '{nominal}': use 'pldi' or 'midpoint'")
+    check_nominal(nominal)
     poly = pldi.polytope
     m, k = pldi.m, len(pldi.entries)
-    n = 2 * m
     lower, upper = np.asarray(pldi.lower, float), np.asarray(pldi.upper, float)
     # the principal directions whose supports the PLDI searched: rows 2k.. of the half-spaces
     n_pc = (poly.n_halfspaces - 2 * k) // 2
@@ -193,61 +267,17 @@ def axes_plant(
     rho = np.maximum(np.abs(e_lo), np.abs(e_hi))
     centre = centre0 + b_r @ z_mid
     lay = entry_layout(pldi)
-    A0, B0 = np.asarray(pldi.A0, float), np.asarray(pldi.B0, float)
-    AB = np.hstack([A0[m:], B0[m:]])
-    AB[lay[:, 0], lay[:, 1]] = centre
-    A_mid = A0.copy()
-    A_mid[m:] = AB[:, :n]
-    B_mid = B0.copy()
-    B_mid[m:] = AB[:, n:]
-
-    # residual full block (first in Δ), then one repeated real scalar per direction
-    blocks_B, blocks_C, blk, names, ch_names, ch_param = [], [], [], [], [], []
-    Bf, Cf, gains = residual_block(lay, rho, m)
-    if Bf is not None:
-        size = Bf.shape[1]
-        blocks_B.append(Bf)
-        blocks_C.append(Cf)
-        blk.append([size, size])
-        ch_names += [f"res#{i}" for i in range(size)]
-        ch_param += [-1] * size
+    A_mid, B_mid = centred_matrices(pldi, lay, centre)
+    stack = AxesChannels(lay, m)
+    gains = stack.residual(rho)
     for j in range(r):
-        E = np.zeros((m, 3 * m))
-        E[lay[:, 0], lay[:, 1]] = b_r[:, j] * z_rad[j]
-        Uu, s, Vt = np.linalg.svd(E)
-        rank = int(np.sum(s > 1e-12 * max(s[0], 1e-300)))
-        blocks_B.append(Uu[:, :rank] * s[:rank])
-        blocks_C.append(Vt[:rank])
-        blk.append([-rank, 0])
-        names.append(f"z{j + 1}")
-        ch_names += [f"z{j + 1}#{i}" for i in range(rank)]
-        ch_param += [j] * rank
-    low = np.zeros((n, m))
-    low[m:] = np.eye(m)
-    Bd_low = np.hstack(blocks_B) if blocks_B else np.zeros((m, 0))
-    Cvu = np.vstack(blocks_C) if blocks_C else np.zeros((0, 3 * m))
-    plant = UncertainPlant(
-        robot_name=pldi.robot_name,
-        nominal_kind=nominal,
-        A_nom=A_mid,
-        B_nom=B_mid,
-        C=np.hstack([np.eye(m), np.zeros((m, m))]),
-        A_mid=A_mid,
-        B_mid=B_mid,
-        B_d=low @ Bd_low,
-        C_v=Cvu[:, :n],
-        D_vu=Cvu[:, n:],
-        parameter_names=tuple(names),
-        parameter_lower=z_lo + 0.0,
-        parameter_upper=z_hi + 0.0,
-        channel_names=tuple(ch_names),
-        channel_parameter=np.array(ch_param, int),
-        channel_index=None,
-        channel_lower=None,
-        channel_upper=None,
-        nominal_delta=np.zeros(r),
-        offset=np.zeros(r),
-        block_structure=np.array(blk, int).reshape(-1, 2),
+        stack.direction(b_r[:, j] * z_rad[j], f"z{j + 1}", j)
+    plant = model_plant(
+        pldi,
+        "axes",
+        (A_mid, B_mid),
+        stack.channels(),
+        ([f"z{j + 1}" for j in range(r)], z_lo + 0.0, z_hi + 0.0),
         # the directions' ranges are the PLDI's sampled support values (and the residual's
         # LPs run over its polytope of sampled half-spaces), certified intervals or not
         info={
@@ -265,14 +295,12 @@ def axes_plant(
             **gains,
             "layout": lay,
         },
-        model="axes",
+        nominal_kind=nominal,
     )
     if nominal == "midpoint":
         return plant
-    p0 = np.asarray(pldi.nominal, float)
-    z0 = W_r @ (p0 - centre)
-    nd = np.where(z_rad > 0, z0 / np.where(z_rad > 0, z_rad, 1.0), 0.0)
-    return plant.with_figures(A_nom=A0, B_nom=B0, nominal_delta=nd, offset=-z_rad * nd)
+    nd = normalised(W_r @ (np.asarray(pldi.nominal, float) - centre), z_rad)
+    return at_pldi_nominal(plant, pldi, nd, z_rad)
 
 
 def axes_contains(unc: UncertainPlant, A, B, *, rtol: float = 1e-9) -> np.ndarray:

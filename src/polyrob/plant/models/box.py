@@ -62,8 +62,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from polyrob.errors import BoundsError, PolyrobError
-from polyrob.plant.lftplant import UncertainPlant, weakest_enclosure
+from polyrob.errors import BoundsError
+from polyrob.plant.lftplant import UncertainPlant
+from polyrob.plant.models.assembly import Channels, check_nominal, enclosure_info, model_plant, normalised
 
 __all__ = ["box_plant", "box_contains", "SYMMETRY_RTOL"]
 
@@ -140,8 +141,7 @@ def box_plant(pldi, *, nominal: str = "pldi", merge_symmetric: bool = False) -> 
     >>> round(lo, 4), round(hi, 4)
     (-0.0461, -0.0164)
     """
-    if nominal not in ("pldi", "midpoint"):
-        raise PolyrobError(f"unknown nominal '{nominal}': use 'pldi' or 'midpoint'")
+    check_nominal(nominal)
     A0, B0 = np.array(pldi.A0, dtype=float), np.array(pldi.B0, dtype=float)
     m = B0.shape[1]
     n = 2 * m
@@ -199,42 +199,27 @@ def box_plant(pldi, *, nominal: str = "pldi", merge_symmetric: bool = False) -> 
         else:
             D_vu[j, c] = 1.0  # v_j = u_c
 
+    # a zero-width interval (possible with degenerate bounds) has no δ of its own: 0 (normalised)
     first = np.array([g[0] for g in groups], dtype=int)
-    # a zero-width interval (possible with degenerate bounds) has no δ of its own: 0
-    safe = np.where(rad[first] > 0, rad[first], 1.0)
-    nominal_delta = np.where(rad[first] > 0, (nom[first] - mid[first]) / safe, 0.0)
-    blk = np.array([[-len(g), 0] for g in groups], dtype=int).reshape(-1, 2)
     param_names = tuple("=".join(names[k] for k in g) for g in groups)
 
-    return UncertainPlant(
-        robot_name=getattr(pldi, "robot_name", ""),
+    return model_plant(
+        pldi,
+        "box",
+        (A_mid, B_mid),
+        Channels(B_d, C_v, D_vu, [[-len(g), 0] for g in groups], [names[k] for k in channels], ch_param),
+        (param_names, lower[first].copy(), upper[first].copy()),
+        # the box is the PLDI's intervals: exactly as proved as they are
+        enclosure_info({"PLDI": getattr(pldi, "enclosure", None)}),
         nominal_kind=nominal,
         A_nom=A_nom,
         B_nom=B_nom,
-        C=np.hstack([np.eye(m), np.zeros((m, m))]),
-        A_mid=A_mid,
-        B_mid=B_mid,
-        B_d=B_d,
-        C_v=C_v,
-        D_vu=D_vu,
-        parameter_names=param_names,
-        parameter_lower=lower[first].copy(),
-        parameter_upper=upper[first].copy(),
-        channel_names=tuple(names[k] for k in channels),
-        channel_parameter=ch_param,
         channel_index=index[channels].copy() if nd else np.zeros((0, 3), dtype=int),
         channel_lower=lower[channels].copy(),
         channel_upper=upper[channels].copy(),
-        nominal_delta=nominal_delta,
+        nominal_delta=normalised(nom[first] - mid[first], rad[first]),
         offset=mid[first] - nom[first],
-        block_structure=blk,
         merged=tuple((names[k1], names[k2]) for k1, k2 in pairs),
-        # the box is the PLDI's intervals: exactly as proved as they are
-        info={
-            "enclosure": weakest_enclosure(getattr(pldi, "enclosure", None)),
-            "enclosure_inputs": {"PLDI": getattr(pldi, "enclosure", None)},
-        },
-        model="box",
     )
 
 

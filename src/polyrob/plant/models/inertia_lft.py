@@ -30,7 +30,8 @@ from __future__ import annotations
 import numpy as np
 
 from polyrob.errors import NotApplicable, PolyrobError
-from polyrob.plant.lftplant import UncertainPlant, weakest_enclosure
+from polyrob.plant.lftplant import UncertainPlant
+from polyrob.plant.models import assembly
 
 __all__ = [
     "inertia_lft_plant",
@@ -188,30 +189,21 @@ def inertia_lft_plant(
         ``M(q)`` is not affine in single-angle cos/sin terms, ``B`` is not
         ``[0; M^{-1}]``, or the robot is an inner closed loop.
     """
-    from polyrob.bounds.pldi import bound_pldi, entry_name
+    from polyrob.bounds.pldi import entry_name
 
+    assembly.check_nominal(nominal)
     robot = pldi.robot if robot is None else robot
     if getattr(robot, "inner", None) not in (None, "none"):
         # the model is M(q)^-1 of one robot; an inner loop's PLDI spans several true robots (talos: coverage 1/3)
         raise NotApplicable(f"{robot.name}: an inner closed loop ({robot.inner}), not the robot's own M(q)^-1")
-    domain = pldi.domain
     m = robot.m
     n = 2 * m
-    names, _, _, M0, Mf, ranges = affine_inertia(robot, domain)
-    # B must be [0; M^-1] (no motor model in front of the arm)
-    q, qd, u = domain.sample(16, method="uniform", seed=5)
-    A_s, B_s = robot.jacobians_batch(q, qd, u)
-    Ms = np.array([robot.mass_matrix(qq) for qq in q])
-    if np.abs(Ms @ B_s[:, m:, :] - np.eye(m)).max() > 1e-8:
-        raise NotApplicable(f"{robot.name}: B is not [0; M(q)^-1]; the lft model does not apply")
+    names, _, _, M0, Mf, ranges = affine_inertia(robot, pldi.domain)
+    assembly.check_inverse_inertia_input(robot, pldi.domain, "lft")
     if a_part not in ("entries", "torque"):
         raise PolyrobError(f"unknown a_part '{a_part}': use 'entries' or 'torque'")
     torque = a_part == "torque"
-    if torque:
-        opts = {"samples": pldi.info.get("samples"), "progress": False, "coverage": 0, **(bound_options or {})}
-        npldi = bound_pldi(TorqueJacobians(robot), domain, **opts)
-    else:
-        npldi = pldi
+    npldi = assembly.torque_side_pldi(pldi, robot, bound_options) if torque else pldi
     nidx = np.asarray(npldi.entry_index, int).reshape(-1, 3)
     if torque and np.any(nidx[:, 0] != 0):
         raise NotApplicable(f"{robot.name}: M(q) B is not constant; the lft model does not apply")
@@ -245,8 +237,7 @@ def inertia_lft_plant(
     for j, (_, r, c) in enumerate(nidx):
         E[r - m, j] = n_rad[j]
         C_N[j, c] = 1.0
-    low = np.zeros((n, m))
-    low[m:] = np.eye(m)
+    low = assembly.into_accelerations(m)
     # torque: x_low' = M^-1 (N x + u); entries: x_low' = A_low x + M^-1 u
     T = Minv if torque else np.eye(m)
     B_d = np.hstack([low @ T @ E, -(low @ Minv @ U)])
@@ -256,9 +247,7 @@ def inertia_lft_plant(
     if torque:
         D_vd[k:, :k] = V @ Minv @ E
     D_vd[k:, k:] = -V @ Minv @ U
-    A_mid = np.zeros((n, n))
-    A_mid[:m, m:] = np.eye(m)
-    A_mid[m:] = T @ N_c
+    A_mid = assembly.arm_state_matrix(T @ N_c)
     B_mid = low @ Minv
 
     n_names = tuple(entry_name("N" if torque else "A", r, c, n) for _, r, c in nidx)
@@ -267,31 +256,14 @@ def inertia_lft_plant(
     ch_names = n_names + tuple(f"{names[p - k]}@{i}" for i, p in enumerate(ch_param[k:]))
     blk = [[-1, 0]] * k + [[-Uf.shape[1], 0] for Uf, _ in facs]
     inputs = {"PLDI": pldi.enclosure, **({"N PLDI": npldi.enclosure} if torque else {})}
-    plant = UncertainPlant(
-        robot_name=pldi.robot_name,
-        nominal_kind=nominal,
-        A_nom=A_mid,
-        B_nom=B_mid,
-        C=np.hstack([np.eye(m), np.zeros((m, m))]),
-        A_mid=A_mid,
-        B_mid=B_mid,
-        B_d=B_d,
-        C_v=C_v,
-        D_vu=D_vu,
-        parameter_names=par_names,
-        parameter_lower=np.r_[n_lo, ranges[:, 0]],
-        parameter_upper=np.r_[n_hi, ranges[:, 1]],
-        channel_names=ch_names,
-        channel_parameter=ch_param,
-        channel_index=None,
-        channel_lower=None,
-        channel_upper=None,
-        nominal_delta=np.zeros(len(par_names)),
-        offset=np.zeros(len(par_names)),
-        block_structure=np.array(blk, int).reshape(-1, 2),
-        info={
-            "enclosure": weakest_enclosure(*inputs.values()),
-            "enclosure_inputs": inputs,
+    plant = assembly.model_plant(
+        pldi,
+        "lft-torque" if torque else "lft",
+        (A_mid, B_mid),
+        assembly.Channels(B_d, C_v, D_vu, blk, ch_names, ch_param, D_vd),
+        (par_names, np.r_[n_lo, ranges[:, 0]], np.r_[n_hi, ranges[:, 1]]),
+        {
+            **assembly.enclosure_info(inputs),
             "N_enclosure": npldi.enclosure,
             "M0": M0,
             "Mf": Mf,
@@ -301,24 +273,12 @@ def inertia_lft_plant(
             "N_index": nidx,
             "N_seconds": npldi.info.get("seconds_total") if torque else 0.0,
         },
-        model="lft-torque" if torque else "lft",
-        D_vd=D_vd,
+        nominal_kind=nominal,
     )
     if nominal == "midpoint":
         return plant
-    if nominal != "pldi":
-        raise PolyrobError(f"unknown nominal '{nominal}': use 'pldi' or 'midpoint'")
-    A0, B0 = np.asarray(pldi.A0, float), np.asarray(pldi.B0, float)
-    ok, delta = _locate(plant, A0, B0)
-    nom_delta = np.where(np.isfinite(delta[0]), delta[0], 0.0)
-    centre = np.r_[n_mid, th_mid]
-    rad = np.r_[n_rad, th_rad]
-    return plant.with_figures(
-        A_nom=A0,
-        B_nom=B0,
-        nominal_delta=nom_delta,
-        offset=centre - (centre + rad * nom_delta),
-    )
+    _, delta = _locate(plant, pldi.A0, pldi.B0)
+    return assembly.at_pldi_nominal(plant, pldi, np.where(np.isfinite(delta[0]), delta[0], 0.0), np.r_[n_rad, th_rad])
 
 
 def _locate(unc: UncertainPlant, A, B):

@@ -38,23 +38,13 @@ import time
 
 import numpy as np
 
-from polyrob.errors import NotApplicable, PolyrobError
-from polyrob.plant.lftplant import UncertainPlant, weakest_enclosure
+from polyrob.errors import NotApplicable
+from polyrob.plant.lftplant import UncertainPlant
+from polyrob.plant.models import assembly
 from polyrob.plant.models.axes import RESIDUAL_TOL, axes_contains, axes_plant
 from polyrob.plant.models.inertia_factors import factor_ranges, inverse_channels
-from polyrob.plant.models.inertia_lft import TorqueJacobians
 
 __all__ = ["inertia_plant", "inertia_contains"]
-
-
-def _check_input_matrix(robot, domain) -> None:
-    """Raise :class:`NotApplicable` unless ``B = [0; M(q)⁻¹]`` at a few points of the domain."""
-    m = robot.m
-    q, qd, u = domain.sample(16, method="uniform", seed=5)
-    _, B = robot.jacobians_batch(q, qd, u)
-    Ms = np.array([robot.mass_matrix(qq) for qq in q])
-    if np.abs(B[:, :m]).max() > 0 or np.abs(Ms @ B[:, m:, :] - np.eye(m)).max() > 1e-8:
-        raise NotApplicable(f"{robot.name}: B is not [0; M(q)^-1]; the inertia model does not apply")
 
 
 def _n_coordinates(sub: UncertainPlant, N) -> np.ndarray:
@@ -64,7 +54,7 @@ def _n_coordinates(sub: UncertainPlant, N) -> np.ndarray:
     p = AB[:, info["layout"][:, 0], info["layout"][:, 1]]
     z = (p - info["centre"]) @ info["W"].T
     zr = info["z_rad"]
-    return np.where(zr > 0, z / np.where(zr > 0, zr, 1.0), 0.0)
+    return assembly.normalised(z, zr)
 
 
 def inertia_plant(
@@ -100,18 +90,13 @@ def inertia_plant(
     PolyrobError
         Unknown nominal.
     """
-    from polyrob.bounds.pldi import bound_pldi
-
-    if nominal not in ("pldi", "midpoint"):
-        raise PolyrobError(f"unknown nominal '{nominal}': use 'pldi' or 'midpoint'")
+    assembly.check_nominal(nominal)
     robot = pldi.robot if robot is None else robot
-    domain = pldi.domain
-    m, n = robot.m, 2 * robot.m
-    _check_input_matrix(robot, domain)
-    factors = factor_ranges(robot, domain, **(factor_options or {}))
+    m = robot.m
+    assembly.check_inverse_inertia_input(robot, pldi.domain, "inertia")
+    factors = factor_ranges(robot, pldi.domain, **(factor_options or {}))
     t0 = time.perf_counter()
-    opts = {"samples": pldi.info.get("samples"), "progress": False, "coverage": 0, **(bound_options or {})}
-    npldi = bound_pldi(TorqueJacobians(robot), domain, **opts)
+    npldi = assembly.torque_side_pldi(pldi, robot, bound_options)
     n_seconds = time.perf_counter() - t0
     tol = RESIDUAL_TOL if residual_tol is None else residual_tol
     sub = axes_plant(npldi, n_directions=n_directions, residual_tol=tol, nominal="midpoint")
@@ -122,11 +107,8 @@ def inertia_plant(
     M_c, B1, C1, D11, m_param = inverse_channels(factors)
     Minv = np.linalg.inv(M_c)
     N_c, BdN = sub.A_mid[m:], sub.B_d[m:]  # w = N_c x + u + BdN d_N
-    low = np.zeros((n, m))
-    low[m:] = np.eye(m)
-    A_mid = np.zeros((n, n))
-    A_mid[:m, m:] = np.eye(m)
-    A_mid[m:] = Minv @ N_c
+    low = assembly.into_accelerations(m)
+    A_mid = assembly.arm_state_matrix(Minv @ N_c)
     B_mid = low @ Minv
     kN, kM = sub.n_delta, len(m_param)
     B_d = np.hstack([low @ Minv @ BdN, -(low @ Minv @ B1)])
@@ -153,48 +135,27 @@ def inertia_plant(
     }
     lower = np.r_[sub.parameter_lower, factors.lower]
     upper = np.r_[sub.parameter_upper, factors.upper]
-    plant = UncertainPlant(
-        robot_name=pldi.robot_name,
-        nominal_kind=nominal,
-        A_nom=A_mid,
-        B_nom=B_mid,
-        C=np.hstack([np.eye(m), np.zeros((m, m))]),
-        A_mid=A_mid,
-        B_mid=B_mid,
-        B_d=B_d,
-        C_v=C_v,
-        D_vu=D_vu,
-        parameter_names=par_names,
-        parameter_lower=lower,
-        parameter_upper=upper,
-        channel_names=ch_names,
-        channel_parameter=ch_param,
-        channel_index=None,
-        channel_lower=None,
-        channel_upper=None,
-        nominal_delta=np.zeros(len(par_names)),
-        offset=np.zeros(len(par_names)),
-        block_structure=blk,
-        info={
-            "enclosure": weakest_enclosure(*inputs.values()),
-            "enclosure_inputs": inputs,
+    plant = assembly.model_plant(
+        pldi,
+        "inertia",
+        (A_mid, B_mid),
+        assembly.Channels(B_d, C_v, D_vu, blk, ch_names, ch_param, D_vd),
+        (par_names, lower, upper),
+        {
+            **assembly.enclosure_info(inputs),
             "N_enclosure": npldi.enclosure,
             "factors": factors,
             "N_plant": sub,
             "n_directions": sub.info["n_directions"],
             "N_seconds": round(n_seconds, 3),
         },
-        model="inertia",
-        D_vd=D_vd,
+        nominal_kind=nominal,
     )
     if nominal == "midpoint":
         return plant
-    A0, B0 = np.asarray(pldi.A0, float), np.asarray(pldi.B0, float)
-    _, delta = _locate(plant, A0[None], B0[None])
-    nd = delta[0]
-    nd = np.where(np.abs(nd) <= 1.0 + 1e-9, np.clip(nd, -1.0, 1.0), nd)  # a nominal on a range's end
-    rad = 0.5 * (upper - lower)
-    return plant.with_figures(A_nom=A0, B_nom=B0, nominal_delta=nd, offset=-rad * nd)
+    _, delta = _locate(plant, pldi.A0, pldi.B0)
+    nd = np.where(np.abs(delta[0]) <= 1.0 + 1e-9, np.clip(delta[0], -1.0, 1.0), delta[0])  # a nominal on a range's end
+    return assembly.at_pldi_nominal(plant, pldi, nd, 0.5 * (upper - lower))
 
 
 def _locate(unc: UncertainPlant, A, B):

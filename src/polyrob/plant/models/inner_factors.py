@@ -54,6 +54,7 @@ from scipy.optimize import minimize, minimize_scalar
 from polyrob.errors import NotApplicable
 from polyrob.model.inner import InnerLoopRobot
 from polyrob.plant.lftplant import UncertainPlant
+from polyrob.plant.models.assembly import Channels, arm_state_matrix, into_accelerations, model_plant
 from polyrob.plant.models.axes import entry_layout, residual_of_radii
 
 __all__ = [
@@ -191,40 +192,28 @@ def inner_factors_plant(pldi, robot) -> UncertainPlant:
     k, P = sum(sizes), len(params)
     # channels: the residual block, then each theta repeated m times; every channel enters the accelerations:
     # a = u + sum_j d_j + B_f d_f, and every output reads [x; a]
-    nd = k + P * m
     to_a = np.hstack([Bf if k else np.zeros((m, 0)), np.tile(np.eye(m), P)])  # a = u + to_a d
-    B_d = np.zeros((n, nd))
-    B_d[m:] = to_a
     reads = np.vstack(([Cf] if k else []) + [r * K for r, K in zip(ranges, centres)])
     C_v, D_vu, D_vd = reads[:, :n], reads[:, n:], reads[:, n:] @ to_a
-    A_mid = np.zeros((n, n))
-    A_mid[:m, m:] = np.eye(m)
-    B_mid = np.zeros((n, m))
-    B_mid[m:] = np.eye(m)
     names = tuple(name for name, _, _ in params)
-    return UncertainPlant(
-        robot_name=pldi.robot_name,
-        nominal_kind="pldi",
+    channels = Channels(
+        into_accelerations(m) @ to_a,
+        C_v,
+        D_vu,
+        [[size, size] for size in sizes] + [[-m, 0]] * P,
+        [f"res#{i}" for i in range(k)] + [f"{nm}#{i}" for nm in names for i in range(m)],
+        [-1] * k + [j for j in range(P) for _ in range(m)],
+        D_vd,
+    )
+    centre = (arm_state_matrix(np.zeros((m, n))), into_accelerations(m))
+    return model_plant(
+        pldi,
+        "inner-gain",
+        centre,
+        channels,
+        (names, -ranges, ranges),
         A_nom=np.asarray(pldi.A0, float),
         B_nom=np.asarray(pldi.B0, float),
-        C=np.hstack([np.eye(m), np.zeros((m, m))]),
-        A_mid=A_mid,
-        B_mid=B_mid,
-        B_d=B_d,
-        C_v=C_v,
-        D_vu=D_vu,
-        D_vd=D_vd,
-        parameter_names=names,
-        parameter_lower=-ranges,
-        parameter_upper=ranges,
-        channel_names=tuple([f"res#{i}" for i in range(k)] + [f"{nm}#{i}" for nm in names for i in range(m)]),
-        channel_parameter=np.array([-1] * k + [j for j in range(P) for _ in range(m)], int),
-        channel_index=None,
-        channel_lower=None,
-        channel_upper=None,
-        nominal_delta=np.zeros(P),
-        offset=np.zeros(P),
-        block_structure=np.array([[size, size] for size in sizes] + [[-m, 0]] * P, int).reshape(-1, 2),
         info={
             "enclosure": "sampled",
             "enclosure_inputs": {"PLDI": pldi.enclosure, "factors": "sampled"},
@@ -236,7 +225,6 @@ def inner_factors_plant(pldi, robot) -> UncertainPlant:
             "residual_blocks": [{key: b[key] for key in ("rows", "cols", "W_l", "W_r")} for b in blocks],
             "residual_spread": spread,
         },
-        model="inner-gain",
     )
 
 

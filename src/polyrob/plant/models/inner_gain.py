@@ -38,7 +38,8 @@ import numpy as np
 
 from polyrob.errors import NotApplicable
 from polyrob.plant.lftplant import UncertainPlant
-from polyrob.plant.models.axes import entry_layout, residual_block
+from polyrob.plant.models.assembly import at_pldi_nominal, model_plant, normalised
+from polyrob.plant.models.axes import AxesChannels, centred_matrices, entry_layout
 
 __all__ = ["inner_gain_plant", "gain_range", "applies"]
 
@@ -128,54 +129,16 @@ def inner_gain_plant(pldi, *, robot=None) -> UncertainPlant:
     eps_mid, eps_rad = 0.5 * (e_lo + e_hi), 0.5 * (e_hi - e_lo)
     centre = base + eps_mid * d
     W = np.where(diag, 1.0 / m, 0.0)[None, :]  # reads eps from the diagonal of B
-    A0, B0 = np.asarray(pldi.A0, float), np.asarray(pldi.B0, float)
-    AB = np.hstack([A0[m:], B0[m:]])
-    AB[lay[:, 0], lay[:, 1]] = centre
-    A_mid, B_mid = A0.copy(), B0.copy()
-    A_mid[m:], B_mid[m:] = AB[:, :n], AB[:, n:]
-    blocks_B, blocks_C, blk, ch_names, ch_param = [], [], [], [], []
-    Bf, Cf, gains = residual_block(lay, rho, m)
-    if Bf is not None:
-        size = Bf.shape[1]
-        blocks_B.append(Bf)
-        blocks_C.append(Cf)
-        blk.append([size, size])
-        ch_names += [f"res#{i}" for i in range(size)]
-        ch_param += [-1] * size
-    E = np.zeros((m, 3 * m))
-    E[lay[:, 0], lay[:, 1]] = d * eps_rad
-    Uu, s, Vt = np.linalg.svd(E)
-    rank = int(np.sum(s > 1e-12 * max(s[0], 1e-300)))
-    blocks_B.append(Uu[:, :rank] * s[:rank])
-    blocks_C.append(Vt[:rank])
-    blk.append([-rank, 0])
-    ch_names += [f"eps#{i}" for i in range(rank)]
-    ch_param += [0] * rank
-    low = np.zeros((n, m))
-    low[m:] = np.eye(m)
-    Cvu = np.vstack(blocks_C)
-    plant = UncertainPlant(
-        robot_name=pldi.robot_name,
-        nominal_kind="pldi",
-        A_nom=A_mid,
-        B_nom=B_mid,
-        C=np.hstack([np.eye(m), np.zeros((m, m))]),
-        A_mid=A_mid,
-        B_mid=B_mid,
-        B_d=low @ np.hstack(blocks_B),
-        C_v=Cvu[:, :n],
-        D_vu=Cvu[:, n:],
-        parameter_names=("eps",),
-        parameter_lower=np.array([e_lo - eps_mid]),
-        parameter_upper=np.array([e_hi - eps_mid]),
-        channel_names=tuple(ch_names),
-        channel_parameter=np.array(ch_param, int),
-        channel_index=None,
-        channel_lower=None,
-        channel_upper=None,
-        nominal_delta=np.zeros(1),
-        offset=np.zeros(1),
-        block_structure=np.array(blk, int).reshape(-1, 2),
+    A_mid, B_mid = centred_matrices(pldi, lay, centre)
+    stack = AxesChannels(lay, m)
+    gains = stack.residual(rho)
+    stack.direction(d * eps_rad, "eps", 0)
+    plant = model_plant(
+        pldi,
+        "inner-gain",
+        (A_mid, B_mid),
+        stack.channels(),
+        (["eps"], [e_lo - eps_mid], [e_hi - eps_mid]),
         info={
             "enclosure": "sampled",
             "enclosure_inputs": {"PLDI": pldi.enclosure},
@@ -190,10 +153,8 @@ def inner_gain_plant(pldi, *, robot=None) -> UncertainPlant:
             **gains,
             "layout": lay,
         },
-        model="inner-gain",
     )
     # the nominal: the PLDI's (the exact model, eps = 0)
     p0 = np.asarray(pldi.nominal, float)
-    z0 = float((W @ (p0 - centre))[0])
-    nd = np.array([z0 / eps_rad if eps_rad > 0 else 0.0])
-    return plant.with_figures(A_nom=A0, B_nom=B0, nominal_delta=nd, offset=-eps_rad * nd)
+    nd = normalised(W @ (p0 - centre), eps_rad)
+    return at_pldi_nominal(plant, pldi, nd, eps_rad)
