@@ -244,24 +244,32 @@ def test_unknown_structure():
 def test_fixed_structure_is_dispatched_with_options_passed_through(monkeypatch):
     import polyrob.synthesis.mu_synthesis as musyn_module
     from polyrob.synthesis.fixed.options import FixedStructureOptions
+    from polyrob.synthesis.options import FixedStructure, MusynOptions
 
     calls = {}
 
-    def fake(P, blk, structure, **kw):
-        calls.update(P=P, blk=blk, structure=structure, kw=kw)
+    def fake(P, blk, *, options, **kw):
+        calls.update(P=P, blk=blk, options=options, kw=kw)
         return "fixed-result"
 
     monkeypatch.setattr(musyn_module, "fixed_structure_musyn", fake)
     P = distillation_plant()
-    opts = FixedStructureOptions(grid_density=5.0)
-    out = musyn(P, DISTILLATION_BLK, structure="tf3", max_iter=7, starts=2, options=opts, n_u=2, n_y=2)
+    tuning = FixedStructureOptions(grid_density=5.0)
+    out = musyn(P, DISTILLATION_BLK, structure="tf3", max_iter=7, starts=2, options=tuning, n_u=2, n_y=2)
     assert out == "fixed-result"
-    kw = calls["kw"]
-    assert calls["structure"] == "tf3"
-    # given values pass through unchanged, the options object by identity; the
-    # others are None ("the fixed-structure solver's own default"), not musyn's defaults
-    assert kw["max_iter"] == 7 and kw["starts"] == 2 and kw["options"] is opts
-    assert kw["tol"] is None and kw["mixed"] is None and kw["omega"] is None
+    opts = calls["options"]
+    assert isinstance(opts, MusynOptions)
+    # the flat keywords of earlier versions become one options object: the method a
+    # FixedStructure holding the tuning by identity; the common options left at None
+    # ("the fixed-structure solver's own default"), not musyn's defaults
+    assert opts.method == FixedStructure("tf3", starts=2, tuning=tuning) and opts.method.tuning is tuning
+    assert opts.max_iter == 7 and opts.tol is None and opts.mixed is None and opts.omega is None
+    assert calls["kw"]["n_u"] == 2 and calls["kw"]["n_y"] == 2
+    # the same call with the options object
+    calls.clear()
+    method = FixedStructure("tf3", starts=2, tuning=tuning)
+    musyn(P, DISTILLATION_BLK, options=MusynOptions(method=method, max_iter=7), n_u=2, n_y=2)
+    assert calls["options"] == opts
 
 
 def test_full_order_options_refused_for_a_fixed_structure():

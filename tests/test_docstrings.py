@@ -108,12 +108,9 @@ def docstring_gaps() -> set[str]:
 KNOWN_GAPS: set[str] = {
     # keyword added after the docstring was written
     "polyrob.analysis.mu.bounds.mu_bounds: parameter 'warm_timeout' not in Parameters",
-    "polyrob.bounds.pldi.bound_pldi: parameter 'seed' not in Parameters",
     # n_u, n_y (control inputs / measured outputs of a plain state-space P) undocumented
     "polyrob.plant.loops.lft: parameter 'n_u' not in Parameters",
     "polyrob.plant.loops.lft: parameter 'n_y' not in Parameters",
-    "polyrob.synthesis.reduction.reduce_controller: parameter 'n_u' not in Parameters",
-    "polyrob.synthesis.reduction.reduce_controller: parameter 'n_y' not in Parameters",
 }
 
 

@@ -32,6 +32,10 @@ How the bounds are found (``enclosure = "sampled"``):
    in up to :data:`VERTEX_MAX_DIM` reduced dimensions, its vertices;
 6. fresh random points of the domain check the coverage (it must be 1.0).
 
+What to do is a :class:`~polyrob.bounds.options.BoundOptions` (its
+:class:`~polyrob.bounds.options.SearchEffort` the effort of steps 2-4), or
+its fields as flat keywords.
+
 With ``certify=True`` the intervals are replaced by a guaranteed enclosure
 computed by interval arithmetic (:mod:`polyrob.bounds.certified.enclosure`); ``enclosure`` is
 then ``"certified"``, and every entry whose certified interval has a non-zero
@@ -61,15 +65,18 @@ import time
 import numpy as np
 
 from polyrob.bounds import search
+from polyrob.bounds.options import BoundOptions, SearchEffort
 from polyrob.bounds.parallel import WorkerPool, available_cores
 from polyrob.bounds.pldi_result import PLDI, entry_name
 from polyrob.bounds.polytope import COVERAGE_RTOL, VERTEX_MAX_DIM, Polytope, build_polytope, principal_directions
 from polyrob.bounds.supports import support_values
 from polyrob.domains.torque_box import Domain
-from polyrob.errors import ArgumentError, BoundsError, CertificationError
+from polyrob.errors import BoundsError, CertificationError
 
 __all__ = [
     "PLDI",
+    "BoundOptions",
+    "SearchEffort",
     "Polytope",
     "bound_pldi",
     "coverage_fraction",
@@ -103,25 +110,7 @@ def _nominal(robot, domain: Domain, nominal):
     raise BoundsError(f"unknown nominal '{nominal}': use 'equilibrium', 'midpoint' or a dict with q, qdot, u")
 
 
-def bound_pldi(
-    robot,
-    domain: Domain | None = None,
-    *,
-    samples: int | None = None,
-    nominal="equilibrium",
-    refine: bool = True,
-    verify_rounds: int = 3,
-    starts_per_direction: int = 3,
-    screen: int | None = None,
-    screen_starts: int = 4,
-    coverage: int = 10_000,
-    describe_polytope: bool = True,
-    certify: bool = False,
-    certify_options: dict | None = None,
-    seed: int = 0,
-    workers: int | None = None,
-    progress: bool | None = None,
-) -> PLDI:
+def bound_pldi(robot, domain: Domain | None = None, *, options: BoundOptions | None = None, **keywords) -> PLDI:
     """Bound the Jacobians of ``robot`` over ``domain``: a :class:`PLDI`.
 
     Parameters
@@ -132,51 +121,23 @@ def bound_pldi(
         :class:`~polyrob.domains.task.TaskDomain` the search moves in
         ``(q, qdot, qddot)`` and evaluates the Jacobians at the torques of
         the inverse dynamics; the witnesses are given as ``(q, qdot, u)``.
-    samples : int, optional
-        Sobol' positions (rounded up to a power of two); default grows with
-        the number of positions that matter (512 per dimension, at most 8192).
-    nominal : "equilibrium", "midpoint" or dict
-        ``(A0, B0)`` at ``q = 0`` (clipped into the domain; a task domain's
-        reference pose), ``qdot = 0`` and the
-        torque that holds it (``u = g(q)``), at the interval midpoints, or at a
-        given ``{"q", "qdot", "u"}``.
-    refine : bool
-        Refine every extreme by local search.
-    verify_rounds : int
-        After refining, up to this many fresh designs (another scramble of the
-        positions) are searched; support values they beat are refined again.
-    starts_per_direction : int
-        Local searches per direction (and per beaten direction in each
-        verification round) from the highest peaks of the sampled landscape.
-    screen : int, optional
-        Random points of the domain screened for more starts (0 to skip):
-        once uniformly, once around the witnesses found; default 65,536 per
-        position that matters, at most 524,288.
-    screen_starts : int
-        Starts per direction each screen gives.
-    coverage : int
-        Fresh random points for the coverage check (0 to skip).
-    describe_polytope : bool
-        The polytope's vertices and volume ratio (LPs, sampling); ``False``
-        keeps its half-spaces alone (an uncertainty model's factor loops).
-    certify : bool
-        Replace the intervals by a guaranteed enclosure (interval arithmetic).
-    certify_options : dict, optional
-        Keyword arguments of
-        :func:`~polyrob.bounds.certified.enclosure.certified_jacobian_bounds`:
-        ``rel_tol`` (default here 1e-5), ``time_limit`` (s, default 120),
-        ``max_joints`` (default 3).
-    workers : int, optional
-        Worker processes (spawned; ``1`` runs everything in this process).
-        Default: one for robots whose dynamics depend on at most
-        :data:`SERIAL_MAX_ACTIVE_POSITIONS` positions, else every available core.
-    progress : bool, optional
-        Progress bars (default: when stderr is a terminal).
+    options : BoundOptions, optional
+        The search's effort (:class:`~polyrob.bounds.options.SearchEffort`:
+        ``samples``, ``refine``, ``verify_rounds``, ``starts_per_direction``,
+        ``screen``, ``screen_starts``, ``seed``), the nominal pair, the
+        coverage check, ``certify`` (the intervals proved by interval
+        arithmetic) and its ``certify_options``, ``describe_polytope``,
+        ``workers`` (default: one for robots whose dynamics depend on at
+        most :data:`SERIAL_MAX_ACTIVE_POSITIONS` positions, else every
+        available core) and ``progress``.
+    **keywords
+        Any of those fields, flat (:meth:`BoundOptions.build`): e.g.
+        ``bound_pldi(robot, samples=256, coverage=0)``.
 
     Raises
     ------
     ArgumentError
-        A negative or zero count.
+        A negative or zero count, an unknown option.
     BoundsError
         The domain is not the robot's, ``M(q)`` is not positive definite at a
         sampled position, or the polytope's linear programs fail.
@@ -184,120 +145,45 @@ def bound_pldi(
         With ``certify=True``, when no guaranteed enclosure can be produced.
     """
     t_start = time.perf_counter()
-    _check_counts(
-        samples=samples,
-        screen=screen,
-        coverage=coverage,
-        verify_rounds=verify_rounds,
-        starts_per_direction=starts_per_direction,
-        screen_starts=screen_starts,
-        workers=workers,
-    )
+    opts = BoundOptions.build(options, **keywords)
     if domain is None:
         domain = Domain.from_robot(robot)
     if tuple(domain.joint_names) != tuple(robot.joint_names):
         raise BoundsError(f"the domain's joints {domain.joint_names} are not the robot's {robot.joint_names}")
-    if progress is None:
-        progress = sys.stderr.isatty()
-    rng = np.random.default_rng(seed)
-    proved = None
-    if certify and getattr(domain, "kind", "box") != "box":
-        raise CertificationError(
-            "certified bounds cover a torque box only: a task domain's torques come from inverse dynamics, "
-            "which the interval arithmetic does not enclose; drop --certify (its bounds are sampled)"
-        )
-    if certify:  # first: it gives up at once where it cannot work
-        # 1e-5 of each width: tight enough for the paper's printed digits, ~1 s on a 2R
-        options = {"rel_tol": 1e-5, **(certify_options or {})}
-        proved = _certified(robot, domain, options, progress)
+    progress = sys.stderr.isatty() if opts.progress is None else opts.progress
+    proved = _certified(robot, domain, opts, progress) if opts.certify else None  # first: it gives up at once
     problem = search.Problem(robot, domain)
-    m = robot.m
-
-    pilot_vals, varying = search.pilot(problem, seed)
-    if proved is not None:
-        # every entry the proof lets vary is a parameter of the plant, even
-        # when the 4096 pilot samples saw it constant
-        c_lo = problem.entries_from(proved[0][None], proved[2][None])[0]
-        c_hi = problem.entries_from(proved[1][None], proved[3][None])[0]
-        varying = varying | (c_hi > c_lo)
-    index = problem.all_index[varying]
-    k = len(index)
+    rng = np.random.default_rng(opts.seed)
+    cloud, index, varying = _varying_entries(problem, proved, opts.seed)
     dropped = search.dropped_positions(problem, rng)
-    active_q = m - len(dropped)
-    if samples is None:
-        samples = int(min(8192, max(256, 512 * active_q)))
-    q = search.position_design(problem, samples, dropped, seed)
-    if screen is None:
-        screen = int(min(2**19, 2**16 * active_q))
-    if workers is None:
-        workers = 1 if active_q <= SERIAL_MAX_ACTIVE_POSITIONS else available_cores()
-
-    cloud = pilot_vals[:, varying]
-    spread = cloud.max(axis=0) - cloud.min(axis=0)
-    # entries constant over the cloud (certified ones may be) take no part in
-    # the principal directions: a tiny scale would blow their rounding up
-    moving = spread > 1e-12 * np.maximum(1.0, np.abs(cloud).max(axis=0, initial=0.0))
-    scale = np.where(moving, spread, 1.0)
-    axes = np.zeros((k, 0))
-    if moving.any():
-        sub = principal_directions(cloud[:, moving], scale[moving])
-        axes = np.zeros((k, sub.shape[1]))
-        axes[moving] = sub
-    pcs = axes[:, :PRINCIPAL_DIRECTIONS].T
-    directions = np.vstack([np.eye(k), -np.eye(k), pcs / scale, -pcs / scale]) if k else np.zeros((0, 0))
+    active_q = robot.m - len(dropped)
+    effort = opts.search.sized(active_q)
+    q = search.position_design(problem, effort.samples, dropped, effort.seed)
+    workers = opts.workers or (1 if active_q <= SERIAL_MAX_ACTIVE_POSITIONS else available_cores())
+    directions, scale, axes = _search_directions(cloud, len(index))
     with WorkerPool(problem, workers) as pool:
         values, witnesses, sampled_width, stages, rounds, t_sample, t_refine = support_values(
-            problem,
-            q,
-            directions,
-            index,
-            dropped,
-            pool,
-            progress,
-            refine=refine,
-            samples=samples,
-            screen=screen,
-            screen_starts=screen_starts,
-            starts_per_direction=starts_per_direction,
-            verify_rounds=verify_rounds,
-            seed=seed,
+            problem, q, directions, index, dropped, pool, progress, effort
         )
         fallback = pool.fallback
+    k = len(index)
     upper, lower = values[:k], -values[k : 2 * k]
-    width = upper - lower
-    refinement = np.where(sampled_width > 0, width / np.where(sampled_width > 0, sampled_width, 1) - 1.0, 0.0)
-
-    polytope = build_polytope(directions, values, 2 * k, cloud, scale, axes, rng, describe=describe_polytope)
-
-    # full matrices of bounds (constant entries from any point of the domain)
-    A_any, B_any = robot.jacobians_batch(*domain.sample(1, method="uniform", seed=seed))
-    A_lower, A_upper, B_lower, B_upper = A_any[0].copy(), A_any[0].copy(), B_any[0].copy(), B_any[0].copy()
-    for (mat, r, c), lo_, hi_ in zip(index, lower, upper):
-        (A_lower if mat == 0 else B_lower)[r, c] = lo_
-        (A_upper if mat == 0 else B_upper)[r, c] = hi_
-
-    enclosure = "sampled"
+    refinement = np.where(sampled_width > 0, (upper - lower) / np.where(sampled_width > 0, sampled_width, 1) - 1.0, 0.0)
+    polytope = build_polytope(directions, values, 2 * k, cloud, scale, axes, rng, describe=opts.describe_polytope)
     notes = [] if fallback is None else [fallback]
-    cert_info = None
-    if certify:
-        A_lower, A_upper, B_lower, B_upper, cert_info = proved
-        enclosure = "certified"
+    if proved is None:
+        matrices, cert_info = _interval_matrices(robot, domain, index, lower, upper, opts.seed), None
+    else:
+        matrices, cert_info = _proved_matrices(problem, proved, index, lower, upper), proved[4]
         notes.append("the polytope's half-spaces are sampled supports; the intervals are certified")
-        lower_c = problem.entries_from(A_lower[None], B_lower[None], index)[0]
-        upper_c = problem.entries_from(A_upper[None], B_upper[None], index)[0]
-        if np.any(lower_c > lower + COVERAGE_RTOL * (1 + np.abs(lower))) or np.any(
-            upper_c < upper - COVERAGE_RTOL * (1 + np.abs(upper))
-        ):
-            raise CertificationError("internal error: a sampled Jacobian lies outside the certified bounds")
-
-    point = _nominal(robot, domain, nominal)
+    A_lower, A_upper, B_lower, B_upper = matrices
+    point = _nominal(robot, domain, opts.nominal)
     if point is None:
         A0, B0 = 0.5 * (A_lower + A_upper), 0.5 * (B_lower + B_upper)
     else:
         A0, B0 = robot.jacobians(point["q"], point["qdot"], point["u"])
         point = {key: v.tolist() for key, v in point.items()}
 
-    names = tuple(entry_name("AB"[mt], r, c, 2 * m) for mt, r, c in index)
     result = PLDI(
         robot_name=robot.name,
         robot_source=robot.source,
@@ -310,12 +196,12 @@ def bound_pldi(
         A_upper=A_upper,
         B_lower=B_lower,
         B_upper=B_upper,
-        entries=names,
+        entries=tuple(entry_name("AB"[mt], r, c, 2 * robot.m) for mt, r, c in index),
         entry_index=index,
         witness_lower=domain.points(witnesses[k : 2 * k]) if k else witnesses[k : 2 * k],
         witness_upper=domain.points(witnesses[:k]) if k else witnesses[:k],
         polytope=polytope,
-        enclosure=enclosure,
+        enclosure="sampled" if proved is None else "certified",
         coverage=float("nan"),
         coverage_points=0,
         refinement=refinement,
@@ -334,24 +220,65 @@ def bound_pldi(
         },
         robot_locked=tuple(getattr(robot, "locked", ())),
     )
-    if coverage:
-        frac = coverage_fraction(result, robot, coverage, seed=seed + 1)
+    if opts.coverage:
+        frac = coverage_fraction(result, robot, opts.coverage, seed=opts.seed + 1)
         object.__setattr__(result, "coverage", frac)
-        object.__setattr__(result, "coverage_points", int(coverage))
+        object.__setattr__(result, "coverage_points", int(opts.coverage))
     result.info["seconds_total"] = round(time.perf_counter() - t_start, 3)
     return result
 
 
-def _check_counts(**counts) -> None:
-    """Sample counts must be whole numbers, positive where zero makes no sense."""
-    positive = {"samples", "starts_per_direction", "workers"}
-    for name, value in counts.items():
-        if value is None:
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-            raise ArgumentError(f"{name} must be a whole number, got {value!r}")
-        if value < (1 if name in positive else 0):
-            raise ArgumentError(f"{name} must be {'>= 1' if name in positive else '>= 0'}, got {value}")
+def _varying_entries(problem, proved, seed: int):
+    """``(cloud, index, varying)``: the pilot cloud of the varying entries, their index and mask.
+
+    Every entry the proof lets vary is a parameter of the plant, even when
+    the pilot samples saw it constant.
+    """
+    pilot_vals, varying = search.pilot(problem, seed)
+    if proved is not None:
+        c_lo = problem.entries_from(proved[0][None], proved[2][None])[0]
+        c_hi = problem.entries_from(proved[1][None], proved[3][None])[0]
+        varying = varying | (c_hi > c_lo)
+    return pilot_vals[:, varying], problem.all_index[varying], varying
+
+
+def _search_directions(cloud, k: int):
+    """``(directions, scale, axes)``: ``±e_i`` and ``±`` the cloud's principal directions (in units of its spread)."""
+    spread = cloud.max(axis=0) - cloud.min(axis=0)
+    # entries constant over the cloud (certified ones may be) take no part in
+    # the principal directions: a tiny scale would blow their rounding up
+    moving = spread > 1e-12 * np.maximum(1.0, np.abs(cloud).max(axis=0, initial=0.0))
+    scale = np.where(moving, spread, 1.0)
+    axes = np.zeros((k, 0))
+    if moving.any():
+        sub = principal_directions(cloud[:, moving], scale[moving])
+        axes = np.zeros((k, sub.shape[1]))
+        axes[moving] = sub
+    pcs = axes[:, :PRINCIPAL_DIRECTIONS].T
+    directions = np.vstack([np.eye(k), -np.eye(k), pcs / scale, -pcs / scale]) if k else np.zeros((0, 0))
+    return directions, scale, axes
+
+
+def _interval_matrices(robot, domain, index, lower, upper, seed: int):
+    """``(A_lower, A_upper, B_lower, B_upper)``: the sampled intervals, constant entries from any point of the domain."""
+    A_any, B_any = robot.jacobians_batch(*domain.sample(1, method="uniform", seed=seed))
+    A_lower, A_upper, B_lower, B_upper = A_any[0].copy(), A_any[0].copy(), B_any[0].copy(), B_any[0].copy()
+    for (mat, r, c), lo_, hi_ in zip(index, lower, upper):
+        (A_lower if mat == 0 else B_lower)[r, c] = lo_
+        (A_upper if mat == 0 else B_upper)[r, c] = hi_
+    return A_lower, A_upper, B_lower, B_upper
+
+
+def _proved_matrices(problem, proved, index, lower, upper):
+    """The certified ``(A_lower, A_upper, B_lower, B_upper)``, checked to hold every sampled Jacobian."""
+    A_lower, A_upper, B_lower, B_upper, _ = proved
+    lower_c = problem.entries_from(A_lower[None], B_lower[None], index)[0]
+    upper_c = problem.entries_from(A_upper[None], B_upper[None], index)[0]
+    if np.any(lower_c > lower + COVERAGE_RTOL * (1 + np.abs(lower))) or np.any(
+        upper_c < upper - COVERAGE_RTOL * (1 + np.abs(upper))
+    ):
+        raise CertificationError("internal error: a sampled Jacobian lies outside the certified bounds")
+    return A_lower, A_upper, B_lower, B_upper
 
 
 def coverage_fraction(pldi: PLDI, robot, n: int, *, seed=None) -> float:
@@ -370,15 +297,23 @@ def coverage_fraction(pldi: PLDI, robot, n: int, *, seed=None) -> float:
     return float(inside.mean())
 
 
-def _certified(robot, domain: Domain, options: dict, progress: bool):
+def _certified(robot, domain: Domain, opts: BoundOptions, progress: bool):
+    """The certified ``(A_lo, A_hi, B_lo, B_hi, info)`` of ``robot`` over a torque box (interval arithmetic)."""
     from polyrob.bounds.certified import enclosure as certify_module
 
+    if getattr(domain, "kind", "box") != "box":
+        raise CertificationError(
+            "certified bounds cover a torque box only: a task domain's torques come from inverse dynamics, "
+            "which the interval arithmetic does not enclose; drop --certify (its bounds are sampled)"
+        )
     model = getattr(robot, "model", None)
     if model is None:
         raise CertificationError(
             f"{robot.name}: certified bounds need a URDF robot (interval evaluation of its rigid-body "
             "dynamics); analytic models get sampled bounds only: drop --certify"
         )
+    # 1e-5 of each width: tight enough for the paper's printed digits, ~1 s on a 2R
+    options = {"rel_tol": 1e-5, **(opts.certify_options or {})}
     enc = certify_module.certified_jacobian_bounds(
         model,
         robot.damping,

@@ -12,28 +12,18 @@ import time
 import numpy as np
 
 from polyrob.bounds import local_search, screens, search
+from polyrob.bounds.options import SearchEffort
 
 __all__ = ["support_values"]
 
 
-def support_values(
-    problem,
-    q,
-    directions,
-    index,
-    dropped,
-    pool,
-    progress,
-    *,
-    refine,
-    samples,
-    screen,
-    screen_starts,
-    starts_per_direction,
-    verify_rounds,
-    seed,
-):
-    """Support values (and witnesses) along every direction: design, screens, local search, verification."""
+def support_values(problem, q, directions, index, dropped, pool, progress, effort: SearchEffort):
+    """Support values (and witnesses) along every direction: design, screens, local search, verification.
+
+    ``effort`` has its defaults sized (:meth:`SearchEffort.sized`).
+    """
+    samples, screen, screen_starts, seed = effort.samples, effort.screen, effort.screen_starts, effort.seed
+    starts_per_direction = effort.starts_per_direction
     k = len(index)
     m = problem.m
     t0 = time.perf_counter()
@@ -53,7 +43,7 @@ def support_values(
     t_sample = time.perf_counter() - t0
     sampled_width = values[:k] + values[k : 2 * k]
     rounds = 0
-    if refine and k:
+    if effort.refine and k:
         args = (index, dropped, depends, progress, pool)
         t1 = time.perf_counter()
         values, witnesses = local_search.refine(
@@ -76,7 +66,7 @@ def support_values(
         t1 = time.perf_counter()
         # Verification rounds: a fresh design (another scramble) must not beat
         # any support value; where it does, refine again from its witness.
-        for rounds in range(1, verify_rounds + 1):
+        for rounds in range(1, effort.verify_rounds + 1):
             q_new = search.position_design(problem, samples, dropped, seed + 7919 * rounds)
             # only what beats a support value is wanted: positions whose cheap bound cannot are skipped
             # (their bound stands in for the landscape of a beaten direction, below its support value)

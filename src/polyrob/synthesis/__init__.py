@@ -3,8 +3,10 @@
 * :func:`hinfsyn` - H∞ synthesis with scaling, documented regularisation,
   own γ bisection around SLICOT SB10FD and an LMI fallback.
 * :func:`musyn` - μ-synthesis (D-K for complex, D-G-K for mixed real/complex
-  uncertainty) returning a :class:`MusynResult` with a certified μ; other
-  controller structures are delegated to :mod:`polyrob.synthesis.fixed.synthesis`.
+  uncertainty) returning a :class:`MusynResult` with a certified μ; what it
+  does is a :class:`MusynOptions` whose method is a :class:`FullOrder`
+  iteration or a :class:`FixedStructure` (delegated to
+  :mod:`polyrob.synthesis.fixed.synthesis`).
 * :func:`max_bandwidth_scaling` - the largest scaling of the weights'
   bandwidths that still certifies μ < 1.
 * :func:`reduce_controller` - smallest balanced-truncation order whose
@@ -21,6 +23,7 @@ from polyrob.synthesis.fixed.structures import controller_structure
 from polyrob.synthesis.fixed.synthesis import fixed_structure_musyn
 from polyrob.synthesis.hinf.synthesis import HinfResult, hinfsyn
 from polyrob.synthesis.mu_synthesis import musyn
+from polyrob.synthesis.options import FixedStructure, FullOrder, MusynOptions
 from polyrob.synthesis.reduction import ReductionResult, reduce_controller
 from polyrob.synthesis.result import MusynResult
 from polyrob.synthesis.scalings.dfit import LogMagnitudeFit, SlicotMagnitudeFit
@@ -31,6 +34,9 @@ __all__ = [
     "hinfsyn",
     "hinf_norm",
     "musyn",
+    "MusynOptions",
+    "FullOrder",
+    "FixedStructure",
     "DKIteration",
     "MuUpperBound",
     "HinfStep",

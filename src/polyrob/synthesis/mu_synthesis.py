@@ -1,20 +1,21 @@
 """``musyn`` (MATLAB's name): robust controller by μ-synthesis, full order (D-K / D-G-K) or fixed structure.
 
-The full-order iteration is :class:`~polyrob.synthesis.dk.iteration.DKIteration`; a
-fixed structure (``"tfN"``, ``"pid"``, ``"ss:N"``) goes to
-:func:`~polyrob.synthesis.fixed.synthesis.fixed_structure_musyn` with the common
-options passed through unchanged (``None`` meaning "that method's default")
-and its own options (``starts``, ``seed``, ``init``, ``options``, a
-:class:`~polyrob.synthesis.fixed.options.FixedStructureOptions`) as given.
+What to do is a :class:`~polyrob.synthesis.options.MusynOptions` (MATLAB's
+``musynOptions``) whose method is a strategy: the full-order iteration
+(:class:`~polyrob.synthesis.options.FullOrder`, run here by
+:class:`~polyrob.synthesis.dk.iteration.DKIteration`) or a fixed structure
+(:class:`~polyrob.synthesis.options.FixedStructure`: ``"tfN"``, ``"pid"``,
+``"ss:N"``, run by :func:`~polyrob.synthesis.fixed.synthesis.fixed_structure_musyn`
+with the same options, ``None`` meaning "that method's default").
 Whatever the iteration optimised, the controller is certified by
-:func:`~polyrob.synthesis.dk.frequency.certify`.
+:func:`~polyrob.analysis.certificate.certify_loop`.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from dataclasses import replace
 
 import control
 import numpy as np
@@ -22,16 +23,17 @@ import numpy as np
 from polyrob._threads import single_blas_thread
 from polyrob.analysis.certificate import certify_loop
 from polyrob.analysis.mu.blocks import as_block_structure
+from polyrob.controller import as_controller_ss
 from polyrob.errors import PolyrobError, SynthesisError
-from polyrob.plant.generalized import as_controller_ss
 from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound
 from polyrob.synthesis.dk.iteration import DKIteration
 from polyrob.synthesis.fixed.synthesis import fixed_structure_musyn
 from polyrob.synthesis.hinf.checks import check_stabilizable
+from polyrob.synthesis.options import FixedStructure, MusynOptions
 from polyrob.synthesis.result import MusynResult
 from polyrob.synthesis.scalings.dfit import LogMagnitudeFit
 
-__all__ = ["musyn", "scaling_order_defaults", "LARGE_STRUCTURE_ORDERS"]
+__all__ = ["musyn", "MusynOptions", "scaling_order_defaults", "LARGE_STRUCTURE_ORDERS"]
 
 log = logging.getLogger("polyrob")
 
@@ -49,6 +51,16 @@ FULL_ORDER_DEFAULTS = {
     "d_order": (0, 1, 2, 3, 4),
     "g_order": (0, 1, 2),
     "fit_tol": 0.01,
+}
+
+
+#: What the full-order iterations follow, for ``info["reference"]``.
+REFERENCES = {
+    "D-G-K": (
+        "P. M. Young, Controller design with real parametric uncertainty, IJC 65(3), 1996; "
+        "G-scalings via J-spectral factorisation (see polyrob.synthesis.scalings.dscale)"
+    ),
+    "D-K": "J. C. Doyle, Structured uncertainty in control system design, CDC 1985 (D-K iteration)",
 }
 
 
@@ -100,31 +112,8 @@ def _parse_plant(P, blk, n_u, n_y):
 
 
 def musyn(
-    P,
-    blk=None,
-    *,
-    structure: str = "full",
-    mixed: bool | None = None,
-    max_iter: int | None = None,
-    tol: float | None = None,
-    patience: int | None = None,
-    d_order: Sequence[int] | None = None,
-    g_order: Sequence[int] | None = None,
-    fit_tol: float | None = None,
-    omega=None,
-    progress: bool | None = None,
-    target: float | None = None,
-    initial_controller=None,
-    mu_bound=None,
-    d_fit=None,
-    hinf_step=None,
-    certify_omega=None,
-    check_weights: bool = True,
-    n_u: int | None = None,
-    n_y: int | None = None,
-    time_limit: float | None = None,
-    **structure_options,
-) -> MusynResult:
+    P, blk=None, *, options: MusynOptions | None = None, n_u: int | None = None, n_y: int | None = None, **keywords
+):
     """Robust controller by μ-synthesis (MATLAB's ``musyn``), with its μ certificate.
 
     Parameters
@@ -135,59 +124,19 @@ def musyn(
     blk : BlockStructure or array_like, optional
         Default: ``P.block_structure_rp`` (uncertainty blocks and the
         performance block).
-    structure : str
-        ``"full"`` (full-order D-K here) or a fixed structure (``"tf3"``,
-        ``"pid"``, ``"ss:N"``, see :func:`~polyrob.synthesis.fixed.structures.controller_structure`)
-        handled by :func:`polyrob.synthesis.fixed.synthesis.fixed_structure_musyn`, which
-        receives ``mixed``, ``max_iter``, ``tol``, ``omega``, ``progress``,
-        ``target``, ``initial_controller``, ``n_u``, ``n_y``,
-        ``certify_omega`` as given (``None``: its own default) and
-        ``structure_options`` (``starts``, ``seed``, ``init``, ``options``).
-        The full-order options ``patience``, ``d_order``, ``g_order``,
-        ``fit_tol``, ``mu_bound``, ``d_fit``, ``hinf_step`` are refused
-        with a fixed structure.
-    mixed : bool, optional
-        D-G-K with real blocks kept real; ``False``: every block complex
-        (D-K).  Default: D-G-K when ``blk`` has real blocks.
-    max_iter, tol, patience : int, float, int, optional
-        Stopping rules, see :class:`DKIteration` (full order: 20, 1e-3, 2).
-    d_order, g_order : sequence of int, optional
-        Candidate orders of the D and G fits (the lowest that fits is used;
-        default ``0..4`` and ``0..2``; constant scalings, :data:`LARGE_STRUCTURE_ORDERS`,
-        on structures above :data:`~polyrob.analysis.mu.sweep.DESCENT_ABOVE` padded channels).
-    fit_tol : float, optional
-        Relative tolerance of the fitted bound (default 0.01), see
-        :class:`~polyrob.synthesis.scalings.dfit.LogMagnitudeFit`.
-    omega : array_like, optional
-        D-step grid (rad/s); default :func:`frequency_grid` (8 points per
-        decade); lightly damped closed-loop poles are added each iteration.
-    progress : bool, optional
-        One line per iteration; default only on a terminal.
-    target : float, optional
-        Stop once the grid peak μ is below it (a PID start: its certificate).
-    initial_controller : LTI or "pid", optional
-        Start with a D-step on this controller instead of the unscaled H∞
-        one; for a mixed problem the iteration then goes straight to D-G-K
-        steps (warm start, e.g. from a complex D-K result).  ``"pid"``: the
-        per-joint PID tuned to ``P``'s weights
-        (:func:`polyrob.synthesis.pid_tuning.tuned_pid`), the start of an
-        arm behind computed torque; ``info["start"]`` says which start was used.
-    mu_bound, d_fit, hinf_step : strategy objects, optional
-        Replace :class:`MuUpperBound`, :class:`~polyrob.synthesis.scalings.dscale.LogMagnitudeFit`,
-        :class:`HinfStep`.
-    certify_omega : array_like, optional
-        Grid of the final certificate (default: the loop's own grid of
-        :func:`polyrob.analysis.certificate.certify_loop`, the one ``analyze`` uses).
-    check_weights : bool
-        Raise :class:`SynthesisError` when ``W_S`` and ``W_T`` alone force
-        μ > 1 (:func:`performance_lower_bound`).
+    options : MusynOptions, optional
+        What to do (MATLAB's ``musynOptions``): the method, a
+        :class:`~polyrob.synthesis.options.FullOrder` D-K / D-G-K iteration
+        (default) or a :class:`~polyrob.synthesis.options.FixedStructure`
+        (``"tf3"``, ``"pid"``, ``"ss:N"``, handled by
+        :func:`polyrob.synthesis.fixed.synthesis.fixed_structure_musyn`), and
+        the stopping rules, grids, start and time limit every method shares.
     n_u, n_y : int, optional
         For a bare ``StateSpace``.
-    time_limit : float, optional
-        Seconds after which no new iteration (or fixed-structure start)
-        begins; the best controller so far is certified and ``info["stopped_by"]``
-        says what stopped it.  A safety net on wall-clock time: the figures of
-        the iterations that ran do not depend on it.
+    **keywords
+        The fields of :class:`MusynOptions` and the flat keywords of earlier
+        versions (``structure``, ``starts``, ``d_order``, ...), applied to
+        ``options`` by :meth:`MusynOptions.build`.
 
     Returns
     -------
@@ -199,7 +148,9 @@ def musyn(
         ``info`` has ``method``, ``orders`` (D/G per iteration), ``gamma``,
         ``timings``, ``regularization``, ``best_iteration``, ``grid_peak_mu``,
         ``fallbacks`` (rejected K-steps, G steps replaced by D steps, failed
-        worker calls: what was done instead of the planned route).
+        worker calls: what was done instead of the planned route),
+        ``stopped_by`` (what stopped the iteration: ``time_limit`` says so)
+        and ``start`` (``initial_controller="pid"``: the tuned PID's words).
 
     Raises
     ------
@@ -208,87 +159,66 @@ def musyn(
         performance impossible, unknown structure.
     PolyrobError
         Inconsistent sizes.
+    ArgumentError
+        Unknown options, or a method's option given to the other.
 
     Examples
     --------
     A first-order plant with a 50% input-multiplicative complex uncertainty:
 
     >>> import control, numpy as np
-    >>> from polyrob.synthesis import musyn
+    >>> from polyrob.synthesis import MusynOptions, musyn
     >>> G = control.ss(control.tf([1], [1, 1]))
     >>> # inputs [d, w, u], outputs [v, z, y]:  v = 0.5 u, z = 0.5 e, y = e = w - G (u + d)
     >>> A, B, C = G.A, G.B, G.C
     >>> P = control.ss(A, np.hstack([B, 0 * B, B]),
     ...                np.vstack([0 * C, -0.5 * C, -C]),
     ...                [[0, 0, 0.5], [0, 0.5, 0], [0, 1, 0]])
-    >>> res = musyn(P, [[1, 1], [1, 1]], n_u=1, n_y=1, max_iter=3, progress=False)
+    >>> res = musyn(P, [[1, 1], [1, 1]], n_u=1, n_y=1, options=MusynOptions(max_iter=3, progress=False))
     >>> res.order >= 1, bool(res.peak_mu < 1)
     (True, True)
     """
+    opts = MusynOptions.build(options, **keywords)
     t_start = time.perf_counter()
-    deadline = None if time_limit is None else t_start + float(time_limit)
+    deadline = None if opts.time_limit is None else t_start + float(opts.time_limit)
+    if not isinstance(opts.structure, str):
+        raise SynthesisError(f"unknown controller structure {opts.structure!r}: give a string such as 'full' or 'tf3'")
     start_words = None
-    if isinstance(initial_controller, str) and initial_controller == "pid":
-        from polyrob.synthesis.pid_tuning import pid_start
-
-        stop = {"target": target, "only": max_iter == 1 and structure == "full"} if structure in ("full", "pid") else {}
-        initial_controller, start_words, done = pid_start(P, certify_omega=certify_omega, **stop)
+    if isinstance(opts.initial_controller, str) and opts.initial_controller == "pid":
+        opts, start_words, done = _pid_start(P, opts)
         if done is not None:
             return done
-    if not isinstance(structure, str):
-        raise SynthesisError(f"unknown controller structure {structure!r}: give a string such as 'full' or 'tf3'")
-    if structure != "full":
-        full_only = {
-            "patience": patience,
-            "d_order": d_order,
-            "g_order": g_order,
-            "fit_tol": fit_tol,
-            "mu_bound": mu_bound,
-            "d_fit": d_fit,
-            "hinf_step": hinf_step,
-        }
-        given = sorted(k for k, v in full_only.items() if v is not None)
-        if given:
-            raise PolyrobError(f"options {given} apply to the full-order synthesis only, not to {structure!r}")
+    if isinstance(opts.method, FixedStructure):
         # the fixed-structure solver validates the structure name (controller_structure)
-        result = fixed_structure_musyn(
-            P,
-            blk,
-            structure,
-            mixed=mixed,
-            max_iter=max_iter,
-            tol=tol,
-            omega=omega,
-            progress=progress,
-            target=target,
-            initial_controller=initial_controller,
-            n_u=n_u,
-            n_y=n_y,
-            deadline=deadline,
-            certify_omega=certify_omega,
-            **structure_options,
-        )
+        result = fixed_structure_musyn(P, blk, options=opts, n_u=n_u, n_y=n_y, deadline=deadline)
         if start_words:
             result.info["start"] = start_words
         return result
-    if structure_options:
-        raise PolyrobError(f"unexpected options for a full-order synthesis: {sorted(structure_options)}")
-    opt = {
-        k: (v if v is not None else FULL_ORDER_DEFAULTS[k])
-        for k, v in {
-            "max_iter": max_iter,
-            "tol": tol,
-            "patience": patience,
-            "d_order": d_order,
-            "g_order": g_order,
-            "fit_tol": fit_tol,
-        }.items()
-    }
+    return _full_order(P, blk, opts, n_u, n_y, t_start, deadline, start_words)
+
+
+def _pid_start(P, opts: MusynOptions):
+    """``initial_controller="pid"``: the options with the tuned PID as the start, its words, and a result when it is the answer."""
+    from polyrob.synthesis.pid_tuning import pid_start
+
+    stop = {}
+    if opts.structure in ("full", "pid"):
+        stop = {"target": opts.target, "only": opts.max_iter == 1 and opts.structure == "full"}
+    controller, words, done = pid_start(P, certify_omega=opts.certify_omega, **stop)
+    return replace(opts, initial_controller=controller), words, done
+
+
+def _full_order_settings(P, blk, opts: MusynOptions, n_u, n_y):
+    """The plant, block structure, sizes, grid and scaling fit of a full-order run (checked)."""
+    method = opts.method
     Psys, st, n_u, n_y = _parse_plant(P, blk, n_u, n_y)
-    defaults = scaling_order_defaults(st)
-    opt["d_order"] = d_order if d_order is not None else defaults["d_order"]
-    opt["g_order"] = g_order if g_order is not None else defaults["g_order"]
-    if check_weights:
+    orders = scaling_order_defaults(st)
+    fit = {
+        "d_order": orders["d_order"] if method.d_order is None else method.d_order,
+        "g_order": orders["g_order"] if method.g_order is None else method.g_order,
+        "fit_tol": FULL_ORDER_DEFAULTS["fit_tol"] if method.fit_tol is None else method.fit_tol,
+    }
+    if opts.check_weights:
         lb, wlb = performance_lower_bound(P)
         if lb >= 1.0:
             raise SynthesisError(
@@ -296,33 +226,41 @@ def musyn(
                 f"|W_T|^2) = {lb:.3g} >= 1, so no controller reaches mu < 1 (S + T = I). Lower the bandwidth "
                 "of W_S or raise the crossover of W_T (or pass check_weights=False to get the best mu > 1)"
             )
-    if mixed is None:
-        mixed = st.has_real
-    mixed = bool(mixed) and st.has_real
-    if omega is None:
-        omega = frequency_grid(Psys)
+    mixed = bool(st.has_real if opts.mixed is None else opts.mixed) and st.has_real
+    omega = frequency_grid(Psys) if opts.omega is None else opts.omega
     omega = np.unique(np.asarray(omega, float).ravel())
     if omega.size < 3 or np.any(omega <= 0) or not np.all(np.isfinite(omega)):
         raise PolyrobError("omega must hold at least three positive finite frequencies")
     B = np.asarray(Psys.B, float)
     C = np.asarray(Psys.C, float)
     check_stabilizable(np.asarray(Psys.A, float), B[:, -n_u:], C[-n_y:], list(Psys.state_labels))
+    return Psys, st, n_u, n_y, mixed, omega, fit
+
+
+def _full_order(P, blk, opts: MusynOptions, n_u, n_y, t_start, deadline, start_words) -> MusynResult:
+    """The full-order D-K / D-G-K iteration, its best controllers certified."""
+    method = opts.method
+    Psys, st, n_u, n_y, mixed, omega, fit = _full_order_settings(P, blk, opts, n_u, n_y)
+    d_fit = method.d_fit
     if d_fit is None:
-        d_fit = LogMagnitudeFit(orders=opt["d_order"], g_orders=opt["g_order"], tol=opt["fit_tol"])
+        d_fit = LogMagnitudeFit(orders=fit["d_order"], g_orders=fit["g_order"], tol=fit["fit_tol"])
+
+    def rule(name):
+        value = getattr(opts if name in ("max_iter", "tol") else method, name)
+        return FULL_ORDER_DEFAULTS[name] if value is None else value
+
     loop = DKIteration(
-        mu_bound,
+        method.mu_bound,
         d_fit,
-        hinf_step,
-        max_iter=opt["max_iter"],
-        tol=opt["tol"],
-        patience=opt["patience"],
-        target=target,
-        progress=progress,
+        method.hinf_step,
+        max_iter=rule("max_iter"),
+        tol=rule("tol"),
+        patience=rule("patience"),
+        target=opts.target,
+        progress=opts.progress,
         deadline=deadline,
     )
-    K0 = None
-    if initial_controller is not None:
-        K0 = as_controller_ss(initial_controller, n_u, n_y)
+    K0 = None if opts.initial_controller is None else as_controller_ss(opts.initial_controller, n_u, n_y)
     with single_blas_thread():
         # a warm start of a mixed problem goes straight to D-G-K steps: the
         # controller is presumably already the outcome of D-K steps
@@ -330,41 +268,15 @@ def musyn(
         hist = loop.run(Psys, n_u, n_y, st, omega, mixed=mixed, initial_controller=K0, start_phase=phase0)
         if not hist:
             raise SynthesisError("musyn: no iteration completed")
-        # certify the best controllers (by grid peak); a sharp peak between
-        # grid points can make the runner-up the better one
-        order = sorted(range(len(hist)), key=lambda i: hist[i].mu_peak)
-        if not np.isfinite(hist[order[0]].mu_peak):
-            raise SynthesisError("musyn: no controller stabilised the plant")
-        Pc = P if not isinstance(P, control.StateSpace) else Psys
-        kw = {} if not isinstance(P, control.StateSpace) else {"n_u": n_u, "n_y": n_y}
-        best = None
-        for i in order[:2]:
-            rec = hist[i]
-            if not np.isfinite(rec.mu_peak):
-                break
-            # the certificate every caller makes: the loop's own grid unless one is given
-            t_cert = time.perf_counter()
-            cert = certify_loop(Pc, rec.K, st, certify_omega, sweep_unstable=False, **kw)
-            log.info(
-                f"musyn: certificate of iteration {i + 1} (order {rec.K.nstates}): {cert.status.value}, "
-                f"grid peak {cert.mu_upper_grid:.4g}, {time.perf_counter() - t_cert:.1f} s"
-            )
-            if best is None or cert.mu_upper_grid < best[1].mu_upper_grid:
-                best = (i, cert)
-            if cert.mu_upper_grid <= rec.mu_peak * 1.02:
-                break  # the grid saw the peak: no need to look further
-    i_best, cert = best
-    peak_mu, peak_lo, N = cert.mu_upper_grid, cert.mu_lower, cert.closed_loop
-    peak_w = float(cert.mu.peak_upper_frequency) if cert.mu is not None else float("nan")
+        i_best, cert = _certify_best(P, Psys, hist, st, opts.certify_omega, n_u, n_y)
     rec = hist[i_best]
-    seconds = time.perf_counter() - t_start
     info = {
         "method": "D-G-K" if mixed else "D-K",
         "mixed": mixed,
         "best_iteration": i_best + 1,
         "grid_peak_mu": float(rec.mu_peak),
         "orders": [h.orders for h in hist],
-        "scaling_orders": {"d_order": list(opt["d_order"]), "g_order": list(opt["g_order"])},
+        "scaling_orders": {"d_order": list(fit["d_order"]), "g_order": list(fit["g_order"])},
         "regularization": list(rec.notes),
         # K-steps rejected, G steps replaced by D steps: what the iteration did instead
         "fallbacks": list(loop.failures) + list(getattr(getattr(loop.mu_bound, "sweep", None), "notes", [])),
@@ -372,26 +284,45 @@ def musyn(
         "stopped_by": loop.stopped_by,
         "start": start_words or ("the given controller" if K0 is not None else "the unscaled H-infinity controller"),
         "omega": omega,
-        "reference": (
-            "P. M. Young, Controller design with real parametric uncertainty, IJC 65(3), 1996; "
-            "G-scalings via J-spectral factorisation (see polyrob.synthesis.scalings.dscale)"
-        )
-        if mixed
-        else "J. C. Doyle, Structured uncertainty in control system design, CDC 1985 (D-K iteration)",
+        "reference": REFERENCES["D-G-K" if mixed else "D-K"],
     }
-    return MusynResult(
-        controller=rec.K,
-        structure="full",
-        order=int(rec.K.nstates),
-        peak_mu=float(peak_mu),
-        peak_mu_lower=float(peak_lo),
-        peak_frequency=float(peak_w),
-        mu_history=np.array([h.mu_peak for h in hist]),
-        gamma_history=np.array([h.gamma for h in hist]),
+    return MusynResult.certified(
+        rec.K,
+        "full",
+        cert,
+        mu_history=[h.mu_peak for h in hist],
+        gamma_history=[h.gamma for h in hist],
         scalings=(rec.scalings,),
-        closed_loop=N,
-        certificate=cert,
         iterations=len(hist),
-        seconds=float(seconds),
+        seconds=time.perf_counter() - t_start,
         info=info,
     )
+
+
+def _certify_best(P, Psys, hist, st, certify_omega, n_u, n_y):
+    """``(index, certificate)`` of the best iteration: the two lowest grid peaks certified, the lower certificate kept.
+
+    A sharp peak between grid points can make the runner-up the better one.
+    """
+    order = sorted(range(len(hist)), key=lambda i: hist[i].mu_peak)
+    if not np.isfinite(hist[order[0]].mu_peak):
+        raise SynthesisError("musyn: no controller stabilised the plant")
+    bare = isinstance(P, control.StateSpace)
+    Pc, kw = (Psys, {"n_u": n_u, "n_y": n_y}) if bare else (P, {})
+    best = None
+    for i in order[:2]:
+        rec = hist[i]
+        if not np.isfinite(rec.mu_peak):
+            break
+        # the certificate every caller makes: the loop's own grid unless one is given
+        t_cert = time.perf_counter()
+        cert = certify_loop(Pc, rec.K, st, certify_omega, sweep_unstable=False, **kw)
+        log.info(
+            f"musyn: certificate of iteration {i + 1} (order {rec.K.nstates}): {cert.status.value}, "
+            f"grid peak {cert.mu_upper_grid:.4g}, {time.perf_counter() - t_cert:.1f} s"
+        )
+        if best is None or cert.mu_upper_grid < best[1].mu_upper_grid:
+            best = (i, cert)
+        if cert.mu_upper_grid <= rec.mu_peak * 1.02:
+            break  # the grid saw the peak: no need to look further
+    return best

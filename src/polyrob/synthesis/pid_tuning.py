@@ -367,21 +367,12 @@ def start_result(tuned: TunedPID, certificate, seconds: float, stopped_by: str):
     """The :class:`~polyrob.synthesis.result.MusynResult` of a tuned PID with its certificate (no D-K step)."""
     from polyrob.synthesis.result import MusynResult
 
-    mu = certificate.mu
-    return MusynResult(
-        controller=tuned.controller,
-        structure="pid",
-        order=int(tuned.controller.nstates),
-        peak_mu=float(certificate.mu_upper_grid),
-        peak_mu_lower=float(certificate.mu_lower),
-        peak_frequency=float(mu.peak_upper_frequency) if mu is not None else float("nan"),
-        mu_history=np.array([tuned.grid_mu]),
-        gamma_history=np.array([np.nan]),
-        scalings=(),
-        closed_loop=certificate.closed_loop,
-        certificate=certificate,
-        iterations=0,
-        seconds=float(seconds),
+    return MusynResult.certified(
+        tuned.controller,
+        "pid",
+        certificate,
+        mu_history=[tuned.grid_mu],
+        seconds=seconds,
         info={
             "method": "tuned per-joint PID (no D-K step)",
             "start": tuned.words(),

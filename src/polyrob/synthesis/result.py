@@ -63,6 +63,43 @@ class MusynResult:
     seconds: float
     info: dict = field(default_factory=dict)
 
+    @classmethod
+    def certified(
+        cls,
+        controller,
+        structure: str,
+        certificate,
+        *,
+        seconds: float,
+        info: dict,
+        mu_history=None,
+        gamma_history=None,
+        scalings: tuple = (),
+        iterations: int = 0,
+    ) -> MusynResult:
+        """The result of ``controller`` with its ``certificate``, whose figures (peak μ, closed loop) it reads.
+
+        Without an iteration (a tuned PID, a reduced controller) the history
+        is the certificate's peak and no H∞ level.
+        """
+        mu = certificate.mu
+        return cls(
+            controller=controller,
+            structure=structure,
+            order=int(controller.nstates),
+            peak_mu=float(certificate.mu_upper_grid),
+            peak_mu_lower=float(certificate.mu_lower),
+            peak_frequency=float(mu.peak_upper_frequency) if mu is not None else float("nan"),
+            mu_history=np.asarray([certificate.mu_upper_grid] if mu_history is None else mu_history, float),
+            gamma_history=np.asarray([np.nan] if gamma_history is None else gamma_history, float),
+            scalings=scalings,
+            closed_loop=certificate.closed_loop,
+            certificate=certificate,
+            iterations=int(iterations),
+            seconds=float(seconds),
+            info=info,
+        )
+
     @property
     def peak_mu_everywhere(self) -> float | None:
         """A μ bound verified at every frequency (the certificate's check between its grid points), or ``None``."""

@@ -79,7 +79,7 @@ from slycot.exceptions import SlycotError
 from polyrob._threads import single_blas_thread
 from polyrob.analysis.certificate import certify_loop
 from polyrob.analysis.mu.blocks import as_block_structure
-from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.errors import ArgumentError, PolyrobError, SynthesisError
 from polyrob.plant.generalized import paper_controller
 from polyrob.synthesis.fixed.iteration import (
     StartRun,
@@ -95,6 +95,7 @@ from polyrob.synthesis.fixed.loop import FixedLoop, closed_loop_response, plant_
 from polyrob.synthesis.fixed.options import FixedStructureOptions
 from polyrob.synthesis.fixed.scalings import dstep, scalings_from
 from polyrob.synthesis.fixed.structures import ControllerStructure, controller_structure
+from polyrob.synthesis.options import FixedStructure, MusynOptions
 from polyrob.synthesis.result import MusynResult
 
 __all__ = ["fixed_structure_musyn", "FixedStructureOptions", "closed_loop_response"]
@@ -103,23 +104,13 @@ __all__ = ["fixed_structure_musyn", "FixedStructureOptions", "closed_loop_respon
 def fixed_structure_musyn(
     P,
     blk=None,
-    structure: str | ControllerStructure = "tf3",
+    structure: str | ControllerStructure | None = None,
     *,
-    starts: int = 5,
-    seed: int = 0,
-    max_iter: int | None = None,
-    omega=None,
-    certify_omega=None,
-    init=None,
-    initial_controller=None,
-    progress=None,
-    tol: float | None = None,
-    target: float | None = None,
-    mixed: bool | None = None,
+    options: MusynOptions | FixedStructureOptions | None = None,
     n_u: int | None = None,
     n_y: int | None = None,
-    options: FixedStructureOptions | None = None,
     deadline: float | None = None,
+    **keywords,
 ) -> MusynResult:
     """Fixed-structure μ-synthesis (MATLAB ``musyn`` with a tunable controller).
 
@@ -131,49 +122,36 @@ def fixed_structure_musyn(
     blk : BlockStructure or array_like, optional
         Structure of ``diag(Δ, Δ_perf)`` for ``lft(P, K)``; default
         ``P.block_structure_rp`` (robust performance).
-    structure : str or ControllerStructure
+    structure : str or ControllerStructure, optional
         ``"tfN"`` (each ``K_ij`` of order ``N``), ``"pid"`` or ``"ss:N"``
-        (:func:`~polyrob.synthesis.fixed.structures.controller_structure`).
-    starts : int
-        Number of starts: ``init`` (or a generic H2 design fitted to the
-        structure), then random perturbations of it.
-    seed : int
-        Seed of the perturbations: same seed, same result.
-    max_iter : int, optional
-        D-G-K iterations per start (default 40).
-    omega : array_like, optional
-        Working (D-step) grid, refined around the peaks as the iteration
-        goes; its span also sets the rigorous screening grid (40 points per
-        decade).  Default: ``grid_density`` points per decade over the
-        closed-loop poles of the first start, widened by a decade each side.
-    certify_omega : array_like, optional
-        Grid of the final certificate (:func:`~polyrob.analysis.mu.bounds.mu_bounds`, which
-        refines the peak); default ``mu_bounds``' own grid for the final
-        closed loop.  Also screened during the iteration.
-    init : "paper", LTI system, MusynResult, array, or None
-        Starting controller, fitted to the structure; ``"paper"`` is the
-        paper's ``K*`` (:func:`~polyrob.plant.paper_controller`), represented
-        exactly by ``"tf3"``.  A lower-order result (e.g. a ``"pid"``, which
-        is an exact ``"ss:4"``) is a start for a richer structure.
-    initial_controller : LTI system, optional
-        Alias of ``init`` (the name :func:`polyrob.synthesis.mu_synthesis.musyn` forwards).
-    progress : bool or callable, optional
-        ``True`` prints one line per iteration on stderr; a callable gets a
-        dict per iteration.
-    tol : float, optional
-        Overrides ``options.tol`` (relative progress below which an
-        iteration counts as stalled).
-    target : float, optional
-        Stop a start once its grid peak is below ``target``.
-    mixed : bool, optional
-        ``False`` treats every real block as complex (plain D-K); default:
-        real blocks stay real (D-G-K).
+        (:func:`~polyrob.synthesis.fixed.structures.controller_structure`);
+        default the method's (``"tf3"``).
+    options : MusynOptions or FixedStructureOptions, optional
+        A :class:`~polyrob.synthesis.options.MusynOptions` whose method is a
+        :class:`~polyrob.synthesis.options.FixedStructure`: its ``starts``
+        (``init``, or a generic H2 design fitted to the structure, then random
+        perturbations of it), ``seed`` (same seed, same result), ``init``
+        (``"paper"``: the paper's ``K*``, :func:`~polyrob.plant.paper_controller`,
+        exact in ``"tf3"``; a lower-order result is a start for a richer
+        structure) and ``tuning`` (a :class:`FixedStructureOptions`); and the
+        common ``max_iter`` (per start, default 40), ``omega`` (the working
+        grid, refined around the peaks; default ``grid_density`` points per
+        decade over the closed-loop poles of the first start, widened by a
+        decade each side), ``certify_omega`` (grid of the final certificate,
+        also screened during the iteration), ``initial_controller`` (alias
+        of ``init``), ``progress`` (``True``: a line per iteration; a
+        callable gets a dict per iteration), ``tol`` (overrides the tuning's),
+        ``target`` (stop a start once its grid peak is below it) and ``mixed``
+        (``False``: every real block complex, plain D-K).  A bare
+        :class:`FixedStructureOptions` is the tuning.
     n_u, n_y : int, optional
         Sizes for a bare ``StateSpace`` plant.
-    options : FixedStructureOptions, optional
     deadline : float, optional
         ``time.perf_counter()`` value after which no new iteration or start
         begins; the best controller so far is certified (its notes say so).
+    **keywords
+        Fields of the options, flat (:meth:`MusynOptions.build`): ``starts``,
+        ``init``, ``max_iter``, ...
 
     Returns
     -------
@@ -195,13 +173,76 @@ def fixed_structure_musyn(
     See the module docstring.
     """
     t_start = time.perf_counter()
-    fallbacks: list[str] = []
-    opts = options or FixedStructureOptions()
-    max_iter = 40 if max_iter is None else int(max_iter)
-    if tol is not None:
-        opts = replace(opts, tol=float(tol))
+    chosen = {} if structure is None else {"structure": structure}
+    opts = MusynOptions.build(options, default_method=FixedStructure(), **chosen, **keywords)
+    method = opts.method
+    if not isinstance(method, FixedStructure):
+        raise ArgumentError("fixed_structure_musyn needs a FixedStructure method (musyn runs the full order)")
+    tuning = method.tuning or FixedStructureOptions()
+    if opts.tol is not None:
+        tuning = replace(tuning, tol=float(opts.tol))
+    max_iter = 40 if opts.max_iter is None else int(opts.max_iter)
     sysP, n_u, n_y = plant_parts(P, n_u, n_y)
-    strc = controller_structure(structure, n_u, n_y)
+    strc = controller_structure(method.structure, n_u, n_y)
+    st = _block_structure(P, blk, opts.mixed, sysP, n_u, n_y)
+    if int(method.starts) < 1:
+        raise PolyrobError(f"starts must be >= 1, got {method.starts}")
+    omega, certify_omega = check_grid(opts.omega, "omega"), check_grid(opts.certify_omega, "certify_omega")
+    if method.init is not None and opts.initial_controller is not None:
+        raise PolyrobError("give init or initial_controller, not both")
+    init = opts.initial_controller if method.init is None else method.init
+    fallbacks: list[str] = []
+    search = _Search(sysP, FixedLoop(sysP, n_u, n_y, strc, st), tuning, max_iter, reporter(opts.progress), opts.target)
+
+    with single_blas_thread():
+        candidates = _starts(search.loop, sysP, init, method, tuning, fallbacks)
+        runs, failures, screen = search.run_starts(candidates, omega, certify_omega, deadline, fallbacks)
+        if not runs:
+            raise SynthesisError(
+                f"no start stabilises the closed loop with a {strc.name} controller "
+                f"({'; '.join(failures)}); try another structure, a higher order or an init controller"
+            )
+        best = min(runs, key=lambda r: r.peak)
+        K, sweep, cert = search.certify(P, best, certify_omega, screen)
+
+    N = cert.closed_loop
+    poles = np.linalg.eigvals(np.asarray(N.A)) if N.nstates else np.zeros(0)
+    if poles.size and np.max(poles.real) >= 0:  # pragma: no cover - guarded by every accepted step
+        raise SynthesisError("the final closed loop is not stable")
+    info = {
+        "method": f"D-G-K over per-frequency scalings ({tuning.kstep} K-step: SLSQP epigraph, trust region, "
+        "closed-loop spectral abscissa constraint; scalings by warm-started batched BFGS and "
+        "AB13MD); adaptive grid with rigorous screening; certificate by mu_bounds",
+        "theta": best.theta.tolist(),
+        "coefficients": strc.describe(best.theta),
+        "start": best.notes[0] if best.notes else "",
+        "starts": [
+            {"start": r.notes[0] if r.notes else "", "grid_peak_mu": r.peak, "iterations": r.iterations} for r in runs
+        ],
+        "failed_starts": failures,
+        # what was done instead of the planned route (e.g. a random start after a failed H2 start)
+        "fallbacks": fallbacks + list(search.loop.notes),
+        "notes": best.notes[1:],
+        "grid_omega": best.sc.omega.copy(),
+        "certify_omega": None if certify_omega is None else certify_omega.copy(),
+        "block_structure": st.matlab.tolist(),
+        "closed_loop_poles": poles,
+    }
+    return MusynResult.certified(
+        K,
+        strc.name,
+        cert,
+        mu_history=best.history + [sweep.peak_upper],
+        gamma_history=best.gammas,
+        scalings=(best.sc.omega.copy(), best.sc.Dm.copy(), best.sc.G.copy()),
+        iterations=best.iterations,
+        seconds=time.perf_counter() - t_start,
+        info=info,
+    )
+
+
+def _block_structure(P, blk, mixed, sysP, n_u: int, n_y: int):
+    """The block structure of ``lft(P, K)`` (default ``P``'s robust performance), complex throughout when ``mixed is False``."""
     if blk is None:
         if not hasattr(P, "block_structure_rp"):
             raise PolyrobError("give blk for a bare StateSpace plant")
@@ -214,60 +255,55 @@ def fixed_structure_musyn(
         raise PolyrobError(
             f"blk {st} needs a {st.m_shape} closed loop; lft(P, K) is {sysP.noutputs - n_y}x{sysP.ninputs - n_u}"
         )
-    if int(starts) < 1:
-        raise PolyrobError(f"starts must be >= 1, got {starts}")
-    omega, certify_omega = check_grid(omega, "omega"), check_grid(certify_omega, "certify_omega")
-    if init is not None and initial_controller is not None:
-        raise PolyrobError("give init or initial_controller, not both")
-    init = initial_controller if init is None else init
-    report = reporter(progress)
-    loop = FixedLoop(sysP, n_u, n_y, strc, st)
+    return st
 
-    with single_blas_thread():
-        # ---------------------------------------------------------- starts
-        if isinstance(init, str):
-            if init != "paper":
-                raise PolyrobError(f"init must be 'paper', a controller or None, got {init!r}")
-            init = paper_controller()
-        if isinstance(init, MusynResult):
-            init = init.controller
-        if init is not None:
-            theta0 = strc.from_controller(init)
-            origin = "init"
-        else:
-            try:
-                theta0 = strc.from_controller(default_controller(sysP, n_u, n_y))
-                origin = "h2"
-            except (
-                ValueError,
-                ArithmeticError,
-                np.linalg.LinAlgError,
-                SlycotError,
-                ControlArgument,
-                PolyrobError,
-            ) as exc:
-                # e.g. an unstabilisable plant (no LQR/Kalman solution): a random start, recorded
-                theta0 = strc.initial(int(seed))
-                origin = "random"
-                fallbacks.append(f"H2 start failed ({type(exc).__name__}: {exc}); random start (seed {seed}) used")
-        rng_seeds = np.random.default_rng(int(seed)).integers(0, 2**31 - 1, size=int(starts))
-        candidates = [(origin, theta0)] + [
-            (f"perturbed#{k}", strc.initial(int(rng_seeds[k]), around=theta0, spread=opts.spread))
-            for k in range(1, int(starts))
-        ]
 
+def _starts(loop: FixedLoop, sysP, init, method, tuning: FixedStructureOptions, fallbacks: list) -> list:
+    """``(label, theta)`` of every start: ``init`` (or an H2 design, or at worst a random point), then perturbations."""
+    strc, seed = loop.structure, int(method.seed)
+    if isinstance(init, str):
+        if init != "paper":
+            raise PolyrobError(f"init must be 'paper', a controller or None, got {init!r}")
+        init = paper_controller()
+    if isinstance(init, MusynResult):
+        init = init.controller
+    if init is not None:
+        theta0, origin = strc.from_controller(init), "init"
+    else:
+        try:
+            theta0, origin = strc.from_controller(default_controller(sysP, loop.n_u, loop.n_y)), "h2"
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError, SlycotError, ControlArgument, PolyrobError) as exc:
+            # e.g. an unstabilisable plant (no LQR/Kalman solution): a random start, recorded
+            theta0, origin = strc.initial(seed), "random"
+            fallbacks.append(f"H2 start failed ({type(exc).__name__}: {exc}); random start (seed {seed}) used")
+    rng_seeds = np.random.default_rng(seed).integers(0, 2**31 - 1, size=int(method.starts))
+    return [(origin, theta0)] + [
+        (f"perturbed#{k}", strc.initial(int(rng_seeds[k]), around=theta0, spread=tuning.spread))
+        for k in range(1, int(method.starts))
+    ]
+
+
+class _Search:
+    """What every start shares: the plant and its loop, the tuning, the iteration budget, the reporter, the target."""
+
+    def __init__(self, sysP, loop: FixedLoop, tuning: FixedStructureOptions, max_iter: int, report, target):
+        self.sysP, self.loop, self.st = sysP, loop, loop.st
+        self.tuning, self.max_iter, self.report, self.target = tuning, max_iter, report, target
+
+    def run_starts(self, candidates, omega, certify_omega, deadline, fallbacks: list):
+        """Optimise every start that can be stabilised: ``(runs, failures, screening grid)``."""
+        loop, tuning = self.loop, self.tuning
         runs, failures = [], []
-        span = None
+        span = screen = work = None
         for label, th in candidates:
             if runs and deadline is not None and time.perf_counter() >= deadline:
                 fallbacks.append(f"starts after {len(runs)} not run: the time limit")
                 break
-            th, a = stabilise(loop, th, opts.min_decay)
-            if not a <= -opts.min_decay:
+            th, a = stabilise(loop, th, tuning.min_decay)
+            if not a <= -tuning.min_decay:
                 failures.append(f"{label}: spectral abscissa {a:.3g}")
                 continue
-            a_full = loop.abscissa(th, full=True)
-            if not a_full < 0:
+            if not loop.abscissa(th, full=True) < 0:
                 # modes of P that no controller moves (not in the u -> y channel)
                 failures.append(
                     f"{label}: P has unstable modes outside the u -> y channel "
@@ -276,83 +312,41 @@ def fixed_structure_musyn(
                 continue
             if span is None:
                 span = grid_span(loop, th, omega)
-                work = omega if omega is not None else log_grid(*span, opts.grid_density)
-                screen = log_grid(*span, opts.screen_density)
+                work = omega if omega is not None else log_grid(*span, tuning.grid_density)
+                screen = log_grid(*span, tuning.screen_density)
                 if certify_omega is not None:
                     screen = np.union1d(screen, certify_omega[certify_omega > 0])
-            sc = dstep(loop, th, work, st)
+            sc = dstep(loop, th, work, self.st)
             run = StartRun(theta=th, sc=sc, peak=float(np.max(sc.mu)))
             run.history.append(run.peak)
-            screen_grid(loop, run, screen, st, opts)
+            screen_grid(loop, run, screen, self.st, tuning)
             run.history[-1] = run.peak
-            optimise_start(loop, run, st, opts, int(max_iter), screen, report, label, target, deadline)
+            optimise_start(loop, run, self.st, tuning, self.max_iter, screen, self.report, label, self.target, deadline)
             run.notes.insert(0, label)
             runs.append(run)
-        if not runs:
-            raise SynthesisError(
-                f"no start stabilises the closed loop with a {strc.name} controller "
-                f"({'; '.join(failures)}); try another structure, a higher order or an init controller"
-            )
-        best = min(runs, key=lambda r: r.peak)
+        return runs, failures, screen
 
-        # ---------------------------------------------------------- certify
-        cert = None
-        for rnd in range(opts.certify_rounds + 1):
-            K = strc.controller(best.theta)
-            kw = {} if hasattr(P, "block_structure_rp") else {"n_u": n_u, "n_y": n_y}
-            decided = certify_loop(P if not kw else sysP, K, st, certify_omega, **kw)
-            N, cert = decided.closed_loop, decided.mu
-            if cert.peak_upper <= best.peak * (1 + 1e-3) or rnd == opts.certify_rounds:
+    def certify(self, P, best: StartRun, certify_omega, screen):
+        """``(K, μ sweep, certificate)`` of the best start; a peak the grids missed sends it back to the iteration."""
+        loop, tuning = self.loop, self.tuning
+        kw = {} if hasattr(P, "block_structure_rp") else {"n_u": loop.n_u, "n_y": loop.n_y}
+        for rnd in range(tuning.certify_rounds + 1):
+            K = loop.structure.controller(best.theta)
+            decided = certify_loop(P if not kw else self.sysP, K, self.st, certify_omega, **kw)
+            sweep = decided.mu
+            if sweep.peak_upper <= best.peak * (1 + 1e-3) or rnd == tuning.certify_rounds:
                 break
             # a peak the grids missed: take its scalings, iterate a little more
-            i = int(np.argmax(cert.upper))
-            extra = scalings_from(cert.D[[i]], cert.G[[i]], cert.omega[[i]], cert.upper[[i]])
+            i = int(np.argmax(sweep.upper))
+            extra = scalings_from(sweep.D[[i]], sweep.G[[i]], sweep.omega[[i]], sweep.upper[[i]])
             best.sc = best.sc.merged(extra)
             best.peak = float(np.max(best.sc.mu))
             best.notes.append(
-                f"certificate round {rnd}: peak {cert.peak_upper:.5g} at {cert.omega[i]:.4g} rad/s "
+                f"certificate round {rnd}: peak {sweep.peak_upper:.5g} at {sweep.omega[i]:.4g} rad/s "
                 "above the grid peak; added"
             )
-            screen = np.union1d(screen, cert.omega[cert.omega > 0])
-            optimise_start(loop, best, st, opts, max(3, int(max_iter) // 4), screen, report, "certify", target)
-        sweep, cert = cert, decided
-
-    poles = np.linalg.eigvals(np.asarray(N.A)) if N.nstates else np.zeros(0)
-    if poles.size and np.max(poles.real) >= 0:  # pragma: no cover - guarded by every accepted step
-        raise SynthesisError("the final closed loop is not stable")
-    seconds = time.perf_counter() - t_start
-    info = {
-        "method": f"D-G-K over per-frequency scalings ({opts.kstep} K-step: SLSQP epigraph, trust region, "
-        "closed-loop spectral abscissa constraint; scalings by warm-started batched BFGS and "
-        "AB13MD); adaptive grid with rigorous screening; certificate by mu_bounds",
-        "theta": best.theta.tolist(),
-        "coefficients": strc.describe(best.theta),
-        "start": best.notes[0] if best.notes else "",
-        "starts": [
-            {"start": r.notes[0] if r.notes else "", "grid_peak_mu": r.peak, "iterations": r.iterations} for r in runs
-        ],
-        "failed_starts": failures,
-        # what was done instead of the planned route (e.g. a random start after a failed H2 start)
-        "fallbacks": fallbacks + list(loop.notes),
-        "notes": best.notes[1:],
-        "grid_omega": best.sc.omega.copy(),
-        "certify_omega": None if certify_omega is None else certify_omega.copy(),
-        "block_structure": st.matlab.tolist(),
-        "closed_loop_poles": poles,
-    }
-    return MusynResult(
-        controller=K,
-        structure=strc.name,
-        order=int(K.nstates),
-        peak_mu=float(sweep.peak_upper),
-        peak_mu_lower=float(sweep.peak_lower),
-        peak_frequency=float(sweep.peak_upper_frequency),
-        mu_history=np.array(best.history + [sweep.peak_upper], float),
-        gamma_history=np.array(best.gammas, float),
-        scalings=(best.sc.omega.copy(), best.sc.Dm.copy(), best.sc.G.copy()),
-        closed_loop=N,
-        certificate=cert,
-        iterations=int(best.iterations),
-        seconds=seconds,
-        info=info,
-    )
+            screen = np.union1d(screen, sweep.omega[sweep.omega > 0])
+            optimise_start(
+                loop, best, self.st, tuning, max(3, self.max_iter // 4), screen, self.report, "certify", self.target
+            )
+        return K, sweep, decided
