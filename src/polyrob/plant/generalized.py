@@ -64,6 +64,7 @@ from dataclasses import dataclass, field
 import control
 import numpy as np
 
+from polyrob.controller import as_controller_ss  # noqa: F401 - its home is polyrob.controller
 from polyrob.errors import PolyrobError
 from polyrob.plant.lftplant import UncertainPlant, upper_lft
 from polyrob.plant.loops import (  # noqa: F401  (re-exported: the pipeline imports them from here)
@@ -75,7 +76,7 @@ from polyrob.plant.loops import (  # noqa: F401  (re-exported: the pipeline impo
     nominal_closed_loop,
 )
 from polyrob.plant.paper_controller import PAPER_CONTROLLER, paper_controller  # noqa: F401
-from polyrob.plant.realize import as_controller_ss, ss_matrices, weight_ss  # noqa: F401
+from polyrob.plant.realize import ss_matrices, weight_ss  # noqa: F401
 
 __all__ = [
     "GeneralizedPlant",

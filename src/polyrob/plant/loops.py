@@ -22,8 +22,9 @@ import control
 import numpy as np
 
 from polyrob.analysis.stability import stability_verdict
+from polyrob.controller import as_controller_ss
 from polyrob.errors import PolyrobError
-from polyrob.plant.realize import as_controller_ss, as_state_space, ss_matrices
+from polyrob.plant.realize import as_state_space, ss_matrices
 
 if TYPE_CHECKING:
     from polyrob.plant.lftplant import UncertainPlant

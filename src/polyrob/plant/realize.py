@@ -12,7 +12,7 @@ import scipy.linalg as sla
 
 from polyrob.errors import PolyrobError
 
-__all__ = ["is_static", "as_state_space", "weight_ss", "ss_matrices", "as_controller_ss"]
+__all__ = ["is_static", "as_state_space", "weight_ss", "ss_matrices"]
 
 
 def is_static(W) -> bool:
@@ -125,22 +125,3 @@ def weight_ss(W, m: int, name: str) -> control.StateSpace | None:
 
 def ss_matrices(sys: control.StateSpace):
     return tuple(np.asarray(X, dtype=float) for X in (sys.A, sys.B, sys.C, sys.D))
-
-
-def as_controller_ss(K, n_u: int, n_y: int) -> control.StateSpace:
-    """A controller (LTI system or static gain) as an ``n_u x n_y`` continuous-time ``StateSpace``.
-
-    Raises :class:`~polyrob.errors.PolyrobError` on a size mismatch.
-    """
-    Ks = (
-        as_state_space(K, "K")
-        if not is_static(K)
-        else control.ss(
-            np.zeros((0, 0)), np.zeros((0, n_y)), np.zeros((n_u, 0)), np.atleast_2d(np.asarray(K, float)), dt=0
-        )
-    )
-    if (Ks.noutputs, Ks.ninputs) != (n_u, n_y):
-        raise PolyrobError(
-            f"K maps {Ks.ninputs} inputs to {Ks.noutputs} outputs; expected {n_y} measurements -> {n_u} controls"
-        )
-    return Ks

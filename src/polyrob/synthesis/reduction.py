@@ -36,8 +36,8 @@ import scipy.linalg as sla
 from polyrob._threads import single_blas_thread
 from polyrob.analysis.certificate import certify_loop
 from polyrob.analysis.mu.blocks import as_block_structure
+from polyrob.controller import as_controller_ss
 from polyrob.errors import PolyrobError, SynthesisError
-from polyrob.plant.generalized import as_controller_ss
 from polyrob.synthesis.dk.frequency import frequency_grid
 from polyrob.synthesis.result import MusynResult
 
@@ -233,6 +233,8 @@ def reduce_controller(
         Certificate grid (default: the full-order result's D-step range
         widened by a decade each side, 8 points per decade; every
         certificate adds the closed loop's resonances and refines its peak).
+    n_u, n_y : int, optional
+        Controls and measurements of a bare ``StateSpace`` plant (its last inputs and outputs).
 
     Returns
     -------
@@ -277,10 +279,7 @@ def reduce_controller(
     kw = {} if not isinstance(P, control.StateSpace) else {"n_u": n_u, "n_y": n_y}
     if isinstance(P, control.StateSpace) and (n_u is None or n_y is None):
         raise PolyrobError("reduce_controller of a bare StateSpace plant needs n_u and n_y")
-    if not isinstance(K, control.StateSpace):
-        nu = P.n_u if n_u is None else n_u
-        ny = P.n_y if n_y is None else n_y
-        K = as_controller_ss(K, nu, ny)
+    K = as_controller_ss(K, P.n_u if n_u is None else n_u, P.n_y if n_y is None else n_y)
     if omega is None:
         base = frequency_grid(P.system if hasattr(P, "system") else P)
         omega = np.logspace(
@@ -295,8 +294,7 @@ def reduce_controller(
             Kr = balanced_reduction(K, order, method)
         t = time.perf_counter()
         cert = certify_loop(P, Kr, st, omega, sweep_unstable=False, **kw)
-        wpk = float(cert.mu.peak_upper_frequency) if cert.mu is not None else float("nan")
-        cache[order] = (cert.mu_upper_grid, cert.mu_lower, wpk, cert.closed_loop, cert, Kr)
+        cache[order] = (cert.mu_upper_grid, cert.mu_lower, cert, Kr)
         log.info(
             f"reduction: order {order}: peak mu {cert.mu_upper_grid:.4g} ({cert.status.value}), "
             f"{time.perf_counter() - t:.1f} s"
@@ -333,25 +331,17 @@ def reduce_controller(
         else:
             finite = {o: v for o, v in cache.items() if o <= cap}
             chosen = min(finite, key=lambda o: finite[o][0])
-        mu, mlo, wpk, N, cert, Kr = cache[chosen]
+        mu, mlo, cert, Kr = cache[chosen]
     table = [
         {"order": int(o), "peak_mu": float(v[0]), "stable": bool(np.isfinite(v[0])), "method": method}
         for o, v in sorted(cache.items())
     ]
     meets = bool(mu <= tgt)
-    mres = MusynResult(
-        controller=Kr,
-        structure=f"reduced:{chosen}",
-        order=int(chosen),
-        peak_mu=float(mu),
-        peak_mu_lower=float(mlo),
-        peak_frequency=float(wpk),
-        mu_history=np.array([mu]),
-        gamma_history=np.array([np.nan]),
-        scalings=(),
-        closed_loop=N,
-        certificate=cert,
-        iterations=0,
+    mres = MusynResult.certified(
+        Kr,
+        f"reduced:{chosen}",
+        cert,
+        mu_history=[mu],
         seconds=time.perf_counter() - t0,
         info={"reduction": method, "full_order": n, "full_peak_mu": full_mu, "table": table},
     )

@@ -37,8 +37,8 @@ import control
 import numpy as np
 
 from polyrob.analysis.mu.frequency import freqresp
+from polyrob.controller import Controller, as_controller_ss
 from polyrob.errors import PolyrobError
-from polyrob.plant.generalized import as_controller_ss
 from polyrob.plant.loops import lft, lower_lft
 
 __all__ = [
@@ -122,12 +122,9 @@ def discretize(K, rate: float, *, method: str = "tustin", prewarp: float | None 
     rate = float(rate)
     if not (math.isfinite(rate) and rate > 0):
         raise PolyrobError(f"the sample rate must be a positive number of Hz, got {rate}")
-    if isinstance(K, control.LTI):
-        if getattr(K, "dt", 0) not in (0, None):
-            raise PolyrobError("the controller is already discrete-time")
-        Ks = as_controller_ss(K, K.noutputs, K.ninputs)
-    else:
-        Ks = as_controller_ss(K, *np.atleast_2d(np.asarray(K, float)).shape)
+    if isinstance(K, control.LTI) and getattr(K, "dt", 0) not in (0, None):
+        raise PolyrobError("the controller is already discrete-time")
+    Ks = Controller.of(K).system
     h = 1.0 / rate
     if prewarp is not None:
         prewarp = float(prewarp)

@@ -46,8 +46,8 @@ import control
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from polyrob.controller import as_controller_ss
 from polyrob.errors import PolyrobError
-from polyrob.plant.generalized import as_controller_ss
 from polyrob.validate.reference import Reference, smooth_reference, step_reference
 from polyrob.validate.sampled import simulate_sampled
 from polyrob.validate.step_metrics import SETTLING_BAND, JointMetrics, domain_check, step_metrics

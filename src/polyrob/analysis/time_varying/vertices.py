@@ -189,7 +189,7 @@ def _weight_mats(W, m: int, name: str):
     """``(A, B, C, D)`` of an ``m x m`` weight (SISO: one copy per channel); ``None`` omits it."""
     import control
 
-    from polyrob.plant.generalized import as_controller_ss
+    from polyrob.controller import as_controller_ss
 
     if W is None:
         return None
@@ -206,15 +206,10 @@ def _weight_mats(W, m: int, name: str):
 
 
 def controller_mats(K, m: int):
-    """``(A_K, B_K, C_K, D_K)`` of an ``m x m`` controller ``u = K e`` (LTI or gain)."""
-    from polyrob.plant.generalized import as_controller_ss
+    """``(A_K, B_K, C_K, D_K)`` of an ``m x m`` controller ``u = K e`` (any form :meth:`~polyrob.controller.Controller.of` takes)."""
+    from polyrob.controller import Controller
 
-    if isinstance(K, tuple) and len(K) == 4:
-        Ak, Bk, Ck, Dk = (np.asarray(X, float) for X in K)
-        nk = Ak.shape[0] if Ak.size else 0
-        return Ak.reshape(nk, nk), Bk.reshape(nk, m), Ck.reshape(m, nk), Dk.reshape(m, m)
-    Ks = as_controller_ss(K, m, m)
-    return tuple(np.asarray(X, float) for X in (Ks.A, Ks.B, Ks.C, Ks.D))
+    return Controller.of(K, m, m).matrices
 
 
 def closed_loop_vertices(vs: VertexSet, K) -> np.ndarray:

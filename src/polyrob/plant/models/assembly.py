@@ -26,7 +26,6 @@ __all__ = [
     "model_plant",
     "at_pldi_nominal",
     "check_inverse_inertia_input",
-    "torque_side_pldi",
 ]
 
 
@@ -168,16 +167,3 @@ def check_inverse_inertia_input(robot, domain, model: str) -> None:
     Ms = np.array([robot.mass_matrix(qq) for qq in q])
     if np.abs(B[:, :m]).max() > 0 or np.abs(Ms @ B[:, m:, :] - np.eye(m)).max() > 1e-8:
         raise NotApplicable(f"{robot.name}: B is not [0; M(q)^-1]; the {model} model does not apply")
-
-
-def torque_side_pldi(pldi, robot, bound_options: dict | None = None):
-    """The PLDI of the torque-side Jacobian ``N = M(q) A_low`` over ``pldi``'s domain.
-
-    The PLDI's number of samples, no progress bars and no coverage check
-    unless ``bound_options`` says otherwise.
-    """
-    from polyrob.bounds.pldi import bound_pldi
-    from polyrob.plant.models.inertia_lft import TorqueJacobians
-
-    opts = {"samples": pldi.info.get("samples"), "progress": False, "coverage": 0, **(bound_options or {})}
-    return bound_pldi(TorqueJacobians(robot), pldi.domain, **opts)

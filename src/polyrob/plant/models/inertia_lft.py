@@ -40,6 +40,7 @@ __all__ = [
     "NotApplicable",
     "AFFINE_RTOL",
     "TorqueJacobians",
+    "torque_side_pldi",
 ]
 
 #: Largest relative residual of the affine fit of ``M(q)`` that counts as exact.
@@ -141,6 +142,18 @@ class TorqueJacobians:
         return A[0], B[0]
 
 
+def torque_side_pldi(pldi, robot, bound_options: dict | None = None):
+    """The PLDI of the torque-side Jacobian ``N = M(q) A_low`` (:class:`TorqueJacobians`) over ``pldi``'s domain.
+
+    The PLDI's number of samples, no progress bars and no coverage check
+    unless ``bound_options`` says otherwise.
+    """
+    from polyrob.bounds.pldi import bound_pldi
+
+    opts = {"samples": pldi.info.get("samples"), "progress": False, "coverage": 0, **(bound_options or {})}
+    return bound_pldi(TorqueJacobians(robot), pldi.domain, **opts)
+
+
 def _factor(Mf: np.ndarray):
     """``M_f = U V`` with ``U`` (m, r), ``V`` (r, m), ``r = rank M_f`` (symmetric eigen-split)."""
     lam, Q = np.linalg.eigh(Mf)
@@ -203,7 +216,7 @@ def inertia_lft_plant(
     if a_part not in ("entries", "torque"):
         raise PolyrobError(f"unknown a_part '{a_part}': use 'entries' or 'torque'")
     torque = a_part == "torque"
-    npldi = assembly.torque_side_pldi(pldi, robot, bound_options) if torque else pldi
+    npldi = torque_side_pldi(pldi, robot, bound_options) if torque else pldi
     nidx = np.asarray(npldi.entry_index, int).reshape(-1, 3)
     if torque and np.any(nidx[:, 0] != 0):
         raise NotApplicable(f"{robot.name}: M(q) B is not constant; the lft model does not apply")

@@ -43,6 +43,7 @@ from polyrob.plant.lftplant import UncertainPlant
 from polyrob.plant.models import assembly
 from polyrob.plant.models.axes import RESIDUAL_TOL, axes_contains, axes_plant
 from polyrob.plant.models.inertia_factors import factor_ranges, inverse_channels
+from polyrob.plant.models.inertia_lft import torque_side_pldi
 
 __all__ = ["inertia_plant", "inertia_contains"]
 
@@ -96,7 +97,7 @@ def inertia_plant(
     assembly.check_inverse_inertia_input(robot, pldi.domain, "inertia")
     factors = factor_ranges(robot, pldi.domain, **(factor_options or {}))
     t0 = time.perf_counter()
-    npldi = assembly.torque_side_pldi(pldi, robot, bound_options)
+    npldi = torque_side_pldi(pldi, robot, bound_options)
     n_seconds = time.perf_counter() - t0
     tol = RESIDUAL_TOL if residual_tol is None else residual_tol
     sub = axes_plant(npldi, n_directions=n_directions, residual_tol=tol, nominal="midpoint")

@@ -6,15 +6,17 @@ See :mod:`polyrob.synthesis.fixed.structures` for the kinds and the factory.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import control
 import numpy as np
 from control.exception import ControlArgument, ControlSlycot
 from slycot.exceptions import SlycotError
 
+from polyrob.controller import Controller
 from polyrob.errors import PolyrobError
 
-__all__ = ["ControllerStructure", "as_theta", "io_labels", "as_lti", "siso_tf"]
+__all__ = ["ControllerStructure", "OrderedStructure", "as_theta", "io_labels", "as_lti", "siso_tf"]
 
 
 def as_theta(theta, n: int) -> np.ndarray:
@@ -114,16 +116,34 @@ class ControllerStructure:
         return th + spread * self.scale(th) * rng.standard_normal(th.size)
 
 
+@dataclass(frozen=True)
+class OrderedStructure(ControllerStructure):
+    """A kind named by its order ``N`` (``"tfN"``, ``"ss:N"``): the name is :attr:`prefix` then ``N``."""
+
+    #: What the name puts before ``N``.
+    prefix: ClassVar[str] = ""
+    N: int = 0
+
+    def __post_init__(self):
+        if self.N < 0:
+            raise PolyrobError(f"{self.prefix}N needs N >= 0, got {self.N}")
+
+    @property
+    def name(self) -> str:
+        return f"{self.prefix}{self.N}"
+
+
 # =================================================================== tfN
 
 
 def as_lti(K, n_u, n_y):
-    """A python-control LTI controller (a matrix becomes a static gain), sizes checked."""
-    if isinstance(K, np.ndarray) or np.isscalar(K):
-        Dk = np.atleast_2d(np.asarray(K, float))
-        K = control.ss(np.zeros((0, 0)), np.zeros((0, Dk.shape[1])), np.zeros((Dk.shape[0], 0)), Dk)
+    """A python-control LTI controller, sizes checked; a transfer function stays one (its entries are fitted as given).
+
+    Any other form (a gain, a 4-tuple, a :class:`~polyrob.controller.Controller`)
+    goes through :meth:`Controller.of <polyrob.controller.Controller.of>`.
+    """
     if not isinstance(K, control.LTI):
-        raise PolyrobError(f"a controller must be a python-control LTI system, got {type(K).__name__}")
+        return Controller.of(K, n_u, n_y).system
     if (K.noutputs, K.ninputs) != (n_u, n_y):
         raise PolyrobError(f"the controller is {K.noutputs}x{K.ninputs}; the structure needs {n_u}x{n_y}")
     if K.dt not in (0, None):
