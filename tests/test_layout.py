@@ -11,7 +11,9 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "polyrob"
-MAX_LINES = 450
+#: A smell guard, not a target: past it a module surely holds more than one topic.  Modules are split
+#: where their topics part, never at a count (a cap just above the largest module had them stop at 400).
+MAX_LINES = 600
 
 
 def _modules() -> dict[str, Path]:

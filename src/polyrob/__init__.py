@@ -26,17 +26,7 @@ from __future__ import annotations
 import importlib
 import logging
 
-from polyrob.errors import (
-    ArgumentError,
-    BoundsError,
-    CertificationError,
-    ControllerFileError,
-    DomainError,
-    PolyrobError,
-    RobotError,
-    SolverError,
-    SynthesisError,
-)
+from polyrob import errors
 
 __version__ = "0.1.0"
 
@@ -73,6 +63,7 @@ _LAZY = {
     "lpvnorm": "polyrob.analysis.lpv",
     "LpvNormResult": "polyrob.analysis.lpv",
     "musyn": "polyrob.synthesis",
+    "MusynOptions": "polyrob.synthesis",
     "MusynResult": "polyrob.synthesis",
     "reduce_controller": "polyrob.synthesis",
     "load_controller": "polyrob.io.controller",
@@ -100,6 +91,7 @@ __all__ = [
     "robperf",
     "lpvnorm",
     "musyn",
+    "MusynOptions",
     "reduce_controller",
     "load_controller",
     "save_controller",
@@ -118,20 +110,14 @@ __all__ = [
     "LpvNormResult",
     "Problem",
     # errors
-    "PolyrobError",
-    "ArgumentError",
-    "RobotError",
-    "DomainError",
-    "BoundsError",
-    "CertificationError",
-    "SolverError",
-    "SynthesisError",
-    "ControllerFileError",
+    *errors.__all__,
 ]
 
 
 def __getattr__(name: str):
-    if name in _LAZY:
+    if name in errors.__all__:  # the one error hierarchy: every class of it is public here
+        value = getattr(errors, name)
+    elif name in _LAZY:
         value = getattr(importlib.import_module(_LAZY[name]), name)
     elif name in _SUBMODULES:
         value = importlib.import_module(_SUBMODULES[name])
@@ -142,4 +128,4 @@ def __getattr__(name: str):
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_LAZY) | set(_SUBMODULES))
+    return sorted(set(globals()) | set(_LAZY) | set(_SUBMODULES) | set(errors.__all__))

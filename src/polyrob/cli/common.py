@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from dataclasses import replace
 
@@ -22,6 +21,7 @@ from polyrob.cli.options import (
     robot_uncertainty_from_args,
 )
 from polyrob.errors import ArgumentError, DomainError
+from polyrob.fleet.outputs import plain
 
 __all__ = [
     "DEFAULT_ROBOT",
@@ -61,23 +61,8 @@ class HelpFormatter(argparse.HelpFormatter):
         return f"{text} (default: {default})"
 
 
-def _plain(obj):
-    """JSON-ready: non-finite floats become null (strict JSON has no NaN/inf), arrays lists."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, (str, int, bool)) or obj is None:
-        return obj
-    if hasattr(obj, "tolist"):  # numpy scalars and arrays
-        return _plain(obj.tolist())
-    return str(obj)
-
-
 def to_json(doc) -> str:
-    return json.dumps(_plain(doc), indent=2, allow_nan=False)
+    return json.dumps(plain(doc), indent=2, allow_nan=False)
 
 
 _LOG_HANDLER = None

@@ -51,6 +51,18 @@ def number(text: str, option: str, *, finite: bool = True) -> float:
     return value
 
 
+def _per_joint(text: str, option: str, value):
+    """``JOINT=V,...`` as a mapping, else the list of plain values, each read by ``value`` (a mix refused)."""
+    items = [s for s in text.split(",") if s.strip()]
+    if not items:
+        raise ArgumentError(f"{option}: empty value")
+    if all("=" in s for s in items):
+        return {k.strip(): value(v) for k, v in (s.split("=", 1) for s in items)}
+    if any("=" in s for s in items):
+        raise ArgumentError(f"{option}: mix of JOINT=VALUE and plain values in '{text}'")
+    return [value(s) for s in items]
+
+
 def parse_joint_values(text: str | None, option: str, *, ranges: bool):
     """Parse ``4``, ``4,10``, ``joint1=4,joint2=10``, ``-pi:pi`` or ``joint2=-1:1``.
 
@@ -61,9 +73,6 @@ def parse_joint_values(text: str | None, option: str, *, ranges: bool):
     """
     if text is None:
         return None
-    items = [s for s in text.split(",") if s.strip()]
-    if not items:
-        raise ArgumentError(f"{option}: empty value")
 
     def value(s):
         if ":" in s:
@@ -81,11 +90,9 @@ def parse_joint_values(text: str | None, option: str, *, ranges: bool):
             )
         return v
 
-    if all("=" in s for s in items):
-        return {k.strip(): value(v) for k, v in (s.split("=", 1) for s in items)}
-    if any("=" in s for s in items):
-        raise ArgumentError(f"{option}: mix of JOINT=VALUE and plain values in '{text}'")
-    values = [value(s) for s in items]
+    values = _per_joint(text, option, value)
+    if isinstance(values, dict):
+        return values
     if len(values) == 1:
         return values[0]
     return [v if isinstance(v, list) else [-abs(v), abs(v)] for v in values]
@@ -98,9 +105,6 @@ def parse_armature(text: str | None):
     """
     if text is None:
         return None
-    items = [s for s in text.split(",") if s.strip()]
-    if not items:
-        raise ArgumentError("--armature: empty value")
 
     def value(s):
         v = number(s, "--armature")
@@ -108,12 +112,8 @@ def parse_armature(text: str | None):
             raise ArgumentError(f"--armature: a reflected inertia must be >= 0, got '{s}'")
         return v
 
-    if all("=" in s for s in items):
-        return {k.strip(): value(v) for k, v in (s.split("=", 1) for s in items)}
-    if any("=" in s for s in items):
-        raise ArgumentError(f"--armature: mix of JOINT=VALUE and plain values in '{text}'")
-    values = [value(s) for s in items]
-    return values[0] if len(values) == 1 else values
+    values = _per_joint(text, "--armature", value)
+    return values[0] if isinstance(values, list) and len(values) == 1 else values
 
 
 def parse_pose(text: str | None):

@@ -15,7 +15,7 @@ import numpy as np
 
 from polyrob.errors import DomainError
 
-__all__ = ["GROUPS", "GROUP_TEXT", "read_spec", "apply_spec", "joint_range"]
+__all__ = ["GROUPS", "GROUP_TEXT", "read_spec", "apply_spec", "joint_range", "box_from_dict"]
 
 #: The groups of a torque-box domain, in the order of its box.
 GROUPS = ("q", "qdot", "u")
@@ -111,3 +111,16 @@ def joint_range(value, group, where):
     if lo > hi:
         raise DomainError(f"{where}: {text} range [{lo:g}, {hi:g}] is inverted: give lower <= upper")
     return float(lo), float(hi)
+
+
+def box_from_dict(data, groups, source: str) -> list[np.ndarray]:
+    """``[lower, upper]`` arrays of each group of a box as a domain's ``to_dict`` writes it (``data[group][joint]``).
+
+    Raises ``KeyError`` or ``TypeError`` where an entry is missing (the caller
+    names what it reads), :class:`DomainError` where one is not a range.
+    """
+    arrays = []
+    for g in groups:
+        pairs = [joint_range(data[g][n], g, f"{source}: '{g}' entry of joint '{n}'") for n in data["joints"]]
+        arrays += [np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])]
+    return arrays

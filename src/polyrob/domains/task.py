@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from polyrob.domains.joint_box import JointBox
-from polyrob.domains.spec import joint_range
+from polyrob.domains.spec import box_from_dict, joint_range
 from polyrob.domains.torque_box import Domain, unit_design
 from polyrob.errors import DomainError
 
@@ -258,10 +258,7 @@ class TaskDomain(JointBox):
         """The task domain :meth:`to_dict` wrote; ``robot`` maps its accelerations to torques."""
         try:
             names = tuple(data["joints"])
-            arrays = []
-            for g in _BOX:
-                pairs = [joint_range(data[g][n], g, f"{source}: '{g}' entry of joint '{n}'") for n in names]
-                arrays += [np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])]
+            arrays = box_from_dict(data, _BOX, source)
             pose = data["pose"]
         except (KeyError, TypeError) as exc:
             raise DomainError(f"{source}: not a task domain as to_dict writes it (missing {exc})") from None

@@ -34,7 +34,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from polyrob.domains.joint_box import JointBox
-from polyrob.domains.spec import GROUP_TEXT, GROUPS, apply_spec, joint_range, read_spec
+from polyrob.domains.spec import GROUP_TEXT, GROUPS, apply_spec, box_from_dict, read_spec
 from polyrob.errors import DomainError
 
 __all__ = ["Domain", "JointBox", "unit_design"]
@@ -273,10 +273,7 @@ class Domain(JointBox):
         """The domain :meth:`to_dict` wrote; ``source`` (e.g. the file it was read from) names it in errors."""
         try:
             names = tuple(data["joints"])
-            arrays = []
-            for g in GROUPS:
-                pairs = [joint_range(data[g][n], g, f"{source}: '{g}' entry of joint '{n}'") for n in names]
-                arrays += [np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])]
+            arrays = box_from_dict(data, GROUPS, source)
         except (KeyError, TypeError) as exc:
             raise DomainError(f"{source}: not a domain as to_dict writes it (missing {exc})") from None
         return cls(names, *arrays, name=data.get("name", "custom"))

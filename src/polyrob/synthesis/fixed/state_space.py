@@ -10,13 +10,13 @@ from control.exception import ControlArgument, ControlSlycot
 from slycot.exceptions import SlycotError
 
 from polyrob.errors import PolyrobError
-from polyrob.synthesis.fixed.base import ControllerStructure, as_lti, as_theta
+from polyrob.synthesis.fixed.base import OrderedStructure, as_lti, as_theta
 
 __all__ = ["StateSpaceStructure"]
 
 
 @dataclass(frozen=True)
-class StateSpaceStructure(ControllerStructure):
+class StateSpaceStructure(OrderedStructure):
     """A state-space controller of order ``N`` with free ``A, B, C, D`` (``"ss:N"``).
 
     ``θ = [vec(A), vec(B), vec(C), vec(D)]`` (row-major).  Over-parametrised
@@ -31,15 +31,8 @@ class StateSpaceStructure(ControllerStructure):
     36
     """
 
+    prefix = "ss:"
     N: int = 4
-
-    def __post_init__(self):
-        if self.N < 0:
-            raise PolyrobError(f"ss:N needs N >= 0, got {self.N}")
-
-    @property
-    def name(self) -> str:
-        return f"ss:{self.N}"
 
     @property
     def n_params(self) -> int:

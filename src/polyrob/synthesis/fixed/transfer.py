@@ -7,8 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyrob.errors import PolyrobError
-from polyrob.synthesis.fixed.base import ControllerStructure, as_lti, as_theta, siso_tf
+from polyrob.synthesis.fixed.base import OrderedStructure, as_lti, as_theta, siso_tf
 
 __all__ = ["TransferFunctionStructure", "hurwitz_factors", "tf_string"]
 
@@ -34,7 +33,7 @@ def hurwitz_factors(den: np.ndarray) -> tuple[np.ndarray, list[tuple[float, floa
 
 
 @dataclass(frozen=True)
-class TransferFunctionStructure(ControllerStructure):
+class TransferFunctionStructure(OrderedStructure):
     """Each ``K_ij`` a stable proper transfer function of order ``N`` (``"tfN"``).
 
     Parameters of entry ``(i, j)`` (row-major, ``2N + 1`` each): first the
@@ -55,15 +54,8 @@ class TransferFunctionStructure(ControllerStructure):
     ([1.0, 3.0, 2.0], [0.0, 3.0, 1.0])
     """
 
+    prefix = "tf"
     N: int = 3
-
-    def __post_init__(self):
-        if self.N < 0:
-            raise PolyrobError(f"tfN needs N >= 0, got {self.N}")
-
-    @property
-    def name(self) -> str:
-        return f"tf{self.N}"
 
     @property
     def per_entry(self) -> int:
