@@ -50,14 +50,14 @@ __all__ = ["ReductionResult", "reduce_controller", "stable_unstable_split", "bal
 class ReductionResult:
     """A reduced controller and the μ-order trade-off behind it.
 
+    The reduced controller's own figures are its :attr:`result`'s
+    (``controller``, ``order``, ``peak_mu``, ``peak_mu_lower``,
+    ``certificate`` read them from there).
+
     Attributes
     ----------
-    controller : control.StateSpace
-        The reduced controller (``order`` states).
-    order : int
-    peak_mu : float
-        Certified peak μ of ``Fl(P, K_r)`` (``inf`` if the loop is unstable).
-    peak_mu_lower : float
+    result : MusynResult
+        The reduced controller as a :class:`MusynResult` (``structure="reduced:N"``).
     target : float
         The μ the order had to reach (default: full-order μ × (1 + tol)).
     meets_target : bool
@@ -73,16 +73,10 @@ class ReductionResult:
     n_unstable : int
         Poles kept exactly (unstable or on the axis).
     method : str
-    certificate : MuBoundsResult or None
-    result : MusynResult
-        The reduced controller as a :class:`MusynResult` (``structure="reduced:N"``).
     seconds : float
     """
 
-    controller: control.StateSpace
-    order: int
-    peak_mu: float
-    peak_mu_lower: float
+    result: MusynResult
     target: float
     meets_target: bool
     full_order: int
@@ -91,9 +85,30 @@ class ReductionResult:
     hankel: np.ndarray
     n_unstable: int
     method: str
-    certificate: object
-    result: MusynResult
     seconds: float = 0.0
+
+    @property
+    def controller(self) -> control.StateSpace:
+        """The reduced controller (``order`` states)."""
+        return self.result.controller
+
+    @property
+    def order(self) -> int:
+        return self.result.order
+
+    @property
+    def peak_mu(self) -> float:
+        """Certified peak μ of ``Fl(P, K_r)`` (``inf`` if the loop is unstable)."""
+        return self.result.peak_mu
+
+    @property
+    def peak_mu_lower(self) -> float:
+        return self.result.peak_mu_lower
+
+    @property
+    def certificate(self):
+        """The reduced loop's :class:`~polyrob.analysis.certificate.Certificate`."""
+        return self.result.certificate
 
     def summary(self) -> dict:
         """Plain figures for reports and JSON."""
@@ -346,19 +361,5 @@ def reduce_controller(
         info={"reduction": method, "full_order": n, "full_peak_mu": full_mu, "table": table},
     )
     return ReductionResult(
-        controller=Kr,
-        order=int(chosen),
-        peak_mu=float(mu),
-        peak_mu_lower=float(mlo),
-        target=tgt,
-        meets_target=meets,
-        full_order=int(n),
-        full_peak_mu=float(full_mu),
-        table=table,
-        hankel=hsv,
-        n_unstable=int(nu),
-        method=method,
-        certificate=cert,
-        result=mres,
-        seconds=time.perf_counter() - t0,
+        mres, tgt, meets, int(n), float(full_mu), table, hsv, int(nu), method, seconds=time.perf_counter() - t0
     )
