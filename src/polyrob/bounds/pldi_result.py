@@ -2,7 +2,8 @@
 
 :class:`PLDI` is what :func:`polyrob.bounds.pldi.bound_pldi` returns; it is
 saved as two files from one stem (:func:`save_pldi`): ``stem.json``, readable
-(robot, domain, intervals, notes; ``format`` ``polyrob.pldi/1``), and
+(robot, domain, intervals, notes, the provenance of :mod:`polyrob.provenance`;
+``format`` ``polyrob.pldi/1``), and
 ``stem.npz`` with every array.  :func:`load_pldi` checks the format.
 
 Examples
@@ -256,6 +257,7 @@ def save_pldi(pldi: PLDI, path) -> tuple[Path, Path]:
         },
         "info": pldi.info,
         "arrays": npz.name,
+        "provenance": _provenance(pldi).to_dict(),
     }
     arrays = {k: getattr(pldi, k) for k in _ARRAYS}
     arrays.update(
@@ -269,6 +271,18 @@ def save_pldi(pldi: PLDI, path) -> tuple[Path, Path]:
     atomic_write(npz, lambda f: np.savez_compressed(f, **arrays), binary=True)
     atomic_write(path, lambda f: f.write(json.dumps(meta, indent=2, default=json_default)))
     return path, npz
+
+
+def _provenance(pldi: PLDI):
+    """What made the PLDI file: versions, command, the URDF's and the domain's hashes (polyrob.provenance)."""
+    from polyrob.provenance import Provenance
+
+    return Provenance.capture(
+        robot=pldi.source_robot,
+        urdf=pldi.robot_source,
+        description={"robot": pldi.robot_name, "domain": pldi.domain.to_dict()},
+        function="polyrob.bounds.pldi_result.save_pldi",
+    )
 
 
 def load_pldi(path) -> PLDI:

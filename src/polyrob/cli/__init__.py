@@ -77,7 +77,10 @@ def main(argv=None) -> int:
     try:
         with guard:
             args = build_parser().parse_args(argv)
-            return _run(args, guard)
+            from polyrob.provenance import command_line
+
+            with command_line(sys.argv[1:] if argv is None else argv, args):  # what written files record
+                return _run(args, guard)
     except KeyboardInterrupt:
         pass
     except Exception as exc:

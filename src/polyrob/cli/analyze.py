@@ -87,11 +87,20 @@ def cmd_analyze(args) -> int:
     from polyrob.pipeline.matching import check_controller_size
 
     check_controller_size(K, robot, source)  # its size first: a file of another size is not for this robot
+    from polyrob.provenance import Provenance, differences
+
+    stored, mismatches = Provenance.of_file(args.controller), []
 
     def check(known):  # robot, domain and weights are known before the bounding step
+        if stored is not None:  # what differs from what the file was certified for, one line each
+            uncertainty = {"requested": args.uncertainty, "merge_symmetric": bool(args.merge_symmetric)}
+            now = Provenance.capture(robot=robot, description={**known, "uncertainty": uncertainty})
+            mismatches.extend(f"{source}: {line}" for line in differences(stored, now))
+            for line in mismatches:
+                out.line(line)
         check_controller_problem(info, known, source)
 
-    problem = problem_from_args(robot, args, out, check=check if info else None)
+    problem = problem_from_args(robot, args, out, check=check if info or stored else None)
     if info:
         check_controller_problem(info, problem, source)
     omega = frequency_grid(*omega_spec) if omega_spec else None
@@ -117,6 +126,7 @@ def cmd_analyze(args) -> int:
         "uncertainty": problem.model,
         "parameters": int(problem.unc.n_params),
         "problem_compared": bool(info),
+        "provenance_differences": mismatches,
         **a.summary(),
     }
     out.document(report)

@@ -126,11 +126,13 @@ def print_input_check(problem, out) -> dict:
 
 def save_design(design, problem, args, out, info_extra=None, certificate_extra=None, path=None):
     from polyrob.io.controller import save_controller
+    from polyrob.provenance import Provenance
 
     info = problem.description()
     info.update(info_extra or {})
     cert = dict(design.record, **(certificate_extra or {}))
-    path = save_controller(design.controller, path or args.output, certificate=cert, info=info)
+    made = Provenance.capture(robot=problem.robot, description=info)  # the robot's URDF hashed too
+    path = save_controller(design.controller, path or args.output, certificate=cert, info=info, provenance=made)
     out.line(f"wrote {path}")
     return str(path)
 

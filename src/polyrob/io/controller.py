@@ -9,7 +9,11 @@ transfer functions (per element, as the paper prints K*)::
     {"format": "polyrob.controller/1", "type": "tf",
      "num": [[[b2, b1, b0], ...], ...], "den": [[[a3, a2, a1, a0], ...], ...]}
 
-plus free-form ``"certificate"`` and ``"info"`` mappings.  ``info`` holds
+plus free-form ``"certificate"`` and ``"info"`` mappings and a
+``"provenance"`` one (:class:`polyrob.provenance.Provenance`: polyrob's and
+the libraries' versions, the command, the date, the URDF's and the problem
+inputs' hashes; a file without one, written before it was recorded, reads
+the same).  ``info`` holds
 what the controller was designed for (robot, domain, weight
 hyperparameters, uncertainty model, see
 :meth:`polyrob.pipeline.Problem.description`) so that an analysis can
@@ -48,8 +52,10 @@ FORMAT = "polyrob.controller/1"
 _FAMILY, _VERSION = FORMAT.split("/")
 
 
-def save_controller(K, path, *, certificate: dict | None = None, info: dict | None = None) -> Path:
-    """Write ``K`` (StateSpace or TransferFunction) and its certificate to ``path``.
+def save_controller(
+    K, path, *, certificate: dict | None = None, info: dict | None = None, provenance=None
+) -> Path:
+    """Write ``K`` (StateSpace or TransferFunction), its certificate and its provenance to ``path``.
 
     Parameters
     ----------
@@ -60,6 +66,10 @@ def save_controller(K, path, *, certificate: dict | None = None, info: dict | No
     info : dict, optional
         What the controller was made for (robot, domain, weights, uncertainty
         model), compared by :func:`polyrob.pipeline.check_controller_problem`.
+    provenance : Provenance, optional
+        What made it (:meth:`polyrob.provenance.Provenance.capture` with the
+        robot, whose URDF is then hashed); default: captured here from
+        ``info``, without the robot's files.
 
     Returns
     -------
@@ -75,7 +85,12 @@ def save_controller(K, path, *, certificate: dict | None = None, info: dict | No
     else:
         K = control.ss(K)
         data = {"type": "ss", **{k: np.asarray(getattr(K, k), float).tolist() for k in "ABCD"}}
+    if provenance is None:
+        from polyrob.provenance import Provenance
+
+        provenance = Provenance.capture(description=info, function="polyrob.io.controller.save_controller")
     doc = {"format": FORMAT, **data, "certificate": certificate or {}, "info": info or {}}
+    doc["provenance"] = provenance.to_dict()
     atomic_write(path, lambda f: f.write(json.dumps(doc, indent=1, default=json_default)))
     return path
 
@@ -132,7 +147,7 @@ def read_controller_file(path) -> dict:
     _check_format(path, doc)
     if doc.get("type") not in ("ss", "tf"):
         raise ControllerFileError(f'{path}: a controller file needs "type": "ss" or "tf" (see polyrob.io.controller)')
-    for key in ("info", "certificate"):
+    for key in ("info", "certificate", "provenance"):
         if not isinstance(doc.get(key, {}), dict):
             raise ControllerFileError(f'{path}: "{key}" must be a JSON object')
     return doc

@@ -221,19 +221,24 @@ def _paper_reference(problem) -> dict:
     return {"paper K*": paper_controller()}
 
 
-def save_run_certificates(run_dir, certificates: dict, controller: str = "K.json", notes=()) -> Path:
+def save_run_certificates(run_dir, certificates: dict, controller: str = "K.json", notes=(), provenance=None) -> Path:
     """Write ``run_dir/certificate.json``: the records of ``certificates`` for the controller file ``controller``.
 
     ``{"format": RUN_CERTIFICATES_FORMAT, "controller": "K.json", "certificates": {name: record},
     "notes": [...]}``, records as :func:`~polyrob.report.certificates.certificate_record` makes them;
-    ``notes`` (e.g. what the controller certifies instead) are shown again when the report is rebuilt.
+    ``notes`` (e.g. what the controller certifies instead) are shown again when the report is rebuilt;
+    ``"provenance"``: ``provenance`` (a :class:`~polyrob.provenance.Provenance`; default: captured here).
     """
+    from polyrob.provenance import Provenance
+
     path = Path(run_dir) / RUN_CERTIFICATES
+    provenance = provenance or Provenance.capture(function="polyrob.report.build.save_run_certificates")
     doc = {
         "format": RUN_CERTIFICATES_FORMAT,
         "controller": str(controller),
         "certificates": {str(k): _strict(certificate_record(v)) for k, v in certificates.items()},
         "notes": list(dict.fromkeys(str(n) for n in notes)),
+        "provenance": provenance.to_dict(),
     }
     atomic_write(path, lambda f: f.write(json.dumps(doc, indent=1, default=json_default, allow_nan=False)))
     return path
@@ -349,6 +354,7 @@ def write_run_report(
     if not (run / "pldi.json").exists():
         problem.pldi.save(run / "pldi.json")
     val = validate_controller(problem, K, **options)
+    made, provenance = _provenance(run, problem, controller_file)
     comp = {**_paper_reference(problem), **(controllers or {})}
     options = ReportOptions(
         title=title,
@@ -364,8 +370,23 @@ def write_run_report(
         mu_curves=val.mu_curves,
         notes=tuple(notes) + tuple(val.notes),
         problem_summary=problem_summary(problem, K, controller_words),
+        provenance=provenance,
     )
     files = write_report(run, options)
     if certificates:
-        save_run_certificates(run, certificates, controller_file, notes)
+        save_run_certificates(run, certificates, controller_file, notes, provenance=made)
     return files
+
+
+def _provenance(run: Path, problem, controller_file: str):
+    """The report's own provenance, and ``{column: Provenance}`` with the controller file's when it records one."""
+    from polyrob.provenance import Provenance
+
+    made = Provenance.capture(
+        robot=problem.robot, description=problem.description(), function="polyrob.report.build.write_run_report"
+    )
+    columns = {"this report": made}
+    stored = Provenance.of_file(run / controller_file)
+    if stored is not None:
+        columns[f"the controller file {controller_file}"] = stored
+    return made, columns

@@ -201,6 +201,9 @@ class ReportOptions:
     problem_summary : dict, optional
         ``{"robot": ..., "domain": ..., "controller": ...}``: the lines under
         the certificates (what was certified, for what motion, with what).
+    provenance : dict, optional
+        ``{column title: Provenance}``: the "Provenance" section and the footer
+        (:func:`polyrob.report.provenance.add_provenance`).
     """
 
     title: str | None = None
@@ -216,6 +219,7 @@ class ReportOptions:
     mu_curves: dict | None = None
     notes: tuple = ()
     problem_summary: dict | None = None
+    provenance: dict | None = None
 
 
 def write_report(run_dir, options: ReportOptions = ReportOptions()) -> ReportFiles:
@@ -413,6 +417,11 @@ def write_report(run_dir, options: ReportOptions = ReportOptions()) -> ReportFil
         validation["discretization"] = discretization
 
 
+    if o.provenance:
+        from polyrob.report.provenance import add_provenance
+
+        add_provenance(doc, o.provenance)
+        validation["provenance"] = {k: p.to_dict() for k, p in o.provenance.items()}
     page, md = doc.text()
     h, m = run / "report.html", run / "report.md"
     v = run / "validation.json"
