@@ -94,7 +94,9 @@ def test_pldi_file_records_its_robot_and_domain(synthesised):
 
 def test_analyze_says_nothing_when_robot_and_problem_match(synthesised, capsys):
     d, _ = synthesised
-    code, out, _ = run(capsys, "analyze", "planar_2r", "--pldi", d / "pldi.json", "--controller", d / "K.json", *ANALYZE)
+    code, out, _ = run(
+        capsys, "analyze", "planar_2r", "--pldi", d / "pldi.json", "--controller", d / "K.json", *ANALYZE
+    )
     assert code == 1 and "verdict:" in out  # analysed (VIOLATED)
     assert "certified for" not in out and "differ" not in out
 

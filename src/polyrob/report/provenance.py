@@ -18,8 +18,8 @@ def _versions(mapping: dict) -> str:
     return ", ".join(f"{name} {version}" for name, version in mapping.items()) or "not recorded"
 
 
-def _file(path, digest) -> str:
-    return f"{digest} ({path})" if digest else "none"
+def _file(path, digest, absent: str) -> str:
+    return f"{digest} ({path})" if digest else absent
 
 
 def provenance_rows(columns: dict) -> list[tuple]:
@@ -32,12 +32,15 @@ def provenance_rows(columns: dict) -> list[tuple]:
         ("libraries", lambda p: _versions(p.dependencies)),
         ("solvers (cvxpy)", lambda p: _versions(p.solvers)),
         ("robot", lambda p: p.robot or "not recorded"),
-        ("URDF sha256", lambda p: _file(p.urdf, p.urdf_sha256)),
-        ("SRDF sha256", lambda p: _file(p.srdf, p.srdf_sha256)),
+        ("URDF sha256", lambda p: _file(p.urdf, p.urdf_sha256, "no URDF file (an analytic model)")),
+        ("SRDF sha256", lambda p: _file(p.srdf, p.srdf_sha256, "no SRDF file")),
         ("problem inputs sha256", lambda p: p.inputs_sha256 or "not recorded"),
         (
             "input files sha256",
-            lambda p: "; ".join(f"{k} {v.get('path')}: {v.get('sha256')}" for k, v in p.input_files.items()) or "none",
+            lambda p: (
+                "; ".join(f"{k} {v.get('path')}: {v.get('sha256')}" for k, v in p.input_files.items())
+                or "no file given (the problem from options)"
+            ),
         ),
     )
     return [(name, *(value(p) for p in columns.values())) for name, value in fields]
