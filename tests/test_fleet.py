@@ -7,11 +7,13 @@ D-K synthesis take about a second each) and a name that does not exist.
 from __future__ import annotations
 
 import functools
+import hashlib
 import json
 import math
 import pickle
 import re
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -187,6 +189,10 @@ def test_cli_batch_writes_files_and_a_summary(pendulums, tmp_path, capsys):
     assert doc["certified"] == int(a["certified"])
     cert = json.loads((out / "pendulum_a" / "certificate.json").read_text())
     assert cert["row"] == rows["pendulum_a"]
+    # traceability: the URDF's bytes hashed, in the certificate and the controller file (polyrob.provenance)
+    urdf_sha256 = hashlib.sha256(Path(pendulums[0]).read_bytes()).hexdigest()
+    assert cert["provenance"]["urdf_sha256"] == urdf_sha256
+    assert json.loads((out / "pendulum_a" / "controller.json").read_text())["provenance"]["urdf_sha256"] == urdf_sha256
     K = load_controller(out / "pendulum_a" / "controller.json")
     assert np.asarray(K.A).shape == (rows["pendulum_a"]["order"],) * 2
     assert json.loads((out / MISSING / "certificate.json").read_text())["row"]["ok"] is False

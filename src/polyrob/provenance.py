@@ -68,6 +68,7 @@ __all__ = [
     "problem_inputs",
     "differences",
     "command_line",
+    "robot_urdf",
 ]
 
 #: Distributions whose versions a result records (the PyPI names).
@@ -211,6 +212,22 @@ def _robot_files(robot) -> tuple[str | None, str | None]:
 def _file_path(path) -> str | None:
     """``path`` made absolute when it names a file (a robot's ``source`` may be a description)."""
     return os.path.abspath(path) if path and Path(str(path)).is_file() else None
+
+
+def robot_urdf(robot) -> str | None:
+    """The URDF file a robot name or path names (as :func:`polyrob.load_robot` finds it); ``None``: none.
+
+    An analytic model, an unknown name or nothing given has none.
+    """
+    if not robot:
+        return None
+    from polyrob.errors import RobotError
+    from polyrob.model.robots import resolve_urdf
+
+    try:
+        return _file_path(resolve_urdf(str(robot)))
+    except RobotError:
+        return None
 
 
 def files_of_args(args) -> dict:

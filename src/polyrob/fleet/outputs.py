@@ -9,6 +9,8 @@ Layout of ``out_dir``::
     ROBOT/certificate.json  the robot's row, certificate, problem and details
                             (synthesis, analysis, validation), or its error
 
+Both robot files carry the provenance of :mod:`polyrob.provenance`.
+
 Every file is written atomically (temporary file, then rename); the summary
 is rewritten as each robot finishes, so an interrupted batch leaves a
 summary of the robots done.
@@ -67,6 +69,13 @@ def write_robot(out_dir, result) -> dict:
     """Write one robot's files; returns ``{"certificate": path, "controller": path or None}``."""
     folder = Path(out_dir) / robot_dir_name(result.name)
     paths = {"certificate": str(folder / "certificate.json"), "controller": None}
+    from polyrob.provenance import Provenance, robot_urdf
+
+    made = Provenance.capture(
+        urdf=robot_urdf((result.problem or {}).get("job", {}).get("robot") or result.robot),
+        description=result.problem,
+        function="polyrob.fleet.outputs.write_robot",
+    )
     if result.ok and result.controller is not None:
         from polyrob.io.controller import save_controller
 
@@ -76,6 +85,7 @@ def write_robot(out_dir, result) -> dict:
                 folder / "controller.json",
                 certificate=plain(result.certificate),
                 info=plain(result.problem),
+                provenance=made,
             )
         )
     doc = {
@@ -84,6 +94,7 @@ def write_robot(out_dir, result) -> dict:
         "problem": result.problem,
         "details": result.details,
         "files": paths,
+        "provenance": made.to_dict(),
     }
     _dump(folder / "certificate.json", doc)
     return paths
