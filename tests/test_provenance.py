@@ -185,6 +185,19 @@ def test_report_and_certificate_record_the_command_and_hashes(synthesised, tmp_p
     assert val["the controller file K.json"]["command"] == "polyrob " + " ".join(synth_argv)
 
 
+def test_export_names_the_controller_file_it_came_from(synthesised, tmp_path, capsys):
+    """`polyrob export`: the C's JSON records the export's command and the controller file's hash and provenance."""
+    d, synth_argv = synthesised
+    code, _, _ = run(capsys, "export", d / "K.json", "--rate", "1000", "-o", tmp_path, "--quiet")
+    assert code == 0
+    doc = json.loads((tmp_path / "controller.json").read_text())
+    assert doc["provenance"]["command"] == f"polyrob export {d / 'K.json'} --rate 1000 -o {tmp_path} --quiet"
+    source = doc["controller_file"]
+    assert source["sha256"] == sha256_of(d / "K.json")
+    assert source["provenance"]["command"] == "polyrob " + " ".join(synth_argv)
+    assert source["provenance"]["urdf_sha256"] == sha256_of(PLANAR_URDF)
+
+
 def test_library_calls_and_old_files(tmp_path):
     """A library call is named as one; a file written before provenance loads and records none."""
     import control

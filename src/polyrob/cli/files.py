@@ -109,6 +109,7 @@ def cmd_export(args) -> int:
 
     from polyrob.cli.analyze import load_controller_args
     from polyrob.errors import PolyrobError
+    from polyrob.provenance import exported_from
     from polyrob.validate.export_c import check_export_word_length, export_controller
 
     out_dir = check_output_dir(args.output)
@@ -146,6 +147,7 @@ def cmd_export(args) -> int:
         real=args.real,
         name=args.name,
         inner=info.get("inner"),
+        extra=exported_from(args.controller),  # the C's JSON names the controller file it came from
     )
     doc = res.summary()
     if info.get("inner"):
