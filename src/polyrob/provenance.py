@@ -22,9 +22,8 @@ mapping, :meth:`Provenance.to_dict` of a :class:`Provenance` that
 * ``input_files``: the SHA-256 of each file the command read its problem
   from (``--domain FILE``, ``--pldi`` and its arrays, ``--init FILE``).
 
-An exported controller's JSON (``polyrob export``) records its own
-provenance and the SHA-256 and provenance of the controller file it came
-from (:func:`exported_from`).
+``polyrob export`` records the export's provenance and the controller
+file's SHA-256 and provenance beside the C code.
 
 :func:`differences` says, one line per difference, how the robot and the
 problem of a file differ from the ones it is used with (``polyrob analyze``
@@ -73,7 +72,6 @@ __all__ = [
     "differences",
     "command_line",
     "robot_urdf",
-    "exported_from",
 ]
 
 #: Distributions whose versions a result records (the PyPI names).
@@ -149,14 +147,10 @@ def problem_inputs(description: Mapping | None, robot=None) -> dict:
         out["weights"] = dict(d["weights"])
     if isinstance(d.get("uncertainty"), Mapping):
         out["uncertainty"] = {k: d["uncertainty"][k] for k in ("requested", "merge_symmetric") if k in d["uncertainty"]}
-    if "reflected_inertia" in d:
-        out["reflected_inertia"] = str(d["reflected_inertia"])
-    elif robot is not None:  # as Problem.description words it
-        out["reflected_inertia"] = str(getattr(robot, "reflected_inertia", "unknown"))
-    if "inner" in d:
-        out["inner"] = str(d["inner"])
-    elif robot is not None and hasattr(robot, "inner") and hasattr(robot, "words"):
-        out["inner"] = robot.words()
+    if "reflected_inertia" in d or robot is not None:  # worded as Problem.description words it
+        out["reflected_inertia"] = str(d.get("reflected_inertia", getattr(robot, "reflected_inertia", "unknown")))
+    if "inner" in d or hasattr(robot, "inner"):  # an inner loop's words
+        out["inner"] = str(d["inner"]) if "inner" in d else robot.words()
     return _plain(out)
 
 
@@ -393,23 +387,6 @@ class Provenance:
         if self.inputs_sha256:
             parts.append(f"inputs sha256 {self.inputs_sha256[:SHORT]}")
         return " · ".join(parts)
-
-
-def exported_from(controller) -> dict:
-    """What an exported controller's JSON records: the export's provenance and the controller file it came from.
-
-    ``{"provenance": ..., "controller_file": {"path", "sha256", "provenance"}}``;
-    the file's own provenance is ``None`` when it records none, and a
-    controller that is no file (``paper``) is named as given.
-    """
-    made = Provenance.capture(function="polyrob.validate.export_c.export_controller")
-    path = Path(str(controller))
-    if not path.is_file():
-        return {"provenance": made.to_dict(), "controller_file": {"path": str(controller)}}
-    stored = Provenance.of_file(path)
-    source = {"path": os.path.abspath(path), "sha256": sha256_file(path)}
-    source["provenance"] = None if stored is None else stored.to_dict()
-    return {"provenance": made.to_dict(), "controller_file": source}
 
 
 # --------------------------------------------------------------------------- comparing

@@ -104,12 +104,26 @@ def _export_problem(args, info: dict, path, out):
     )
 
 
+def _exported_from(controller) -> dict:
+    """The export's provenance and the controller file's (path, SHA-256, its own provenance or ``None``)."""
+    from pathlib import Path
+
+    from polyrob.provenance import Provenance, sha256_file
+
+    made = Provenance.capture(function="polyrob.validate.export_c.export_controller").to_dict()
+    path = Path(str(controller))
+    if not path.is_file():  # `paper`: the paper's K*
+        return {"provenance": made, "controller_file": {"path": str(controller)}}
+    stored = Provenance.of_file(path)
+    source = {"path": str(path.resolve()), "sha256": sha256_file(path)}
+    return {"provenance": made, "controller_file": {**source, "provenance": stored and stored.to_dict()}}
+
+
 def cmd_export(args) -> int:
     import sys
 
     from polyrob.cli.analyze import load_controller_args
     from polyrob.errors import PolyrobError
-    from polyrob.provenance import exported_from
     from polyrob.validate.export_c import check_export_word_length, export_controller
 
     out_dir = check_output_dir(args.output)
@@ -147,7 +161,7 @@ def cmd_export(args) -> int:
         real=args.real,
         name=args.name,
         inner=info.get("inner"),
-        extra=exported_from(args.controller),  # the C's JSON names the controller file it came from
+        extra=_exported_from(args.controller),  # the C's JSON names the controller file it came from
     )
     doc = res.summary()
     if info.get("inner"):
