@@ -228,3 +228,17 @@ def test_round_trip_and_differences():
     other = Provenance.capture(robot=robot, description=dict(description, domain=wider.to_dict()), function="f")
     (line,) = differences(p, other)
     assert line.startswith("problem inputs differ from those it was certified for (domain u): sha256 ")
+
+
+def test_srdf_is_hashed_and_compared():
+    """panda's SRDF (its reference poses) is part of the robot: hashed, and a change named in one line."""
+    import dataclasses
+    from pathlib import Path
+
+    robot = polyrob.load_robot("panda")
+    p = Provenance.capture(robot=robot, function="f", now=WHEN)
+    assert p.srdf_sha256 == sha256_of(Path(robot.srdf)) and p.urdf_sha256 == sha256_of(Path(robot.source))
+    edited = dataclasses.replace(p, srdf_sha256="0" * 64)
+    (line,) = differences(edited, p)
+    assert line.startswith("SRDF differs from the one it was certified for: sha256 " + p.srdf_sha256[:12])
+    assert line.endswith(f"{'0' * 12} ({robot.srdf}) certified")

@@ -95,9 +95,9 @@ def cmd_analyze(args) -> int:
         if stored is not None:  # what differs from what the file was certified for, one line each
             uncertainty = {"requested": args.uncertainty, "merge_symmetric": bool(args.merge_symmetric)}
             now = Provenance.capture(robot=robot, description={**known, "uncertainty": uncertainty})
-            mismatches.extend(f"{source}: {line}" for line in differences(stored, now))
-            for line in mismatches:
-                out.line(line)
+            for line in differences(stored, now):
+                mismatches.append(f"{source}: {line}")
+                out.line(mismatches[-1])
         check_controller_problem(info, known, source)
 
     problem = problem_from_args(robot, args, out, check=check if info or stored else None)
