@@ -20,7 +20,8 @@ mapping, :meth:`Provenance.to_dict` of a :class:`Provenance` that
   :func:`problem_inputs`) and the SHA-256 of their canonical JSON
   (:func:`canonical_json`);
 * ``input_files``: the SHA-256 of each file the command read its problem
-  from (``--domain FILE``, ``--pldi`` and its arrays, ``--init FILE``).
+  from (``--domain``, ``--robot-uncertainty``, ``--pldi`` and its arrays,
+  ``--init``, a batch's ``--jobs``).
 
 ``polyrob export`` records the export's provenance and the controller
 file's SHA-256 and provenance beside the C code.
@@ -80,8 +81,8 @@ DEPENDENCIES = ("pin", "example-robot-data", "numpy", "scipy", "control", "slyco
 SOLVERS = ("clarabel", "scs")
 #: Keys of a domain that name it rather than bound it (a file's path, an SRDF pose's name): not hashed.
 NAMING_KEYS = ("name", "pose_source")
-#: Options naming files a problem is read from, and the ``args`` attribute holding each.
-INPUT_FILE_OPTIONS = (("--domain", "domain"), ("--pldi", "pldi"), ("--init", "init"))
+#: Options that may name a file a problem is read from (argparse keeps each as ``args.robot_uncertainty``, ...).
+INPUT_FILE_OPTIONS = ("--domain", "--robot-uncertainty", "--pldi", "--init", "--jobs")
 #: Hex digits of a hash shown in a sentence (the files hold all 64).
 SHORT = 12
 
@@ -230,13 +231,13 @@ def robot_urdf(robot) -> str | None:
 
 
 def files_of_args(args) -> dict:
-    """``{option: {"path", "sha256"}}`` of the files named by ``--domain``, ``--pldi`` (both halves), ``--init``.
+    """``{option: {"path", "sha256"}}`` of the files :data:`INPUT_FILE_OPTIONS` name (``--pldi``: both halves).
 
     A value that is not a file (a named domain, ``--init pid``) is no file input.
     """
     out = {}
-    for option, attr in INPUT_FILE_OPTIONS:
-        value = getattr(args, attr, None)
+    for option in INPUT_FILE_OPTIONS:
+        value = getattr(args, option.lstrip("-").replace("-", "_"), None)
         if not value:
             continue
         paths = [Path(value)]
