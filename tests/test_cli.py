@@ -214,7 +214,7 @@ def test_export_writes_c_and_json(tmp_path, capsys):
 
     K = save_controller(paper_controller(), tmp_path / "K.json")
     out = tmp_path / "ctrl"
-    code, stdout, err = run(capsys, "export", str(K), "--rate", "1000", "--word-length", "24", "--json", "-o", str(out))
+    code, stdout, err = run(capsys, "export", str(K), "--rate", "1000", "--word-length", "35", "--json", "-o", str(out))
     doc = json.loads(stdout)
     assert code == 0 and err.startswith("[1/1] export")
     assert sorted(p.name for p in out.iterdir()) == ["controller.c", "controller.h", "controller.json"]

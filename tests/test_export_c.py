@@ -154,8 +154,9 @@ def paper_run(tmp_path_factory):
 
 
 def test_export_refuses_a_word_length_the_analysis_rules_out(paper_run, tmp_path, capsys):
-    """K* at 1000 Hz needs 25 bits (the report's word-length analysis): 24 is refused in one line, exit 2,
-    naming 25; --force writes it with a warning; 25 is written without one."""
+    """K* at 1000 Hz: 24 bits move its DC gain by 14.7 % (35 bits keep poles and DC gains): refused in one
+    line, exit 2, naming 35; --force writes it with both checks' warnings (the μ analysis asks for 25);
+    35 is written without one."""
     from polyrob.cli import main
 
     K = str(paper_run / "K.json")
@@ -163,19 +164,20 @@ def test_export_refuses_a_word_length_the_analysis_rules_out(paper_run, tmp_path
     assert main(["export", K, "--rate", "1000", "--word-length", "24", "-o", str(out), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and err.startswith("polyrob: error: export refused: 24-bit")
-    assert "the smallest word length that does is 25 bits" in err and "--force" in err
+    assert "DC gain moves by 14.7 %" in err and "is 35 bits (--word-length 35)" in err and "--force" in err
     assert not (out / "controller.c").exists()
 
     assert main(["export", K, "--rate", "1000", "--word-length", "24", "-o", str(out), "--force", "--json"]) == 0
     cap = capsys.readouterr()
     warnings = [line for line in cap.err.splitlines() if line.startswith("polyrob: warning:")]
-    assert len(warnings) == 1 and "25 bits" in warnings[0] and "written anyway (--force)" in warnings[0]
+    assert len(warnings) == 2 and "35 bits" in warnings[0] and "written anyway (--force)" in warnings[0]
+    assert "the smallest word length that does is 25 bits" in warnings[1]
     doc = json.loads(cap.out)
     assert doc["word_length"] == 24 and doc["word_length_check"]["ok"] is False
-    assert doc["word_length_check"]["smallest_word_length"] == 25
+    assert doc["word_length_check"]["smallest_word_length"] == 25 and doc["smallest_word_length"] == 35
     assert "24-bit fixed-point" in (out / "controller.h").read_text()
 
-    assert main(["export", K, "--rate", "1000", "--word-length", "25", "-o", str(out), "--json", "--quiet"]) == 0
+    assert main(["export", K, "--rate", "1000", "--word-length", "35", "-o", str(out), "--json", "--quiet"]) == 0
     cap = capsys.readouterr()
     assert "warning" not in cap.err and json.loads(cap.out)["word_length_check"]["ok"] is True
 
@@ -194,11 +196,11 @@ def test_export_refusal_when_no_word_length_works(tmp_path, capsys):
     argv = ["export", str(tmp_path / "K.json"), "--rate", "1000", "--word-length", "24", "-o", str(out)]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "no word length up to 40 bits does" in err
+    assert len(err.splitlines()) == 1 and "moves by 89.7 % of its distance to z = 1" in err and "is 52 bits" in err
     assert not out.exists() or not list(out.iterdir())
     assert main([*argv, "--force", "--quiet"]) == 0
     cap = capsys.readouterr()
-    assert cap.err.count("polyrob: warning:") == 1 and "no word length up to 40 bits does" in cap.err
+    assert cap.err.count("polyrob: warning:") == 2 and "no word length up to 40 bits does" in cap.err
     assert (out / "controller.c").is_file()
 
 
@@ -209,7 +211,8 @@ def test_export_without_a_problem_warns(tmp_path, capsys):
 
     save_controller(polyrob.paper_controller(), tmp_path / "K.json")
     out = tmp_path / "ctrl"
-    assert main(["export", str(tmp_path / "K.json"), "--rate", "500", "--word-length", "20", "-o", str(out)]) == 0
+    assert main(["export", str(tmp_path / "K.json"), "--rate", "500", "--word-length", "33", "-o", str(out)]) == 0
     cap = capsys.readouterr()
-    assert "polyrob: warning: 20-bit coefficients not checked" in cap.err and "--pldi" in cap.err
+    assert cap.err.count("polyrob: warning:") == 1
+    assert "polyrob: warning: 33-bit coefficients not checked" in cap.err and "--pldi" in cap.err
     assert (out / "controller.c").is_file()

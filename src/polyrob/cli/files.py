@@ -72,7 +72,9 @@ def _export_pldi(args, info: dict):
     """Where the word-length check's problem comes from: ``(PLDI path or None, why none)``.
 
     ``--pldi``, else ``pldi.json`` beside the controller file (a run
-    directory's); ``(None, None)``: bounded again over the domain the file records.
+    directory's); ``(None, None)``: bounded again over the domain the file
+    records (a torque box without an inner layer: an inner layer's robot is
+    not rebuilt from the file's words, a task domain's PLDI is not bounded here).
     """
     from pathlib import Path
 
@@ -80,9 +82,18 @@ def _export_pldi(args, info: dict):
 
     beside = Path(args.controller).with_name("pldi.json")
     path = pldi_path(args) if args.pldi else (beside if beside.is_file() else None)
-    if path is None and (not info.get("robot") or not isinstance(info.get("domain"), dict)):
+    if path is not None:
+        return path, None
+    domain = info.get("domain")
+    if not info.get("robot") or not isinstance(domain, dict):
         return None, f"{args.controller} records no robot and domain (pass --pldi FILE)"
-    return path, None
+    if domain.get("kind") == "task" or _has_inner(info):
+        return None, f"{args.controller} was made on a task domain or an inner layer: pass its PLDI with --pldi FILE"
+    return None, None
+
+
+def _has_inner(info: dict) -> bool:
+    return bool(info.get("inner")) and not str(info["inner"]).startswith("inner layer: none")
 
 
 def _export_problem(args, info: dict, path, out):
@@ -119,21 +130,102 @@ def _exported_from(controller) -> dict:
     return {"provenance": made, "controller_file": {**source, "provenance": stored and stored.to_dict()}}
 
 
+def _output_limits(info: dict, m: int):
+    """``(lower, upper, where from)`` of the controller's output in its unit, or ``(None, None, why)``."""
+    import numpy as np
+
+    domain = info.get("domain") if isinstance(info.get("domain"), dict) else {}
+    if _has_inner(info):
+        acc = domain.get("qddot")
+        if isinstance(acc, dict) and len(acc) == m:
+            lo, hi = zip(*(acc[j] for j in acc))
+            return tuple(map(float, lo)), tuple(map(float, hi)), "the task's acceleration bounds qddot, rad/s^2"
+        return None, None, "no acceleration bound recorded: set them with the _set_limits function"
+    if info.get("robot"):
+        import polyrob
+
+        try:
+            effort = np.asarray(polyrob.load_robot(info["robot"]).effort_limit, float)
+        except Exception:  # noqa: BLE001 - a robot that no longer loads: no limit, said in the header
+            effort = np.full(m, np.inf)
+        if effort.size == m and np.all(np.isfinite(effort)) and np.all(effort > 0):
+            return (
+                tuple(-effort),
+                tuple(effort),
+                f"the URDF effort limits of {info['robot']}, N m, on the deviation u; with u_eq known set "
+                "lower = -effort - u_eq, upper = effort - u_eq",
+            )
+    return None, None, "no effort limit known: set them with the _set_limits function"
+
+
 def cmd_export(args) -> int:
     import sys
 
     from polyrob.cli.analyze import load_controller_args
     from polyrob.errors import PolyrobError
-    from polyrob.validate.export_c import check_export_word_length, export_controller
+    from polyrob.validate.discretize import discretize
+    from polyrob.validate.export_c import (
+        Signals,
+        check_export_word_length,
+        export_controller,
+        lowest_rate_of_controller,
+    )
+    from polyrob.validate.quantize import (
+        check_accuracy,
+        quantize,
+        round_to_float,
+        smallest_accurate_word_length,
+        sos_realization,
+    )
 
     out_dir = check_output_dir(args.output)
     K, info, _ = load_controller_args(args.controller)
+    warnings = []
+
+    # the rate: refused below the lowest rate for this controller (--allow-low-rate writes it, with a warning)
+    lowest = lowest_rate_of_controller(K)
+    rate_words = (
+        f"its lowest rate is {lowest:.4g} Hz (the Nyquist frequency at twice its fastest mode, "
+        "which Tustin warps by 27 % there)"
+    )
+    if args.rate < lowest:
+        if not args.allow_low_rate:
+            raise ArgumentError(
+                f"--rate {args.rate:g}: too low for {args.controller}: {rate_words}; give --rate {lowest:.4g} or more "
+                "(--allow-low-rate writes it anyway, with a warning)"
+            )
+        warnings.append(
+            f"--rate {args.rate:g} Hz is too low for this controller: {rate_words}; written anyway (--allow-low-rate)"
+        )
+
+    # the realisation in the stated arithmetic: poles and DC gains against the exact discrete controller
+    sos = sos_realization(discretize(K, args.rate, method=args.method, prewarp=args.prewarp))
+    smallest = smallest_accurate_word_length(sos)
+    rounded = sos if args.word_length is None else quantize(sos, args.word_length)
+    if args.real == "float":
+        rounded = round_to_float(rounded)
+    accuracy = check_accuracy(sos, rounded)
+    keep = (
+        f"the smallest fixed-point word length that keeps them is {smallest} bits (--word-length {smallest})"
+        if smallest is not None
+        else "no fixed-point word length up to 53 bits keeps them"
+    )
+    if not accuracy.ok:
+        fix = keep if args.real == "double" else "--real double keeps them"
+        line = (
+            f"{accuracy.arithmetic} coefficients do not keep the controller's poles (1 % of their distance to "
+            f"z = 1) and DC gains (0.1 %): {accuracy.problem}; {fix}"
+        )
+        if not args.force:
+            raise PolyrobError(f"export refused: {line}; --force writes it anyway")
+        warnings.append(f"{line}; written anyway (--force)")
+
     path, why = _export_pldi(args, info) if args.word_length is not None else (None, "no --word-length")
     checking = why is None
     out = Output(args, stages=3 if checking else 1)
-    check_doc, warning = None, None
+    check_doc = None
     if args.word_length is not None and not checking:
-        warning = f"{args.word_length}-bit coefficients not checked: {why}"
+        warnings.append(f"{args.word_length}-bit coefficients not checked against the loop's μ: {why}")
         check_doc = {"checked": False, "why": why}
     if checking:  # the report's word-length analysis, on the controller written here
         problem = _export_problem(args, info, path, out)
@@ -145,7 +237,26 @@ def cmd_export(args) -> int:
         if not check.ok:
             if not args.force:
                 raise PolyrobError(f"export refused: {check.line()}; --force writes it anyway")
-            warning = f"{check.line()}; written anyway (--force)"
+            warnings.append(f"{check.line()}; written anyway (--force)")
+    lower, upper, limit_source = _output_limits(info, K.noutputs)
+    checked = [f"the rate: {args.rate:g} Hz, {'at or above' if args.rate >= lowest else 'BELOW'} {rate_words}"]
+    checked.append(f"the coefficients' poles and DC gains: {'kept' if accuracy.ok else 'NOT kept'}; {keep}")
+    if check_doc and check_doc.get("checked"):
+        checked.append(f"μ of the discretised loop with these coefficients: {'kept' if check_doc['ok'] else 'NOT kept'}")
+    signals = Signals(
+        inner=info.get("inner"),
+        lower=lower,
+        upper=upper,
+        limit_source=limit_source,
+        checked="; ".join(checked),
+        warnings=tuple(warnings),
+        realisation=(
+            f"{args.method} at {args.rate:g} Hz"
+            + (f" pre-warped at {args.prewarp:g} rad/s" if args.prewarp else "")
+            + ", second-order sections per entry (transposed direct form II), integrators in first-order "
+            "sections of their own"
+        ),
+    )
     out.stage(
         f"export: {args.controller} at {args.rate:g} Hz ({args.method}"
         + (f", {args.word_length}-bit coefficients" if args.word_length else "")
@@ -162,18 +273,24 @@ def cmd_export(args) -> int:
         name=args.name,
         inner=info.get("inner"),
         extra=_exported_from(args.controller),  # the C's JSON names the controller file it came from
+        signals=signals,
     )
     doc = res.summary()
+    doc["lowest_rate_hz"] = lowest
+    doc["smallest_word_length"] = smallest
+    doc["accuracy"] = accuracy.summary()
+    doc["output_limits"] = {"lower": lower, "upper": upper, "source": limit_source}
     if info.get("inner"):
         doc["inner"] = info["inner"]
     if check_doc is not None:
         doc["word_length_check"] = check_doc
     out.document(doc)
     out.line(f"wrote {res.header}, {res.source} and {res.json}")
-    if info.get("inner") and not str(info["inner"]).startswith("inner layer: none"):
-        out.line(f"the controller's output is an inner layer's input v; at run time: {info['inner']}")
-    if warning:  # on stderr, also with --json and --quiet
-        print(f"polyrob: warning: {warning}", file=sys.stderr, flush=True)
+    out.line(f"coefficients: {keep} (poles within 1 % of their distance to z = 1, DC gains within 0.1 %)")
+    if _has_inner(info):
+        out.line(f"the controller's output is an inner layer's input v (rad/s^2); at run time: {info['inner']}")
+    for w in warnings:  # on stderr, also with --json and --quiet
+        print(f"polyrob: warning: {w}", file=sys.stderr, flush=True)
     return 0
 
 
@@ -208,7 +325,12 @@ def register(sub) -> None:
     p.add_argument(
         "--force",
         action="store_true",
-        help="write coefficients of a --word-length that the check finds too short (with a warning)",
+        help="write coefficients that the checks find too short (--word-length, --real float), with a warning",
+    )
+    p.add_argument(
+        "--allow-low-rate",
+        action="store_true",
+        help="write a controller at a --rate below its lowest rate (with a warning in the header and on stderr)",
     )
     p.add_argument("-o", "--output", required=True, help="directory for the C and JSON files")
     add_output_flags(p)

@@ -50,7 +50,20 @@ __all__ = [
     "check_word_length",
     "min_word_length",
     "q_format",
+    "round_to_float",
+    "AccuracyCheck",
+    "check_accuracy",
+    "smallest_accurate_word_length",
+    "POLE_TOLERANCE",
+    "DC_TOLERANCE",
 ]
+
+#: How far a rounded pole may move, relative to its distance from z = 1 (1 %: its time constant within 1 %).
+POLE_TOLERANCE = 0.01
+#: How far an entry's DC gain (its integral gain when it integrates) may move after rounding (0.1 %).
+DC_TOLERANCE = 1e-3
+#: A pole (or zero) this close to z = 1 is an integrator (a differentiator): it must stay exactly there.
+AT_ONE = 1e-12
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,27 +114,76 @@ class SOSController:
                 if s.shape[0]:
                     yield i, j, s
 
-    def run(self, e) -> np.ndarray:
+    def run(self, e, *, lower=None, upper=None, initial=None) -> np.ndarray:
         """Response to the input sequence ``e`` (``n_in x N``): ``u`` (``n_out x N``).
 
         Transposed direct form II with exactly the operation order of the
         generated C code (so both agree to rounding, bit for bit on IEEE doubles).
+        ``lower``/``upper`` (per output): the C code's output saturation with
+        its anti-windup (conditional integration: while output ``i``
+        saturates, the states of its sections keep their values);
+        ``initial``: the states to start from (``n_sections x 2``, C order, e.g.
+        :meth:`bumpless_state`), zero by default.
         """
         e = np.atleast_2d(np.asarray(e, float))
         N = e.shape[1]
         u = np.zeros((self.n_outputs, N))
-        states = {(i, j): np.zeros((s.shape[0], 2)) for i, j, s in self.entries()}
+        lo = np.full(self.n_outputs, -np.inf) if lower is None else np.asarray(lower, float)
+        hi = np.full(self.n_outputs, np.inf) if upper is None else np.asarray(upper, float)
+        states = np.zeros((max(1, self.n_sections), 2)) if initial is None else np.array(initial, float)
+        first = self._first_sections()
         for k in range(N):
-            for i, j, secs in self.entries():
+            before = states.copy()
+            for (i, j, secs), f in zip(self.entries(), first):
                 x = float(e[j, k])
-                st = states[(i, j)]
                 for n, (b0, b1, b2, _, a1, a2) in enumerate(secs):
-                    y = b0 * x + st[n, 0]
-                    st[n, 0] = b1 * x - a1 * y + st[n, 1]
-                    st[n, 1] = b2 * x - a2 * y
+                    st = states[f + n]
+                    y = b0 * x + st[0]
+                    st[0] = b1 * x - a1 * y + st[1]
+                    st[1] = b2 * x - a2 * y
                     x = y
                 u[i, k] += x
+            for i in range(self.n_outputs):
+                v = u[i, k]
+                u[i, k] = lo[i] if v < lo[i] else (hi[i] if v > hi[i] else v)
+                if u[i, k] != v:  # saturated: this output's states hold (anti-windup)
+                    for (ii, _, secs), f in zip(self.entries(), first):
+                        if ii == i:
+                            states[f : f + secs.shape[0]] = before[f : f + secs.shape[0]]
         return u
+
+    def _first_sections(self) -> list:
+        """Index of each entry's first section in the C state array."""
+        first, k = [], 0
+        for _, _, secs in self.entries():
+            first.append(k)
+            k += secs.shape[0]
+        return first
+
+    def bumpless_state(self, e, u) -> np.ndarray:
+        """States (C order) from which one step with input ``e`` outputs exactly ``u`` (the C ``_bumpless``).
+
+        All states zero but one per output: ``s[0]`` of a section of the
+        output's first entry (its last integrator section, else its last
+        section) takes the difference, scaled by the ``b0`` of the sections after it.
+        """
+        e, u = np.asarray(e, float), np.asarray(u, float)
+        states = np.zeros((max(1, self.n_sections), 2))
+        v = np.zeros(self.n_outputs)
+        for i, j, secs in self.entries():
+            x = float(e[j])
+            for row in secs:
+                x = row[0] * x
+            v[i] += x
+        done = set()
+        for (i, _, secs), f in zip(self.entries(), self._first_sections()):
+            if i in done:
+                continue
+            done.add(i)
+            n = _offset_section(secs)
+            gain = float(np.prod(secs[n + 1 :, 0])) if n + 1 < secs.shape[0] else 1.0
+            states[f + n, 0] = (u[i] - v[i]) / gain
+        return states
 
     def to_ss(self) -> control.StateSpace:
         """The discrete state-space system of the cascades (block by block, no rounding but the sections')."""
@@ -163,6 +225,16 @@ class SOSController:
         fb = data.get("frac_bits")
         formats = None if fb is None else tuple(tuple(np.asarray(f, int).reshape(-1, 2) for f in row) for row in fb)
         return cls(sections, float(data["dt"]), data.get("word_length"), formats, dict(data.get("info", {})))
+
+
+def _offset_section(secs) -> int:
+    """The section whose ``s[0]`` a bumpless start sets: the last integrator section whose later ``b0`` are not zero."""
+    n = secs.shape[0] - 1
+    for k in range(secs.shape[0] - 1, -1, -1):
+        b0, _, _, _, a1, a2 = secs[k]
+        if 1.0 + a1 + a2 == 0.0 and np.all(secs[k + 1 :, 0] != 0.0):
+            return k
+    return n
 
 
 def _cascade_ss(secs):
@@ -264,7 +336,15 @@ def _entry_sos(g) -> np.ndarray:
     k = H * np.prod(z0 - p) / np.prod(z0 - z) if z.size else H * np.prod(z0 - p)
     if abs(k.imag) > 1e-6 * max(abs(k), 1e-300):
         raise PolyrobError(f"internal error: complex gain {k} of a real controller entry")
-    return np.atleast_2d(ss.zpk2sos(z, p, k.real))
+    at_one = np.abs(p - 1.0) <= AT_ONE
+    if not at_one.any() or p.size < 2:
+        return np.atleast_2d(ss.zpk2sos(z, p, k.real))
+    # an integrator gets a first-order section of its own: [1, -1, 0] is exact in every arithmetic,
+    # whereas paired with another pole p its a1 = -(1 + p), a2 = p round apart and move it off z = 1
+    n_int = int(at_one.sum())
+    rest = np.atleast_2d(ss.zpk2sos(z, p[~at_one], k.real)) if (~at_one).any() else np.array([[k.real, 0, 0, 1, 0, 0]])
+    integrators = np.tile([1.0, 0.0, 0.0, 1.0, -1.0, 0.0], (n_int, 1))
+    return np.vstack([rest, integrators])
 
 
 def q_format(values, word_length: int) -> int:
@@ -303,6 +383,119 @@ def quantize(sos: SOSController, word_length: int) -> SOSController:
         rows.append(tuple(out_row))
         fmts.append(tuple(fmt_row))
     return SOSController(tuple(rows), sos.dt, W, tuple(fmts), dict(sos.info))
+
+
+def round_to_float(sos: SOSController) -> SOSController:
+    """The coefficients as C ``float`` holds them (IEEE single precision, 24-bit significand)."""
+    rows = tuple(tuple(np.asarray(s, np.float32).astype(float) for s in row) for row in sos.sections)
+    return SOSController(rows, sos.dt, sos.word_length, sos.formats, {**sos.info, "arithmetic": "float"})
+
+
+def _section_roots(row, part: str) -> np.ndarray:
+    c = row[:3] if part == "zeros" else row[3:]
+    c = np.trim_zeros(np.asarray(c, float), "b")
+    return np.roots(c) if c.size > 1 else np.zeros(0)
+
+
+def _entry_gain(secs):
+    """``(poles, integrators, differentiators, gain)`` of one entry's sections.
+
+    ``gain``: ``(1 - z^-1)^(d - i) K(z)`` at ``z = 1`` (the DC gain, or the
+    integral gain of an entry that integrates), from the coefficient sums:
+    rooting a numerator with a double zero near ``z = 1`` (a PID's) is too
+    ill-conditioned to show what rounding does to it.
+    """
+    poles, n_int, n_dif, gain = [], 0, 0, 1.0
+    for row in secs:
+        b0, b1, b2, _, a1, a2 = (float(c) for c in row)
+        poles.extend(_section_roots(row, "poles"))
+        num, den = b0 + b1 + b2, 1.0 + a1 + a2
+        if abs(den) <= AT_ONE * (1.0 + abs(a1) + abs(a2)):
+            n_int, den = n_int + 1, 1.0 - a2  # (1 - w)(1 - a2 w): what is left at w = 1
+        if abs(num) <= AT_ONE * (abs(b0) + abs(b1) + abs(b2)) and num != 0.0 or (num == 0.0 and b0 != 0.0):
+            n_dif, num = n_dif + 1, b0 - b2  # (1 - w)(b0 - b2 w)
+        gain = gain * num / den if den != 0.0 else np.inf
+    return np.array(poles, complex), n_int, n_dif, gain
+
+
+@dataclass(frozen=True, eq=False)
+class AccuracyCheck:
+    """Whether rounded coefficients keep the exact discrete controller's poles and DC gains.
+
+    ``ok``: every pole moved by at most :data:`POLE_TOLERANCE` of its distance
+    to ``z = 1``, none reached or crossed the unit circle, every integrator
+    stayed exactly at ``z = 1`` and every entry's DC gain (its integral gain
+    when it integrates) moved by at most :data:`DC_TOLERANCE`.  ``problem``
+    says what broke first (empty when ``ok``).
+    """
+
+    arithmetic: str
+    ok: bool
+    pole_move: float
+    dc_error: float
+    problem: str = ""
+
+    def summary(self) -> dict:
+        return {
+            "arithmetic": self.arithmetic,
+            "ok": self.ok,
+            "worst_pole_move": self.pole_move,
+            "worst_dc_gain_error": self.dc_error,
+            "problem": self.problem,
+        }
+
+
+def check_accuracy(exact: SOSController, rounded: SOSController, *, arithmetic: str | None = None) -> AccuracyCheck:
+    """Poles and DC gain of ``rounded`` against ``exact`` (same sections, e.g. :func:`quantize` of it)."""
+    if arithmetic is None:
+        arithmetic = "double" if rounded.word_length is None else f"{rounded.word_length}-bit fixed point"
+        if rounded.info.get("arithmetic") == "float":
+            arithmetic = "float" if rounded.word_length is None else f"{arithmetic} in float"
+    worst_move, worst_dc, problem = 0.0, 0.0, ""
+    for (i, j, a), (_, _, b) in zip(exact.entries(), rounded.entries()):
+        pa, ia, da, ga = _entry_gain(a)
+        pb, ib, db, gb = _entry_gain(b)
+        where = f"K[{i}][{j}]"
+        for p in pa:
+            q = pb[np.argmin(np.abs(pb - p))] if pb.size else np.inf
+            if abs(p - 1.0) <= AT_ONE:  # an integrator: exactly at z = 1 or lost
+                if abs(q - 1.0) > 0.0 and ib < ia and not problem:
+                    problem = f"{where}'s integrator pole moves from z = 1 to z = {complex(q).real:.15g}"
+                continue
+            move = float(abs(q - p) / abs(1.0 - p))
+            worst_move = max(worst_move, move)
+            if abs(q) >= 1.0 > abs(p) and not problem:
+                problem = (
+                    f"{where}'s pole z = {complex(p).real:.15g} moves onto or out of the unit circle "
+                    f"(|z| = {abs(q):.15g})"
+                )
+            elif move > POLE_TOLERANCE and not problem:
+                problem = (
+                    f"{where}'s pole z = {complex(p).real:.15g} moves by {100 * move:.3g} % of its distance to z = 1"
+                )
+        if ia == ib and da == db and ga != 0.0:
+            err = float(abs(gb - ga) / abs(ga))
+            worst_dc = max(worst_dc, err)
+            if err > DC_TOLERANCE and not problem:
+                kind = "integral gain" if ia > da else "DC gain"
+                problem = f"{where}'s {kind} moves by {100 * err:.3g} %"
+        elif ib > ia and not problem:
+            problem = f"{where} gains a pole at z = 1 that its exact form does not have"
+        elif db != da and not problem:
+            kind = "integral gain" if ia > da else "DC gain"
+            problem = f"{where}'s {kind} is lost (a numerator zero moves {'onto' if db > da else 'off'} z = 1)"
+    return AccuracyCheck(arithmetic, not problem, worst_move, worst_dc, problem)
+
+
+def smallest_accurate_word_length(sos: SOSController, *, longest: int = 53, float_: bool = False) -> int | None:
+    """Shortest fixed-point word length (4 .. ``longest``) whose coefficients pass :func:`check_accuracy`."""
+    for W in range(4, int(longest) + 1):
+        q = quantize(sos, W)
+        if float_:
+            q = round_to_float(q)
+        if check_accuracy(sos, q).ok:
+            return W
+    return None
 
 
 @dataclass(frozen=True, eq=False)
