@@ -25,7 +25,7 @@ from polyrob.cli import main
 from polyrob.io.controller import load_controller, save_controller
 from polyrob.validate.discretize import discretize
 from polyrob.validate.export_c import write_c
-from polyrob.validate.quantize import check_accuracy, quantize, round_to_float, sos_realization
+from polyrob.validate.quantize import quantize, sos_realization
 
 CC = shutil.which("cc") or shutil.which("gcc")
 #: a controller file as `synth -o` writes it on planar_2r's task: a PID behind a computed-torque inner layer
@@ -130,10 +130,13 @@ def test_float_coefficients_checked_against_the_exact_controller(tmp_path, capsy
     assert "--real double keeps them" in err
     code, _, err = _export(capsys, SYNTH_FILE, "--rate", "1000", "--real", "float", "--force", "-o", out, "--quiet")
     assert code == 0 and "WARNING: float coefficients" in (out / "controller.h").read_text()
+    assert "integral gain is lost" in json.loads((out / "controller.json").read_text())["warnings"][0]
 
 
 def test_integrators_keep_their_pole_at_one_in_every_arithmetic():
     """An integrator gets its own section [1, -1, 0]: float rounding cannot move it (paired, it moved)."""
+    from polyrob.validate.quantize import check_accuracy, round_to_float
+
     sos = sos_realization(discretize(load_controller(SYNTH_FILE), 1000.0))
     rows = [row for _, _, secs in sos.entries() for row in secs]
     assert sum(1 for r in rows if r[4] == -1.0 and r[5] == 0.0) == 2  # one per joint

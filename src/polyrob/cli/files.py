@@ -274,6 +274,22 @@ def cmd_export(args) -> int:
         inner=info.get("inner"),
         extra=_exported_from(args.controller),  # the C's JSON names the controller file it came from
         signals=signals,
+        extra={
+            "signals": {
+                "input": "e[j] = r[j] - q[j], the tracking error of joint j, rad",
+                "output": (
+                    "v[i], the acceleration command of joint i (the inner layer's input), rad/s^2"
+                    if _has_inner(info)
+                    else "the torque deviation of joint i from the equilibrium torque, N m"
+                ),
+                "output_limits": {"lower": lower, "upper": upper, "source": limit_source},
+                "anti_windup": "conditional integration: an output's section states hold while it saturates",
+            },
+            "lowest_rate_hz": lowest,
+            "smallest_word_length": smallest,
+            "accuracy": accuracy.summary(),
+            "warnings": list(warnings),
+        },
     )
     doc = res.summary()
     doc["lowest_rate_hz"] = lowest
