@@ -106,16 +106,31 @@ def test_header_gives_one_meaning_and_unit_per_signal(tmp_path, capsys):
 
 
 def test_rate_too_low_is_refused_in_one_line(tmp_path, capsys):
-    """The PID's derivative filter at 40 rad/s: Nyquist at twice it is 80 rad/s, 25.46 Hz; 20 Hz refused."""
+    """The PID on the inner layer's double integrator crosses over at 4.19 rad/s: the hold's half-sample delay
+    costs 10 degrees there at 12 Hz; 10 Hz is refused in one line naming 12 Hz, --allow-low-rate warns."""
     out = tmp_path / "ctrl"
-    code, _, err = _export(capsys, SYNTH_FILE, "--rate", "20", "-o", out)
-    assert code == 2 and err.count("\n") == 1 and "--rate 20: too low" in err and "25.46 Hz" in err
+    code, _, err = _export(capsys, SYNTH_FILE, "--rate", "10", "-o", out)
+    assert code == 2 and err.count("\n") == 1 and "--rate 10: too low" in err and "its lowest rate is 12 Hz" in err
+    assert "crossover, 4.188 rad/s" in err
     assert not out.exists() or not list(out.iterdir())
-    code, _, err = _export(capsys, SYNTH_FILE, "--rate", "20", "--allow-low-rate", "-o", out, "--quiet")
-    assert code == 0 and err.count("polyrob: warning: --rate 20 Hz is too low") == 1
-    assert " * WARNING: --rate 20 Hz is too low for this controller" in (out / "controller.h").read_text()
-    code, _, err = _export(capsys, SYNTH_FILE, "--rate", "26", "-o", out, "--quiet")
+    code, _, err = _export(capsys, SYNTH_FILE, "--rate", "10", "--allow-low-rate", "-o", out, "--quiet")
+    assert code == 0 and err.count("polyrob: warning: --rate 10 Hz is too low") == 1
+    assert " * WARNING: --rate 10 Hz is too low for this controller" in (out / "controller.h").read_text()
+    code, _, err = _export(capsys, SYNTH_FILE, "--rate", "12.5", "-o", out, "--quiet")
     assert code == 0 and "warning" not in err
+
+
+def test_lowest_rate_rests_on_the_crossover_not_on_fast_modes():
+    """A fast controller mode far above crossover does not raise the lowest rate; without a plant it does."""
+    import control
+
+    from polyrob.validate.export_c import lowest_rate_of_controller, nominal_arm
+
+    K = control.ss(control.tf([100.0, 100.0], [1.0 / 5000.0, 1.0]))  # PD-like, a pole at 5000 rad/s
+    low = lowest_rate_of_controller(K, nominal_arm(1))
+    wc = 100.0  # |K(j w) / (j w)^2| = 1 near w = 100 (the pole is far above)
+    assert low.rate == pytest.approx(wc / (2 * np.radians(10.0)), rel=0.05) and "crossover" in low.basis
+    assert lowest_rate_of_controller(K).rate == pytest.approx(2 * 5000.0 / np.pi)
 
 
 # 3. the arithmetic -----------------------------------------------------------------------------------------

@@ -158,6 +158,33 @@ def _output_limits(info: dict, m: int):
     return None, None, "no effort limit known: set them with the _set_limits function"
 
 
+def _nominal_plant(info: dict, K):
+    """The arm's nominal plant for the rate check (:func:`~polyrob.validate.export_c.nominal_arm`), or None."""
+    import numpy as np
+
+    from polyrob.validate.export_c import nominal_arm
+
+    m = K.noutputs
+    if K.ninputs != m:
+        return None
+    if _has_inner(info):
+        return nominal_arm(m)
+    domain = info.get("domain") if isinstance(info.get("domain"), dict) else {}
+    if not info.get("robot"):
+        return None
+    pose = domain.get("pose")
+    if pose is None and isinstance(domain.get("q"), dict):
+        pose = [0.5 * (lo + hi) for lo, hi in domain["q"].values()]
+    try:
+        import polyrob
+
+        robot = polyrob.load_robot(info["robot"])
+        q = np.zeros(robot.m) if pose is None else np.asarray(pose, float)
+        return nominal_arm(m, np.linalg.inv(robot.mass_matrix(q))) if robot.m == m else None
+    except Exception:  # noqa: BLE001 - a robot that no longer loads: the controller-only rule
+        return None
+
+
 def cmd_export(args) -> int:
     import sys
 
@@ -183,11 +210,9 @@ def cmd_export(args) -> int:
     warnings = []
 
     # the rate: refused below the lowest rate for this controller (--allow-low-rate writes it, with a warning)
-    lowest = lowest_rate_of_controller(K)
-    rate_words = (
-        f"its lowest rate is {lowest:.4g} Hz (the Nyquist frequency at twice its fastest mode, "
-        "which Tustin warps by 27 % there)"
-    )
+    low = lowest_rate_of_controller(K, _nominal_plant(info, K))
+    lowest = low.rate
+    rate_words = f"its lowest rate is {lowest:.4g} Hz ({low.basis})"
     if args.rate < lowest:
         if not args.allow_low_rate:
             raise ArgumentError(

@@ -31,6 +31,7 @@ Examples
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -50,6 +51,8 @@ __all__ = [
     "WordLengthCheck",
     "check_export_word_length",
     "lowest_rate_of_controller",
+    "nominal_arm",
+    "LowestRate",
 ]
 
 #: The report's word-length analysis: μ of the discretised loop within 5 % of the continuous loop's,
@@ -442,22 +445,60 @@ def export_controller(
     return ExportResult(header=h, source=c, json=j, sos=sos, discrete=dc)
 
 
-def lowest_rate_of_controller(K) -> float:
-    """The lowest rate (Hz) for ``K`` alone: the Nyquist frequency ``π rate`` at twice its fastest mode.
+#: The phase the hold's half-sample delay may cost at the loop's crossover: 10 degrees.
+HOLD_PHASE = math.radians(10.0)
 
-    Below it Tustin warps that mode by more than tan(π/4)/(π/4) - 1 = 27 %.
-    With the problem known, :func:`~polyrob.validate.discretize.min_sample_rate`
-    (μ of the discretised loop) is the finer test.
+
+def nominal_arm(m: int, inverse_mass=None):
+    """The arm's nominal plant for the crossover: ``M^-1 / s^2`` (``inverse_mass``, identity by default).
+
+    With a computed-torque inner layer ``q'' = v`` (identity); on the torque, the
+    mass matrix at the domain's pose (gravity's stiffness neglected).
+    """
+    import control
+
+    Minv = np.eye(m) if inverse_mass is None else np.asarray(inverse_mass, float)
+    Z, Id = np.zeros((m, m)), np.eye(m)
+    return control.ss(np.block([[Z, Id], [Z, Z]]), np.vstack([Z, Minv]), np.hstack([Id, Z]), Z)
+
+
+@dataclass(frozen=True)
+class LowestRate:
+    """The lowest sample rate (Hz) for a controller, and on what it rests (``basis``, words)."""
+
+    rate: float
+    basis: str
+
+
+def lowest_rate_of_controller(K, plant=None) -> LowestRate:
+    """The lowest rate (Hz) at which the hold costs the loop at most :data:`HOLD_PHASE` at crossover.
+
+    ``plant``: the nominal plant (:func:`nominal_arm`); the loop's gain
+    crossover ``ω_c`` (:func:`~polyrob.validate.discretize.crossover_frequency`)
+    then needs ``ω_c h / 2 <= 10°``.  Without a plant: the Nyquist frequency at
+    twice the controller's fastest mode (cruder: a fast mode far above
+    crossover asks for more than the loop needs).
     """
     import control
 
     from polyrob.plant.generalized import as_controller_ss
+    from polyrob.validate.discretize import crossover_frequency
 
     Ks = K if isinstance(K, control.StateSpace) else as_controller_ss(K, *_shape(K))
+    if plant is not None:
+        wc = crossover_frequency(plant, Ks, np.logspace(-3, 6, 1800))
+        return LowestRate(
+            wc / (2.0 * HOLD_PHASE),
+            f"the hold's half-sample delay costs at most 10 degrees of phase at the loop's crossover, "
+            f"{wc:.4g} rad/s on the nominal arm",
+        )
     if Ks.nstates == 0:
-        return 0.0
+        return LowestRate(0.0, "a static gain: any rate")
     fastest = float(np.max(np.abs(np.linalg.eigvals(np.asarray(Ks.A, float)))))
-    return 2.0 * fastest / np.pi
+    return LowestRate(
+        2.0 * fastest / np.pi,
+        f"the Nyquist frequency at twice the controller's fastest mode, {fastest:.4g} rad/s (no plant known)",
+    )
 
 
 def _shape(K):
