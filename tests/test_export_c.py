@@ -182,6 +182,26 @@ def test_export_refuses_a_word_length_the_analysis_rules_out(paper_run, tmp_path
     assert "warning" not in cap.err and json.loads(cap.out)["word_length_check"]["ok"] is True
 
 
+def test_export_refuses_a_rate_the_loop_mu_rules_out(paper_run, tmp_path, capsys):
+    """K* at 50 Hz passes the crossover rule (44.1 Hz on the nominal arm) but the discretised loop's μ is 5.5 %
+    above the continuous loop's: refused in one line naming the rate that keeps it; --allow-low-rate warns."""
+    from polyrob.cli import main
+
+    argv = ["export", str(paper_run / "K.json"), "--rate", "50", "--word-length", "40", "-o", str(tmp_path / "c")]
+    assert main([*argv, "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("polyrob: error: --rate 50: too low")
+    assert "(exact coefficients) is μ 2.592 above 2.457" in err and "from about 8" in err
+    assert main([*argv, "--allow-low-rate", "--json"]) == 0
+    cap = capsys.readouterr()
+    doc = json.loads(cap.out)
+    rate = doc["word_length_check"]["rate"]
+    assert rate["ok"] is False and rate["mu"] == pytest.approx(2.592, abs=1e-3)
+    assert doc["word_length_check"]["checked"] is False  # no word length keeps μ at a rate that loses it
+    assert "--rate 50 Hz is too low" in cap.err
+    assert "μ of the discretised loop at this rate: NOT kept" in (tmp_path / "c" / "controller.h").read_text()
+
+
 def test_export_refusal_when_no_word_length_works(tmp_path, capsys):
     """The issue's controller: no word length up to 40 bits keeps its discretised loop stable."""
     from polyrob.cli import main

@@ -193,6 +193,7 @@ def cmd_export(args) -> int:
     from polyrob.validate.discretize import discretize
     from polyrob.validate.export_c import (
         Signals,
+        check_export_rate,
         check_export_word_length,
         export_controller,
         lowest_rate_of_controller,
@@ -254,18 +255,36 @@ def cmd_export(args) -> int:
         check_doc = {"checked": False, "why": why}
     if checking:  # the report's word-length analysis, on the controller written here
         problem = _export_problem(args, info, path, out)
-        out.stage(f"word-length check: {args.word_length} bits at {args.rate:g} Hz (μ of the discretised loop)")
-        check = check_export_word_length(
-            problem.P, K, args.rate, args.word_length, method=args.method, prewarp=args.prewarp
+        rate_check, _ = check_export_rate(
+            problem.P, K, args.rate, method=args.method, prewarp=args.prewarp, search=not args.allow_low_rate
         )
-        check_doc = {"checked": True, **check.summary()}
-        if not check.ok:
+        check_doc = {"rate": {"ok": rate_check.ok, "mu": rate_check.mu, "lowest_rate_hz": rate_check.lowest}}
+        if not rate_check.ok:
+            if not args.allow_low_rate:
+                raise ArgumentError(
+                    f"--rate {args.rate:g}: too low for {args.controller}: {rate_check.line()} "
+                    "(--allow-low-rate writes it anyway, with a warning)"
+                )
+            warnings.append(f"--rate {args.rate:g} Hz is too low: {rate_check.line()}; written anyway (--allow-low-rate)")
+        out.stage(f"word-length check: {args.word_length} bits at {args.rate:g} Hz (μ of the discretised loop)")
+        check = None
+        if rate_check.ok:  # at a rate that already loses μ, no word length can keep it
+            check = check_export_word_length(
+                problem.P, K, args.rate, args.word_length, method=args.method, prewarp=args.prewarp
+            )
+            check_doc = {"checked": True, **check.summary(), **check_doc}
+        else:
+            check_doc = {"checked": False, "why": "the rate already loses μ (--allow-low-rate)", **check_doc}
+        if check is not None and not check.ok:
             if not args.force:
                 raise PolyrobError(f"export refused: {check.line()}; --force writes it anyway")
             warnings.append(f"{check.line()}; written anyway (--force)")
     lower, upper, limit_source = _output_limits(info, K.noutputs)
     checked = [f"the rate: {args.rate:g} Hz, {'at or above' if args.rate >= lowest else 'BELOW'} {rate_words}"]
     checked.append(f"the coefficients' poles and DC gains: {'kept' if accuracy.ok else 'NOT kept'}; {keep}")
+    if check_doc and "rate" in check_doc:
+        rate_ok = check_doc["rate"]["ok"]
+        checked.append(f"μ of the discretised loop at this rate: {'kept' if rate_ok else 'NOT kept'} within 5 %")
     if check_doc and check_doc.get("checked"):
         checked.append(f"μ of the discretised loop with these coefficients: {'kept' if check_doc['ok'] else 'NOT kept'}")
     signals = Signals(

@@ -51,6 +51,8 @@ __all__ = [
     "WordLengthCheck",
     "check_export_word_length",
     "lowest_rate_of_controller",
+    "check_export_rate",
+    "RateCheck",
     "nominal_arm",
     "LowestRate",
 ]
@@ -503,6 +505,60 @@ def lowest_rate_of_controller(K, plant=None) -> LowestRate:
 
 def _shape(K):
     return (K.noutputs, K.ninputs) if hasattr(K, "noutputs") else np.atleast_2d(np.asarray(K, float)).shape
+
+
+@dataclass(frozen=True)
+class RateCheck:
+    """Whether the discretised loop (exact coefficients) at ``rate`` keeps μ within 5 % of the continuous loop's.
+
+    ``lowest``: when not, the lowest rate that does
+    (:func:`~polyrob.validate.discretize.min_sample_rate`; ``None``: none up to ``ceiling`` Hz).
+    """
+
+    rate: float
+    ok: bool
+    stable: bool
+    mu: float
+    threshold: float
+    lowest: float | None = None
+    ceiling: float = 0.0
+
+    def line(self) -> str:
+        state = f"μ {self.mu:.4g} above {self.threshold:.4g} (the continuous loop's + 5 %)" if self.stable else "unstable"
+        head = f"at {self.rate:g} Hz the discretised loop (exact coefficients) is {state}"
+        if self.ok or not self.ceiling:
+            return head
+        if self.lowest is None:
+            return f"{head}; no rate up to {self.ceiling:g} Hz keeps it"
+        return f"{head}; it keeps μ within 5 % from about {self.lowest:.4g} Hz (a 10 % bisection's lowest passing rate)"
+
+
+def check_export_rate(
+    P, K, rate: float, *, method: str = "tustin", prewarp: float | None = None, omega=None, search: bool = True
+):
+    """μ of ``K`` discretised as the export does at ``rate``, closed around ``P`` by zero-order hold (the report's check).
+
+    Returns ``(RateCheck, threshold)``; the lowest rate is searched (bisection in log
+    rate to 10 %, as the report's) only when ``rate`` fails and ``search``.
+    """
+    from polyrob.report.build import DISCRETE_GRID
+    from polyrob.validate.discretize import continuous_mu, min_sample_rate, sampled_data_mu
+
+    grid = DISCRETE_GRID if omega is None else np.asarray(omega, float)
+    mu_c = continuous_mu(P, K, grid)
+    threshold = MU_MARGIN * mu_c
+    sd = sampled_data_mu(P, K, rate, method=method, prewarp=prewarp, omega=grid, upper_only=True)
+    ok = bool(sd.stable and sd.mu_upper <= threshold)
+    if ok or not search:
+        return RateCheck(float(rate), ok, bool(sd.stable), float(sd.mu_upper), float(threshold)), threshold
+    ceiling = 20.0 * float(rate)
+    found = min_sample_rate(
+        P, K, mu_continuous=mu_c, omega=grid, method=method, prewarp=prewarp, rel_tol=0.1, rate_bounds=(rate, ceiling)
+    )
+    return (
+        RateCheck(float(rate), False, bool(sd.stable), float(sd.mu_upper), float(threshold), found.rate, ceiling),
+        threshold,
+    )
 
 
 @dataclass(frozen=True, eq=False)
