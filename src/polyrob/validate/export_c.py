@@ -143,6 +143,8 @@ def c_sources(
     ns = max(1, sos.n_sections)
     guard = f"{P}_H"
     wl = "double precision" if sos.word_length is None else f"{sos.word_length}-bit fixed-point coefficients"
+    if sos.word_length is None and sos.info.get("arithmetic") == "float":
+        wl = "single-precision (float) coefficients"
     n_out = sos.n_outputs
     lower = sig.lower if sig.lower is not None else (-np.inf,) * n_out
     upper = sig.upper if sig.upper is not None else (np.inf,) * n_out
