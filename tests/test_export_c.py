@@ -30,6 +30,7 @@ def cc():
         pytest.skip("no C compiler")
     return CC
 
+
 HARNESS = r"""
 #include <stdio.h>
 #include "controller.h"

@@ -48,8 +48,21 @@ def _export(capsys, *argv):
 def _library(cc, out: Path) -> ctypes.CDLL:
     lib = out / "libcontroller.so"
     subprocess.run(
-        [cc, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-shared", "-fPIC", "-o", str(lib),
-         str(out / "controller.c"), "-lm"],
+        [
+            cc,
+            "-std=c99",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-pedantic",
+            "-O2",
+            "-shared",
+            "-fPIC",
+            "-o",
+            str(lib),
+            str(out / "controller.c"),
+            "-lm",
+        ],
         check=True,
         capture_output=True,
     )
@@ -70,9 +83,7 @@ class _C:
         return np.array(u[:])
 
     def bumpless(self, e, u):
-        self.lib.controller_bumpless(
-            self.state, (ctypes.c_double * self.n_in)(*e), (ctypes.c_double * self.n_out)(*u)
-        )
+        self.lib.controller_bumpless(self.state, (ctypes.c_double * self.n_in)(*e), (ctypes.c_double * self.n_out)(*u))
 
     def set_limits(self, lo, hi):
         self.lib.controller_set_limits(
@@ -230,8 +241,10 @@ def _closed_loop(robot, step_controller, r, n_steps, h, substeps=4):
         v = step_controller(r - q)
         tau = robot.mass_matrix(q) @ v + robot.inverse_dynamics(q[None], qd[None], np.zeros((1, 2)))[0]
         for _ in range(substeps):
+
             def f(x):
                 return np.concatenate([x[2:], robot.acceleration(x[:2], x[2:], tau)])
+
             x = np.concatenate([q, qd])
             k1 = f(x)
             k2 = f(x + 0.5 * dt * k1)

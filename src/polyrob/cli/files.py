@@ -79,6 +79,7 @@ def _export_pldi(args, info: dict):
     from pathlib import Path
 
     from polyrob.cli.plant import pldi_path
+    from polyrob.validate.export_c import has_inner_layer
 
     beside = Path(args.controller).with_name("pldi.json")
     path = pldi_path(args) if args.pldi else (beside if beside.is_file() else None)
@@ -87,13 +88,9 @@ def _export_pldi(args, info: dict):
     domain = info.get("domain")
     if not info.get("robot") or not isinstance(domain, dict):
         return None, f"{args.controller} records no robot and domain (pass --pldi FILE)"
-    if domain.get("kind") == "task" or _has_inner(info):
+    if domain.get("kind") == "task" or has_inner_layer(info):
         return None, f"{args.controller} was made on a task domain or an inner layer: pass its PLDI with --pldi FILE"
     return None, None
-
-
-def _has_inner(info: dict) -> bool:
-    return bool(info.get("inner")) and not str(info["inner"]).startswith("inner layer: none")
 
 
 def _export_problem(args, info: dict, path, out):
@@ -130,61 +127,6 @@ def _exported_from(controller) -> dict:
     return {"provenance": made, "controller_file": {**source, "provenance": stored and stored.to_dict()}}
 
 
-def _output_limits(info: dict, m: int):
-    """``(lower, upper, where from)`` of the controller's output in its unit, or ``(None, None, why)``."""
-    import numpy as np
-
-    domain = info.get("domain") if isinstance(info.get("domain"), dict) else {}
-    if _has_inner(info):
-        acc = domain.get("qddot")
-        if isinstance(acc, dict) and len(acc) == m:
-            lo, hi = zip(*(acc[j] for j in acc))
-            return tuple(map(float, lo)), tuple(map(float, hi)), "the task's acceleration bounds qddot, rad/s^2"
-        return None, None, "no acceleration bound recorded: set them with the _set_limits function"
-    if info.get("robot"):
-        import polyrob
-
-        try:
-            effort = np.asarray(polyrob.load_robot(info["robot"]).effort_limit, float)
-        except Exception:  # noqa: BLE001 - a robot that no longer loads: no limit, said in the header
-            effort = np.full(m, np.inf)
-        if effort.size == m and np.all(np.isfinite(effort)) and np.all(effort > 0):
-            return (
-                tuple(-effort),
-                tuple(effort),
-                f"the URDF effort limits of {info['robot']}, N m, on the deviation u; with u_eq known set "
-                "lower = -effort - u_eq, upper = effort - u_eq",
-            )
-    return None, None, "no effort limit known: set them with the _set_limits function"
-
-
-def _nominal_plant(info: dict, K):
-    """The arm's nominal plant for the rate check (:func:`~polyrob.validate.export_c.nominal_arm`), or None."""
-    import numpy as np
-
-    from polyrob.validate.export_c import nominal_arm
-
-    m = K.noutputs
-    if K.ninputs != m:
-        return None
-    if _has_inner(info):
-        return nominal_arm(m)
-    domain = info.get("domain") if isinstance(info.get("domain"), dict) else {}
-    if not info.get("robot"):
-        return None
-    pose = domain.get("pose")
-    if pose is None and isinstance(domain.get("q"), dict):
-        pose = [0.5 * (lo + hi) for lo, hi in domain["q"].values()]
-    try:
-        import polyrob
-
-        robot = polyrob.load_robot(info["robot"])
-        q = np.zeros(robot.m) if pose is None else np.asarray(pose, float)
-        return nominal_arm(m, np.linalg.inv(robot.mass_matrix(q))) if robot.m == m else None
-    except Exception:  # noqa: BLE001 - a robot that no longer loads: the controller-only rule
-        return None
-
-
 def cmd_export(args) -> int:
     import sys
 
@@ -196,7 +138,10 @@ def cmd_export(args) -> int:
         check_export_rate,
         check_export_word_length,
         export_controller,
+        has_inner_layer,
         lowest_rate_of_controller,
+        nominal_plant,
+        output_limits,
     )
     from polyrob.validate.quantize import (
         check_accuracy,
@@ -211,7 +156,7 @@ def cmd_export(args) -> int:
     warnings = []
 
     # the rate: refused below the lowest rate for this controller (--allow-low-rate writes it, with a warning)
-    low = lowest_rate_of_controller(K, _nominal_plant(info, K))
+    low = lowest_rate_of_controller(K, nominal_plant(info, K))
     lowest = low.rate
     rate_words = f"its lowest rate is {lowest:.4g} Hz ({low.basis})"
     if args.rate < lowest:
@@ -265,7 +210,9 @@ def cmd_export(args) -> int:
                     f"--rate {args.rate:g}: too low for {args.controller}: {rate_check.line()} "
                     "(--allow-low-rate writes it anyway, with a warning)"
                 )
-            warnings.append(f"--rate {args.rate:g} Hz is too low: {rate_check.line()}; written anyway (--allow-low-rate)")
+            warnings.append(
+                f"--rate {args.rate:g} Hz is too low: {rate_check.line()}; written anyway (--allow-low-rate)"
+            )
         out.stage(f"word-length check: {args.word_length} bits at {args.rate:g} Hz (μ of the discretised loop)")
         check = None
         if rate_check.ok:  # at a rate that already loses μ, no word length can keep it
@@ -279,14 +226,16 @@ def cmd_export(args) -> int:
             if not args.force:
                 raise PolyrobError(f"export refused: {check.line()}; --force writes it anyway")
             warnings.append(f"{check.line()}; written anyway (--force)")
-    lower, upper, limit_source = _output_limits(info, K.noutputs)
+    lower, upper, limit_source = output_limits(info, K.noutputs)
     checked = [f"the rate: {args.rate:g} Hz, {'at or above' if args.rate >= lowest else 'BELOW'} {rate_words}"]
     checked.append(f"the coefficients' poles and DC gains: {'kept' if accuracy.ok else 'NOT kept'}; {keep}")
     if check_doc and "rate" in check_doc:
         rate_ok = check_doc["rate"]["ok"]
         checked.append(f"μ of the discretised loop at this rate: {'kept' if rate_ok else 'NOT kept'} within 5 %")
     if check_doc and check_doc.get("checked"):
-        checked.append(f"μ of the discretised loop with these coefficients: {'kept' if check_doc['ok'] else 'NOT kept'}")
+        checked.append(
+            f"μ of the discretised loop with these coefficients: {'kept' if check_doc['ok'] else 'NOT kept'}"
+        )
     signals = Signals(
         inner=info.get("inner"),
         lower=lower,
@@ -316,14 +265,14 @@ def cmd_export(args) -> int:
         real=args.real,
         name=args.name,
         inner=info.get("inner"),
-        extra=_exported_from(args.controller),  # the C's JSON names the controller file it came from
         signals=signals,
         extra={
+            **_exported_from(args.controller),  # the C's JSON names the controller file it came from
             "signals": {
                 "input": "e[j] = r[j] - q[j], the tracking error of joint j, rad",
                 "output": (
                     "v[i], the acceleration command of joint i (the inner layer's input), rad/s^2"
-                    if _has_inner(info)
+                    if has_inner_layer(info)
                     else "the torque deviation of joint i from the equilibrium torque, N m"
                 ),
                 "output_limits": {"lower": lower, "upper": upper, "source": limit_source},
@@ -347,7 +296,7 @@ def cmd_export(args) -> int:
     out.document(doc)
     out.line(f"wrote {res.header}, {res.source} and {res.json}")
     out.line(f"coefficients: {keep} (poles within 1 % of their distance to z = 1, DC gains within 0.1 %)")
-    if _has_inner(info):
+    if has_inner_layer(info):
         out.line(f"the controller's output is an inner layer's input v (rad/s^2); at run time: {info['inner']}")
     for w in warnings:  # on stderr, also with --json and --quiet
         print(f"polyrob: warning: {w}", file=sys.stderr, flush=True)

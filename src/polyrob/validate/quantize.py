@@ -50,6 +50,7 @@ __all__ = [
     "check_word_length",
     "min_word_length",
     "q_format",
+    "offset_section",
     "round_to_float",
     "AccuracyCheck",
     "check_accuracy",
@@ -180,7 +181,7 @@ class SOSController:
             if i in done:
                 continue
             done.add(i)
-            n = _offset_section(secs)
+            n = offset_section(secs)
             gain = float(np.prod(secs[n + 1 :, 0])) if n + 1 < secs.shape[0] else 1.0
             states[f + n, 0] = (u[i] - v[i]) / gain
         return states
@@ -227,7 +228,7 @@ class SOSController:
         return cls(sections, float(data["dt"]), data.get("word_length"), formats, dict(data.get("info", {})))
 
 
-def _offset_section(secs) -> int:
+def offset_section(secs) -> int:
     """The section whose ``s[0]`` a bumpless start sets: the last integrator section whose later ``b0`` are not zero."""
     n = secs.shape[0] - 1
     for k in range(secs.shape[0] - 1, -1, -1):
