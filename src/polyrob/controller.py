@@ -31,7 +31,7 @@ from functools import cached_property
 import control
 import numpy as np
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.plant.realize import as_state_space, is_static
 
 __all__ = ["Controller", "as_controller_ss"]
@@ -87,7 +87,7 @@ class Controller:
             ss = as_state_space(K, "K")
             out = cls(*(np.asarray(X, float) for X in (ss.A, ss.B, ss.C, ss.D)), given=ss)
         if n_u is not None and n_y is not None and (out.n_u, out.n_y) != (n_u, n_y):
-            raise PolyrobError(
+            raise ArgumentError(
                 f"K maps {out.n_y} inputs to {out.n_u} outputs; expected {n_y} measurements -> {n_u} controls"
             )
         return out
@@ -104,7 +104,7 @@ class Controller:
         B = np.asarray(B, float).reshape(nk, D.shape[1])
         C = np.asarray(C, float).reshape(D.shape[0], nk)
         if not all(np.all(np.isfinite(X)) for X in (A, B, C, D)):
-            raise PolyrobError("K has non-finite entries")
+            raise ArgumentError("K has non-finite entries")
         return cls(A, B, C, D)
 
     @property

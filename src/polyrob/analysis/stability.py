@@ -254,9 +254,9 @@ def stability_verdict(system, *, extended_bits: int = 212) -> StabilityVerdict:
     """
     A = np.array(getattr(system, "A", system), dtype=float)
     if A.ndim != 2 or A.shape[0] != A.shape[1]:
-        from polyrob.errors import PolyrobError
+        from polyrob.errors import ArgumentError
 
-        raise PolyrobError(f"stability needs a square state matrix, got shape {A.shape}")
+        raise ArgumentError(f"stability needs a square state matrix, got shape {A.shape}")
     n = A.shape[0]
     if n == 0:
         return StabilityVerdict(STABLE, -np.inf, 0.0, 0, 1.0, 53, ("no states",))

@@ -131,7 +131,6 @@ def cmd_export(args) -> int:
     import sys
 
     from polyrob.cli.analyze import load_controller_args
-    from polyrob.errors import PolyrobError
     from polyrob.validate.discretize import discretize
     from polyrob.validate.export_c import (
         Signals,
@@ -188,7 +187,7 @@ def cmd_export(args) -> int:
             f"z = 1) and DC gains (0.1 %): {accuracy.problem}; {fix}"
         )
         if not args.force:
-            raise PolyrobError(f"export refused: {line}; --force writes it anyway")
+            raise ArgumentError(f"export refused: {line}; --force writes it anyway")
         warnings.append(f"{line}; written anyway (--force)")
 
     path, why = _export_pldi(args, info) if args.word_length is not None else (None, "no --word-length")
@@ -224,7 +223,7 @@ def cmd_export(args) -> int:
             check_doc = {"checked": False, "why": "the rate already loses μ (--allow-low-rate)", **check_doc}
         if check is not None and not check.ok:
             if not args.force:
-                raise PolyrobError(f"export refused: {check.line()}; --force writes it anyway")
+                raise ArgumentError(f"export refused: {check.line()}; --force writes it anyway")
             warnings.append(f"{check.line()}; written anyway (--force)")
     lower, upper, limit_source = output_limits(info, K.noutputs)
     checked = [f"the rate: {args.rate:g} Hz, {'at or above' if args.rate >= lowest else 'BELOW'} {rate_words}"]

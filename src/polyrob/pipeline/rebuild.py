@@ -24,7 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 
 __all__ = ["RunDirectory", "load_run", "rebuild_problem"]
 
@@ -106,10 +106,10 @@ def load_run(
 
     run = Path(run_dir)
     if not run.is_dir():
-        raise PolyrobError(f"{run}: no such run directory")
+        raise ArgumentError(f"{run}: no such run directory")
     for name in (controller, pldi):
         if not (run / name).exists():
-            raise PolyrobError(
+            raise ArgumentError(
                 f"{run}: no {name} (a run directory holds K.json and pldi.json: `polyrob run ROBOT -o DIR` writes them)"
             )
     doc = read_controller_file(run / controller)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.plant.lftplant import UncertainPlant
 from polyrob.plant.models import MODELS
 
@@ -33,7 +33,7 @@ def model_contains(unc: UncertainPlant, A, B) -> np.ndarray:
     The test of the model that built ``unc`` (:func:`polyrob.plant.models.model_of`).
     """
     if unc.model not in MODELS:
-        raise PolyrobError(f"no membership test for the model '{unc.model}'")
+        raise ArgumentError(f"no membership test for the model '{unc.model}'")
     return MODELS[unc.model].contains(unc, A, B)
 
 

@@ -65,7 +65,7 @@ import control
 import numpy as np
 
 from polyrob.controller import as_controller_ss  # noqa: F401 - its home is polyrob.controller
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.plant.lftplant import UncertainPlant, upper_lft
 from polyrob.plant.loops import (  # noqa: F401  (re-exported: the pipeline imports them from here)
     ClosedLoop,
@@ -208,20 +208,20 @@ def generalized_plant(
     ['r[0]', 'r[1]', 'u[0]', 'u[1]']
     """
     if not isinstance(unc, UncertainPlant):
-        raise PolyrobError(f"generalized_plant needs an UncertainPlant, got {type(unc).__name__}")
+        raise ArgumentError(f"generalized_plant needs an UncertainPlant, got {type(unc).__name__}")
     m = unc.m
     WS, WT, WKS = weight_ss(W_S, m, "W_S"), weight_ss(W_T, m, "W_T"), weight_ss(W_KS, m, "W_KS")
     if regularize is not None:
         try:
             eps = float(regularize)
         except (TypeError, ValueError):
-            raise PolyrobError(f"regularize must be a positive number, got {regularize!r}") from None
+            raise ArgumentError(f"regularize must be a positive number, got {regularize!r}") from None
         if not (math.isfinite(eps) and eps > 0):
-            raise PolyrobError(f"regularize must be a positive number, got {regularize!r}")
+            raise ArgumentError(f"regularize must be a positive number, got {regularize!r}")
     else:
         eps = None
     if WS is None and WT is None and WKS is None and eps is None:
-        raise PolyrobError("give at least one weight (W_S, W_T or W_KS): z would be empty")
+        raise ArgumentError("give at least one weight (W_S, W_T or W_KS): z would be empty")
 
     n, nd = unc.n_x, unc.n_delta
     A_g, B_g, C_g = unc.A_mid, unc.B_mid, unc.C

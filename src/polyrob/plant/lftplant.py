@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import control
 import numpy as np
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 
 __all__ = ["UncertainPlant", "upper_lft", "upper_lft_matrices", "MAX_CORNERS", "weakest_enclosure"]
 
@@ -56,7 +56,7 @@ def upper_lft_matrices(A, B, C, D, Delta):
         return A.copy(), B2.copy(), C2.copy(), D22.copy()
     lhs = np.eye(nd) - Delta @ D11
     if np.linalg.cond(lhs) > 1e12:
-        raise PolyrobError("the upper LFT is ill posed: I - Δ D_vd is singular")
+        raise ArgumentError("the upper LFT is ill posed: I - Δ D_vd is singular")
     Q = np.linalg.solve(lhs, Delta)
     return A + B1 @ Q @ C1, B2 + B1 @ Q @ D12, C2 + D21 @ Q @ C1, D22 + D21 @ Q @ D12
 
@@ -84,7 +84,7 @@ def upper_lft(M: control.StateSpace, Delta) -> control.StateSpace:
     Delta = np.atleast_2d(np.asarray(Delta))
     nd, nv = Delta.shape
     if nd > M.ninputs or nv > M.noutputs:
-        raise PolyrobError(f"Δ is {nd}x{nv} but M has only {M.ninputs} inputs and {M.noutputs} outputs")
+        raise ArgumentError(f"Δ is {nd}x{nv} but M has only {M.ninputs} inputs and {M.noutputs} outputs")
     return control.ss(
         *upper_lft_matrices(*(np.asarray(X) for X in (M.A, M.B, M.C, M.D)), Delta),
         inputs=M.input_labels[nd:],
@@ -252,14 +252,14 @@ class UncertainPlant:
         """``δ`` as a float array of one value per parameter (``|δ| <= 1`` when ``strict``)."""
         delta = np.asarray(delta, dtype=float)
         if delta.shape != (self.n_params,):
-            raise PolyrobError(
+            raise ArgumentError(
                 f"δ must have one value per parameter ({self.n_params}: {', '.join(self.parameter_names)}), "
                 f"got shape {delta.shape}"
             )
         if not np.all(np.isfinite(delta)):
-            raise PolyrobError("δ must be finite")
+            raise ArgumentError("δ must be finite")
         if strict and np.any(np.abs(delta) > 1.0 + 1e-12):
-            raise PolyrobError(
+            raise ArgumentError(
                 f"δ must lie in [-1, 1] (max |δ| = {np.abs(delta).max():.6g}); pass strict=False to extrapolate"
             )
         return delta
@@ -280,7 +280,7 @@ class UncertainPlant:
             for size, R in zip(self.full_blocks, residual):
                 R = np.asarray(R)
                 if R.shape != (size, size):
-                    raise PolyrobError(f"a residual block must be {size}x{size}, got {R.shape}")
+                    raise ArgumentError(f"a residual block must be {size}x{size}, got {R.shape}")
                 D[start : start + size, start : start + size] = R
                 start += size
         return D
@@ -353,19 +353,19 @@ class UncertainPlant:
         rng = np.random.default_rng(seed)
         if kind == "uniform":
             if n is None or int(n) < 0:
-                raise PolyrobError("uniform δ sampling needs a number of samples n >= 0")
+                raise ArgumentError("uniform δ sampling needs a number of samples n >= 0")
             return rng.uniform(-1.0, 1.0, size=(int(n), k))
         if kind == "corners":
             if n is not None:
                 return rng.choice([-1.0, 1.0], size=(int(n), k))
             if 2**k > max_corners:
-                raise PolyrobError(
+                raise ArgumentError(
                     f"{k} parameters have 2^{k} = {2**k} corners, more than max_corners={max_corners}; "
                     "raise max_corners or draw random corners with delta_samples(n, kind='corners')"
                 )
             bits = (np.arange(2**k)[:, None] >> np.arange(k)[None, :]) & 1
             return 2.0 * bits - 1.0
-        raise PolyrobError(f"unknown δ sampling kind '{kind}': use 'uniform' or 'corners'")
+        raise ArgumentError(f"unknown δ sampling kind '{kind}': use 'uniform' or 'corners'")
 
     def usample(self, n: int, seed=None, *, return_delta: bool = False):
         """``n`` plants at uniform random ``δ ∈ [-1, 1]^k`` (and random residual blocks), MATLAB's ``usample``."""

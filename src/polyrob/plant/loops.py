@@ -23,7 +23,7 @@ import numpy as np
 
 from polyrob.analysis.stability import stability_verdict
 from polyrob.controller import as_controller_ss
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.plant.realize import as_state_space, ss_matrices
 
 if TYPE_CHECKING:
@@ -85,7 +85,7 @@ def lower_lft(P: control.StateSpace, K: control.StateSpace, n_u: int, n_y: int) 
     try:
         _well_posed(np.asarray(P.D, float)[nz:, nw:], np.asarray(K.D, float), n_y)
     except np.linalg.LinAlgError:
-        raise PolyrobError("the lower LFT is ill posed: I - D_yu D_K is singular") from None
+        raise ArgumentError("the lower LFT is ill posed: I - D_yu D_K is singular") from None
     if K.dt != P.dt:  # the caller has checked the sample times agree (to rounding)
         K = control.ss(K.A, K.B, K.C, K.D, dt=P.dt)
     try:
@@ -142,12 +142,12 @@ def lft(P, K, *, n_u: int | None = None, n_y: int | None = None) -> control.Stat
         n_u, n_y, sys = P.n_u, P.n_y, P.system
     elif isinstance(P, control.StateSpace):
         if n_u is None or n_y is None:
-            raise PolyrobError("lft of a bare StateSpace needs n_u and n_y")
+            raise ArgumentError("lft of a bare StateSpace needs n_u and n_y")
         sys = P
         if not (0 < n_u <= sys.ninputs and 0 < n_y <= sys.noutputs):
-            raise PolyrobError(f"n_u={n_u}, n_y={n_y} do not fit a {sys.noutputs}x{sys.ninputs} plant")
+            raise ArgumentError(f"n_u={n_u}, n_y={n_y} do not fit a {sys.noutputs}x{sys.ninputs} plant")
     else:
-        raise PolyrobError(f"lft needs a GeneralizedPlant or a StateSpace, got {type(P).__name__}")
+        raise ArgumentError(f"lft needs a GeneralizedPlant or a StateSpace, got {type(P).__name__}")
     return lower_lft(sys, as_controller_ss(K, n_u, n_y), n_u, n_y)
 
 

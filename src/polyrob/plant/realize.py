@@ -10,7 +10,7 @@ import control
 import numpy as np
 import scipy.linalg as sla
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError, PolyrobError
 
 __all__ = ["is_static", "as_state_space", "weight_ss", "ss_matrices"]
 
@@ -25,7 +25,7 @@ def _siso_ss(num, den) -> control.StateSpace:
     if len(num) == 0:
         return control.ss([], [], [], [[0.0]], dt=0)
     if len(num) > len(den):
-        raise PolyrobError("an improper transfer function has no state-space realisation")
+        raise ArgumentError("an improper transfer function has no state-space realisation")
     if len(den) == 1:
         return control.ss([], [], [], [[num[0] / den[0]]], dt=0)
     return control.ss(control.tf(num, den))
@@ -69,18 +69,18 @@ def as_state_space(sys, what: str) -> control.StateSpace:
         try:
             entries = {(i, j): _siso_ss(sys.num[i][j], sys.den[i][j]) for i in range(p) for j in range(q)}
         except (ValueError, PolyrobError) as exc:
-            raise PolyrobError(f"{what}: {exc}") from None
+            raise ArgumentError(f"{what}: {exc}") from None
         A, B, C, D = _block_ss(entries, p, q)
         out = control.ss(A, B, C, D, dt=sys.dt)
     elif isinstance(sys, control.LTI):
         try:
             out = control.ss(sys)
         except (ValueError, TypeError, NotImplementedError, control.ControlMIMONotImplemented) as exc:
-            raise PolyrobError(f"{what}: cannot convert {type(sys).__name__} to state space ({exc})") from None
+            raise ArgumentError(f"{what}: cannot convert {type(sys).__name__} to state space ({exc})") from None
     else:
-        raise PolyrobError(f"{what} must be a python-control LTI system or a number, got {type(sys).__name__}")
+        raise ArgumentError(f"{what} must be a python-control LTI system or a number, got {type(sys).__name__}")
     if out.dt not in (0, None):
-        raise PolyrobError(f"{what} is discrete-time (dt={out.dt}); the plant is continuous-time")
+        raise ArgumentError(f"{what} is discrete-time (dt={out.dt}); the plant is continuous-time")
     return out
 
 
@@ -93,12 +93,12 @@ def weight_ss(W, m: int, name: str) -> control.StateSpace | None:
         if G.ndim == 0:
             G = float(G) * np.eye(m)
         if G.shape != (m, m):
-            raise PolyrobError(f"{name} is a {G.shape} gain; expected a scalar or {m}x{m}")
+            raise ArgumentError(f"{name} is a {G.shape} gain; expected a scalar or {m}x{m}")
         if not np.all(np.isfinite(G)):
-            raise PolyrobError(f"{name} has non-finite entries")
+            raise ArgumentError(f"{name} has non-finite entries")
         return control.ss(np.zeros((0, 0)), np.zeros((0, m)), np.zeros((m, 0)), G, dt=0)
     if not isinstance(W, control.LTI):
-        raise PolyrobError(f"{name} must be a python-control LTI system, an array or a number, got {type(W).__name__}")
+        raise ArgumentError(f"{name} must be a python-control LTI system, an array or a number, got {type(W).__name__}")
     p, q = W.noutputs, W.ninputs
     if (p, q) == (1, 1):
         # a SISO weight applies to every channel: m decoupled copies
@@ -110,13 +110,13 @@ def weight_ss(W, m: int, name: str) -> control.StateSpace | None:
     elif (p, q) == (m, m):
         out = as_state_space(W, name)
     else:
-        raise PolyrobError(
+        raise ArgumentError(
             f"{name} is {p}x{q}; expected SISO (applied to every channel) or {m}x{m} (the robot has m={m} joints)"
         )
     if out.nstates:
         poles = np.linalg.eigvals(np.asarray(out.A))
         if np.max(poles.real) >= 0:
-            raise PolyrobError(
+            raise ArgumentError(
                 f"{name} has a pole with Re >= 0 ({poles[np.argmax(poles.real)]:.4g}): weights sit outside the "
                 "loop, so the generalized plant would not be stabilisable; use a stable weight (e.g. makeweight)"
             )

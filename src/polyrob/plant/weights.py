@@ -17,7 +17,7 @@ from collections.abc import Sequence
 import control
 import numpy as np
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 
 __all__ = [
     "makeweight",
@@ -43,10 +43,10 @@ def _positive(name: str, value: float, allow_zero: bool = False) -> float:
     try:
         v = float(value)
     except (TypeError, ValueError) as exc:
-        raise PolyrobError(f"{name} must be a number, got {value!r}") from exc
+        raise ArgumentError(f"{name} must be a number, got {value!r}") from exc
     if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
         kind = "non-negative" if allow_zero else "positive"
-        raise PolyrobError(f"{name} must be a finite {kind} number, got {value!r}")
+        raise ArgumentError(f"{name} must be a finite {kind} number, got {value!r}")
     return v
 
 
@@ -109,7 +109,7 @@ def makeweight(
     """
     if isinstance(crossover, (tuple, list, np.ndarray)):
         if len(crossover) != 2:
-            raise PolyrobError(f"crossover must be freq or (freq, mag), got {crossover!r}")
+            raise ArgumentError(f"crossover must be freq or (freq, mag), got {crossover!r}")
         freq, mag = crossover
     else:
         freq, mag = crossover, 1.0
@@ -118,10 +118,10 @@ def makeweight(
     freq = _positive("crossover frequency", freq)
     mag = _positive("crossover magnitude", mag)
     if int(order) != order or order < 1:
-        raise PolyrobError(f"order must be a positive integer, got {order!r}")
+        raise ArgumentError(f"order must be a positive integer, got {order!r}")
     n = int(order)
     if not (dc < mag < hf or dc > mag > hf):
-        raise PolyrobError(
+        raise ArgumentError(
             f"makeweight needs mag strictly between dcgain and hfgain (got dcgain={dc}, mag={mag}, hfgain={hf})"
         )
     wp = freq * ((hf**2 - mag**2) / (mag**2 - dc**2)) ** (1.0 / (2 * n))
@@ -197,17 +197,17 @@ def diagonal_weight(weights: Sequence) -> control.TransferFunction:
     (2, 2, 2.0)
     """
     if len(weights) == 0:
-        raise PolyrobError("diagonal_weight needs at least one weight")
+        raise ArgumentError("diagonal_weight needs at least one weight")
     tfs = []
     for i, w in enumerate(weights):
         if isinstance(w, (int, float, np.floating, np.integer)):
             w = control.tf([float(w)], [1.0])
         elif isinstance(w, control.LTI):
             if (w.noutputs, w.ninputs) != (1, 1):
-                raise PolyrobError(f"weight {i} is {w.noutputs}x{w.ninputs}, expected SISO")
+                raise ArgumentError(f"weight {i} is {w.noutputs}x{w.ninputs}, expected SISO")
             w = control.tf(w)
         else:
-            raise PolyrobError(f"weight {i} must be a SISO LTI system or a number, got {type(w).__name__}")
+            raise ArgumentError(f"weight {i} must be a SISO LTI system or a number, got {type(w).__name__}")
         tfs.append(w)
     n = len(tfs)
     num = [[tfs[i].num[0][0] if i == j else np.array([0.0]) for j in range(n)] for i in range(n)]
@@ -241,10 +241,10 @@ def paper_weights(
     keys = ("omega_b", "M_s", "A_s", "omega_bt", "M_t", "A_t")
     missing = [k for k in keys if k not in h]
     if missing:
-        raise PolyrobError(f"missing weight hyperparameters: {missing}")
+        raise ArgumentError(f"missing weight hyperparameters: {missing}")
     n = {len(h[k]) for k in keys}
     if len(n) != 1:
-        raise PolyrobError(f"weight hyperparameters must all have the same length, got {n}")
+        raise ArgumentError(f"weight hyperparameters must all have the same length, got {n}")
     ws = [sensitivity_weight(*p) for p in zip(h["omega_b"], h["M_s"], h["A_s"])]
     wt = [complementary_weight(*p) for p in zip(h["omega_bt"], h["M_t"], h["A_t"])]
     return diagonal_weight(ws), diagonal_weight(wt)

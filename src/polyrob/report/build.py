@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ControllerFileError
 from polyrob.io.atomic import atomic_write, json_default
 from polyrob.report.certificates import certificate_record, is_decided
 from polyrob.report.html import ReportFiles, ReportOptions, write_report
@@ -268,9 +268,9 @@ def read_run_certificates(run_dir, controller: str = "K.json") -> tuple[dict, li
     try:
         doc = json.loads(path.read_text())
     except ValueError as exc:
-        raise PolyrobError(f"{path}: not JSON ({exc})") from None
+        raise ControllerFileError(f"{path}: not JSON ({exc})") from None
     if not isinstance(doc, dict):
-        raise PolyrobError(f"{path}: expected a mapping of certificate name -> record")
+        raise ControllerFileError(f"{path}: expected a mapping of certificate name -> record")
     if doc.get("format") == RUN_CERTIFICATES_FORMAT:
         if doc.get("controller") != controller:
             return {}, [f"{path.name} holds the certificates of {doc.get('controller')}, not of {controller}: not used"]

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.errors import ArgumentError, SynthesisError
 from polyrob.synthesis.result import MusynResult
 
 __all__ = ["BandwidthScalingResult", "scaled_hyperparameters", "max_bandwidth_scaling"]
@@ -115,7 +115,7 @@ def scaled_hyperparameters(
     h = dict(PAPER_HYPERPARAMETERS if hyperparameters is None else hyperparameters)
     for key in scale:
         if key not in h:
-            raise PolyrobError(f"unknown weight hyperparameter {key!r}; known: {sorted(h)}")
+            raise ArgumentError(f"unknown weight hyperparameter {key!r}; known: {sorted(h)}")
         h[key] = tuple(float(alpha * x) for x in h[key])
     return h
 
@@ -241,9 +241,9 @@ def max_bandwidth_scaling(
     synthesize = synthesize or _default_synthesis(progress=progress, **musyn_options)
     grid = np.asarray(sorted(float(a) for a in alphas))
     if grid.size == 0 or not np.all(np.isfinite(grid)) or grid[0] <= 0:
-        raise PolyrobError(f"alphas must be positive finite numbers, got {alphas!r}")
+        raise ArgumentError(f"alphas must be positive finite numbers, got {alphas!r}")
     if not (rtol > 0):
-        raise PolyrobError(f"rtol must be positive, got {rtol!r}")
+        raise ArgumentError(f"rtol must be positive, got {rtol!r}")
     t0 = time.perf_counter()
     history: list = []
     solved: dict = {}

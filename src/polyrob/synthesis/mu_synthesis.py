@@ -24,7 +24,7 @@ from polyrob._threads import single_blas_thread
 from polyrob.analysis.certificate import certify_loop
 from polyrob.analysis.mu.blocks import as_block_structure
 from polyrob.controller import as_controller_ss
-from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.errors import ArgumentError, SynthesisError
 from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound
 from polyrob.synthesis.dk.iteration import DKIteration
 from polyrob.synthesis.fixed.synthesis import fixed_structure_musyn
@@ -94,20 +94,20 @@ def _parse_plant(P, blk, n_u, n_y):
     elif isinstance(P, control.StateSpace):
         Psys = P
         if n_u is None or n_y is None:
-            raise PolyrobError("musyn of a bare StateSpace needs n_u and n_y")
+            raise ArgumentError("musyn of a bare StateSpace needs n_u and n_y")
         if blk is None:
-            raise PolyrobError("musyn of a bare StateSpace needs blk")
+            raise ArgumentError("musyn of a bare StateSpace needs blk")
     else:
-        raise PolyrobError(f"musyn needs a GeneralizedPlant or a StateSpace, got {type(P).__name__}")
+        raise ArgumentError(f"musyn needs a GeneralizedPlant or a StateSpace, got {type(P).__name__}")
     st = as_block_structure(blk)
     nr, nc = st.m_shape
     if (Psys.noutputs - n_y, Psys.ninputs - n_u) != (nr, nc):
-        raise PolyrobError(
+        raise ArgumentError(
             f"the plant has {Psys.noutputs - n_y} outputs and {Psys.ninputs - n_u} inputs besides y and u, "
             f"but the block structure {st} needs {nr} and {nc}"
         )
     if Psys.dt not in (0, None):
-        raise PolyrobError("musyn: the plant must be continuous-time")
+        raise ArgumentError("musyn: the plant must be continuous-time")
     return Psys, st, int(n_u), int(n_y)
 
 
@@ -230,7 +230,7 @@ def _full_order_settings(P, blk, opts: MusynOptions, n_u, n_y):
     omega = frequency_grid(Psys) if opts.omega is None else opts.omega
     omega = np.unique(np.asarray(omega, float).ravel())
     if omega.size < 3 or np.any(omega <= 0) or not np.all(np.isfinite(omega)):
-        raise PolyrobError("omega must hold at least three positive finite frequencies")
+        raise ArgumentError("omega must hold at least three positive finite frequencies")
     B = np.asarray(Psys.B, float)
     C = np.asarray(Psys.C, float)
     check_stabilizable(np.asarray(Psys.A, float), B[:, -n_u:], C[-n_y:], list(Psys.state_labels))

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 import control
 import numpy as np
 
-from polyrob.errors import SynthesisError
+from polyrob.errors import ArgumentError, SynthesisError
 
 __all__ = [
     "TunedPID",
@@ -335,10 +335,9 @@ def pid_start(
     """
     import time
 
-    from polyrob.errors import PolyrobError
 
     if isinstance(P, control.StateSpace):
-        raise PolyrobError("initial_controller='pid' needs a GeneralizedPlant (its weights place the crossover)")
+        raise ArgumentError("initial_controller='pid' needs a GeneralizedPlant (its weights place the crossover)")
     t0 = time.perf_counter()
     tuned = tuned_pid(P)
     log.info(f"musyn: start from a {tuned.words()}, coarse-grid mu {tuned.grid_mu:.4f}")

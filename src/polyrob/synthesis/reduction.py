@@ -37,7 +37,7 @@ from polyrob._threads import single_blas_thread
 from polyrob.analysis.certificate import certify_loop
 from polyrob.analysis.mu.blocks import as_block_structure
 from polyrob.controller import as_controller_ss
-from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.errors import ArgumentError, SynthesisError
 from polyrob.synthesis.dk.frequency import frequency_grid
 from polyrob.synthesis.result import MusynResult
 
@@ -196,7 +196,7 @@ def balanced_reduction(
     2
     """
     if method not in ("truncate", "matchdc"):
-        raise PolyrobError(f"method must be 'truncate' or 'matchdc', got {method!r}")
+        raise ArgumentError(f"method must be 'truncate' or 'matchdc', got {method!r}")
     A = np.asarray(K.A, float)
     if K.nstates == 0 or order >= K.nstates:
         return K
@@ -204,7 +204,7 @@ def balanced_reduction(
     alpha = -margin * max(1.0, float(np.max(np.abs(lam))))
     nu = int(np.sum(lam.real >= alpha))
     if order < nu:
-        raise PolyrobError(f"cannot reduce below the {nu} unstable/marginal poles of the controller")
+        raise ArgumentError(f"cannot reduce below the {nu} unstable/marginal poles of the controller")
     Kc = control.ss(A, np.asarray(K.B, float), np.asarray(K.C, float), np.asarray(K.D, float))
     if nu == 0 and method == "truncate" and order > 0:
         return control.balred(Kc, order, method="truncate")  # AB09AD (alpha is for AB09MD only)
@@ -289,11 +289,11 @@ def reduce_controller(
     if blk is None:
         blk = getattr(P, "block_structure_rp", None)
         if blk is None:
-            raise PolyrobError("reduce_controller needs blk for a bare StateSpace plant")
+            raise ArgumentError("reduce_controller needs blk for a bare StateSpace plant")
     st = as_block_structure(blk)
     kw = {} if not isinstance(P, control.StateSpace) else {"n_u": n_u, "n_y": n_y}
     if isinstance(P, control.StateSpace) and (n_u is None or n_y is None):
-        raise PolyrobError("reduce_controller of a bare StateSpace plant needs n_u and n_y")
+        raise ArgumentError("reduce_controller of a bare StateSpace plant needs n_u and n_y")
     K = as_controller_ss(K, P.n_u if n_u is None else n_u, P.n_y if n_y is None else n_y)
     if omega is None:
         base = frequency_grid(P.system if hasattr(P, "system") else P)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.validate.quantize import SOSController, offset_section
 
 __all__ = ["Signals", "c_sources"]
@@ -93,9 +93,9 @@ def c_sources(
 ) -> tuple[str, str]:
     """The text of ``name.h`` and ``name.c``; ``signals``: what the header says (``inner``: its inner layer only)."""
     if real not in ("double", "float"):
-        raise PolyrobError(f"real must be 'double' or 'float', got '{real}'")
+        raise ArgumentError(f"real must be 'double' or 'float', got '{real}'")
     if not name.isidentifier():
-        raise PolyrobError(f"'{name}' is not a C identifier")
+        raise ArgumentError(f"'{name}' is not a C identifier")
     sig = signals if signals is not None else Signals(inner=inner)
     P = name.upper()
     entries = list(sos.entries())

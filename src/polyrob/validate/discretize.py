@@ -38,7 +38,7 @@ import numpy as np
 
 from polyrob.analysis.mu.frequency import freqresp
 from polyrob.controller import Controller, as_controller_ss
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.plant.loops import lft, lower_lft
 
 __all__ = [
@@ -118,20 +118,20 @@ def discretize(K, rate: float, *, method: str = "tustin", prewarp: float | None 
         ``π rate``; ``None`` for the plain bilinear map.
     """
     if method not in METHODS:
-        raise PolyrobError(f"unknown discretisation '{method}': use one of {', '.join(METHODS)}")
+        raise ArgumentError(f"unknown discretisation '{method}': use one of {', '.join(METHODS)}")
     rate = float(rate)
     if not (math.isfinite(rate) and rate > 0):
-        raise PolyrobError(f"the sample rate must be a positive number of Hz, got {rate}")
+        raise ArgumentError(f"the sample rate must be a positive number of Hz, got {rate}")
     if isinstance(K, control.LTI) and getattr(K, "dt", 0) not in (0, None):
-        raise PolyrobError("the controller is already discrete-time")
+        raise ArgumentError("the controller is already discrete-time")
     Ks = Controller.of(K).system
     h = 1.0 / rate
     if prewarp is not None:
         prewarp = float(prewarp)
         if method != "tustin":
-            raise PolyrobError("pre-warping applies to the Tustin method only")
+            raise ArgumentError("pre-warping applies to the Tustin method only")
         if not (0 < prewarp < math.pi * rate):
-            raise PolyrobError(f"the pre-warping frequency must lie in (0, π·rate) = (0, {math.pi * rate:.4g}) rad/s")
+            raise ArgumentError(f"the pre-warping frequency must lie in (0, π·rate) = (0, {math.pi * rate:.4g}) rad/s")
     if Ks.nstates == 0:
         Kd = control.ss(np.zeros((0, 0)), np.zeros((0, Ks.ninputs)), np.zeros((Ks.noutputs, 0)), Ks.D, dt=h)
     elif method == "tustin":
@@ -144,7 +144,7 @@ def discretize(K, rate: float, *, method: str = "tustin", prewarp: float | None 
 def discrete_lft(Pd: control.StateSpace, Kd: control.StateSpace, n_u: int, n_y: int) -> control.StateSpace:
     """Lower LFT of a discrete plant and controller of the same ``dt`` (:func:`~polyrob.plant.loops.lower_lft`)."""
     if not np.isclose(float(Pd.dt), float(Kd.dt)):
-        raise PolyrobError(f"plant dt = {Pd.dt} and controller dt = {Kd.dt} differ")
+        raise ArgumentError(f"plant dt = {Pd.dt} and controller dt = {Kd.dt} differ")
     return lower_lft(Pd, Kd, n_u, n_y)
 
 
@@ -247,7 +247,7 @@ def sampled_data_mu(
         Passed to :func:`~polyrob.analysis.mu.bounds.mu_bounds` (default ``refine_peak=False``).
     """
     if not (hasattr(P, "system") and hasattr(P, "block_structure_rp")):
-        raise PolyrobError(f"sampled_data_mu needs a GeneralizedPlant, got {type(P).__name__}")
+        raise ArgumentError(f"sampled_data_mu needs a GeneralizedPlant, got {type(P).__name__}")
     h = 1.0 / float(rate)
     if controller is None:
         if method != "tustin":
@@ -263,7 +263,7 @@ def sampled_data_mu(
         dc = DiscreteController(Ksys, 1.0 / float(Ksys.dt), "given", None, Ksys)
     Kd = dc.system
     if not np.isclose(float(Kd.dt), h):
-        raise PolyrobError(f"the discrete controller runs at {1 / float(Kd.dt):.6g} Hz, not {rate:.6g} Hz")
+        raise ArgumentError(f"the discrete controller runs at {1 / float(Kd.dt):.6g} Hz, not {rate:.6g} Hz")
     Pd = control.sample_system(P.system, h, method="zoh")
     N = discrete_lft(Pd, Kd, P.n_u, P.n_y)
     rho = float(np.abs(np.linalg.eigvals(np.asarray(N.A))).max()) if N.nstates else 0.0  # discrete time: |z| < 1

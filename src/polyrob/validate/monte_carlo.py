@@ -29,7 +29,7 @@ import control
 import numpy as np
 
 from polyrob.analysis.mu.frequency import freqresp as frequency_response  # the one evaluation, kept by this name
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.plant.generalized import loop_functions
 
 __all__ = ["MonteCarloResult", "monte_carlo", "frequency_response", "weight_shape"]
@@ -51,7 +51,7 @@ def weight_shape(W, omega, m: int) -> np.ndarray | None:
     if H.shape[1:] == (1, 1):
         return np.repeat(1.0 / np.abs(H[:, 0, 0])[None, :], m, axis=0)
     if H.shape[1:] != (m, m):
-        raise PolyrobError(f"a weight is {H.shape[1]}x{H.shape[2]}; expected SISO or {m}x{m}")
+        raise ArgumentError(f"a weight is {H.shape[1]}x{H.shape[2]}; expected SISO or {m}x{m}")
     return 1.0 / np.abs(np.diagonal(H, axis1=1, axis2=2)).T
 
 
@@ -211,14 +211,14 @@ def monte_carlo(
         W_T = unc.W_T if W_T is None else W_T
         unc = unc.uncertain
     if not all(hasattr(unc, a) for a in ("delta_samples", "plant_at", "nominal_system")):
-        raise PolyrobError(f"monte_carlo needs an UncertainPlant or GeneralizedPlant, got {type(unc).__name__}")
+        raise ArgumentError(f"monte_carlo needs an UncertainPlant or GeneralizedPlant, got {type(unc).__name__}")
     if isinstance(n, str):
         if n != "corners":
-            raise PolyrobError(f"n must be a number of samples or 'corners', got '{n}'")
+            raise ArgumentError(f"n must be a number of samples or 'corners', got '{n}'")
         deltas, kind = unc.delta_samples(kind="corners"), "corners"
     else:
         if int(n) < 1:
-            raise PolyrobError(f"n must be at least 1, got {n}")
+            raise ArgumentError(f"n must be at least 1, got {n}")
         deltas, kind = unc.delta_samples(int(n), kind="uniform", seed=seed), "uniform"
     m = unc.m
     nominal = loop_functions(unc.nominal_system(), K)

@@ -40,7 +40,7 @@ import control
 import numpy as np
 import scipy.signal as ss
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError, PolyrobError
 
 __all__ = [
     "SOSController",
@@ -294,7 +294,7 @@ def sos_realization(controller, *, tol: float = 1e-9) -> SOSController:
     sys = getattr(controller, "system", controller)
     sys = control.ss(sys)
     if sys.dt in (0, None):
-        raise PolyrobError("sos_realization needs a discrete-time controller (see discretize)")
+        raise ArgumentError("sos_realization needs a discrete-time controller (see discretize)")
     rows = []
     for i in range(sys.noutputs):
         row = []
@@ -367,7 +367,7 @@ def quantize(sos: SOSController, word_length: int) -> SOSController:
     """Coefficients rounded to ``word_length``-bit fixed point (per section: one Q format for b, one for a)."""
     W = int(word_length)
     if not 2 <= W <= 53:
-        raise PolyrobError(f"the word length must lie in [2, 53] bits, got {word_length}")
+        raise ArgumentError(f"the word length must lie in [2, 53] bits, got {word_length}")
     rows, fmts = [], []
     for row in sos.sections:
         out_row, fmt_row = [], []

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 
 __all__ = ["Reference", "step_reference", "smooth_reference"]
 
@@ -60,7 +60,7 @@ def step_reference(target) -> Reference:
 def smooth_reference(target, duration: float, start=None) -> Reference:
     """A minimum-jerk move from ``start`` (default: the initial ``q``) to ``target`` in ``duration`` s."""
     if not duration > 0:
-        raise PolyrobError(f"a smooth reference needs a positive duration, got {duration}")
+        raise ArgumentError(f"a smooth reference needs a positive duration, got {duration}")
     return Reference(
         "smooth",
         target=np.asarray(target, float),

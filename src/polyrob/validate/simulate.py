@@ -47,7 +47,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from polyrob.controller import as_controller_ss
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.validate.reference import Reference, smooth_reference, step_reference
 from polyrob.validate.sampled import simulate_sampled
 from polyrob.validate.step_metrics import SETTLING_BAND, JointMetrics, domain_check, step_metrics
@@ -177,9 +177,9 @@ class SimulationResult:
 def _domain_and_offset(robot, domain_or_pldi, u_eq):
     domain = getattr(domain_or_pldi, "domain", domain_or_pldi)
     if not hasattr(domain, "q_lower"):
-        raise PolyrobError(f"simulate needs a Domain or a PLDI, got {type(domain_or_pldi).__name__}")
+        raise ArgumentError(f"simulate needs a Domain or a PLDI, got {type(domain_or_pldi).__name__}")
     if tuple(domain.joint_names) != tuple(robot.joint_names):
-        raise PolyrobError(f"the domain's joints {domain.joint_names} are not the robot's {robot.joint_names}")
+        raise ArgumentError(f"the domain's joints {domain.joint_names} are not the robot's {robot.joint_names}")
     if u_eq is None:
         point = getattr(domain_or_pldi, "nominal_point", None)
         if point is not None:
@@ -280,7 +280,7 @@ def simulate(
         u_eq, u_source = robot.inverse_dynamics(q0[None], 0 * q0[None], 0 * q0[None])[0], "the input holding q0 at rest"
     r_of_t = reference.bind(q0)
     if not t_final > 0:
-        raise PolyrobError(f"t_final must be positive, got {t_final}")
+        raise ArgumentError(f"t_final must be positive, got {t_final}")
 
     discrete = isinstance(K, DiscreteController) or (
         isinstance(K, control.LTI) and getattr(K, "dt", 0) not in (0, None)
@@ -356,7 +356,7 @@ def _deadline(time_budget):
     if time_budget is None:
         return None
     if not time_budget > 0:
-        raise PolyrobError(f"time_budget must be positive seconds, got {time_budget}")
+        raise ArgumentError(f"time_budget must be positive seconds, got {time_budget}")
     return time.monotonic() + float(time_budget)
 
 

@@ -36,7 +36,7 @@ from typing import Literal, Union
 
 import numpy as np
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 
 __all__ = ["Block", "BlockStructure", "as_block_structure"]
 
@@ -111,27 +111,27 @@ class BlockStructure:
         try:
             arr = np.asarray(blk, dtype=float)
         except (TypeError, ValueError) as exc:
-            raise PolyrobError(f"block structure must be an N x 2 integer array, got {blk!r}") from exc
+            raise ArgumentError(f"block structure must be an N x 2 integer array, got {blk!r}") from exc
         if arr.ndim == 1 and arr.size == 2:
             arr = arr.reshape(1, 2)
         if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] == 0:
-            raise PolyrobError(
+            raise ArgumentError(
                 f"block structure must be a non-empty N x 2 array of [rows, cols], got shape {arr.shape}"
             )
         if not np.all(np.isfinite(arr)) or np.any(arr != np.round(arr)):
-            raise PolyrobError(f"block structure entries must be integers, got {arr.tolist()}")
+            raise ArgumentError(f"block structure entries must be integers, got {arr.tolist()}")
         blocks = []
         for i, (r, c) in enumerate(arr.astype(int).tolist()):
             if r == 0:
-                raise PolyrobError(f"block {i}: [{r}, {c}] has zero size")
+                raise ArgumentError(f"block {i}: [{r}, {c}] has zero size")
             if r < 0:
                 if c != 0:
-                    raise PolyrobError(f"block {i}: [{r}, {c}] is invalid; real blocks are scalars [-r, 0]")
+                    raise ArgumentError(f"block {i}: [{r}, {c}] is invalid; real blocks are scalars [-r, 0]")
                 blocks.append(Block("real", -r, -r))
             elif c == 0:
                 blocks.append(Block("complex", r, r))
             elif c < 0:
-                raise PolyrobError(f"block {i}: [{r}, {c}] has a negative column count")
+                raise ArgumentError(f"block {i}: [{r}, {c}] has a negative column count")
             elif r == 1 and c == 1:
                 # MATLAB treats [1 1] and [1 0] identically: a complex scalar.
                 blocks.append(Block("complex", 1, 1))
@@ -210,7 +210,7 @@ class BlockStructure:
             full complex blocks.
         """
         if self.has_repeated:
-            raise PolyrobError("AB13MD does not support repeated scalar blocks; use method='lmi'")
+            raise ArgumentError("AB13MD does not support repeated scalar blocks; use method='lmi'")
         nblock = np.array([b.size for b in self.blocks], dtype=np.int64)
         itype = np.array([1 if b.kind == "real" else 2 for b in self.blocks], dtype=np.int64)
         return nblock, itype
@@ -262,12 +262,12 @@ class BlockStructure:
         """Return ``M`` as a complex 2-D array, checking its shape."""
         M = np.atleast_2d(np.asarray(M, dtype=complex))
         if M.shape != self.m_shape:
-            raise PolyrobError(
+            raise ArgumentError(
                 f"M has shape {M.shape} but block structure {self} needs {self.m_shape} "
                 "(rows = sum of block columns, cols = sum of block rows)"
             )
         if not np.all(np.isfinite(M)):
-            raise PolyrobError("M contains NaN or Inf")
+            raise ArgumentError("M contains NaN or Inf")
         return M
 
     def pad(self, M: np.ndarray) -> np.ndarray:
@@ -345,7 +345,7 @@ class BlockStructure:
     def assemble(self, parts: Sequence[np.ndarray | complex]) -> np.ndarray:
         """Block-diagonal :math:`\\Delta` from one matrix (or scalar) per block."""
         if len(parts) != len(self.blocks):
-            raise PolyrobError(f"need {len(self.blocks)} blocks, got {len(parts)}")
+            raise ArgumentError(f"need {len(self.blocks)} blocks, got {len(parts)}")
         out = np.zeros(self.delta_shape, dtype=complex)
         for b, p, rs, cs in zip(self.blocks, parts, self.row_slices, self.col_slices):
             p = np.asarray(p, dtype=complex)

@@ -49,7 +49,7 @@ from polyrob.analysis.mu.sweep import (
     run_sweep,
 )
 from polyrob.analysis.mu.upper import LmiUpper
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 
 __all__ = [
     "MussvResult",
@@ -82,9 +82,9 @@ def resolve_method(st: BlockStructure, method: str) -> str:
             return "gradient" if many else "ab13md"
         return "gradient"
     if method not in ("ab13md", "lmi", "gradient", "relaxed"):
-        raise PolyrobError(f"method must be 'auto', 'ab13md', 'lmi', 'gradient' or 'relaxed', got {method!r}")
+        raise ArgumentError(f"method must be 'auto', 'ab13md', 'lmi', 'gradient' or 'relaxed', got {method!r}")
     if method == "ab13md" and st.has_repeated:
-        raise PolyrobError("AB13MD cannot handle repeated scalar blocks; use method='lmi', 'gradient' or 'relaxed'")
+        raise ArgumentError("AB13MD cannot handle repeated scalar blocks; use method='lmi', 'gradient' or 'relaxed'")
     return method
 
 
@@ -264,9 +264,9 @@ def mu_bounds(
 
     st = as_block_structure(blk)
     if not isinstance(sys, control.LTI):
-        raise PolyrobError(f"mu_bounds needs a python-control LTI system, got {type(sys).__name__}")
+        raise ArgumentError(f"mu_bounds needs a python-control LTI system, got {type(sys).__name__}")
     if (sys.noutputs, sys.ninputs) != st.m_shape:
-        raise PolyrobError(f"system is {sys.noutputs}x{sys.ninputs} but block structure {st} needs {st.m_shape}")
+        raise ArgumentError(f"system is {sys.noutputs}x{sys.ninputs} but block structure {st} needs {st.m_shape}")
     is_frd = isinstance(sys, control.FrequencyResponseData)
     if omega is None:
         omega = np.asarray(sys.omega if is_frd else default_grid(sys), dtype=float)
@@ -275,7 +275,7 @@ def mu_bounds(
     # degenerate bracket for the peak refinement
     omega = omega[np.r_[True, np.diff(omega) > 1e-9 * np.abs(omega[1:])]] if omega.size else omega
     if omega.size == 0 or np.any(omega < 0) or not np.all(np.isfinite(omega)):
-        raise PolyrobError("omega must be a non-empty array of finite non-negative frequencies")
+        raise ArgumentError("omega must be a non-empty array of finite non-negative frequencies")
     meth = resolve_method(st, method)
     with single_blas_thread():
         return run_sweep(

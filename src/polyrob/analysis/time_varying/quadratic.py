@@ -44,7 +44,7 @@ from polyrob.analysis.time_varying.vertices import (
     performance_vertices,
     vertex_set,
 )
-from polyrob.errors import PolyrobError
+from polyrob.errors import NotApplicable
 
 __all__ = ["QuadStabResult", "QuadPerfResult", "quadstab", "quadperf"]
 
@@ -61,7 +61,7 @@ MAX_STATES = 40
 
 def _check_size(n: int, what: str) -> None:
     if n > MAX_STATES:
-        raise PolyrobError(
+        raise NotApplicable(
             f"{what}: the closed loop has {n} states; the vertex LMIs are built for at most {MAX_STATES} "
             "(memory grows like n^3 per vertex): reduce the controller (--reduce) or use a fixed structure"
         )

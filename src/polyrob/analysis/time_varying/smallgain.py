@@ -37,7 +37,7 @@ import numpy as np
 
 from polyrob.analysis.mu.blocks import as_block_structure
 from polyrob.analysis.norms import hinf_norm
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 
 __all__ = ["ScaledSmallGainResult", "scaled_small_gain"]
 
@@ -135,7 +135,7 @@ def scaled_small_gain(N, blk, *, rtol: float = 1e-3, max_steps: int = 30) -> Sca
     A, B, C, D = (np.asarray(X, float) for X in (N.A, N.B, N.C, N.D))
     nr, nc = st.delta_shape
     if (C.shape[0], B.shape[1]) != (nc, nr):
-        raise PolyrobError(f"N is {C.shape[0]}x{B.shape[1]}; the structure needs {nc}x{nr} (outputs x inputs)")
+        raise ArgumentError(f"N is {C.shape[0]}x{B.shape[1]}; the structure needs {nc}x{nr} (outputs x inputs)")
     n = A.shape[0]
     if n and np.max(np.linalg.eigvals(A).real) >= 0:
         return ScaledSmallGainResult(

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyrob.bounds.polytope import box_corners, polytope_vertices
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError, NotApplicable, PolyrobError
 
 __all__ = [
     "VertexSet",
@@ -139,12 +139,12 @@ def vertex_set(source, *, which: str = "auto", max_vertices: int = MAX_VERTICES)
     try:
         pairs = [(np.asarray(a, float), np.asarray(b, float)) for a, b in source]
     except (TypeError, ValueError):
-        raise PolyrobError("vertices must be a PLDI or a sequence of (A_i, B_i) pairs") from None
+        raise ArgumentError("vertices must be a PLDI or a sequence of (A_i, B_i) pairs") from None
     if not pairs:
-        raise PolyrobError("no vertices given")
+        raise ArgumentError("no vertices given")
     n, m = pairs[0][0].shape[0], pairs[0][1].shape[1]
     if n != 2 * m or any(a.shape != (n, n) or b.shape != (n, m) for a, b in pairs):
-        raise PolyrobError(
+        raise ArgumentError(
             f"every vertex must be (A: 2m x 2m, B: 2m x m); got A {pairs[0][0].shape}, B {pairs[0][1].shape}"
         )
     C = np.hstack([np.eye(m), np.zeros((m, m))])
@@ -153,7 +153,7 @@ def vertex_set(source, *, which: str = "auto", max_vertices: int = MAX_VERTICES)
 
 def _from_pldi(pldi, which: str, max_vertices: int) -> VertexSet:
     if which not in ("auto", "polytope", "box"):
-        raise PolyrobError(f"which must be 'auto', 'polytope' or 'box', got {which!r}")
+        raise ArgumentError(f"which must be 'auto', 'polytope' or 'box', got {which!r}")
     lo, hi = np.asarray(pldi.lower, float), np.asarray(pldi.upper, float)
     n_box = 2 ** int(np.count_nonzero(hi > lo))  # what box_corners gives: 2^k for k varying entries
     poly_pts = polytope_vertices(pldi.polytope, POLYTOPE_MAX_DIM) if which in ("auto", "polytope") else None
@@ -167,7 +167,7 @@ def _from_pldi(pldi, which: str, max_vertices: int) -> VertexSet:
     if which != "auto":
         choices = [c for c in choices if c[1] == which]
     if not choices:
-        raise PolyrobError(
+        raise NotApplicable(
             f"no '{which}' vertex set with at most {max_vertices} vertices ({note}); use the constant-D "
             "scaled small-gain test on an LFT model (polyrob.analysis.time_varying.smallgain.scaled_small_gain)"
         )
@@ -201,7 +201,7 @@ def _weight_mats(W, m: int, name: str):
     try:
         g = as_controller_ss(W, m, m)
     except PolyrobError as exc:
-        raise PolyrobError(f"{name}: {exc}") from None
+        raise ArgumentError(f"{name}: {exc}") from None
     return tuple(np.asarray(X, float) for X in (g.A, g.B, g.C, g.D))
 
 
@@ -249,7 +249,7 @@ def augmented_vertices(vs: VertexSet, W_S=None, W_T=None, W_KS=None):
         if w is not None
     ]
     if not ws:
-        raise PolyrobError("give at least one weight (W_S, W_T or W_KS)")
+        raise ArgumentError("give at least one weight (W_S, W_T or W_KS)")
     C = vs.C
     I_m, Z_m = np.eye(m), np.zeros((m, m))
     feeds = {"e": (-C, I_m, Z_m), "y": (C, Z_m, Z_m), "u": (np.zeros((m, n)), Z_m, I_m)}

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyrob.errors import NotApplicable, PolyrobError
+from polyrob.errors import ArgumentError, NotApplicable
 from polyrob.plant.lftplant import UncertainPlant, weakest_enclosure
 
 __all__ = [
@@ -32,7 +32,7 @@ __all__ = [
 def check_nominal(nominal: str) -> None:
     """Raise :class:`PolyrobError` unless ``nominal`` is ``"pldi"`` or ``"midpoint"``."""
     if nominal not in ("pldi", "midpoint"):
-        raise PolyrobError(f"unknown nominal '{nominal}': use 'pldi' or 'midpoint'")
+        raise ArgumentError(f"unknown nominal '{nominal}': use 'pldi' or 'midpoint'")
 
 
 def position_output(m: int) -> np.ndarray:

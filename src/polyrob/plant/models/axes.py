@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import optimize
 
-from polyrob.errors import BoundsError, PolyrobError
+from polyrob.errors import ArgumentError, BoundsError
 from polyrob.plant.lftplant import UncertainPlant
 from polyrob.plant.models.assembly import (
     Channels,
@@ -257,7 +257,7 @@ def axes_plant(
     else:
         r = int(n_directions)
         if not 0 <= r <= n_pc:
-            raise PolyrobError(f"n_directions must lie in [0, {n_pc}] (the searched principal directions), got {r}")
+            raise ArgumentError(f"n_directions must lie in [0, {n_pc}] (the searched principal directions), got {r}")
         W_r, b_r, z_lo, z_hi, e_lo, e_hi = build(r)
 
     # centre: the cloud mean moved to the middle of the z box; the residual

@@ -42,7 +42,7 @@ import numpy as np
 from scipy import optimize
 
 from polyrob._threads import single_blas_thread
-from polyrob.errors import NotApplicable, PolyrobError
+from polyrob.errors import NotApplicable
 
 __all__ = ["InertiaFactors", "ldl", "factor_ranges", "inverse_channels"]
 
@@ -267,7 +267,7 @@ def _factor_ranges(robot, domain, samples, starts, verify, seed) -> InertiaFacto
     l_lo[il], l_hi[il] = best[0, :n_l], best[1, :n_l]
     d_lo, d_hi = best[0, n_l:].copy(), best[1, n_l:].copy()
     if d_lo.min() <= 0:
-        raise PolyrobError(f"{robot.name}: a pivot of M(q) = L D L^T reaches {d_lo.min():.3g} <= 0 on the domain")
+        raise NotApplicable(f"{robot.name}: a pivot of M(q) = L D L^T reaches {d_lo.min():.3g} <= 0 on the domain")
     index = [(int(i), int(j)) for i, j, v in zip(*il, varying[:n_l]) if v]
     index += [(i, i) for i in range(m) if varying[n_l + i]]
     # a constant factor: its sampled mean, exactly

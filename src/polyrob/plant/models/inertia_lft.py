@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from polyrob.errors import NotApplicable, PolyrobError
+from polyrob.errors import ArgumentError, NotApplicable
 from polyrob.plant.lftplant import UncertainPlant
 from polyrob.plant.models import assembly
 
@@ -214,7 +214,7 @@ def inertia_lft_plant(
     names, _, _, M0, Mf, ranges = affine_inertia(robot, pldi.domain)
     assembly.check_inverse_inertia_input(robot, pldi.domain, "lft")
     if a_part not in ("entries", "torque"):
-        raise PolyrobError(f"unknown a_part '{a_part}': use 'entries' or 'torque'")
+        raise ArgumentError(f"unknown a_part '{a_part}': use 'entries' or 'torque'")
     torque = a_part == "torque"
     npldi = torque_side_pldi(pldi, robot, bound_options) if torque else pldi
     nidx = np.asarray(npldi.entry_index, int).reshape(-1, 3)

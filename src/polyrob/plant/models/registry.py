@@ -45,7 +45,7 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.plant.lftplant import UncertainPlant, weakest_enclosure
 
 __all__ = [
@@ -331,6 +331,6 @@ def model_of(unc: UncertainPlant) -> UncertaintyModel:
     try:
         return MODELS[unc.model]
     except KeyError:
-        raise PolyrobError(
+        raise ArgumentError(
             f"unknown uncertainty model '{unc.model}' of the plant: registered are {', '.join(MODELS)}"
         ) from None

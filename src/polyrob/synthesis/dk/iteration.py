@@ -52,7 +52,7 @@ from polyrob.analysis.mu.blocks import as_block_structure
 from polyrob.analysis.mu.frequency import matrix_response
 from polyrob.analysis.norms import hinf_norm_estimate
 from polyrob.analysis.stability import stability_screen
-from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.errors import ArgumentError, SynthesisError
 from polyrob.plant.generalized import lower_lft_matrices
 from polyrob.report.numbers import gamma_text
 from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound, resonances
@@ -150,7 +150,7 @@ class DKIteration:
         self.switch_tol = float(switch_tol)
         self.reject_ratio = 1.25
         if self.max_iter < 1:
-            raise PolyrobError("max_iter must be >= 1")
+            raise ArgumentError("max_iter must be >= 1")
 
     def _k_step(self, Ps, n_u, n_y, A, B, C, D, level_old, it):
         """H∞ step with safeguards: ``None`` if it fails, destabilises ``P`` or is worse than the old K."""
@@ -207,7 +207,7 @@ class DKIteration:
         st_c = complexified(st)
         phase = start_phase or "D"
         if phase not in ("D", "DG") or (phase == "DG" and not mixed):
-            raise PolyrobError(f"start_phase must be 'D' (or 'DG' for mixed problems), got {start_phase!r}")
+            raise ArgumentError(f"start_phase must be 'D' (or 'DG' for mixed problems), got {start_phase!r}")
         omega = np.asarray(omega, float)
         A, B, C, D = (np.asarray(X, float) for X in (Psys.A, Psys.B, Psys.C, Psys.D))
         hist: list[IterationRecord] = []

@@ -14,7 +14,7 @@ from control.exception import ControlArgument, ControlSlycot
 from slycot.exceptions import SlycotError
 
 from polyrob.controller import Controller
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError, SolverError
 
 __all__ = ["ControllerStructure", "OrderedStructure", "as_theta", "io_labels", "as_lti", "siso_tf"]
 
@@ -23,9 +23,9 @@ def as_theta(theta, n: int) -> np.ndarray:
     """``θ`` as a flat float vector of ``n`` finite entries (else :class:`PolyrobError`)."""
     th = np.asarray(theta, dtype=float).ravel()
     if th.size != n:
-        raise PolyrobError(f"θ has {th.size} entries; this structure has {n} parameters")
+        raise ArgumentError(f"θ has {th.size} entries; this structure has {n} parameters")
     if not np.all(np.isfinite(th)):
-        raise PolyrobError("θ has non-finite entries")
+        raise ArgumentError("θ has non-finite entries")
     return th
 
 
@@ -108,7 +108,7 @@ class ControllerStructure:
         if isinstance(source, (control.LTI, np.ndarray)) and not np.isscalar(source):
             return self.from_controller(source)
         if not isinstance(source, (int, np.integer)):
-            raise PolyrobError(f"initial() takes a seed or an LTI controller, got {type(source).__name__}")
+            raise ArgumentError(f"initial() takes a seed or an LTI controller, got {type(source).__name__}")
         rng = np.random.default_rng(int(source))
         if around is None:
             return self.random(rng)
@@ -126,7 +126,7 @@ class OrderedStructure(ControllerStructure):
 
     def __post_init__(self):
         if self.N < 0:
-            raise PolyrobError(f"{self.prefix}N needs N >= 0, got {self.N}")
+            raise ArgumentError(f"{self.prefix}N needs N >= 0, got {self.N}")
 
     @property
     def name(self) -> str:
@@ -145,9 +145,9 @@ def as_lti(K, n_u, n_y):
     if not isinstance(K, control.LTI):
         return Controller.of(K, n_u, n_y).system
     if (K.noutputs, K.ninputs) != (n_u, n_y):
-        raise PolyrobError(f"the controller is {K.noutputs}x{K.ninputs}; the structure needs {n_u}x{n_y}")
+        raise ArgumentError(f"the controller is {K.noutputs}x{K.ninputs}; the structure needs {n_u}x{n_y}")
     if K.dt not in (0, None):
-        raise PolyrobError("the controller must be continuous-time")
+        raise ArgumentError("the controller must be continuous-time")
     return K
 
 
@@ -182,7 +182,7 @@ def siso_tf(Kij, N: int) -> tuple[np.ndarray, np.ndarray]:
             ControlArgument,
             ControlSlycot,
         ) as exc:  # SLICOT reduction failures
-            raise PolyrobError(f"cannot reduce a controller entry of order {g.nstates} to order {N}: {exc}") from None
+            raise SolverError(f"cannot reduce a controller entry of order {g.nstates} to order {N}: {exc}") from None
         t = control.tf(g)
         num = np.trim_zeros(np.asarray(t.num[0][0], float), "f")
         den = np.trim_zeros(np.asarray(t.den[0][0], float), "f")
@@ -190,7 +190,7 @@ def siso_tf(Kij, N: int) -> tuple[np.ndarray, np.ndarray]:
             num = np.zeros(1)
     num, den = num / den[0], den / den[0]
     if len(num) > len(den):
-        raise PolyrobError("an improper controller entry cannot be fitted")
+        raise ArgumentError("an improper controller entry cannot be fitted")
     # pad with a cancelling pole/zero near the existing dynamics (exact)
     roots = np.roots(den) if len(den) > 1 else np.zeros(0)
     p = float(np.exp(np.mean(np.log(np.abs(roots) + 1e-12)))) if roots.size else 1.0

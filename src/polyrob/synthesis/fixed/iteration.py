@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.synthesis.fixed.kstep import kstep
 from polyrob.synthesis.fixed.loop import FixedLoop
 from polyrob.synthesis.fixed.options import FixedStructureOptions
@@ -44,7 +44,7 @@ def check_grid(omega, name):
         return None
     w = np.unique(np.asarray(omega, float).ravel())
     if w.size < 3 or np.any(w < 0) or not np.all(np.isfinite(w)) or not np.any(w > 0):
-        raise PolyrobError(f"{name} must hold at least 3 finite non-negative frequencies")
+        raise ArgumentError(f"{name} must hold at least 3 finite non-negative frequencies")
     return w
 
 

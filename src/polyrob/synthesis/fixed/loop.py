@@ -19,7 +19,7 @@ import numpy as np
 from slycot.exceptions import SlycotArithmeticError, SlycotError
 
 from polyrob.analysis.mu.frequency import freqresp, matrix_response
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.plant.loops import lower_lft_matrices
 from polyrob.synthesis.fixed.structures import ControllerStructure
 
@@ -165,11 +165,11 @@ def plant_parts(P, n_u, n_y):
         return P.system, P.n_u, P.n_y
     if isinstance(P, control.StateSpace):
         if n_u is None or n_y is None:
-            raise PolyrobError("a bare StateSpace plant needs n_u and n_y")
+            raise ArgumentError("a bare StateSpace plant needs n_u and n_y")
         if P.dt not in (0, None):
-            raise PolyrobError("the plant must be continuous-time")
+            raise ArgumentError("the plant must be continuous-time")
         return P, int(n_u), int(n_y)
-    raise PolyrobError(f"fixed_structure_musyn needs a GeneralizedPlant or a StateSpace, got {type(P).__name__}")
+    raise ArgumentError(f"fixed_structure_musyn needs a GeneralizedPlant or a StateSpace, got {type(P).__name__}")
 
 
 def diagonal_blocks(st):

@@ -9,7 +9,7 @@ import control
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.synthesis.fixed.base import ControllerStructure, as_lti, as_theta
 
 __all__ = ["PIDStructure"]
@@ -36,7 +36,7 @@ class PIDStructure(ControllerStructure):
 
     def __post_init__(self):
         if self.n_u != self.n_y:
-            raise PolyrobError(f"a decentralised PID needs as many controls as measurements, got {self.n_u}x{self.n_y}")
+            raise ArgumentError(f"a decentralised PID needs as many controls as measurements, got {self.n_u}x{self.n_y}")
 
     @property
     def name(self) -> str:

@@ -9,7 +9,7 @@ import numpy as np
 from control.exception import ControlArgument, ControlSlycot
 from slycot.exceptions import SlycotError
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import SolverError
 from polyrob.synthesis.fixed.base import OrderedStructure, as_lti, as_theta
 
 __all__ = ["StateSpaceStructure"]
@@ -98,7 +98,7 @@ class StateSpaceStructure(OrderedStructure):
             try:
                 Ks = control.balred(Ks, self.N, method="matchdc")
             except (ValueError, np.linalg.LinAlgError, SlycotError, ControlArgument, ControlSlycot) as exc:
-                raise PolyrobError(f"cannot reduce the controller to order {self.N}: {exc}") from None
+                raise SolverError(f"cannot reduce the controller to order {self.N}: {exc}") from None
         A, B, C, D = (np.asarray(X, float) for X in (Ks.A, Ks.B, Ks.C, Ks.D))
         n = A.shape[0]
         if n:

@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import re
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.synthesis.fixed.base import ControllerStructure
 from polyrob.synthesis.fixed.pid import PIDStructure
 from polyrob.synthesis.fixed.state_space import StateSpaceStructure
@@ -99,7 +99,7 @@ def controller_structure(structure, n_u: int, n_y: int) -> ControllerStructure:
     """
     if isinstance(structure, ControllerStructure):
         if (structure.n_u, structure.n_y) != (n_u, n_y):
-            raise PolyrobError(f"structure is {structure.n_u}x{structure.n_y}; the plant needs {n_u}x{n_y}")
+            raise ArgumentError(f"structure is {structure.n_u}x{structure.n_y}; the plant needs {n_u}x{n_y}")
         return structure
     if isinstance(structure, str):
         s = structure.strip().lower()
@@ -109,4 +109,4 @@ def controller_structure(structure, n_u: int, n_y: int) -> ControllerStructure:
             return PIDStructure(n_u, n_y)
         if m := re.fullmatch(r"ss:(\d+)", s):
             return StateSpaceStructure(n_u, n_y, int(m.group(1)))
-    raise PolyrobError(f"unknown controller structure {structure!r}; valid: {', '.join(VALID_STRUCTURES)}")
+    raise ArgumentError(f"unknown controller structure {structure!r}; valid: {', '.join(VALID_STRUCTURES)}")

@@ -186,10 +186,10 @@ def fixed_structure_musyn(
     strc = controller_structure(method.structure, n_u, n_y)
     st = _block_structure(P, blk, opts.mixed, sysP, n_u, n_y)
     if int(method.starts) < 1:
-        raise PolyrobError(f"starts must be >= 1, got {method.starts}")
+        raise ArgumentError(f"starts must be >= 1, got {method.starts}")
     omega, certify_omega = check_grid(opts.omega, "omega"), check_grid(opts.certify_omega, "certify_omega")
     if method.init is not None and opts.initial_controller is not None:
-        raise PolyrobError("give init or initial_controller, not both")
+        raise ArgumentError("give init or initial_controller, not both")
     init = opts.initial_controller if method.init is None else method.init
     fallbacks: list[str] = []
     search = _Search(sysP, FixedLoop(sysP, n_u, n_y, strc, st), tuning, max_iter, reporter(opts.progress), opts.target)
@@ -245,14 +245,14 @@ def _block_structure(P, blk, mixed, sysP, n_u: int, n_y: int):
     """The block structure of ``lft(P, K)`` (default ``P``'s robust performance), complex throughout when ``mixed is False``."""
     if blk is None:
         if not hasattr(P, "block_structure_rp"):
-            raise PolyrobError("give blk for a bare StateSpace plant")
+            raise ArgumentError("give blk for a bare StateSpace plant")
         blk = P.block_structure_rp
     st = as_block_structure(blk)
     if mixed is False and st.has_real:
         # complex μ: every real block becomes a complex one of the same size
         st = as_block_structure([[b.rows, 0] if b.kind == "real" else list(b.matlab) for b in st.blocks])
     if st.m_shape != (sysP.noutputs - n_y, sysP.ninputs - n_u):
-        raise PolyrobError(
+        raise ArgumentError(
             f"blk {st} needs a {st.m_shape} closed loop; lft(P, K) is {sysP.noutputs - n_y}x{sysP.ninputs - n_u}"
         )
     return st
@@ -263,7 +263,7 @@ def _starts(loop: FixedLoop, sysP, init, method, tuning: FixedStructureOptions, 
     strc, seed = loop.structure, int(method.seed)
     if isinstance(init, str):
         if init != "paper":
-            raise PolyrobError(f"init must be 'paper', a controller or None, got {init!r}")
+            raise ArgumentError(f"init must be 'paper', a controller or None, got {init!r}")
         init = paper_controller()
     if isinstance(init, MusynResult):
         init = init.controller

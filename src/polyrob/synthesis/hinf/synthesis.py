@@ -66,7 +66,7 @@ import numpy as np
 from polyrob._threads import single_blas_thread
 from polyrob.analysis.norms import hinf_norm, hinf_norm_estimate, state_matrices
 from polyrob.analysis.stability import stability_screen
-from polyrob.errors import PolyrobError, SynthesisError
+from polyrob.errors import ArgumentError, SynthesisError
 from polyrob.plant.generalized import lower_lft_matrices
 from polyrob.synthesis.hinf.checks import check_stabilizable
 from polyrob.synthesis.hinf.lmi import lmi_controller
@@ -142,19 +142,19 @@ def _parse_plant(P, n_y, n_u):
         if isinstance(P, control.LTI):
             P = control.ss(P)
         else:
-            raise PolyrobError(f"hinfsyn needs a StateSpace or GeneralizedPlant, got {type(P).__name__}")
+            raise ArgumentError(f"hinfsyn needs a StateSpace or GeneralizedPlant, got {type(P).__name__}")
     if P.dt not in (0, None):
-        raise PolyrobError("hinfsyn: the plant must be continuous-time")
+        raise ArgumentError("hinfsyn: the plant must be continuous-time")
     if n_y is None or n_u is None:
-        raise PolyrobError("hinfsyn of a bare StateSpace needs n_y and n_u")
+        raise ArgumentError("hinfsyn of a bare StateSpace needs n_y and n_u")
     n_y, n_u = int(n_y), int(n_u)
     if not (0 < n_u < P.ninputs and 0 < n_y < P.noutputs):
-        raise PolyrobError(f"n_u={n_u}, n_y={n_y} do not fit a {P.noutputs}x{P.ninputs} plant (need exogenous w and z)")
+        raise ArgumentError(f"n_u={n_u}, n_y={n_y} do not fit a {P.noutputs}x{P.ninputs} plant (need exogenous w and z)")
     if labels is None:
         labels = list(getattr(P, "state_labels", None) or []) or None
     A, B, C, D = state_matrices(P)
     if not all(np.all(np.isfinite(X)) for X in (A, B, C, D)):
-        raise PolyrobError("hinfsyn: the plant has NaN or Inf entries")
+        raise ArgumentError("hinfsyn: the plant has NaN or Inf entries")
     return A, B, C, D, n_y, n_u, labels
 
 
@@ -236,9 +236,9 @@ def hinfsyn(
     """
     A, B, C, D, n_y, n_u, labels = _parse_plant(P, n_y, n_u)
     if method not in ("auto", "riccati", "lmi"):
-        raise PolyrobError(f"method must be 'auto', 'riccati' or 'lmi', got {method!r}")
+        raise ArgumentError(f"method must be 'auto', 'riccati' or 'lmi', got {method!r}")
     if not (0 < tol < 1):
-        raise PolyrobError(f"tol must be in (0, 1), got {tol!r}")
+        raise ArgumentError(f"tol must be in (0, 1), got {tol!r}")
     nw, nz = B.shape[1] - n_u, C.shape[0] - n_y
     check_stabilizable(A, B[:, nw:], C[nz:], labels)
     with single_blas_thread():

@@ -16,7 +16,7 @@ import control
 import numpy as np
 
 from polyrob.analysis.mu.blocks import BlockStructure
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.synthesis.dk.musweep import MuSweep, complex_dscales
 from polyrob.synthesis.scalings.data import BlockScaling, ScalingData, Scalings
 from polyrob.synthesis.scalings.gfit import fit_g
@@ -66,7 +66,7 @@ class LogMagnitudeFit:
         #: share the D-step's worker; ``None``: a serial sweep)
         self.sweep: MuSweep | None = None
         if not self.orders or min(self.orders) < 0:
-            raise PolyrobError(f"D-scale orders must be non-negative integers, got {orders!r}")
+            raise ArgumentError(f"D-scale orders must be non-negative integers, got {orders!r}")
 
     # -- one block, magnitude
     def _fit_d(self, omega, dv, wt, tol):

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.synthesis.balanced import balanced_realization
 
 
@@ -260,7 +260,7 @@ def fit_magnitude(
     ok = np.isfinite(m) & (m > 0) & (w > 0)
     w, m = w[ok], m[ok]
     if w.size < 2:
-        raise PolyrobError("fit_magnitude needs at least two positive frequencies with positive data")
+        raise ArgumentError("fit_magnitude needs at least two positive frequencies with positive data")
     wt = np.ones_like(w) if weight is None else np.asarray(weight, float)[ok]
     wt = np.maximum(wt, 0.0)
     if wt.sum() <= 0:
@@ -268,7 +268,7 @@ def fit_magnitude(
     y = np.log(m)
     n = int(order)
     if n < 0:
-        raise PolyrobError("order must be >= 0")
+        raise ArgumentError("order must be >= 0")
     k0 = float(np.sum(wt * y) / np.sum(wt))
     if n == 0:
         e = (y - k0) / np.log(10)

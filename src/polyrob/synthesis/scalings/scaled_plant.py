@@ -10,7 +10,7 @@ import control
 import numpy as np
 import scipy.linalg as sla
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError
 from polyrob.synthesis.scalings.data import Scalings
 
 __all__ = ["scaled_plant"]
@@ -78,7 +78,7 @@ def scaled_plant(P: control.StateSpace, scalings: Scalings, n_u: int, n_y: int) 
     A, B, C, D = (np.array(X, float) for X in (P.A, P.B, P.C, P.D))
     nr, nc = st.m_shape
     if (C.shape[0] - n_y, B.shape[1] - n_u) != (nr, nc):
-        raise PolyrobError(
+        raise ArgumentError(
             f"plant has {C.shape[0] - n_y}x{B.shape[1] - n_u} M channels but the structure needs {nr}x{nc}"
         )
     beta = float(scalings.beta)
