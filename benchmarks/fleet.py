@@ -6,7 +6,7 @@ Prints one JSON document::
      "robots": [{"robot", "joints", "entries" (uncertain parameters before
                  reduction: one per varying Jacobian entry, the paper's box),
                  "parameters" (after: the model "auto" resolves to), "model",
-                 "bound_s", "synthesis_s", "analysis_s", "mu_upper",
+                 "bound_s", "synthesis_s", "analysis_s", "mu_upper", "mu_upper_grid",
                  "certified", "order", "alpha", "validation", "reason", "error"}, ...],
      "batch_seconds": ...,
      "speedup": {"robots": [...], "seconds_1_worker", "seconds_2_workers", "speedup"}}
@@ -70,6 +70,7 @@ def _row(r) -> dict:
         "validation_s": secs("validation"),
         "total_s": round(r.seconds, 2),
         "mu_upper": r.mu_upper,
+        "mu_upper_grid": r.mu_upper_grid,
         "mu_lower": r.mu_lower,
         "certified": r.certified,
         "order": r.order,
@@ -135,7 +136,7 @@ def main(argv=None) -> int:
         print(
             f"[{done}/{total}] {r.name}: "
             + (
-                f"{r.status} mu {r.mu_upper:.4g}, order {r.order}, alpha {r.alpha}, {r.validation} ({r.seconds:.0f} s)"
+                f"{r.status} mu (grid) {r.mu_upper_grid:.4g}, order {r.order}, alpha {r.alpha}, {r.validation} ({r.seconds:.0f} s)"
                 if r.ok
                 else f"FAILED {r.error}: {r.message}"
             ),

@@ -50,7 +50,7 @@ def _mu(P, K):
     t = time.perf_counter()
     rp = robperf(P, K)
     return {
-        "rp_upper": round(rp.mu_upper, 4),
+        "rp_upper": round(rp.mu_upper_grid, 4),
         "rp_lower": round(rp.mu_lower, 4),
         "seconds": round(time.perf_counter() - t, 1),
     }

@@ -81,7 +81,7 @@ def main() -> None:
         wl = min_word_length(P, sos, threshold=1.05 * mu_c, omega=w, lengths=(8, 48))
         out[f"word_length_{label}"] = {
             "rate_hz": rate,
-            "mu_discrete": sd.mu_upper,
+            "mu_discrete": sd.mu_upper_grid,
             **wl.summary(),
             "seconds": round(time.perf_counter() - t, 1),
         }

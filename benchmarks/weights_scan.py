@@ -89,7 +89,7 @@ def run_case(case):
         "peak_mu_certified": res.peak_mu,
         "peak_mu_lower": res.peak_mu_lower,
         "peak_frequency": res.peak_frequency,
-        "robust_stability_mu": rs.mu_upper,
+        "robust_stability_mu": rs.mu_upper_grid,
         "order": res.order,
         "iterations": res.iterations,
         "seconds": round(time.perf_counter() - t0, 1),
@@ -103,7 +103,7 @@ def run_case(case):
             "mu_below_1e-3_rad_s": float(mu[w < 1e-3].max()),
             "mu_0.1_to_30_rad_s": float(mu[(w >= 0.1) & (w <= 30)].max()),
         }
-    log(f"{name}: mu {res.peak_mu:.4f} (RS {rs.mu_upper:.4f}), order {res.order}, {out['seconds']} s")
+    log(f"{name}: mu {res.peak_mu:.4f} (RS {rs.mu_upper_grid:.4f}), order {res.order}, {out['seconds']} s")
     return out
 
 

@@ -192,7 +192,7 @@ def test_analyze_reproduces_the_reduced_certificate(files, tmp_path_factory):
     assert code == (0 if report["certified"] else 1) == 1
     rp = report["robust_performance"]
     # two independent sweeps (synthesis grid vs analysis grid, both peak-refined)
-    assert rp["mu_upper"] == pytest.approx(cert["peak_mu_upper"], rel=2e-3)
+    assert rp["mu_upper_grid"] == pytest.approx(cert["peak_mu_upper"], rel=2e-3)
     assert rp["mu_lower"] == pytest.approx(cert["peak_mu_lower"], rel=2e-3)
     assert report["parameters"] == 10
     # one D-K iteration reduced to a few states: mu far above 1, its lower bound too: disproved,
@@ -234,7 +234,7 @@ def test_run_json_announces_stages_when_they_start_and_matches_synth(files, tmp_
     # not certified: one line of what it certifies instead (the mu level proved at every frequency,
     # read as a share of the parameter ranges) and what stands in the way
     margin, instead = doc["analysis"]["margin"], doc["analysis"]["instead"]
-    assert margin["proved"] and margin["level"] >= doc["analysis"]["robust_performance"]["mu_upper"]
+    assert margin["proved"] and margin["level"] >= doc["analysis"]["robust_performance"]["mu_upper_grid"]
     assert margin["fraction_of_ranges"] == pytest.approx(1 / margin["level"])
     assert instead.startswith("instead: robust performance at level ") and "in the way: mu peaks at " in instead
     assert "\n" not in instead and len(instead) < 300
@@ -243,7 +243,7 @@ def test_run_json_announces_stages_when_they_start_and_matches_synth(files, tmp_
     saved = json.loads(out_file.read_text())
     cert_full = json.loads(K.read_text())["certificate"]["full_peak_mu_upper"]
     # run's analysis of its (deterministic) synthesis = synth's certificate of the same synthesis
-    assert saved["certificate"]["robust_performance"]["mu_upper"] == pytest.approx(cert_full, rel=2e-3)
+    assert saved["certificate"]["robust_performance"]["mu_upper_grid"] == pytest.approx(cert_full, rel=2e-3)
     assert saved["info"]["uncertainty"]["model"] == "box" and saved["info"]["weights"]["M_s"] == [2.0, 3.0]
 
 

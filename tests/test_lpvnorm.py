@@ -231,6 +231,7 @@ def test_affine_system_covers_the_box():
     assert r.proved and r.coverage.startswith("the whole parameter box [0, 1]")
     on_grid = polyrob.lpvnorm(_oscillator, grid)
     assert on_grid.coverage == "on the grid of 3 points"
+    assert r.whole_box and not on_grid.whole_box  # the fact the moving-robot status reads, not the words
     assert r.gamma == pytest.approx(on_grid.gamma, rel=1e-3)  # constant X: M affine, the vertices suffice
     basis = [(lambda r: 1.0, lambda r: [0.0]), (lambda r: r[0], lambda r: [1.0])]
     ra = polyrob.lpvnorm(_oscillator, grid, [(-0.5, 0.5)], basis, affine=True)

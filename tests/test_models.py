@@ -193,7 +193,7 @@ def test_tight_model_mu_of_k_star_is_below_the_box(unc, lft):
     mus = {}
     for name, model in (("box", unc), ("lft", lft)):
         r = robperf(generalized_plant(model, W_S, W_T), paper_controller(), omega, refine_peak=False)
-        mus[name] = r.mu_upper
+        mus[name] = r.mu_upper_grid
     # the lft model is the box with B on its true curve: a subset, and μ of K* drops
     # (full sweeps: box 2.43, lft 2.12, see docs/uncertainty.md)
     assert mus["lft"] < 0.95 * mus["box"]

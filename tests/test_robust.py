@@ -31,11 +31,11 @@ def test_paper_controller_robust_stability_is_not_certified(paper):
     unc, P, K = paper
     rs = robstab(P, K, omega=OMEGA)
     assert rs.nominally_stable and rs.stability.verdict == "stable"
-    assert rs.mu_lower <= rs.mu_upper + 1e-9
+    assert rs.mu_lower <= rs.mu_upper_grid + 1e-9
     # the lower bound exceeds 1: a destabilising perturbation inside the box
     # AB13MD's upper bound and the power-iteration lower bound on this grid (deterministic: the
     # seeded PLDI); the lower bound is checked independently below (its delta destabilises)
-    assert rs.mu_lower == pytest.approx(1.5366, rel=2e-3) and rs.mu_upper == pytest.approx(1.7372, rel=2e-3)
+    assert rs.mu_lower == pytest.approx(1.5366, rel=2e-3) and rs.mu_upper_grid == pytest.approx(1.7372, rel=2e-3)
     # a lower bound >= 1 disproves robust stability: VIOLATED, not merely "not certified"
     assert not rs.robust and rs.certificate.status.value == "VIOLATED"
     assert rs.failed == (f"mu lower bound {rs.mu_lower:.4g} >= 1: some parameters in the set break it",)
@@ -52,9 +52,9 @@ def test_paper_controller_robust_stability_is_not_certified(paper):
 def test_paper_controller_robust_performance_bounds(paper):
     _, P, K = paper
     rp = robperf(P, K, omega=OMEGA)
-    assert rp.mu_lower <= rp.mu_upper + 1e-9
+    assert rp.mu_lower <= rp.mu_upper_grid + 1e-9
     # far from the paper's 0.9999
-    assert rp.mu_lower == pytest.approx(2.3482, rel=2e-3) and rp.mu_upper == pytest.approx(2.4319, rel=2e-3)
+    assert rp.mu_lower == pytest.approx(2.3482, rel=2e-3) and rp.mu_upper_grid == pytest.approx(2.4319, rel=2e-3)
     assert not rp.robust
 
 
@@ -102,7 +102,7 @@ def test_loop_unstable_at_delta0_with_small_mu_is_not_robust(paper):
     P2 = polyrob.generalized_plant(u2, *paper_weights())
     assert nominal_closed_loop(u2, K).stable  # the equilibrium loop is unchanged and stable
     rs = robstab(P2, K, omega=OMEGA, refine_peak=False)
-    assert rs.mu_upper < 0.5 and rs.nominally_stable
+    assert rs.mu_upper_grid < 0.5 and rs.nominally_stable
     assert rs.stability.verdict == "unstable" and rs.stability.abscissa > 0.1
     assert not rs.robust
     # Delta = 0 is a member of the set: a loop proved unstable there violates robust stability
@@ -129,7 +129,7 @@ def test_cli_analyze_json(capsys):
     out = capsys.readouterr().out
     rep = json.loads(out)
     assert code == 1 and rep["status"] == "VIOLATED" and rep["certified"] is False  # K* is not certified
-    assert rep["robust_performance"]["mu_upper"] > 2 and rep["nominal_stability"]
+    assert rep["robust_performance"]["mu_upper_grid"] > 2 and rep["nominal_stability"]
 
 
 def test_cli_analyze_missing_controller_file(capsys):
@@ -144,7 +144,7 @@ def test_real_parameter_crossing_at_zero_frequency_is_on_the_grid():
     P = control.ss([[-1.0]], [[1.0, 1.0]], [[1.0], [1.0]], [[0.0, 0.0], [0.0, 0.0]])  # with u = -x: 1/(s+2)
     r = loop_mu(P, -1.0, [[-1, 0]], np.logspace(-2, 2, 41), n_u=1, n_y=1, kind="stability")
     # every positive frequency gives a complex N(jw): real mu is 0 there
-    assert r.mu_upper == pytest.approx(0.5, rel=1e-9) and r.mu_lower == pytest.approx(0.5, rel=1e-9)
+    assert r.mu_upper_grid == pytest.approx(0.5, rel=1e-9) and r.mu_lower == pytest.approx(0.5, rel=1e-9)
     assert r.critical_frequency == 0.0 and 0.0 in r.mu.omega
     # proved at every frequency: the grid's scalings hold between its points too
     assert r.certificate.status.value == "CERTIFIED" and "every frequency" in r.covers

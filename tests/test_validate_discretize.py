@@ -62,9 +62,9 @@ def test_discretised_loop_mu_tends_to_continuous_and_fails_when_slow():
     mu_c = continuous_mu(P, K, GRID)
     fast = sampled_data_mu(P, K, 5000.0, omega=GRID, upper_only=True)
     assert fast.stable and fast.spectral_radius < 1
-    assert fast.mu_upper == pytest.approx(mu_c, rel=0.02)
+    assert fast.mu_upper_grid == pytest.approx(mu_c, rel=0.02)
     slow = sampled_data_mu(P, K, 2.0, omega=GRID)
-    assert not slow.stable and slow.mu_upper == math.inf
+    assert not slow.stable and slow.mu_upper_grid == math.inf
     res = min_sample_rate(P, K, mu_continuous=mu_c, omega=GRID, rate_bounds=(2.0, 5000.0), rel_tol=0.5)
     assert res.rate is not None and 2.0 < res.rate <= 5000.0
     passed = [h for h in res.history if h[3]]
@@ -79,7 +79,7 @@ def test_quantisation_word_length_search():
     rate = 200.0
     sd = sampled_data_mu(P, K, rate, omega=GRID)
     sos = sos_realization(sd.controller)
-    res = min_word_length(P, sos, threshold=1.05 * sd.mu_upper, omega=GRID, lengths=(6, 40))
+    res = min_word_length(P, sos, threshold=1.05 * sd.mu_upper_grid, omega=GRID, lengths=(6, 40))
     assert res.word_length is not None and 6 < res.word_length <= 40
     ok = {h[0]: h[3] for h in res.history}
     # the bisection ends on a bracket: one bit fewer was checked and failed
@@ -88,4 +88,4 @@ def test_quantisation_word_length_search():
     # the quantised controller at that length: coefficients on the fixed-point grid, loop stable
     q = quantize(sos, res.word_length)
     chk = sampled_data_mu(P, None, rate, controller=q.to_ss(), omega=GRID)
-    assert chk.stable and chk.mu_upper <= 1.05 * sd.mu_upper
+    assert chk.stable and chk.mu_upper_grid <= 1.05 * sd.mu_upper_grid

@@ -59,7 +59,7 @@ def test_tutorial_api_equivalents(tmp_path):
     unc = polyrob.uncertain_plant(pldi)
     P = polyrob.generalized_plant(unc, *paper_weights())
     rs = robstab(P, polyrob.paper_controller(), omega=np.logspace(-2, 2, 6), refine_peak=False)
-    assert rs.nominally_stable and rs.mu_upper >= rs.mu_lower > 0
+    assert rs.nominally_stable and rs.mu_upper_grid >= rs.mu_lower > 0
     save_controller(polyrob.paper_controller(), tmp_path / "K.json")
     res = export_controller(load_controller(tmp_path / "K.json"), 1000.0, tmp_path / "ctrl", word_length=24)
     assert {p.name for p in (tmp_path / "ctrl").iterdir()} == {"controller.h", "controller.c", "controller.json"}

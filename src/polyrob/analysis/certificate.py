@@ -44,6 +44,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from polyrob.analysis.loop_sweep import FLAT_RTOL, POINTS_PER_DECADE, RESPONSE_BITS, RESPONSE_TOL, grid_words
 from polyrob.analysis.scope import ARBITRARY, FROZEN, Scope, finite_or_none, strict_json, weakest_enclosure
 
 __all__ = [
@@ -56,9 +57,16 @@ __all__ = [
     "decide_mu",
     "decide_gain",
     "decide_gridded_gain",
+    "gain_certificate",
+    "gridded_gain_certificate",
+    "nominal_performance_verdict",
     "weakest_enclosure",
     "FROZEN",
     "ARBITRARY",
+    "POINTS_PER_DECADE",
+    "FLAT_RTOL",
+    "RESPONSE_BITS",
+    "RESPONSE_TOL",
 ]
 
 
@@ -98,6 +106,7 @@ class Certificate:
     bound : float
         The figure the status rests on: for μ the bound at every frequency
         when it was proved, else the grid peak; for an L2 gain the verified γ.
+        :attr:`mu_upper` is the proved μ bound alone.
     mu_upper_grid, mu_lower : float
         Peak μ upper bound on the grid and the peak lower bound (NaN for a gain).
     stable_at_delta0 : StabilityVerdict or None
@@ -110,6 +119,11 @@ class Certificate:
     default_grid : bool
         The sweep ran on the loop's own default grid (``omega=None``): the
         same call as every other caller's, so it can be reused (:func:`rescoped`).
+    bound_everywhere : bool
+        ``bound`` is a μ bound proved at every frequency (not a grid peak).
+    lower_bound_disproves : bool
+        A μ lower bound ``>= 1`` disproves (VIOLATED); ``False`` for a
+        structure that is only a sufficient test (:func:`certify_loop`).
     """
 
     status: Status
@@ -122,6 +136,8 @@ class Certificate:
     mu: object = None
     closed_loop: object = field(default=None, repr=False)
     default_grid: bool = False
+    bound_everywhere: bool = False
+    lower_bound_disproves: bool = True
 
     @property
     def certified(self) -> bool:
@@ -130,8 +146,8 @@ class Certificate:
 
     @property
     def mu_upper(self) -> float:
-        """The μ bound the status rests on (see :attr:`bound`)."""
-        return self.bound
+        """The μ upper bound proved at every frequency: ``inf`` when none was (the grid peak is :attr:`mu_upper_grid`)."""
+        return float(self.bound) if self.bound_everywhere else float("inf")
 
     @property
     def verdict(self) -> str:
@@ -162,6 +178,7 @@ class Certificate:
             "status": self.status.value,
             "certified": self.certified,
             "bound": finite_or_none(self.bound),
+            "mu_upper": finite_or_none(self.mu_upper),
             "mu_upper_grid": finite_or_none(self.mu_upper_grid),
             "mu_lower": finite_or_none(self.mu_lower),
             "stable_at_delta0": None if self.stable_at_delta0 is None else self.stable_at_delta0.verdict,
@@ -176,8 +193,15 @@ class Certificate:
         return replace(self, scope=replace(scope, frequencies=self.scope.frequencies))
 
 
-def decide_mu(stability, mu_upper_grid: float, mu_lower: float, between) -> tuple[Status, tuple[str, ...]]:
+def decide_mu(
+    stability, mu_upper_grid: float, mu_lower: float, between, *, model_gap: str = "", lower_bound_disproves=True
+) -> tuple[Status, tuple[str, ...]]:
     """The μ decision: status and reasons from the loop's stability, the grid peaks and the check between points.
+
+    ``model_gap``: why the model does not cover the robot (empty: it does);
+    then μ < 1 certifies the model, not the robot.  ``lower_bound_disproves``
+    False: the structure is a sufficient test only, so a lower bound ``>= 1``
+    disproves nothing (NOT_CERTIFIED, not VIOLATED).
 
     >>> from types import SimpleNamespace as NS
     >>> stable = NS(stable=True, unstable=False, verdict="stable")
@@ -194,6 +218,11 @@ def decide_mu(stability, mu_upper_grid: float, mu_lower: float, between) -> tupl
             f"the loop at Delta = 0 is not proved stable ({'not checked' if stability is None else stability.verdict})"
         )
     if np.isfinite(mu_lower) and mu_lower >= 1.0 and not reasons:
+        if not lower_bound_disproves:
+            return Status.NOT_CERTIFIED, (
+                f"this test cannot prove it: mu lower bound {mu_lower:.4g} >= 1 of the scaled structure "
+                "(a sufficient test; no robot of the set is shown to violate it)",
+            )
         return Status.VIOLATED, (f"mu lower bound {mu_lower:.4g} >= 1: some parameters in the set break it",)
     if not mu_upper_grid < 1.0:
         reasons.append(f"mu in [{mu_lower:.4g}, {mu_upper_grid:.4g}] on the grid: not below 1")
@@ -201,7 +230,7 @@ def decide_mu(stability, mu_upper_grid: float, mu_lower: float, between) -> tupl
     if reasons:
         return Status.NOT_CERTIFIED, tuple(reasons)
     if between is not None and between.holds and between.level < 1.0:
-        return Status.CERTIFIED, ()
+        return (Status.NOT_CERTIFIED, (model_gap,)) if model_gap else (Status.CERTIFIED, ())
     if between is not None and (between.failed_at is not None or between.peak_upper >= 1.0 or between.level >= 1.0):
         reached = max(float(between.peak_upper), float(between.level) if between.holds else 0.0)
         return Status.NOT_CERTIFIED, (
@@ -236,15 +265,38 @@ def decide_gridded_gain(proved: bool, gamma: float, between: bool, why: str = ""
     return status, reasons
 
 
-def _grid_words(omega) -> str:
-    w = np.asarray(omega, float)
-    pos = w[w > 0]
-    zero = " and at 0" if np.any(w == 0) else ""
-    return (
-        f"a grid of {w.size} frequencies from {pos.min():.3g} to {pos.max():.3g} rad/s{zero}"
-        if pos.size
-        else "the grid"
-    )
+def gain_certificate(scope: Scope, *, stable: bool, checked: bool, gamma=None, why: str = "", notes=()) -> Certificate:
+    """The certificate of a verified L2 gain (``gamma``) or, with ``gamma=None``, of stability alone.
+
+    ``checked``: the test ran and its solution was re-checked; ``notes`` are
+    added to the reasons when it does not certify.
+
+    >>> gain_certificate(Scope(kind="robust stability"), stable=True, checked=True).status.value
+    'CERTIFIED'
+    """
+    status, reasons = decide_gain(stable, 0.0 if gamma is None else float(gamma), checked, why)
+    reasons = reasons + tuple(n for n in notes if n not in reasons) if reasons else ()
+    bound = float("nan") if gamma is None else float(gamma)
+    return Certificate(status, bound, float("nan"), float("nan"), None, scope, reasons)
+
+
+def gridded_gain_certificate(scope: Scope, *, gamma: float, proved: bool, between: bool, why: str = "") -> Certificate:
+    """The certificate of an L2 gain proved on a parameter grid; ``between``: proved between its points too.
+
+    >>> gridded_gain_certificate(Scope(), gamma=0.5, proved=True, between=False).status.value
+    'GRID_ONLY'
+    """
+    status, reasons = decide_gridded_gain(proved, gamma, between, why)
+    return Certificate(status, float(gamma), float("nan"), float("nan"), None, scope, reasons)
+
+
+def nominal_performance_verdict(hinf_norm: float) -> str:
+    """``"met"`` when the nominal loop's ``||N_zw||inf < 1`` (a computed norm, no certificate), else ``"not met"``.
+
+    >>> nominal_performance_verdict(0.4), nominal_performance_verdict(float("nan"))
+    ('met', 'not met')
+    """
+    return "met" if hinf_norm < 1.0 else "not met"
 
 
 def certify_loop(
@@ -258,6 +310,7 @@ def certify_loop(
     n_u: int | None = None,
     n_y: int | None = None,
     sweep_unstable: bool = True,
+    lower_bound_disproves: bool = True,
     **mu_options,
 ) -> Certificate:
     """Close the loop, decide its stability at ``Δ = 0``, sweep μ, check between the grid points, decide.
@@ -273,11 +326,9 @@ def certify_loop(
         ``P.block_structure_rs`` (``"stability"``).
     omega : array_like, optional
         Frequencies; default the loop's own grid
-        (:func:`polyrob.analysis.mu.frequency.default_grid` with
-        :data:`POINTS_PER_DECADE`, thinned where the response is flat at
-        either end, :data:`FLAT_RTOL`), so that every caller certifies one
-        controller on the same grid.  ω = 0 is added for
-        real blocks (real μ is discontinuous there).
+        (:func:`polyrob.analysis.loop_sweep.sweep_loop`), so that every caller
+        certifies one controller on the same grid.  ω = 0 is added for real
+        blocks (real μ is discontinuous there).
     n_u, n_y : int, optional
         Controls and measurements of a bare state-space ``P`` (its last
         inputs and outputs); not with a GeneralizedPlant.
@@ -289,6 +340,9 @@ def certify_loop(
     sweep_unstable : bool
         Sweep μ also when the loop is proved unstable (for the report's
         figures); the status is VIOLATED either way.
+    lower_bound_disproves : bool
+        False when ``blk`` is only a sufficient test (a scaled structure
+        whose μ ``>= 1`` shows no member of the set breaking the property).
     **mu_options
         Passed to :func:`polyrob.analysis.mu.bounds.mu_bounds`.
 
@@ -296,9 +350,7 @@ def certify_loop(
     -------
     Certificate
     """
-    from polyrob.analysis.mu.blocks import as_block_structure
-    from polyrob.analysis.mu.bounds import mu_bounds
-    from polyrob.analysis.mu.frequency import default_grid, needs_extended_precision, thin_flat_ends
+    from polyrob.analysis.loop_sweep import sweep_loop
     from polyrob.analysis.stability import stability_verdict
     from polyrob.plant.loops import lft
 
@@ -313,22 +365,15 @@ def certify_loop(
     if stability.unstable and not sweep_unstable:
         status, reasons = decide_mu(stability, np.inf, np.nan, None)
         return Certificate(status, np.inf, np.inf, np.nan, stability, base, reasons, None, N)
-    st = as_block_structure(blk)
-    if omega is None:
-        w = thin_flat_ends(M, default_grid(M, per_decade=POINTS_PER_DECADE), FLAT_RTOL)
-    else:
-        w = np.asarray(omega, dtype=float).ravel()
-    if st.has_real:
-        w = np.union1d(w, [0.0])
-    # double-precision responses of a badly conditioned realisation can be wrong in
-    # every digit: a few frequencies are checked in 212-bit arithmetic, and the whole
-    # sweep is evaluated there when double precision is off by more than 1e-6
-    if "response_bits" not in mu_options and needs_extended_precision(M, w, RESPONSE_BITS, RESPONSE_TOL):
-        mu_options["response_bits"] = RESPONSE_BITS
-    mu_options.setdefault("progress", False)
-    mu = mu_bounds(M, st, w, **mu_options)
+    mu, response_bits = sweep_loop(M, blk, omega, **mu_options)
     cert = certificate_of_sweep(
-        N, mu, M=M, stability=stability, scope=base, response_bits=mu_options.get("response_bits")
+        N,
+        mu,
+        M=M,
+        stability=stability,
+        scope=base,
+        response_bits=response_bits,
+        lower_bound_disproves=lower_bound_disproves,
     )
     return replace(cert, default_grid=omega is None)
 
@@ -339,13 +384,17 @@ def rescoped(cert: Certificate, scope: Scope) -> Certificate:
         return cert.with_scope(scope)
     kind = "robust performance" if "performance" in cert.scope.kind else "robust stability"
     new = certificate_of_sweep(
-        cert.closed_loop, cert.mu, stability=cert.stable_at_delta0, scope=replace(scope, kind=kind)
+        cert.closed_loop,
+        cert.mu,
+        stability=cert.stable_at_delta0,
+        scope=replace(scope, kind=kind),
+        lower_bound_disproves=cert.lower_bound_disproves,
     )
     return replace(new, default_grid=cert.default_grid)
 
 
 def certificate_of_sweep(
-    N, mu, *, M=None, stability=None, scope: Scope | None = None, response_bits=None
+    N, mu, *, M=None, stability=None, scope: Scope | None = None, response_bits=None, lower_bound_disproves=True
 ) -> Certificate:
     """Decide a sweep already made (a synthesis' own certificate grid): stability, the check between points, status.
 
@@ -360,18 +409,21 @@ def certificate_of_sweep(
     if getattr(mu, "between", None) is None:
         mu = with_between(M, mu, response_bits=response_bits)
     between = mu.between
-    status, reasons = decide_mu(stability, float(mu.peak_upper), float(mu.peak_lower), between)
     scope = scope or Scope()
-    if status is Status.CERTIFIED and scope.coverage is not None and scope.coverage < 1.0:
+    gap = ""
+    if scope.coverage is not None and scope.coverage < 1.0:
         # mu < 1 on a model that misses some of the robot's Jacobians certifies the model, not the robot
-        status, reasons = (
-            Status.NOT_CERTIFIED,
-            (
-                f"the '{scope.model}' model contains only {scope.coverage:.4g} of {scope.coverage_points} fresh Jacobians",
-            ),
-        )
+        gap = f"the '{scope.model}' model contains only {scope.coverage:.4g} of {scope.coverage_points} fresh Jacobians"
+    status, reasons = decide_mu(
+        stability,
+        float(mu.peak_upper),
+        float(mu.peak_lower),
+        between,
+        model_gap=gap,
+        lower_bound_disproves=lower_bound_disproves,
+    )
     everywhere = status is Status.CERTIFIED or (between is not None and between.holds and between.level < 1.0)
-    frequencies = "every frequency" if everywhere else _grid_words(mu.omega)
+    frequencies = "every frequency" if everywhere else grid_words(mu.omega)
     bound = float(between.level) if everywhere else float(mu.peak_upper)
     return Certificate(
         status=status,
@@ -383,18 +435,6 @@ def certificate_of_sweep(
         reasons=reasons,
         mu=mu,
         closed_loop=N,
+        bound_everywhere=everywhere,
+        lower_bound_disproves=lower_bound_disproves,
     )
-
-
-#: Density of the certificate's default grid (log-spaced, plus the loop's natural frequencies, refined
-#: around the peak).  The check between the grid points makes the density a matter of tightness and
-#: time, not of soundness: a peak between two points is found there (measured on the paper's K* loop:
-#: 12 per decade gives the same peak as 40, in 19 s instead of 62 s).
-POINTS_PER_DECADE = 12
-#: Where the loop's response has settled at either end of that grid (every entry within this fraction of
-#: its largest magnitude), one point per decade is kept (:func:`~polyrob.analysis.mu.frequency.thin_flat_ends`):
-#: a PID's near-cancelled integrator pole stretches the grid over decades where nothing happens.
-FLAT_RTOL = 1e-4
-
-#: Extended precision of the response check, and the relative error above which it is used for the whole sweep.
-RESPONSE_BITS, RESPONSE_TOL = 212, 1e-6

@@ -29,7 +29,7 @@ Examples
 >>> unc = polyrob.uncertain_plant(pldi)
 >>> P = polyrob.generalized_plant(unc, *paper_weights())
 >>> rs = robstab(P, polyrob.paper_controller(), omega=np.logspace(-2, 3, 40), refine_peak=False)
->>> rs.nominally_stable, rs.mu_upper >= rs.mu_lower
+>>> rs.nominally_stable, rs.mu_upper_grid >= rs.mu_lower
 (True, True)
 """
 
@@ -62,12 +62,12 @@ class RobustnessResult:
     Attributes
     ----------
     kind : {"stability", "performance"}
-    mu_upper, mu_lower : float
+    mu_upper_grid, mu_lower : float
         Peak μ upper and lower bounds **on the frequency grid** (see
-        :attr:`covers`): ``mu_upper`` bounds μ at every grid point, not
+        :attr:`covers`): ``mu_upper_grid`` bounds μ at every grid point, not
         between them.
     margin_lower, margin_upper : float
-        ``1/mu_upper`` and ``1/mu_lower`` (on the grid, as above).
+        ``1/mu_upper_grid`` and ``1/mu_lower`` (on the grid, as above).
     critical_frequency : float
         Where the lower bound peaks (rad/s).
     worst_delta : ndarray
@@ -96,7 +96,7 @@ class RobustnessResult:
     """
 
     kind: str
-    mu_upper: float
+    mu_upper_grid: float
     mu_lower: float
     margin_lower: float
     margin_upper: float
@@ -133,12 +133,12 @@ class RobustnessResult:
         return self.certificate.scope.sentence()
 
     def __str__(self) -> str:
-        return f"{self.kind}: peak mu on the grid in [{self.mu_lower:.4g}, {self.mu_upper:.4g}]; {self.certificate.verdict}"
+        return f"{self.kind}: peak mu on the grid in [{self.mu_lower:.4g}, {self.mu_upper_grid:.4g}]; {self.certificate.verdict}"
 
     def summary(self) -> dict:
         return {
             "kind": self.kind,
-            "mu_upper": float(self.mu_upper),
+            "mu_upper_grid": float(self.mu_upper_grid),
             "mu_lower": float(self.mu_lower),
             "mu_scope": "peak on the frequency grid",
             "mu_upper_every_frequency": self.everywhere,
@@ -181,7 +181,7 @@ def _analyse(
         nominal = stability_verdict(nominal_closed_loop(unc, K).system)
     return RobustnessResult(
         kind=kind,
-        mu_upper=float(mu.peak_upper),
+        mu_upper_grid=float(mu.peak_upper),
         mu_lower=float(mu.peak_lower),
         margin_lower=_inv(mu.peak_upper),
         margin_upper=_inv(mu.peak_lower),
@@ -292,7 +292,7 @@ def loop_mu(P, K, blk, omega=None, *, n_u: int, n_y: int, kind: str = "performan
     >>> from polyrob.analysis.robust import loop_mu
     >>> P = control.ss([[-1.0]], [[1.0, 1.0]], [[1.0], [1.0]], [[0.0, 0.0], [0.0, 0.0]])
     >>> r = loop_mu(P, -1.0, [[1, 1]], np.logspace(-2, 2, 41), n_u=1, n_y=1)
-    >>> r.stability.verdict, round(r.mu_upper, 4)          # N = 1/(s + 2)
+    >>> r.stability.verdict, round(r.mu_upper_grid, 4)          # N = 1/(s + 2)
     ('stable', 0.5)
     """
     return _analyse(kind, P, K, blk, omega, n_u=n_u, n_y=n_y, **mu_options)

@@ -32,10 +32,12 @@ def load_controller_args(text):
 
 def print_analysis(a, out) -> None:
     """The text report of a :class:`polyrob.pipeline.ControllerAnalysis` (shared with ``run``)."""
+    from polyrob.analysis.certificate import nominal_performance_verdict
+
     rs, rp, s = a.robust_stability, a.robust_performance, a.sampling
     npf = a.nominal_performance
     out.line(f"nominal stability      {'yes' if rs.nominally_stable else 'NO'}")
-    out.line(f"nominal performance    ||N_zw||inf = {npf:.4g}  ({'met' if npf < 1 else 'not met'})")
+    out.line(f"nominal performance    ||N_zw||inf = {npf:.4g}  ({nominal_performance_verdict(npf)})")
     for title, r in (("robust stability", rs), ("robust performance", rp)):
         if r.implied_by:  # read from the other certificate: no figures of its own to show
             out.line(
@@ -44,7 +46,7 @@ def print_analysis(a, out) -> None:
             )
             continue
         out.line(
-            f"{title:<22} mu in [{r.mu_lower:.4g}, {r.mu_upper:.4g}] (peak on the frequency grid) "
+            f"{title:<22} mu in [{r.mu_lower:.4g}, {r.mu_upper_grid:.4g}] (peak on the frequency grid) "
             f"at {r.critical_frequency:.4g} rad/s: {r.certificate.status}"
         )
         between = getattr(r.mu, "between", None)

@@ -145,7 +145,10 @@ def cmd_batch(args) -> int:
     if args.output:
         doc["files"] = res.files
     out.document(doc)
-    out.line(f"{'robot':<22}{'joints':>7}{'params':>8}{'mu':>10}{'order':>7}{'alpha':>8}{'time s':>9}  result")
+    out.line(
+        f"{'robot':<22}{'joints':>7}{'params':>8}{'mu bound':>10}{'mu grid':>9}{'order':>7}{'alpha':>8}{'time s':>9}"
+        "  result"
+    )
     problem_lines = []
     for r in res.results:
         result = str(r.status) if r.ok else f"FAILED {r.error}: {r.message}"
@@ -155,7 +158,7 @@ def cmd_batch(args) -> int:
             result += f"; why: {r.reason}"
         out.line(
             f"{r.name:<22}{_fmt(r.joints, 'd'):>7}{_fmt(r.parameters, 'd'):>8}{_fmt(r.mu_upper):>10}"
-            f"{_fmt(r.order, 'd'):>7}{_fmt(r.alpha):>8}{r.seconds:>9.1f}  {result}"
+            f"{_fmt(r.mu_upper_grid):>9}{_fmt(r.order, 'd'):>7}{_fmt(r.alpha):>8}{r.seconds:>9.1f}  {result}"
         )
         if r.ok:
             problem_lines.append(

@@ -159,7 +159,7 @@ def _progress_printer(progress):
 
     def show(result: RobotResult, done: int, total: int) -> None:
         if result.ok:
-            what = f"{result.status}, mu {result.mu_upper:.4g}, order {result.order}"
+            what = f"{result.status}, mu peak on the grid {result.mu_upper_grid:.4g}, order {result.order}"
         else:
             what = f"FAILED: {result.error}: {result.message}"
         log.info(f"[{done}/{total}] {result.name}: {what} ({result.seconds:.1f} s)")

@@ -12,6 +12,7 @@ one robot cannot stop the others.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import PurePath
@@ -365,7 +366,8 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         domain=problem.domain.name,
         inner=problem.robot.words() if hasattr(problem.robot, "inner") else "none",
         reflected_inertia=str(getattr(problem.robot, "reflected_inertia", "unknown")),
-        mu_upper=float(cert.bound),
+        mu_upper=float(cert.mu_upper) if math.isfinite(cert.mu_upper) else None,
+        mu_upper_grid=float(cert.mu_upper_grid),
         mu_lower=float(cert.mu_lower),
         status=cert.status.value,
         order=int(design.record.get("order", design.result.order)),

@@ -21,7 +21,8 @@ class RobotResult:
     ``status`` is the controller's :class:`~polyrob.analysis.certificate.Certificate`
     status on the robot's problem (the analysis' certificate when it ran, the
     design's otherwise: the same call), ``verdict`` its line; ``mu_upper`` is
-    the bound that status rests on, ``mu_lower`` the lower bound.  ``validation`` is the nonlinear simulation's
+    the μ bound proved at every frequency (``None``: none was), ``mu_upper_grid``
+    the peak upper bound on the frequency grid, ``mu_lower`` the lower bound.  ``validation`` is the nonlinear simulation's
     verdict line when it ran (``None`` otherwise).  ``reason`` says, for a
     robot left without a certificate, what stands in the way: the
     performance limit of its unstable poles at the weights used
@@ -47,6 +48,7 @@ class RobotResult:
     inner: str | None = None
     reflected_inertia: str | None = None
     mu_upper: float | None = None
+    mu_upper_grid: float | None = None
     mu_lower: float | None = None
     status: str | None = None
     order: int | None = None
@@ -89,6 +91,7 @@ class RobotResult:
             "inner",
             "reflected_inertia",
             "mu_upper",
+            "mu_upper_grid",
             "mu_lower",
             "status",
             "order",

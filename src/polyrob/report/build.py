@@ -162,7 +162,7 @@ def validate_controller(
             "discrete_loop_stable": sd.stable,
             "spectral_radius": sd.spectral_radius,
             "mu_continuous_grid": mu_c,
-            "mu_discrete_grid": sd.mu_upper,
+            "mu_discrete_grid": sd.mu_upper_grid,
             "mu_threshold (continuous + 5 %)": 1.05 * mu_c,
         }
         if search_rate:

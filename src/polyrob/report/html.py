@@ -86,7 +86,7 @@ def _certificates(doc, certificates, problem_summary=None, deployment: str | Non
         (name, st, plain_words(records[name]), cell(bound, "no finite bound"), covers)
         for name, st, bound, covers in certificate_rows(records)
     ]
-    bad = [k for k, row in enumerate(rows) if row[1] != Status.CERTIFIED.value]
+    bad = [k for k, row in enumerate(rows) if not Status(row[1]).certified]
     header = ["certificate", "status", "in plain words", "bound", "what it covers"]
     doc.table(
         header, rows, bad_rows=bad, ident="certificates", left=(0, 1, 2, 4), classes={1: "status", 2: "text", 4: "text"}

@@ -161,7 +161,7 @@ def crossover_frequency(G, K, omega=None) -> float:
 class SampledDataResult:
     """Stability and μ of the discretised loop at one sample rate.
 
-    ``mu_upper``/``mu_lower`` are the peaks on the grid ``omega`` (below
+    ``mu_upper_grid``/``mu_lower`` are the peaks on the grid ``omega`` (below
     Nyquist); ``stable`` is whether every closed-loop pole lies strictly
     inside the unit circle (``spectral_radius < 1``).
     """
@@ -171,7 +171,7 @@ class SampledDataResult:
     prewarp: float | None
     stable: bool
     spectral_radius: float
-    mu_upper: float
+    mu_upper_grid: float
     mu_lower: float
     peak_frequency: float
     omega: np.ndarray
@@ -187,7 +187,7 @@ class SampledDataResult:
             "prewarp_rad_s": self.prewarp,
             "stable": self.stable,
             "spectral_radius": self.spectral_radius,
-            "mu_upper": self.mu_upper,
+            "mu_upper_grid": self.mu_upper_grid,
             "mu_lower": self.mu_lower,
             "peak_frequency": self.peak_frequency,
         }
@@ -288,7 +288,7 @@ def sampled_data_mu(
         prewarp=dc.prewarp,
         stable=bool(stable),
         spectral_radius=rho,
-        mu_upper=float(up),
+        mu_upper_grid=float(up),
         mu_lower=float(lo),
         peak_frequency=float(pk),
         omega=ww,
@@ -374,9 +374,9 @@ def min_sample_rate(
 
     def passes(rate):
         res = sampled_data_mu(P, K, rate, method=method, omega=omega, **{"upper_only": True, **options})
-        ok = res.stable and res.mu_upper <= threshold
-        history.append((float(rate), float(res.mu_upper), bool(res.stable), bool(ok)))
-        return ok, res.mu_upper
+        ok = res.stable and res.mu_upper_grid <= threshold
+        history.append((float(rate), float(res.mu_upper_grid), bool(res.stable), bool(ok)))
+        return ok, res.mu_upper_grid
 
     lo, hi = map(float, rate_bounds)
     ok_hi, mu_hi = passes(hi)

@@ -529,8 +529,8 @@ def check_word_length(P, sos: SOSController, word_length: int, *, threshold: flo
 
     q = quantize(sos, word_length)
     res = sampled_data_mu(P, None, sos.rate, controller=q.to_ss(), omega=omega, **{"upper_only": True, **mu_options})
-    ok = bool(res.stable and res.mu_upper <= threshold)
-    return ok, float(res.mu_upper), bool(res.stable), q
+    ok = bool(res.stable and res.mu_upper_grid <= threshold)
+    return ok, float(res.mu_upper_grid), bool(res.stable), q
 
 
 def min_word_length(

@@ -89,17 +89,16 @@ class MovingRobotCertificate:
     @property
     def certificate(self):
         """The decided :class:`~polyrob.analysis.certificate.Certificate` (``None`` when not computed)."""
-        from polyrob.analysis.certificate import Certificate, Scope, decide_gridded_gain
+        from polyrob.analysis.certificate import Scope, gridded_gain_certificate
 
         if not self.computed or self.decided is not None:  # decided: a certificate made elsewhere (mu)
             return self.decided
         r = self.result
         proved = bool(r is not None and r.proved and np.isfinite(self.gamma))
-        between = proved and (not str(r.coverage).startswith("on the grid") or bool(self.cells.get("holds")))
+        between = proved and (r.whole_box or bool(self.cells.get("holds")))
         why = "" if proved else (self.notes[-1] if self.notes else (r.reason if r is not None else ""))
-        status, reasons = decide_gridded_gain(proved, self.gamma, between, why)
         scope = replace(self.scope or Scope(), kind="robust performance", frequencies="")
-        return Certificate(status, float(self.gamma), float("nan"), float("nan"), None, scope, reasons)
+        return gridded_gain_certificate(scope, gamma=self.gamma, proved=proved, between=between, why=why)
 
     @property
     def verdict(self) -> str:

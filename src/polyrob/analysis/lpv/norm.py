@@ -369,7 +369,8 @@ def lpvnorm(system, grid, rate_bounds=None, basis=None, **options) -> LpvNormRes
         if rate_bounds is not None:
             notes.append("no basis: a constant X, so the bound holds for arbitrarily fast variation")
     box = " x ".join(f"[{lo:.4g}, {hi:.4g}]" for lo, hi in zip(ev.lo, ev.hi))
-    if aff is not None and proved:
+    whole_box = aff is not None and proved
+    if whole_box:
         coverage = (
             f"the whole parameter box {box} (between grid points: multi-convexity, Gahinet-Apkarian-Chilali 1996; "
             "the system declared affine in rho, checked at the grid points)"
@@ -383,6 +384,7 @@ def lpvnorm(system, grid, rate_bounds=None, basis=None, **options) -> LpvNormRes
         frozen_gamma=float(frozen),
         variation=variation,
         coverage=coverage,
+        whole_box=whole_box,
         n_points=N,
         n_rate_vertices=int(data.rates().shape[1]) if not ev.constant_x else 1,
         n_basis=k,

@@ -59,6 +59,9 @@ class LpvNormResult:
     coverage : str
         Which parameter values: "on the grid of N points" (the LMIs hold at
         the grid points only) or "the whole box ... (multi-convexity)".
+    whole_box : bool
+        The bound is proved between the grid points too (the whole box);
+        the fact behind :attr:`coverage`'s words.
     n_points, n_rate_vertices, n_basis, n_states : int
     solver_status : str
     reason : str
@@ -88,6 +91,7 @@ class LpvNormResult:
     X: tuple = field(default=(), repr=False)
     notes: tuple = ()
     seconds: float = 0.0
+    whole_box: bool = False
 
     @property
     def status(self) -> str:
@@ -126,6 +130,7 @@ class LpvNormResult:
             "frozen_gamma": float(self.frozen_gamma),
             "variation": self.variation,
             "coverage": self.coverage,
+            "whole_box": self.whole_box,
             "n_points": self.n_points,
             "n_rate_vertices": self.n_rate_vertices,
             "n_basis": self.n_basis,

@@ -111,19 +111,17 @@ class TimeVaryingCertificate:
     scope: object = None
 
     def _decided(self, kind: str):
-        from polyrob.analysis.certificate import ARBITRARY, Certificate, Scope, decide_gain
+        from polyrob.analysis.certificate import ARBITRARY, Scope, gain_certificate
 
         scope = replace(self.scope or Scope(), kind=kind, variation=ARBITRARY, frequencies="")
         why = self.notes[-1] if self.notes else ""
         if kind == "robust stability":
-            status, reasons = decide_gain(self.stability_holds, 0.0, self.stability is not None, why)
-            bound = float("nan")
+            checked, gamma = self.stability is not None, None
         else:
-            ran = self.performance is not None and self.stability_holds
-            status, reasons = decide_gain(self.stability_holds, self.gamma, ran, why)
-            bound = float(self.gamma)
-        reasons = reasons + tuple(n for n in self.notes if n not in reasons) if reasons else ()
-        return Certificate(status, bound, float("nan"), float("nan"), None, scope, reasons)
+            checked, gamma = self.performance is not None and self.stability_holds, self.gamma
+        return gain_certificate(
+            scope, stable=self.stability_holds, checked=checked, gamma=gamma, why=why, notes=self.notes
+        )
 
     @property
     def certificate(self):
