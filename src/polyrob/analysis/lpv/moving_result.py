@@ -95,7 +95,8 @@ class MovingRobotCertificate:
             return self.decided
         r = self.result
         proved = bool(r is not None and r.proved and np.isfinite(self.gamma))
-        between = proved and (r.whole_box or bool(self.cells.get("holds")))
+        # proved between the grid points: on the whole box by multi-convexity, or on the cells covering it
+        between = bool(r is not None and r.whole_box) or bool(self.cells.get("holds"))
         why = "" if proved else (self.notes[-1] if self.notes else (r.reason if r is not None else ""))
         scope = replace(self.scope or Scope(), kind="robust performance", frequencies="")
         return gridded_gain_certificate(scope, gamma=self.gamma, proved=proved, between=between, why=why)
