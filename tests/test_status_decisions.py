@@ -1,7 +1,8 @@
 """Every status and verdict is decided in ``polyrob.analysis.certificate``, and nowhere else.
 
 The checks read the source (``ast``, docstrings skipped): outside
-``analysis/certificate.py`` no code names a :class:`Status` member, builds a
+``analysis/certificate.py`` no code chooses a :class:`Status` member (it may
+compare a decided status with one: that reads it), builds a
 :class:`Certificate`, rewrites a status with ``replace(..., status=...)``,
 spells a status or a met/pass/fail verdict as a string, calls the ``decide_*``
 functions, or derives the facts it passes to ``certificate.py`` from the
@@ -44,6 +45,16 @@ def _name(node) -> str:
     return ""
 
 
+def _read_only(tree) -> set[int]:
+    """Nodes inside a comparison (``status == Status.CERTIFIED.value`` reads a decided status) or ``__all__``."""
+    ids = set()
+    for node in ast.walk(tree):
+        names = [t.id for t in getattr(node, "targets", []) if isinstance(t, ast.Name)]
+        if isinstance(node, ast.Compare) or (isinstance(node, ast.Assign) and "__all__" in names):
+            ids |= {id(n) for n in ast.walk(node)} - ({id(node)} if isinstance(node, ast.Assign) else set())
+    return ids
+
+
 def _docstrings(tree) -> set[int]:
     ids = set()
     for node in ast.walk(tree):
@@ -58,6 +69,7 @@ def decisions_outside(path: Path) -> list[str]:
     """``path:line: what`` for every status or verdict decided in ``path``."""
     tree = ast.parse(path.read_text())
     skip = _docstrings(tree)
+    reads = _read_only(tree)
     found = []
     where = path.relative_to(PACKAGE.parent) if path.is_relative_to(PACKAGE.parent) else path.name
 
@@ -66,7 +78,8 @@ def decisions_outside(path: Path) -> list[str]:
 
     for node in ast.walk(tree):
         if isinstance(node, ast.Attribute) and node.attr in STATUS_MEMBERS and _name(node.value) == "Status":
-            hit(node, f"names Status.{node.attr}")
+            if id(node) not in reads:
+                hit(node, f"chooses Status.{node.attr}")
         elif isinstance(node, ast.Call):
             called = _name(node.func)
             if called == "Certificate":
@@ -75,7 +88,7 @@ def decisions_outside(path: Path) -> list[str]:
                 hit(node, f"calls {called} (pass the facts to a certificate.py factory)")
             elif called == "replace" and any(k.arg == "status" for k in node.keywords):
                 hit(node, "rewrites a status after the decision")
-        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skip:
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skip | reads:
             word = node.value.strip()
             if word in STATUS_MEMBERS or word.lower() in VERDICT_WORDS:
                 hit(node, f"spells the verdict {word!r}")
@@ -108,7 +121,9 @@ def test_no_status_or_verdict_decided_outside_certificate_module():
         ),
         ("def f(r):\n    return gridded_gain_certificate(s, between=r.coverage.startswith('on'))\n", "read from words"),
         ("c = replace(c, status=s)\n", "rewrites a status"),
-        ("ok = c.status is Status.VIOLATED\n", "names Status.VIOLATED"),
+        ("def f(c):\n    return Status.VIOLATED if c.lower >= 1 else c.status\n", "chooses Status.VIOLATED"),
+        ("if c.status is Status.CERTIFIED:\n    words = c.verdict\n", None),
+        ("__all__ = ['fail', 'pair']\n", None),
         ("w = 'met' if x < 1 else 'not met'\n", "spells the verdict 'met'"),
         ("c = Certificate(s, 1.0, 1.0, 1.0, None, scope)\n", "builds a Certificate"),
         ("def f():\n    '''NOT_CERTIFIED in a docstring is words, not a decision.'''\n", None),
