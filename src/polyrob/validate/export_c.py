@@ -269,15 +269,15 @@ def check_export_rate(
     mu_c = continuous_mu(P, K, grid)
     threshold = MU_MARGIN * mu_c
     sd = sampled_data_mu(P, K, rate, method=method, prewarp=prewarp, omega=grid, upper_only=True)
-    ok = bool(sd.stable and sd.mu_upper <= threshold)
+    ok = bool(sd.stable and sd.mu_upper_grid <= threshold)
     if ok or not search:
-        return RateCheck(float(rate), ok, bool(sd.stable), float(sd.mu_upper), float(threshold)), threshold
+        return RateCheck(float(rate), ok, bool(sd.stable), float(sd.mu_upper_grid), float(threshold)), threshold
     ceiling = 20.0 * float(rate)
     found = min_sample_rate(
         P, K, mu_continuous=mu_c, omega=grid, method=method, prewarp=prewarp, rel_tol=0.1, rate_bounds=(rate, ceiling)
     )
     return (
-        RateCheck(float(rate), False, bool(sd.stable), float(sd.mu_upper), float(threshold), found.rate, ceiling),
+        RateCheck(float(rate), False, bool(sd.stable), float(sd.mu_upper_grid), float(threshold), found.rate, ceiling),
         threshold,
     )
 
