@@ -120,7 +120,7 @@ def test_a_search_time_limit_keeps_the_best_factor_so_far_and_says_so(monkeypatc
     # 32, 16, 8 fail, 4 certifies, 5.66 fails, 4.76 certifies: then 5.5 s have passed
     assert len(cut.history) == 6 and cut.alpha == pytest.approx(4.757, rel=1e-3) and cut.peak_mu < 1
     assert cut.bracket[1] / cut.bracket[0] - 1 > 0.05
-    assert "time limit of 5.5 s, before alpha = 5.187" in cut.stopped_by
+    assert "time limit of 5.5 s you set, before alpha = 5.187" in cut.stopped_by
     assert cut.summary()["stopped_by"] == cut.stopped_by
     clock[0] = 0.0
     with pytest.raises(SynthesisError, match="none certifies before the search's time limit of 2.5 s"):

@@ -43,7 +43,7 @@ def robot():
 def _check(searched, gamma, **kw):
     model, system, r, sysf, c, basis, used = searched
     return check_cells(model, system, r.X, basis, kw.pop("rates", used), gamma, similarity=sysf.similarity, c=c,
-                       time_limit=60, **kw)  # fmt: skip
+                       **kw)  # fmt: skip
 
 
 def test_the_lmis_are_proved_on_cells_covering_the_box_and_hold_at_random_points(searched):

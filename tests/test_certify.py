@@ -7,6 +7,7 @@ from polyrob's own interval code.
 from __future__ import annotations
 
 import importlib.metadata
+import inspect
 import time
 from pathlib import Path
 
@@ -169,11 +170,31 @@ def test_seven_joint_robot_refused_at_once():
         )
 
 
-@pytest.mark.timeout(30)  # the limit ends the work (an unguarded run takes minutes)
-def test_time_limit_respected():
+@pytest.mark.timeout(600)  # a hang guard: the limits below end the work after a few boxes
+def test_the_time_limit_you_set_is_named_when_it_fires(monkeypatch):
+    """A fake clock 10 s further at each reading: the limit of 25 s fires after a couple of boxes, whatever the load."""
+    from clocks import FakeClock
+
     d, *box = DOMAINS["double_pendulum"]
-    with pytest.raises(CertificationError, match="time limit of 0.2 s reached after"):
-        certified_jacobian_bounds(load("double_pendulum"), d, *box, time_limit=0.2)
+    FakeClock(step=10.0).install(monkeypatch)
+    with pytest.raises(CertificationError, match=r"stopped by the time limit of 25 s you set after [1-3] boxes"):
+        certified_jacobian_bounds(load("double_pendulum"), d, *box, time_limit=25)
+
+
+@pytest.mark.timeout(600)
+def test_the_proof_gives_up_after_a_number_of_boxes_not_of_seconds(monkeypatch):
+    """Before: 120 s of wall clock by default, so the same domain was proved idle and refused under load.
+    Now a count of boxes: a clock running 1000x faster changes nothing."""
+    from clocks import slowed_clock
+
+    from polyrob.bounds.certified.enclosure import MAX_BOXES
+
+    assert inspect.signature(certified_jacobian_bounds).parameters["time_limit"].default is None
+    assert MAX_BOXES >= 100_000
+    d, *box = DOMAINS["double_pendulum"]
+    slowed_clock(monkeypatch, 1000.0)
+    with pytest.raises(CertificationError, match="the limit of 5 boxes reached after 5 boxes"):
+        certified_jacobian_bounds(load("double_pendulum"), d, *box, max_boxes=5)
 
 
 def test_bad_domain_refused():

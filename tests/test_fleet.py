@@ -469,4 +469,6 @@ def test_the_batch_search_bisects_to_its_own_tolerance_and_time_limit(monkeypatc
     monkeypatch.setattr(stages, "search_skipped", lambda problem, details: None)
     with pytest.raises(RuntimeError, match="stop here"):
         stages.design_stage(SimpleNamespace(), Settings(search_bandwidth=True), {}, {})
-    assert seen["rtol"] == 0.25 and seen["search_time_limit"] == 600.0
+    # the search is bounded by its factors and its bisection: no wall-clock limit unless the user sets one
+    assert seen["rtol"] == 0.25 and seen["search_time_limit"] is None
+    assert Settings().validate_budget is None and Settings().validate_evaluations >= 10**6

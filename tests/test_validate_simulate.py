@@ -122,7 +122,7 @@ def test_time_budget_keeps_the_result_of_a_run_that_finishes():
     robot, dom, K = _setup()
     ref = step_reference([0.01, -0.005])
     whole = simulate(robot, K, dom, ref, t_final=5.0)
-    pieces = simulate(robot, K, dom, ref, t_final=5.0, time_budget=600.0)
+    pieces = simulate(robot, K, dom, ref, t_final=5.0, max_evaluations=10**7)
     assert pieces.success and pieces.stayed_in_domain
     assert np.allclose(pieces.q[:, -1], whole.q[:, -1], atol=1e-7)
     q_w = np.array([np.interp(pieces.t, whole.t, whole.q[j]) for j in range(2)])
@@ -130,12 +130,33 @@ def test_time_budget_keeps_the_result_of_a_run_that_finishes():
 
 
 @pytest.mark.parametrize("rate", [None, 1000.0])
-def test_time_budget_stops_a_simulation_and_says_so(rate):
+def test_the_time_limit_you_set_stops_a_simulation_and_says_so(rate, monkeypatch):
+    """A fake clock 1 s further at each reading: a limit of 50 s fires early in the run, whatever the load."""
+    from clocks import FakeClock
+
     robot, dom, K = _setup()
-    sim = simulate(robot, K, dom, step_reference([0.01, -0.005]), t_final=50.0, rate=rate, time_budget=0.05)
+    FakeClock(step=1.0).install(monkeypatch)
+    sim = simulate(robot, K, dom, step_reference([0.01, -0.005]), t_final=50.0, rate=rate, time_budget=50.0)
     assert not sim.success and not sim.stayed_in_domain
-    assert "time budget" in sim.verdict()
+    assert "stopped by the time limit of 50 s you set" in sim.verdict()
     assert sim.t[-1] < 50.0 and sim.q.shape[1] == len(sim.t)
+
+
+@pytest.mark.parametrize("rate", [None, 1000.0])
+def test_a_simulation_is_bounded_by_its_evaluations_and_not_by_the_clock(rate, monkeypatch):
+    """Before: the batch's and the report's simulations stopped after 120 s / 300 s of wall clock, so a
+    loaded machine reported "not finished" where an idle one validated.  Now a count of evaluations: a
+    clock running 1000x faster gives the same trajectory, and the limit names itself."""
+    from clocks import slowed_clock
+
+    robot, dom, K = _setup()
+    ref = step_reference([0.01, -0.005])
+    normal = simulate(robot, K, dom, ref, t_final=5.0, rate=rate, max_evaluations=2000)
+    slowed_clock(monkeypatch, 1000.0)
+    slowed = simulate(robot, K, dom, ref, t_final=5.0, rate=rate, max_evaluations=2000)
+    assert not normal.success and "limit of 2000 evaluations of the dynamics" in normal.verdict()
+    assert 0 < normal.t[-1] < 5.0
+    assert np.array_equal(slowed.t, normal.t) and np.array_equal(slowed.q, normal.q)
 
 
 def test_time_budget_must_be_positive():

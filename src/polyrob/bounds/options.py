@@ -113,7 +113,8 @@ class BoundOptions:
     certify_options : dict, optional
         Keyword arguments of
         :func:`~polyrob.bounds.certified.enclosure.certified_jacobian_bounds`:
-        ``rel_tol`` (default here 1e-5), ``time_limit`` (s, default 120),
+        ``rel_tol`` (default here 1e-5), ``max_boxes`` (a count of work),
+        ``time_limit`` (s, a safety net the caller sets; default none),
         ``max_joints`` (default 3).
     workers : int, optional
         Worker processes (spawned; ``1`` runs everything in this process).

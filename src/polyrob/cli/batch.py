@@ -232,9 +232,10 @@ def register(sub) -> None:
     g.add_argument(
         "--search-time-limit",
         type=nonnegative_float,
-        default=600.0,
+        default=0.0,
         metavar="SECONDS",
-        help="--max-bandwidth: no new factor of a robot's search starts after this (default 600; 0: none)",
+        help="--max-bandwidth: a safety net: no new factor of a robot's search starts after this many seconds, "
+        "and the row says so (default 0: none; the search is bounded by its factors and its bisection)",
     )
     g.add_argument(
         "--uncertainty",
@@ -265,8 +266,9 @@ def register(sub) -> None:
     g.add_argument(
         "--validate-budget",
         type=positive_float,
-        default=120.0,
-        help="wall-clock seconds the closed-loop simulation may take (default 120)",
+        default=None,
+        help="a safety net: wall-clock seconds the closed-loop simulation may take, named in the row when it "
+        "fires (default none: the simulation is bounded by its number of dynamics evaluations)",
     )
     add_output_flags(p)
     p.set_defaults(func=cmd_batch)

@@ -125,7 +125,8 @@ def register(sub) -> None:
         "--time-limit",
         type=positive_float,
         default=None,
-        help="--certify: seconds before the proof gives up (default 120)",
+        help="--certify: a safety net of wall-clock seconds before the proof gives up (default none: the proof "
+        "is bounded by its number of boxes, so its answer does not depend on the machine's load)",
     )
     p.add_argument(
         "--rel-tol",

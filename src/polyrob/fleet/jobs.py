@@ -120,6 +120,11 @@ def as_job(item) -> Job:
     raise ArgumentError(f"a job is a robot name, a mapping or a Job, not {type(item).__name__}")
 
 
+#: Dynamics evaluations a batch's validation simulation may make (a count of work; a stiff loop stops there).
+#: About two minutes of an idle 2-core x86_64, far above what a settled move of 20 s needs.
+VALIDATE_EVALUATIONS = 5_000_000
+
+
 @dataclass(frozen=True)
 class Settings:
     """What every job of a batch shares (bounding, synthesis, analysis options).
@@ -140,11 +145,12 @@ class Settings:
     alphas : tuple of float, optional
         The factors the search scans (default its own).
     search_time_limit : float or None
-        Seconds of one robot's bandwidth search after which no new factor
-        starts (its best certified factor so far stands, and the row says the
-        search stopped); ``None``: no limit.  A batch is a shared budget: one
-        robot whose μ problem is slow (talos_left_arm's 72-parameter model)
-        should not hold a worker for an hour.
+        A safety net the user sets: seconds of one robot's bandwidth search
+        after which no new factor starts (its best certified factor so far
+        stands, and the row names the limit); ``None`` (default): no limit.
+        The search is bounded by its work already (the factors of its scan
+        and a bisection to ``search_rtol``), so a robot's factor does not
+        depend on the machine's load.
     search_rtol : float
         The search's bisection stops when the first factor that failed is
         within this fraction above the last certified one (0.25: a batch
@@ -166,9 +172,13 @@ class Settings:
         planar_2r's factor-32 controller), which no robot's reference does.
     validate_time : float
         Simulated seconds.
-    validate_budget : float
-        Wall-clock seconds the simulation may take; a stiff closed loop that
-        has not finished by then is reported as such (``None``: no limit).
+    validate_budget : float or None
+        A safety net the user sets: wall-clock seconds the simulation may
+        take, named in the row when it fires (``None``, default: no limit).
+    validate_evaluations : int or None
+        Evaluations of the dynamics the simulation may make; a stiff closed
+        loop that has not finished by then is reported as such (a count of
+        work, so the row is the same on an idle and on a loaded machine).
     reduce_max_order : int or None
         A certified full-order controller is reduced to the smallest order up
         to this one that keeps μ < 1 (:func:`polyrob.pipeline.reduce_design`);
@@ -180,7 +190,7 @@ class Settings:
     omega: tuple | None = None
     search_bandwidth: bool = False
     alphas: tuple | None = None
-    search_time_limit: float | None = 600.0
+    search_time_limit: float | None = None
     search_rtol: float = 0.25
     analyze: bool = True
     mc: int = 200
@@ -188,7 +198,8 @@ class Settings:
     validate_step: float = 0.02
     validate_move: float = 2.0
     validate_time: float = 20.0
-    validate_budget: float | None = 120.0
+    validate_budget: float | None = None
+    validate_evaluations: int | None = VALIDATE_EVALUATIONS
     reduce_max_order: int | None = 20
 
     def to_dict(self) -> dict:

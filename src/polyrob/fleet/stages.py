@@ -36,6 +36,7 @@ def validate_stage(problem, K, settings) -> dict:
         move,
         t_final=settings.validate_time,
         time_budget=settings.validate_budget,
+        max_evaluations=settings.validate_evaluations,
         u_eq="hold",
     )
     out = sim.summary()

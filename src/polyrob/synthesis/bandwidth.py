@@ -187,7 +187,8 @@ def max_bandwidth_scaling(
         Progress bars of each synthesis (default: only on a terminal); one
         line per α goes to the ``polyrob`` logger whatever this says.
     search_time_limit : float, optional
-        Seconds of the whole search after which no new factor starts (the
+        A safety net the caller sets (default none: the scan and the bisection
+        bound the search's work): seconds of the whole search after which no new factor starts (the
         one running finishes): the largest certified factor so far is the
         result, its ``bracket`` ending at the next factor not tried
         (``stopped_by`` says so); none so far raises :class:`SynthesisError`.
@@ -306,7 +307,7 @@ def max_bandwidth_scaling(
         nonlocal stopped
         if deadline is None or time.perf_counter() < deadline:
             return False
-        stopped = f"the search's time limit of {search_time_limit:g} s, before alpha = {next_alpha:.4g}"
+        stopped = f"the search's time limit of {search_time_limit:g} s you set, before alpha = {next_alpha:.4g}"
         log.info(f"bandwidth search stopped by {stopped}")
         return True
 

@@ -23,6 +23,7 @@ import numpy as np
 from polyrob._threads import single_blas_thread
 from polyrob.analysis.certificate import certify_loop
 from polyrob.analysis.mu.blocks import as_block_structure
+from polyrob.clock import UserTimeLimit
 from polyrob.controller import as_controller_ss
 from polyrob.errors import ArgumentError, SynthesisError
 from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound
@@ -180,7 +181,7 @@ def musyn(
     """
     opts = MusynOptions.build(options, **keywords)
     t_start = time.perf_counter()
-    deadline = None if opts.time_limit is None else t_start + float(opts.time_limit)
+    deadline = UserTimeLimit.starting_now(opts.time_limit)
     if not isinstance(opts.structure, str):
         raise SynthesisError(f"unknown controller structure {opts.structure!r}: give a string such as 'full' or 'tf3'")
     start_words = None

@@ -131,7 +131,9 @@ class MusynOptions:
     check_weights : bool
         Refuse weights that alone force μ > 1 (full order).
     time_limit : float, optional
-        Seconds after which no new iteration or start begins (a safety net).
+        A safety net the user sets (default none): seconds of wall clock after
+        which no new iteration or start begins; the result names the limit
+        ("the time limit of N s you set").
     """
 
     method: FullOrder | FixedStructure = field(default_factory=FullOrder)

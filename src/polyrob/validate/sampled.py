@@ -2,20 +2,18 @@
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 from scipy.integrate import solve_ivp
 
 __all__ = ["simulate_sampled"]
 
 
-def simulate_sampled(robot, Kd, r_of_t, t_final, q0, qdot0, u_eq, rtol, atol, deadline):
+def simulate_sampled(robot, Kd, r_of_t, t_final, q0, qdot0, u_eq, rtol, atol, limits=None):
     """The robot under the discrete controller ``Kd``: ``e`` sampled every period, ``u`` held in between.
 
     Returns ``(t, x, u, r, success, info)`` (states ``x = [q; qdot]`` at the
     sampling instants; ``u`` and ``r`` held over each period, reported at its
-    end too).  ``deadline`` is a ``time.monotonic()`` value or ``None``.
+    end too).  ``limits``: a :class:`~polyrob.validate.simulate.SimulationLimits` or ``None``.
     """
     m = robot.m
     h = float(Kd.dt)
@@ -27,8 +25,8 @@ def simulate_sampled(robot, Kd, r_of_t, t_final, q0, qdot0, u_eq, rtol, atol, de
     ok, message, nfev = True, "reached t_final", 0
     for k in range(n_steps):
         tk = k * h
-        if deadline is not None and time.monotonic() > deadline:
-            ok, message = False, f"not finished within the time budget (stopped at t = {tk:.4g} s of {t_final:.4g} s)"
+        if limits is not None and limits.exceeded(nfev):
+            ok, message = False, f"{limits.words(nfev)} (stopped at t = {tk:.4g} s of {t_final:.4g} s)"
             break
         rk = r_of_t(tk)
         e = rk - x[:m]

@@ -210,6 +210,7 @@ def simulate(
     atol: float = 1e-9,
     time_budget: float | None = None,
     true_seed: int | None = 0,
+    max_evaluations: int | None = None,
 ) -> SimulationResult:
     """Simulate the robot's nonlinear dynamics in closed loop with ``K``.
 
@@ -245,17 +246,25 @@ def simulate(
     n_points : int
         Output samples of the continuous simulation.
     time_budget : float, optional
-        Wall-clock seconds the integration may take.  A stiff closed loop
-        (a fast controller on a light robot) can keep an implicit solver on
-        tiny steps for many minutes; past the budget the simulation stops,
-        keeps what it integrated and reports ``success=False`` with a message
-        saying how far it got.  ``None``: no limit.
+        A safety net the caller sets: wall-clock seconds the integration may
+        take; past it the simulation stops, keeps what it integrated and
+        reports ``success=False`` with a message naming the limit ("stopped by
+        the time limit of N s you set").  ``None``: no limit.  Whether it
+        fires depends on the machine's load: bound the work with
+        ``max_evaluations`` instead.
     true_seed : int or None
         For an inner loop with ranges (:mod:`polyrob.model.inner`): the seed
         of the true robot simulated, its payload and inertia factor drawn
         from their ranges (``info["true_robot"]`` says which; the inner layer
         computes with the model); ``None``: the model itself.  ``u`` is then
         the outer input ``v`` and ``info["motor_torque_peak"]`` the motors'.
+    max_evaluations : int, optional
+        Evaluations of the dynamics the integration may make (a count of
+        work: the same on an idle and on a loaded machine).  A stiff closed
+        loop (a fast controller on a light robot) can keep an implicit solver
+        on tiny steps for many minutes; past the limit the simulation stops,
+        keeps what it integrated and reports ``success=False`` with a message
+        saying how far it got.  ``None``: no limit.
 
     Returns
     -------
@@ -291,7 +300,7 @@ def simulate(
     if discrete:
         Kd = K.system if isinstance(K, DiscreteController) else control.ss(K)
         t, X, U, R, ok, info = simulate_sampled(
-            robot, Kd, r_of_t, t_final, q0, qdot0, u_eq, rtol, atol, _deadline(time_budget)
+            robot, Kd, r_of_t, t_final, q0, qdot0, u_eq, rtol, atol, _limits(time_budget, max_evaluations)
         )
         info["u_eq_source"] = u_source
         m = robot.m
@@ -300,10 +309,12 @@ def simulate(
     Ks = as_controller_ss(K, m, m)
     Ak, Bk, Ck, Dk = (np.asarray(X, float) for X in (Ks.A, Ks.B, Ks.C, Ks.D))
     nk = Ak.shape[0]
-    deadline = _deadline(time_budget)
+    limits = _limits(time_budget, max_evaluations)
+    calls = [0]
 
     def rhs(t, z):
-        if deadline is not None and time.monotonic() > deadline:
+        calls[0] += 1
+        if limits.exceeded(calls[0]):
             raise _OutOfTime
         q, qd, xk = z[:m], z[m : 2 * m], z[2 * m :]
         e = r_of_t(t) - q
@@ -312,7 +323,7 @@ def simulate(
 
     # Without a budget one solve_ivp call; with one, CHUNKS calls, so that
     # what was integrated before the budget ran out is kept.
-    edges = np.linspace(0.0, t_final, (1 if deadline is None else CHUNKS) + 1)
+    edges = np.linspace(0.0, t_final, (1 if limits.none else CHUNKS) + 1)
     z = np.concatenate([q0, qdot0, np.zeros(nk)])
     pieces, step_times, nfev, ok, message = [], [np.zeros(1)], 0, True, ""
     for a, b in zip(edges[:-1], edges[1:]):
@@ -320,10 +331,7 @@ def simulate(
             sol = solve_ivp(rhs, (a, b), z, method="LSODA", dense_output=True, rtol=rtol, atol=atol)
         except _OutOfTime:
             ok = False
-            message = (
-                f"not finished within the time budget of {time_budget:g} s "
-                f"(integrated to t = {a:.4g} s of {t_final:.4g} s)"
-            )
+            message = f"{limits.words(calls[0])} (integrated to t = {a:.4g} s of {t_final:.4g} s)"
             break
         nfev += int(sol.nfev)
         pieces.append((float(sol.t[-1]), sol.sol))
@@ -349,15 +357,42 @@ CHUNKS = 20
 
 
 class _OutOfTime(Exception):
-    """The simulation's wall-clock budget ran out (raised from the ODE's right-hand side)."""
+    """The simulation's limit (evaluations, or the wall clock the caller set) ran out (raised from the ODE's right-hand side)."""
 
 
-def _deadline(time_budget):
+@dataclass(frozen=True)
+class SimulationLimits:
+    """When a simulation stops early: a count of dynamics evaluations, and a wall-clock safety net the caller sets."""
+
+    max_evaluations: int | None = None
+    time_budget: float | None = None
+    deadline: float | None = None
+
+    @property
+    def none(self) -> bool:
+        return self.max_evaluations is None and self.deadline is None
+
+    def exceeded(self, evaluations: int) -> bool:
+        if self.max_evaluations is not None and evaluations > self.max_evaluations:
+            return True
+        return self.deadline is not None and time.monotonic() > self.deadline
+
+    def words(self, evaluations: int) -> str:
+        """Why it stopped, naming the limit."""
+        if self.max_evaluations is not None and evaluations > self.max_evaluations:
+            return f"not finished within its limit of {self.max_evaluations} evaluations of the dynamics"
+        return f"stopped by the time limit of {self.time_budget:g} s you set"
+
+
+def _limits(time_budget, max_evaluations) -> SimulationLimits:
+    if max_evaluations is not None and not int(max_evaluations) >= 1:
+        raise ArgumentError(f"max_evaluations must be >= 1, got {max_evaluations}")
     if time_budget is None:
-        return None
+        return SimulationLimits(None if max_evaluations is None else int(max_evaluations))
     if not time_budget > 0:
         raise ArgumentError(f"time_budget must be positive seconds, got {time_budget}")
-    return time.monotonic() + float(time_budget)
+    deadline = time.monotonic() + float(time_budget)
+    return SimulationLimits(None if max_evaluations is None else int(max_evaluations), float(time_budget), deadline)
 
 
 def _evaluate(pieces, t, z0):

@@ -169,7 +169,7 @@ def moving_robot_certificate(
     recheck="auto",
     level=None,
     cells: bool = False,
-    cell_time_limit: float = 1800.0,
+    cell_time_limit: float | None = None,
     symmetric: bool = False,
     progress: bool = False,
 ) -> MovingRobotCertificate:
@@ -211,8 +211,10 @@ def moving_robot_certificate(
     cells : bool
         Prove the returned ``X`` between the grid points, on cells covering the
         whole box (:func:`~polyrob.analysis.lpv.cells.check_cells`, at ``level``
-        or else halfway from the grid's bound to 1), within ``cell_time_limit`` seconds
-        (``progress``: a bar); when it holds the status is CERTIFIED.
+        or else halfway from the grid's bound to 1), bounded by its number of
+        cells (``progress``: a bar); when it holds the status is CERTIFIED.
+        ``cell_time_limit``: a wall-clock safety net the caller sets (default
+        none), named in the verdict when it fires.
     symmetric : bool or "auto"
         When the loop is even in ``rho`` on a symmetric box, search and prove
         on the half box with ``X`` on the even functions of the basis

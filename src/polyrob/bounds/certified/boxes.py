@@ -15,7 +15,7 @@ Examples
 ...     top = max(abs(lo[0]), abs(hi[0]))
 ...     return 1.01 - top**2 * (1 + (hi[0] - lo[0])), "x^2 may exceed 1.01"
 >>> ok, leaves, why = prove_on_boxes([(np.array([-1.0]), np.array([1.0]))], evaluate, np.array([2.0]),
-...                                  min_width=1e-6, max_boxes=1000, deadline=float("inf"))
+...                                  min_width=1e-6, max_boxes=1000)
 >>> ok, len(leaves) > 2
 (True, True)
 """
@@ -58,8 +58,14 @@ def _bisect(queue, evaluate, lo, hi, width0, min_width, contrib=None):
     return True
 
 
-def prove_on_boxes(boxes, evaluate, width0, *, min_width, max_boxes, deadline, bar=None, by_contribution=False):
-    """Branch and bound: ``(True, leaves' values, "")`` when every leaf has a positive margin, else ``(False, ..., why)``."""
+def prove_on_boxes(boxes, evaluate, width0, *, min_width, max_boxes, time_limit=None, bar=None, by_contribution=False):
+    """Branch and bound: ``(True, leaves' values, "")`` when every leaf has a positive margin, else ``(False, ..., why)``.
+
+    It gives up past ``max_boxes`` boxes (a count of work: the answer does not
+    depend on the machine's load), or past ``time_limit`` wall-clock seconds,
+    a safety net only a caller sets (``None``: none), which ``why`` then names.
+    """
+    t0 = time.perf_counter()
     queue, leaves = deque((lo, hi, None) for lo, hi in boxes), []
     while queue:
         lo, hi, known = queue.popleft()
@@ -71,8 +77,16 @@ def prove_on_boxes(boxes, evaluate, width0, *, min_width, max_boxes, deadline, b
             if bar is not None:
                 bar.update(1)
             continue
-        if len(leaves) + len(queue) >= max_boxes or time.perf_counter() > deadline:
-            return False, leaves, f"gave up after {len(leaves)} cells: {value[-1]} at rho in {box_words(lo, hi)}"
+        if len(leaves) + len(queue) >= max_boxes:
+            return False, leaves, (
+                f"gave up after {len(leaves)} cells (the limit of {max_boxes} cells): {value[-1]} at rho in "
+                f"{box_words(lo, hi)}"
+            )
+        if time_limit is not None and time.perf_counter() - t0 > time_limit:
+            return False, leaves, (
+                f"stopped by the time limit of {time_limit:g} s you set, after {len(leaves)} cells: {value[-1]} "
+                f"at rho in {box_words(lo, hi)}"
+            )
         if not _bisect(queue, evaluate, lo, hi, width0, min_width, value[1] if by_contribution else None):
             return False, leaves, f"{value[-1]} at rho in {box_words(lo, hi)} (a cell at the smallest width)"
         if bar is not None:

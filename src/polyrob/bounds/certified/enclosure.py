@@ -52,7 +52,11 @@ from polyrob.bounds.polytope import box_corners
 from polyrob.bounds.reference import reference_jacobians
 from polyrob.errors import CertificationError, DomainError
 
-__all__ = ["CertifiedEnclosure", "certified_jacobian_bounds", "reference_jacobians"]
+__all__ = ["CertifiedEnclosure", "certified_jacobian_bounds", "reference_jacobians", "MAX_BOXES"]
+
+#: Boxes the branch and bound processes before giving up: a count of work, never seconds, so that the
+#: same robot and domain are proved or refused on an idle and on a loaded machine alike.
+MAX_BOXES = 200_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,7 +126,8 @@ def certified_jacobian_bounds(
     *,
     max_joints=3,
     rel_tol=1e-3,
-    time_limit=120.0,
+    max_boxes=MAX_BOXES,
+    time_limit=None,
     progress=False,
 ):
     """Guaranteed entrywise bounds of ``A = df/dx`` and ``B = df/du`` over a box.
@@ -147,8 +152,14 @@ def certified_jacobian_bounds(
     rel_tol : float, default 1e-3
         Stop refining a box when it cannot widen an entry's bound by more than
         ``rel_tol`` times the entry's current width.
-    time_limit : float, default 120
-        Seconds; past it :class:`~polyrob.errors.CertificationError` is raised.
+    max_boxes : int, default :data:`MAX_BOXES`
+        Boxes processed before giving up (:class:`~polyrob.errors.CertificationError`):
+        a count of work, so whether the bounds are proved does not depend on
+        the machine's load.
+    time_limit : float, optional
+        A safety net the caller sets: wall-clock seconds before giving up;
+        the error then names it ("stopped by the time limit of N s you set").
+        ``None`` (default): no wall-clock limit.
     progress : bool, default False
         Show a tqdm bar (boxes processed / processed + queued).
 
@@ -160,7 +171,7 @@ def certified_jacobian_bounds(
     ------
     CertificationError
         Too many joints, unsupported joint, ``M`` not provably invertible,
-        or time limit reached.
+        ``max_boxes`` or the time limit reached.
     DomainError
         Malformed box.
 
@@ -230,14 +241,20 @@ def certified_jacobian_bounds(
     heap = [(0.0, 0, 0, tuple(qlo), tuple(qhi), items)]
     counter, n_boxes, max_depth = itertools.count(1), 0, 0
     while heap:
-        if time.perf_counter() - t0 > time_limit:
+        out_of_boxes = n_boxes >= max_boxes
+        if out_of_boxes or (time_limit is not None and time.perf_counter() - t0 > time_limit):
             open_items = sum(len(h[5]) for h in heap)
             if bar is not None:
                 bar.close()
+            what = (
+                f"the limit of {max_boxes} boxes reached"
+                if out_of_boxes
+                else f"stopped by the time limit of {time_limit:g} s you set"
+            )
             raise CertificationError(
-                f"certified bounds: time limit of {time_limit:g} s reached after {n_boxes} boxes "
-                f"(depth {max_depth}) with {open_items} sub-problems still open in {len(heap)} boxes; "
-                "raise the time limit (--time-limit) or the tolerance (--rel-tol), or shrink the domain"
+                f"certified bounds: {what} after {n_boxes} boxes (depth {max_depth}) with {open_items} "
+                f"sub-problems still open in {len(heap)} boxes; raise the tolerance (--rel-tol) or shrink the domain"
+                + (", or raise the time limit (--time-limit)" if not out_of_boxes else "")
             )
         _, _, depth, lo, hi, items = heapq.heappop(heap)
         n_boxes += 1

@@ -107,9 +107,10 @@ class DKIteration:
     progress : bool, optional
         A progress bar (tqdm); default: only on a terminal.  One line per
         iteration goes to the ``polyrob`` logger whatever this says.
-    deadline : float, optional
-        ``time.perf_counter()`` value after which no new iteration starts;
-        the best controller so far is kept and :attr:`stopped_by` says why.
+    deadline : UserTimeLimit, optional
+        The time limit the user set (:class:`polyrob.clock.UserTimeLimit`): past it no
+        new iteration starts; the best controller so far is kept and
+        :attr:`stopped_by` names the limit.
     switch_tol : float
         Mixed problems: D-K steps while the peak improves by more than this
         (relative, per iteration), then D-G-K steps.
@@ -135,7 +136,7 @@ class DKIteration:
         patience: int = 2,
         target: float | None = None,
         progress: bool | None = None,
-        deadline: float | None = None,
+        deadline=None,
         switch_tol: float = 0.02,
     ):
         self.mu_bound = mu_bound or MuUpperBound()
@@ -143,7 +144,7 @@ class DKIteration:
         self.hinf_step = hinf_step or HinfStep()
         self.max_iter, self.tol, self.patience = int(max_iter), float(tol), int(patience)
         self.target, self.progress = target, progress
-        #: ``time.perf_counter()`` value after which no new iteration starts (``None``: no limit)
+        #: the time limit the user set (:class:`polyrob.clock.UserTimeLimit`; ``None``: no limit)
         self.deadline = deadline
         #: why the last run stopped early (``None``: it did not)
         self.stopped_by = None
@@ -282,8 +283,8 @@ class DKIteration:
                 )
                 if it + 1 >= self.max_iter:
                     break
-                if self.deadline is not None and time.perf_counter() >= self.deadline:
-                    self.stopped_by = f"the time limit, after {it + 1} iteration(s)"
+                if self.deadline is not None and self.deadline.passed():
+                    self.stopped_by = f"{self.deadline.words}, after {it + 1} iteration(s)"
                     log.info(f"musyn: stopped by {self.stopped_by}")
                     break
                 if since_best >= self.patience:

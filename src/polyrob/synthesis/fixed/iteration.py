@@ -211,7 +211,7 @@ def optimise_start(
     report: Callable[[dict], None],
     label: str,
     target: float | None = None,
-    deadline: float | None = None,
+    deadline=None,
 ):
     radius = opts.trust_region
     stall = 0
@@ -220,8 +220,8 @@ def optimise_start(
             break
         # a start that began makes at least one iteration (a start is not begun after the limit):
         # on a loaded machine its set-up alone can outlast a short limit
-        if deadline is not None and run.iterations > 0 and time.perf_counter() >= deadline:
-            run.notes.append(f"stopped by the time limit after {run.iterations} iteration(s)")
+        if deadline is not None and run.iterations > 0 and deadline.passed():
+            run.notes.append(f"stopped by {deadline.words} after {run.iterations} iteration(s)")
             break
         t0 = time.perf_counter()
         old = run.peak

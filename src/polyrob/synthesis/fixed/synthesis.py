@@ -109,7 +109,7 @@ def fixed_structure_musyn(
     options: MusynOptions | FixedStructureOptions | None = None,
     n_u: int | None = None,
     n_y: int | None = None,
-    deadline: float | None = None,
+    deadline=None,
     **keywords,
 ) -> MusynResult:
     """Fixed-structure μ-synthesis (MATLAB ``musyn`` with a tunable controller).
@@ -146,9 +146,10 @@ def fixed_structure_musyn(
         :class:`FixedStructureOptions` is the tuning.
     n_u, n_y : int, optional
         Sizes for a bare ``StateSpace`` plant.
-    deadline : float, optional
-        ``time.perf_counter()`` value after which no new iteration or start
-        begins; the best controller so far is certified (its notes say so).
+    deadline : UserTimeLimit, optional
+        The time limit the user set (:class:`polyrob.clock.UserTimeLimit`): past it
+        no new iteration or start begins; the best controller so far is
+        certified (its notes name the limit).
     **keywords
         Fields of the options, flat (:meth:`MusynOptions.build`): ``starts``,
         ``init``, ``max_iter``, ...
@@ -296,8 +297,8 @@ class _Search:
         runs, failures = [], []
         span = screen = work = None
         for label, th in candidates:
-            if runs and deadline is not None and time.perf_counter() >= deadline:
-                fallbacks.append(f"starts after {len(runs)} not run: the time limit")
+            if runs and deadline is not None and deadline.passed():
+                fallbacks.append(f"starts after {len(runs)} not run: {deadline.words}")
                 break
             th, a = stabilise(loop, th, tuning.min_decay)
             if not a <= -tuning.min_decay:
