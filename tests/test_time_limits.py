@@ -60,7 +60,11 @@ def test_the_check_between_grid_points_is_the_same_under_a_clock_1000x_faster(mo
     slowed_clock(monkeypatch, 1000.0)
     slowed = verify_between(G, coarse)
     assert normal.holds and slowed.holds
-    assert (slowed.level, slowed.points_added, slowed.intervals) == (normal.level, normal.points_added, normal.intervals)
+    assert (slowed.level, slowed.points_added, slowed.intervals) == (
+        normal.level,
+        normal.points_added,
+        normal.intervals,
+    )
 
 
 def test_the_check_between_grid_points_gives_up_after_its_points_and_says_how_many():

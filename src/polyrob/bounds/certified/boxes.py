@@ -78,14 +78,22 @@ def prove_on_boxes(boxes, evaluate, width0, *, min_width, max_boxes, time_limit=
                 bar.update(1)
             continue
         if len(leaves) + len(queue) >= max_boxes:
-            return False, leaves, (
-                f"gave up after {len(leaves)} cells (the limit of {max_boxes} cells): {value[-1]} at rho in "
-                f"{box_words(lo, hi)}"
+            return (
+                False,
+                leaves,
+                (
+                    f"gave up after {len(leaves)} cells (the limit of {max_boxes} cells): {value[-1]} at rho in "
+                    f"{box_words(lo, hi)}"
+                ),
             )
         if time_limit is not None and time.perf_counter() - t0 > time_limit:
-            return False, leaves, (
-                f"stopped by the time limit of {time_limit:g} s you set, after {len(leaves)} cells: {value[-1]} "
-                f"at rho in {box_words(lo, hi)}"
+            return (
+                False,
+                leaves,
+                (
+                    f"stopped by the time limit of {time_limit:g} s you set, after {len(leaves)} cells: {value[-1]} "
+                    f"at rho in {box_words(lo, hi)}"
+                ),
             )
         if not _bisect(queue, evaluate, lo, hi, width0, min_width, value[1] if by_contribution else None):
             return False, leaves, f"{value[-1]} at rho in {box_words(lo, hi)} (a cell at the smallest width)"
