@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 from conftest import paper_pldi
@@ -25,14 +26,21 @@ def test_a_problem_the_performance_limit_rules_out_stops_with_one_line(capsys):
     assert "synthesis" not in doc  # nothing was synthesised
 
 
-@pytest.mark.timeout(300)
-def test_fixed_structure_progress_off_a_terminal_and_its_time_limit(capsys, tmp_path):
-    """A line per iteration on stderr although stderr is not a terminal; no new iteration after --time-limit."""
+@pytest.mark.timeout(900)  # a hang guard; the time limit below runs on a fake clock
+def test_fixed_structure_progress_off_a_terminal_and_its_time_limit(capsys, tmp_path, monkeypatch):
+    """A line per iteration on stderr although stderr is not a terminal; no new iteration after --time-limit,
+    and the output names the limit.  The clock moves 1 s per reading, so the limit fires after a few
+    iterations of the first start, whatever the machine's load."""
+    from clocks import FakeClock
+
     paper_pldi().save(tmp_path / "paper.json")
     argv = ["synth", "paper_2r", "--pldi", tmp_path / "paper.npz", "--uncertainty", "box", "--complex", "--structure", "tf3"]
+    FakeClock(step=1.0).install(monkeypatch)
     code, out, err = _run(capsys, *argv, "--init", "paper", "--starts", "2", "--max-iter", "40", "--time-limit", "10")
+    monkeypatch.undo()
     assert "[fixed " in err and "peak mu" in err  # the library's progress lines, shown by the CLI
-    assert "synthesis stopped by" in out or "stopped by the time limit" in out
+    stopped = re.search(r"stopped by the time limit of 10 s you set after (\d+) iteration", out)
+    assert stopped and 1 <= int(stopped.group(1)) < 40, out
     assert code in (0, 1)
     # --quiet: no progress lines
     code, _, err = _run(capsys, *argv, "--init", "paper", "--starts", "1", "--max-iter", "1", "--quiet")
@@ -42,3 +50,89 @@ def test_fixed_structure_progress_off_a_terminal_and_its_time_limit(capsys, tmp_
 def test_run_into_a_place_for_no_results_names_the_file_it_would_write(capsys):
     code, _, err = _run(capsys, "run", "planar_2r", "-o", "/proc/polyrob_run")
     assert code == 2 and "K.json" in err and "controller.json" not in err
+
+
+# ---- one progress line for the whole job (polyrob.progress), on a fake clock ----------------------------
+
+
+def _job(titles, clock, **kw):
+    import io
+
+    from polyrob.progress import JobProgress
+
+    out = io.StringIO()
+    return JobProgress(titles, stream=out, clock=clock, **kw), out
+
+
+def _lines(out):
+    return [x for x in out.getvalue().splitlines() if x.startswith("progress: ")]
+
+
+def test_off_a_terminal_a_line_at_least_every_30_s_with_stage_fraction_and_eta():
+    """Before: progress restarted per phase ("refining 304 tasks (about 510 s left)" twice) and `synth` was
+    silent for 5 min 20 s after "certificate of the PID start".  Now: stage k of n, a fraction of the whole
+    job that never decreases, and a line at least every 30 s of (fake) time while a stage runs."""
+    from clocks import FakeClock
+
+    from polyrob.progress import report
+
+    clock = FakeClock(now=0.0)
+    job, out = _job(["bounds", "synthesis", "analysis", "validation"], clock)
+    seen = []  # (time, stage, fraction) at each line
+    plan = [(1, "bounds: ur5 (6 joints)", 120, 304), (2, "synthesis (full, then order reduction)", 540, 0),
+            (3, "analysis: mu sweeps", 200, 0), (4, "validation and report into DIR", 60, 0)]  # fmt: skip
+    job.start()  # the current job: the library's report() reaches it
+    job._stop.set()  # no real-time ticks in a test: the test ticks on its clock
+    try:
+        for k, title, seconds, tasks in plan:
+            job.begin(k, title)
+            for s in range(seconds):
+                clock.advance(1.0)
+                if tasks:  # a library loop reports its tasks, twice over (two phases: it restarts)
+                    report((s * 2 * tasks // seconds) % tasks + 1, tasks)
+                before = len(_lines(out))
+                job.tick()
+                if len(_lines(out)) > before:
+                    seen.append((clock.now, k, job.fraction))
+    finally:
+        job.stop()
+    lines = _lines(out)
+    times = [0.0] + [t for t, _, _ in seen] + [clock.now]
+    assert max(b - a for a, b in zip(times, times[1:])) <= 30.0  # never silent for more than 30 s
+    fractions = [f for _, _, f in seen]
+    assert fractions == sorted(fractions) and 0 < fractions[0] and fractions[-1] < 1
+    assert lines[0].startswith("progress: stage 1 of 4 (bounds), 0 % of the job")
+    assert any(x.startswith("progress: stage 2 of 4 (synthesis), ") for x in lines)
+    assert any(x.startswith("progress: stage 4 of 4 (validation and report), ") for x in lines)
+    for x in lines[1:]:
+        assert " elapsed, about " in x and x.endswith(" left"), x
+    # the bounds stage's share comes from its tasks: 95 % of the stage at most, before the stage ends
+    bounds_last = [f for _, k, f in seen if k == 1][-1]
+    assert 0.1 < bounds_last <= 0.2 * 0.95 / (0.2 + 0.45 + 0.25 + 0.1) + 1e-12
+
+
+def test_on_a_terminal_the_job_is_one_bar():
+    from clocks import FakeClock
+
+    clock = FakeClock(now=0.0)
+    job, out = _job(["bounds", "synthesis"], clock, terminal=True)
+    job.begin(1, "bounds: planar_2r")
+    clock.advance(10.0)
+    job.within(0.5)
+    job.tick()
+    job.begin(2, "synthesis (full)")
+    job.stop()
+    text = out.getvalue()
+    assert "stage 1 of 2 (bounds)" in text and "stage 2 of 2 (synthesis)" in text and "|" in text
+    assert not _lines(out)  # a bar, not lines
+
+
+def test_synth_shows_the_job_progress_off_a_terminal_and_not_with_quiet(capsys):
+    """TwoDofs stops after its bounds (the performance limit): the job's line says stage 1 of 2."""
+    code, _, err = _run(capsys, "synth", "TwoDofs")
+    assert code == 1 and "progress: stage 1 of 2 (bounds), 0 % of the job" in err
+    from polyrob.progress import current
+
+    assert current() is None  # the command's end stopped it
+    code, _, err = _run(capsys, "synth", "TwoDofs", "--quiet")
+    assert code == 1 and "progress:" not in err

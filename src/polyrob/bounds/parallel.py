@@ -59,8 +59,11 @@ class _Progress:
         self.t0 = self.last = time.perf_counter()
 
     def update(self) -> None:
+        from polyrob.progress import report
+
         self.bar.update()
         self.done += 1
+        report(self.done, self.total)  # the whole job's progress line, when a command shows one
         now = time.perf_counter()
         if self.log and now - self.last >= LOG_EVERY and self.done < self.total:
             self.last = now

@@ -46,6 +46,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _run(args, guard) -> int:
+    from polyrob.progress import stop_current
+
     try:
         return int(args.func(args) or 0)
     except PolyrobError as exc:
@@ -56,6 +58,8 @@ def _run(args, guard) -> int:
     except BrokenPipeError:  # `polyrob robots | head`: not an error
         sys.stderr.close()
         return 0
+    finally:
+        stop_current()  # the job's progress line ends with the command
 
 
 def _caused_by_interrupt(exc: BaseException) -> bool:
@@ -71,7 +75,7 @@ def _caused_by_interrupt(exc: BaseException) -> bool:
 
 def main(argv=None) -> int:
     """Run the ``polyrob`` command with ``argv`` (default ``sys.argv[1:]``); returns the exit status."""
-    from polyrob.cli.interrupt import EXIT_INTERRUPTED, InterruptGuard
+    from polyrob.cli.interrupt import EXIT_INTERRUPTED, InterruptGuard, interrupted_line
 
     guard = InterruptGuard()
     try:
@@ -89,7 +93,7 @@ def main(argv=None) -> int:
         # which may reach here before the watchdog thread has flagged the interrupt
         if not (guard.interrupted.is_set() or _caused_by_interrupt(exc)):
             raise
-    print("polyrob: interrupted", file=sys.stderr, flush=True)
+    print(interrupted_line(), file=sys.stderr, flush=True)
     return EXIT_INTERRUPTED
 
 

@@ -89,15 +89,24 @@ class Output:
     Text mode: the report on stdout, each stage's start line first (flushed,
     so a pipe shows it when the stage starts).  ``--json``: one JSON document
     on stdout, stage lines on stderr (none with ``--quiet``).  Progress bars
-    only on a terminal and without ``--quiet``.
+    only on a terminal and without ``--quiet``.  ``job``: the stages' expected
+    titles (their first words weigh them), for one progress line for the
+    whole job (:class:`polyrob.progress.JobProgress`: stage k of n, fraction,
+    ETA; a bar on a terminal, else a line on stderr at least every 20 s),
+    none with ``--quiet``.
     """
 
-    def __init__(self, args, stages: int = 0):
+    def __init__(self, args, stages: int = 0, *, job=None):
         self.json = bool(getattr(args, "json", False))
         self.quiet = bool(getattr(args, "quiet", False))
         self.stages = stages
         self._stage = 0
         show_library_log(not self.quiet)
+        self.job = None
+        if job and not self.quiet:
+            from polyrob.progress import JobProgress
+
+            self.job = JobProgress(list(job), terminal=sys.stderr.isatty()).start()
 
     @property
     def progress(self) -> bool:
@@ -110,6 +119,8 @@ class Output:
             print(line, flush=True)
         elif not self.quiet:
             print(line, file=sys.stderr, flush=True)
+        if self.job is not None:
+            self.job.begin(self._stage, text)
 
     def line(self, text: str = "") -> None:
         if not self.json:

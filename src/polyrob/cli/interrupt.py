@@ -17,10 +17,26 @@ import sys
 import threading
 import time
 
-__all__ = ["EXIT_INTERRUPTED", "InterruptGuard"]
+__all__ = ["EXIT_INTERRUPTED", "InterruptGuard", "keep", "interrupted_line"]
 
 EXIT_INTERRUPTED = 130
 GRACE_SECONDS = 4.0
+
+
+#: Results a command has written so far (complete files, written atomically): an interrupt keeps them and says so.
+_KEPT: list[str] = []
+
+
+def keep(path) -> None:
+    """Record a finished result file: a later interrupt keeps it and :func:`interrupted_line` names it."""
+    if str(path) not in _KEPT:
+        _KEPT.append(str(path))
+
+
+def interrupted_line() -> str:
+    """The one line an interrupted command prints: what it kept, if anything."""
+    kept = f"; kept {', '.join(_KEPT)}" if _KEPT else ""
+    return f"polyrob: interrupted{kept}"
 
 
 def stop_children(timeout: float = 1.0) -> None:

@@ -81,14 +81,23 @@ def _run_dir(args):
 
 
 def cmd_run(args) -> int:
-    """bounds -> synthesis -> analysis in one go."""
+    """bounds -> synthesis -> analysis in one go, each artefact written as soon as it exists.
+
+    With ``-o``, the PLDI is saved once bounded (a run directory), and the
+    controller file with its certificate as soon as the synthesis' controller
+    is certified, before the analysis: a run stopped later (SIGTERM, Ctrl-C,
+    a shared machine's limit) keeps what was certified.  Each file is written
+    atomically (a temporary file, then a rename) and rewritten with the
+    analysis' figures at the end.
+    """
     from polyrob.pipeline import analyze_controller, design_controller, frequency_grid, pldi_report
 
     omega_spec = parse_frequencies(args.omega)
     if args.max_bandwidth:  # option errors before any work
         scale_names(args.scale_only), alphas_from_args(args.alphas)
     run_dir = _run_dir(args)
-    out = Output(args, stages=3 if run_dir is None else 4)
+    stages = ["bounds", "largest bandwidth" if args.max_bandwidth else "synthesis", "analysis"]
+    out = Output(args, stages=len(stages) + (run_dir is not None), job=stages + ["validation"] * (run_dir is not None))
     main_job_defaults(args, out)
     options = options_from_args(args, out)
     robot = robot_from_args(args)
@@ -99,6 +108,8 @@ def cmd_run(args) -> int:
         f"({problem.model} model)"
     )
     out.line(pldi.table())
+    if run_dir is not None and not (run_dir / "pldi.json").exists():
+        pldi.save(run_dir / "pldi.json")  # kept if the run stops later; the report reads it
     limit = print_limit(problem, out)
     input_check = print_input_check(problem, out)
     early = {"robot": robot.name, "problem": problem.description(), "performance_limit": limit}
@@ -110,13 +121,15 @@ def cmd_run(args) -> int:
         if args.reduce and args.structure == "full":
             from polyrob.pipeline.design import reduce_design
 
-            design = reduce_design(problem, design, args.reduce_max_order, certify=False)
+            design = reduce_design(problem, design, args.reduce_max_order)
     else:
         out.stage(f"synthesis ({args.structure}" + (", then order reduction" if args.reduce else "") + ")")
-        design = design_controller(
-            problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, certify=False, **options
-        )
+        design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
     print_design(design, out)
+    controller_path = run_dir / "K.json" if run_dir is not None else args.output
+    if controller_path:  # the certified controller first: a stop during the analysis keeps it
+        save_design(design, problem, args, out, path=controller_path)
+        out.line(f"certificate of the controller: {design.certificate.verdict}")
     out.stage(
         f"analysis: mu sweeps (robust stability, robust performance), {args.mc} Monte Carlo parameter sets"
         + (", time-varying certificate" if args.time_varying else "")
@@ -134,6 +147,7 @@ def cmd_run(args) -> int:
         moving=moving_asked(args),
         moving_options=moving_options(args),
         limit=None if args.max_bandwidth else limit,  # the limit printed above is factor 1's
+        certificate=design.certificate,  # decided again, not swept again, when it is of the same loop and grid
     )
     print_analysis(a, out)
     design = design.certified_by(a.certificate)  # the analysis' certificate is the design's: one call, one verdict
@@ -152,7 +166,7 @@ def cmd_run(args) -> int:
     if run_dir is not None:
         from polyrob.report.build import write_run_report
 
-        doc["output"] = save_design(design, problem, args, out, certificate_extra=extra, path=run_dir / "K.json")
+        doc["output"] = save_design(design, problem, args, out, certificate_extra=extra, path=controller_path)
         out.stage(f"validation and report into {run_dir} (nonlinear simulations, discretisation)")
         files = write_run_report(
             run_dir,

@@ -131,8 +131,11 @@ def save_design(design, problem, args, out, info_extra=None, certificate_extra=N
     info = problem.description()
     info.update(info_extra or {})
     cert = dict(design.record, **(certificate_extra or {}))
+    from polyrob.cli.interrupt import keep
+
     made = Provenance.capture(robot=problem.robot, description=info)  # the robot's URDF hashed too
     path = save_controller(design.controller, path or args.output, certificate=cert, info=info, provenance=made)
+    keep(path)  # complete on disk (written atomically): an interrupt from now on keeps it
     out.line(f"wrote {path}")
     return str(path)
 
@@ -176,7 +179,8 @@ def cmd_synth(args) -> int:
     args.moving = bool(moving_asked(args))
     if args.max_bandwidth:  # option errors before any work
         scale_names(args.scale_only), alphas_from_args(args.alphas)
-    out = Output(args, stages=3 if args.moving else 2)
+    stages = ["bounds", "largest bandwidth" if args.max_bandwidth else "synthesis"] + ["moving-robot"] * args.moving
+    out = Output(args, stages=len(stages), job=stages)
     options = options_from_args(args, out)
     robot = robot_from_args(args)
     problem = problem_from_args(robot, args, out)

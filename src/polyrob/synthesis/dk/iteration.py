@@ -55,6 +55,7 @@ from polyrob.analysis.stability import stability_screen
 from polyrob.errors import ArgumentError, SynthesisError
 from polyrob.plant.generalized import lower_lft_matrices
 from polyrob.report.numbers import gamma_text
+from polyrob.progress import report as progress_report
 from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound, resonances
 from polyrob.synthesis.dk.strategies import HinfStep, MuUpperBound
 from polyrob.synthesis.scalings.data import ScalingData, Scalings, complexified, scaling_data
@@ -273,6 +274,7 @@ class DKIteration:
                 best = min(best, peak)
                 prev = peak
                 bar.update(1)
+                progress_report(it + 1, self.max_iter)  # the whole job's progress line, when a command shows one
                 bar.set_postfix(mu=f"{peak:.4f}", best=f"{best:.4f}", gamma=gamma_text(gamma), nK=K.nstates)
                 bound = "mixed " if phase == "DG" else "complex " if st.has_real else ""
                 # one line per iteration on the polyrob logger, terminal or not (grid peak: a search figure)
