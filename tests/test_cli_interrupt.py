@@ -171,3 +171,76 @@ def test_an_error_a_ctrl_c_turned_into_is_the_interrupt(monkeypatch, capsys):
     monkeypatch.setattr(listing, "cmd_info", interrupted_import)
     assert main(["info", "paper_2r"]) == 130
     assert capsys.readouterr().err.strip() == "polyrob: interrupted"
+
+
+#: The cheapest `polyrob run ur5` that still certifies: the analysis after the controller file is cut to
+#: its least (the test stops the run before it ends).  The time to the controller file is the bounds, the
+#: PID's tuning and its certificate: minutes (see the report of the change that added this test).
+UR5_RUN_OPTIONS = ("--mc", "1", "--no-time-varying", "--no-moving")
+
+
+def _default_sigint():
+    """A child of a shell without job control starts with SIGINT ignored: give it Ctrl-C back."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+@pytest.mark.slow  # minutes of bounds and certificate on a 6-joint arm: `pytest -m slow`
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="POSIX signals")
+@pytest.mark.timeout(3600)  # a hang guard only: the test waits for the controller file, however long it takes
+@pytest.mark.parametrize("how", [signal.SIGTERM, signal.SIGINT])
+def test_a_run_stopped_after_its_certificate_keeps_the_controller_and_its_certificate(tmp_path, how):
+    """Before: `polyrob run ur5 -o DIR` had a certified controller after 9 minutes and, stopped at 15 (a shared
+    machine), left no directory: every file was written at the end.  Now the PLDI is written once bounded and
+    K.json with its certificate as soon as the synthesis' controller is certified, atomically."""
+    import json
+
+    run_dir = tmp_path / "run"
+    argv = [sys.executable, "-m", "polyrob.cli", "run", "ur5", "-o", str(run_dir), *UR5_RUN_OPTIONS]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
+    controller = run_dir / "K.json"
+    try:
+        while not controller.exists() and proc.poll() is None:
+            time.sleep(0.5)
+        assert controller.exists(), (proc.returncode, proc.stderr.read())
+        assert (run_dir / "pldi.json").exists()  # written once bounded
+        proc.send_signal(how)
+        rc = proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    err = proc.stderr.read()
+    out = proc.stdout.read()
+    assert rc == (-signal.SIGTERM if how == signal.SIGTERM else 130), (rc, err)
+    assert "[3/4] analysis" in out  # stopped after the certificate, during the analysis
+    doc = json.loads(controller.read_text())
+    assert doc["certificate"]["status"] == "CERTIFIED", doc["certificate"]
+    assert doc["certificate"]["certificate"]["bound"] < 1.0
+    assert doc["info"]["robot"] == "ur5"
+    assert "report.html" not in {p.name for p in run_dir.iterdir()}
+    assert not [p for p in run_dir.iterdir() if p.name.endswith(".tmp")]  # no half-written file
+    if how == signal.SIGINT:
+        assert err.strip().splitlines()[-1] == f"polyrob: interrupted; kept {controller}", err
+
+
+def test_a_run_interrupted_during_its_analysis_keeps_the_certified_controller(tmp_path, monkeypatch, capsys):
+    """The same in-process and in seconds: a 2-joint arm's PID start (certified before any D-K step), and a
+    Ctrl-C as the analysis starts.  Before: nothing was written before the end of the analysis."""
+    import json
+
+    import polyrob.pipeline
+    from polyrob.cli import main
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(polyrob.pipeline, "analyze_controller", interrupted)
+    run_dir = tmp_path / "run"
+    task = ["--inner", "computed-torque", "--pose", "0,1.5708", "--q-radius", "0.2", "--qdot-max", "0.5"]
+    code = main(["run", "planar_2r", *task, "--qddot-max", "2", "-o", str(run_dir)])
+    out, err = capsys.readouterr()
+    assert code == 130 and "[3/4] analysis" in out
+    assert err.strip().splitlines()[-1] == f"polyrob: interrupted; kept {run_dir / 'K.json'}"
+    doc = json.loads((run_dir / "K.json").read_text())
+    assert doc["certificate"]["status"] == "CERTIFIED" and doc["certificate"]["certificate"]["bound"] < 1.0
+    assert doc["info"]["robot"] == "planar_2r" and (run_dir / "pldi.json").exists()
+    assert sorted(p.name for p in run_dir.iterdir()) == ["K.json", "pldi.json", "pldi.npz"]

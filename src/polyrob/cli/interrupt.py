@@ -72,6 +72,7 @@ class InterruptGuard:
         self._previous_hook(unraisable)
 
     def __enter__(self):
+        _KEPT.clear()  # a new command: nothing of its own kept yet
         if threading.current_thread() is not threading.main_thread():
             return self
         self._previous_hook = sys.unraisablehook
