@@ -250,14 +250,14 @@ def test_local_pool_stops_running_workers_at_once_on_interrupt():
 
     # Children that other tests left (e.g. a timed AB13MD worker) are not this pool's.
     before = {p.pid for p in multiprocessing.active_children()}
-    gen = LocalExecutor(2).run(time.sleep, [(0.01,), (60.0,), (60.0,)])
+    gen = LocalExecutor(2).run(time.sleep, [(0.01,), (600.0,), (600.0,)])
     assert next(gen)[0] == 0
     t0 = time.perf_counter()
     workers = [p for p in multiprocessing.active_children() if p.is_alive() and p.pid not in before]
     assert workers
     with pytest.raises(KeyboardInterrupt):
         gen.throw(KeyboardInterrupt)
-    assert time.perf_counter() - t0 < 10
+    assert time.perf_counter() - t0 < 300  # not a timing: the workers sleep 600 s unless stopped
     # the OS's view: Process.is_alive can lag when the executor's thread reaps a worker
     alive = [p for p in workers if process_running(p.pid)]
     assert not alive, f"pool workers still running: {alive}"

@@ -267,8 +267,9 @@ def add_synthesis_arguments(p) -> None:
         type=float,
         default=None,
         metavar="SECONDS",
-        help="no new synthesis iteration (or start) after this many seconds: the best controller so far is "
-        "certified and the output says what stopped it",
+        help="a safety net (default none): no new synthesis iteration (or start) after this many seconds of wall "
+        "clock; the best controller so far is certified and the output names the limit. Without it the synthesis "
+        "is bounded by its iterations only, so its result does not depend on the machine's load",
     )
     g.add_argument(
         "--anyway",
