@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import control
 import numpy as np
 import pytest
@@ -146,3 +148,59 @@ def test_a_certificate_on_its_default_grid_skips_the_flat_decades_and_proves_the
     assert thinned.certified and everywhere.certified
     assert len(thinned.mu.omega) < 0.6 * len(full) and thinned.default_grid
     assert thinned.bound == pytest.approx(everywhere.bound, rel=1e-9)
+
+
+#: The closed loop of panda's PID start on its default task (`polyrob synth panda`: the per-joint PID tuned to
+#: the weights, certified before any D-K step) and the μ sweep of its certificate, saved from that command
+#: (``M``'s state space, the structure, the grid with its bounds and D-G scalings).
+PANDA_PID_START = Path(__file__).parent / "fixtures" / "panda_pid_start_sweep.npz"
+
+
+def _panda_pid_start():
+    from polyrob.analysis.mu.blocks import as_block_structure
+    from polyrob.analysis.mu.results import MuBoundsResult
+
+    z = np.load(PANDA_PID_START)
+    M = control.ss(z["A"], z["B"], z["C"], z["D"])
+    mu = MuBoundsResult(
+        omega=z["omega"],
+        upper=z["upper"],
+        lower=z["lower"],
+        D=z["Dscale"],
+        G=z["Gscale"],
+        peak_upper=float(z["peak_upper"]),
+        peak_upper_frequency=float(z["peak_upper_frequency"]),
+        peak_lower=float(z["peak_lower"]),
+        critical_frequency=float(z["critical_frequency"]),
+        worst_delta=z["worst_delta"],
+        structure=as_block_structure(z["blk"].tolist()),
+        method=str(z["method"]),
+    )
+    return M, mu
+
+
+#: What the check found on that sweep under the normal clock (`polyrob synth panda --max-iter 1`, 245 s of it at
+#: load 5-7 on a 2-core x86_64; the certificate: CERTIFIED, mu <= 0.9699 at every frequency, as README quotes).
+PANDA_NORMAL_CLOCK = {"level": 0.969904759132365, "points_added": 14, "intervals": 152}
+
+
+@pytest.mark.timeout(3600)  # a hang guard only
+def test_panda_pid_start_has_the_same_certificate_under_a_clock_1000x_faster(monkeypatch):
+    """Before: the check between the grid points gave up after 120 s of wall clock, so `polyrob synth panda`'s
+    PID start was CERTIFIED on an idle machine and GRID_ONLY (bound 0.9603, the grid's peak) at load 5-10.
+    Here every second of work reads as 1000 s (a machine 1000 times as loaded): the same points, the same
+    level as under the normal clock, CERTIFIED."""
+    from clocks import slowed_clock
+
+    from polyrob.analysis.certificate import Status, certificate_of_sweep
+
+    M, mu = _panda_pid_start()
+    assert mu.peak_upper == pytest.approx(0.9603, abs=5e-5)
+    slowed_clock(monkeypatch, 1000.0)
+    loaded = certificate_of_sweep(M, mu)
+    assert loaded.status is Status.CERTIFIED, loaded.reasons
+    between = loaded.mu.between
+    found = {"level": between.level, "points_added": between.points_added, "intervals": between.intervals}
+    assert found == pytest.approx(PANDA_NORMAL_CLOCK, rel=1e-9)
+    assert loaded.bound == pytest.approx(0.9699, abs=5e-5)
+    assert between.seconds > 120.0  # as the loaded clock reads it: past the old limit of 120 s
