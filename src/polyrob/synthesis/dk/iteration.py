@@ -54,8 +54,8 @@ from polyrob.analysis.norms import hinf_norm_estimate
 from polyrob.analysis.stability import stability_screen
 from polyrob.errors import ArgumentError, SynthesisError
 from polyrob.plant.generalized import lower_lft_matrices
-from polyrob.report.numbers import gamma_text
 from polyrob.progress import report as progress_report
+from polyrob.report.numbers import gamma_text
 from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound, resonances
 from polyrob.synthesis.dk.strategies import HinfStep, MuUpperBound
 from polyrob.synthesis.scalings.data import ScalingData, Scalings, complexified, scaling_data
