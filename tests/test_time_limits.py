@@ -37,7 +37,7 @@ def test_no_give_up_that_decides_a_status_has_a_default_in_seconds():
     from polyrob.bounds.certified.enclosure import certified_jacobian_bounds
     from polyrob.fleet.jobs import Settings
     from polyrob.synthesis.bandwidth import max_bandwidth_scaling
-    from polyrob.synthesis.mu_synthesis import musyn
+    from polyrob.synthesis.options import MusynOptions
     from polyrob.validate.simulate import simulate
 
     for fn, name in [
@@ -46,11 +46,11 @@ def test_no_give_up_that_decides_a_status_has_a_default_in_seconds():
         (check_cells, "time_limit"),
         (moving_robot_certificate, "cell_time_limit"),
         (max_bandwidth_scaling, "search_time_limit"),
-        (musyn, "time_limit"),
         (simulate, "time_budget"),
     ]:
         assert inspect.signature(fn).parameters[name].default is None, fn.__name__
     assert Settings().search_time_limit is None and Settings().validate_budget is None
+    assert MusynOptions().time_limit is None
     assert "max_seconds" not in inspect.signature(verify_between).parameters
 
 
