@@ -103,6 +103,7 @@ class Certificate:
     Attributes
     ----------
     status : Status
+        CERTIFIED, GRID_ONLY, NOT_CERTIFIED or VIOLATED, decided in this module only.
     bound : float
         The figure the status rests on: for μ the bound at every frequency
         when it was proved, else the grid peak; for an L2 gain the verified γ.

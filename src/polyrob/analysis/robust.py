@@ -62,6 +62,7 @@ class RobustnessResult:
     Attributes
     ----------
     kind : {"stability", "performance"}
+        Which of ``robstab`` / ``robperf`` produced it.
     mu_upper_grid, mu_lower : float
         Peak μ upper and lower bounds **on the frequency grid** (see
         :attr:`covers`): ``mu_upper_grid`` bounds μ at every grid point, not

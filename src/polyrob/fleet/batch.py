@@ -49,6 +49,7 @@ class BatchResult:
     Attributes
     ----------
     results : tuple of RobotResult
+        One row per robot, in the order the jobs were given.
         In the order of the jobs.
     settings : Settings
     executor : str

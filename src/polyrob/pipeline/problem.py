@@ -105,6 +105,7 @@ class Problem:
     Attributes
     ----------
     robot : Manipulator
+        The robot the PLDI bounds (with its inner layer, if any).
     pldi : PLDI
     unc : UncertainPlant
     P : GeneralizedPlant

@@ -36,6 +36,7 @@ class RunDirectory:
     Attributes
     ----------
     path : Path
+        The run directory read.
     problem : Problem
         Rebuilt on the saved PLDI with the controller file's weights and model.
     controller : LTI

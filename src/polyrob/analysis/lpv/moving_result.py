@@ -42,6 +42,7 @@ class MovingRobotCertificate:
     Attributes
     ----------
     computed : bool
+        False when the moving-robot check did not apply (its reason says why).
     gamma : float
         Proved bound of the ``r -> z`` induced L2 gain on the grid (``inf``: none).
     frozen_gamma : float

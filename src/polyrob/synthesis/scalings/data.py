@@ -36,6 +36,7 @@ class ScalingData:
     Attributes
     ----------
     omega : ndarray
+        Frequencies in rad/s, ascending.
     mu : ndarray
         Upper bound at each frequency (the level the data certify).
     d : ndarray

@@ -64,6 +64,7 @@ class MagnitudeFit:
     Attributes
     ----------
     order : int
+        Number of poles (and of zeros) of the filter.
     gain : float
         High-frequency gain ``k`` (numerator and denominator are monic).
     zeros, poles : ndarray
