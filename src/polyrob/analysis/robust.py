@@ -41,6 +41,7 @@ import numpy as np
 
 from polyrob.analysis.certificate import certify_loop
 from polyrob.analysis.stability import StabilityVerdict, stability_verdict
+from polyrob.controller import Controller
 from polyrob.plant.generalized import GeneralizedPlant, closed_loop, lft, nominal_closed_loop
 
 __all__ = [
@@ -353,6 +354,7 @@ def sample_stability(unc, K, *, n: int = 1000, max_corners: int = 1024, seed: in
     samples it finds unstable or cannot decide are decided again in extended
     precision (:func:`~polyrob.analysis.stability.stability_verdict`).
     """
+    K = Controller.of(K)  # once: every sample's closed_loop takes it as it is
     deltas = unc.delta_samples(n, kind="uniform", seed=seed)
     corners = None
     if 2**unc.n_params <= max_corners:

@@ -112,6 +112,10 @@ def controller_data(K) -> dict:
     import control
     import numpy as np
 
+    from polyrob.controller import Controller
+
+    if isinstance(K, Controller):
+        return {"type": "ss", **dict(zip("ABCD", K.matrices))}
     if isinstance(K, control.TransferFunction):
         return {
             "type": "tf",

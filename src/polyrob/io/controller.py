@@ -43,10 +43,11 @@ from pathlib import Path
 import control
 import numpy as np
 
+from polyrob.controller import Controller
 from polyrob.errors import ControllerFileError
 from polyrob.io.atomic import atomic_write, json_default
 
-__all__ = ["save_controller", "load_controller", "read_controller_file", "ControllerFileError", "FORMAT"]
+__all__ = ["save_controller", "load_controller", "load_controller_value", "read_controller_file", "ControllerFileError", "FORMAT"]
 
 FORMAT = "polyrob.controller/1"
 _FAMILY, _VERSION = FORMAT.split("/")
@@ -205,6 +206,20 @@ def load_controller(path):
     """
     path = Path(path)
     return controller_from_mapping(read_controller_file(path), path)
+
+
+def load_controller_value(path) -> Controller:
+    """Read a controller file (:func:`load_controller`) as one :class:`~polyrob.controller.Controller`.
+
+    A ``tf`` file is realised exactly (:meth:`Controller.of <polyrob.controller.Controller.of>`);
+    the Controller's ``system`` is the file's ``StateSpace`` for an ``ss`` file.
+
+    Raises
+    ------
+    ControllerFileError
+        As :func:`load_controller`.
+    """
+    return Controller.of(load_controller(path))
 
 
 def same_number(a, b, rtol: float = 1e-9) -> bool:

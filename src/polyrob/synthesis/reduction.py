@@ -276,7 +276,7 @@ def reduce_controller(
 
     t0 = time.perf_counter()
     if isinstance(result_or_K, MusynResult):
-        K = result_or_K.controller
+        K = result_or_K.controller_value  # built once on the result; as_controller_ss below takes it as it is
         full_mu = float(result_or_K.peak_mu)
         if blk is None and result_or_K.certificate is not None:
             blk = result_or_K.certificate.mu.structure

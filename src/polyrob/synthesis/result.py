@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import control
 import numpy as np
+
+from polyrob.controller import Controller
 
 __all__ = ["MusynResult"]
 
@@ -62,6 +65,11 @@ class MusynResult:
     iterations: int
     seconds: float
     info: dict = field(default_factory=dict)
+
+    @cached_property
+    def controller_value(self) -> Controller:
+        """``controller`` as a :class:`~polyrob.controller.Controller`, built once (its ``system`` is ``controller``)."""
+        return Controller.of(self.controller)
 
     @classmethod
     def certified(

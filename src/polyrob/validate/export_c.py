@@ -200,30 +200,24 @@ def lowest_rate_of_controller(K, plant=None) -> LowestRate:
     twice the controller's fastest mode (cruder: a fast mode far above
     crossover asks for more than the loop needs).
     """
-    import control
-
-    from polyrob.plant.generalized import as_controller_ss
+    from polyrob.controller import Controller
     from polyrob.validate.discretize import crossover_frequency
 
-    Ks = K if isinstance(K, control.StateSpace) else as_controller_ss(K, *_shape(K))
+    K = Controller.of(K)  # once: crossover_frequency takes it as it is
     if plant is not None:
-        wc = crossover_frequency(plant, Ks, np.logspace(-3, 6, 1800))
+        wc = crossover_frequency(plant, K, np.logspace(-3, 6, 1800))
         return LowestRate(
             wc / (2.0 * HOLD_PHASE),
             f"the hold's half-sample delay costs at most 10 degrees of phase at the loop's crossover, "
             f"{wc:.4g} rad/s on the nominal arm",
         )
-    if Ks.nstates == 0:
+    if K.order == 0:
         return LowestRate(0.0, "a static gain: any rate")
-    fastest = float(np.max(np.abs(np.linalg.eigvals(np.asarray(Ks.A, float)))))
+    fastest = float(np.max(np.abs(np.linalg.eigvals(K.A))))
     return LowestRate(
         2.0 * fastest / np.pi,
         f"the Nyquist frequency at twice the controller's fastest mode, {fastest:.4g} rad/s (no plant known)",
     )
-
-
-def _shape(K):
-    return (K.noutputs, K.ninputs) if hasattr(K, "noutputs") else np.atleast_2d(np.asarray(K, float)).shape
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,7 @@ import control
 import numpy as np
 
 from polyrob.analysis.mu.frequency import freqresp as frequency_response  # the one evaluation, kept by this name
+from polyrob.controller import Controller
 from polyrob.errors import ArgumentError
 from polyrob.plant.generalized import loop_functions
 
@@ -221,6 +222,7 @@ def monte_carlo(
             raise ArgumentError(f"n must be at least 1, got {n}")
         deltas, kind = unc.delta_samples(int(n), kind="uniform", seed=seed), "uniform"
     m = unc.m
+    K = Controller.of(K)  # once: every sample's loop_functions takes it as it is
     nominal = loop_functions(unc.nominal_system(), K)
     omega = _default_omega(W_S, W_T, nominal) if omega is None else np.asarray(omega, float)
     t = _default_time(nominal, omega) if t is None else np.asarray(t, float)

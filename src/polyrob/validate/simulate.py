@@ -46,7 +46,7 @@ import control
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from polyrob.controller import as_controller_ss
+from polyrob.controller import Controller
 from polyrob.errors import ArgumentError
 from polyrob.validate.reference import Reference, smooth_reference, step_reference
 from polyrob.validate.sampled import simulate_sampled
@@ -306,8 +306,7 @@ def simulate(
         m = robot.m
         return _result(robot, dom, t, X[:m], X[m:], U, R, "discrete", 1.0 / float(Kd.dt), reference, q0, u_eq, ok, info)
 
-    Ks = as_controller_ss(K, m, m)
-    Ak, Bk, Ck, Dk = (np.asarray(X, float) for X in (Ks.A, Ks.B, Ks.C, Ks.D))
+    Ak, Bk, Ck, Dk = Controller.of(K, m, m).matrices
     nk = Ak.shape[0]
     limits = _limits(time_budget, max_evaluations)
     calls = [0]

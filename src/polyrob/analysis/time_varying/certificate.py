@@ -178,7 +178,9 @@ def time_varying_certificate(problem, K, *, performance: bool = True, max_vertic
     LFT model.
     """
     from polyrob.analysis.certificate import Scope
+    from polyrob.controller import Controller
 
+    K = Controller.of(K)  # once: the vertex LMIs and the small-gain test take it as it is
     tv = _time_varying_tests(problem, K, performance=performance, max_vertices=max_vertices)
     scope = problem.scope() if hasattr(problem, "scope") else Scope()  # a bare (pldi, P) pair: no model
     s = tv.stability

@@ -19,6 +19,7 @@ import numpy as np
 from slycot.exceptions import SlycotArithmeticError, SlycotError
 
 from polyrob.analysis.mu.frequency import freqresp, matrix_response
+from polyrob.controller import Controller
 from polyrob.errors import ArgumentError
 from polyrob.plant.loops import lower_lft_matrices
 from polyrob.synthesis.fixed.structures import ControllerStructure
@@ -145,14 +146,18 @@ def closed_loop_response(P, K, omega, *, n_u: int | None = None, n_y: int | None
     >>> H = closed_loop_response(P, -2.0, [1.0, 2.0], n_u=1, n_y=1)   # 1/(s + 2)
     >>> np.round(H[:, 0, 0], 6).tolist()
     [(0.4-0.2j), (0.25-0.25j)]
+    >>> from polyrob.controller import Controller
+    >>> np.allclose(closed_loop_response(P, Controller.of(-2.0), [1.0, 2.0], n_u=1, n_y=1), H)
+    True
     """
     sysP, n_u, n_y = plant_parts(P, n_u, n_y)
     omega = np.asarray(omega, float).ravel()
     Hp = freqresp(sysP, omega)
-    if isinstance(K, control.LTI):
+    if isinstance(K, control.LTI):  # a transfer function is evaluated as given, not realised first
         Kw = freqresp(K, omega)
     else:
-        Kw = np.broadcast_to(np.atleast_2d(np.asarray(K, float)), (omega.size, n_u, n_y)).astype(complex)
+        K = Controller.of(K, n_u, n_y)  # a gain, a 4-tuple or a Controller (taken as it is)
+        Kw = freqresp(K.system, omega) if K.order else np.broadcast_to(K.D, (omega.size, n_u, n_y)).astype(complex)
     nz, nw = sysP.noutputs - n_y, sysP.ninputs - n_u
     P11, P12, P21, P22 = Hp[:, :nz, :nw], Hp[:, :nz, nw:], Hp[:, nz:, :nw], Hp[:, nz:, nw:]
     return P11 + P12 @ Kw @ np.linalg.solve(np.eye(n_y) - P22 @ Kw, P21)

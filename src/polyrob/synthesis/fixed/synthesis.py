@@ -267,7 +267,7 @@ def _starts(loop: FixedLoop, sysP, init, method, tuning: FixedStructureOptions, 
             raise ArgumentError(f"init must be 'paper', a controller or None, got {init!r}")
         init = paper_controller()
     if isinstance(init, MusynResult):
-        init = init.controller
+        init = init.controller_value  # from_controller takes a Controller as it is
     if init is not None:
         theta0, origin = strc.from_controller(init), "init"
     else:
