@@ -20,7 +20,7 @@ Examples
 >>> Controller.of(K, n_u=2, n_y=1)
 Traceback (most recent call last):
 ...
-polyrob.errors.PolyrobError: K maps 1 inputs to 1 outputs; expected 1 measurements -> 2 controls
+polyrob.errors.ArgumentError: K maps 1 inputs to 1 outputs; expected 1 measurements -> 2 controls
 """
 
 from __future__ import annotations
