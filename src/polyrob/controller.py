@@ -138,6 +138,6 @@ class Controller:
 def as_controller_ss(K, n_u: int, n_y: int) -> control.StateSpace:
     """A controller (LTI system, static gain, 4-tuple, :class:`Controller`) as an ``n_u x n_y`` continuous-time ``StateSpace``.
 
-    Raises :class:`~polyrob.errors.PolyrobError` on a size mismatch.
+    Raises :class:`~polyrob.errors.ArgumentError` on a size mismatch.
     """
     return Controller.of(K, n_u, n_y).system

@@ -83,7 +83,7 @@ def controller_structure(structure, n_u: int, n_y: int) -> ControllerStructure:
 
     Raises
     ------
-    PolyrobError
+    ArgumentError
         An unknown string (the message lists the valid ones) or sizes that do
         not match.
 
@@ -95,7 +95,7 @@ def controller_structure(structure, n_u: int, n_y: int) -> ControllerStructure:
     >>> controller_structure("lqg", 1, 1)
     Traceback (most recent call last):
     ...
-    polyrob.errors.PolyrobError: unknown controller structure 'lqg'; valid: "tfN" (e.g. "tf3": each K_ij of order N), "pid", "ss:N" (e.g. "ss:4")
+    polyrob.errors.ArgumentError: unknown controller structure 'lqg'; valid: "tfN" (e.g. "tf3": each K_ij of order N), "pid", "ss:N" (e.g. "ss:4")
     """
     if isinstance(structure, ControllerStructure):
         if (structure.n_u, structure.n_y) != (n_u, n_y):
