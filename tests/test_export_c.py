@@ -53,6 +53,10 @@ int main(void)
 """.replace("N_STEPS", str(N_STEPS))
 
 
+#: What the exported C must compile under without a warning (also tests/test_export_run.py).
+STRICT_C99 = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2"]
+
+
 def _run_c(cc, sos, tmp_path):
     write_c(sos, tmp_path)
     (tmp_path / "main.c").write_text(HARNESS)
@@ -60,12 +64,7 @@ def _run_c(cc, sos, tmp_path):
     subprocess.run(
         [
             cc,
-            "-std=c99",
-            "-Wall",
-            "-Wextra",
-            "-Werror",
-            "-pedantic",
-            "-O2",
+            *STRICT_C99,
             "-o",
             str(exe),
             str(tmp_path / "main.c"),

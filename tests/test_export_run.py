@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_export_c import STRICT_C99
 
 import polyrob
 from polyrob.cli import main
@@ -50,12 +51,7 @@ def _library(cc, out: Path) -> ctypes.CDLL:
     subprocess.run(
         [
             cc,
-            "-std=c99",
-            "-Wall",
-            "-Wextra",
-            "-Werror",
-            "-pedantic",
-            "-O2",
+            *STRICT_C99,
             "-shared",
             "-fPIC",
             "-o",
