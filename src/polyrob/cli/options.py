@@ -192,7 +192,7 @@ def parse_frequencies(text: str | None):
 
 
 def add_robot_uncertainty_arguments(group) -> None:
-    """``--robot-uncertainty FILE`` and ``--link-error P``: the per-link set of issue 38 (validated, not yet certified)."""
+    """``--robot-uncertainty FILE`` and ``--link-error P``: the per-link set (validated, not yet certified)."""
     group.add_argument(
         "--robot-uncertainty",
         default=None,
@@ -241,7 +241,7 @@ def refuse_uncertified(spec, args) -> None:
     raise ArgumentError(
         f"{where} ({spec.words()}): not yet certified: polyrob's certificates cover one factor on all links "
         "(--model-error PCT) and a payload range at the flange (--payload-mass, --payload-com), not this "
-        "per-link set (issue 38)"
+        "per-link set"
     )
 
 

@@ -3,7 +3,7 @@
 A robot of :data:`MIN_JOINTS` joints or more (the spatial arms: so101, ur5,
 ur10, z1, talos_left_arm, panda, xarm7, ...) given to ``synth``, ``analyze``,
 ``run``, ``bounds``, ``info`` or ``batch`` without any domain or inner-layer
-option is posed the problem an arm engineer poses (issue 21):
+option is posed the problem an arm engineer poses:
 
 * a **task domain** (:class:`~polyrob.domains.task.TaskDomain`) around
   the robot's reference pose (its SRDF's first ``group_state`` where

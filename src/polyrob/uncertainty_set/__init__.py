@@ -1,4 +1,4 @@
-"""The robot's uncertainty as an engineer states it (issue 38), and true robots drawn inside it.
+"""The robot's uncertainty as an engineer states it, and true robots drawn inside it.
 
 * :mod:`~polyrob.uncertainty_set.spec`: :class:`RobotUncertainty`, the robot-uncertainty file
   (per-link parameter errors, a payload body, joint friction), read, checked and written;

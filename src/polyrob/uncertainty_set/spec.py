@@ -1,6 +1,6 @@
 """What a robot engineer states about the robot: per-link parameter errors, a payload body, joint friction.
 
-A :class:`RobotUncertainty` is the uncertainty of issue 38 in one value,
+A :class:`RobotUncertainty` is that uncertainty in one value,
 read from a YAML/JSON file (:meth:`RobotUncertainty.from_file`) or the
 ``--link-error P`` option, and written back by :meth:`RobotUncertainty.to_dict`:
 
@@ -37,7 +37,7 @@ non-physical draws (:mod:`polyrob.uncertainty_set.draw`).
 
 No command certifies this set yet: the certified models are the common
 factor of :mod:`polyrob.model.inner`; ``--robot-uncertainty`` and
-``--link-error`` are refused with one line saying so (issue 38).
+``--link-error`` are refused with one line saying so.
 
 Examples
 --------
