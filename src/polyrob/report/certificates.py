@@ -175,12 +175,9 @@ def _subject(scope: dict) -> tuple[str, str]:
 
 
 def _figure(record: dict) -> str:
-    """What the status rests on, e.g. ``mu <= 0.9449 at every frequency`` (the verdict's own words)."""
-    verdict = str(record.get("verdict") or "")
-    kind = str((record.get("scope") or {}).get("kind") or "")
-    head = f"{kind} {record['status']}"
-    if record["status"] == Status.CERTIFIED.value and verdict.startswith(head + ": "):
-        return verdict[len(head) + 2 :]
+    """What the status rests on, e.g. ``mu <= 0.9449 at every frequency`` (the certificate's ``figure``)."""
+    if record.get("figure"):
+        return str(record["figure"])
     bound = _bound(record.get("bound"))
     return "" if bound is None else f"bound {bound:.4g}"
 
