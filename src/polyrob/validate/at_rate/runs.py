@@ -45,6 +45,7 @@ __all__ = [
     "default_uncertainty",
     "task_references",
     "true_plants",
+    "model_with_middle_payload",
     "validate_at_rate",
 ]
 
@@ -81,12 +82,16 @@ def _base(robot):
     return robot._base if hasattr(robot, "_base") else robot
 
 
-def _model_with_middle_payload(robot, spec):
-    """What the inner layer computes with: the nominal links and the middle of the set's payload."""
+def model_with_middle_payload(robot, spec):
+    """What the inner layer computes with: the nominal links and the middle of the set's payload.
+
+    ``robot``: a URDF robot or an :class:`~polyrob.model.inner.InnerLoopRobot` (a set without a
+    payload keeps its model: the nominal links with the middle of its own payload range).
+    """
     from polyrob.model.payload import with_payload
 
     if spec.payload is None:
-        return robot.model_robot
+        return getattr(robot, "model_robot", robot)
     pl = spec.payload
     mass = 0.5 * (pl.mass_lower + pl.mass_upper)
     com = np.array(pl.com_centre) if pl.com_radius is not None else 0.5 * (np.array(pl.com_lower) + np.array(pl.com_upper))
@@ -106,7 +111,7 @@ def true_plants(robot, spec, n: int, seed: int = 0) -> list:
     drawn = draw_true_robots(base, spec, n, seed=seed)
     if not hasattr(robot, "true_robot"):
         return [(t.robot, t.words()) for t in drawn]
-    model = _model_with_middle_payload(robot, spec)
+    model = model_with_middle_payload(robot, spec)
     return [
         (replace(robot, model_robot=model, true_robot=t.robot, scenario=t.words(), _scenarios=()), t.words())
         for t in drawn

@@ -1,0 +1,81 @@
+"""The independent frozen check: its own Jacobians, weights and norm agree with polyrob's, and it can fail.
+
+The controller ``tests/fixtures/planar_2r_ct_pid_K.json`` is ``polyrob synth planar_2r --inner
+computed-torque --model-error 10 --pose 0.4,0.3 --q-radius 0.3 --qdot-max 0.5 --qddot-max 2
+--structure pid`` (CERTIFIED, mu <= 0.677).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import control
+import numpy as np
+import pytest
+
+from polyrob import load_robot
+from polyrob.domains.task import TaskDomain
+from polyrob.io.controller import load_controller
+from polyrob.model.inner import inner_loop
+from polyrob.plant.weights import paper_weights
+from polyrob.uncertainty_set.draw import draw_true_robots
+from polyrob.uncertainty_set.spec import RobotUncertainty
+from polyrob.validate.independent import frozen_check, frozen_jacobians, weights_from_hyperparameters
+
+FIXTURE = Path(__file__).parent / "fixtures" / "planar_2r_ct_pid_K.json"
+HYPER = {"omega_b": (0.5, 0.1), "M_s": (2.0, 3.0), "A_s": (0.01, 0.02), "omega_bt": (10.0, 12.0), "M_t": (2.1, 3.0)}
+HYPER["A_t"] = (0.01, 0.01)
+
+
+def test_the_check_reproduces_the_certificates_nominal_weighted_norm():
+    from polyrob.analysis.robust import nominal_performance
+    from polyrob.pipeline import build_problem
+
+    arm = inner_loop(load_robot("planar_2r"), "computed-torque", model_error=0.1)
+    dom = TaskDomain.from_robot(arm, pose=[0.4, 0.3], q_radius=0.3, qdot_max=0.5, qddot_max=2.0)
+    # the nominal plant does not depend on the search's effort: the cheapest bounds give the same P's nominal
+    cheap = {"samples": 32, "coverage": 0, "refine": 0, "verify_rounds": 0, "screen": 0, "workers": 1}
+    problem = build_problem(arm, dom, progress=False, bound_options={**cheap, "describe_polytope": False})
+    polyrobs = nominal_performance(problem.P, load_controller(FIXTURE))
+    check = frozen_check(FIXTURE, RobotUncertainty(link_error=0.0), nominal_only=True, at_pose=True)
+    (own,) = check.weighted_norm
+    assert abs(own - polyrobs) <= 1e-6
+    assert own <= polyrobs  # polyrob quotes AB13DD's peak raised by its tolerance: a bound from above
+    assert check.unstable == 0 and check.bound == pytest.approx(0.6773241094692622)
+
+
+def test_its_jacobians_are_polyrobs_on_a_drawn_robot():
+    robot = load_robot("planar_2r")
+    arm = inner_loop(robot, "computed-torque", model_error=0.1)
+    (true,) = draw_true_robots(robot, RobotUncertainty(link_error=0.1), 1, seed=5)
+    q, qdot, qddot = np.array([0.5, 0.2]), np.array([0.3, -0.4]), np.array([1.5, -1.0])
+    A, B, v = frozen_jacobians(true.model, true.viscous, robot.model, robot.damping, "computed-torque", q, qdot, qddot)
+    from dataclasses import replace
+
+    theirs = replace(arm, true_robot=true.robot, _scenarios=())
+    assert np.allclose(theirs.acceleration(q, qdot, v), qddot, atol=1e-10)  # v gives the point's qddot
+    A2, B2 = theirs.jacobians_batch(q[None], qdot[None], v[None])
+    assert np.allclose(A, A2[0], atol=1e-9) and np.allclose(B, B2[0], atol=1e-12)
+    assert not np.allclose(A[2:, :2], 0.0, atol=1e-6)  # the drawn links are not the model's: residual stiffness
+
+
+def test_its_weights_are_the_papers():
+    (As, Bs, Cs, Ds), (At, Bt, Ct, Dt) = weights_from_hyperparameters(HYPER, 2)
+    WS, WT = paper_weights(HYPER)
+    for w in (0.01, 0.3, 7.0, 300.0):
+        s = 1j * w
+        own_s = Cs @ np.linalg.solve(s * np.eye(2) - As, Bs) + Ds
+        own_t = Ct @ np.linalg.solve(s * np.eye(2) - At, Bt) + Dt
+        assert np.allclose(own_s, WS(s), rtol=1e-12) and np.allclose(own_t, WT(s), rtol=1e-12)
+
+
+def test_the_check_flags_an_unstable_loop():
+    K = control.ss(load_controller(FIXTURE))
+    flipped = control.ss(K.A, K.B, -K.C, -K.D)  # positive feedback
+    bad = frozen_check(FIXTURE, RobotUncertainty(link_error=0.1), n=10, controller=flipped)
+    doc = bad.summary()
+    assert doc["unstable"] == 10 and doc["worst_pole_real"] > 0
+    assert doc["every_loop_stable_and_below_bound"] is False
+    good = frozen_check(FIXTURE, RobotUncertainty(link_error=0.1), n=50, points=2).summary()
+    assert good["loops"] == 100 and good["unstable"] == 0
+    assert good["weighted_norm_worst"] < good["bound"] and good["every_loop_stable_and_below_bound"]
