@@ -162,3 +162,45 @@ def test_planar_2r_at_1_khz_settles_without_friction_and_not_with_coulomb(arm, d
     assert not rough.meets_bar
     doc = rough.summary()
     assert doc["by_reference"]["step"]["settled"] == 0 and doc["conditions"]["encoder_bits"] == 18
+
+
+def test_run_reads_the_validation_options_and_refuses_bad_ones_in_one_line(capsys, tmp_path):
+    from polyrob.cli import build_parser, main
+    from polyrob.cli.options import rate_conditions_from_args
+
+    argv = ["run", "planar_2r", "--encoder-bits", "16", "--friction-coulomb", "0.5", "--true-robots", "3"]
+    args = build_parser().parse_args(argv)
+    c = rate_conditions_from_args(args)
+    assert (c.rate, c.delay_samples, c.encoder_bits, c.friction_viscous, c.friction_coulomb) == (
+        1000.0,
+        1,
+        16,
+        1.0,
+        0.5,
+    )
+    assert args.true_robots == 3
+    assert rate_conditions_from_args(build_parser().parse_args(["run", "--true-robots", "0"])) is None
+    for bad, option in (
+        (["--friction-coulomb", "-1"], "--friction-coulomb"),
+        (["--encoder-bits", "2"], "--encoder-bits"),
+    ):
+        with pytest.raises(SystemExit) as stop:
+            main(["run", "planar_2r", *bad, "-o", str(tmp_path / "run")])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert stop.value.code == 2 and len(err) == 1 and option in err[0]
+        assert not (tmp_path / "run").exists()
+
+
+def test_the_report_shows_the_validation_at_the_rate(arm, domain, tmp_path):
+    import json
+
+    from polyrob.report.html import ReportOptions, write_report
+
+    refs = task_references(domain, np.array(POSE), settle_time=1.0)[:1]
+    summary = validate_at_rate(arm, load_controller(FIXTURE), domain, true_robots=1, q0=POSE, references=refs).summary()
+    files = write_report(tmp_path, ReportOptions(robot_name="planar_2r", rate_validation=summary))
+    doc = json.loads(files.validation.read_text())
+    assert doc["at_rate"]["by_reference"]["step"]["runs"] == 1
+    assert doc["at_rate"]["conditions"]["friction_coulomb"] == 2.0
+    md = files.markdown.read_text()
+    assert "Validation at the rate" in md and "a simulation, not a certificate" in md

@@ -28,6 +28,8 @@ __all__ = [
     "add_robot_uncertainty_arguments",
     "robot_uncertainty_from_args",
     "refuse_uncertified",
+    "add_validation_arguments",
+    "rate_conditions_from_args",
 ]
 
 
@@ -293,3 +295,66 @@ def fraction(text) -> float:
     if not 0 < value < 1:
         raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text}")
     return value
+
+
+# --------------------------------------------------------------------------- validation at the rate
+# ``--encoder-bits`` is read as ``args.encoder_bits`` by the validation and by the weights' sensor-noise
+# level alike: whichever group defines it first owns the option, the other reads the same attribute.
+# The rate and the delay are the certificate's (``args.rate``, ``args.delay_samples`` when the command
+# has them; else 1 kHz and one sample).
+
+#: The loop's rate (Hz) when the command states none.
+DEFAULT_RATE = 1000.0
+
+
+def add_validation_arguments(parser) -> None:
+    """The group "validation at the rate" of ``parser`` (an option another group defined already is kept)."""
+    g = parser.add_argument_group(
+        "validation at the rate",
+        "run -o DIR: the controller, discretised, closed on true robots drawn from the set (the nonlinear arm, "
+        "one sample of delay, quantised encoders, friction the inner model does not have)",
+    )
+    have = getattr(parser, "_option_string_actions", {})
+    if "--encoder-bits" not in have:
+        g.add_argument(
+            "--encoder-bits",
+            dest="encoder_bits",
+            type=int_at_least(4),
+            default=18,
+            help="joint encoder resolution in bits per turn (LSB = 2 pi / 2^B; default 18)",
+        )
+    g.add_argument(
+        "--friction-viscous",
+        type=nonnegative_float,
+        default=1.0,
+        help="viscous friction on every joint, N m s/rad, not in the inner model (default 1)",
+    )
+    g.add_argument(
+        "--friction-coulomb",
+        type=nonnegative_float,
+        default=2.0,
+        help="Coulomb friction on every joint, N m, not in the inner model (default 2; c tanh(qdot / 0.01 rad/s))",
+    )
+    g.add_argument(
+        "--true-robots",
+        type=int_at_least(0),
+        default=20,
+        help="true robots drawn from the set for the validation at the rate (default 20; 0: skip it)",
+    )
+
+
+def rate_conditions_from_args(args):
+    """The :class:`~polyrob.validate.at_rate.loop.RealLoopConditions` of the options, or ``None`` (0 true robots)."""
+    from polyrob.validate.at_rate.loop import RealLoopConditions
+
+    if not getattr(args, "true_robots", 0):
+        return None
+    rate = getattr(args, "rate", None) or DEFAULT_RATE
+    delay = getattr(args, "delay_samples", None)
+    return RealLoopConditions(
+        rate=float(rate),
+        delay_samples=1 if delay is None else int(delay),
+        encoder_bits=getattr(args, "encoder_bits", 18),
+        friction_viscous=float(args.friction_viscous),
+        friction_coulomb=float(args.friction_coulomb),
+    )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from polyrob.cli.analyze import add_moving_argument, moving_asked, moving_options, print_analysis
 from polyrob.cli.common import Output, alphas_from_args, exit_status, robot_from_args, scale_names
-from polyrob.cli.options import int_at_least, parse_frequencies
+from polyrob.cli.options import add_validation_arguments, int_at_least, parse_frequencies, rate_conditions_from_args
 from polyrob.cli.plant import problem_from_args
 from polyrob.cli.synth import (
     add_bandwidth_arguments,
@@ -96,6 +96,7 @@ def cmd_run(args) -> int:
     if args.max_bandwidth:  # option errors before any work
         scale_names(args.scale_only), alphas_from_args(args.alphas)
     run_dir = _run_dir(args)
+    at_rate = rate_conditions_from_args(args) if run_dir is not None else None  # its refusals before any work
     stages = ["bounds", "largest bandwidth" if args.max_bandwidth else "synthesis", "analysis"]
     out = Output(args, stages=len(stages) + (run_dir is not None), job=stages + ["validation"] * (run_dir is not None))
     main_job_defaults(args, out)
@@ -176,6 +177,8 @@ def cmd_run(args) -> int:
             controller_file="K.json",
             controller_words=controller_words(design),
             notes=(a.instead,) if a.instead else (),
+            at_rate=at_rate,
+            true_robots=args.true_robots,
         )
         doc["report"] = str(files.html)
         out.line(f"wrote {files.html}")
@@ -231,6 +234,7 @@ def register(sub) -> None:
     )
     p.add_argument("--omega", default=None, help="analysis frequency grid LO:HI:N in rad/s (default automatic)")
     add_moving_argument(p)
+    add_validation_arguments(p)
     p.add_argument(
         "--stability-sweep",
         action="store_true",

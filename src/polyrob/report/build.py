@@ -58,6 +58,7 @@ class Validation:
     mu_curves: dict | None = None
     notes: tuple = ()
     info: dict = field(default_factory=dict)
+    at_rate: object = None
 
 
 #: Dynamics evaluations each default simulation of the report may make (a count of work, not seconds:
@@ -101,6 +102,8 @@ def validate_controller(
     search_rate: bool = True,
     mu_omega=None,
     discrete_omega=None,
+    at_rate=None,
+    true_robots: int = 20,
 ) -> Validation:
     """Monte Carlo, nonlinear simulations, discretisation/quantisation and μ of ``K`` on ``problem``.
 
@@ -124,6 +127,10 @@ def validate_controller(
         Grid of the μ curve (default 60 points, 1e-3 .. 1e4 rad/s).
     discrete_omega : array_like, optional
         Grid of the discretisation checks (default :data:`DISCRETE_GRID`).
+    at_rate : RealLoopConditions, optional
+        Also run :func:`polyrob.validate.at_rate.runs.validate_at_rate` under these conditions on
+        ``true_robots`` robots drawn from the set (``None``: not run).
+    true_robots : int
     """
     from polyrob.analysis.mu.bounds import mu_bounds
     from polyrob.plant.generalized import lft
@@ -193,7 +200,14 @@ def validate_controller(
             "μ of the discretised loop (plant by zero-order hold) checks the sample rate and the word "
             "length; it is not a certificate of the sampled-data system."
         )
-    return Validation(monte_carlo=mc_res, simulations=sims, discretization=disc, mu_curves=curves, notes=tuple(notes))
+    real = None
+    if at_rate is not None:
+        from polyrob.validate.at_rate.runs import validate_at_rate
+
+        real = validate_at_rate(robot, K, pldi, conditions=at_rate, true_robots=true_robots, seed=seed)
+    return Validation(
+        monte_carlo=mc_res, simulations=sims, discretization=disc, mu_curves=curves, notes=tuple(notes), at_rate=real
+    )
 
 
 def _paper_reference(problem) -> dict:
@@ -372,6 +386,7 @@ def write_run_report(
         notes=tuple(notes) + tuple(val.notes),
         problem_summary=problem_summary(problem, K, controller_words),
         provenance=provenance,
+        rate_validation=None if val.at_rate is None else val.at_rate.summary(),
     )
     files = write_report(run, options)
     if certificates:

@@ -204,6 +204,9 @@ class ReportOptions:
     provenance : dict, optional
         ``{column title: Provenance}``: the "Provenance" section and the footer
         (:func:`polyrob.report.provenance.add_provenance`).
+    rate_validation : dict, optional
+        A :meth:`~polyrob.validate.at_rate.runs.RateValidation.summary`: the section
+        "Validation at the rate" (:mod:`polyrob.report.at_rate`) and ``validation.json["at_rate"]``.
     """
 
     title: str | None = None
@@ -220,6 +223,7 @@ class ReportOptions:
     notes: tuple = ()
     problem_summary: dict | None = None
     provenance: dict | None = None
+    rate_validation: dict | None = None
 
 
 def write_report(run_dir, options: ReportOptions = ReportOptions()) -> ReportFiles:
@@ -397,6 +401,11 @@ def write_report(run_dir, options: ReportOptions = ReportOptions()) -> ReportFil
     simulation_section(
         along, "Nonlinear closed loop along a trajectory (the robot's own dynamics)", "tracking.png"
     )
+    if o.rate_validation:
+        from polyrob.report.at_rate import add_rate_validation
+
+        add_rate_validation(doc, o.rate_validation)
+        validation["at_rate"] = o.rate_validation
     if steps:
         doc.heading("Appendix")
         doc.para(

@@ -61,7 +61,9 @@ def chatter_peak_to_peak(t, tau, *, start: float, window: float = CHATTER_WINDOW
     if seg.shape[1] < 2 * n:
         return np.full(tau.shape[0], np.nan)
     kernel = np.ones(n) / n
-    mean = np.array([np.convolve(row, kernel, mode="valid") for row in seg])  # centred on seg[:, n // 2 + i] (half a sample late when n is even)
+    mean = np.array(
+        [np.convolve(row, kernel, mode="valid") for row in seg]
+    )  # centred on seg[:, n // 2 + i] (half a sample late when n is even)
     detrended = seg[:, n // 2 : n // 2 + mean.shape[1]] - mean
     return detrended.max(axis=1) - detrended.min(axis=1)
 

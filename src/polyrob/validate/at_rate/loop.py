@@ -148,7 +148,11 @@ class RealLoopConditions:
         return encoder_lsb(self.encoder_bits)
 
     def words(self) -> str:
-        enc = "exact encoders" if self.encoder_bits is None else f"{self.encoder_bits}-bit encoders (LSB {self.lsb:.3g} rad)"
+        enc = (
+            "exact encoders"
+            if self.encoder_bits is None
+            else f"{self.encoder_bits}-bit encoders (LSB {self.lsb:.3g} rad)"
+        )
         return (
             f"{self.rate:g} Hz ({self.method} controller, zero-order hold), {self.delay_samples} sample(s) of delay, "
             f"{enc}, friction not in the inner model: viscous {self.friction_viscous:g} N m s/rad + Coulomb "
@@ -204,7 +208,9 @@ def substeps(robot, q0, conditions: RealLoopConditions) -> int:
     M = np.asarray(robot.mass_matrix(q0), float)
     lam_min = float(np.linalg.eigvalsh(0.5 * (M + M.T)).min())
     damping = float(np.max(np.asarray(getattr(robot, "damping", 0.0), float), initial=0.0))
-    slope = (damping + conditions.friction_viscous + conditions.friction_coulomb / conditions.coulomb_velocity) / lam_min
+    slope = (
+        damping + conditions.friction_viscous + conditions.friction_coulomb / conditions.coulomb_velocity
+    ) / lam_min
     n = max(1, math.ceil(slope / conditions.rate / RK4_STABLE))
     if n > MAX_SUBSTEPS:
         raise ArgumentError(

@@ -94,7 +94,11 @@ def model_with_middle_payload(robot, spec):
         return getattr(robot, "model_robot", robot)
     pl = spec.payload
     mass = 0.5 * (pl.mass_lower + pl.mass_upper)
-    com = np.array(pl.com_centre) if pl.com_radius is not None else 0.5 * (np.array(pl.com_lower) + np.array(pl.com_upper))
+    com = (
+        np.array(pl.com_centre)
+        if pl.com_radius is not None
+        else 0.5 * (np.array(pl.com_lower) + np.array(pl.com_upper))
+    )
     model = with_payload(_base(robot), mass, com)
     model.__dict__["_polyrob_base"] = _base(robot)
     return model
