@@ -176,6 +176,8 @@ def test_cli_batch_writes_files_and_a_summary(pendulums, tmp_path, capsys):
             "0.01:1000:8",
             "--mc",
             "5",
+            "--true-robots",
+            "2",
         ]
     )
     status = args.func(args)
@@ -189,6 +191,10 @@ def test_cli_batch_writes_files_and_a_summary(pendulums, tmp_path, capsys):
     a = rows["pendulum_a"]
     assert a["certified"] is (a["status"] == "CERTIFIED") and STATUS_WORD[a["status"]] in a["verdict"]
     assert doc["certified"] == int(a["certified"])
+    # the validation at the rate on 2 drawn true robots: a step and the task's trajectory on each
+    at_rate = a["validation_at_rate"]
+    assert [at_rate["by_reference"][k]["runs"] for k in ("step", "trajectory")] == [2, 2]
+    assert "a simulation, not a certificate" in at_rate["verdict"] and isinstance(at_rate["meets_bar"], bool)
     cert = json.loads((out / "pendulum_a" / "certificate.json").read_text())
     assert cert["row"] == rows["pendulum_a"]
     # traceability: the URDF's bytes hashed, in the certificate and the controller file (polyrob.provenance)

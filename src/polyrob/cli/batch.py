@@ -13,6 +13,7 @@ import json
 from polyrob.cli.common import Output, add_output_flags
 from polyrob.cli.options import (
     add_robot_uncertainty_arguments,
+    add_validation_arguments,
     int_at_least,
     nonnegative_float,
     number,
@@ -22,6 +23,7 @@ from polyrob.cli.options import (
     parse_list,
     parse_pose,
     positive_float,
+    rate_conditions_dict,
 )
 from polyrob.errors import ArgumentError
 
@@ -113,6 +115,8 @@ def settings_from_args(args) -> dict:
         "validate": not args.no_validate,
         "validate_budget": args.validate_budget,
         "validate_move": args.validate_move,
+        "true_robots": args.true_robots,
+        "at_rate": rate_conditions_dict(args),
         "reduce_max_order": args.reduce_max_order or None,
     }
 
@@ -154,6 +158,8 @@ def cmd_batch(args) -> int:
         result = str(r.status) if r.ok else f"FAILED {r.error}: {r.message}"
         if r.ok and r.validation:
             result += f"; validation: {r.validation}"
+        if r.ok and r.validation_at_rate:
+            result += f"; at the rate: {r.validation_at_rate['verdict']}"
         if r.ok and r.reason:
             result += f"; why: {r.reason}"
         out.line(
@@ -270,5 +276,6 @@ def register(sub) -> None:
         help="a safety net: wall-clock seconds the closed-loop simulation may take, named in the row when it "
         "fires (default none: the simulation is bounded by its number of dynamics evaluations)",
     )
+    add_validation_arguments(p)
     add_output_flags(p)
     p.set_defaults(func=cmd_batch)

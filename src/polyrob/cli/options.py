@@ -30,6 +30,7 @@ __all__ = [
     "refuse_uncertified",
     "add_validation_arguments",
     "rate_conditions_from_args",
+    "rate_conditions_dict",
 ]
 
 
@@ -358,3 +359,11 @@ def rate_conditions_from_args(args):
         friction_viscous=float(args.friction_viscous),
         friction_coulomb=float(args.friction_coulomb),
     )
+
+
+def rate_conditions_dict(args) -> dict:
+    """The conditions of the options as plain fields (a batch's settings travel to its workers as data)."""
+    c = rate_conditions_from_args(args)
+    if c is None:
+        return {}
+    return {k: getattr(c, k) for k in ("rate", "delay_samples", "encoder_bits", "friction_viscous", "friction_coulomb")}

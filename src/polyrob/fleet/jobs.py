@@ -20,7 +20,7 @@ from pathlib import PurePath
 from polyrob.errors import ArgumentError
 from polyrob.fleet.diagnosis import why_not_certified
 from polyrob.fleet.results import RobotResult, controller_data, controller_system  # noqa: F401 (re-exported)
-from polyrob.fleet.stages import design_stage, one_line, reduce_stage, validate_stage
+from polyrob.fleet.stages import design_stage, one_line, rate_validation_stage, reduce_stage, validate_stage
 
 __all__ = ["Job", "Settings", "RobotResult", "run_job", "as_job"]
 
@@ -179,6 +179,13 @@ class Settings:
         Evaluations of the dynamics the simulation may make; a stiff closed
         loop that has not finished by then is reported as such (a count of
         work, so the row is the same on an idle and on a loaded machine).
+    true_robots : int
+        True robots drawn from the set for the validation at the rate
+        (:func:`polyrob.validate.at_rate.runs.validate_at_rate`; 0, the library's default: skipped;
+        ``polyrob batch`` asks for 20, ``--true-robots N``).
+    at_rate : dict
+        Its conditions, the fields of :class:`~polyrob.validate.at_rate.loop.RealLoopConditions`
+        (empty: the defaults, 1 kHz, one sample of delay, 18-bit encoders, viscous 1 and Coulomb 2 N m).
     reduce_max_order : int or None
         A certified full-order controller is reduced to the smallest order up
         to this one that keeps μ < 1 (:func:`polyrob.pipeline.reduce_design`);
@@ -200,6 +207,8 @@ class Settings:
     validate_time: float = 20.0
     validate_budget: float | None = None
     validate_evaluations: int | None = VALIDATE_EVALUATIONS
+    true_robots: int = 0
+    at_rate: dict = field(default_factory=dict)
     reduce_max_order: int | None = 20
 
     def to_dict(self) -> dict:
@@ -361,6 +370,15 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         except Exception as exc:  # noqa: BLE001 - recorded: a failed simulation is a finding about this robot
             validation = f"simulation failed: {type(exc).__name__}: {one_line(exc)}"
         timings["validation"] = time.perf_counter() - t1
+    at_rate = None
+    if settings.validate and settings.true_robots:
+        t1 = time.perf_counter()
+        try:
+            details["at_rate"] = rate_validation_stage(problem, design.controller, settings)
+            at_rate = {k: details["at_rate"][k] for k in ("by_reference", "meets_bar", "verdict")}
+        except Exception as exc:  # noqa: BLE001 - recorded: a failed simulation is a finding about this robot
+            at_rate = {"verdict": f"validation at the rate failed: {type(exc).__name__}: {one_line(exc)}"}
+        timings["validation at the rate"] = time.perf_counter() - t1
     reason = None if cert.certified else why_not_certified(problem, details)
     if reason and skipped:
         reason = f"{reason} (bandwidth search skipped)"
@@ -385,6 +403,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         alpha=alpha,
         verdict="verdict: " + cert.verdict,
         validation=validation,
+        validation_at_rate=at_rate,
         reason=reason,
         seconds=time.perf_counter() - t0,
         timings=timings,

@@ -23,7 +23,9 @@ class RobotResult:
     design's otherwise: the same call), ``verdict`` its line; ``mu_upper`` is
     the μ bound proved at every frequency (``None``: none was), ``mu_upper_grid``
     the peak upper bound on the frequency grid, ``mu_lower`` the lower bound.  ``validation`` is the nonlinear simulation's
-    verdict line when it ran (``None`` otherwise).  ``reason`` says, for a
+    verdict line when it ran (``None`` otherwise); ``validation_at_rate`` the validation at
+    the rate on true robots drawn from the set (:mod:`polyrob.validate.at_rate`): its figures
+    per reference, whether every run met the bar and its verdict line (``None``: not run).  ``reason`` says, for a
     robot left without a certificate, what stands in the way: the
     performance limit of its unstable poles at the weights used
     (:mod:`polyrob.analysis.limits`), a model whose ``B = M^-1`` is not
@@ -55,6 +57,7 @@ class RobotResult:
     alpha: float | None = None
     verdict: str | None = None
     validation: str | None = None
+    validation_at_rate: dict | None = None
     reason: str | None = None
     seconds: float = 0.0
     timings: dict = field(default_factory=dict)
@@ -98,6 +101,7 @@ class RobotResult:
             "alpha",
             "verdict",
             "validation",
+            "validation_at_rate",
             "reason",
         )
         out = {k: getattr(self, k) for k in keys}

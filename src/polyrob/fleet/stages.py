@@ -11,7 +11,7 @@ import time
 from polyrob.errors import SynthesisError
 from polyrob.fleet.diagnosis import search_skipped
 
-__all__ = ["design_stage", "reduce_stage", "validate_stage", "one_line"]
+__all__ = ["design_stage", "reduce_stage", "validate_stage", "rate_validation_stage", "one_line"]
 
 
 def validate_stage(problem, K, settings) -> dict:
@@ -41,6 +41,18 @@ def validate_stage(problem, K, settings) -> dict:
     )
     out = sim.summary()
     out.pop("joints", None)
+    return out
+
+
+def rate_validation_stage(problem, K, settings) -> dict:
+    """The controller at the rate on ``settings.true_robots`` robots drawn from the set (its summary, without the runs)."""
+    from polyrob.validate.at_rate.loop import RealLoopConditions
+    from polyrob.validate.at_rate.runs import validate_at_rate
+
+    conditions = RealLoopConditions(**settings.at_rate)
+    res = validate_at_rate(problem.robot, K, problem.pldi, conditions=conditions, true_robots=settings.true_robots)
+    out = res.summary()
+    out.pop("runs", None)
     return out
 
 
