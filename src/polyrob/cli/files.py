@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from polyrob.cli.common import Output, add_output_flags
-from polyrob.cli.options import int_at_least, positive_float
+from polyrob.cli.options import add_validation_arguments, int_at_least, positive_float, rate_conditions_from_args
 from polyrob.errors import ArgumentError
 
 __all__ = ["register", "check_output_dir"]
@@ -32,6 +32,7 @@ def cmd_report(args) -> int:
     from polyrob.report.build import write_run_report
     from polyrob.report.certificates import certificate_rows, frozen_status, headline
 
+    at_rate = rate_conditions_from_args(args)  # its refusals before any work
     out = Output(args, stages=2)
     out.stage(f"report: reading {args.run_dir} and rebuilding its problem")
     run = load_run(args.run_dir, controller=args.controller, pldi=args.pldi)
@@ -46,6 +47,8 @@ def cmd_report(args) -> int:
         controllers=run.controllers,
         controller_file=args.controller,
         notes=run.notes,
+        at_rate=at_rate,
+        true_robots=args.true_robots,
     )
     status = frozen_status(run.certificates)
     doc = {
@@ -307,6 +310,7 @@ def register(sub) -> None:
     p.add_argument("run_dir", help="directory written by `polyrob run ROBOT -o DIR`")
     p.add_argument("--controller", default="K.json", help="controller file inside the directory")
     p.add_argument("--pldi", default="pldi.json", help="PLDI file inside the directory")
+    add_validation_arguments(p, true_robots=0)  # a rebuilt report re-runs it only when asked (minutes)
     add_output_flags(p)
     p.set_defaults(func=cmd_report)
 

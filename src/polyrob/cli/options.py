@@ -308,8 +308,11 @@ def fraction(text) -> float:
 DEFAULT_RATE = 1000.0
 
 
-def add_validation_arguments(parser) -> None:
-    """The group "validation at the rate" of ``parser`` (an option another group defined already is kept)."""
+def add_validation_arguments(parser, *, true_robots: int = 20) -> None:
+    """The group "validation at the rate" of ``parser`` (an option another group defined already is kept).
+
+    ``true_robots``: the default of ``--true-robots`` (0: the validation runs only when asked).
+    """
     g = parser.add_argument_group(
         "validation at the rate",
         "run -o DIR: the controller, discretised, closed on true robots drawn from the set (the nonlinear arm, "
@@ -339,8 +342,8 @@ def add_validation_arguments(parser) -> None:
     g.add_argument(
         "--true-robots",
         type=int_at_least(0),
-        default=20,
-        help="true robots drawn from the set for the validation at the rate (default 20; 0: skip it)",
+        default=true_robots,
+        help="true robots drawn from the set for the validation at the rate (default %(default)s; 0: skip it)",
     )
 
 
