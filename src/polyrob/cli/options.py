@@ -306,6 +306,8 @@ def fraction(text) -> float:
 
 #: The loop's rate (Hz) when the command states none.
 DEFAULT_RATE = 1000.0
+#: Encoder bits per turn when the command states none (``--encoder-bits`` left to a per-robot default elsewhere).
+DEFAULT_ENCODER_BITS = 18
 
 
 def add_validation_arguments(parser, *, true_robots: int = 20) -> None:
@@ -324,8 +326,8 @@ def add_validation_arguments(parser, *, true_robots: int = 20) -> None:
             "--encoder-bits",
             dest="encoder_bits",
             type=int_at_least(4),
-            default=18,
-            help="joint encoder resolution in bits per turn (LSB = 2 pi / 2^B; default 18)",
+            default=DEFAULT_ENCODER_BITS,
+            help="joint encoder resolution in bits per turn (LSB = 2 pi / 2^B; default %(default)s)",
         )
     g.add_argument(
         "--friction-viscous",
@@ -358,7 +360,7 @@ def rate_conditions_from_args(args):
     return RealLoopConditions(
         rate=float(rate),
         delay_samples=1 if delay is None else int(delay),
-        encoder_bits=getattr(args, "encoder_bits", 18),
+        encoder_bits=getattr(args, "encoder_bits", None) or DEFAULT_ENCODER_BITS,
         friction_viscous=float(args.friction_viscous),
         friction_coulomb=float(args.friction_coulomb),
     )
