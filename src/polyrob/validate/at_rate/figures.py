@@ -103,7 +103,14 @@ class RunFigures:
     message: str
 
     def to_dict(self) -> dict:
-        return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in asdict(self).items()}
+        """Plain JSON: a figure not measured (NaN: a joint without an effort limit, a run too short) is ``None``."""
+        return {k: _plain(v) for k, v in asdict(self).items()}
+
+
+def _plain(v):
+    if isinstance(v, list):
+        return [_plain(x) for x in v]
+    return None if isinstance(v, float) and not np.isfinite(v) else v
 
 
 def _fraction(peak, lower, upper) -> float | None:
