@@ -317,7 +317,9 @@ def validate_at_rate(
             )
     return RateValidation(
         conditions=conditions,
-        uncertainty=spec.words() if hasattr(spec, "words") else str(spec),
+        uncertainty=spec.words()
+        if getattr(base, "model", None) is not None
+        else "the model itself (an analytic robot: no links to draw)",
         true_robots=len(plants),
         seed=int(seed),
         figures=tuple(figures),
