@@ -35,6 +35,12 @@ def main() -> None:
     ap.add_argument("--link-error", type=float, default=10.0, help="per-link error in percent (default 10)")
     ap.add_argument("--payload-max", type=float, default=1.5, help="payload up to this many kg (capped at the rated)")
     ap.add_argument("--com-radius", type=float, default=0.1, help="payload centre of mass within this radius (m)")
+    ap.add_argument(
+        "--common-factor",
+        type=float,
+        default=None,
+        help="draw from the set today's certificates cover instead: one factor on every link within ±P %%",
+    )
     add_results_option(ap)
     args = ap.parse_args()
 
@@ -59,7 +65,10 @@ def main() -> None:
             step[0] = done * 10 // total
             print(f"independent check: {done} of {total} loops", file=sys.stderr, flush=True)
 
-    check = frozen_check(args.controller, spec, n=args.n, points=args.points, seed=args.seed, on_loop=progress)
+    factor = None if args.common_factor is None else args.common_factor / 100.0
+    check = frozen_check(
+        args.controller, spec, n=args.n, points=args.points, seed=args.seed, common_factor=factor, on_loop=progress
+    )
     out = check.summary()
     out["seconds"] = round(time.perf_counter() - t0, 1)
     figure = (

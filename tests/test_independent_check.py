@@ -79,3 +79,12 @@ def test_the_check_flags_an_unstable_loop():
     good = frozen_check(FIXTURE, RobotUncertainty(link_error=0.1), n=50, points=2).summary()
     assert good["loops"] == 100 and good["unstable"] == 0
     assert good["weighted_norm_worst"] < good["bound"] and good["every_loop_stable_and_below_bound"]
+
+
+def test_on_the_certified_set_every_loop_is_below_the_bound_and_the_per_link_set_is_another():
+    """The fixture is certified for one factor on both links within ±10 %: drawn from that set, every frozen
+    loop stays below mu's bound (the certificate's promise); drawn per link at ±30 %, some do not."""
+    own = frozen_check(FIXTURE, RobotUncertainty(), n=100, common_factor=0.1).summary()
+    assert own["unstable"] == 0 and own["above_bound"] == 0 and own["weighted_norm_worst"] < own["bound"]
+    wider = frozen_check(FIXTURE, RobotUncertainty(link_error=0.3), n=100, points=2).summary()
+    assert wider["above_bound"] > 0 and not wider["every_loop_stable_and_below_bound"]

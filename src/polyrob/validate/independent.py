@@ -225,6 +225,7 @@ def frozen_check(
     nominal_only: bool = False,
     at_pose: bool = False,
     controller=None,
+    common_factor: float | None = None,
     on_loop=None,
 ) -> FrozenCheck:
     """The frozen check of the controller file ``controller_path`` on ``n`` true robots of ``uncertainty``.
@@ -246,6 +247,10 @@ def frozen_check(
         The points are the task's pose at rest (``qdot = qddot = 0``) instead of random.
     controller : LTI, optional
         Replace the file's controller (e.g. a deliberately broken one).
+    common_factor : float, optional
+        Draw instead from the set today's certificates cover: every link times one factor
+        uniform in ``[1 - p, 1 + p]`` (``p`` this value), the payload of ``uncertainty``
+        (point mass, as :func:`polyrob.model.payload.with_payload` puts it), the URDF's damping.
     on_loop : callable, optional
         Called with ``(done, total)`` loops (progress).
     """
@@ -276,6 +281,17 @@ def frozen_check(
     if nominal_only:
         trues = [(model_hat.model, np.asarray(model_hat.damping, float))]
         words = "the nominal robot (the inner layer's model)"
+    elif common_factor is not None:
+        from polyrob.model.payload import with_payload
+
+        draw = np.random.default_rng(seed)
+        trues = []
+        for _ in range(int(n)):
+            mass, com = (0.0, np.zeros(3)) if spec.payload is None else spec.payload.draw(draw)
+            scale = draw.uniform(1 - common_factor, 1 + common_factor)
+            trues.append((with_payload(robot, mass, com, scale=scale).model, np.asarray(robot.damping, float)))
+        payload = "no payload" if spec.payload is None else spec.payload.words()
+        words = f"one factor on every link within ±{100 * common_factor:g} %, {payload}"
     else:
         drawn = draw_true_robots(robot, spec, int(n), seed=seed)
         trues = [(t.model, np.asarray(t.viscous, float)) for t in drawn]
