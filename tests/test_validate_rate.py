@@ -204,3 +204,5 @@ def test_the_report_shows_the_validation_at_the_rate(arm, domain, tmp_path):
     assert doc["at_rate"]["conditions"]["friction_coulomb"] == 2.0
     md = files.markdown.read_text()
     assert "Validation at the rate" in md and "a simulation, not a certificate" in md
+    header = next(line for line in md.splitlines() if line.startswith("| reference |"))
+    assert header.count("|") == 10  # nine columns: no pipe inside a heading
