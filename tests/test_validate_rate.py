@@ -206,3 +206,15 @@ def test_the_report_shows_the_validation_at_the_rate(arm, domain, tmp_path):
     assert "Validation at the rate" in md and "a simulation, not a certificate" in md
     header = next(line for line in md.splitlines() if line.startswith("| reference |"))
     assert header.count("|") == 10  # nine columns: no pipe inside a heading
+
+
+def test_a_run_that_stopped_early_is_neither_inside_nor_settled(arm, domain):
+    from polyrob.validate.at_rate.figures import run_figures
+    from polyrob.validate.at_rate.loop import RealLoopTrace
+
+    t = 0.001 * np.arange(3)
+    q = np.tile(np.array(POSE)[:, None], (1, 3))
+    zero = np.zeros((2, 3))
+    trace = RealLoopTrace(t, q, zero, zero, q, q, zero, zero, np.zeros(2), False, {"message": "diverged"})
+    fig = run_figures(trace, domain, arm, reference="step", true_robot="x", move_end=0.0, lsb=encoder_lsb(18))
+    assert not fig.inside_task and not fig.settled and fig.final_tracking_error == 0.0

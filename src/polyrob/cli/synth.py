@@ -14,7 +14,7 @@ from polyrob.cli.common import (
     robot_from_args,
     scale_names,
 )
-from polyrob.cli.options import int_at_least, positive_float
+from polyrob.cli.options import add_validation_arguments, int_at_least, positive_float, rate_conditions_from_args
 from polyrob.cli.plant import add_plant_arguments, problem_from_args
 
 __all__ = [
@@ -179,7 +179,9 @@ def cmd_synth(args) -> int:
     args.moving = bool(moving_asked(args))
     if args.max_bandwidth:  # option errors before any work
         scale_names(args.scale_only), alphas_from_args(args.alphas)
+    at_rate = rate_conditions_from_args(args)
     stages = ["bounds", "largest bandwidth" if args.max_bandwidth else "synthesis"] + ["moving-robot"] * args.moving
+    stages += ["validation"] * (at_rate is not None)
     out = Output(args, stages=len(stages), job=stages)
     options = options_from_args(args, out)
     robot = robot_from_args(args)
@@ -215,6 +217,8 @@ def cmd_synth(args) -> int:
             info_extra=extra,
             certificate_extra=None if moving is None else {"moving": moving},
         )
+    if at_rate is not None:  # after the controller file: a stop during the simulations keeps it
+        doc["validation_at_rate"] = validation_at_rate_stage(problem, design.controller, at_rate, args, out)
     cert = design.certificate
     doc["covers"] = cert.scope.sentence()
     doc["certificate"] = cert.summary()
@@ -310,6 +314,28 @@ def moving_check(problem, K, out, options=None) -> dict:
     return mv.summary()
 
 
+def validation_at_rate_stage(problem, K, conditions, args, out) -> dict:
+    """``synth --true-robots N``: the controller at the rate on drawn true robots; with ``-o K.json`` the whole
+    summary goes to ``K.validation.json`` and the document keeps its figures per reference."""
+    import json
+    from pathlib import Path
+
+    from polyrob.io.atomic import atomic_write, json_default
+    from polyrob.validate.at_rate.runs import validate_at_rate
+
+    out.stage(f"validation at the rate ({args.true_robots} true robots drawn from the set)")
+    res = validate_at_rate(problem.robot, K, problem.pldi, conditions=conditions, true_robots=args.true_robots)
+    out.line(res.verdict())
+    summary = res.summary()
+    short = {k: summary[k] for k in ("conditions", "uncertainty", "true_robots", "by_reference", "meets_bar", "verdict")}
+    if args.output:
+        path = Path(args.output).with_suffix(".validation.json")
+        atomic_write(path, lambda f: f.write(json.dumps(summary, indent=1, default=json_default)))
+        out.line(f"wrote {path}")
+        short["file"] = str(path)
+    return short
+
+
 def register(sub) -> None:
     p = sub.add_parser("synth", help="mu-synthesis: full order (D-K, D-G-K) or fixed structure")
     add_synthesis_arguments(p)
@@ -323,4 +349,5 @@ def register(sub) -> None:
         "controller has the moving-robot certificate too",
     )
     add_moving_harmonics_argument(p)
+    add_validation_arguments(p, true_robots=0)  # synth validates only when asked (minutes on an arm)
     p.set_defaults(func=cmd_synth)

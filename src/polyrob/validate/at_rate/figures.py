@@ -142,7 +142,8 @@ def run_figures(trace, domain, robot, *, reference: str, true_robot: str, move_e
     qdot_frac = _fraction(np.abs(trace.qdot).max(axis=1), domain.qdot_lower, domain.qdot_upper)
     qdd_lo, qdd_hi = getattr(domain, "qddot_lower", None), getattr(domain, "qddot_upper", None)
     qddot_frac = _fraction(np.asarray(trace.qddot_peak), qdd_lo, qdd_hi)
-    inside = bool(excess <= 1e-9 and (qdot_frac or 0.0) <= 1.0 and (qddot_frac or 0.0) <= 1.0)
+    # a run that stopped early (diverged) is not inside: its samples end before the task does
+    inside = bool(trace.success and excess <= 1e-9 and (qdot_frac or 0.0) <= 1.0 and (qddot_frac or 0.0) <= 1.0)
     finite_pct = pct[np.isfinite(pct)]
     return RunFigures(
         reference=reference,

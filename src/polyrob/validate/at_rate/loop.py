@@ -308,7 +308,7 @@ def simulate_real_loop(
             x = x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
         q_read_prev = q_read
         if not np.all(np.isfinite(x)):
-            ok, message = False, f"the state is not finite at t = {tk + h:.4g} s (the loop diverged)"
+            ok, message = False, f"the state is not finite at t = {tk + h:.4g} s (the loop, or its integration at this step, diverged)"
             n_samples = k + 1
             break
         if on_sample is not None:
