@@ -180,6 +180,12 @@ def test_run_reads_the_validation_options_and_refuses_bad_ones_in_one_line(capsy
     )
     assert args.true_robots == 3
     assert rate_conditions_from_args(build_parser().parse_args(["run", "--true-robots", "0"])) is None
+    # run and batch validate 20 true robots by default; synth and report only when asked (minutes on an arm)
+    defaults = {
+        cmd: build_parser().parse_args([cmd, *rest]).true_robots
+        for cmd, rest in (("run", []), ("batch", []), ("synth", []), ("report", ["run_dir"]))
+    }
+    assert defaults == {"run": 20, "batch": 20, "synth": 0, "report": 0}
     for bad, option in (
         (["--friction-coulomb", "-1"], "--friction-coulomb"),
         (["--encoder-bits", "2"], "--encoder-bits"),
