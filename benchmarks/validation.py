@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import shutil
 import subprocess
 import tempfile
@@ -68,9 +69,14 @@ def at_rate(args) -> None:
 
     info = read_controller_file(args.controller).get("info") or {}
     robot = load_robot(info["robot"])
-    words = str(info.get("inner", ""))
-    layer = next((k for k in ("computed-torque", "gravity") if words.startswith(f"inner layer: {k}")), "none")
-    error = 0.1 if "±10 %" in words else 0.0
+    words = str(info.get("inner", "") or "none")
+    layer = next(
+        (k for k in ("computed-torque", "gravity", "none") if words.startswith((f"inner layer: {k}", k))), None
+    )
+    if layer is None:
+        raise SystemExit(f"{args.controller}: its inner layer {words[:60]!r} is not one this script reads")
+    found = re.search(r"link masses/inertias ±([0-9.]+) %", words)  # the common factor the certificate covers
+    error = float(found.group(1)) / 100.0 if found else 0.0
     arm = robot if layer == "none" else inner_loop(robot, layer, model_error=error)
     domain = domain_from_dict(info["domain"], robot=arm)
     conditions = RealLoopConditions(

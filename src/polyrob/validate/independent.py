@@ -200,11 +200,12 @@ class FrozenCheck:
 
 
 def _inner_layer(info: dict) -> str:
+    """The controller file's inner layer; words this check cannot read are refused, not taken for "none"."""
     words = str(info.get("inner", "") or "none")
     for layer in ("computed-torque", "gravity", "none"):
         if words.startswith(f"inner layer: {layer}") or words == layer:
             return layer
-    return "none"
+    raise ArgumentError(f"the controller file's inner layer {words[:60]!r} is not one this check knows")
 
 
 def _task_box(info: dict, joints):
