@@ -1,0 +1,421 @@
+"""Proved ranges of the factors of a computed-torque inner loop over a task box, for arms of up to 7 joints.
+
+A computed-torque inner layer computes with a model ``(M_hat, h_hat)``; a
+true robot differs from it by scalars ``theta_k`` in directions ``Delta_k``
+of the inertial parameters (the link factor, the payload mass:
+:mod:`polyrob.plant.models.inner_factors`), and the ``inner-gain`` model
+needs the range of each factor ``K_k = [J_k G_k]`` (``m x 3m``) over the
+task box ``(q, qdot, qddot)``.  Torques are linear in the inertial
+parameters, so with ``R_k(q, qdot, a)`` the inverse dynamics of the
+parameters ``Delta_k`` (gravity included), ``Y = M_hat^-1`` and
+``psi_k = Y R_k``::
+
+    G_k = -Y M_k,    J_k[:, q_p] = Y (dM_hat/dq_p psi_k - dR_k/dq_p),    J_k[:, qdot_l] = -Y dR_k/dqdot_l
+
+exactly (the factor does not depend on ``theta_k``; ``tests/test_certified_arms.py``
+checks it against :class:`~polyrob.plant.models.inner_factors.FactorLoop` at points).
+
+How a box is enclosed (:meth:`FactorProblem.enclose`):
+
+* ``M_hat``, ``M_k`` (the torques of unit accelerations) and ``R_k`` at
+  rest in acceleration are computed by Newton-Euler
+  (:mod:`polyrob.bounds.certified.jet_rnea`) in ball arithmetic with
+  derivatives: at the box's centre in ``q`` (value and first derivatives,
+  ``qdot`` over its whole box) and over the box (values, first and second
+  derivatives); ``Y`` by a preconditioned ball inverse;
+* mean-value form in ``q``: ``K(q, qdot, a)`` lies in
+  ``K(q_c, Qdot, a) + sum_p dK/dq_p(Q, Qdot, a) [q_p - q_c,p]``, so the
+  over-estimation is second order in the box's size;
+* ``K`` is affine in the acceleration ``a``: every ``K`` is a convex
+  combination of its values at the vertices of the ``a``-box, which are
+  enumerated (``2^m``), never split;
+* ``qdot`` enters as a ball (``J`` is quadratic in it, with small
+  coefficients at an arm's task speeds) and is split like ``q``.
+
+Branch and bound: an entry's side is closed on a box when its bound is
+within ``rel_tol`` of the entry's width of the *inner* value (one attained
+at a point: the sampled search's, or this module's pilot); a box with an
+open side is split along the coordinate that carries most of the
+over-estimation.  The result is the union of the leaves' enclosures:
+rigorous whatever the inner values are (they only steer), and the work is
+counted in boxes (:data:`MAX_BOXES`), never in seconds.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, lower, upper
+from polyrob.bounds.certified.jet_rnea import PARAMETER_RTOL, Chain, rnea
+from polyrob.errors import CertificationError
+
+__all__ = ["FactorProblem", "FactorEnclosure", "prove_factor_ranges", "MAX_BOXES", "BATCH"]
+
+#: Boxes the branch and bound evaluates before giving up (a count of work, not of seconds).
+MAX_BOXES = 20_000
+#: Boxes evaluated together (vectorised).
+BATCH = 16
+
+
+def _radius(lo, hi):
+    """``(centre, radius)`` with ``[lo, hi]`` inside ``centre ± radius`` (radius rounded up)."""
+    c = 0.5 * (lo + hi)
+    r = np.maximum(hi - c, c - lo)
+    return c, np.where(r > 0, np.nextafter(r, np.inf) * (1 + 4e-16), 0.0)
+
+
+@dataclass(frozen=True, eq=False)
+class FactorEnclosure:
+    """Proved entrywise ranges ``lower <= K_k(x) <= upper`` of each factor over the box.
+
+    Attributes
+    ----------
+    names : tuple of str
+        The factors (``links``, ``payload``).
+    lower, upper : ndarray (F, m, 3m)
+        Columns: ``q``, ``qdot``, then ``a`` (the factor's ``G``).
+    boxes : int
+        Boxes evaluated.
+    seconds : float
+    """
+
+    names: tuple
+    lower: np.ndarray
+    upper: np.ndarray
+    boxes: int
+    seconds: float
+
+
+@dataclass(frozen=True, eq=False)
+class FactorProblem:
+    """The chain, the model's inertial parameters and each factor's direction ``Delta_k`` (balls)."""
+
+    chain: Chain
+    names: tuple
+    params: np.ndarray  # (1 + F, m, 13): the model, then each Delta_k
+    params_rad: np.ndarray
+
+    @property
+    def m(self) -> int:
+        return self.chain.m
+
+    @classmethod
+    def from_loops(cls, loops) -> FactorProblem:
+        """From ``[(name, FactorLoop), ...]`` (:func:`polyrob.plant.models.inner_factors.factor_parameters`).
+
+        ``Delta_k = (true - model) / theta_k`` in the parameters, with a
+        radius covering the float arithmetic of the difference.
+        """
+        if not loops:
+            raise CertificationError("no factor to prove: the inner loop has no model error or payload range")
+        model = loops[0][1].model_robot.model
+        chain = Chain.from_model(model)
+        hat = Chain.parameters(model)
+        params, rads = [hat], [PARAMETER_RTOL * np.abs(hat)]
+        for _, loop in loops:
+            if loop.inner != "computed-torque":
+                raise CertificationError("proved factor ranges need a computed-torque inner layer")
+            armature = np.asarray(getattr(loop.true_robot.model, "armature", np.zeros(chain.m)), float)
+            hat_armature = np.asarray(getattr(model, "armature", np.zeros(chain.m)), float)
+            if np.any(armature != hat_armature) or np.any(np.asarray(loop.true_robot.damping) != np.asarray(loop.model_robot.damping)):
+                raise CertificationError("proved factor ranges need the model's rotor inertia and damping on the true robot")
+            true = Chain.parameters(loop.true_robot.model)
+            theta = float(loop.theta)
+            params.append((true - hat) / theta)
+            rads.append(PARAMETER_RTOL * (np.abs(true) + np.abs(hat)) / abs(theta) + TINY)
+        return cls(chain, tuple(name for name, _ in loops), np.array(params), np.array(rads))
+
+    # ------------------------------------------------------------------ one batch of boxes
+    def _dynamics(self, qc, qr, vc, vr, order):
+        """``(M, h)``: jets (``order``) of the mass matrices ``(B, P, m, m)`` (in ``q``) and torques ``(B, P, m)`` (in ``q, qdot``)."""
+        m = self.m
+        s, c = ball_sin_cos(qc, qr, order)
+        M = rnea(self.chain, s, c, None, np.eye(m), False, self.params, self.params_rad)  # (B, S=j, P, i)
+        M = M.transpose(0, 2, 3, 1)  # (B, P, i, j)
+        s2, c2 = ball_sin_cos(np.concatenate([qc, vc], -1), np.concatenate([qr, np.zeros_like(vr)], -1), order)
+        qd = BallJet.variables(np.concatenate([qc, vc], -1), np.concatenate([qr, vr], -1), order)[:, m:]
+        h = rnea(self.chain, s2[:, :m], c2[:, :m], qd, None, True, self.params, self.params_rad)[:, 0]  # (B, P, m)
+        return M, h
+
+    @staticmethod
+    def _split_jet(J, index, nvars):
+        """Value (``index=None``) or derivative ``index`` of a jet, one order lower, in ``nvars`` variables (zero-padded)."""
+        if J.order == 1:
+            return J.value() if index is None else J.derivative_value(index)
+        low = J.lowered(index, min(nvars, J.n))
+        if low.n < nvars:  # M does not depend on qdot
+            pad = np.zeros((nvars - low.n, *low.shape))
+            low = BallJet(np.concatenate([low.mid, pad]), np.concatenate([low.rad, pad]), nvars, 1)
+        return low
+
+    def _inverse(self, M, Y_centre, radii):
+        """``Y = M_hat^-1`` at one order below ``M``, and the boxes where it is not provably enclosed.
+
+        At a point: a preconditioned ball inverse.  Over a box (``Y_centre``
+        the inverse at its centre, ``radii`` its half-widths): the set
+        ``Yhat`` is grown until ``T(Yhat) = Y_c + sum_p (-Yhat dM/dq_p Yhat) [-r_p, r_p]``
+        lies inside it; then ``Y(q)`` stays in ``T(Yhat)`` on every segment from the
+        centre (mean-value theorem; ``Y`` cannot leave ``Yhat`` without crossing
+        its boundary), which is far tighter than inverting the box's ``M``.
+        """
+        m = self.m
+        Mv = self._split_jet(M, None, m)
+        if Mv.order == 0:
+            Ym, Yr = ball_inverse(Mv.mid[0, :, 0], Mv.rad[0, :, 0])
+            singular = ~np.isfinite(Yr).all((-1, -2))
+            return BallJet(Ym[None], np.where(singular[:, None, None], 0.0, Yr)[None], m, 0), singular
+        dM = [BallJet(Mv.mid[1 + p : 2 + p, :, 0], Mv.rad[1 + p : 2 + p, :, 0], m, 0) for p in range(m)]
+        Yc_mid, Yc_rad = Y_centre
+        r = radii[:, :m]
+
+        def T(Yhat):
+            rad = Yc_rad.copy()
+            for p in range(m):
+                prod = Yhat @ (dM[p] @ Yhat)
+                rad = rad + r[:, p, None, None] * (np.abs(prod.mid[0]) + prod.rad[0])
+            return _inflate_rad(rad, np.abs(Yc_mid))
+
+        absY = np.abs(Yc_mid) + Yc_rad
+        guess = Yc_rad + sum(r[:, p, None, None] * (absY @ (np.abs(dM[p].mid[0]) + dM[p].rad[0]) @ absY) for p in range(m))
+        rad = 2.0 * guess + 1e-12 * absY
+        proved = np.zeros(len(r), bool)
+        final = np.full_like(rad, np.inf)
+        for _ in range(12):
+            new = T(BallJet(Yc_mid[None], rad[None], m, 0))
+            inside = np.all(new < rad, axis=(-1, -2)) & np.all(np.isfinite(new), axis=(-1, -2))
+            final = np.where((inside & ~proved)[:, None, None], new, final)
+            proved |= inside
+            if proved.all():
+                break
+            rad = np.where(proved[:, None, None], rad, 1.5 * np.maximum(new, rad))
+        singular = ~proved
+        final = np.where(singular[:, None, None], 0.0, final)
+        Y0 = BallJet(Yc_mid[None], final[None], m, 0)
+        grads = [-(Y0 @ (dM[p] @ Y0)) for p in range(m)]
+        zeros = np.zeros((m, *Y0.shape))  # Y does not depend on qdot
+        mid = np.concatenate([Y0.mid] + [g.mid for g in grads] + [zeros])
+        radius = np.concatenate([Y0.rad] + [g.rad for g in grads] + [zeros])
+        return BallJet(mid, radius, 2 * m, 1), singular
+
+    def _factors(self, M, h, Y_centre=None, radii=None):
+        """``(K0, Ka, singular)``: the factor at ``a = 0`` ``(B, F, m, 3m)`` and its ``a``-coefficients ``(B, F, m, m_p, m_j)``, one order below ``M``, ``h``, in ``(q, qdot)``."""
+        m = self.m
+        nv = 2 * m
+        Y, singular = self._inverse(M, Y_centre, radii)
+        Mv, hv = self._split_jet(M, None, nv), self._split_jet(h, None, nv)
+        dM = BallJet.stack([self._split_jet(M, p, nv) for p in range(m)], 1)  # (B, p, P, i, j)
+        dhq = BallJet.stack([self._split_jet(h, p, nv) for p in range(m)], 1)  # (B, p, P, i)
+        dhv = BallJet.stack([self._split_jet(h, m + p, nv) for p in range(m)], 1)  # (B, l, P, i)
+        Yb = Y[:, None]  # (B, 1, i, j) against the factors' axis
+        Md, hd = Mv[:, 1:], hv[:, 1:]  # (B, F, i, j), (B, F, i)
+        dMh, dMd = dM[:, :, 0], dM[:, :, 1:]  # (B, p, i, j), (B, p, F, i, j)
+        psi_a = Yb @ Md  # (B, F, i, j)
+        w0 = Yb.form("matvec", hd)  # (B, F, i)
+        # J_q at a = 0: Y (dM_hat/dq_p w0 - dR/dq_p)
+        inner0 = dMh[:, :, None].form("matvec", w0[:, None]) - dhq[:, :, 1:]  # (B, p, F, i)
+        Jq0 = Yb[:, None].form("matvec", inner0)  # (B, p, F, i)
+        Jqd = -(Yb[:, None].form("matvec", dhv[:, :, 1:]))  # (B, l, F, i)
+        G = -psi_a  # (B, F, i, j)
+        # the a-coefficients of J_q: Y (dM_hat/dq_p Psi - dM_k/dq_p)
+        Ja = Yb[:, None] @ (dMh[:, :, None] @ psi_a[:, None] - dMd)  # (B, p, F, i, j)
+        K0 = BallJet.stack([Jq0.transpose(0, 2, 3, 1), Jqd.transpose(0, 2, 3, 1), G], 3)  # (B, F, i, 3, m)
+        n0 = K0.mid.shape
+        K0 = BallJet(K0.mid.reshape(*n0[:4], 3 * m), K0.rad.reshape(*n0[:4], 3 * m), K0.n, K0.order)
+        return K0, Ja.transpose(0, 2, 3, 1, 4), singular  # (B, F, i, p, j)
+
+    def enclose(self, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi):
+        """Proved bounds of every factor entry on each box: ``(lower, upper, contribution)``.
+
+        ``q_lo`` ... ``qd_hi``: ``(B, m)``; ``a_lo``, ``a_hi``: ``(m,)`` (the
+        acceleration box is never split).  ``lower``, ``upper``: ``(B, F, m, 3m)``
+        (``inf`` where ``M_hat`` is not provably invertible on the box);
+        ``contribution``: ``(B, F, m, 3m, 2m)``, the over-estimation bound
+        each coordinate (``q``, then ``qdot``) adds to each entry.
+        """
+        m = self.m
+        qc, qr = _radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
+        vc, vr = _radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
+        zero = np.zeros_like(qr)
+        Mc, hc = self._dynamics(qc, zero, vc, zero, 1)
+        K0c, Kac, singular_c = self._factors(Mc, hc)
+        Yc, _ = self._inverse(Mc, None, None)
+        radii = np.concatenate([qr, vr], -1)  # (B, 2m)
+        K0b, Kab, singular_b = self._factors(*self._dynamics(qc, qr, vc, vr, 2), (Yc.mid[0], Yc.rad[0]), radii)
+        unbounded = singular_c | singular_b
+        # a-vertices: the factor is affine in a, so its extremes over the a-box are at them
+        a_lo, a_hi = np.asarray(a_lo, float), np.asarray(a_hi, float)
+        free = np.flatnonzero(a_hi > a_lo)
+        V = np.tile(a_lo, (2 ** len(free), 1))
+        for bit, j in enumerate(free):
+            V[(np.arange(len(V)) >> bit) & 1 == 1, j] = a_hi[j]
+        Va = np.abs(V)
+        k = 2 * m + 2
+        # value at the centre (q_c, qdot_c), a at each vertex: K0 + Ka V (columns q only)
+        vm = K0c.mid[0][..., None].repeat(len(V), -1)  # (B, F, i, 3m, nv)
+        vrad = K0c.rad[0][..., None].repeat(len(V), -1)
+        vmag = np.abs(vm).copy()
+        am, ar = Kac.mid[0], Kac.rad[0]  # (B, F, i, p, j)
+        vm[:, :, :, :m] += am @ V.T
+        vrad[:, :, :, :m] += ar @ Va.T
+        vmag[:, :, :, :m] += np.abs(am) @ Va.T
+        vrad = (vrad + GAMMA * k * (vmag + np.abs(vm))) * (1 + GAMMA) + TINY
+        # the gradient in (q, qdot) over the box, at each vertex: sup |dK/dx_p|
+        gm = K0b.mid[1:][..., None].repeat(len(V), -1)  # (2m, B, F, i, 3m, nv)
+        gr = K0b.rad[1:][..., None].repeat(len(V), -1)
+        gmag = np.abs(gm).copy()
+        bm, br = np.moveaxis(Kab.mid[1:], 0, -2), np.moveaxis(Kab.rad[1:], 0, -2)  # (B, F, i, p, 2m, j)
+        gm[:, :, :, :, :m] += np.moveaxis(bm @ V.T, -2, 0)
+        gr[:, :, :, :, :m] += np.moveaxis(br @ Va.T, -2, 0)
+        gmag[:, :, :, :, :m] += np.moveaxis(np.abs(bm) @ Va.T, -2, 0)
+        gabs = np.abs(gm) + (gr + GAMMA * k * (gmag + np.abs(gm))) * (1 + GAMMA) + TINY
+        spread = np.einsum("pbfiev,bp->bfiev", gabs, radii)
+        spread = spread * (1 + 8 * m * GAMMA) + TINY
+        hi = upper(vm, vrad + spread).max(-1)
+        lo = lower(vm, vrad + spread).min(-1)
+        hi[unbounded], lo[unbounded] = np.inf, -np.inf
+        contribution = (gabs.max(-1) * radii.T[:, :, None, None, None]).transpose(1, 2, 3, 4, 0)  # (B, F, i, e, 2m)
+        return lo, hi, contribution
+
+
+def _inflate_rad(rad, mag):
+    return (rad + GAMMA * mag) * (1.0 + GAMMA) + TINY
+
+
+def _vertices_pilot(problem, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, n, rng):
+    """Attained (float) values of the factors at ``n`` points with ``qdot`` and ``a`` at vertices: ``(F, m, 3m)`` min and max."""
+    m = problem.m
+    lo = hi = None
+    for start in range(0, n, BATCH * 4):
+        k = min(BATCH * 4, n - start)
+        q = rng.uniform(q_lo, q_hi, (k, m))
+        v = np.where(rng.random((k, m)) < 0.5, qd_lo, qd_hi)
+        a = np.where(rng.random((k, m)) < 0.5, a_lo, a_hi)
+        K = problem.values(q, v, a)
+        lo = K.min(0) if lo is None else np.minimum(lo, K.min(0))
+        hi = K.max(0) if hi is None else np.maximum(hi, K.max(0))
+    return lo, hi
+
+
+def _values(self, q, qd, a):
+    """Float values of every factor at points ``(n, m)``: ``(n, F, m, 3m)`` (midpoints of thin enclosures)."""
+    m = self.m
+    zero = np.zeros_like(q)
+    K0, Ka, _ = self._factors(*self._dynamics(q, zero, qd, zero, 1))
+    K = K0.mid[0].copy()
+    K[..., :m] += np.einsum("bfipj,bj->bfip", Ka.mid[0], a)
+    return K
+
+
+FactorProblem.values = _values
+
+
+def prove_factor_ranges(
+    loops,
+    domain,
+    *,
+    inner=None,
+    rel_tol: float = 0.02,
+    max_boxes: int = MAX_BOXES,
+    time_limit: float | None = None,
+    progress=None,
+    pilot: int = 256,
+    seed: int = 0,
+) -> FactorEnclosure:
+    """Proved ranges of the factors of ``loops`` over a task ``domain`` (a branch and bound on its ``(q, qdot)`` box).
+
+    Parameters
+    ----------
+    loops : list of (str, FactorLoop)
+        :func:`polyrob.plant.models.inner_factors.factor_parameters`' loops, names first.
+    domain : TaskDomain
+        ``q_lower`` ... ``qddot_upper``.
+    inner : (lower, upper) arrays (F, m, 3m), optional
+        Attained values (the sampled search's) that steer the refinement;
+        by default a pilot of ``pilot`` points.  They never enter the bounds.
+    rel_tol : float
+        A side of an entry is closed on a box when its bound is within
+        ``rel_tol`` of the entry's (inner) width of the inner value.
+    max_boxes : int
+        Give up (:class:`~polyrob.errors.CertificationError`) after this many boxes.
+    time_limit : float, optional
+        A wall-clock safety net the caller sets (none by default).
+    progress : callable, optional
+        ``progress(fraction, boxes, eta_seconds)``: the whole job's fraction
+        of open volume closed.
+    """
+    t0 = time.perf_counter()
+    problem = FactorProblem.from_loops(loops)
+    m = problem.m
+    q_lo, q_hi = np.asarray(domain.q_lower, float), np.asarray(domain.q_upper, float)
+    v_lo, v_hi = np.asarray(domain.qdot_lower, float), np.asarray(domain.qdot_upper, float)
+    a_lo, a_hi = np.asarray(domain.qddot_lower, float), np.asarray(domain.qddot_upper, float)
+    rng = np.random.default_rng(seed)
+    p_lo, p_hi = _vertices_pilot(problem, q_lo, q_hi, v_lo, v_hi, a_lo, a_hi, pilot, rng)
+    if inner is not None:
+        p_lo, p_hi = np.minimum(p_lo, inner[0]), np.maximum(p_hi, inner[1])
+    width = p_hi - p_lo
+    scale = np.maximum(np.abs(p_lo), np.abs(p_hi))
+    tol = rel_tol * width + 1e-9 * np.maximum(scale, 1e-9)
+    F = len(problem.names)
+    out_lo, out_hi = np.full((F, m, 3 * m), np.inf), np.full((F, m, 3 * m), -np.inf)
+    root_q, root_v = np.where(q_hi > q_lo, q_hi - q_lo, 1.0), np.where(v_hi > v_lo, v_hi - v_lo, 1.0)
+    # boxes: (q_lo, q_hi, qd_lo, qd_hi, open sides (F, m, 3m, 2), volume share)
+    stack = [(q_lo, q_hi, v_lo, v_hi, np.ones((F, m, 3 * m, 2), bool), 1.0)]
+    total_sides = F * m * 3 * m * 2
+    closed_share, boxes = 0.0, 0
+    while stack:
+        if boxes >= max_boxes or (time_limit is not None and time.perf_counter() - t0 > time_limit):
+            what = (
+                f"the limit of {max_boxes} boxes reached"
+                if boxes >= max_boxes
+                else f"stopped by the time limit of {time_limit:g} s you set"
+            )
+            raise CertificationError(
+                f"proved factor ranges: {what} with {len(stack)} boxes still open "
+                f"({100 * closed_share:.1f} % of the work done); raise the tolerance (--rel-tol) or shrink the task"
+            )
+        batch, stack = stack[-BATCH:], stack[:-BATCH]
+        boxes += len(batch)
+        ql, qh, vl, vh = (np.array([b[k] for b in batch]) for k in range(4))
+        lo, hi, contribution = problem.enclose(ql, qh, vl, vh, a_lo, a_hi)
+        for b, (bql, bqh, bvl, bvh, open_, share) in enumerate(batch):
+            done_hi = hi[b] <= p_hi + tol
+            done_lo = lo[b] >= p_lo - tol
+            q_can = (bqh - bql) > 1e-6 * root_q
+            v_can = (bvh - bvl) > 1e-3 * root_v
+            still = open_ & ~np.stack([done_lo, done_hi], -1)
+            if not (q_can.any() or v_can.any()):
+                still[:] = False  # cannot refine further: keep this box's enclosure
+            closing = open_ & ~still
+            out_lo = np.where(closing[..., 0], np.minimum(out_lo, lo[b]), out_lo)
+            out_hi = np.where(closing[..., 1], np.maximum(out_hi, hi[b]), out_hi)
+            if not still.any():
+                continue
+            # split where the open entries' over-estimation comes from (relative to their tolerance)
+            weight = still.any(-1) / tol
+            scores = np.einsum("fie,fiep->p", weight, contribution[b]) * np.concatenate([q_can, v_can])
+            p = int(np.argmax(scores))
+            if not np.isfinite(scores[p]) or scores[p] <= 0:
+                p = int(np.argmax(np.concatenate([(bqh - bql) / root_q * q_can, (bvh - bvl) / root_v * v_can])))
+            for half in (0, 1):
+                nql, nqh, nvl, nvh = bql.copy(), bqh.copy(), bvl.copy(), bvh.copy()
+                if p < m:
+                    mid = 0.5 * (bql[p] + bqh[p])
+                    (nqh if half == 0 else nql)[p] = mid
+                else:
+                    mid = 0.5 * (bvl[p - m] + bvh[p - m])
+                    (nvh if half == 0 else nvl)[p - m] = mid
+                stack.append((nql, nqh, nvl, nvh, still, 0.5 * share))
+        # the whole job's fraction: the open work left is each queued box's volume share times its open sides
+        closed_share = 1.0 - sum(b[5] * b[4].sum() for b in stack) / total_sides
+        if progress is not None:
+            done = closed_share
+            elapsed = time.perf_counter() - t0
+            eta = elapsed * (1 - done) / done if done > 0 else float("nan")
+            progress(done, boxes, eta)
+    if not (np.all(np.isfinite(out_lo)) and np.all(np.isfinite(out_hi))):
+        raise CertificationError("proved factor ranges: some entry could not be bounded")
+    return FactorEnclosure(problem.names, out_lo, out_hi, boxes, time.perf_counter() - t0)
