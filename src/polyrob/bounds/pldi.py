@@ -151,7 +151,9 @@ def bound_pldi(robot, domain: Domain | None = None, *, options: BoundOptions | N
     if tuple(domain.joint_names) != tuple(robot.joint_names):
         raise BoundsError(f"the domain's joints {domain.joint_names} are not the robot's {robot.joint_names}")
     progress = sys.stderr.isatty() if opts.progress is None else opts.progress
-    proved = _certified(robot, domain, opts, progress) if opts.certify else None  # first: it gives up at once
+    factors = _proved_factors(robot, domain, opts, progress) if opts.certify and _factor_task(robot, domain) else None
+    # first: it gives up at once
+    proved = _certified(robot, domain, opts, progress) if opts.certify and factors is None else None
     problem = search.Problem(robot, domain)
     rng = np.random.default_rng(opts.seed)
     cloud, index, varying = _varying_entries(problem, proved, opts.seed)
@@ -171,7 +173,13 @@ def bound_pldi(robot, domain: Domain | None = None, *, options: BoundOptions | N
     refinement = np.where(sampled_width > 0, (upper - lower) / np.where(sampled_width > 0, sampled_width, 1) - 1.0, 0.0)
     polytope = build_polytope(directions, values, 2 * k, cloud, scale, axes, rng, describe=opts.describe_polytope)
     notes = [] if fallback is None else [fallback]
-    if proved is None:
+    if factors is not None:
+        matrices, cert_info = _interval_matrices(robot, domain, index, lower, upper, opts.seed), factors
+        notes.append(
+            "the factor ranges of the inner loop are proved by interval arithmetic over the task box "
+            f"({factors['boxes']} boxes); the A, B intervals themselves are sampled"
+        )
+    elif proved is None:
         matrices, cert_info = _interval_matrices(robot, domain, index, lower, upper, opts.seed), None
     else:
         matrices, cert_info = _proved_matrices(problem, proved, index, lower, upper), proved[4]
@@ -295,6 +303,60 @@ def coverage_fraction(pldi: PLDI, robot, n: int, *, seed=None) -> float:
         if len(pldi.entries):
             inside &= pldi.polytope.contains(pldi.entry_values(A, B))
     return float(inside.mean())
+
+
+def _factor_task(robot, domain) -> bool:
+    """Whether the proof is of an inner loop's factor ranges: a computed-torque loop over a task domain."""
+    return getattr(domain, "kind", "box") != "box" and getattr(robot, "inner", None) == "computed-torque"
+
+
+def _proved_factors(robot, domain, opts: BoundOptions, progress: bool) -> dict:
+    """The proved ranges of the inner loop's factors (:mod:`polyrob.bounds.certified.factors`), as ``info["certify"]``.
+
+    Progress is the whole proof's fraction of work done (the open volume
+    left, weighted by the entries still open), with tqdm's ETA.
+    """
+    from polyrob.bounds.certified import factors as factor_module
+
+    options = dict(opts.certify_options or {})
+    loops = factor_module.factor_directions(robot)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(
+            total=1000,
+            desc="prove factor ranges",
+            unit="‰",
+            bar_format="{l_bar}{bar}| {n_fmt}‰ [{elapsed}<{remaining}]",
+        )
+
+    def report(done, boxes, eta):
+        if bar is not None:
+            bar.update(max(0, int(1000 * done) - bar.n))
+            bar.set_postfix(boxes=boxes, refresh=False)
+
+    try:
+        enc = factor_module.prove_factor_ranges(
+            loops,
+            domain,
+            rel_tol=options.get("rel_tol", factor_module.REL_TOL),
+            max_boxes=options.get("max_boxes", factor_module.MAX_BOXES),
+            time_limit=options.get("time_limit"),
+            progress=report,
+            seed=opts.seed,
+        )
+    finally:
+        if bar is not None:
+            bar.close()
+    return {
+        "factors": {
+            name: {"lower": enc.lower[k].tolist(), "upper": enc.upper[k].tolist()} for k, name in enumerate(enc.names)
+        },
+        "boxes": int(enc.boxes),
+        "seconds": round(float(enc.seconds), 3),
+        "covers": "the inner loop's factor ranges over the task box, proved; the A, B intervals sampled",
+    }
 
 
 def _certified(robot, domain: Domain, opts: BoundOptions, progress: bool):

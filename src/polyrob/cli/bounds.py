@@ -41,12 +41,18 @@ def cmd_bounds(args) -> int:
     if args.output:  # before any work: a refused path leaves nothing behind
         for path in (args.output, *pair_paths(args.output)):
             check_output_path(path, "-o")
-    if not args.certify and (args.time_limit is not None or args.rel_tol is not None):
-        raise ArgumentError("--time-limit and --rel-tol set the interval-arithmetic proof: use them with --certify")
+    if not args.certify and (args.time_limit is not None or args.rel_tol is not None or args.max_boxes is not None):
+        raise ArgumentError(
+            "--time-limit, --rel-tol and --max-boxes set the interval-arithmetic proof: use them with --certify"
+        )
     out = Output(args, stages=2 if args.models else 1)
     robot = robot_from_args(args)
     domain = domain_from_args(robot, args)
-    certify_options = {k: v for k, v in (("time_limit", args.time_limit), ("rel_tol", args.rel_tol)) if v is not None}
+    certify_options = {
+        k: v
+        for k, v in (("time_limit", args.time_limit), ("rel_tol", args.rel_tol), ("max_boxes", args.max_boxes))
+        if v is not None
+    }
     out.stage(
         f"bounds: {robot.name} ({robot.m} joints) over domain '{domain.name}'"
         + (", certified by interval arithmetic" if args.certify else "")
@@ -65,6 +71,7 @@ def cmd_bounds(args) -> int:
         )
     except CertificationError as exc:  # the library names its parameters; the user typed options
         text = str(exc).replace("time_limit", "--time-limit").replace("rel_tol", "--rel-tol")
+        text = text.replace("max_boxes", "--max-boxes")
         raise CertificationError(text) from None
     report = pldi_report(pldi, robot.joint_names)
     if args.models:
@@ -96,6 +103,13 @@ def cmd_bounds(args) -> int:
             f"local search widened the sampled intervals by at most {r['max_percent']:.3g} % "
             f"({r['entry']}); {r['verification_rounds']} verification round(s)"
         )
+    factors = (pldi.info.get("certify") or {}).get("factors")
+    if factors:
+        proof = pldi.info["certify"]
+        print(
+            f"proved by interval arithmetic over the task box: the factor ranges of {', '.join(factors)} "
+            f"({proof['boxes']} boxes, {proof['seconds']:.1f} s); the A, B intervals above are sampled"
+        )
     if report["coverage"] is not None:
         print(f"coverage: {report['coverage']:.4f} of {report['coverage_points']} fresh points")
     if report["dropped_positions"]:
@@ -120,7 +134,18 @@ def register(sub) -> None:
     p = sub.add_parser("bounds", help="bound the Jacobians over the domain: intervals and a polytope (PLDI)")
     add_robot_arguments(p)
     add_domain_arguments(p)
-    p.add_argument("--certify", action="store_true", help="prove the intervals by interval arithmetic (up to 3 joints)")
+    p.add_argument(
+        "--certify",
+        action="store_true",
+        help="prove by interval arithmetic: the intervals over a torque box (up to 3 joints), or an arm's "
+        "computed-torque factor ranges over its task (up to 7 joints)",
+    )
+    p.add_argument(
+        "--max-boxes",
+        type=int_at_least(1),
+        default=None,
+        help="--certify: boxes the proof evaluates before giving up (a count of work, not seconds)",
+    )
     p.add_argument(
         "--time-limit",
         type=positive_float,

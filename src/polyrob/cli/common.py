@@ -241,9 +241,9 @@ def apply_default_task(robot, args) -> bool:
     """Fill ``args`` with the robot's default task (:mod:`polyrob.domains.default_task`) when it applies.
 
     It applies to a robot of ``MIN_JOINTS`` joints or more when no domain
-    option, no inner-layer/payload/model-error option, no ``--pldi``, no
-    ``--certify`` (interval arithmetic needs a torque box) and no
-    ``--torque-box`` is given.  Sets ``args.default_task`` to the task's
+    option, no inner-layer/payload/model-error option, no ``--pldi`` and no
+    ``--torque-box`` is given (``--certify`` proves the task's factor ranges:
+    it keeps the task).  Sets ``args.default_task`` to the task's
     words (``None`` when it does not apply) and returns whether it applied.
     """
     import logging
@@ -255,7 +255,7 @@ def apply_default_task(robot, args) -> bool:
     given = (
         domain_options_given(args)
         or inner_options_given(args)
-        or any(getattr(args, k, None) for k in ("pldi", "certify", "torque_box"))
+        or any(getattr(args, k, None) for k in ("pldi", "torque_box"))
     )
     if given or not applies_to(robot.m):
         return False

@@ -52,10 +52,22 @@ from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_invers
 from polyrob.bounds.certified.jet_rnea import PARAMETER_RTOL, Chain, rnea
 from polyrob.errors import CertificationError
 
-__all__ = ["FactorProblem", "FactorEnclosure", "prove_factor_ranges", "MAX_BOXES", "BATCH"]
+__all__ = [
+    "FactorProblem",
+    "FactorEnclosure",
+    "prove_factor_ranges",
+    "attained_range",
+    "factor_directions",
+    "MAX_BOXES",
+    "REL_TOL",
+    "BATCH",
+]
 
-#: Boxes the branch and bound evaluates before giving up (a count of work, not of seconds).
-MAX_BOXES = 20_000
+#: Boxes the branch and bound evaluates before giving up (a count of work, not of seconds): a few
+#: minutes of a loaded 2-core machine.
+MAX_BOXES = 1_000
+#: Default tolerance: a side closes within 2 % of its entry's width of the inner value.
+REL_TOL = 0.02
 #: Boxes evaluated together (vectorised).
 BATCH = 16
 
@@ -88,6 +100,11 @@ class FactorEnclosure:
     boxes: int
     seconds: float
 
+    def contains(self, K) -> np.ndarray:
+        """Whether factor values ``K`` (``(n, F, m, 3m)``) lie in the ranges: one bool per point."""
+        K = np.asarray(K, float)
+        return np.all((K >= self.lower) & (K <= self.upper), axis=(1, 2, 3))
+
 
 @dataclass(frozen=True, eq=False)
 class FactorProblem:
@@ -104,7 +121,7 @@ class FactorProblem:
 
     @classmethod
     def from_loops(cls, loops) -> FactorProblem:
-        """From ``[(name, FactorLoop), ...]`` (:func:`polyrob.plant.models.inner_factors.factor_parameters`).
+        """From ``[(name, loop), ...]``: :func:`factor_directions`, or the plant's ``FactorLoop`` objects.
 
         ``Delta_k = (true - model) / theta_k`` in the parameters, with a
         radius covering the float arithmetic of the difference.
@@ -120,13 +137,26 @@ class FactorProblem:
                 raise CertificationError("proved factor ranges need a computed-torque inner layer")
             armature = np.asarray(getattr(loop.true_robot.model, "armature", np.zeros(chain.m)), float)
             hat_armature = np.asarray(getattr(model, "armature", np.zeros(chain.m)), float)
-            if np.any(armature != hat_armature) or np.any(np.asarray(loop.true_robot.damping) != np.asarray(loop.model_robot.damping)):
-                raise CertificationError("proved factor ranges need the model's rotor inertia and damping on the true robot")
+            if np.any(armature != hat_armature) or np.any(
+                np.asarray(loop.true_robot.damping) != np.asarray(loop.model_robot.damping)
+            ):
+                raise CertificationError(
+                    "proved factor ranges need the model's rotor inertia and damping on the true robot"
+                )
             true = Chain.parameters(loop.true_robot.model)
             theta = float(loop.theta)
             params.append((true - hat) / theta)
             rads.append(PARAMETER_RTOL * (np.abs(true) + np.abs(hat)) / abs(theta) + TINY)
         return cls(chain, tuple(name for name, _ in loops), np.array(params), np.array(rads))
+
+    def values(self, q, qd, a):
+        """Float values of every factor at points ``(n, m)``: ``(n, F, m, 3m)`` (midpoints of thin enclosures)."""
+        m = self.m
+        zero = np.zeros_like(q)
+        K0, Ka, _ = self._factors(*self._dynamics(q, zero, qd, zero, 1))
+        K = K0.mid[0].copy()
+        K[..., :m] += np.einsum("bfipj,bj->bfip", Ka.mid[0], a)
+        return K
 
     # ------------------------------------------------------------------ one batch of boxes
     def _dynamics(self, qc, qr, vc, vr, order):
@@ -179,7 +209,9 @@ class FactorProblem:
             return _inflate_rad(rad, np.abs(Yc_mid))
 
         absY = np.abs(Yc_mid) + Yc_rad
-        guess = Yc_rad + sum(r[:, p, None, None] * (absY @ (np.abs(dM[p].mid[0]) + dM[p].rad[0]) @ absY) for p in range(m))
+        guess = Yc_rad + sum(
+            r[:, p, None, None] * (absY @ (np.abs(dM[p].mid[0]) + dM[p].rad[0]) @ absY) for p in range(m)
+        )
         rad = 2.0 * guess + 1e-12 * absY
         proved = np.zeros(len(r), bool)
         final = np.full_like(rad, np.inf)
@@ -235,6 +267,10 @@ class FactorProblem:
         ``contribution``: ``(B, F, m, 3m, 2m)``, the over-estimation bound
         each coordinate (``q``, then ``qdot``) adds to each entry.
         """
+        with np.errstate(over="ignore", invalid="ignore"):  # a box whose M_hat may be singular gets inf
+            return self._enclose(q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi)
+
+    def _enclose(self, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi):
         m = self.m
         qc, qr = _radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
         vc, vr = _radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
@@ -284,7 +320,48 @@ def _inflate_rad(rad, mag):
     return (rad + GAMMA * mag) * (1.0 + GAMMA) + TINY
 
 
-def _vertices_pilot(problem, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, n, rng):
+@dataclass(frozen=True, eq=False)
+class Direction:
+    """One scalar in which a true robot differs from the inner layer's model: ``theta`` and that true robot."""
+
+    inner: str
+    model_robot: object
+    true_robot: object
+    theta: float
+
+
+def factor_directions(robot) -> list[tuple[str, Direction]]:
+    """``[(name, Direction)]`` of a computed-torque inner loop (:class:`~polyrob.model.inner.InnerLoopRobot`).
+
+    The same scalars as :func:`polyrob.plant.models.inner_factors.factor_parameters`
+    (the link factor ``theta = p`` at ``s = 1 - p``; the payload mass, half
+    its range above the middle), built here so that the bounds do not
+    import the plant; ``tests/test_certified_arms.py`` checks that the two agree.
+
+    Raises
+    ------
+    CertificationError
+        A payload whose centre of mass ranges (not affine in one scalar).
+    """
+    payload = robot.payload
+    mass, com = payload.midpoint if payload is not None else (0.0, np.zeros(3))
+    if payload is not None and np.any(np.array(payload.com_upper) > np.array(payload.com_lower)):
+        raise CertificationError("proved factor ranges: a payload whose centre of mass ranges is not one scalar")
+    out = []
+    if robot.model_error:
+        p = float(robot.model_error)
+        out.append(
+            ("links", Direction(robot.inner, robot.model_robot, robot.with_true(mass, com, 1.0 - p).true_robot, p))
+        )
+    if payload is not None and payload.mass_upper > payload.mass_lower:
+        r = 0.5 * (payload.mass_upper - payload.mass_lower)
+        out.append(
+            ("payload", Direction(robot.inner, robot.model_robot, robot.with_true(mass + r, com, 1.0).true_robot, r))
+        )
+    return out
+
+
+def attained_range(problem, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, n, rng):
     """Attained (float) values of the factors at ``n`` points with ``qdot`` and ``a`` at vertices: ``(F, m, 3m)`` min and max."""
     m = problem.m
     lo = hi = None
@@ -299,25 +376,12 @@ def _vertices_pilot(problem, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, n, rng):
     return lo, hi
 
 
-def _values(self, q, qd, a):
-    """Float values of every factor at points ``(n, m)``: ``(n, F, m, 3m)`` (midpoints of thin enclosures)."""
-    m = self.m
-    zero = np.zeros_like(q)
-    K0, Ka, _ = self._factors(*self._dynamics(q, zero, qd, zero, 1))
-    K = K0.mid[0].copy()
-    K[..., :m] += np.einsum("bfipj,bj->bfip", Ka.mid[0], a)
-    return K
-
-
-FactorProblem.values = _values
-
-
 def prove_factor_ranges(
     loops,
     domain,
     *,
     inner=None,
-    rel_tol: float = 0.02,
+    rel_tol: float = REL_TOL,
     max_boxes: int = MAX_BOXES,
     time_limit: float | None = None,
     progress=None,
@@ -328,8 +392,8 @@ def prove_factor_ranges(
 
     Parameters
     ----------
-    loops : list of (str, FactorLoop)
-        :func:`polyrob.plant.models.inner_factors.factor_parameters`' loops, names first.
+    loops : list of (str, Direction or FactorLoop)
+        :func:`factor_directions` of the inner loop (names first).
     domain : TaskDomain
         ``q_lower`` ... ``qddot_upper``.
     inner : (lower, upper) arrays (F, m, 3m), optional
@@ -353,12 +417,13 @@ def prove_factor_ranges(
     v_lo, v_hi = np.asarray(domain.qdot_lower, float), np.asarray(domain.qdot_upper, float)
     a_lo, a_hi = np.asarray(domain.qddot_lower, float), np.asarray(domain.qddot_upper, float)
     rng = np.random.default_rng(seed)
-    p_lo, p_hi = _vertices_pilot(problem, q_lo, q_hi, v_lo, v_hi, a_lo, a_hi, pilot, rng)
+    p_lo, p_hi = attained_range(problem, q_lo, q_hi, v_lo, v_hi, a_lo, a_hi, pilot, rng)
     if inner is not None:
         p_lo, p_hi = np.minimum(p_lo, inner[0]), np.maximum(p_hi, inner[1])
     width = p_hi - p_lo
     scale = np.maximum(np.abs(p_lo), np.abs(p_hi))
-    tol = rel_tol * width + 1e-9 * np.maximum(scale, 1e-9)
+    # a floor far above the propagated rounding margins (about 1e-10 of a factor's largest entry)
+    tol = rel_tol * width + 1e-8 * np.maximum(scale.max(axis=(1, 2), keepdims=True), 1e-300)
     F = len(problem.names)
     out_lo, out_hi = np.full((F, m, 3 * m), np.inf), np.full((F, m, 3 * m), -np.inf)
     root_q, root_v = np.where(q_hi > q_lo, q_hi - q_lo, 1.0), np.where(v_hi > v_lo, v_hi - v_lo, 1.0)
@@ -375,7 +440,8 @@ def prove_factor_ranges(
             )
             raise CertificationError(
                 f"proved factor ranges: {what} with {len(stack)} boxes still open "
-                f"({100 * closed_share:.1f} % of the work done); raise the tolerance (--rel-tol) or shrink the task"
+                f"({100 * closed_share:.1f} % of the work done); raise the tolerance (rel_tol) or the work "
+                "limit (max_boxes), or shrink the task; or drop --certify (sampled bounds)"
             )
         batch, stack = stack[-BATCH:], stack[:-BATCH]
         boxes += len(batch)

@@ -99,15 +99,21 @@ class Chain:
         rad = [1e-15 * (np.abs(Rp) @ np.abs(P0)) for P0 in (np.outer(k, k), np.eye(3) - np.outer(k, k), _skew(k))]
         c4, s4 = cos.expand(-1).expand(-1), sin.expand(-1).expand(-1)
         out = c4.const_form("mul", parts[1], rad[1]) + s4.const_form("mul", parts[2], rad[2])
-        constant = BallJet.constant(np.broadcast_to(parts[0], out.shape), np.broadcast_to(rad[0], out.shape), out.n, out.order)
+        constant = BallJet.constant(
+            np.broadcast_to(parts[0], out.shape), np.broadcast_to(rad[0], out.shape), out.n, out.order
+        )
         return out + constant
 
 
 def _split(params: np.ndarray, rad: np.ndarray):
     """``(mass, h, I_o)`` balls of a parameter array ``(P, m, 13)``."""
-    return (params[..., 0], rad[..., 0]), (params[..., 1:4], rad[..., 1:4]), (
-        params[..., 4:].reshape(*params.shape[:-1], 3, 3),
-        rad[..., 4:].reshape(*rad.shape[:-1], 3, 3),
+    return (
+        (params[..., 0], rad[..., 0]),
+        (params[..., 1:4], rad[..., 1:4]),
+        (
+            params[..., 4:].reshape(*params.shape[:-1], 3, 3),
+            rad[..., 4:].reshape(*rad.shape[:-1], 3, 3),
+        ),
     )
 
 
@@ -134,7 +140,6 @@ def rnea(chain: Chain, sin: BallJet, cos: BallJet, qd, acc, gravity: bool, param
     prad = np.zeros_like(params) if params_rad is None else np.asarray(params_rad, float)
     (mass, mass_r), (h, h_r), (Io, Io_r) = _split(params, prad)
     B = sin.shape[0]
-    S = 1 if acc is None else len(acc)
 
     def zero(*shape):
         return BallJet.constant(np.zeros(shape), 0.0, n, order)

@@ -1,0 +1,143 @@
+"""Proved factor ranges of an arm's computed-torque loop (bounds/certified/factors.py and its ball arithmetic).
+
+Small boxes of ur5's default task keep every test within seconds; the full
+task is the benchmark's (benchmarks/certified_arms.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from fractions import Fraction
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from polyrob import load_robot
+from polyrob.bounds.certified.ball_jets import BallJet, ball_inverse, ball_sin_cos, lower, upper
+from polyrob.bounds.certified.factors import FactorProblem, factor_directions, prove_factor_ranges
+from polyrob.bounds.certified.jet_rnea import Chain, rnea
+from polyrob.domains.default_task import default_task_domain, default_task_robot
+from polyrob.errors import CertificationError
+from polyrob.plant.models.inner_factors import factor_parameters
+
+
+@pytest.fixture(scope="module")
+def ur5():
+    robot = load_robot("ur5")
+    loops = [(name, loop) for name, _, loop in factor_parameters(default_task_robot(robot))]
+    return robot, loops, FactorProblem.from_loops(loops), default_task_domain(robot)
+
+
+def _reference(loops, q, qd, a):
+    """The factors by Pinocchio: FactorLoop's Jacobians at (q, qd, v(a)), ``(n, F, m, 3m)``."""
+    m = q.shape[1]
+    out = []
+    for _, loop in loops:
+        A, B = loop.jacobians_batch(q, qd, loop.inverse_dynamics(q, qd, a))
+        out.append(np.concatenate([A[:, m:], B[:, m:]], axis=2))
+    return np.stack(out, axis=1)
+
+
+def _small_box(domain, q_radius, qd_radius, a_radius):
+    pose = 0.5 * (domain.q_lower + domain.q_upper)
+    return replace(
+        domain,
+        q_lower=pose - q_radius,
+        q_upper=pose + q_radius,
+        qdot_lower=np.full(len(pose), -qd_radius),
+        qdot_upper=np.full(len(pose), qd_radius),
+        qddot_lower=np.full(len(pose), -a_radius),
+        qddot_upper=np.full(len(pose), a_radius),
+    )
+
+
+def _points(domain, n, seed):
+    rng = np.random.default_rng(seed)
+    return tuple(rng.uniform(lo, hi, (n, len(lo))) for lo, hi in (
+        (domain.q_lower, domain.q_upper), (domain.qdot_lower, domain.qdot_upper),
+        (domain.qddot_lower, domain.qddot_upper)))  # fmt: skip
+
+
+def test_outward_rounding_contains_the_exact_rational_results():
+    x = BallJet.constant(np.array([0.1, 1e308, 2.0 / 3.0]), 0.0, 0, 0)
+    y = BallJet.constant(np.array([3.0, 1.0, 3.0]), 0.0, 0, 0)
+    for result, exact in ((x * y, [Fraction(0.1) * 3, Fraction(1e308), Fraction(2.0 / 3.0) * 3]),
+                          (x + y, [Fraction(0.1) + 3, Fraction(1e308) + 1, Fraction(2.0 / 3.0) + 3])):  # fmt: skip
+        lo, hi = lower(result.mid[0], result.rad[0]), upper(result.mid[0], result.rad[0])
+        for k, e in enumerate(exact):
+            assert Fraction(lo[k]) <= e <= Fraction(hi[k])
+        assert np.all(hi - lo <= 1e-13 * np.abs(result.mid[0]) + 1e-300)  # tight: a few ulps, not a sloppy margin
+    # 1/3 is no float: the ball inverse of [[3]] must hold it, and [[2, 1], [1, 1]]^-1 = [[1, -1], [-1, 2]]
+    Ym, Yr = ball_inverse(np.array([[[3.0]], [[2.0]]])[:1], np.zeros((1, 1, 1)))
+    assert Fraction(lower(Ym, Yr)[0, 0, 0]) <= Fraction(1, 3) <= Fraction(upper(Ym, Yr)[0, 0, 0])
+    Ym, Yr = ball_inverse(np.array([[[2.0, 1.0], [1.0, 1.0]]]), np.zeros((1, 2, 2)))
+    assert np.all(lower(Ym, Yr) <= [[1, -1], [-1, 2]]) and np.all(upper(Ym, Yr) >= [[1, -1], [-1, 2]])
+    # sin over a ball holds sin at its ends and its middle; cos(0.3) within its radius of libm's
+    s, c = ball_sin_cos(np.array([[0.3]]), np.array([[0.2]]), 0)
+    for t in (0.1, 0.3, 0.5):
+        assert lower(s.mid[0], s.rad[0])[0, 0] <= np.sin(t) <= upper(s.mid[0], s.rad[0])[0, 0]
+        assert lower(c.mid[0], c.rad[0])[0, 0] <= np.cos(t) <= upper(c.mid[0], c.rad[0])[0, 0]
+
+
+def test_newton_euler_in_balls_agrees_with_pinocchio_at_a_point(ur5):
+    robot, _, _, _ = ur5
+    model, data = robot.model, robot.model.createData()
+    rng = np.random.default_rng(3)
+    q, v, a = rng.normal(size=6), rng.normal(size=6), rng.normal(size=6)
+    x = np.concatenate([q, v])[None]
+    s, c = ball_sin_cos(x, np.zeros_like(x), 1)
+    qd = BallJet.variables(x, np.zeros_like(x), 1)[:, 6:]
+    tau = rnea(Chain.from_model(model), s[:, :6], c[:, :6], qd, a[None], True, Chain.parameters(model)[None])
+    dq, dv, _ = pin.computeRNEADerivatives(model, data, q, v, a)
+    ref = pin.rnea(model, data, q, v, a)
+    assert np.abs(tau.mid[0, 0, 0, 0] - ref).max() <= 1e-12 * (1 + np.abs(ref).max())
+    assert np.all(np.abs(tau.mid[0, 0, 0, 0] - ref) <= tau.rad[0, 0, 0, 0])  # the ball holds Pinocchio's value
+    assert np.abs(tau.mid[1:7, 0, 0, 0].T - dq).max() <= 1e-12 * (1 + np.abs(dq).max())
+    assert np.abs(tau.mid[7:13, 0, 0, 0].T - dv).max() <= 1e-12 * (1 + np.abs(dv).max())
+
+
+def test_factors_at_degenerate_boxes_agree_with_pinocchio(ur5):
+    robot, loops, problem, domain = ur5
+    # the bounds' own directions (no import of the plant) are the plant's factors
+    own = FactorProblem.from_loops(factor_directions(default_task_robot(robot)))
+    assert own.names == problem.names and np.array_equal(own.params, problem.params)
+    q, qd, a = _points(domain, 3, seed=1)
+    K_ref = _reference(loops, q, qd, a)
+    scale = 1.0 + np.abs(K_ref).max()
+    assert np.abs(problem.values(q, qd, a) - K_ref).max() <= 1e-12 * scale
+    for k in range(3):  # a box of width 0: its enclosure is a few ulps of propagated margins wide
+        lo, hi, _ = problem.enclose(q[k : k + 1], q[k : k + 1], qd[k : k + 1], qd[k : k + 1], a[k], a[k])
+        # Pinocchio's floats carry their own rounding (about 1e-13 here): the enclosure holds them up to that
+        slack = 1e-12 * scale
+        assert np.all(lo[0] - slack <= K_ref[k]) and np.all(K_ref[k] <= hi[0] + slack)
+        assert (hi - lo).max() <= 1e-8 * scale
+        assert np.abs(0.5 * (hi + lo)[0] - K_ref[k]).max() <= 1e-11 * scale
+
+
+def test_random_points_of_a_small_box_lie_in_its_enclosure_and_a_shrunk_interval_is_caught(ur5):
+    _, loops, problem, domain = ur5
+    box = _small_box(domain, 2e-3, 5e-3, 0.02)
+    lo, hi, _ = problem.enclose(box.q_lower[None], box.q_upper[None], box.qdot_lower[None], box.qdot_upper[None],
+                                box.qddot_lower, box.qddot_upper)  # fmt: skip
+    q, qd, a = _points(box, 200, seed=2)
+    K = _reference(loops, q, qd, a)
+    assert np.all((K >= lo[0]) & (K <= hi[0]))
+    # the same check catches an upper bound moved below the largest value attained
+    f, i, e = np.unravel_index(np.argmax(K.max(0) - K.min(0)), K.shape[1:])
+    shrunk = hi[0].copy()
+    shrunk[f, i, e] = K[:, f, i, e].max() - 0.1 * (K[:, f, i, e].max() - K[:, f, i, e].min())
+    assert not np.all((K >= lo[0]) & (K <= shrunk))
+
+
+def test_branch_and_bound_proves_a_small_box_and_gives_up_on_counted_work(ur5):
+    _, loops, _, domain = ur5
+    box = _small_box(domain, 1e-6, 2e-6, 1e-5)  # where one box suffices (the full task is the benchmark's)
+    reports = []
+    enc = prove_factor_ranges(loops, box, rel_tol=1.0, max_boxes=20, progress=lambda *r: reports.append(r))
+    q, qd, a = _points(box, 100, seed=4)
+    assert enc.contains(_reference(loops, q, qd, a)).all()
+    assert enc.names == ("links", "payload") and enc.boxes >= 1
+    assert reports and reports[-1][0] == pytest.approx(1.0)  # the whole job's fraction ends at 1
+    with pytest.raises(CertificationError, match="limit of 1 boxes"):
+        prove_factor_ranges(loops, _small_box(domain, 0.2, 0.5, 2.0), rel_tol=1e-3, max_boxes=1)
