@@ -209,9 +209,7 @@ class FactorProblem:
             return _inflate_rad(rad, np.abs(Yc_mid))
 
         absY = np.abs(Yc_mid) + Yc_rad
-        guess = Yc_rad + sum(
-            r[:, p, None, None] * (absY @ (np.abs(dM[p].mid[0]) + dM[p].rad[0]) @ absY) for p in range(m)
-        )
+        guess = T(BallJet(Yc_mid[None], Yc_rad[None], m, 0))  # the first-order spread, with Y_c's cancellations
         rad = 2.0 * guess + 1e-12 * absY
         proved = np.zeros(len(r), bool)
         final = np.full_like(rad, np.inf)
@@ -223,6 +221,12 @@ class FactorProblem:
             if proved.all():
                 break
             rad = np.where(proved[:, None, None], rad, 1.5 * np.maximum(new, rad))
+        # T maps an enclosure of Y(Q) to one: iterating it (and intersecting) only tightens
+        for _ in range(6):
+            if not proved.any():
+                break
+            new = T(BallJet(Yc_mid[None], np.where(proved[:, None, None], final, 0.0)[None], m, 0))
+            final = np.where(proved[:, None, None], np.minimum(final, new), final)
         singular = ~proved
         final = np.where(singular[:, None, None], 0.0, final)
         Y0 = BallJet(Yc_mid[None], final[None], m, 0)
