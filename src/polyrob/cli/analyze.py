@@ -15,8 +15,9 @@ from polyrob.cli.common import (
 )
 from polyrob.cli.options import int_at_least, parse_frequencies
 from polyrob.cli.plant import add_plant_arguments, problem_from_args
+from polyrob.errors import PolyrobError
 
-__all__ = ["register", "print_analysis"]
+__all__ = ["register", "print_analysis", "jerk_bound", "check_jerk_applies"]
 
 
 def load_controller_args(text):
@@ -103,6 +104,7 @@ def cmd_analyze(args) -> int:
         check_controller_problem(info, known, source)
 
     problem = problem_from_args(robot, args, out, check=check if info or stored else None)
+    check_jerk_applies(args, problem)
     if info:
         check_controller_problem(info, problem, source)
     omega = frequency_grid(*omega_spec) if omega_spec else None
@@ -152,6 +154,36 @@ def add_moving_argument(p) -> None:
         "domain); default: computed only for small closed loops (docs/certificates.md)",
     )
     add_moving_harmonics_argument(p)
+    p.add_argument(
+        "--qdddot-max",
+        type=jerk_bound,
+        default=None,
+        metavar="JERK",
+        help="a task domain's jerk bound >= 0 (rad/s^3), e.g. 13.5 or 13.5,20: the rate of the accelerations in "
+        "the moving-robot certificate; default: the peak jerk of the task's fastest minimum-jerk move, "
+        "(27/8) qddot_max^2 / qdot_max (docs/certificates.md)",
+    )
+
+
+def jerk_bound(text: str):
+    """``--qdddot-max``: one number or one per joint, each finite and >= 0 (an argparse type: one line, exit 2)."""
+    import math
+
+    from polyrob.cli.options import number
+
+    values = []
+    for item in [s for s in str(text).split(",") if s.strip()] or [""]:
+        try:
+            v = number(item, "--qdddot-max")
+        except PolyrobError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix("--qdddot-max: ")) from None
+        if not math.isfinite(v) or v < 0:
+            raise argparse.ArgumentTypeError(f"a jerk bound must be finite and >= 0 (rad/s^3), got '{item.strip()}'")
+        values.append(v)
+    return values[0] if len(values) == 1 else values
+
+
+jerk_bound.__name__ = "jerk bound"
 
 
 def add_moving_harmonics_argument(p) -> None:
@@ -180,6 +212,20 @@ def add_moving_harmonics_argument(p) -> None:
 MOVING_CELLS_LEVEL = 0.95
 
 
+def check_jerk_applies(args, problem) -> None:
+    """Refuse ``--qdddot-max`` on a problem whose moving-robot certificate does not use a jerk bound."""
+    from polyrob.analysis.lpv.constant import applies
+    from polyrob.errors import ArgumentError
+
+    if getattr(args, "qdddot_max", None) is None:
+        return
+    if getattr(problem.domain, "kind", "") != "task" or applies(problem) is None:
+        raise ArgumentError(
+            "--qdddot-max bounds the jerk of a task domain's moving robot: give a task (--pose, --q-radius, "
+            "--qdot-max, --qddot-max) without an inner layer, or drop it"
+        )
+
+
 def moving_asked(args) -> bool | None:
     """``--moving`` / ``--no-moving`` / neither (``None``); ``--moving-harmonics`` and ``--moving-cells`` ask for it."""
     return True if getattr(args, "moving_harmonics", None) or getattr(args, "moving_cells", False) else args.moving
@@ -189,6 +235,8 @@ def moving_options(args) -> dict | None:
     """The moving-robot search's options from ``--moving-harmonics``, ``--moving-cells`` (``None``: the default)."""
     n = getattr(args, "moving_harmonics", None)
     out = {} if n is None else {"velocities": "bounded", "harmonics": int(n), "points": (9, 3)}
+    if getattr(args, "qdddot_max", None) is not None:
+        out["jerk"] = args.qdddot_max  # a task domain's (polyrob.analysis.lpv.task); refused on another domain
     if getattr(args, "moving_cells", False):
         # cells need an X with room between the points: its margin maximised at a level, q2 every pi/8 (the
         # half box of an even loop holds as many points as the whole one at (9, 3)); docs/certificates.md

@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
-from polyrob.cli.analyze import add_moving_argument, moving_asked, moving_options, print_analysis
+from polyrob.cli.analyze import (
+    add_moving_argument,
+    check_jerk_applies,
+    moving_asked,
+    moving_options,
+    print_analysis,
+)
 from polyrob.cli.common import Output, alphas_from_args, exit_status, robot_from_args, scale_names
 from polyrob.cli.options import add_validation_arguments, int_at_least, parse_frequencies, rate_conditions_from_args
 from polyrob.cli.plant import problem_from_args
@@ -103,6 +109,7 @@ def cmd_run(args) -> int:
     options = options_from_args(args, out)
     robot = robot_from_args(args)
     problem = problem_from_args(robot, args, out)
+    check_jerk_applies(args, problem)
     pldi = problem.pldi
     out.line(
         f"{len(pldi.entries)} varying entries ({pldi.enclosure}), {problem.unc.n_params} real parameters "
@@ -200,17 +207,36 @@ def controller_words(design) -> str:
 
 
 def report_certificates(analysis) -> dict:
-    """The certificates a run report shows, as decided: frozen robot (mu), arbitrarily fast, moving robot."""
+    """The three certificates a run report shows, as decided: frozen robot (mu), arbitrarily fast, moving robot.
+
+    A certificate that was not computed is shown as NOT_CERTIFIED with its reason
+    (:func:`polyrob.analysis.certificate.gain_certificate` with nothing checked), not left out.
+    """
+    from polyrob.analysis.certificate import ARBITRARY, Scope, gain_certificate
     from polyrob.report.certificates import FROZEN_ROW, MOVING_ROW, TIME_VARYING_ROW
+
+    def not_computed(variation, why):
+        scope = Scope(kind="robust performance", variation=variation, frequencies="")
+        return gain_certificate(scope, stable=False, checked=False, why=f"not computed: {why}")
 
     certs = {FROZEN_ROW: analysis.certificate}
     tv = analysis.time_varying
     if tv is not None:
         certs[f"{TIME_VARYING_ROW} ({tv.method})"] = tv
+    else:
+        certs[TIME_VARYING_ROW] = not_computed(ARBITRARY, "not asked for (--no-time-varying)")
     mv = getattr(analysis, "moving", None)
     if mv is not None and mv.computed:
-        certs[f"{MOVING_ROW} ({mv.rate_words})"] = mv
+        certs[f"{MOVING_ROW} ({_short_rates(mv.rate_words)})"] = mv
+    else:
+        why = mv.notes[0] if mv is not None and mv.notes else "not asked for"
+        certs[f"{MOVING_ROW} (the domain's rates)"] = not_computed("the robot moving with the domain's rates", why)
     return certs
+
+
+def _short_rates(words: str) -> str:
+    """The rate words of a row name, cut at the first ``;`` (the whole text is in the row's covers)."""
+    return words.split(";")[0] if len(words) <= 120 else "the task's rates"
 
 
 def register(sub) -> None:

@@ -223,7 +223,10 @@ def analyze_controller(
     moving_options : dict, optional
         Options of the rate-bounded search
         (:func:`~polyrob.analysis.lpv.moving.moving_robot_certificate`, e.g.
-        ``harmonics=2``); not used on an inner-gain model.
+        ``harmonics=2``); not used on an inner-gain model.  ``jerk``: the
+        task's jerk bound (``--qdddot-max``), a task domain only
+        (:func:`polyrob.analysis.lpv.task.task_motion_certificate`, which
+        takes no other option).
     limit : dict, optional
         The robot's performance limit (``PerformanceLimit.to_dict()``), quoted
         by :attr:`ControllerAnalysis.instead` when it excludes μ < 1.
@@ -253,13 +256,22 @@ def analyze_controller(
         from polyrob.analysis.time_varying.certificate import time_varying_certificate
 
         tv = time_varying_certificate(problem, K)
-    from polyrob.analysis.lpv.constant import robot_in_motion_certificate
+    from polyrob.analysis.lpv.constant import applies, robot_in_motion_certificate
     from polyrob.analysis.lpv.moving import MovingRobotCertificate
 
+    options = dict(moving_options or {})
+    jerk = options.pop("jerk", None)
+    task = getattr(problem.domain, "kind", "") == "task" and applies(problem) is not None
+    if jerk is not None and not task:
+        raise ArgumentError("--qdddot-max bounds a task's jerk: give a task domain (--pose/--q-radius/--qddot-max)")
     if moving is False:
         mv = MovingRobotCertificate.not_computed("not asked for (--no-moving)")
+    elif task:  # on a task domain the Jacobians depend on the accelerations too (polyrob.analysis.lpv.task)
+        from polyrob.analysis.lpv.task import task_motion_certificate
+
+        mv = task_motion_certificate(problem, K, auto=moving is None, jerk=jerk, time_varying=tv)
     else:
-        mv = robot_in_motion_certificate(problem, K, auto=moving is None, **(moving_options or {}))
+        mv = robot_in_motion_certificate(problem, K, auto=moving is None, **options)
     from polyrob.analysis.margins import robust_margin
 
     margin = None if rp.certificate.certified else robust_margin(rp.certificate)

@@ -41,6 +41,7 @@ __all__ = [
     "MOVING_ROW",
     "certificate_record",
     "certificate_rows",
+    "lower_bound_words",
     "certificate_sweep",
     "frozen_status",
     "is_decided",
@@ -148,6 +149,33 @@ def certificate_rows(records: dict) -> list[tuple]:
         rec = certificate_record(cert)
         rows.append((str(name), str(rec["status"]), _bound(rec.get("bound")), str(rec.get("covers") or "not stated")))
     return rows
+
+
+def lower_bound_words(record) -> str:
+    """The lower bound beside a certificate's bound, in words: what no certificate of this kind can go below.
+
+    The frozen robot's: μ's lower bound (a frozen robot of the set that
+    reaches it).  The moving robot's: the largest gain found along admissible
+    trajectories when the record carries one (``moving.lower_bound``).  Else
+    ``"not computed"``.
+
+    >>> lower_bound_words({"mu_lower": 0.93, "scope": {"variation": FROZEN}})
+    'mu >= 0.93 (a frozen robot of the set reaches it)'
+    >>> lower_bound_words({"moving": {"lower_bound": 0.726}, "scope": {}})
+    'gain >= 0.726 (the largest found along admissible trajectories)'
+    >>> lower_bound_words({"scope": {"variation": ARBITRARY}})
+    'not computed'
+    """
+    record = _as_record(record)
+    scope = record.get("scope") or {}
+    moving = record.get("moving") if isinstance(record.get("moving"), dict) else {}
+    found = _bound(moving.get("lower_bound"))
+    if found is not None:
+        return f"gain >= {found:.4g} (the largest found along admissible trajectories)"
+    mu_lower = _bound(record.get("mu_lower"))
+    if scope.get("variation") == FROZEN and mu_lower is not None:
+        return f"mu >= {mu_lower:.4g} (a frozen robot of the set reaches it)"
+    return "not computed"
 
 
 # ---------------------------------------------------------------------- in words

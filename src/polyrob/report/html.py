@@ -41,6 +41,7 @@ from polyrob.report.certificates import (
     headline,
     headline_name,
     is_decided,
+    lower_bound_words,
     plain_words,
 )
 from polyrob.report.numbers import zero_round_off
@@ -83,14 +84,15 @@ def _certificates(doc, certificates, problem_summary=None, deployment: str | Non
         doc.para("No certificate was given.")
         return records
     rows = [
-        (name, st, plain_words(records[name]), cell(bound, "no finite bound"), covers)
+        (name, st, plain_words(records[name]), cell(bound, "no finite bound"), lower_bound_words(records[name]), covers)
         for name, st, bound, covers in certificate_rows(records)
     ]
     bad = [k for k, row in enumerate(rows) if not Status(row[1]).certified]
-    header = ["certificate", "status", "in plain words", "bound", "what it covers"]
+    header = ["certificate", "status", "in plain words", "bound", "lower bound", "what it covers"]
     doc.table(
-        header, rows, bad_rows=bad, ident="certificates", left=(0, 1, 2, 4), classes={1: "status", 2: "text", 4: "text"}
-    )
+        header, rows, bad_rows=bad, ident="certificates", left=(0, 1, 2, 4, 5),
+        classes={1: "status", 2: "text", 4: "text", 5: "text"},
+    )  # fmt: skip
     for name, rec in records.items():
         if rec.get("verdict"):
             doc.para(f"{name}: {rec['verdict']}")

@@ -47,6 +47,8 @@ RATE_SAMPLES = 4096
 RATE_MARGIN = 1.05
 #: Relative change of the Jacobians below which a joint position does not enter them.
 _ENTERS_RTOL = 1e-12
+#: The parameter kind that is the time derivative of another (a task model schedules on accelerations too).
+_DERIVATIVE = {"q": "qdot", "qdot": "qddot"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,7 +100,9 @@ class MovingRobotModel:
     def words(self) -> str:
         """The grid in words: ``5 x 3 x 3 = 45 points of (q2, qdot1, qdot2)``."""
         sizes = " x ".join(str(a.size) for a in self.axes)
-        half = f", {self.names[0]} >= 0 (the loop is even in rho: the other half by rho -> -rho)" if self.mirrored else ""
+        half = (
+            f", {self.names[0]} >= 0 (the loop is even in rho: the other half by rho -> -rho)" if self.mirrored else ""
+        )
         return f"{sizes} = {self.n_points} points of ({', '.join(self.names)}){half}"
 
 
@@ -242,6 +246,7 @@ def rate_bounds(model: MovingRobotModel, domain, *, qddot_max=None, samples: int
 def kinematic_rates(model: MovingRobotModel, rates, c: float = 1.0):
     """``rho -> rate box at rho``: ``d q_j/dt = qdot_j`` exactly when ``qdot_j`` is a parameter too.
 
+    Likewise ``d qdot_j/dt = qddot_j`` on a task model (:mod:`polyrob.analysis.lpv.task`).
     At a grid point where ``qdot_j = v`` the rate of ``q_j`` is ``v`` (times the
     factor by which ``rates`` scale the velocity bound, e.g. 0 for frozen), not
     any value in ``±qdot_max``; the other parameters keep ``rates``; all
@@ -259,12 +264,13 @@ def kinematic_rates(model: MovingRobotModel, rates, c: float = 1.0):
     callable
     """
     where = {(kind, j): i for i, (kind, j) in enumerate(zip(model.kinds, model.joints))}
-    vmax = {j: float(np.abs(model.axes[i]).max()) for (kind, j), i in where.items() if kind == "qdot"}
+    peak = {key: float(np.abs(model.axes[i]).max()) for key, i in where.items()}
     plan = []
     for i, (kind, j) in enumerate(zip(model.kinds, model.joints)):
         lo, hi = rates[i]
-        exact = kind == "q" and ("qdot", j) in where and np.isfinite(hi) and vmax.get(j, 0.0) > 0
-        plan.append((where[("qdot", j)], hi / vmax[j]) if exact else None)
+        nxt = (_DERIVATIVE.get(kind), j)  # a task's qdot moves at its qddot, as q at qdot
+        exact = nxt in where and np.isfinite(hi) and peak.get(nxt, 0.0) > 0
+        plan.append((where[nxt], hi / peak[nxt]) if exact else None)
 
     def at(rho):
         out = []

@@ -1,0 +1,432 @@
+"""The moving robot on a task domain: scheduled on positions, velocities and accelerations.
+
+On a task domain (:class:`~polyrob.domains.task.TaskDomain`) the torque is
+the inverse dynamics of the motion, ``u = M(q) qddot + C(q, qdot) qdot +
+g(q) + D qdot``, so the Jacobians of the forward dynamics at ``(q, qdot, u)``
+are functions of ``(q, qdot, qddot)``:
+
+.. math:: A = A(q, \\dot q, \\ddot q), \\qquad B = B(q),
+
+affine in ``qddot`` (``df/dq`` is affine in ``u``, ``u`` affine in
+``qddot``).  :func:`task_scheduling` schedules the loop on the positions
+that enter, the velocities and the accelerations, with the task's rates:
+``dq/dt = qdot`` and ``dqdot/dt = qddot`` exactly at every grid point (the
+next parameter's value), ``|dqddot/dt| <= jerk`` (:func:`minimum_jerk_bound`
+by default, ``--qdddot-max`` otherwise).
+
+The Lyapunov matrix ``X`` of :func:`task_motion_certificate` does not depend
+on the accelerations: the bounded-real LMI at a point is then affine in
+``qddot`` (the plant, and the rate term ``dX/dqdot . qddot``), so its two
+ends per joint carry every acceleration between them exactly, and the
+certificate holds for **any jerk**: the jerk bound is not used by it (it
+says so), and is there for an ``X`` that follows the accelerations.
+
+Minimum-jerk default (:func:`minimum_jerk_bound`): a rest-to-rest move of
+size ``D`` in time ``T`` along ``q = D (10 s^3 - 15 s^4 + 6 s^5)``,
+``s = t/T``, peaks at ``|qdot| = 1.875 D/T``, ``|qddot| = 5.7735 D/T^2``
+(``10/sqrt 3``), ``|qdddot| = 60 D/T^3``.  The move of the task that reaches
+its velocity bound ``v`` and its acceleration bound ``a`` together has
+``T = (10/sqrt 3) v / (1.875 a)`` and jerk ``60 D/T^3 = (27/8) a^2 / v``; when
+that move is longer than the task's range ``2 r``, the move over the range at
+the acceleration bound (``T = sqrt(5.7735 * 2 r / a)``, jerk ``120 r / T^3``).
+A shorter move at the same acceleration has a larger jerk: the default is a
+planning convention, not a bound of every motion of the task.
+
+Examples
+--------
+>>> import numpy as np, polyrob
+>>> from polyrob.domains.task import TaskDomain
+>>> robot = polyrob.load_robot("planar_2r")
+>>> task = TaskDomain.from_robot(robot, pose=[0.0, 1.5708], q_radius=0.5, qdot_max=1.0, qddot_max=2.0)
+>>> minimum_jerk_bound(task).tolist()           # (27/8) a^2 / v
+[13.5, 13.5]
+>>> model = task_scheduling(robot, task, points=(3, 3))
+>>> model.names
+('q2', 'qdot1', 'qdot2', 'qddot1', 'qddot2')
+>>> rho = np.array([1.7, 0.3, -0.5, 1.0, -2.0])
+>>> u = robot.inverse_dynamics([0.0, 1.7], [0.3, -0.5], [1.0, -2.0])[0]
+>>> bool(np.allclose(model.plant(rho)[0], robot.jacobians([0.0, 1.7], [0.3, -0.5], u)[0]))
+True
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from polyrob.analysis.lpv.robot import MovingRobotModel
+from polyrob.errors import ArgumentError, NotApplicable, SolverError
+
+__all__ = [
+    "TaskMotionModel",
+    "task_scheduling",
+    "minimum_jerk_bound",
+    "jerk_bounds",
+    "task_rate_bounds",
+    "task_motion_certificate",
+    "any_rate_motion_certificate",
+    "MIN_JERK_VELOCITY",
+    "MIN_JERK_ACCELERATION",
+    "MIN_JERK_JERK",
+    "AUTO_STATES",
+]
+
+#: Peaks of the minimum-jerk move ``D (10 s^3 - 15 s^4 + 6 s^5)`` per ``D/T``, ``D/T^2``, ``D/T^3``.
+MIN_JERK_VELOCITY = 1.875
+MIN_JERK_ACCELERATION = 10.0 / np.sqrt(3.0)
+MIN_JERK_JERK = 60.0
+#: Largest closed loop (states) the task's rate-bounded search runs on by default (``analyze``, ``run``): the main
+#: job's 16-state loop took 527 s on 2 cores at load 3-14 (X on the positions), so it runs on ``--moving`` only.
+AUTO_STATES = 8
+#: Search grid (points per position, per velocity; the accelerations: their two ends) and its re-check.
+DEFAULT_POINTS = (5, 3)
+DEFAULT_RECHECK = (9, 3)
+
+
+def minimum_jerk_bound(domain) -> np.ndarray:
+    """Per joint, the peak jerk of the task's fastest minimum-jerk move (module docstring): ``(27/8) a^2 / v``.
+
+    ``a``, ``v``: the task's acceleration and velocity bounds; a move longer than
+    the position range ``2 r`` is replaced by the move over the range at the
+    acceleration bound.  A joint that cannot move (``a = 0`` or ``v = 0`` or no
+    range) gets ``0``.
+    """
+    a = np.maximum(np.abs(domain.qddot_lower), np.abs(domain.qddot_upper)).astype(float)
+    v = np.maximum(np.abs(domain.qdot_lower), np.abs(domain.qdot_upper)).astype(float)
+    span = np.asarray(domain.q_upper, float) - np.asarray(domain.q_lower, float)
+    out = np.zeros_like(a)
+    for j in range(a.size):
+        if a[j] <= 0 or v[j] <= 0 or span[j] <= 0:
+            continue
+        T = MIN_JERK_ACCELERATION * v[j] / (MIN_JERK_VELOCITY * a[j])  # both bounds reached
+        D = v[j] * T / MIN_JERK_VELOCITY
+        if D > span[j]:  # longer than the range: the move over the range at the acceleration bound
+            D = span[j]
+            T = np.sqrt(MIN_JERK_ACCELERATION * D / a[j])
+        out[j] = MIN_JERK_JERK * D / T**3
+    return out
+
+
+def jerk_bounds(value, m: int) -> np.ndarray:
+    """``(m,)`` jerk bounds from a number or ``m`` numbers, each finite and >= 0 (:class:`ArgumentError` otherwise)."""
+    arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+    if arr.size == 1:
+        arr = np.full(m, float(arr[0]))
+    if arr.size != m:
+        raise ArgumentError(f"--qdddot-max: give 1 or {m} jerk bounds (rad/s^3), got {arr.size}")
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        raise ArgumentError(f"--qdddot-max: jerk bounds must be finite and >= 0 (rad/s^3), got {arr.tolist()}")
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class TaskMotionModel(MovingRobotModel):
+    """:class:`~polyrob.analysis.lpv.robot.MovingRobotModel` with accelerations: kinds ``q``, ``qdot``, ``qddot``.
+
+    Attributes
+    ----------
+    jerk : ndarray
+        ``(m,)`` bounds of ``|d qddot_j/dt|``.
+    jerk_source : str
+        Where they come from.
+    """
+
+    jerk: np.ndarray = None
+    jerk_source: str = ""
+
+    def motion(self, rho) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(q, qdot, qddot)`` at the parameter point ``rho`` (the fixed joints at the task's midpoint, rest)."""
+        m = self.robot.m
+        out = {"q": self.q_fixed.copy(), "qdot": np.zeros(m), "qddot": np.zeros(m)}
+        for value, kind, j in zip(np.asarray(rho, float), self.kinds, self.joints):
+            out[kind][j] = value
+        return out["q"], out["qdot"], out["qddot"]
+
+    def state(self, rho) -> tuple[np.ndarray, np.ndarray]:
+        q, qdot, _ = self.motion(rho)
+        return q, qdot
+
+    def torque(self, rho) -> np.ndarray:
+        """``u`` by inverse dynamics at ``rho``."""
+        return np.asarray(self.robot.inverse_dynamics(*self.motion(rho)), float).reshape(-1)
+
+    def plant(self, rho) -> tuple[np.ndarray, np.ndarray]:
+        """The Jacobians ``(A, B)`` of the forward dynamics at ``(q, qdot, u(q, qdot, qddot))``."""
+        q, qdot, _ = self.motion(rho)
+        return self.robot.jacobians(q, qdot, self.torque(rho))
+
+    def words(self) -> str:
+        sizes = " x ".join(str(a.size) for a in self.axes)
+        return (
+            f"{sizes} = {self.n_points} points of ({', '.join(self.names)}; the accelerations at the ends of their "
+            "ranges, exact for X free of them)"
+        )
+
+
+def _enters(robot, domain, j: int, rng) -> bool:
+    """Does joint position ``j`` enter the Jacobians along the task (a few random task states)?"""
+    for _ in range(4):
+        q = rng.uniform(domain.q_lower, domain.q_upper)
+        qd = rng.uniform(domain.qdot_lower, domain.qdot_upper)
+        qdd = rng.uniform(domain.qddot_lower, domain.qddot_upper)
+        q2 = q.copy()
+        q2[j] += 0.7
+        A, B = robot.jacobians(q, qd, robot.inverse_dynamics(q, qd, qdd)[0])
+        A2, B2 = robot.jacobians(q2, qd, robot.inverse_dynamics(q2, qd, qdd)[0])
+        scale = max(np.abs(A).max(), np.abs(B).max(), 1.0)
+        if max(np.abs(A2 - A).max(), np.abs(B2 - B).max()) > 1e-12 * scale * (robot.m + 1):
+            return True
+    return False
+
+
+def task_scheduling(robot, domain, *, points=DEFAULT_POINTS, jerk=None, max_joints: int = 3) -> TaskMotionModel:
+    """The scheduling parameters of ``robot`` on the task ``domain`` and their grid.
+
+    Parameters
+    ----------
+    robot : Manipulator
+        An analytic robot or a Pinocchio one of at most ``max_joints`` joints.
+    domain : TaskDomain
+    points : (int, int)
+        Grid points per position and per velocity parameter; each acceleration
+        gets the two ends of its range.
+    jerk : float or array_like, optional
+        ``|d qddot/dt|`` bounds (default :func:`minimum_jerk_bound`).
+    max_joints : int
+
+    Raises
+    ------
+    NotApplicable
+        Not a task domain, a robot with an inner layer (the any-rate route
+        covers those) or too many joints.
+    ArgumentError
+        A negative or NaN jerk bound.
+    """
+    if getattr(domain, "kind", "") != "task" or not hasattr(domain, "qddot_upper"):
+        raise NotApplicable("not a task domain (q, qdot, qddot bounded, torques by inverse dynamics)")
+    if getattr(robot, "inner", None) is not None or type(robot).__name__.startswith("Inner"):
+        raise NotApplicable("an inner loop: its moving-robot verdict is the any-rate one (inner-gain model)")
+    m = robot.m
+    if m > max_joints:
+        raise NotApplicable(f"{m} joints: the task's scheduled grid is built for at most {max_joints}")
+    if jerk is None:
+        jerk_arr, source = minimum_jerk_bound(domain), "the task's minimum-jerk move, (27/8) qddot_max^2 / qdot_max"
+    else:
+        jerk_arr, source = jerk_bounds(jerk, m), "given (--qdddot-max)"
+    rng = np.random.default_rng(0)
+    names, kinds, joints, axes = [], [], [], []
+    groups = (
+        ("q", domain.q_lower, domain.q_upper, int(points[0])),
+        ("qdot", domain.qdot_lower, domain.qdot_upper, int(points[1])),
+        ("qddot", domain.qddot_lower, domain.qddot_upper, 2),
+    )
+    for kind, lo, hi, n in groups:
+        for j in range(m):
+            if hi[j] <= lo[j] or (kind == "q" and not _enters(robot, domain, j, rng)):
+                continue
+            names.append(f"{kind}{j + 1}"), kinds.append(kind), joints.append(j)
+            axes.append(np.linspace(float(lo[j]), float(hi[j]), n))
+    if not names:
+        raise NotApplicable("the Jacobians do not vary over the task: the frozen-robot certificate covers it")
+    mid = 0.5 * (np.asarray(domain.q_lower, float) + np.asarray(domain.q_upper, float))
+    return TaskMotionModel(
+        robot, tuple(names), tuple(kinds), tuple(joints), tuple(axes), mid, np.zeros(m),
+        jerk=jerk_arr, jerk_source=source,
+    )  # fmt: skip
+
+
+def task_rate_bounds(model: TaskMotionModel, domain, *, scale: float = 1.0):
+    """Bounds of ``d rho_i/dt``: the task's velocities, accelerations and the jerk bound (times ``scale``)."""
+    bound = {
+        "q": np.maximum(np.abs(domain.qdot_lower), np.abs(domain.qdot_upper)),
+        "qdot": np.maximum(np.abs(domain.qddot_lower), np.abs(domain.qddot_upper)),
+        "qddot": np.asarray(model.jerk, float),
+    }
+    return [(-b, b) for b in (float(bound[k][j]) * scale if scale else 0.0 for k, j in zip(model.kinds, model.joints))]
+
+
+def _rate_words(model: TaskMotionModel, rates, x_uses_accelerations: bool) -> str:
+    parts = []
+    nxt = {"q": "qdot", "qdot": "qddot"}
+    for name, kind, j, (_lo, hi) in zip(model.names, model.kinds, model.joints, rates):
+        succ = f"{nxt.get(kind, '')}{j + 1}"
+        if kind in nxt and succ in model.names:
+            parts.append(f"d{name}/dt = {succ} (|d{name}/dt| <= {hi:.4g})")
+        elif kind == "qddot" and not x_uses_accelerations:
+            parts.append(f"d{name}/dt any (jerk not needed; {hi:.4g} from {model.jerk_source})")
+        else:
+            parts.append(f"|d{name}/dt| <= {hi:.4g}" if np.isfinite(hi) else f"d{name}/dt arbitrary")
+    return ", ".join(parts)
+
+
+def any_rate_motion_certificate(time_varying, domain_name: str = ""):
+    """The moving-robot certificate a certified arbitrarily-fast one gives (any rate covers the task's), else ``None``."""
+    from polyrob.analysis.lpv.moving_result import MovingRobotCertificate
+
+    if time_varying is None or not time_varying.certificate.certified:
+        return None
+    cert = time_varying.certificate
+    where = f" inside {domain_name!r}" if domain_name else " inside the domain"
+    scope = replace(
+        cert.scope,
+        variation=f"the robot moving{where} at any rate (so with the task's rates: any velocity, acceleration and "
+        f"jerk inside it), by the arbitrarily fast certificate [{time_varying.method}]",
+    )
+    return MovingRobotCertificate(
+        computed=True,
+        gamma=float(cert.bound),
+        rate_words="any (covered by the arbitrarily fast certificate)",
+        grid_words=f"the time-varying certificate [{time_varying.method}]",
+        scope=scope,
+        decided=replace(cert, scope=scope),
+        seconds=float(time_varying.seconds),
+    )
+
+
+def task_motion_certificate(
+    problem,
+    K,
+    *,
+    points=DEFAULT_POINTS,
+    jerk=None,
+    auto: bool = False,
+    velocities: str = "auto",
+    recheck=DEFAULT_RECHECK,
+    time_varying=None,
+):
+    """The moving-robot certificate of ``K`` on a task-domain ``problem``.
+
+    When the arbitrarily fast certificate ``time_varying`` holds it decides
+    (:func:`any_rate_motion_certificate`).  Otherwise the rate-bounded search:
+    :func:`polyrob.lpvnorm` of the weighted closed loop on the task's grid
+    (:func:`task_scheduling`), ``X`` on ``1, cos q_i, sin q_i`` (times ``1,
+    qdot_j`` while the search has at most
+    :data:`~polyrob.analysis.lpv.moving.BOUNDED_VARIABLES` scalars,
+    ``velocities="auto"``; else the velocities move arbitrarily fast), the
+    rates of :func:`task_rate_bounds` exact at each point, re-checked on a
+    finer grid.  Proved at grid points only: GRID_ONLY at best
+    (:func:`polyrob.analysis.certificate.decide_gridded_gain`), and it covers
+    the linearised robot.
+
+    Parameters
+    ----------
+    problem : Problem
+        With a task domain.
+    K : LTI
+    points : (int, int)
+    jerk : float or array_like, optional
+        ``--qdddot-max``; default :func:`minimum_jerk_bound`.
+    auto : bool
+        Run the rate-bounded search only for a loop of at most :data:`AUTO_STATES` states.
+    velocities : {"auto", "bounded", "arbitrary"}
+    recheck : (int, int) or None
+        The finer grid (points per position, per velocity) the ``X`` is re-checked on.
+    time_varying : TimeVaryingCertificate, optional
+
+    Returns
+    -------
+    MovingRobotCertificate
+    """
+    from polyrob.analysis.certificate import Scope
+    from polyrob.analysis.lpv.basis import basis_size, default_basis, finer_recheck
+    from polyrob.analysis.lpv.moving import BOUNDED_VARIABLES, MAX_STATES, conditioned_time_scale
+    from polyrob.analysis.lpv.moving_result import MovingRobotCertificate
+    from polyrob.analysis.lpv.norm import lpvnorm
+    from polyrob.analysis.lpv.robot import closed_loop_system, conditioned, kinematic_rates
+
+    t0 = time.perf_counter()
+    domain, P = problem.domain, problem.P
+    base = problem.scope() if hasattr(problem, "scope") else Scope()
+    if jerk is not None:
+        jerk = jerk_bounds(jerk, problem.robot.m)  # refused before any work
+    decided = any_rate_motion_certificate(time_varying, getattr(domain, "name", ""))
+    if decided is not None:
+        return decided
+    try:
+        model = task_scheduling(problem.robot, domain, points=points, jerk=jerk)
+        system = closed_loop_system(model, K, P.W_S, P.W_T, P.W_KS)
+        n = system(np.array([a[0] for a in model.axes]))[0].shape[0]
+        limit = AUTO_STATES if auto else MAX_STATES
+        if n > limit:
+            more = ": --moving computes it (minutes)" if auto and n <= MAX_STATES else ""
+            raise NotApplicable(
+                f"the closed loop has {n} states (the task's rate-bounded search runs up to {limit}){more}"
+            )
+        rates = task_rate_bounds(model, domain)
+        if velocities == "auto":
+            k = basis_size(model, tensor=True)
+            velocities = "bounded" if k * n * (n + 1) // 2 <= BOUNDED_VARIABLES else "arbitrary"
+        if velocities not in ("bounded", "arbitrary"):
+            raise ArgumentError(f"velocities must be 'auto', 'bounded' or 'arbitrary' (got {velocities!r})")
+        basis = default_basis(model, tensor=True)
+        if velocities == "arbitrary":
+            basis = basis[: 1 + 2 * sum(kind == "q" for kind in model.kinds)]
+            rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
+        result, sysf, cs = _search(model, system, rates, basis, lpvnorm, conditioned, conditioned_time_scale,
+                                   kinematic_rates)  # fmt: skip
+        finer = {} if recheck is None else finer_recheck(sysf, model, result, rates, basis, points=recheck, c=cs)
+    except NotApplicable as exc:
+        return MovingRobotCertificate.not_computed(str(exc))
+    x_on_acc = False  # default_basis has no acceleration functions: the LMI is affine in qddot
+    words = _rate_words(model, task_rate_bounds(model, domain), x_on_acc) + (
+        "; the velocities at any rate (X on the positions only)" if velocities == "arbitrary" else ""
+    )
+    again = f" and the same X re-checked at the {finer['points']} points of a finer grid" if finer.get("points") else ""
+    notes = (
+        f"on the grid of {model.words()}{again}; not proved between the grid points",
+        "the linearised robot (LPV family A(rho(t)), B(rho(t))) with the torques of the task's inverse dynamics, "
+        "not the nonlinear one",
+    ) + tuple(result.notes) + tuple(base.notes)  # fmt: skip
+    where = f" inside domain {base.domain!r}" if base.domain else ""
+    scope = replace(
+        base, variation=f"the linearised robot {base.robot} (LPV family){where} moving with rates {words}",
+        robot="", domain="", model="", coverage=None, coverage_points=0, enclosure="sampled", vertices_from="",
+        notes=notes,
+    )  # fmt: skip
+    gamma, why = float(result.gamma), () if result.proved else (result.reason,)
+    if finer.get("points") and result.proved:
+        gamma = max(gamma, float(finer["gamma"]))
+        if not np.isfinite(gamma):
+            why = (f"the X proved on the grid fails on the finer grid of {finer['points']} points: "
+                   f"{finer.get('reason', '')}",)  # fmt: skip
+    return MovingRobotCertificate(
+        computed=True, gamma=gamma, frozen_gamma=float(result.frozen_gamma),
+        rates=tuple(task_rate_bounds(model, domain)), rate_words=words, grid_words=model.words(), result=result,
+        scope=scope, notes=why, finer=finer, seconds=time.perf_counter() - t0,
+    )  # fmt: skip
+
+
+def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinematic_rates):
+    """``(result, the system it ran on, its time scale)``: the conditioned copy first, then the time-scaled loop."""
+    from polyrob.analysis.lpv.result import LpvNormResult
+
+    centre = np.array([0.5 * (a[0] + a[-1]) for a in model.axes])
+    tries = []
+    try:
+        tries.append((*conditioned(system, centre), {"eps": 1e-4}))
+    except NotApplicable:
+        pass
+    c = time_scale(system, centre)
+
+    def time_scaled(rho):
+        a, b, cc, d = system(rho)
+        return a / c, b / c, cc, d
+
+    tries.append((time_scaled, c, {}))
+    best = None
+    for sysf, cs, options in tries:
+        scaled = [(lo / cs, hi / cs) for lo, hi in rates]
+        try:
+            r = lpvnorm(sysf, list(model.axes), scaled, basis, rates_at=kinematic_rates(model, rates, cs), **options)
+        except SolverError as exc:
+            r = LpvNormResult(
+                float("inf"), False, float("inf"), float("nan"), "", f"on the grid of {model.n_points} points",
+                model.n_points, 0, 0, 0, "solver error", reason=str(exc),
+            )  # fmt: skip
+        if best is None or r.gamma < best[0].gamma:
+            best = (r, sysf, cs)
+        if r.proved:
+            break
+    return best
