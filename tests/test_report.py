@@ -18,7 +18,7 @@ import pytest
 import polyrob
 from polyrob.analysis.certificate import ARBITRARY, Certificate, Scope, Status
 from polyrob.io.controller import load_controller, save_controller
-from polyrob.report.certificates import FROZEN_ROW, TIME_VARYING_ROW
+from polyrob.report.certificates import FROZEN_ROW, MOVING_ROW, TIME_VARYING_ROW
 from polyrob.report.html import ReportOptions, write_report
 from polyrob.validate.monte_carlo import monte_carlo
 from polyrob.validate.simulate import simulate, step_reference
@@ -191,11 +191,16 @@ def test_run_report_shows_the_certificates_and_rebuilds_them(tmp_path, monkeypat
     # the verdict at the top is the frozen-robot certificate's status, as decided
     assert _verdict(page) == a.certificate.status.value
     rows = _certificate_rows(page)
-    assert [r[0] for r in rows] == [FROZEN_ROW, f"{TIME_VARYING_ROW} ({tv.method})"]
-    assert [r[1] for r in rows] == [a.certificate.status.value, tv.certificate.status.value]
-    assert [r[4] for r in rows] == [a.certificate.scope.sentence(), tv.certificate.scope.sentence()]
+    shown = report_certificates(a)  # three rows: frozen, arbitrarily fast, moving (not computed: said so)
+    assert [r[0] for r in rows] == list(shown) and len(rows) == 3
+    assert [r[0] for r in rows[:2]] == [FROZEN_ROW, f"{TIME_VARYING_ROW} ({tv.method})"]
+    assert rows[2][0].startswith(MOVING_ROW)
+    assert [r[1] for r in rows[:2]] == [a.certificate.status.value, tv.certificate.status.value]
+    assert [r[5] for r in rows[:2]] == [a.certificate.scope.sentence(), tv.certificate.scope.sentence()]
     assert float(rows[0][3]) == pytest.approx(a.certificate.bound, rel=1e-4)
     assert rows[1][3] == (f"{tv.gamma:.5g}" if np.isfinite(tv.gamma) else "no finite bound")
+    assert rows[0][4] == f"mu >= {a.certificate.mu_lower:.4g} (a frozen robot of the set reaches it)"
+    assert rows[1][4] == "not computed"
     # every row in plain words: what its status says about which robot
     assert rows[0][2].startswith(("Proved: every frozen robot", "Not proved", "Disproved"))
     assert "varying arbitrarily fast" in rows[1][2]
