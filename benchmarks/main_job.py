@@ -7,7 +7,7 @@ Runs ``polyrob run --json`` (no robot: the main job, see
 ``polyrob run -o DIR`` (the same job with the validation and ``report.html``)
 when ``--output-dir`` is given.  Prints one JSON document: per command the
 wall-clock seconds, the exit status, the certificate's status and bound, the
-controller's order, and the machine (cores, load average before the run):
+moving-robot and arbitrarily fast verdicts' statuses, the controller's order, and the machine (cores, load average before the run):
 a figure measured on a loaded machine says so.  The install is not timed.
 ``--results PATH`` also appends the runs as one record to a results file
 (``benchmarks/results/main_job.json``: the docs' figures are generated from it).
@@ -40,7 +40,13 @@ def _run(cmd: list[str]) -> dict:
         out["error"] = (proc.stderr.strip().splitlines() or ["no JSON on stdout"])[-1]
         return out
     cert = doc.get("analysis", {}).get("robust_performance", {}).get("certificate", {})
+    analysis = doc.get("analysis", {})
+    moving = analysis.get("moving") or {}
+    fast = analysis.get("time_varying") or {}
     out.update(
+        moving_status=moving.get("status") or "not computed",
+        moving_verdict=moving.get("verdict"),
+        time_varying_status=fast.get("status") or "not computed",
         status=cert.get("status"),
         bound=cert.get("bound"),
         controller_order=doc.get("analysis", {}).get("controller_order"),
