@@ -184,7 +184,8 @@ def test_the_report_shows_three_rows_with_their_lower_bounds(robot):
     assert rows[0][0] == FROZEN_ROW and rows[1][0] == TIME_VARYING_ROW and rows[2][0].startswith(MOVING_ROW + " (")
     assert [r[1] for r in rows] == ["CERTIFIED", "NOT_CERTIFIED", moving.certificate.status.value]
     assert rows[2][2] == pytest.approx(moving.gamma) and "qddot" in rows[2][3]
-    assert [lower_bound_words(v) for v in records.values()][0] == "mu >= 0.93 (a frozen robot of the set reaches it)"
+    words = "(mu itself is at least this: no bound of this kind goes below)"
+    assert [lower_bound_words(v) for v in records.values()][0] == f"mu >= 0.93 {words}"
     assert [lower_bound_words(v) for v in records.values()][1:] == ["not computed", "not computed"]
     # a moving robot not computed is a row too, saying why
     a = SimpleNamespace(certificate=frozen, time_varying=None, moving=MovingRobotCertificate.not_computed("too big"))

@@ -199,7 +199,8 @@ def test_run_report_shows_the_certificates_and_rebuilds_them(tmp_path, monkeypat
     assert [r[5] for r in rows[:2]] == [a.certificate.scope.sentence(), tv.certificate.scope.sentence()]
     assert float(rows[0][3]) == pytest.approx(a.certificate.bound, rel=1e-4)
     assert rows[1][3] == (f"{tv.gamma:.5g}" if np.isfinite(tv.gamma) else "no finite bound")
-    assert rows[0][4] == f"mu >= {a.certificate.mu_lower:.4g} (a frozen robot of the set reaches it)"
+    words = "(mu itself is at least this: no bound of this kind goes below)"
+    assert rows[0][4] == f"mu >= {a.certificate.mu_lower:.4g} {words}"
     assert rows[1][4] == "not computed"
     # every row in plain words: what its status says about which robot
     assert rows[0][2].startswith(("Proved: every frozen robot", "Not proved", "Disproved"))

@@ -154,13 +154,13 @@ def certificate_rows(records: dict) -> list[tuple]:
 def lower_bound_words(record) -> str:
     """The lower bound beside a certificate's bound, in words: what no certificate of this kind can go below.
 
-    The frozen robot's: μ's lower bound (a frozen robot of the set that
-    reaches it).  The moving robot's: the largest gain found along admissible
+    The frozen robot's: μ's lower bound (μ itself is at least this, so no
+    upper bound can go below it).  The moving robot's: the largest gain found along admissible
     trajectories when the record carries one (``moving.lower_bound``).  Else
     ``"not computed"``.
 
     >>> lower_bound_words({"mu_lower": 0.93, "scope": {"variation": FROZEN}})
-    'mu >= 0.93 (a frozen robot of the set reaches it)'
+    'mu >= 0.93 (mu itself is at least this: no bound of this kind goes below)'
     >>> lower_bound_words({"moving": {"lower_bound": 0.726}, "scope": {}})
     'gain >= 0.726 (the largest found along admissible trajectories)'
     >>> lower_bound_words({"scope": {"variation": ARBITRARY}})
@@ -174,7 +174,7 @@ def lower_bound_words(record) -> str:
         return f"gain >= {found:.4g} (the largest found along admissible trajectories)"
     mu_lower = _bound(record.get("mu_lower"))
     if scope.get("variation") == FROZEN and mu_lower is not None:
-        return f"mu >= {mu_lower:.4g} (a frozen robot of the set reaches it)"
+        return f"mu >= {mu_lower:.4g} (mu itself is at least this: no bound of this kind goes below)"
     return "not computed"
 
 
