@@ -59,6 +59,9 @@ class Scope:
         For a vertex (time-varying) certificate: the set the vertices came from.
     notes : tuple of str
         What else limits it, e.g. a mimic joint the robot model locked.
+    sampling : str
+        Empty for the continuous-time loop; else the sampled-data loop it
+        covers (rate, delay, hold: :mod:`polyrob.analysis.sampled_data`).
     """
 
     kind: str = "robust performance"
@@ -72,12 +75,15 @@ class Scope:
     frequencies: str = ""
     vertices_from: str = ""
     notes: tuple = ()
+    sampling: str = ""
 
     def sentence(self) -> str:
         """The scope in one sentence (what the verdict line leaves out)."""
         parts = [f"for {self.variation}"]
         if self.frequencies:
             parts.append(f"on {self.frequencies}")
+        if self.sampling:
+            parts.append(f"of the loop {self.sampling}")
         if self.model:
             cov = (
                 "coverage not checked"
