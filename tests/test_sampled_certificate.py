@@ -136,3 +136,44 @@ def test_bad_sampling_specs_are_refused():
     for rate, delay in [(0.0, 1), (-5.0, 1), (float("nan"), 1), (1000.0, -1), (1000.0, 1.5)]:
         with pytest.raises(ArgumentError):
             SamplingSpec(rate, delay)
+
+
+def _cli(capsys, *argv):
+    from polyrob.cli import main
+
+    try:
+        code = main(list(argv))
+    except SystemExit as exc:
+        code = exc.code
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (("--rate", "fast"), "--rate: 'fast' is not a number"),
+        (("--rate", "-100"), "--rate: give a sample rate in Hz > 0 or 'continuous'"),
+        (("--rate", "continuous", "--delay", "2"), "--delay: a delay in samples needs a sample rate"),
+        (("--rate", "1000", "--delay", "-1"), "--delay: give a whole number of samples >= 0"),
+        (("--rate", "1000", "--delay", "0.5"), "--delay: give a whole number of samples >= 0"),
+        (("--delay", "2"), "--delay: a delay in samples needs a sample rate: give --rate HZ"),
+    ],
+)
+def test_bad_rate_or_delay_is_one_line_and_exit_2(capsys, tmp_path, argv, words):
+    target = tmp_path / "K.json"
+    for command in (["analyze", "planar_2r", "--controller", "paper"], ["synth", "planar_2r", "-o", str(target)]):
+        code, _, err = _cli(capsys, *command, *argv)
+        assert code == 2 and words in err and len(err.strip().splitlines()) == 1, err
+        assert not target.exists()
+
+
+def test_rate_options_read_as_a_sampling_spec():
+    from types import SimpleNamespace as NS
+
+    from polyrob.cli.options import sampling_from_args
+
+    assert sampling_from_args(NS(rate=None, delay_samples=None)) is None  # not stated: continuous
+    assert sampling_from_args(NS(rate=500.0, delay_samples=2)) == SamplingSpec(500.0, 2)
+    assert sampling_from_args(NS(rate=1000.0, delay_samples=None)) == SamplingSpec(1000.0, 1)
+    assert sampling_from_args(NS(rate=1000.0, delay_samples=0)) == SamplingSpec(1000.0, 0)

@@ -411,6 +411,26 @@ class SampledCertificate:
     def verdict(self) -> str:
         return self.certificate.verdict
 
+    def line(self) -> str:
+        """The analysis' line: the grid's μ bounds, where they peak (rad/s of the sampled loop), the status."""
+        c = self.certificate
+        head = f"{'sampled-data':<22} "
+        if c.mu is None:
+            return head + f"{sampling_words(self.plant.spec)}: {c.status}"
+        return head + (
+            f"mu in [{c.mu_lower:.4g}, {c.mu_upper_grid:.4g}] (peak on the frequency grid) at "
+            f"{self.peak_frequency:.4g} rad/s, {sampling_words(self.plant.spec)}: {c.status}"
+        )
+
+    def instead_line(self, continuous) -> str:
+        """When the sampled loop is not certified but ``continuous`` (the continuous loop's certificate) is."""
+        spec = self.plant.spec
+        return (
+            f"instead: the continuous-time loop is {continuous.verdict.split(' ', 2)[-1]} (--rate continuous); "
+            f"in the way: the rate and the delay (mu peaks at {self.peak_frequency:.3g} rad/s, Nyquist "
+            f"{spec.nyquist:.4g} rad/s); try a higher --rate, a smaller --delay or a slower controller"
+        )
+
     def summary(self) -> dict:
         return {
             **self.plant.summary(),

@@ -13,7 +13,7 @@ from polyrob.cli.common import (
     exit_status,
     robot_from_args,
 )
-from polyrob.cli.options import int_at_least, parse_frequencies
+from polyrob.cli.options import add_sampling_arguments, int_at_least, parse_frequencies, sampling_from_args
 from polyrob.cli.plant import add_plant_arguments, problem_from_args
 from polyrob.errors import PolyrobError
 
@@ -74,6 +74,9 @@ def print_analysis(a, out) -> None:
         out.line(tv.verdict)
         constants = mv is not None and getattr(mv, "decided", None) is not None
         out.line(f"which covers the robot: {covers_nonlinear(tv.method, constants)}")
+    sampled = getattr(a, "sampled", None)
+    if sampled is not None:  # the loop as it runs: its certificate is the verdict
+        out.line(sampled.line())
     out.line(a.verdict)
     out.line(a.certificate.details())
     if a.instead:  # not certified: what it certifies instead, and what stands in the way
@@ -81,9 +84,11 @@ def print_analysis(a, out) -> None:
 
 
 def cmd_analyze(args) -> int:
+    from polyrob.analysis.sampled_data import sampling_words
     from polyrob.pipeline import analyze_controller, check_controller_problem, frequency_grid
 
     omega_spec = parse_frequencies(args.omega)
+    sampling = sampling_from_args(args)
     out = Output(args, stages=2)
     K, info, source = load_controller_args(args.controller)
     robot = robot_from_args(args)
@@ -111,6 +116,7 @@ def cmd_analyze(args) -> int:
     out.stage(
         f"analysis of {source}: mu sweeps (robust stability, robust performance), {args.mc} Monte Carlo parameter sets"
         + (", time-varying certificate" if args.time_varying else "")
+        + (f", the loop {sampling_words(sampling)}" if sampling is not None else "")
     )
     a = analyze_controller(
         problem,
@@ -122,6 +128,7 @@ def cmd_analyze(args) -> int:
         time_varying=args.time_varying,
         moving=moving_asked(args),
         moving_options=moving_options(args),
+        sampled_loop=sampling,
     )
     report = {
         "robot": robot.name,
@@ -269,5 +276,6 @@ def register(sub) -> None:
         "or the constant-D small gain), the one that covers the moving robot",
     )
     add_moving_argument(p)
+    add_sampling_arguments(p)
     add_output_flags(p)
     p.set_defaults(func=cmd_analyze)

@@ -31,6 +31,8 @@ __all__ = [
     "add_validation_arguments",
     "rate_conditions_from_args",
     "rate_conditions_dict",
+    "add_sampling_arguments",
+    "sampling_from_args",
 ]
 
 
@@ -246,6 +248,68 @@ def refuse_uncertified(spec, args) -> None:
         "(--model-error PCT) and a payload range at the flange (--payload-mass, --payload-com), not this "
         "per-link set"
     )
+
+
+# --------------------------------------------------------------------------- the sample rate and the delay
+# ``--rate`` and ``--delay`` land in ``args.rate`` (Hz, or None: not stated) and ``args.delay_samples``
+# (None: not stated), the attributes the validation at the rate reads too (rate_conditions_from_args:
+# 1 kHz and one sample when not stated).  Not stated, the certificate is the continuous-time one.
+
+
+def _rate(text):
+    """``--rate``: ``continuous`` or ``0`` -> None (the continuous-time certificate), else a rate in Hz > 0."""
+    t = str(text).strip().lower()
+    if t in ("continuous", "0", "0.0"):
+        return None
+    try:
+        value = number(t, "--rate")
+    except ArgumentError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--rate: ")) from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"give a sample rate in Hz > 0 or 'continuous', got '{text}'")
+    return value
+
+
+def _delay(text):
+    try:
+        value = int(str(text).strip())
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"give a whole number of samples >= 0, got '{text}'")
+    return value
+
+
+def add_sampling_arguments(group) -> None:
+    """``--rate HZ|continuous`` and ``--delay SAMPLES``: the loop the certificate covers."""
+    group.add_argument(
+        "--rate",
+        type=_rate,
+        default=None,
+        metavar="HZ",
+        help="certify the loop sampled at HZ (zero-order hold, the controller discretised by Tustin as "
+        "`export` runs it), at the sampling instants; 'continuous' or 0 (the default): the continuous-time loop",
+    )
+    group.add_argument(
+        "--delay",
+        dest="delay_samples",
+        type=_delay,
+        default=None,
+        metavar="SAMPLES",
+        help="computation delay of the sampled loop in whole samples (with --rate HZ; default 1)",
+    )
+
+
+def sampling_from_args(args):
+    """The :class:`~polyrob.analysis.sampled_data.SamplingSpec` of ``--rate``/``--delay``, or ``None`` (continuous)."""
+    rate, delay = getattr(args, "rate", None), getattr(args, "delay_samples", None)
+    if rate is None:
+        if delay is not None:
+            raise ArgumentError("--delay: a delay in samples needs a sample rate: give --rate HZ")
+        return None
+    from polyrob.analysis.sampled_data import SamplingSpec
+
+    return SamplingSpec(float(rate), 1 if delay is None else int(delay))
 
 
 # --------------------------------------------------------------------------- argparse types

@@ -10,7 +10,13 @@ from polyrob.cli.analyze import (
     print_analysis,
 )
 from polyrob.cli.common import Output, alphas_from_args, exit_status, robot_from_args, scale_names
-from polyrob.cli.options import add_validation_arguments, int_at_least, parse_frequencies, rate_conditions_from_args
+from polyrob.cli.options import (
+    add_validation_arguments,
+    int_at_least,
+    parse_frequencies,
+    rate_conditions_from_args,
+    sampling_from_args,
+)
 from polyrob.cli.plant import problem_from_args
 from polyrob.cli.synth import (
     add_bandwidth_arguments,
@@ -99,6 +105,7 @@ def cmd_run(args) -> int:
     from polyrob.pipeline import analyze_controller, design_controller, frequency_grid, pldi_report
 
     omega_spec = parse_frequencies(args.omega)
+    sampling = sampling_from_args(args)
     if args.max_bandwidth:  # option errors before any work
         scale_names(args.scale_only), alphas_from_args(args.alphas)
     run_dir = _run_dir(args)
@@ -156,6 +163,7 @@ def cmd_run(args) -> int:
         moving_options=moving_options(args),
         limit=None if args.max_bandwidth else limit,  # the limit printed above is factor 1's
         certificate=design.certificate,  # decided again, not swept again, when it is of the same loop and grid
+        sampled_loop=sampling,  # --rate HZ: the sampled loop's certificate is the verdict
     )
     print_analysis(a, out)
     design = design.certified_by(a.certificate)  # the analysis' certificate is the design's: one call, one verdict

@@ -14,7 +14,14 @@ from polyrob.cli.common import (
     robot_from_args,
     scale_names,
 )
-from polyrob.cli.options import add_validation_arguments, int_at_least, positive_float, rate_conditions_from_args
+from polyrob.cli.options import (
+    add_sampling_arguments,
+    add_validation_arguments,
+    int_at_least,
+    positive_float,
+    rate_conditions_from_args,
+    sampling_from_args,
+)
 from polyrob.cli.plant import add_plant_arguments, problem_from_args
 
 __all__ = [
@@ -176,6 +183,7 @@ def cmd_synth(args) -> int:
     from polyrob.pipeline import design_controller
 
     check_output(args)
+    sampling = sampling_from_args(args)
     args.moving = bool(moving_asked(args))
     if args.max_bandwidth:  # option errors before any work
         scale_names(args.scale_only), alphas_from_args(args.alphas)
@@ -205,6 +213,8 @@ def cmd_synth(args) -> int:
         print_design(design, out)
         extra = None
     doc["synthesis"] = design.summary()
+    if sampling is not None:  # the loop as it runs: its certificate is the design's verdict
+        design, doc["sampled"] = sampled_check(problem, design, sampling, out)
     moving = moving_check(problem, design.controller, out, moving_options(args)) if args.moving else None
     if moving is not None:
         doc["moving"] = moving
@@ -229,11 +239,24 @@ def cmd_synth(args) -> int:
     return exit_status(cert)
 
 
+def sampled_check(problem, design, sampling, out):
+    """The design certified again as the sampled loop (:mod:`polyrob.analysis.sampled_data`): ``(design, summary)``."""
+    from polyrob.analysis.sampled_data import sampled_certificate, sampling_words
+
+    out.line(f"certificate of the loop {sampling_words(sampling)} (docs/certificates.md)")
+    sampled = sampled_certificate(problem.P, design.controller, sampling, scope=problem.scope(), progress=out.progress)
+    out.line(sampled.line())
+    if not sampled.certificate.certified and design.certificate.certified:
+        out.line(sampled.instead_line(design.certificate))
+    return design.certified_by(sampled.certificate), sampled.summary()
+
+
 def add_synthesis_arguments(p) -> None:
     add_robot_arguments(p)
     add_domain_arguments(p)
     add_weight_arguments(p)
     add_plant_arguments(p)
+    add_sampling_arguments(p)
     g = p.add_argument_group("synthesis")
     g.add_argument(
         "--structure", default="full", help="full (D-K / D-G-K), tfN (e.g. tf3: each K_ij of order N), pid, ss:N"
@@ -327,7 +350,9 @@ def validation_at_rate_stage(problem, K, conditions, args, out) -> dict:
     res = validate_at_rate(problem.robot, K, problem.pldi, conditions=conditions, true_robots=args.true_robots)
     out.line(res.verdict())
     summary = res.summary()
-    short = {k: summary[k] for k in ("conditions", "uncertainty", "true_robots", "by_reference", "meets_bar", "verdict")}
+    short = {
+        k: summary[k] for k in ("conditions", "uncertainty", "true_robots", "by_reference", "meets_bar", "verdict")
+    }
     if args.output:
         path = Path(args.output).with_suffix(".validation.json")
         atomic_write(path, lambda f: f.write(json.dumps(summary, indent=1, default=json_default)))

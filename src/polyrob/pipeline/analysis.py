@@ -35,7 +35,7 @@ def instead_line(problem, analysis, limit: dict | None = None) -> str:
     """
     from polyrob.analysis.margins import dominant_weight
 
-    cert = analysis.certificate
+    cert = analysis.robust_performance.certificate  # the continuous loop's (a sampled one has its own line)
     if cert.certified:
         return ""
     rs, m = analysis.robust_stability.certificate, analysis.margin
@@ -141,10 +141,13 @@ class ControllerAnalysis:
     moving: object = None
     margin: object = None
     instead: str = ""
+    sampled: object = None
 
     @property
     def certificate(self):
-        """The robust-performance certificate: the verdict of the analysis."""
+        """The robust-performance certificate: the verdict of the analysis (the sampled loop's, when asked for)."""
+        if self.sampled is not None:
+            return self.sampled.certificate
         return self.robust_performance.certificate
 
     @property
@@ -175,6 +178,7 @@ class ControllerAnalysis:
             "moving": None if self.moving is None else self.moving.summary(),
             "margin": None if self.margin is None else self.margin.summary(),
             "instead": self.instead or None,
+            "sampled": None if self.sampled is None else self.sampled.summary(),
         }
 
 
@@ -192,6 +196,7 @@ def analyze_controller(
     moving_options: dict | None = None,
     limit: dict | None = None,
     certificate=None,
+    sampled_loop=None,
 ) -> ControllerAnalysis:
     """Nominal/robust stability and performance of ``K`` on ``problem``, and sampled stability.
 
@@ -234,6 +239,10 @@ def analyze_controller(
         The robust-performance certificate of ``K`` on ``problem`` already
         made (a design's): decided again instead of swept when it is of the
         same closed loop on the loop's own grid (``omega`` not given).
+    sampled_loop : SamplingSpec, optional
+        The loop sampled at a rate with a delay
+        (:func:`polyrob.analysis.sampled_data.sampled_certificate`): its
+        certificate is then the verdict; the continuous figures stay beside it.
     """
     from polyrob.analysis.robust import nominal_performance, robperf, robstab, robstab_implied, sample_stability
 
@@ -275,6 +284,11 @@ def analyze_controller(
     from polyrob.analysis.margins import robust_margin
 
     margin = None if rp.certificate.certified else robust_margin(rp.certificate)
+    sampled = None
+    if sampled_loop is not None:
+        from polyrob.analysis.sampled_data import sampled_certificate
+
+        sampled = sampled_certificate(problem.P, K, sampled_loop, scope=problem.scope(), progress=progress)
     analysis = ControllerAnalysis(
         robust_stability=rs,
         robust_performance=rp,
@@ -285,7 +299,10 @@ def analyze_controller(
         time_varying=tv,
         moving=mv,
         margin=margin,
+        sampled=sampled,
     )
+    if sampled is not None and not sampled.certificate.certified and margin is None:
+        return replace(analysis, instead=sampled.instead_line(rp.certificate))
     if margin is None:
         return analysis
     return replace(analysis, instead=instead_line(problem, analysis, limit))
