@@ -42,6 +42,13 @@ def problem():
     return build_problem(arm, dom, progress=False, bound_options={"samples": 1024})
 
 
+@pytest.fixture(scope="module")
+def lft_problem():
+    """The main job's task (an ``lft`` model: inner feedback ``D_vd`` in Δ), coarsely bounded."""
+    dom = TaskDomain.from_robot(load_robot("planar_2r"), pose=[0, 1.5708], q_radius=0.5, qdot_max=1, qddot_max=2.0)
+    return build_problem(load_robot("planar_2r"), dom, progress=False, bound_options={"samples": 256})
+
+
 def _member(unc, rng):
     """A random member of the continuous set: ``δ`` (half of them at corners) and full blocks of norm 1."""
     delta = rng.choice([-1.0, 1.0], unc.n_params) if rng.uniform() < 0.5 else rng.uniform(-1, 1, unc.n_params)
@@ -52,9 +59,11 @@ def _member(unc, rng):
     return delta, residual
 
 
-@pytest.mark.parametrize("rate", [1000.0, 20.0])
-def test_discrete_model_holds_the_exact_zoh_of_random_members(problem, rate):
+@pytest.mark.parametrize("which, rate", [("inner-gain", 1000.0), ("inner-gain", 20.0), ("lft", 1000.0)])
+def test_discrete_model_holds_the_exact_zoh_of_random_members(request, which, rate):
+    problem = request.getfixturevalue("problem" if which == "inner-gain" else "lft_problem")
     unc = problem.P.uncertain
+    assert unc.model == which and (which != "lft" or np.any(unc.D_vd))
     n, m = unc.n_x, unc.m
     sp = sampled_generalized_plant(problem.P, SamplingSpec(rate, 0))
     S = sp.system

@@ -189,11 +189,14 @@ def perturbation_bound(unc) -> float:
         blockwise = sum(_norm(B[:, g]) * _norm(C[g, :]) for g in _channel_groups(unc))
         return min(_norm(B) * _norm(C), blockwise)
     _, (_, scale) = scipy.linalg.matrix_balance(np.abs(D) + 1e-300, permute=False, separate=True)
-    s = 1.0 / np.asarray(scale, float)  # S = diag(s): S D S^-1 is the balanced |D|'s scaling
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.clip(1.0 / np.asarray(scale, float), 1e-8, 1e8)  # S = diag(s): the balanced |D|'s scaling
     for g in _channel_groups(unc)[: len(unc.full_blocks)]:  # a full block takes one scalar
         s[g] = np.exp(np.mean(np.log(s[g])))
     best = math.inf
     for d in (np.ones(len(s)), s):
+        if not np.all(np.isfinite(d)):
+            continue
         contraction = _norm(d[:, None] * D / d[None, :])
         if contraction < 1.0:
             best = min(best, _norm(B / d[None, :]) * _norm(d[:, None] * C) / (1.0 - contraction))
