@@ -16,7 +16,6 @@ import pytest
 import scipy.linalg
 
 from polyrob import load_robot
-from polyrob.analysis.certificate import certify_loop
 from polyrob.analysis.sampled_data import (
     SamplingSpec,
     bilinear_to_continuous,
@@ -118,13 +117,23 @@ def test_bilinear_map_keeps_the_frequency_response_and_stability():
     assert physical_frequency(np.tan(np.pi / 4), 1000.0) == pytest.approx(np.pi / 2 * 1000.0)
 
 
-def test_certified_at_1khz_with_one_sample_of_delay(problem):
-    fast = sampled_certificate(problem.P, load_controller(FIXTURE), SamplingSpec(1000.0, 1), scope=problem.scope())
-    assert fast.certificate.certified, fast.verdict
-    assert fast.certificate.bound == pytest.approx(0.679, abs=0.01)  # continuous: 0.6773
-    covers = fast.certificate.scope.sentence()
+def test_certified_at_1khz_with_one_sample_of_delay_beside_the_continuous_certificate(problem):
+    from polyrob.pipeline import analyze_controller
+
+    K = load_controller(FIXTURE)
+    a = analyze_controller(
+        problem, K, mc=1, time_varying=False, moving=False, stability="implied", sampled_loop=SamplingSpec(1000.0, 1)
+    )
+    continuous = a.robust_performance.certificate  # unchanged: the fixture's own figure
+    assert continuous.certified and continuous.bound == pytest.approx(0.6773241094692622, rel=1e-6)
+    assert continuous.scope.sampling == "" and "zero-order hold" not in continuous.scope.sentence()
+    assert a.certificate is a.sampled.certificate and a.certificate.certified, a.verdict
+    assert a.certificate.bound == pytest.approx(0.679, abs=0.01)
+    covers = a.certificate.scope.sentence()
     assert "sampled at 1000 Hz with one sample of delay, zero-order hold, at the sampling instants" in covers
     assert "Nyquist frequency 3142 rad/s" in covers
+    doc = a.summary()  # the JSON's verdict, status and covers are the sampled loop's
+    assert doc["covers"] == covers and doc["status"] == "CERTIFIED" and doc["sampled"]["delay_samples"] == 1
 
 
 def test_not_certified_at_a_rate_too_low_for_it(problem):
@@ -133,12 +142,6 @@ def test_not_certified_at_a_rate_too_low_for_it(problem):
     assert slow.certificate.status.value == "NOT_CERTIFIED", slow.verdict
     assert slow.certificate.mu_lower > 1.0  # far from it, not a rounding
     assert "sampled at 10 Hz with one sample of delay" in slow.certificate.scope.sentence()
-
-
-def test_the_continuous_certificate_is_unchanged(problem):
-    cert = certify_loop(problem.P, load_controller(FIXTURE), scope=problem.scope())
-    assert cert.certified and cert.bound == pytest.approx(0.6773241094692622, rel=1e-6)  # the fixture's own figure
-    assert "sampled" not in cert.scope.sentence().split("PLDI")[0] and cert.scope.sampling == ""
 
 
 def test_bad_sampling_specs_are_refused():

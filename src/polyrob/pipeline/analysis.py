@@ -295,7 +295,7 @@ def analyze_controller(
         nominal_performance=float(npf),
         sampling=sampling,
         order=controller_order(K),
-        covers=str(covers),
+        covers=str(covers if sampled is None else sampled.certificate.scope.sentence()),  # the verdict's
         time_varying=tv,
         moving=mv,
         margin=margin,
