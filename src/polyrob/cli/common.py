@@ -37,6 +37,7 @@ __all__ = [
     "domain_options_given",
     "apply_default_task",
     "hyperparameters_from_args",
+    "limit_weights_from_args",
     "to_json",
 ]
 
@@ -369,6 +370,23 @@ def add_weight_arguments(parser: argparse.ArgumentParser) -> None:
     for key, text in WEIGHT_OPTIONS:
         g.add_argument(f"--{text}", dest=key, default=None, help=f"{key}")
     g.add_argument("--bandwidth-scale", type=positive_float, default=1.0, help="multiply wB and wBT")
+    lim = parser.add_argument_group(
+        "limit weights W_KS = W_u W_n on u (on by default on an arm's default task; docs/synthesis.md)",
+        "the encoder noise W_n n (n on the measured q) may drive at most 5 %% of the effort limit, peak to peak, "
+        "within what the task's torque leaves",
+    )
+    lim.add_argument(
+        "--encoder-bits",
+        default=None,
+        help="encoder resolution, bits per revolution (default 18): W_n = half a count = pi / 2^B rad",
+    )
+    lim.add_argument(
+        "--effort-weight",
+        default=None,
+        help="W_u > 0, one or one per joint, in 1/(u's unit): 1/N m, or s^2/rad for the computed-torque input v "
+        "(default: from the URDF effort limits minus the task's torque)",
+    )
+    lim.add_argument("--no-limit-weights", action="store_true", help="the paper's W_S and W_T only")
 
 
 def hyperparameters_from_args(m: int, args, domain=None) -> dict:
@@ -388,6 +406,47 @@ def hyperparameters_from_args(m: int, args, domain=None) -> dict:
         h = automatic_hyperparameters(m, domain, overrides)
         return default_hyperparameters(m, h, bandwidth_scale=args.bandwidth_scale)
     return default_hyperparameters(m, overrides, bandwidth_scale=args.bandwidth_scale)
+
+
+def encoder_bits_from_args(args) -> int | None:
+    """``--encoder-bits`` as a whole number from 1 to 64, or ``None``."""
+    text = getattr(args, "encoder_bits", None)
+    if text is None:
+        return None
+    value = number(text, "--encoder-bits")
+    if value != int(value) or not 1 <= value <= 64:
+        raise ArgumentError(f"--encoder-bits: give a whole number of bits from 1 to 64, got '{text}'")
+    return int(value)
+
+
+def limit_weights_from_args(robot, args, domain, hyperparameters: dict) -> dict:
+    """``hyperparameters`` with the limit weights the options ask for (:mod:`polyrob.plant.weights`).
+
+    On by default on an arm's default task; ``--encoder-bits`` or
+    ``--effort-weight`` turn them on elsewhere, ``--no-limit-weights`` off.
+    """
+    bits = encoder_bits_from_args(args)
+    effort = parse_list(getattr(args, "effort_weight", None), "--effort-weight")
+    if getattr(args, "no_limit_weights", False):
+        if bits is not None or effort is not None:
+            raise ArgumentError("--no-limit-weights drops the limit weights: drop --encoder-bits/--effort-weight")
+        return hyperparameters
+    if not (getattr(args, "default_task", None) or bits is not None or effort is not None) or domain is None:
+        return hyperparameters
+    if effort is not None and len(effort) not in (1, robot.m):
+        raise ArgumentError(f"--effort-weight: give 1 or {robot.m} values (one per joint), got {len(effort)}")
+    h = dict(hyperparameters)
+    if effort is None:
+        from polyrob.fleet.autoweights import limit_hyperparameters
+
+        h.update(limit_hyperparameters(robot, domain, encoder_bits=bits).hyperparameters())
+    else:
+        from polyrob.plant.weights import DEFAULT_ENCODER_BITS, encoder_noise_level
+
+        noise = encoder_noise_level(DEFAULT_ENCODER_BITS if bits is None else bits)
+        h["effort"] = tuple(effort * robot.m if len(effort) == 1 else effort)
+        h["noise"] = (noise,) * robot.m
+    return h
 
 
 def scale_names(text: str) -> tuple:

@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
-from polyrob.cli.common import domain_from_args, domain_options_given, hyperparameters_from_args
+from polyrob.cli.common import (
+    domain_from_args,
+    domain_options_given,
+    hyperparameters_from_args,
+    limit_weights_from_args,
+)
 from polyrob.errors import ArgumentError
 
 __all__ = ["add_plant_arguments", "pldi_path", "problem_from_args", "describe_source"]
@@ -58,7 +63,11 @@ def problem_from_args(robot, args, out, *, hyperparameters=None, check=None):
         domain = domain_from_args(robot, args)
         known_domain = domain
     # an arm's default task brings its automatic weights (cli.common.hyperparameters_from_args)
-    h = hyperparameters_from_args(robot.m, args, known_domain) if hyperparameters is None else hyperparameters
+    if hyperparameters is None:
+        h = hyperparameters_from_args(robot.m, args, known_domain)
+        h = limit_weights_from_args(robot, args, known_domain, h)  # effort and encoder noise (docs/synthesis.md)
+    else:
+        h = hyperparameters
     if check is not None:
         check(
             {

@@ -158,7 +158,8 @@ def max_bandwidth_design(problem, args, out, options: dict):
     moving = bool(args.moving) and applies(problem) is None  # the inner-gain route: one mu test per factor
     what = "the moving-robot certificate (masses constant, the state at any rate)" if moving else "mu < 1"
     out.stage(f"largest bandwidth factor with {what} (scaling {', '.join(scale)}; a synthesis per factor)")
-    design, res = design_max_bandwidth(problem, scale=scale, alphas=alphas, moving=moving, **options)
+    rate = getattr(args, "rate", None)  # the sampled-data options, when given (docs/synthesis.md)
+    design, res = design_max_bandwidth(problem, scale=scale, alphas=alphas, moving=moving, rate=rate, **options)
     out.line(f"{'alpha':>10}  {('moving-robot ' if moving else '') + 'mu at every frequency (inf: not certified)':>18}")
     for alpha, mu in res.history:
         out.line(f"{alpha:>10.4g}  {mu:>18.5g}")
@@ -174,6 +175,11 @@ def max_bandwidth_design(problem, args, out, options: dict):
         f"(mu <= {res.peak_mu:.4g} at every frequency; {beyond}), "
         f"controller order {res.result.order}"
     )
+    if res.bound_hit:
+        out.line(f"bound hit: {res.bound_hit}")
+    if res.crossover == res.crossover:  # not nan
+        cap = f" (cap {res.crossover_limit:.4g} rad/s)" if res.crossover_limit == res.crossover_limit else ""
+        out.line(f"nominal loop crossover at alpha {res.alpha:.4g}: {res.crossover:.4g} rad/s{cap}")
     out.line("weights: " + ", ".join(f"{k} = {list(v)}" for k, v in res.hyperparameters.items()))
     extra = {"weights": {k: list(v) for k, v in res.hyperparameters.items()}}
     return design, scaled_problem(problem, res.hyperparameters), extra

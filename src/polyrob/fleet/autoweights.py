@@ -16,6 +16,13 @@ joint 2).  For ``m`` joints, :func:`automatic_hyperparameters`
   mean on the paper's domain (``paper_2r --domain paper``), clipped to
   ``[1/8, 8]``; it is 1 on the paper's domain.
 
+Beside the paper's W_S and W_T, :func:`limit_hyperparameters` gives the
+weights of what limits a real loop (:mod:`polyrob.plant.weights`): the
+control effort ``W_u`` from the URDF's effort limits and the torque the task
+needs, and the encoder noise ``W_n`` from the encoder resolution
+(``--encoder-bits``, default 18).  :func:`automatic_hyperparameters` adds
+them when given the robot.
+
 The result is a starting point, not a tuned design: the bandwidth search
 (:func:`polyrob.pipeline.design_max_bandwidth`) then scales both bandwidths
 to the largest factor with certified μ < 1.
@@ -32,15 +39,31 @@ Examples
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+
+import numpy as np
 
 from polyrob.errors import ArgumentError
 
-__all__ = ["automatic_hyperparameters", "domain_level", "PAPER_DOMAIN_RATIO", "LEVEL_LIMITS"]
+__all__ = [
+    "automatic_hyperparameters",
+    "domain_level",
+    "limit_hyperparameters",
+    "EffortBudget",
+    "PAPER_DOMAIN_RATIO",
+    "LEVEL_LIMITS",
+    "TASK_TORQUE_SAMPLES",
+    "TASK_TORQUE_MARGIN",
+]
 
 #: Geometric mean over the joints of ``h_qdot / h_q`` on the paper's domain (|qdot| <= 3.9564, 9.9561; q in +-pi).
 PAPER_DOMAIN_RATIO = math.sqrt(3.9564 * 9.9561) / math.pi
 #: The domain level factor is clipped to this range (a degenerate domain must not ask for absurd bandwidths).
 LEVEL_LIMITS = (0.125, 8.0)
+#: Domain points the task's torque and the inner layer's mass matrix are sampled at (seeded).
+TASK_TORQUE_SAMPLES = 512
+#: The sampled task torque is raised by this factor: a sampled maximum is an estimate from below.
+TASK_TORQUE_MARGIN = 1.1
 
 
 def _half_width(interval) -> float:
@@ -74,8 +97,134 @@ def domain_level(domain) -> float:
     return min(max(level, LEVEL_LIMITS[0]), LEVEL_LIMITS[1])
 
 
-def automatic_hyperparameters(m: int, domain=None, overrides: dict | None = None) -> dict:
-    """W_S / W_T hyperparameters for ``m`` joints over ``domain`` (the paper's shape).
+@dataclass(frozen=True)
+class EffortBudget:
+    """What the limit weights of one robot rest on (per joint, in the robot's units).
+
+    Attributes
+    ----------
+    effort_limit : tuple of float
+        ``tau_max`` [N m] (the URDF's effort limits).
+    task_torque : tuple of float
+        The largest ``|tau|`` the task needs [N m], sampled over the domain
+        and the true robots, times :data:`TASK_TORQUE_MARGIN` (not proved).
+    torque_gain : tuple of float or None
+        ``max_q ||M_hat(q)[j, :]||`` [N m s^2/rad] when ``u`` is the
+        computed-torque input ``v``; ``None`` when ``u`` is the torque.
+    encoder_bits : int
+    effort : tuple of float
+        ``W_u`` [1/N m, or s^2/rad for ``v``].
+    noise : tuple of float
+        ``W_n = LSB/2`` [rad].
+    binds : tuple of str
+        Per joint, what sets its torque budget: ``"encoder noise"`` (5 % of
+        the limit peak to peak) or ``"effort limit"`` (less is left by the task).
+    u_unit : str
+    """
+
+    effort_limit: tuple
+    task_torque: tuple
+    torque_gain: tuple | None
+    encoder_bits: int
+    effort: tuple
+    noise: tuple
+    binds: tuple
+    u_unit: str
+
+    def hyperparameters(self) -> dict:
+        """``{"effort": ..., "noise": ...}`` for :func:`automatic_hyperparameters`."""
+        return {"effort": self.effort, "noise": self.noise}
+
+    def words(self) -> str:
+        """The budget in one line (what ``synth`` prints)."""
+        from polyrob.plant.weights import CHATTER_FRACTION, encoder_lsb
+
+        lim = ", ".join(f"{t:.3g}" for t in self.effort_limit)
+        task = ", ".join(f"{t:.3g}" for t in self.task_torque)
+        return (
+            f"limit weights: W_u = {self.effort[0]:.4g}{'' if len(set(self.effort)) == 1 else ' ...'} "
+            f"[1/({self.u_unit})] from effort limits ({lim}) N m minus the task's torque ({task}) N m "
+            f"(sampled), noise within {100 * CHATTER_FRACTION:g} % of the limit peak to peak; "
+            f"W_n = {self.noise[0]:.4g} rad (half a count of a {self.encoder_bits}-bit encoder, "
+            f"LSB {encoder_lsb(self.encoder_bits):.3g} rad)"
+        )
+
+
+def _task_points(robot, domain, n: int):
+    """``(q, qdot, qddot)`` (n, m) each, sampled in the domain (``qddot = 0`` on a torque-box domain)."""
+    z = np.asarray(domain.sample_box(n, seed=0), float)
+    m = robot.m
+    q, qdot = z[:, :m], z[:, m : 2 * m]
+    if getattr(domain, "_third", "u") != "qddot":
+        return q, qdot, np.zeros_like(q)
+    qddot = z[:, 2 * m :]
+    # the torque is affine in qddot: each point also with its accelerations pushed to the box's corner
+    lo, hi = np.asarray(domain.qddot_lower, float), np.asarray(domain.qddot_upper, float)
+    corner = np.where(qddot >= 0.5 * (lo + hi), hi, lo)
+    return np.vstack([q, q]), np.vstack([qdot, qdot]), np.vstack([qddot, corner])
+
+
+def limit_hyperparameters(robot, domain, *, encoder_bits: int | None = None, samples: int = TASK_TORQUE_SAMPLES):
+    """The limit weights of ``robot`` over ``domain``: an :class:`EffortBudget`.
+
+    The task's torque is the inverse dynamics of every true robot
+    (:meth:`~polyrob.model.inner.InnerLoopRobot.variants`) at ``samples``
+    points of the domain's ``(q, qdot, qddot)`` (``qddot = 0`` on a
+    torque-box domain, which states no acceleration; each point also with its
+    accelerations at the box's corner), raised by
+    :data:`TASK_TORQUE_MARGIN`.  On a computed-torque robot ``u`` is ``v``
+    and the torque gain is the largest row norm of the model's ``M_hat(q)``
+    at the same points.
+
+    Raises
+    ------
+    ArgumentError
+        A joint without a finite effort limit, or a task that needs a
+        joint's whole effort limit.
+    """
+    from polyrob.plant.weights import DEFAULT_ENCODER_BITS, effort_level, encoder_noise_level
+
+    bits = DEFAULT_ENCODER_BITS if encoder_bits is None else encoder_bits
+    noise = encoder_noise_level(bits)
+    limit = np.asarray(robot.effort_limit, float).ravel()
+    if limit.size != robot.m or not np.all(np.isfinite(limit) & (limit > 0)):
+        raise ArgumentError(
+            f"{robot.name}: the limit weights need a finite effort limit > 0 on every joint "
+            f"(the URDF's <limit effort>), got {limit.tolist()}; drop the limit weights (--no-limit-weights)"
+        )
+    q, qdot, qddot = _task_points(robot, domain, int(samples))
+    inner = getattr(robot, "inner", "none")
+    variants = robot.variants() if hasattr(robot, "variants") else (robot,)
+    truths = [getattr(v, "true_robot", v) for v in variants]
+    need = np.max([np.abs(t.inverse_dynamics(q, qdot, qddot)).max(axis=0) for t in truths], axis=0)
+    task = TASK_TORQUE_MARGIN * need
+    gain = None
+    if inner == "computed-torque":
+        model = robot.model_robot
+        rows = np.array([np.linalg.norm(model.mass_matrix(qk), axis=1) for qk in q])
+        gain = rows.max(axis=0)
+    effort = effort_level(limit, task, gain)
+    from polyrob.plant.weights import CHATTER_FRACTION
+
+    binds = tuple(
+        "effort limit" if lim - t < 0.5 * CHATTER_FRACTION * lim else "encoder noise" for lim, t in zip(limit, task)
+    )
+    return EffortBudget(
+        effort_limit=tuple(float(v) for v in limit),
+        task_torque=tuple(float(v) for v in task),
+        torque_gain=None if gain is None else tuple(float(v) for v in gain),
+        encoder_bits=int(bits),
+        effort=tuple(float(v) for v in effort),
+        noise=(float(noise),) * robot.m,
+        binds=binds,
+        u_unit="N m" if gain is None else "rad/s^2",
+    )
+
+
+def automatic_hyperparameters(
+    m: int, domain=None, overrides: dict | None = None, *, robot=None, encoder_bits: int | None = None
+) -> dict:
+    """W_S / W_T hyperparameters for ``m`` joints over ``domain`` (the paper's shape), and the limit weights.
 
     Parameters
     ----------
@@ -86,11 +235,17 @@ def automatic_hyperparameters(m: int, domain=None, overrides: dict | None = None
     overrides : dict, optional
         ``key -> sequence`` of 1 or ``m`` values, applied after (as in
         :func:`polyrob.pipeline.default_hyperparameters`; not levelled).
+    robot : Manipulator, optional
+        With ``domain``: adds the limit weights ``effort`` and ``noise``
+        (:func:`limit_hyperparameters`; an override of either wins).
+    encoder_bits : int, optional
+        The encoder resolution of the noise weight (default 18).
 
     Returns
     -------
     dict
-        ``key -> tuple`` of ``m`` floats, keys of :data:`polyrob.pipeline.WEIGHT_KEYS`.
+        ``key -> tuple`` of ``m`` floats, keys of :data:`polyrob.pipeline.WEIGHT_KEYS`
+        (and :data:`polyrob.plant.weights.LIMIT_KEYS` with ``robot``).
     """
     from polyrob.pipeline.problem import default_hyperparameters
     from polyrob.plant.weights import PAPER_HYPERPARAMETERS
@@ -108,6 +263,8 @@ def automatic_hyperparameters(m: int, domain=None, overrides: dict | None = None
         if key in ("omega_b", "omega_bt"):
             vals = [v * level for v in vals]
         shaped[key] = vals
+    if robot is not None and domain is not None:
+        shaped.update(limit_hyperparameters(robot, domain, encoder_bits=encoder_bits).hyperparameters())
     # the user's overrides replace the shaped values as given
     shaped.update({k: list(v) for k, v in (overrides or {}).items()})
     return default_hyperparameters(m, shaped)

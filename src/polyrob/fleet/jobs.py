@@ -278,7 +278,8 @@ def _problem(job: Job, settings: Settings, timings: dict):
 
     robot, domain, task = job_robot_and_domain(job)
     if job.auto_weights:
-        h = automatic_hyperparameters(robot.m, domain, job.weights)
+        # on a task the automatic weights carry the effort limit and the encoder noise (docs/synthesis.md)
+        h = automatic_hyperparameters(robot.m, domain, job.weights, robot=robot if task is not None else None)
     else:
         h = default_hyperparameters(robot.m, job.weights)
     if job.bandwidth_scale != 1.0:

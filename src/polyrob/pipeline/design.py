@@ -7,6 +7,7 @@ the controller with the certificate a controller file stores.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 from polyrob.errors import ArgumentError
@@ -233,7 +234,17 @@ def reduce_design(
 MOVING_ALPHAS = tuple(2.0 ** (k / 4) for k in range(-12, 21))
 
 
-def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None, limit=True, moving=False, **options):
+def design_max_bandwidth(
+    problem,
+    *,
+    scale=("omega_b", "omega_bt"),
+    alphas=None,
+    limit=True,
+    moving=False,
+    rate=None,
+    delay_samples=1.0,
+    **options,
+):
     """The largest bandwidth factor with certified μ < 1; returns ``(Design, BandwidthScalingResult)``.
 
     With ``limit`` (default) a factor at which the robot's performance limit
@@ -243,6 +254,12 @@ def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None,
     (:func:`polyrob.analysis.lpv.constant.constant_parameter_certificate`:
     the masses constant, the state at any rate), so the result is the
     largest factor at which the robot in motion is certified.
+
+    With the limit weights (``effort``, ``noise``: an arm's default task) the
+    controller will run sampled: ``rate`` [Hz] (default 1 kHz there, none
+    on the paper's problem) and ``delay_samples`` cap the crossover
+    (:func:`polyrob.synthesis.bandwidth.crossover_cap`), and the result's
+    ``bound_hit`` names the bound where the search stops.
     """
     from polyrob.plant.generalized import paper_controller
     from polyrob.synthesis import max_bandwidth_scaling
@@ -272,12 +289,47 @@ def design_max_bandwidth(problem, *, scale=("omega_b", "omega_bt"), alphas=None,
         # the moving robot's test passes in a window of factors (so101: 16 and 32 fail, 22.6 passes,
         # docs/certificates.md): a quarter-octave scan from the top finds it where octaves step over it
         options.setdefault("alphas", MOVING_ALPHAS)
+    if "effort" in problem.hyperparameters:
+        from polyrob.synthesis.bandwidth import DEFAULT_RATE
+
+        options["rate"] = DEFAULT_RATE[0] if rate is None else rate
+        options["delay_samples"] = delay_samples
+        options["channel_names"] = limit_channel_names(problem)
+    elif rate is not None:
+        options["rate"], options["delay_samples"] = rate, delay_samples
     res = max_bandwidth_scaling(problem.unc, problem.hyperparameters, scale=tuple(scale), **options)
     cert = res.result.summary()
     cert.update(bandwidth_scaling={**res.summary(), "per_factor": per_factor})
     notes = tuple(res.result.info.get("notes", [])) if isinstance(res.result.info, dict) else ()
     design = Design(controller=res.result.controller, result=res.result, reduced=None, record=cert, notes=notes)
     return certify_design(scaled_problem(problem, res.hyperparameters), design), res
+
+
+def limit_channel_names(problem) -> dict:
+    """Words for the weighted channels, the limit weight's naming what sets its level on this robot."""
+    from polyrob.errors import PolyrobError
+    from polyrob.synthesis.bandwidth import CHANNEL_NAMES
+
+    names = dict(CHANNEL_NAMES)
+    try:
+        from polyrob.fleet.autoweights import limit_hyperparameters
+        from polyrob.plant.weights import encoder_noise_level
+
+        noise = float(problem.hyperparameters["noise"][0])
+        bits = next((b for b in range(1, 65) if math.isclose(encoder_noise_level(b), noise)), None)
+        budget = limit_hyperparameters(problem.robot, problem.domain, encoder_bits=bits)
+    except (PolyrobError, AttributeError, KeyError, TypeError, ValueError):
+        return names  # a given --effort-weight or a robot without effort limits: the channel's own words
+    if tuple(budget.effort) != tuple(problem.hyperparameters["effort"]):
+        names["W_KS u"] = "effort weight as given (W_u K S W_n)"
+    elif "effort limit" in budget.binds:
+        joints = [j for j, b in enumerate(budget.binds) if b == "effort limit"]
+        names["W_KS u"] = f"effort limit (the task's torque leaves less than the noise budget on joints {joints})"
+    else:
+        names["W_KS u"] = (
+            f"encoder noise ({budget.encoder_bits}-bit: its torque reaches 5 % of the effort limit peak to peak)"
+        )
+    return names
 
 
 def moving_judge(problem):
@@ -299,7 +351,7 @@ def moving_judge(problem):
 def scaled_problem(problem, hyperparameters: dict):
     """``problem`` with other weight hyperparameters (same PLDI and model): where a bandwidth factor's controller is certified."""
     from polyrob.plant.generalized import generalized_plant
-    from polyrob.plant.weights import paper_weights
+    from polyrob.plant.weights import plant_weights
 
     h = {k: tuple(v) for k, v in hyperparameters.items()}
-    return replace(problem, P=generalized_plant(problem.unc, *paper_weights(h)), hyperparameters=h)
+    return replace(problem, P=generalized_plant(problem.unc, **plant_weights(h)), hyperparameters=h)

@@ -54,15 +54,16 @@ def default_hyperparameters(m: int, overrides: dict | None = None, *, bandwidth_
     >>> default_hyperparameters(2, bandwidth_scale=2)["omega_b"]
     (1.0, 0.2)
     """
-    from polyrob.plant.weights import PAPER_HYPERPARAMETERS
+    from polyrob.plant.weights import LIMIT_KEYS, PAPER_HYPERPARAMETERS
 
     overrides = dict(overrides or {})
-    unknown = sorted(set(overrides) - set(WEIGHT_KEYS))
+    unknown = sorted(set(overrides) - set(WEIGHT_KEYS) - set(LIMIT_KEYS))
     if unknown:
-        raise ArgumentError(f"unknown weight hyperparameter(s) {unknown}; known: {list(WEIGHT_KEYS)}")
+        raise ArgumentError(f"unknown weight hyperparameter(s) {unknown}; known: {list(WEIGHT_KEYS + LIMIT_KEYS)}")
     h = {}
-    for key in WEIGHT_KEYS:
-        paper = PAPER_HYPERPARAMETERS[key]
+    # the limit weights (effort, noise) are kept only when given: without them the problem is the paper's
+    for key in WEIGHT_KEYS + tuple(k for k in LIMIT_KEYS if k in overrides):
+        paper = PAPER_HYPERPARAMETERS.get(key)
         vals = overrides.get(key)
         if vals is None:
             vals = list(paper) if m == len(paper) else [paper[0]] * m
@@ -269,7 +270,7 @@ def build_problem(
         A PLDI of another robot, weights of the wrong length, unknown model.
     """
     from polyrob.plant.generalized import generalized_plant
-    from polyrob.plant.weights import paper_weights
+    from polyrob.plant.weights import plant_weights
 
     h = default_hyperparameters(robot.m) if hyperparameters is None else dict(hyperparameters)
     if {len(v) for v in h.values()} != {robot.m}:
@@ -284,7 +285,7 @@ def build_problem(
     else:
         _check_pldi(robot, pldi, domain)
     unc, model = make_uncertain_plant(pldi, uncertainty, merge_symmetric=merge_symmetric)
-    P = generalized_plant(unc, *paper_weights(h))
+    P = generalized_plant(unc, **plant_weights(h))
     return Problem(
         robot=robot,
         pldi=pldi,

@@ -59,7 +59,7 @@ Examples
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import control
 import numpy as np
@@ -168,7 +168,7 @@ class GeneralizedPlant:
 
 
 def generalized_plant(
-    unc: UncertainPlant, W_S=None, W_T=None, W_KS=None, *, regularize: float | None = None
+    unc: UncertainPlant, W_S=None, W_T=None, W_KS=None, *, W_n=None, regularize: float | None = None
 ) -> GeneralizedPlant:
     """Augment the uncertain plant with weights: the paper's ``P`` (eq. 10).
 
@@ -180,6 +180,15 @@ def generalized_plant(
         channel), ``m x m`` (diagonal in the paper; any ``m x m`` is accepted)
         or a static gain.  Continuous-time, proper and stable.  ``None``
         omits the channel; at least one must be given.
+    W_n : LTI system, array or number, optional
+        Sensor-noise weight: a second exogenous input ``n`` (``m`` channels)
+        enters the measurement, ``y_meas = r - (q + W_n n)``, so
+        ``w = [r; n]`` and ``n_w = 2m`` (labels ``n[i]``).  ``W_S`` still
+        weighs the true error ``r - q`` and ``W_T`` the true ``q``; the
+        channel ``n -> z_KS`` is ``-W_KS K S W_n``: with ``W_KS = W_u`` the
+        torque (or ``v``) the noise drives.  ``None`` (default): no noise
+        input (the pipeline folds a constant ``W_n`` into ``W_KS`` instead,
+        :func:`polyrob.plant.weights.limit_weight`).
     regularize : float, optional
         ``ε > 0`` appends ``z_reg = ε u`` so that ``D_zu`` has full column rank
         (needed by H∞/D-K synthesis when ``W_KS`` is omitted: ``G`` is
@@ -222,6 +231,9 @@ def generalized_plant(
         eps = None
     if WS is None and WT is None and WKS is None and eps is None:
         raise ArgumentError("give at least one weight (W_S, W_T or W_KS): z would be empty")
+    Wn = weight_ss(W_n, m, "W_n")
+    if Wn is not None:
+        return _with_noise(generalized_plant(unc, W_S, W_T, W_KS, regularize=regularize), Wn)
 
     n, nd = unc.n_x, unc.n_delta
     A_g, B_g, C_g = unc.A_mid, unc.B_mid, unc.C
@@ -314,3 +326,38 @@ def generalized_plant(
         block_structure_rs=blk_rs,
         block_structure_rp=blk_rp,
     )
+
+
+def _with_noise(P: GeneralizedPlant, Wn: control.StateSpace) -> GeneralizedPlant:
+    """``P`` with the sensor-noise input ``n``: ``w = [r; n]``, ``y_meas = r - q - W_n n``.
+
+    Only the measurement row sees ``n``: the weights on the true error and
+    position do not (they weigh what the robot does, not what it reads).
+    """
+    m, nd = P.n_u, P.n_delta
+    A, B, C, D = ss_matrices(P.system)
+    An, Bn, Cn, Dn = ss_matrices(Wn)
+    N, k = A.shape[0], An.shape[0]
+    rows_y = slice(C.shape[0] - m, C.shape[0])
+    # inputs [d, r, n, u]; states [x_P, x_Wn]
+    A2 = np.block([[A, np.zeros((N, k))], [np.zeros((k, N)), An]])
+    B2 = np.zeros((N + k, B.shape[1] + m))
+    B2[:N, : nd + m] = B[:, : nd + m]
+    B2[:N, nd + 2 * m :] = B[:, nd + m :]
+    B2[N:, nd + m : nd + 2 * m] = Bn
+    C2 = np.hstack([C, np.zeros((C.shape[0], k))])
+    C2[rows_y, N:] = -Cn
+    D2 = np.zeros((D.shape[0], D.shape[1] + m))
+    D2[:, : nd + m] = D[:, : nd + m]
+    D2[:, nd + 2 * m :] = D[:, nd + m :]
+    D2[rows_y, nd + m : nd + 2 * m] = -Dn
+    ins = list(P.system.input_labels)
+    inputs = ins[: nd + m] + [f"n[{i}]" for i in range(m)] + ins[nd + m :]
+    states = list(P.system.state_labels) + [f"xn[{i}]" for i in range(k)]
+    system = control.ss(
+        A2, B2, C2, D2, inputs=inputs, outputs=list(P.system.output_labels), states=states, name="P", dt=0
+    )
+    blk_rp = P.block_structure_rp.copy()
+    blk_rp[-1, 0] = 2 * m
+    info = dict(P.info, W_n=Wn, w_labels=("r", "n"))
+    return replace(P, system=system, n_w=2 * m, block_structure_rp=blk_rp, info=info)

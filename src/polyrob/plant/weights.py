@@ -7,6 +7,17 @@
   parametrised :math:`W_S`, :math:`W_T`; :func:`paper_weights` gives its 2x2
   diagonal weights from :data:`PAPER_HYPERPARAMETERS`.
 * :func:`diagonal_weight` stacks SISO weights into a diagonal MIMO weight.
+* What limits a real loop (beside the paper's shape): :func:`encoder_noise_level`
+  (the sensor-noise weight ``W_n`` from the encoder resolution),
+  :func:`effort_level` (the control-effort weight ``W_u`` from the effort
+  limit and the torque the task needs) and :func:`limit_weight` (the
+  ``W_KS = W_u W_n`` they make on the ``u`` channel); :func:`plant_weights`
+  gives every weight of a hyperparameter dict.
+
+Units: ``e``, ``y`` and the noise ``W_n n`` are joint positions [rad];
+``u`` is the plant's input, a torque deviation [N m] (no inner layer,
+gravity compensation) or the computed-torque layer's ``v`` [rad/s^2] whose
+torque is ``M_hat(q) v``.
 """
 
 from __future__ import annotations
@@ -26,6 +37,14 @@ __all__ = [
     "diagonal_weight",
     "paper_weights",
     "PAPER_HYPERPARAMETERS",
+    "LIMIT_KEYS",
+    "CHATTER_FRACTION",
+    "DEFAULT_ENCODER_BITS",
+    "encoder_lsb",
+    "encoder_noise_level",
+    "effort_level",
+    "limit_weight",
+    "plant_weights",
 ]
 
 #: Hyperparameters of the paper's weights, one entry per joint/output channel.
@@ -248,3 +267,161 @@ def paper_weights(
     ws = [sensitivity_weight(*p) for p in zip(h["omega_b"], h["M_s"], h["A_s"])]
     wt = [complementary_weight(*p) for p in zip(h["omega_bt"], h["M_t"], h["A_t"])]
     return diagonal_weight(ws), diagonal_weight(wt)
+
+
+# --------------------------------------------------------------------------- what limits a real loop
+
+#: Hyperparameters of the limit weights (optional): ``effort`` is ``W_u`` per joint [1/(u's unit)],
+#: ``noise`` is ``W_n`` per joint [rad]; absent, the plant has the paper's W_S and W_T only.
+LIMIT_KEYS = ("effort", "noise")
+#: The encoder noise may drive at most this fraction of a joint's effort limit, peak to peak.
+CHATTER_FRACTION = 0.05
+#: Encoder resolution assumed when none is given (bits per revolution; ``--encoder-bits``).
+DEFAULT_ENCODER_BITS = 18
+
+
+def encoder_lsb(bits: float) -> float:
+    """One count of a ``bits``-bit absolute encoder: ``2 pi / 2**bits`` [rad].
+
+    Examples
+    --------
+    >>> from polyrob.plant.weights import encoder_lsb
+    >>> f"{encoder_lsb(18):.4e}"
+    '2.3968e-05'
+    """
+    b = _positive("encoder bits", bits)
+    if int(b) != b or not 1 <= b <= 64:
+        raise ArgumentError(f"encoder bits must be a whole number from 1 to 64, got {bits!r}")
+    return 2.0 * math.pi / 2.0 ** int(b)
+
+
+def encoder_noise_level(bits: float) -> float:
+    """``W_n`` of a ``bits``-bit encoder: the largest quantisation error, half a count [rad].
+
+    Rounding to the nearest count errs by at most ``LSB/2``, so a unit noise
+    input ``|n| <= 1`` through ``W_n = LSB/2`` spans every error the encoder
+    makes (peak to peak one LSB).
+
+    Examples
+    --------
+    >>> from polyrob.plant.weights import encoder_noise_level
+    >>> f"{encoder_noise_level(18):.4e}"
+    '1.1984e-05'
+    """
+    return 0.5 * encoder_lsb(bits)
+
+
+def effort_level(effort_limit, task_torque, torque_gain=None, *, fraction: float = CHATTER_FRACTION) -> np.ndarray:
+    """``W_u`` per joint: one over the torque amplitude the noise may drive, through ``u``.
+
+    The noise-driven torque of joint ``j`` may swing by ``fraction`` of its
+    effort limit peak to peak, and never past what the task leaves::
+
+        a_j = min(fraction * tau_max_j / 2,  tau_max_j - tau_task_j)    [N m, amplitude]
+
+    Without ``torque_gain`` ``u`` is the torque deviation and ``W_u = diag(1/a_j)``.
+    With it (the computed-torque layer: torque ``= M_hat(q) v``, ``torque_gain``
+    the largest ``|M_hat|`` row norms over the domain, ``g_j = max_q ||M_hat(q)[j, :]||``)
+    ``|tau_j| <= g_j |v|``, so ``|v| <= min_j a_j / g_j`` keeps every joint in
+    its budget and ``W_u = max_j(g_j / a_j)`` on every ``v`` channel.
+
+    Parameters
+    ----------
+    effort_limit : sequence of float
+        ``tau_max`` per joint [N m] (the URDF's effort limits).
+    task_torque : sequence of float
+        The largest ``|tau|`` the task needs per joint [N m].
+    torque_gain : sequence of float, optional
+        ``g_j`` [N m per rad/s^2] when ``u`` is the computed-torque input ``v``.
+    fraction : float
+        Peak-to-peak share of the effort limit (default :data:`CHATTER_FRACTION`).
+
+    Returns
+    -------
+    ndarray
+        ``W_u`` per joint, in 1/N m (torque input) or s^2/rad (``v``).
+
+    Raises
+    ------
+    ArgumentError
+        A limit that is not positive and finite, or a task that needs the
+        whole effort limit of a joint (no torque is left for feedback).
+
+    Examples
+    --------
+    >>> from polyrob.plant.weights import effort_level
+    >>> effort_level([150.0, 28.0], [20.0, 27.5]).round(4).tolist()   # 3.75 N m; 0.5 N m left on joint 2
+    [0.2667, 2.0]
+    >>> effort_level([150.0, 28.0], [20.0, 5.0], torque_gain=[3.0, 0.1]).round(4).tolist()
+    [0.8, 0.8]
+    """
+    tau_max = np.asarray(effort_limit, float).ravel()
+    tau_task = np.abs(np.asarray(task_torque, float).ravel())
+    frac = _positive("fraction", fraction)
+    if tau_max.shape != tau_task.shape or tau_max.size == 0:
+        raise ArgumentError(
+            f"effort limits and task torques need one value per joint, got {tau_max.size}, {tau_task.size}"
+        )
+    if not np.all(np.isfinite(tau_max) & (tau_max > 0)):
+        raise ArgumentError(f"effort limits must be finite and > 0 (the URDF's <limit effort>), got {tau_max.tolist()}")
+    left = tau_max - tau_task
+    if np.any(left <= 0):
+        j = int(np.argmin(left))
+        raise ArgumentError(
+            f"the task needs {tau_task[j]:.4g} N m on joint {j}, its effort limit is {tau_max[j]:.4g} N m: "
+            "no torque is left for feedback; give a smaller task (--qddot-max, --qdot-max, --q-range)"
+        )
+    amplitude = np.minimum(0.5 * frac * tau_max, left)
+    if torque_gain is None:
+        return 1.0 / amplitude
+    g = np.asarray(torque_gain, float).ravel()
+    if g.shape != tau_max.shape or not np.all(np.isfinite(g) & (g > 0)):
+        raise ArgumentError(f"torque_gain needs one finite value > 0 per joint, got {g.tolist()}")
+    return np.full(tau_max.size, float(np.max(g / amplitude)))
+
+
+def limit_weight(hyperparameters: dict):
+    """``W_KS = W_u W_n`` of the limit hyperparameters, or ``None`` without them.
+
+    The noise ``n`` enters the measurement as ``e = r - q - W_n n``, at the same
+    point as the reference, so ``n -> u`` is ``-K S W_n`` (``K S`` is the map
+    ``r -> u``).  With one noise level ``w_n`` on every joint (``W_n = w_n I``,
+    the largest when they differ, which only enlarges the weight)
+    ``||W_u K S W_n|| = ||(w_n W_u) K S||``: the weight ``W_KS = w_n W_u`` on
+    ``u`` bounds exactly the noise-driven effort, with ``r`` standing in for
+    ``n`` (:func:`polyrob.plant.generalized.generalized_plant` also builds
+    the separate input ``n``).
+
+    Examples
+    --------
+    >>> from polyrob.plant.weights import limit_weight
+    >>> limit_weight({"effort": (2.0, 4.0), "noise": (1e-5, 2e-5)}).tolist()
+    [[4e-05, 0.0], [0.0, 8e-05]]
+    >>> limit_weight({"omega_b": (1.0,)}) is None
+    True
+    """
+    if "effort" not in hyperparameters and "noise" not in hyperparameters:
+        return None
+    missing = [k for k in LIMIT_KEYS if k not in hyperparameters]
+    if missing:
+        raise ArgumentError(f"the limit weights need both {list(LIMIT_KEYS)}, missing {missing}")
+    effort = np.array([_positive("effort weight", v) for v in hyperparameters["effort"]])
+    noise = max(_positive("noise weight", v) for v in hyperparameters["noise"])
+    return np.diag(effort * noise)
+
+
+def plant_weights(hyperparameters: dict | None = None) -> dict:
+    """Every weight of ``hyperparameters``: ``{"W_S", "W_T", "W_KS"}`` for :func:`generalized_plant`.
+
+    ``W_KS`` is :func:`limit_weight` (``None`` without the limit keys: the paper's problem).
+
+    Examples
+    --------
+    >>> from polyrob.plant.weights import plant_weights
+    >>> w = plant_weights()
+    >>> sorted(w), w["W_KS"] is None
+    (['W_KS', 'W_S', 'W_T'], True)
+    """
+    h = dict(PAPER_HYPERPARAMETERS if hyperparameters is None else hyperparameters)
+    W_S, W_T = paper_weights(h)
+    return {"W_S": W_S, "W_T": W_T, "W_KS": limit_weight(h)}

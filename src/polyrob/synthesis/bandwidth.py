@@ -15,6 +15,14 @@ stabilise an unstable plant) and a very large α asks ``|W_S S| < 1`` up to
 high frequency.  The search therefore scans α on a geometric grid first and
 then bisects between the largest grid point that certifies ``μ < target``
 and the next one, which does not.
+
+Where it stops, :attr:`BandwidthScalingResult.bound_hit` says which bound
+binds there (:func:`binding_bound`): ``"sample rate"`` when the next
+factor's controller crosses over above :func:`crossover_cap` (the rate and
+delay the loop will run at), else the weighted channel with the largest
+nominal peak: ``"tracking (W_S)"``, ``"uncertainty (W_T)"``, or the limit
+weight ``W_KS = W_u W_n`` (``"encoder noise"`` / ``"effort limit"``,
+:mod:`polyrob.plant.weights`).
 """
 
 from __future__ import annotations
@@ -30,10 +38,34 @@ import numpy as np
 from polyrob.errors import ArgumentError, SynthesisError
 from polyrob.synthesis.result import MusynResult
 
-__all__ = ["BandwidthScalingResult", "scaled_hyperparameters", "max_bandwidth_scaling"]
+__all__ = [
+    "BandwidthScalingResult",
+    "scaled_hyperparameters",
+    "max_bandwidth_scaling",
+    "crossover_cap",
+    "loop_crossover",
+    "channel_peaks",
+    "binding_bound",
+    "RATE_PHASE_BUDGET",
+    "DEFAULT_RATE",
+    "CHANNEL_NAMES",
+]
 
 #: Default scan of the bandwidth factor α (geometric, factor 2).
 DEFAULT_ALPHAS = tuple(2.0**k for k in range(-3, 6))
+#: Phase lag [rad] the hold and the computation delay may add at the loop's crossover (8.6 degrees).
+RATE_PHASE_BUDGET = 0.15
+#: Sample rate [Hz] and delay [samples] assumed when the options give none.
+DEFAULT_RATE = (1000.0, 1.0)
+#: What each weighted channel of the generalized plant bounds, in words.
+CHANNEL_NAMES = {
+    "W_S e": "tracking (W_S)",
+    "W_T y": "uncertainty (W_T)",
+    "W_KS u": "encoder noise against the effort limit (W_u K S W_n)",
+    "reg u": "regularisation",
+}
+#: Frequencies [rad/s] of the nominal channel peaks and the crossover (a diagnosis on a grid, not a bound).
+_GRID = np.logspace(-3, 6, 901)
 
 
 log = logging.getLogger(__name__)
@@ -68,6 +100,12 @@ class BandwidthScalingResult:
         for every controller (see :mod:`polyrob.analysis.limits`).
     stopped_by : str
         Empty, or why the search ended before its bracket was narrowed to ``rtol``.
+    bound_hit : str
+        Which bound stops the search at ``bracket[1]`` (:func:`binding_bound`).
+    crossover : float
+        Largest gain crossover [rad/s] of the nominal loop of the controller at ``alpha``.
+    crossover_limit : float
+        :func:`crossover_cap` of the rate the search was given (``nan``: none).
     """
 
     alpha: float
@@ -80,6 +118,9 @@ class BandwidthScalingResult:
     seconds: float = 0.0
     excluded: list = ()
     stopped_by: str = ""
+    bound_hit: str = ""
+    crossover: float = math.nan
+    crossover_limit: float = math.nan
 
     def summary(self) -> dict:
         """JSON-ready figures (the controller itself is in ``result``)."""
@@ -94,6 +135,9 @@ class BandwidthScalingResult:
             "seconds": round(self.seconds, 2),
             "excluded_by_performance_limit": [list(e) for e in self.excluded],
             "stopped_by": self.stopped_by or None,
+            "bound_hit": self.bound_hit or None,
+            "crossover_rad_s": None if math.isnan(self.crossover) else self.crossover,
+            "crossover_limit_rad_s": None if math.isnan(self.crossover_limit) else self.crossover_limit,
         }
 
 
@@ -118,6 +162,114 @@ def scaled_hyperparameters(
             raise ArgumentError(f"unknown weight hyperparameter {key!r}; known: {sorted(h)}")
         h[key] = tuple(float(alpha * x) for x in h[key])
     return h
+
+
+def crossover_cap(rate: float = DEFAULT_RATE[0], delay_samples: float = DEFAULT_RATE[1]) -> float:
+    """The largest crossover [rad/s] a loop sampled at ``rate`` Hz with ``delay_samples`` of delay may have.
+
+    A zero-order hold lags like half a sample, the computation delay like
+    ``delay_samples``: at the crossover ``w_c`` they cost the phase
+    ``(delay_samples + 1/2) w_c / rate``, which the continuous-time
+    certificate does not see.  The rule keeps it within
+    :data:`RATE_PHASE_BUDGET` (0.15 rad, 8.6 degrees)::
+
+        w_c <= 0.15 rate / (delay_samples + 1/2)      (100 rad/s at 1 kHz, one sample)
+
+    A design rule, not a sampled-data certificate.
+
+    Examples
+    --------
+    >>> from polyrob.synthesis.bandwidth import crossover_cap
+    >>> round(crossover_cap(), 6), round(crossover_cap(500.0), 6), round(crossover_cap(1000.0, 0.0), 6)
+    (100.0, 50.0, 300.0)
+    """
+    f = float(rate)
+    d = float(delay_samples)
+    if not (math.isfinite(f) and f > 0):
+        raise ArgumentError(f"the sample rate must be a finite number of Hz > 0, got {rate!r}")
+    if not (math.isfinite(d) and d >= 0):
+        raise ArgumentError(f"the delay must be a finite number of samples >= 0, got {delay_samples!r}")
+    return RATE_PHASE_BUDGET * f / (d + 0.5)
+
+
+def _loop_responses(P, controller, omega):
+    """``(G, K)`` frequency responses (N, m, m) of the nominal plant and the controller."""
+    from polyrob.analysis.mu.frequency import freqresp
+    from polyrob.controller import as_controller_ss
+
+    unc = P.uncertain
+    G = freqresp(unc.nominal_system(), omega)
+    K = freqresp(as_controller_ss(controller, unc.m, unc.m), omega)
+    return G, K
+
+
+def loop_crossover(P, controller, omega=None) -> float:
+    """The largest gain crossover [rad/s] of the nominal loop ``L = G K``: ``max w`` with ``sigma_max(L(jw)) >= 1``.
+
+    Found on a grid (1e-3 to 1e6 rad/s) and refined by bisection between
+    its points; ``0`` when the loop gain never reaches 1, ``inf`` when it
+    still does at the grid's end.
+    """
+    w = _GRID if omega is None else np.asarray(omega, float)
+    G, K = _loop_responses(P, controller, w)
+    gain = np.linalg.norm(G @ K, ord=2, axis=(1, 2))
+    above = np.nonzero(gain >= 1.0)[0]
+    if above.size == 0:
+        return 0.0
+    k = int(above[-1])
+    if k == w.size - 1:
+        return math.inf
+    lo, hi = float(w[k]), float(w[k + 1])
+    for _ in range(40):
+        mid = math.sqrt(lo * hi)
+        Gm, Km = _loop_responses(P, controller, np.array([mid]))
+        if np.linalg.norm(Gm[0] @ Km[0], 2) >= 1.0:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def channel_peaks(P, controller, omega=None) -> dict:
+    """``label -> (peak, frequency)`` of each weighted channel of ``P`` on the nominal loop (a grid value).
+
+    ``W_S S``, ``W_T T`` and ``W_KS K S`` of the loop ``u = K (r - y)``
+    around the nominal plant, ``sigma_max`` maximised over the grid: which
+    channel is nearest its bound, not a certificate.
+    """
+    from polyrob.analysis.mu.frequency import freqresp
+
+    w = _GRID if omega is None else np.asarray(omega, float)
+    G, K = _loop_responses(P, controller, w)
+    m = G.shape[1]
+    S = np.linalg.inv(np.eye(m)[None] + G @ K)
+    loops = {"W_S e": S, "W_T y": G @ K @ S, "W_KS u": K @ S}
+    weights = {"W_S e": P.W_S, "W_T y": P.W_T, "W_KS u": P.W_KS}
+    out = {}
+    for label, H in loops.items():
+        if weights[label] is None:
+            continue
+        sv = np.linalg.norm(freqresp(weights[label], w) @ H, ord=2, axis=(1, 2))
+        i = int(np.argmax(sv))
+        out[label] = (float(sv[i]), float(w[i]))
+    return out
+
+
+def binding_bound(P, controller, names: dict | None = None) -> str:
+    """The weighted channel of ``P`` nearest its bound with ``controller``, in words (:func:`channel_peaks`).
+
+    ``names`` maps the labels of ``P.z_labels`` to words (default :data:`CHANNEL_NAMES`).
+    """
+    peaks = channel_peaks(P, controller)
+    if not peaks:
+        return "no weighted channel"
+    label = max(peaks, key=lambda k: peaks[k][0])
+    peak, where = peaks[label]
+    others = ", ".join(f"{lab} {p:.3g}" for lab, (p, _) in peaks.items() if lab != label)
+    return (
+        f"{(names or CHANNEL_NAMES).get(label, label)}: nominal peak {peak:.3g} at {where:.3g} rad/s "
+        f"(grid; {others or 'no other channel'})"
+    )
 
 
 def _default_synthesis(initial_controller=None, **musyn_options) -> Callable:
@@ -153,6 +305,9 @@ def max_bandwidth_scaling(
     search_time_limit: float | None = None,
     judge: Callable | None = None,
     stop_after_rises: int = 2,
+    rate: float | None = None,
+    delay_samples: float = DEFAULT_RATE[1],
+    channel_names: dict | None = None,
     **musyn_options,
 ) -> BandwidthScalingResult:
     """The largest factor α on the weights' bandwidths with a certified μ < ``target``.
@@ -205,6 +360,16 @@ def max_bandwidth_scaling(
         PIDs all fail used to spend the search's whole time limit below it,
         docs/fleet.md).  A heuristic, and the error says it stopped there;
         0 scans the whole grid.
+    rate : float, optional
+        Sample rate [Hz] the controller will run at: a certified factor
+        whose nominal loop crosses over above :func:`crossover_cap` of
+        ``rate`` and ``delay_samples`` counts as a failure (``"sample
+        rate"``).  ``None`` (default): no rate, the continuous-time problem.
+    delay_samples : float
+        Computation delay in samples (default one).
+    channel_names : dict, optional
+        Words for the weighted channels in :attr:`BandwidthScalingResult.bound_hit`
+        (default :data:`CHANNEL_NAMES`).
 
     Returns
     -------
@@ -234,10 +399,10 @@ def max_bandwidth_scaling(
     """
     if plant is None:
         from polyrob.plant.generalized import generalized_plant
-        from polyrob.plant.weights import paper_weights
+        from polyrob.plant.weights import plant_weights
 
         def plant(alpha, h):
-            return generalized_plant(unc, *paper_weights(h))
+            return generalized_plant(unc, **plant_weights(h))
 
     synthesize = synthesize or _default_synthesis(progress=progress, **musyn_options)
     grid = np.asarray(sorted(float(a) for a in alphas))
@@ -270,6 +435,12 @@ def max_bandwidth_scaling(
             mu = float(cert.bound) if cert.certified else math.inf
             status = cert.status
             figure = None if cert.certified else float(cert.bound)
+            plants[alpha] = P
+            if cert.certified and cap is not None and _is_plant(P):
+                wc = loop_crossover(P, res.controller)
+                crossovers[alpha] = wc
+                if wc > cap:  # certified in continuous time, too fast for the rate it will run at
+                    mu, status, figure = math.inf, f"sample rate (crossover {wc:.4g} rad/s > {cap:.4g})", None
             evidence.append(f"{alpha:g}: {status} {float(cert.bound):.3f}")
         except SynthesisError as exc:
             res, mu, status = None, math.inf, f"synthesis failed ({exc})"
@@ -283,6 +454,9 @@ def max_bandwidth_scaling(
         log.info(f"bandwidth alpha = {alpha:.4g}: {status}{shown} ({time.perf_counter() - t0:.0f} s)")
         return mu
 
+    cap = None if rate is None else crossover_cap(rate, delay_samples)
+    plants: dict = {}
+    crossovers: dict = {}
     deadline = None if search_time_limit is None else t0 + float(search_time_limit)
     stopped = ""
     figures: list = []  # (alpha, mu figure) of the factors that failed, in the order tried
@@ -346,6 +520,10 @@ def max_bandwidth_scaling(
                 hi = mid
         ok, fail = lo, hi
     res, mu, h = solved[ok]
+    hit = _bound_hit(fail, solved, plants, crossovers, cap, ok, channel_names, stopped, excluded)
+    wc = crossovers.get(ok)
+    if wc is None and _is_plant(plants.get(ok)) and res is not None:
+        wc = loop_crossover(plants[ok], res.controller)
     return BandwidthScalingResult(
         alpha=float(ok),
         peak_mu=mu,
@@ -357,4 +535,37 @@ def max_bandwidth_scaling(
         seconds=time.perf_counter() - t0,
         excluded=excluded,
         stopped_by=stopped,
+        bound_hit=hit,
+        crossover=math.nan if wc is None else float(wc),
+        crossover_limit=math.nan if cap is None else float(cap),
     )
+
+
+def _is_plant(P) -> bool:
+    """A generalized plant (stand-ins of the tests are not: no loop to diagnose)."""
+    return hasattr(P, "uncertain") and hasattr(P, "W_KS")
+
+
+def _bound_hit(fail, solved, plants, crossovers, cap, ok, names, stopped, excluded) -> str:
+    """Which bound stops the search at ``fail`` (the first factor above ``ok`` that did not certify)."""
+    if fail is None:
+        return "none within the scan: its largest factor certifies (larger ones were not tried)"
+    if stopped and fail not in solved:
+        return f"not found: {stopped}"
+    if any(a == fail for a, _ in excluded):
+        return "the performance limit of the robot's unstable poles (no controller certifies there)"
+    wc = crossovers.get(fail)
+    if cap is not None and wc is not None and wc > cap:
+        return (
+            f"sample rate: at alpha = {fail:.4g} the certified loop crosses over at {wc:.4g} rad/s, above "
+            f"{cap:.4g} rad/s (the hold and delay's phase lag within {RATE_PHASE_BUDGET} rad)"
+        )
+    res_fail = solved.get(fail, (None,))[0]
+    if res_fail is not None and getattr(res_fail, "controller", None) is not None and _is_plant(plants.get(fail)):
+        return f"at alpha = {fail:.4g}: " + binding_bound(plants[fail], res_fail.controller, names)
+    res_ok = solved[ok][0]
+    if res_ok is not None and getattr(res_ok, "controller", None) is not None and _is_plant(plants.get(ok)):
+        return f"alpha = {fail:.4g} failed to synthesise; nearest bound at alpha = {ok:.4g}: " + binding_bound(
+            plants[ok], res_ok.controller, names
+        )
+    return f"alpha = {fail:.4g} does not certify"
