@@ -437,9 +437,13 @@ def limit_weights_from_args(robot, args, domain, hyperparameters: dict) -> dict:
         raise ArgumentError(f"--effort-weight: give 1 or {robot.m} values (one per joint), got {len(effort)}")
     h = dict(hyperparameters)
     if effort is None:
+        import logging
+
         from polyrob.fleet.autoweights import limit_hyperparameters
 
-        h.update(limit_hyperparameters(robot, domain, encoder_bits=bits).hyperparameters())
+        budget = limit_hyperparameters(robot, domain, encoder_bits=bits)
+        logging.getLogger("polyrob").info(budget.words())
+        h.update(budget.hyperparameters())
     else:
         from polyrob.plant.weights import DEFAULT_ENCODER_BITS, encoder_noise_level
 

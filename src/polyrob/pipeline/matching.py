@@ -22,7 +22,15 @@ from polyrob.io.controller import same_number
 
 __all__ = ["check_controller_problem", "check_controller_size", "controller_differences"]
 
-_WEIGHT_OPTIONS = {"omega_b": "--wb", "M_s": "--ms", "A_s": "--as", "omega_bt": "--wbt", "M_t": "--mt", "A_t": "--at"}
+_WEIGHT_OPTIONS = {
+    "omega_b": "--wb",
+    "M_s": "--ms",
+    "A_s": "--as",
+    "omega_bt": "--wbt",
+    "M_t": "--mt",
+    "A_t": "--at",
+    "effort": "--effort-weight",
+}
 _GROUP_OPTIONS = {"q": "--q-range", "qdot": "--qdot-max", "u": "--u-max", "qddot": "--qddot-max"}
 
 
