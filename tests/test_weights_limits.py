@@ -29,7 +29,7 @@ from polyrob.synthesis.bandwidth import channel_peaks, crossover_cap, loop_cross
 
 # --------------------------------------------------------------------------- levels
 def test_encoder_levels_are_the_lsb_and_half_of_it():
-    assert encoder_lsb(18) == 2 * math.pi / 262144  # 2.397e-5 rad, the 18-bit encoder
+    assert encoder_lsb(18) == 2 * math.pi / 262144  # 2.397e-5 rad: an 18-bit encoder
     assert encoder_noise_level(18) == math.pi / 262144
     assert encoder_noise_level(12) == pytest.approx(7.67e-4, rel=1e-3)
     for bad in (0, -3, 1.5, float("nan"), float("inf"), 65, "x"):
