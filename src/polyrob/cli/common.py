@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from dataclasses import replace
 
@@ -375,11 +376,13 @@ def add_weight_arguments(parser: argparse.ArgumentParser) -> None:
         "the encoder noise W_n n (n on the measured q) may drive at most 5 %% of the effort limit, peak to peak, "
         "within what the task's torque leaves",
     )
-    lim.add_argument(
-        "--encoder-bits",
-        default=None,
-        help="encoder resolution, bits per revolution (default 18): W_n = half a count = pi / 2^B rad",
-    )
+    if "--encoder-bits" not in getattr(parser, "_option_string_actions", {}):  # one option, read by both groups
+        lim.add_argument(
+            "--encoder-bits",
+            type=_encoder_bits,
+            default=None,
+            help="encoder resolution, bits per revolution (default 18): W_n = half a count = pi / 2^B rad",
+        )
     lim.add_argument(
         "--effort-weight",
         default=None,
@@ -408,30 +411,37 @@ def hyperparameters_from_args(m: int, args, domain=None) -> dict:
     return default_hyperparameters(m, overrides, bandwidth_scale=args.bandwidth_scale)
 
 
-def encoder_bits_from_args(args) -> int | None:
-    """``--encoder-bits`` as a whole number from 1 to 64, or ``None``."""
-    text = getattr(args, "encoder_bits", None)
-    if text is None:
-        return None
-    value = number(text, "--encoder-bits")
-    if value != int(value) or not 1 <= value <= 64:
-        raise ArgumentError(f"--encoder-bits: give a whole number of bits from 1 to 64, got '{text}'")
+def _encoder_bits(text) -> int:
+    """``--encoder-bits``: a whole number of bits from 1 to 64 (argparse type)."""
+    try:
+        value = number(str(text), "--encoder-bits")
+    except ArgumentError:
+        value = math.nan
+    if not (value == int(value) if math.isfinite(value) else False) or not 1 <= value <= 64:
+        raise argparse.ArgumentTypeError(f"give a whole number of bits from 1 to 64, got '{text}'")
     return int(value)
+
+
+def encoder_bits_from_args(args) -> int | None:
+    """``--encoder-bits`` as a whole number from 1 to 64, or ``None`` (not stated)."""
+    value = getattr(args, "encoder_bits", None)
+    return None if value is None else _encoder_bits(value)
 
 
 def limit_weights_from_args(robot, args, domain, hyperparameters: dict) -> dict:
     """``hyperparameters`` with the limit weights the options ask for (:mod:`polyrob.plant.weights`).
 
-    On by default on an arm's default task; ``--encoder-bits`` or
-    ``--effort-weight`` turn them on elsewhere, ``--no-limit-weights`` off.
+    On by default on an arm's default task; ``--effort-weight`` turns them
+    on elsewhere, ``--no-limit-weights`` off; ``--encoder-bits`` sets the noise level.
     """
     bits = encoder_bits_from_args(args)
     effort = parse_list(getattr(args, "effort_weight", None), "--effort-weight")
     if getattr(args, "no_limit_weights", False):
-        if bits is not None or effort is not None:
-            raise ArgumentError("--no-limit-weights drops the limit weights: drop --encoder-bits/--effort-weight")
+        if effort is not None:
+            raise ArgumentError("--no-limit-weights drops the limit weights: drop --effort-weight")
         return hyperparameters
-    if not (getattr(args, "default_task", None) or bits is not None or effort is not None) or domain is None:
+    # --encoder-bits alone does not turn them on: the validation at the rate reads it too, with a default
+    if not (getattr(args, "default_task", None) or effort is not None) or domain is None:
         return hyperparameters
     if effort is not None and len(effort) not in (1, robot.m):
         raise ArgumentError(f"--effort-weight: give 1 or {robot.m} values (one per joint), got {len(effort)}")
