@@ -78,15 +78,21 @@ def jobs_from_args(args) -> list:
 
 
 def refuse_robot_uncertainty(args, jobs) -> None:
-    """``--robot-uncertainty``/``--link-error``: checked against every job's robot, then refused (not yet certified)."""
+    """``--robot-uncertainty``/``--link-error``: checked against every job's robot, then refused (the batch's jobs
+    do not pose the set yet; ``synth``, ``analyze``, ``run`` and ``bounds`` carry it on one robot)."""
     if getattr(args, "robot_uncertainty", None) is None and getattr(args, "link_error", None) is None:
         return
-    from polyrob.cli.options import refuse_uncertified, robot_uncertainty_from_args
+    from polyrob.cli.options import robot_uncertainty_from_args
     from polyrob.model.robots import load_robot
 
     specs = [robot_uncertainty_from_args(args, load_robot(j["robot"])) for j in jobs if isinstance(j.get("robot"), str)]
     if specs:
-        refuse_uncertified(specs[0], args)
+        path = getattr(args, "robot_uncertainty", None)
+        where = f"--robot-uncertainty {path}" if path is not None else f"--link-error {args.link_error}"
+        raise ArgumentError(
+            f"{where} ({specs[0].words()}): not carried by the batch yet: run `polyrob synth ROBOT {where}` "
+            "per robot (the inner-links model), or give the batch --model-error PCT and --payload-mass"
+        )
 
 
 def parse_percent(text: str) -> float:

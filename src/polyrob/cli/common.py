@@ -18,8 +18,9 @@ from polyrob.cli.options import (
     parse_list,
     parse_pose,
     positive_float,
-    refuse_uncertified,
+    robot_of_set,
     robot_uncertainty_from_args,
+    uncertainty_options_clash,
 )
 from polyrob.errors import ArgumentError, DomainError
 from polyrob.fleet.outputs import plain
@@ -228,9 +229,13 @@ def robot_from_args(args):
     lock = None if args.lock is None else [s.strip() for s in args.lock.split(",") if s.strip()]
     robot = load_robot(args.robot, lock=lock, armature=parse_armature(getattr(args, "armature", None)))
     spec = robot_uncertainty_from_args(args, robot)
-    if spec is not None:  # checked, then refused: the certified models do not use the per-link set yet
-        refuse_uncertified(spec, args)
+    if spec is not None:  # the set replaces the payload and model-error options (and the default task's)
+        uncertainty_options_clash(args, {k: getattr(args, k.strip("-").replace("-", "_"), None)
+                                         for k in ("--payload-mass", "--payload-com", "--model-error")})  # fmt: skip
+    args.uncertainty_words = None if spec is None else spec.words()
     apply_default_task(robot, args)
+    if spec is not None:
+        return robot_of_set(robot, spec, args)
     inner, payload = inner_options(args)
     if inner is None:
         return robot
@@ -268,6 +273,8 @@ def apply_default_task(robot, args) -> bool:
     args.payload_mass = user_payload or t.payload_option(robot)
     given_words = f", payload {user_payload} kg at the flange (given)"  # instead of the task's own
     args.default_task = replace(t, payload_fraction=0.0).words() + given_words if user_payload else t.words()
+    if getattr(args, "uncertainty_words", None):  # a robot-uncertainty set replaces the task's model error and payload
+        args.default_task = replace(t, model_error=0.0, payload_fraction=0.0).words() + "; " + args.uncertainty_words
     args.bound_options = t.bound_options
     logging.getLogger("polyrob").info(
         f"default task of {robot.name} ({robot.m} joints, no domain given): {args.default_task}; "

@@ -27,7 +27,8 @@ __all__ = [
     "parse_interval",
     "add_robot_uncertainty_arguments",
     "robot_uncertainty_from_args",
-    "refuse_uncertified",
+    "robot_of_set",
+    "uncertainty_options_clash",
     "add_validation_arguments",
     "rate_conditions_from_args",
     "rate_conditions_dict",
@@ -190,10 +191,9 @@ def parse_frequencies(text: str | None):
 
 
 # --------------------------------------------------------------------------- the robot-uncertainty set
-# No certified model uses the per-link set yet (the certificates cover one factor on all links,
-# polyrob.model.inner): a command given --robot-uncertainty or --link-error checks the set against
-# the robot, then refuses it in one line that echoes it and says what a certificate does cover,
-# rather than certify another set than the one asked for.
+# A per-link set (--robot-uncertainty FILE, --link-error P) is checked against the robot, then carried
+# by the inner-links model (polyrob.plant.models.inner_links) on a computed-torque inner layer; what that
+# model cannot carry is refused in one line that echoes the set and says why.
 
 
 def add_robot_uncertainty_arguments(group) -> None:
@@ -203,15 +203,14 @@ def add_robot_uncertainty_arguments(group) -> None:
         default=None,
         metavar="FILE",
         help="a robot-uncertainty file (YAML/JSON: per-link parameter errors, a payload body, joint friction; "
-        "examples/uncertainty/panda.yaml): checked, then refused, as no certificate covers it yet",
+        "examples/uncertainty/panda.yaml), carried on a computed-torque inner layer (the inner-links model)",
     )
     group.add_argument(
         "--link-error",
         default=None,
         metavar="P",
         help="each link's mass, first moment and inertia about its centre of mass within ±P %% independently "
-        "(checked, then refused: "
-        "not yet certified; --model-error is the certified common factor)",
+        "(replaces the file's percentage; --model-error is the common factor on all links instead)",
     )
 
 
@@ -239,15 +238,47 @@ def robot_uncertainty_from_args(args, robot):
         raise ArgumentError(f"{where}: {str(exc).removeprefix('robot uncertainty: ')}") from None
 
 
-def refuse_uncertified(spec, args) -> None:
-    """Refuse a valid per-link set in one line: no certificate covers it yet, and say what one does cover."""
+def uncertainty_options_clash(args, user_given: dict) -> None:
+    """Refuse in one line the options a robot-uncertainty set replaces (``user_given``: as the user gave them)."""
     path = getattr(args, "robot_uncertainty", None)
     where = f"--robot-uncertainty {path}" if path is not None else f"--link-error {args.link_error}"
-    raise ArgumentError(
-        f"{where} ({spec.words()}): not yet certified: polyrob's certificates cover one factor on all links "
-        "(--model-error PCT) and a payload range at the flange (--payload-mass, --payload-com), not this "
-        "per-link set"
-    )
+    for option, value in user_given.items():
+        if value is not None:
+            raise ArgumentError(
+                f"{where}: {option} {value} would state the uncertainty twice: put the payload and the link "
+                "errors in the robot-uncertainty file (payload:, links:) and drop " + option
+            )
+
+
+def robot_of_set(robot, spec, args):
+    """The inner loop of ``robot`` over the per-link set ``spec``, or one :class:`ArgumentError` line why not.
+
+    The set is carried on a computed-torque inner layer only (the
+    :mod:`~polyrob.plant.models.inner_links` model: there the loop's factor
+    is exactly linear in the parameters); a torque box has no accelerations
+    to hold fixed, so the set needs a task domain.
+    """
+    path = getattr(args, "robot_uncertainty", None)
+    where = f"--robot-uncertainty {path}" if path is not None else f"--link-error {args.link_error}"
+    inner = getattr(args, "inner", None) or "none"
+    if inner != "computed-torque":
+        raise ArgumentError(
+            f"{where} ({spec.words()}): carried on a computed-torque inner layer only (--inner computed-torque, "
+            f"the default task of an arm), not --inner {inner}: there the loop is not linear in the link parameters"
+        )
+    if getattr(args, "torque_box", False):
+        raise ArgumentError(f"{where}: a per-link set needs a task domain (accelerations), not --torque-box")
+    from polyrob.model.inner import inner_loop_of_set
+
+    loop = inner_loop_of_set(robot, inner, spec)
+    if getattr(args, "default_task", None):  # measured before the bounds, on the task the pipeline will pose
+        from polyrob.domains.default_task import DEFAULT_TASK, default_task_domain
+        from polyrob.plant.models.inner_links import carried
+
+        why = carried(loop, default_task_domain(loop, DEFAULT_TASK))
+        if why:
+            raise ArgumentError(f"{where} ({spec.words()}): not carried on {robot.name}'s default task: {why}")
+    return loop
 
 
 # --------------------------------------------------------------------------- the sample rate and the delay

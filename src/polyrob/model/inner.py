@@ -47,7 +47,7 @@ from polyrob.model import dynamics
 from polyrob.model.base import Manipulator
 from polyrob.model.payload import PayloadRange, with_payload
 
-__all__ = ["INNER_LAYERS", "InnerLoopRobot", "inner_loop", "runtime_needs"]
+__all__ = ["INNER_LAYERS", "InnerLoopRobot", "SetLoopRobot", "inner_loop", "inner_loop_of_set", "runtime_needs"]
 
 #: The inner layers: the paper's none, gravity compensation, computed torque.
 INNER_LAYERS = ("none", "gravity", "computed-torque")
@@ -272,4 +272,74 @@ def inner_loop(robot, inner: str = "gravity", *, payload: PayloadRange | None = 
     scenarios = tuple(nominal.with_true(mm, cc, s) for mm, cc in corners for s in scales)
     if payload is None and p == 0:
         scenarios = ()
+    return replace(nominal, _scenarios=scenarios)
+
+
+#: True robots drawn at random inside a robot-uncertainty set that the bounds are taken over (besides the model).
+SET_DRAWS = 16
+
+
+@dataclass(frozen=True, eq=False)
+class SetLoopRobot(InnerLoopRobot):
+    """The inner loop of one true robot of a :class:`~polyrob.uncertainty_set.spec.RobotUncertainty` set.
+
+    The inner layer computes with :func:`~polyrob.uncertainty_set.draw.model_of_set`
+    (nominal links, the middle payload, the middle viscous friction); the
+    true robots are drawn at random inside the set
+    (:func:`~polyrob.uncertainty_set.draw.draw_true_robot`): each link's
+    parameters independently, the payload's mass and off-flange centre of
+    mass, each joint's viscous friction.  Build it with :func:`inner_loop_of_set`.
+    """
+
+    uncertainty: object = field(default=None, repr=False)
+
+    def drawn(self, rng) -> SetLoopRobot:
+        """A true robot drawn at random inside the set."""
+        from polyrob.uncertainty_set.draw import draw_true_robot
+
+        true = draw_true_robot(self.uncertainty_robot, self.uncertainty, rng)
+        return replace(self, true_robot=true.robot, scenario=true.words(), _scenarios=())
+
+    @property
+    def uncertainty_robot(self):
+        """The nominal URDF robot the set is stated for."""
+        return self.model_robot.__dict__["_polyrob_base"]
+
+    def with_true(self, mass=None, com=None, scale: float = 1.0):
+        raise ArgumentError("a robot-uncertainty set's true robots are drawn (drawn(rng)), not given by one factor")
+
+    def words(self) -> str:
+        parts = [f"inner layer: {self.inner}" + ("" if self.inner == "none" else f" ({runtime_needs(self.inner)})")]
+        parts.append(self.uncertainty.words() + " (model: nominal links, the middle payload and viscous friction)")
+        if len(self._scenarios):
+            parts.append(f"bounds sampled at {len(self._scenarios) + 1} true robots (the model and random draws)")
+        return "; ".join(parts)
+
+    def describe(self) -> dict:
+        out = super().describe()
+        out["inner"]["uncertainty"] = self.uncertainty.to_dict()
+        return out
+
+
+def inner_loop_of_set(robot, inner: str, uncertainty, *, draws: int = SET_DRAWS, seed: int = 0) -> SetLoopRobot:
+    """The inner loop of ``robot`` over a robot-uncertainty set: the model, then ``draws`` true robots drawn inside it.
+
+    Raises
+    ------
+    ArgumentError
+        An unknown layer, or a set that does not fit ``robot`` (see
+        :meth:`~polyrob.uncertainty_set.spec.RobotUncertainty.bound`).
+    """
+    from polyrob.uncertainty_set.draw import draw_true_robots, model_of_set
+
+    if inner not in INNER_LAYERS:
+        raise ArgumentError(f"--inner: unknown inner layer {inner!r}: use one of {', '.join(INNER_LAYERS)}")
+    if getattr(robot, "model", None) is None:
+        raise RobotError(f"{robot.name}: an inner layer needs a URDF robot (a Pinocchio model), not an analytic one")
+    spec = uncertainty.bound(robot)
+    model_robot = model_of_set(robot, spec)
+    model_robot.__dict__["_polyrob_base"] = robot
+    nominal = SetLoopRobot(inner, model_robot, model_robot, uncertainty=spec, scenario="the model")
+    trues = draw_true_robots(robot, spec, draws, seed=seed)
+    scenarios = tuple(replace(nominal, true_robot=t.robot, scenario=t.words()) for t in trues)
     return replace(nominal, _scenarios=scenarios)

@@ -82,7 +82,7 @@ __all__ = [
 ]
 
 #: ``model="auto"`` builds the first of these models that applies (the last always does).
-AUTO = ("inner-gain", "lft", "axes")
+AUTO = ("inner-links", "inner-gain", "lft", "axes")
 
 #: The choices of :func:`uncertain_plant`: ``"auto"`` and every registered model.
 CHOICES = ("auto", *MODELS)

@@ -35,6 +35,7 @@ import numpy as np
 import pinocchio
 
 from polyrob.errors import ArgumentError
+from polyrob.uncertainty_set.payload_body import SECOND_MOMENT_ENTRIES, second_moment
 from polyrob.uncertainty_set.spec import (
     RobotUncertainty,
     link_names,
@@ -42,7 +43,15 @@ from polyrob.uncertainty_set.spec import (
     scaled_parameters,
 )
 
-__all__ = ["TrueRobot", "Coverage", "draw_true_robot", "draw_true_robots", "common_factor_covers"]
+__all__ = [
+    "TrueRobot",
+    "Coverage",
+    "draw_true_robot",
+    "draw_true_robots",
+    "common_factor_covers",
+    "model_of_set",
+    "payload_middle",
+]
 
 #: Draws of a ten-parameter box tried before the box is declared (nearly) empty of rigid bodies.
 MAX_REDRAWS = 1000
@@ -187,3 +196,64 @@ def common_factor_covers(true: TrueRobot, robot, *, model_error: float, payload=
     if np.any(true.coulomb > 0) or not np.allclose(true.viscous, robot.damping):
         return Coverage(False, s, residual, "friction the set does not have (Coulomb, or viscous off the URDF's)")
     return Coverage(True, s, residual, "")
+
+
+def model_of_set(robot, spec: RobotUncertainty):
+    """What an inner layer computes with under ``spec``: the nominal links, the middle payload, the middle viscous friction.
+
+    Links given as ten-parameter intervals take their box's centre (an
+    identification's estimate); the payload is its middle mass at the centre
+    of its centre-of-mass ball or box, with its solid body's inertia.
+    """
+    from polyrob.model.payload import flange_frame
+
+    if spec.robot != robot.name:
+        spec = spec.bound(robot)
+    model = robot.model.copy()
+    explicit = {li.link: li for li in spec.links}
+    for name, j in link_names(robot).items():
+        if name in explicit:
+            model.inertias[j] = pinocchio.Inertia.FromDynamicParameters(explicit[name].centre)
+    body = spec.payload
+    if body is not None and body.mass_upper > 0:
+        mass, com, second = payload_middle(body)
+        if mass > 0:
+            _, placement = flange_frame(robot)
+            # about its centre of mass: the solid's inertia plus the middle of m S(c)^T S(c), less the model's own shift
+            extra = second - second_moment(mass, com)
+            about_com = body.rotational_inertia(mass) + _matrix(extra)
+            load = pinocchio.Inertia(float(mass), com, about_com)
+            last = model.njoints - 1
+            model.inertias[last] = model.inertias[last] + placement.act(load)
+    viscous = np.array(robot.damping, dtype=float)
+    for f in spec.friction:
+        viscous[robot.joint_names.index(f.joint)] = 0.5 * (f.viscous[0] + f.viscous[1])
+    model.damping[:] = viscous
+    return replace(robot, model=model, damping=viscous)
+
+
+def payload_middle(body) -> tuple[float, np.ndarray, np.ndarray]:
+    """``(mass, com, second)``: the payload the inner layer computes with.
+
+    The middle of its mass range at the centre of its centre-of-mass ball or
+    box, and ``second`` the middle of the range of the parallel-axis part
+    ``m S(c)^T S(c)`` of its inertia about the flange (six entries,
+    :func:`~polyrob.uncertainty_set.payload_body.second_moment`): the
+    middle of the set in the ten parameters, so that a payload whose centre
+    of mass ranges off the last joint's axis is not modelled at the
+    lightest end of its inertia about that axis.
+    """
+    mass = 0.5 * (body.mass_lower + body.mass_upper)
+    if body.com_radius is not None:
+        com = np.array(body.com_centre, float)
+    else:
+        com = 0.5 * (np.array(body.com_lower, float) + np.array(body.com_upper, float))
+    lo, hi = body.second_moment_range()
+    return mass, com, 0.5 * (lo + hi)
+
+
+def _matrix(six) -> np.ndarray:
+    M = np.zeros((3, 3))
+    for value, (i, j) in zip(six, SECOND_MOMENT_ENTRIES):
+        M[i, j] = M[j, i] = value
+    return M

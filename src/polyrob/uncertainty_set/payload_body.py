@@ -22,7 +22,17 @@ import numpy as np
 
 from polyrob.uncertainty_set.checks import fail, finite, pair, vector3
 
-__all__ = ["PayloadBody", "RatedPayload", "RATED_PAYLOAD"]
+__all__ = ["PayloadBody", "RatedPayload", "RATED_PAYLOAD", "SECOND_MOMENT_ENTRIES", "second_moment"]
+
+#: The six entries ``(i, j)`` of a symmetric 3 x 3 matrix, in ``toDynamicParameters()``'s inertia order.
+SECOND_MOMENT_ENTRIES = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))
+
+
+def second_moment(mass: float, com) -> np.ndarray:
+    """The six entries of ``m S(c)^T S(c) = m (|c|^2 I - c c^T)``: the parallel-axis part of the inertia about the flange."""
+    c = np.asarray(com, float)
+    M = mass * (np.dot(c, c) * np.eye(3) - np.outer(c, c))
+    return np.array([M[i, j] for i, j in SECOND_MOMENT_ENTRIES])
 
 
 @dataclass(frozen=True)
@@ -124,6 +134,38 @@ class PayloadBody:
         a, b, c = self.size
         return mass / 12.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
 
+    def com_box(self) -> list[tuple[float, float]]:
+        """Per flange axis, the interval of the centre of mass (the ball's bounding box)."""
+        if self.com_radius is not None:
+            return [(c - self.com_radius, c + self.com_radius) for c in self.com_centre]
+        return list(zip(self.com_lower, self.com_upper))
+
+    def moment_range(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, upper)`` of the first moment ``m c`` per flange axis over the set (products of the intervals)."""
+        lo, hi = zip(*(_product_range((self.mass_lower, self.mass_upper), b) for b in self.com_box()))
+        return np.array(lo), np.array(hi)
+
+    def second_moment_range(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, upper)`` of the six entries of :func:`second_moment` over the set (an enclosure).
+
+        Diagonal ``m (c_j^2 + c_k^2)``, off-diagonal ``-m c_i c_j``; for a ball
+        the distances are capped at ``|centre| + radius`` from the flange's axes.
+        """
+        box, mass = self.com_box(), (self.mass_lower, self.mass_upper)
+        far = float(np.linalg.norm(self.com_centre)) + self.com_radius if self.com_radius is not None else np.inf
+        lo, hi = np.zeros(6), np.zeros(6)
+        for k, (i, j) in enumerate(SECOND_MOMENT_ENTRIES):
+            if i == j:
+                a, b = (box[x] for x in range(3) if x != i)
+                sq_lo = _square_range(*a)[0] + _square_range(*b)[0]
+                sq_hi = min(_square_range(*a)[1] + _square_range(*b)[1], far * far)
+                lo[k], hi[k] = _product_range(mass, (sq_lo, sq_hi))
+            else:
+                p_lo, p_hi = _product_range(box[i], box[j])
+                p_lo, p_hi = max(p_lo, -far * far / 2), min(p_hi, far * far / 2)
+                lo[k], hi[k] = _product_range(mass, (-p_hi, -p_lo))
+        return lo, hi
+
     def draw(self, rng) -> tuple[float, np.ndarray]:
         """``(mass, com)``: the mass uniform in its range, the centre of mass uniform in its box or ball."""
         mass = float(rng.uniform(self.mass_lower, self.mass_upper))
@@ -181,3 +223,14 @@ class PayloadBody:
         ((key, size),) = inertia.items()
         kwargs.update(solid=str(key).removeprefix("solid_"), size=size)
         return cls(lo, hi, **kwargs)
+
+
+def _product_range(*intervals) -> tuple[float, float]:
+    corners = np.array(np.meshgrid(*intervals, indexing="ij")).reshape(len(intervals), -1)
+    values = np.prod(corners, axis=0)
+    return float(values.min()), float(values.max())
+
+
+def _square_range(lo: float, hi: float) -> tuple[float, float]:
+    low = 0.0 if lo <= 0.0 <= hi else min(lo * lo, hi * hi)
+    return low, max(lo * lo, hi * hi)

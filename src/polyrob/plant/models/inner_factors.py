@@ -62,6 +62,7 @@ __all__ = [
     "factor_parameters",
     "inner_factors_plant",
     "inner_factors_contains",
+    "factor_lft_plant",
     "bound_one_robot",
     "residual_blocks",
     "scaled_residuals",
@@ -177,7 +178,7 @@ def inner_factors_plant(pldi, robot) -> UncertainPlant:
 
     if not isinstance(pldi.domain, TaskDomain):
         raise NotApplicable("inner-gain: with rotor inertia or a payload it needs a task domain, not a torque box")
-    m, n = pldi.m, 2 * pldi.m
+    n = 2 * pldi.m
     params = factor_parameters(robot)
     centres, radii = zip(*(_factor_range(pldi, loop) for _, _, loop in params))
     ranges = np.array([r for _, r, _ in params])
@@ -185,17 +186,68 @@ def inner_factors_plant(pldi, robot) -> UncertainPlant:
         raise NotApplicable("inner-gain: I - sum theta_k G_k may be singular inside the ranges")
     # the residual sum_k theta_k E_k, within sum_k r_k |E_k| entrywise, as full blocks outside the theta loops
     spread = np.tensordot(ranges, np.array(radii), axes=1)
+    names = tuple(name for name, _, _ in params)
+    inputs = {"PLDI": pldi.enclosure, "factors": "sampled"}
+    return factor_lft_plant(pldi, "inner-gain", names, ranges, centres, spread, inputs)
+
+
+def factor_lft_plant(
+    pldi,
+    model: str,
+    names,
+    ranges,
+    centres,
+    spread,
+    inputs: dict,
+    info: dict | None = None,
+    weighting=None,
+    g_norm: float | None = None,
+    g_offset: float = 0.0,
+):
+    """The LFT ``a = v + sum_k theta_k K_k,c [x; a] + E [x; a]`` (module text) as an :class:`UncertainPlant`.
+
+    ``theta_k`` within ``±ranges[k]`` (one real scalar repeated ``m`` times
+    each), ``K_k,c`` the ``centres`` (``m x 3m``), ``E`` within ``spread``
+    entrywise (``m x 3m``: full blocks, :func:`residual_blocks`).  ``inputs``
+    are the plant's enclosure inputs; ``info`` more entries of its ``info``.
+    ``weighting`` ``W`` (``m x m``, invertible): ``spread`` bounds the entries
+    of ``W E diag(I, W^-1)`` instead of ``E`` (in ``M_hat^{1/2}`` coordinates
+    a relative inertia error is a small symmetric block where ``E``'s own
+    entries couple a light wrist to a heavy shoulder).  ``g_norm``: the
+    acceleration columns ``G`` of the (weighted) residual are one full block
+    of norm at most ``g_norm`` instead of entry bounds.  ``g_offset`` ``g0``:
+    the LFT is centred at ``K_0 = [0, g0 I]`` (``a = (v + w) / (1 - g0)`` at
+    ``Δ = 0``, and the model's nominal there): the set of ``I - G =
+    M_hat^-1 M`` of a heavy payload is not centred at the identity.
+    """
+    m, n = pldi.m, 2 * pldi.m
+    ranges = np.asarray(ranges, float)
+    if g_norm is not None:
+        spread = np.array(spread, float)
+        spread[:, n:] = 0.0
     blocks = residual_blocks(spread, n)
+    if g_norm is not None and g_norm > 0:
+        root = np.sqrt(g_norm)
+        C = np.zeros((m, 3 * m))
+        C[:, n:] = root * np.eye(m)
+        blocks.append({"B": root * np.eye(m), "C": C, "rows": np.arange(m), "cols": np.arange(n, 3 * m),
+                       "W_l": np.full(m, root), "W_r": np.full(m, root)})  # fmt: skip
+    if weighting is not None:
+        W = np.asarray(weighting, float)
+        back = np.eye(3 * m)
+        back[n:, n:] = W
+        for b in blocks:
+            b["B"], b["C"] = np.linalg.solve(W, b["B"]), b["C"] @ back
     sizes = [b["B"].shape[1] for b in blocks]
     Bf = np.hstack([b["B"] for b in blocks]) if blocks else None
     Cf = np.vstack([b["C"] for b in blocks]) if blocks else None
-    k, P = sum(sizes), len(params)
+    k, P = sum(sizes), len(names)
     # channels: the residual block, then each theta repeated m times; every channel enters the accelerations:
     # a = u + sum_j d_j + B_f d_f, and every output reads [x; a]
-    to_a = np.hstack([Bf if k else np.zeros((m, 0)), np.tile(np.eye(m), P)])  # a = u + to_a d
+    gain = 1.0 / (1.0 - g_offset)  # a = gain (u + to_a d) around K_0 = [0, g0 I]
+    to_a = gain * np.hstack([Bf if k else np.zeros((m, 0)), np.tile(np.eye(m), P)])  # a = gain u + to_a d
     reads = np.vstack(([Cf] if k else []) + [r * K for r, K in zip(ranges, centres)])
-    C_v, D_vu, D_vd = reads[:, :n], reads[:, n:], reads[:, n:] @ to_a
-    names = tuple(name for name, _, _ in params)
+    C_v, D_vu, D_vd = reads[:, :n], gain * reads[:, n:], reads[:, n:] @ to_a
     channels = Channels(
         into_accelerations(m) @ to_a,
         C_v,
@@ -205,25 +257,29 @@ def inner_factors_plant(pldi, robot) -> UncertainPlant:
         [-1] * k + [j for j in range(P) for _ in range(m)],
         D_vd,
     )
-    centre = (arm_state_matrix(np.zeros((m, n))), into_accelerations(m))
+    centre = (arm_state_matrix(np.zeros((m, n))), gain * into_accelerations(m))
     return model_plant(
         pldi,
-        "inner-gain",
+        model,
         centre,
         channels,
-        (names, -ranges, ranges),
-        A_nom=np.asarray(pldi.A0, float),
-        B_nom=np.asarray(pldi.B0, float),
+        (tuple(names), -ranges, ranges),
+        A_nom=np.asarray(pldi.A0, float) if not g_offset else centre[0],
+        B_nom=np.asarray(pldi.B0, float) if not g_offset else centre[1],
         info={
             "enclosure": "sampled",
-            "enclosure_inputs": {"PLDI": pldi.enclosure, "factors": "sampled"},
-            "factors": names,
+            "enclosure_inputs": dict(inputs),
+            "factors": tuple(names),
             "theta_range": ranges,
             "K_centres": np.array(centres),
             "residual_gain": float(np.linalg.norm(spread)),
             "n_directions": P,
             "residual_blocks": [{key: b[key] for key in ("rows", "cols", "W_l", "W_r")} for b in blocks],
             "residual_spread": spread,
+            **({} if weighting is None else {"residual_weighting": np.asarray(weighting, float)}),
+            **({} if g_norm is None else {"residual_g_norm": float(g_norm)}),
+            "K_offset": np.hstack([np.zeros((m, n)), g_offset * np.eye(m)]),
+            **(info or {}),
         },
     )
 
@@ -267,6 +323,11 @@ def scaled_residuals(unc: UncertainPlant, E: np.ndarray) -> list[np.ndarray]:
     member with residual ``E``; it is in the set when each block's norm is
     at most one.
     """
+    W = unc.info.get("residual_weighting")
+    if W is not None:
+        m = W.shape[0]
+        E = W @ E
+        E[:, 2 * m :] = np.linalg.solve(W.T, E[:, 2 * m :].T).T
     out = []
     for b, size in zip(unc.info["residual_blocks"], unc.full_blocks):
         S = np.zeros((size, size))
@@ -281,7 +342,7 @@ def _scaled_residual(unc: UncertainPlant, K_raw, theta, rtol: float, reached) ->
     An entry that no residual block reaches (``~reached``) must
     match: its mismatch relative to ``rtol`` counts instead when it is larger.
     """
-    E = K_raw - np.tensordot(theta, unc.info["K_centres"], axes=1)
+    E = K_raw - unc.info.get("K_offset", 0.0) - np.tensordot(theta, unc.info["K_centres"], axes=1)
     mismatch = np.abs(E[~reached]).max(initial=0.0) / (rtol * (1.0 + np.abs(K_raw).max()))
     norms = [float(np.linalg.norm(S, 2)) for S in scaled_residuals(unc, E)]
     return max([mismatch, *norms])
@@ -334,7 +395,8 @@ def inner_factors_contains(unc: UncertainPlant, A, B, *, rtol: float = 1e-9) -> 
         def f(theta, K_raw=K_raw):
             return _scaled_residual(unc, K_raw, np.atleast_1d(np.asarray(theta, float)), rtol, reached)
 
-        start = np.clip(np.linalg.lstsq(centres, K_raw.ravel(), rcond=None)[0], -r, r)
+        shifted = (K_raw - unc.info.get("K_offset", 0.0)).ravel()
+        start = np.clip(np.linalg.lstsq(centres, shifted, rcond=None)[0], -r, r)
         best = f(start)
         if best > 1.0 and len(r) == 1:
             best = min(best, minimize_scalar(f, bounds=(-r[0], r[0]), method="bounded").fun)

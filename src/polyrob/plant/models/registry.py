@@ -29,7 +29,7 @@ Examples
 >>> import polyrob
 >>> from polyrob.plant.models import MODELS, model_of
 >>> list(MODELS)
-['box', 'axes', 'lft', 'lft-torque', 'inertia', 'inner-gain']
+['box', 'axes', 'lft', 'lft-torque', 'inertia', 'inner-gain', 'inner-links']
 >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
 >>> unc = MODELS["axes"].build(pldi)
 >>> model_of(unc).name, model_of(unc).enclosure(unc), unc.info["enclosure_inputs"]
@@ -55,6 +55,7 @@ __all__ = [
     "InertiaLFTModel",
     "InertiaModel",
     "InnerGainModel",
+    "InnerLinksModel",
     "MODELS",
     "model_of",
     "enclosure_inputs",
@@ -306,6 +307,44 @@ class InnerGainModel(UncertaintyModel):
         )
 
 
+class InnerLinksModel(UncertaintyModel):
+    """Computed torque over a per-link robot-uncertainty set: the factor exact in the parameters, compressed
+    (:mod:`polyrob.plant.models.inner_links`)."""
+
+    name = "inner-links"
+    options = ("n_directions",)
+    needs_robot = True
+    #: Why ``model="auto"`` takes this model when it applies.
+    applies = "a computed-torque loop over a per-link robot-uncertainty set: the factor linear in the parameters"
+
+    def build(self, pldi, *, n_directions: int | None = None, **options):
+        from polyrob.errors import NotApplicable
+        from polyrob.plant.models.inner_links import inner_links_plant
+
+        robot = pldi.source_robot if pldi.source_robot is not None else getattr(pldi.domain, "robot", None)
+        if robot is None or getattr(robot, "uncertainty", None) is None:
+            raise NotApplicable("inner-links: no robot-uncertainty set recorded with the PLDI")
+        try:
+            return inner_links_plant(pldi, robot, n_directions=n_directions)
+        except NotApplicable as exc:  # a stated set is carried by this model or refused, never by another one
+            raise ArgumentError(f"robot uncertainty ({robot.uncertainty.words()}): not carried: {exc}") from None
+
+    def contains(self, unc, A, B):
+        from polyrob.plant.models.inner_factors import inner_factors_contains
+
+        return inner_factors_contains(unc, A, B)
+
+    def describe(self, unc):
+        size = sum(int(b[0]) for b in unc.block_structure if b[1] > 0)
+        ranges = ", ".join(f"{n} ±{r:.3g}" for n, r in zip(unc.info["factors"], unc.info["theta_range"]))
+        return (
+            f"inner-links: the computed-torque factor [B_low^-1 A_low, I - B_low^-1], exactly linear in the "
+            f"{len(unc.info['scalars'])} scalars of the set's parameter box, as {len(unc.info['factors'])} principal "
+            f"directions (one repeated real each: {ranges}) and the rest in residual blocks of total size {size}; "
+            f"set: {unc.info['set']} ({self.enclosure(unc)} enclosure over the task domain)."
+        )
+
+
 #: The uncertainty models by name (``unc.model``).
 MODELS: dict[str, UncertaintyModel] = {
     model.name: model
@@ -316,6 +355,7 @@ MODELS: dict[str, UncertaintyModel] = {
         InertiaLFTModel("lft-torque", "torque"),
         InertiaModel(),
         InnerGainModel(),
+        InnerLinksModel(),
     )
 }
 

@@ -1,0 +1,565 @@
+"""``inner-links``: a computed-torque loop over a per-link robot-uncertainty set, exact in the parameters.
+
+With the inner layer ``u = M_hat(q) v + h_hat(q, qdot)`` computing with the
+parameters ``pi_hat`` (:func:`~polyrob.uncertainty_set.draw.model_of_set`:
+nominal links, the middle payload, the middle viscous friction) and a true
+robot ``pi = pi_hat + dpi``, the rigid-body torque is linear in the
+parameters, ``tau = Y(q, qdot, a) pi`` (Pinocchio's joint-torque
+regressor, viscous friction a column ``qdot_k`` per joint), so the outer
+input that gives the acceleration ``a`` is::
+
+    v(x, a) = a + M_hat(q)^-1 Y(q, qdot, a) dpi
+
+and the factor of :mod:`~polyrob.plant.models.inner_factors`,
+``K_raw = [B_low^-1 A_low, I - B_low^-1] = -d(v - a)/d[x; a]``, is exactly
+linear in ``dpi`` at every point of a task domain (which fixes ``a``):
+``K_raw(x) = sum_j dpi_j K_j(x)``.
+
+The set's ``dpi`` lies in a box of a few scalars per source, each with its
+exact per-unit direction in parameter space:
+
+* a link given as ``±p`` (mass ``a m``, first moment ``b h``, inertia about
+  the CoM ``d I_c``): four scalars ``a - 1``, ``b - 1``, ``d - 1`` within
+  ``±p`` and ``b^2/a - 1`` (the parallel-axis term ``m S(c)^T S(c)``, since
+  the CoM moves to ``(b/a) c``) within ``±((1 + p)^2/(1 - p) - 1)``: a box
+  that holds every ``(a, b, d)``;
+* a link given as ten-parameter intervals: one scalar per parameter about
+  the box's centre (the model's value);
+* the payload in the flange frame: its mass (with its solid body's
+  inertia, linear in the mass), its first moment ``m c`` (three scalars)
+  and the six entries of ``m S(c)^T S(c)`` over the mass range and the
+  centre-of-mass ball or box, moved to the last body by the flange's
+  placement (a linear map of the ten parameters);
+* each joint's viscous friction over its range.
+
+Each box is symmetric about the model (an asymmetric range is widened to
+its larger side).  ``K_j(x)`` is computed exactly at sampled points of the
+task domain (one true robot per scalar, at its half range).  Forty-odd
+scalars repeated ``m`` times are far too many for μ, so the model keeps
+``P`` principal directions ``t = U^T u`` (``u`` the scalars per unit of
+their half range; ``|t_k| <= ||U_k||_1`` over the box) with centres
+``K_k,c``, and the rest, ``E = sum_j u_j (K_j(x) - sum_k U_jk K_k,c)``, is
+bounded entrywise by ``sum_j |...|`` at each sample, its largest value over
+the samples times :data:`SPREAD_MARGIN`, carried by the full blocks of
+:func:`~polyrob.plant.models.inner_factors.residual_blocks`.  The enclosure
+over the task domain is therefore *sampled* (and checked on fresh points
+like every model's coverage); over the parameters it is exact: every true
+robot of the set is a member with ``t = U^T u`` (:func:`set_witness`).
+
+Coulomb friction is no Jacobian term: it is said in the set's words and not
+carried by this model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio
+
+from polyrob.errors import NotApplicable
+from polyrob.plant.lftplant import UncertainPlant
+from polyrob.uncertainty_set.payload_body import SECOND_MOMENT_ENTRIES, second_moment
+
+__all__ = [
+    "SPREAD_MARGIN",
+    "DEFAULT_DIRECTIONS",
+    "Scalar",
+    "applies",
+    "set_scalars",
+    "payload_points",
+    "payload_coordinates",
+    "unit_factors",
+    "factor_of",
+    "inner_links_plant",
+    "carried",
+    "scalars_of_true",
+    "set_witness",
+]
+
+#: The sampled residual bound is widened by this factor before it is carried (points between samples).
+SPREAD_MARGIN = 1.25
+#: The sampled bound of the inertia block is widened by this factor (it varies little over a task's positions).
+G_MARGIN = 1.05
+#: A scalar whose factor stays below this fraction of the largest scalar's at every sample moves nothing (dropped).
+NEGLIGIBLE = 1e-10
+#: Principal directions kept as repeated real scalars (the rest is the residual block).
+DEFAULT_DIRECTIONS = 2
+
+
+@dataclass(frozen=True)
+class Scalar:
+    """One scalar of the set's box: ``dpi = u * half_range * params`` on Pinocchio body ``body`` (or viscous friction on ``joint``)."""
+
+    name: str
+    half_range: float
+    body: int
+    params: np.ndarray
+    joint: int = -1
+
+
+def applies(robot) -> str | None:
+    """Why the model does not apply to ``robot`` (``None`` when it does)."""
+    if getattr(robot, "uncertainty", None) is None:
+        return "inner-links: needs a robot-uncertainty set (--robot-uncertainty FILE or --link-error P)"
+    if robot.inner != "computed-torque":
+        return (
+            f"inner-links: a per-link set is carried for a computed-torque inner layer only, not '{robot.inner}' "
+            "(its factor is then not linear in the parameters)"
+        )
+    return None
+
+
+def _about_com(theta) -> np.ndarray:
+    m, h = theta[0], theta[1:4]
+    c = h / m
+    shift = m * (np.dot(c, c) * np.eye(3) - np.outer(c, c))
+    return _six(_three(theta[4:]) - shift)
+
+
+def _three(six) -> np.ndarray:
+    ixx, ixy, iyy, ixz, iyz, izz = six
+    return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+
+
+def _six(M) -> np.ndarray:
+    return np.array([M[0, 0], M[0, 1], M[1, 1], M[0, 2], M[1, 2], M[2, 2]])
+
+
+def _parallel_axis_range(p: float) -> float:
+    """``max |b^2/a - 1|`` for ``a, b`` in ``[1 - p, 1 + p]``."""
+    return max((1 + p) ** 2 / (1 - p) - 1, 1 - (1 - p) ** 2 / (1 + p))
+
+
+def _flange_map(robot) -> np.ndarray:
+    """The 10 x 10 matrix taking a body's parameters in the flange frame to the last joint's body frame (linear)."""
+    from polyrob.model.payload import flange_frame
+
+    _, placement = flange_frame(robot)
+    base = np.array([10.0, 0, 0, 0, 10.0, 0, 10.0, 0, 0, 10.0])
+
+    def moved(theta):
+        return np.asarray(placement.act(pinocchio.Inertia.FromDynamicParameters(theta)).toDynamicParameters(), float)
+
+    zero = moved(base)
+    return np.column_stack([moved(base + np.eye(10)[k]) - zero for k in range(10)])
+
+
+def _payload_scalars(robot, body) -> list[Scalar]:
+    """The payload's scalars (see the module text), on the last body, about the model's payload."""
+    from polyrob.uncertainty_set.draw import payload_middle
+
+    T = _flange_map(robot)
+    last = robot.model.njoints - 1
+    m0, c0, second0 = payload_middle(body)
+    solid = _six(body.rotational_inertia(1.0))
+    out = []
+
+    def add(name, lo, hi, flange_params):
+        half = max(abs(lo), abs(hi))
+        if half > 0:
+            out.append(Scalar(f"payload.{name}", half, last, T @ flange_params))
+
+    add("mass", body.mass_lower - m0, body.mass_upper - m0, np.concatenate([[1.0, 0, 0, 0], solid]))
+    h_lo, h_hi = body.moment_range()
+    for i, axis in enumerate("xyz"):
+        add(f"m{axis}", h_lo[i] - m0 * c0[i], h_hi[i] - m0 * c0[i], np.eye(10)[1 + i])
+    s_lo, s_hi = body.second_moment_range()
+    for k, (i, j) in enumerate(SECOND_MOMENT_ENTRIES):
+        add(f"second{i}{j}", s_lo[k] - second0[k], s_hi[k] - second0[k], np.eye(10)[4 + k])
+    return out
+
+
+def payload_points(body, shells: int = 4, per_shell: int = 160) -> list[tuple[float, np.ndarray]]:
+    """``(mass, com)`` points of the payload's set over which its scalars' extremes are taken (sampled).
+
+    Each scalar's effect is linear in the mass at a fixed centre of mass, so
+    the masses are the range's two ends; the centres of mass fill the ball
+    (its centre and ``shells`` spheres of ``per_shell`` Fibonacci points) or
+    the box (a 7-point grid per axis).
+    """
+    if body.com_radius is not None:
+        k = np.arange(per_shell) + 0.5
+        polar, azimuth = np.arccos(1 - 2 * k / per_shell), np.pi * (1 + 5**0.5) * k
+        sphere = np.column_stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)])
+        radii = body.com_radius * np.arange(1, shells + 1) / shells
+        coms = np.vstack([np.zeros((1, 3))] + [r * sphere for r in radii]) + np.array(body.com_centre)
+    else:
+        axes = [np.linspace(lo, hi, 7) for lo, hi in zip(body.com_lower, body.com_upper)]
+        coms = np.array(np.meshgrid(*axes, indexing="ij")).reshape(3, -1).T
+    return [(mass, c) for mass in (body.mass_lower, body.mass_upper) for c in coms]
+
+
+def payload_coordinates(body, mass: float, com) -> dict[str, float]:
+    """The payload scalars' values (physical units, about the model's payload) of a payload ``(mass, com)``."""
+    from polyrob.uncertainty_set.draw import payload_middle
+
+    m0, c0, second0 = payload_middle(body)
+    c = np.asarray(com, float)
+    out = {"payload.mass": mass - m0}
+    for i, axis in enumerate("xyz"):
+        out[f"payload.m{axis}"] = mass * c[i] - m0 * c0[i]
+    second = second_moment(mass, c) - second0
+    for k, (i, j) in enumerate(SECOND_MOMENT_ENTRIES):
+        out[f"payload.second{i}{j}"] = second[k]
+    return out
+
+
+def set_scalars(loop) -> list[Scalar]:
+    """The scalars of the box that holds ``loop``'s set (see the module text), in a fixed order."""
+    from polyrob.uncertainty_set.links import link_names
+
+    spec, robot = loop.uncertainty, loop.uncertainty_robot
+    explicit = {li.link: li for li in spec.links}
+    p = spec.link_error or 0.0
+    out = []
+    for name, j in link_names(robot).items():
+        if name in explicit:
+            li = explicit[name]
+            half = 0.5 * (np.array(li.upper) - np.array(li.lower))
+            out += [Scalar(f"{name}.{k}", float(half[k]), j, np.eye(10)[k]) for k in range(10) if half[k] > 0]
+            continue
+        if p == 0:
+            continue
+        theta = np.asarray(robot.model.inertias[j].toDynamicParameters(), float)
+        ic = _about_com(theta)
+        zero3, zero6 = np.zeros(3), np.zeros(6)
+        out += [
+            Scalar(f"{name}.mass", p, j, np.concatenate([[theta[0]], zero3, zero6])),
+            Scalar(f"{name}.moment", p, j, np.concatenate([[0.0], theta[1:4], zero6])),
+            Scalar(f"{name}.inertia", p, j, np.concatenate([[0.0], zero3, ic])),
+            Scalar(f"{name}.parallel", _parallel_axis_range(p), j, np.concatenate([[0.0], zero3, theta[4:] - ic])),
+        ]
+    if spec.payload is not None and spec.payload.mass_upper > 0:
+        out += _payload_scalars(robot, spec.payload)
+    for f in spec.friction:
+        half = 0.5 * (f.viscous[1] - f.viscous[0])
+        if half > 0:
+            out.append(Scalar(f"{f.joint}.viscous", half, 0, np.zeros(10), robot.joint_names.index(f.joint)))
+    return out
+
+
+def _moved(loop, scalar: Scalar, sign: float):
+    """The inner loop's model robot moved by ``sign`` times the scalar's half range."""
+    from dataclasses import replace
+
+    base = loop.model_robot
+    model = base.model.copy()
+    damping = np.array(base.damping, float)
+    if scalar.joint >= 0:
+        damping[scalar.joint] += sign * scalar.half_range
+        model.damping[:] = damping
+    else:
+        theta = np.asarray(model.inertias[scalar.body].toDynamicParameters(), float)
+        model.inertias[scalar.body] = pinocchio.Inertia.FromDynamicParameters(
+            theta + sign * scalar.half_range * scalar.params
+        )
+    return replace(base, model=model, damping=damping)
+
+
+def factor_of(loop, true_robot, q, qdot, a) -> np.ndarray:
+    """``K_raw = [B_low^-1 A_low, I - B_low^-1]`` (n, m, 3m) of the loop closed on ``true_robot`` at ``(q, qdot, a)``."""
+    from dataclasses import replace
+
+    one = replace(loop, true_robot=true_robot, _scenarios=())
+    v = one.inverse_dynamics(q, qdot, a)
+    A, B = one.jacobians_batch(q, qdot, v)
+    m = loop.m
+    inverse = np.linalg.inv(B[:, m:])
+    return np.concatenate([inverse @ A[:, m:], np.eye(m) - inverse], axis=2)
+
+
+def unit_factors(loop, scalars, q, qdot, a) -> np.ndarray:
+    """``K_j(x)`` per unit of each scalar's half range, (N, n, m, 3m): exact (the factor is linear in ``dpi``).
+
+    Each is the factor of one true robot moved by the scalar's half range
+    (the other way, negated, when that would make the body's mass vanish).
+    """
+    out = []
+    for s in scalars:
+        sign = 1.0
+        if s.joint < 0:
+            mass = float(loop.model_robot.model.inertias[s.body].mass)
+            sign = 1.0 if mass + s.half_range * s.params[0] > 0.05 * mass else -1.0
+        out.append(sign * factor_of(loop, _moved(loop, s, sign), q, qdot, a))
+    return np.array(out)
+
+
+def carried(loop, domain, *, samples: int = 64) -> str | None:
+    """Why the model cannot carry ``loop``'s set over ``domain`` (``None``: it can), measured on a light build.
+
+    The build reads of the PLDI only its domain, size and nominal, so a
+    stand-in answers in seconds what the bounds would take minutes to reach.
+    """
+    from types import SimpleNamespace
+
+    q, qdot, a = _domain_points(domain, 1, seed=0)
+    A0, B0 = loop.jacobians_batch(q, qdot, loop.inverse_dynamics(q, qdot, a))
+    stand_in = SimpleNamespace(m=loop.m, domain=domain, A0=A0[0], B0=B0[0], enclosure="sampled", robot_name=loop.name)
+    try:
+        inner_links_plant(stand_in, loop, samples=samples)
+    except NotApplicable as exc:
+        return str(exc).removeprefix("inner-links: ")
+    return None
+
+
+def _domain_points(domain, n: int, seed):
+    q, qdot, a = domain.split(domain.sample_box(n, method="uniform", seed=seed))
+    return q, qdot, a
+
+
+def inner_links_plant(pldi, robot, *, n_directions: int | None = None, samples: int = 256) -> UncertainPlant:
+    """The ``inner-links`` LFT of the module text for ``robot`` (a :class:`~polyrob.model.inner.SetLoopRobot`).
+
+    Raises
+    ------
+    NotApplicable
+        No robot-uncertainty set, not computed torque (:func:`applies`), not
+        a task domain, or ``I - sum t_k G_k`` may be singular.
+    """
+    from polyrob.domains.task import TaskDomain
+    from polyrob.plant.models.inner_factors import factor_lft_plant
+
+    why = applies(robot)
+    if why:
+        raise NotApplicable(why)
+    if not isinstance(pldi.domain, TaskDomain):
+        raise NotApplicable("inner-links: a per-link set needs a task domain (accelerations), not a torque box")
+    m, n = pldi.m, 2 * pldi.m
+    P = DEFAULT_DIRECTIONS if n_directions is None else int(n_directions)
+    scalars = set_scalars(robot)
+    if not scalars:
+        raise NotApplicable("inner-links: the set has no uncertain parameter")
+    q, qdot, a = _domain_points(pldi.domain, samples, seed=[7, 38])
+    Phi = unit_factors(robot, scalars, q, qdot, a)  # (N, S, m, 3m)
+    moves = np.abs(Phi).reshape(len(scalars), -1).max(axis=1)
+    keep = moves > NEGLIGIBLE * moves.max()  # a first moment at a joint's axis, a mass on a vertical first joint
+    scalars, Phi = [s for s, k in zip(scalars, keep) if k], Phi[keep]
+    N = len(scalars)
+    P = min(P, N)
+    # the payload's scalars range over its physical set (mass x the CoM ball/box), not their box: the box's
+    # corners (no mass but a full second moment) are no rigid body and make the inertia indefinite
+    on_payload = np.array([s.name.startswith("payload.") for s in scalars])
+    body = robot.uncertainty.payload
+    if on_payload.any():
+        pay = np.array([[c[s.name] / s.half_range for s in scalars if s.name.startswith("payload.")]
+                        for c in (payload_coordinates(body, mm, cc) for mm, cc in payload_points(body))])  # fmt: skip
+    else:
+        pay = np.zeros((1, 0))
+    # in M_hat^{1/2} coordinates at the task's centre: K -> W K diag(I, W^-1)
+    W = _weighting(robot, pldi.domain)
+    G_exact, kappa = _exactly_weighted(robot, q, Phi[..., n:], W)
+    Phi = _weighted(Phi, W, np.linalg.inv(W))
+    # principal directions of u -> J (the state columns, of unit RMS) over the samples; the acceleration
+    # columns G are one norm-bounded block (below)
+    weight = np.zeros(3 * m)
+    rms = np.sqrt(np.mean(Phi[..., :n] ** 2))
+    weight[:n] = 1.0 / rms if rms > 0 else 0.0
+    U = np.linalg.svd((Phi * weight).reshape(N, -1), full_matrices=False)[0][:, :P]
+    U = U * np.sign(U[np.argmax(np.abs(U), axis=0), np.arange(P)])
+    ranges = np.abs(U[~on_payload]).sum(axis=0) + np.abs(pay @ U[on_payload]).max(axis=0, initial=0.0)
+    along = np.tensordot(U.T, Phi, axes=1)  # (P, S, m, 3m)
+    centres = 0.5 * (along.min(axis=1) + along.max(axis=1))
+    centres[..., n:] = 0.0
+    rest = Phi - np.tensordot(U, centres, axes=1)[:, None]  # R_j(x) = K_j(x) - sum_k U_jk K_k,c
+    # |E| <= sum over the box scalars of |R_j| + the largest |sum_i u_i R_i| over the payload's physical set
+    worst = np.abs(rest[~on_payload]).sum(axis=0)
+    if on_payload.any():
+        shape = rest.shape[1:]
+        payload_rest = np.abs(pay @ rest[on_payload].reshape(int(on_payload.sum()), -1)).max(axis=0)
+        worst = worst + payload_rest.reshape(shape)
+    spread = SPREAD_MARGIN * worst.max(axis=0)
+    # the acceleration columns: one norm-bounded block (in M_hat^{1/2} coordinates nearly symmetric)
+    g_norm, g0 = _g_norm_bound(G_exact[~on_payload], G_exact[on_payload], pay, kappa)
+    g_norm *= G_MARGIN
+    margin = _well_posed_margin(ranges, centres, g_norm, n, g0)
+    if margin <= 0.0:
+        raise NotApplicable(
+            f"inner-links: the relative inertia error is too large for one LFT around the model: its bound "
+            f"{g_norm:.3g} (M_hat^1/2 coordinates, over the task's positions) is not below the {margin + g_norm:.3g} "
+            "the centre leaves (a smaller payload range or centre-of-mass ball, or smaller link errors)"
+        )
+    centres = _weighted(centres, np.linalg.inv(W), W)  # back to K's own coordinates; the residual stays weighted
+    if margin <= 0.0:
+        raise NotApplicable(
+            f"inner-links: I - sum t_k G_k - E_G may be singular inside the ranges (sigma_min less the residual's "
+            f"gain {margin:.3g} on a grid of the directions)"
+        )
+    inertia = _inertia_ratio(robot, scalars, q)
+    names = tuple(f"t{k}" for k in range(P))
+    return factor_lft_plant(
+        pldi,
+        "inner-links",
+        names,
+        ranges,
+        list(centres),
+        spread,
+        {"PLDI": pldi.enclosure, "factors": "sampled"},
+        weighting=W,
+        g_norm=g_norm,
+        g_offset=g0,
+        info={
+            "set": robot.uncertainty.words(),
+            "scalars": tuple(s.name for s in scalars),
+            "scalar_half_ranges": np.array([s.half_range for s in scalars]),
+            "directions": U,
+            "samples": int(samples),
+            "spread_margin": SPREAD_MARGIN,
+            "inertia_ratio": inertia,
+        },
+    )
+
+
+def _weighting(robot, domain) -> np.ndarray:
+    """``W = M_hat^{1/2}`` at the centre of the task domain (symmetric square root)."""
+    centre = 0.5 * (np.asarray(domain.lower, float) + np.asarray(domain.upper, float))
+    M = robot.model_robot.mass_matrix(centre[: robot.m])
+    values, vectors = np.linalg.eigh(0.5 * (M + M.T))
+    return (vectors * np.sqrt(values)) @ vectors.T
+
+
+def _weighted(K, W, W_inv) -> np.ndarray:
+    """``W K diag(I, W_inv)`` on the last two axes of ``K`` (``... x m x 3m``)."""
+    m = W.shape[0]
+    out = np.einsum("ab,...bc->...ac", W, K)
+    out[..., 2 * m :] = np.einsum("...ab,bc->...ac", out[..., 2 * m :], W_inv)
+    return out
+
+
+def _exactly_weighted(robot, q, G, W) -> tuple[np.ndarray, np.ndarray]:
+    """``W_q G W_q^-1`` with ``W_q = M_hat(q)^{1/2}`` at each sample (symmetric: ``-M_hat^-1/2 dM M_hat^-1/2``), and
+    ``kappa = ||W W_q^-1|| ||W_q W^-1||``, what the fixed weighting ``W`` of the block costs at that sample."""
+    out, kappa = np.empty_like(G), np.empty(len(q))
+    for s, qq in enumerate(q):
+        M = robot.model_robot.mass_matrix(qq)
+        values, vectors = np.linalg.eigh(0.5 * (M + M.T))
+        W_q = (vectors * np.sqrt(values)) @ vectors.T
+        W_q_inv = (vectors / np.sqrt(values)) @ vectors.T
+        out[:, s] = W_q @ G[:, s] @ W_q_inv
+        T = W @ W_q_inv
+        kappa[s] = np.linalg.norm(T, 2) * np.linalg.norm(np.linalg.inv(T), 2)
+    return out, kappa
+
+
+def _g_norm_bound(box_rest, payload_rest, pay, kappa) -> tuple[float, float]:
+    """``(g_norm, g0)``: ``||sum_j u_j R_j - g0 I||_2 <= g_norm`` (acceleration columns) over the set and the samples.
+
+    Box scalars: ``A = sum_j |sym R_j|`` bounds their symmetric part in the
+    Loewner order (``-|S| <= u S <= |S|`` for ``|u| <= 1``), their skew
+    parts add their norms; the payload at each point ``p`` of its sampled
+    physical set (:func:`payload_points`) adds ``S_p``, so the symmetric part
+    lies between ``S_p - A`` and ``S_p + A`` and its eigenvalues between
+    ``lambda_min(S_p - A)`` and ``lambda_max(S_p + A)``.  ``g0`` centres that
+    range (a heavy off-axis payload raises the inertia more than a light one
+    lowers it).
+    """
+
+    def sym_skew(R):
+        sym = 0.5 * (R + np.swapaxes(R, -1, -2))
+        return sym, np.linalg.norm(R - sym, 2, axis=(-2, -1))
+
+    sym, skew = sym_skew(box_rest)
+    values, vectors = np.linalg.eigh(sym)
+    A = np.einsum("...ab,...b,...cb->...ac", vectors, np.abs(values), vectors).sum(axis=0)  # (S, m, m)
+    skew = skew.sum(axis=0)
+    if len(payload_rest):
+        S_p, skew_p = sym_skew(np.einsum("pi,isab->psab", pay, payload_rest))
+        top = np.linalg.eigvalsh(S_p + A).max(axis=-1)
+        bottom = np.linalg.eigvalsh(S_p - A).min(axis=-1)
+        skew = skew + skew_p.max(axis=0)
+    else:
+        top = np.linalg.eigvalsh(A).max(axis=-1)[None]
+        bottom = -top
+    g0 = 0.5 * (float(top.max()) + float(bottom.min()))
+    half = np.maximum(top - g0, g0 - bottom).max(axis=0)
+    return float((kappa * (half + skew)).max()), g0
+
+
+def _well_posed_margin(ranges, centres, g_norm: float, n: int, g0: float = 0.0, points: int = 9) -> float:
+    """``min sigma_min((1 - g0) I - sum t_k G_k,c) - g_norm`` over a grid of the directions' box (``> 0``: well posed there).
+
+    In the weighted coordinates of the residual; the grid has ``points``
+    values per direction (at most 4 directions on the grid, the rest at their ends).
+    """
+    G = np.array([K[:, n:] for K in centres])
+    axes = [np.linspace(-r, r, points if k < 4 else 2) for k, r in enumerate(ranges)]
+    grid = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(ranges), -1).T
+    m = G.shape[1]
+    eye = (1.0 - g0) * np.eye(m)
+    worst = min(float(np.linalg.svd(eye - np.tensordot(t, G, axes=1), compute_uv=False)[-1]) for t in grid)
+    return worst - g_norm
+
+
+def _inertia_ratio(robot, scalars, q) -> float:
+    """``rho``: the largest ``|eig(M_hat^-1 dM)|`` over the box's vertices along each scalar, summed (a bound, for reports)."""
+    dM = []
+    model = robot.model_robot
+    for s in scalars:
+        if s.joint >= 0:
+            continue
+        moved = _moved(
+            robot, s, 1.0 if float(model.model.inertias[s.body].mass) + s.half_range * s.params[0] > 0 else -1.0
+        )
+        dM.append(moved)
+    worst = 0.0
+    for qq in q[:8]:
+        M_hat = model.mass_matrix(qq)
+        L = np.linalg.cholesky(M_hat)
+        total = 0.0
+        for moved in dM:
+            D = moved.mass_matrix(qq) - M_hat
+            total += float(np.max(np.abs(np.linalg.eigvalsh(np.linalg.solve(L, np.linalg.solve(L, D).T)))))
+        worst = max(worst, total)
+    return worst
+
+
+def scalars_of_true(robot, true) -> np.ndarray:
+    """The scalars ``u`` (per unit of their half range) of a drawn :class:`~polyrob.uncertainty_set.draw.TrueRobot`.
+
+    Inside the set every ``|u_j| <= 1``; ``dpi = sum_j u_j half_j params_j`` reproduces its parameters.
+    """
+    from polyrob.uncertainty_set.links import link_names
+
+    spec, base = robot.uncertainty, robot.uncertainty_robot
+    explicit = {li.link: li for li in spec.links}
+    values = {}
+    for name, j in link_names(base).items():
+        drawn = np.asarray(true.link_parameters[name], float)
+        if name in explicit:
+            centre = explicit[name].centre
+            for k in range(10):
+                values[f"{name}.{k}"] = drawn[k] - centre[k]
+            continue
+        theta = np.asarray(base.model.inertias[j].toDynamicParameters(), float)
+        a = drawn[0] / theta[0]
+        k = int(np.argmax(np.abs(theta[1:4])))
+        b = drawn[1 + k] / theta[1 + k] if theta[1 + k] else 1.0
+        ic, ic_drawn = _about_com(theta), _about_com(drawn)
+        k6 = int(np.argmax(np.abs(ic)))
+        d = ic_drawn[k6] / ic[k6]
+        values.update({f"{name}.mass": a - 1, f"{name}.moment": b - 1, f"{name}.inertia": d - 1,
+                       f"{name}.parallel": b * b / a - 1})  # fmt: skip
+    if spec.payload is not None:
+        values.update(payload_coordinates(spec.payload, true.payload_mass, true.payload_com))
+    model_damping = np.asarray(robot.model_robot.damping, float)
+    for k, joint in enumerate(base.joint_names):
+        values[f"{joint}.viscous"] = true.viscous[k] - model_damping[k]
+    return np.array([values[s.name] / s.half_range for s in set_scalars(robot)])
+
+
+def set_witness(unc: UncertainPlant, robot, true, q, qdot, a) -> float:
+    """The largest scaled residual of ``true`` at ``(q, qdot, a)`` with ``t = U^T u`` (its own scalars): ``<= 1`` is membership.
+
+    Also ``max |t_k| / range_k`` must be at most 1, which holds inside the
+    set by construction; the larger of the two is returned.
+    """
+    from polyrob.plant.models.inner_factors import _reached, _scaled_residual
+
+    names = [s.name for s in set_scalars(robot)]
+    u = dict(zip(names, scalars_of_true(robot, true)))
+    t = unc.info["directions"].T @ np.array([u[name] for name in unc.info["scalars"]])
+    worst = float(np.max(np.abs(t) / unc.info["theta_range"]))
+    reached = _reached(unc)
+    for K in factor_of(robot, true.robot, q, qdot, a):
+        worst = max(worst, _scaled_residual(unc, K, t, 1e-9, reached))
+    return worst
