@@ -276,7 +276,7 @@ def inner_loop(robot, inner: str = "gravity", *, payload: PayloadRange | None = 
 
 
 #: True robots drawn at random inside a robot-uncertainty set that the bounds are taken over (besides the model).
-SET_DRAWS = 16
+SET_DRAWS = 6
 
 
 @dataclass(frozen=True, eq=False)
@@ -311,6 +311,8 @@ class SetLoopRobot(InnerLoopRobot):
     def words(self) -> str:
         parts = [f"inner layer: {self.inner}" + ("" if self.inner == "none" else f" ({runtime_needs(self.inner)})")]
         parts.append(self.uncertainty.words() + " (model: nominal links, the middle payload and viscous friction)")
+        if any(f.coulomb > 0 for f in self.uncertainty.friction):
+            parts.append("Coulomb friction as stated, no term of the frozen loop's Jacobians: not covered")
         if len(self._scenarios):
             parts.append(f"bounds sampled at {len(self._scenarios) + 1} true robots (the model and random draws)")
         return "; ".join(parts)

@@ -8,8 +8,8 @@
   today's certified common-factor set contains one;
 * :mod:`~polyrob.uncertainty_set.checks`: the file's numbers, each refusal one line.
 
-No certificate covers this set yet: the commands check it and refuse it (``--robot-uncertainty``,
-``--link-error``, :mod:`polyrob.cli.options`).
+On a computed-torque inner layer the commands carry the set with the ``inner-links`` model
+(:mod:`polyrob.plant.models.inner_links`), or refuse it in one line with the measured reason.
 """
 
 from polyrob.uncertainty_set.draw import TrueRobot, common_factor_covers, draw_true_robot, draw_true_robots

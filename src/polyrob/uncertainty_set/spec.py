@@ -35,9 +35,9 @@ box routinely has such corners while the robot lies in its physical part;
 a box whose *centre* is not physical is refused, and the sampler redraws
 non-physical draws (:mod:`polyrob.uncertainty_set.draw`).
 
-No command certifies this set yet: the certified models are the common
-factor of :mod:`polyrob.model.inner`; ``--robot-uncertainty`` and
-``--link-error`` are refused with one line saying so.
+On a computed-torque inner layer the commands carry this set with the
+``inner-links`` model (:mod:`polyrob.plant.models.inner_links`), or refuse
+it in one line with the measured reason when that model cannot hold it.
 
 Examples
 --------
