@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import replace
 from pathlib import Path
@@ -62,6 +63,12 @@ def model_of(robot, spec, *, samples=64):
     return loop, domain, links.inner_links_plant(pldi, loop, samples=samples)
 
 
+@functools.lru_cache(maxsize=None)
+def carried_model(name: str):
+    """The model of :func:`carried_set` (built once per robot for the tests that read it)."""
+    return model_of(load_robot(name), carried_set(name))
+
+
 def witnesses(unc, loop, domain, trues, points=3, seed=0):
     rng = np.random.default_rng(seed)
     out = []
@@ -92,7 +99,7 @@ def test_the_loop_factor_is_exactly_linear_in_the_parameters():
 def test_every_true_robot_drawn_inside_the_carried_set_is_a_member(name):
     robot = load_robot(name)
     spec = carried_set(name)
-    loop, domain, unc = model_of(robot, spec)
+    loop, domain, unc = carried_model(name)
     trues = draw_true_robots(robot, spec, 200, seed=38)
     assert np.all(witnesses(unc, loop, domain, trues, points=2) <= 1.0 + 1e-9)
     # the membership test of the registry finds them too, from the Jacobians alone
@@ -138,15 +145,14 @@ def test_panda_with_the_default_instrument_is_refused_with_the_measured_reason()
 
 
 def test_channels_and_the_sizes_mu_sees():
-    ur5 = load_robot("ur5")
-    _, _, unc = model_of(ur5, spec_of("ur5"))
+    _, _, unc = carried_model("ur5")
     assert unc.model == "inner-links" and unc.n_params == links.DEFAULT_DIRECTIONS
     blocks = unc.block_structure.tolist()
     repeated = [b for b in blocks if b[1] == 0]
     full = [b for b in blocks if b[1] > 0]
     assert repeated == [[-6, 0]] * links.DEFAULT_DIRECTIONS  # each direction one real scalar on the 6 joints
     assert len(full) == 2 and full[-1] == [6, 6]  # the state columns' residual, then the inertia's norm block
-    assert full[0][0] <= 6
+    assert full[0][0] <= 2 * 6  # square: the larger of its rows (joints) and columns (states)
     assert 0.0 < unc.info["residual_g_norm"] < 1.0 - unc.info["K_offset"][0, -1]  # well posed: I - G never singular
     assert unc.B_d.shape[1] == 6 * links.DEFAULT_DIRECTIONS + sum(b[0] for b in full)
     assert len(unc.info["scalars"]) < 34  # scalars that move nothing (a first moment on a joint's axis) dropped

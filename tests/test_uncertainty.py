@@ -226,7 +226,7 @@ def _building_jacobians(pldi, n=300):
 
 
 def test_every_model_contains_the_jacobians_it_was_built_from(pldi, built):
-    assert list(MODELS) == ["box", "axes", "lft", "lft-torque", "inertia", "inner-gain"]
+    assert list(MODELS) == ["box", "axes", "lft", "lft-torque", "inertia", "inner-gain", "inner-links"]
     A, B = _building_jacobians(pldi)
     for name, unc in built.items():
         model = model_of(unc)
