@@ -210,8 +210,8 @@ def test_input_definiteness_holds_on_the_paper_models_and_fails_on_a_widened_box
 # ---------------------------------------------------------------- the models' interface
 @pytest.fixture(scope="module")
 def built(pldi):
-    """Every registered model built on the paper_2r PLDI through its own ``build`` (inner-gain: an inner loop only)."""
-    return {name: model.build(pldi) for name, model in MODELS.items() if name != "inner-gain"}
+    """Every registered model built on the paper_2r PLDI through its own ``build`` (inner-gain, inner-links: an inner loop only)."""
+    return {name: model.build(pldi) for name, model in MODELS.items() if name not in ("inner-gain", "inner-links")}
 
 
 def _building_jacobians(pldi, n=300):
@@ -264,15 +264,15 @@ def test_enclosure_is_the_weakest_of_the_inputs(pldi, built):
         "inertia": "sampled",
     }
     for name, model in MODELS.items():
-        if name == "inner-gain":  # a computed-torque inner loop only (tests/test_default_task.py)
+        if name in ("inner-gain", "inner-links"):  # computed-torque inner loops only (their own test files)
             continue
         unc = model.build(proved)
         assert model.enclosure(unc) == unc.info["enclosure"] == expected[name], name
 
 
 def test_unknown_models_give_clear_errors(pldi, unc):
-    assert CHOICES == ("auto", "box", "axes", "lft", "lft-torque", "inertia", "inner-gain")
-    msg = "unknown uncertainty model 'cube': use one of auto, box, axes, lft, lft-torque, inertia, inner-gain"
+    assert CHOICES == ("auto", "box", "axes", "lft", "lft-torque", "inertia", "inner-gain", "inner-links")
+    msg = "unknown uncertainty model 'cube': use one of auto, box, axes, lft, lft-torque, inertia, inner-gain, inner-links"
     with pytest.raises(ArgumentError, match=msg):
         uncertain_plant(pldi, model="cube")
     cube = dataclasses.replace(unc, model="cube")
