@@ -100,15 +100,24 @@ def test_a_set_the_model_cannot_carry_is_refused_with_its_measured_reason(capsys
         assert "panda_link8" in line and "Coulomb <= 1.279 N m" in line, argv
 
 
-def test_a_set_is_carried_on_computed_torque_only_and_not_twice_and_not_by_the_batch(capsys):
+def test_a_set_is_carried_on_computed_torque_only_and_not_twice_and_by_the_batch(capsys):
     code, _, err = run(capsys, "bounds", "panda", "--robot-uncertainty", str(EXAMPLE), "--inner", "gravity")
     line = one_error_line(err)
     assert code == 2 and "carried on a computed-torque inner layer only" in line and "not --inner gravity" in line
     code, _, err = run(capsys, "synth", "ur5", "--link-error", "10", "--payload-mass", "0:1")
     assert code == 2 and "--payload-mass 0:1 would state the uncertainty twice" in one_error_line(err)
-    code, out, err = run(capsys, "batch", "panda", "--robot-uncertainty", str(EXAMPLE))
-    line = one_error_line(err)
-    assert code == 2 and out == "" and "not carried by the batch yet" in line and "per-link ±10 %" in line
+    # the batch gives every job the set; a job poses it on its default task with the inner-links model
+    from argparse import Namespace
+
+    from polyrob.cli.batch import with_robot_uncertainty
+    from polyrob.fleet.jobs import as_job, job_robot_and_domain
+
+    args = Namespace(robot_uncertainty=None, link_error="10")
+    (job,) = with_robot_uncertainty(args, [{"robot": "ur5"}])
+    robot, domain, task = job_robot_and_domain(as_job(job))
+    assert type(robot).__name__ == "SetLoopRobot" and robot.inner == "computed-torque" and task is not None
+    assert robot.uncertainty.link_error == 0.1 and "per-link ±10 %" in robot.words()
+    assert type(domain).__name__ == "TaskDomain"
 
 
 def test_link_error_option(capsys):

@@ -27,7 +27,7 @@ from polyrob.cli.options import (
 )
 from polyrob.errors import ArgumentError
 
-__all__ = ["register", "jobs_from_args", "settings_from_args", "refuse_robot_uncertainty"]
+__all__ = ["register", "jobs_from_args", "settings_from_args", "with_robot_uncertainty"]
 
 
 def _jobs_file(path: str) -> list:
@@ -77,22 +77,26 @@ def jobs_from_args(args) -> list:
     return jobs
 
 
-def refuse_robot_uncertainty(args, jobs) -> None:
-    """``--robot-uncertainty``/``--link-error``: checked against every job's robot, then refused (the batch's jobs
-    do not pose the set yet; ``synth``, ``analyze``, ``run`` and ``bounds`` carry it on one robot)."""
+def with_robot_uncertainty(args, jobs) -> list:
+    """``--robot-uncertainty``/``--link-error``: checked against every job's robot, then given to every job.
+
+    Each job carries the set with the ``inner-links`` model on its default
+    task (computed torque); a set that job's model cannot hold fails that
+    job's row with the measured reason, as ``synth`` refuses it.
+    """
     if getattr(args, "robot_uncertainty", None) is None and getattr(args, "link_error", None) is None:
-        return
+        return jobs
     from polyrob.cli.options import robot_uncertainty_from_args
     from polyrob.model.robots import load_robot
 
-    specs = [robot_uncertainty_from_args(args, load_robot(j["robot"])) for j in jobs if isinstance(j.get("robot"), str)]
-    if specs:
-        path = getattr(args, "robot_uncertainty", None)
-        where = f"--robot-uncertainty {path}" if path is not None else f"--link-error {args.link_error}"
-        raise ArgumentError(
-            f"{where} ({specs[0].words()}): not carried by the batch yet: run `polyrob synth ROBOT {where}` "
-            "per robot (the inner-links model), or give the batch --model-error PCT and --payload-mass"
-        )
+    out = []
+    for job in jobs:
+        if not isinstance(job.get("robot"), str):
+            out.append(job)
+            continue
+        spec = robot_uncertainty_from_args(args, load_robot(job["robot"]))
+        out.append(dict(job, robot_uncertainty=spec.to_dict()))
+    return out
 
 
 def parse_percent(text: str) -> float:
@@ -142,7 +146,7 @@ def cmd_batch(args) -> int:
 
         check_output_path(Path(args.output) / "summary.json", "-o")
     jobs = jobs_from_args(args)
-    refuse_robot_uncertainty(args, jobs)
+    jobs = with_robot_uncertainty(args, jobs)
     options = settings_from_args(args)
     if args.workers < 1:
         raise ArgumentError(f"-j must be >= 1, got {args.workers}")

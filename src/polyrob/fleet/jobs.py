@@ -65,6 +65,10 @@ class Job:
         Payload range as the ``--payload-mass`` / ``--payload-com`` options take it.
     torque_box : bool
         The URDF torque box without an inner layer even for an arm (no default task).
+    robot_uncertainty : dict, optional
+        A robot-uncertainty set (the file's mapping,
+        :meth:`~polyrob.uncertainty_set.spec.RobotUncertainty.to_dict`), carried on a
+        computed-torque inner layer by the ``inner-links`` model; it replaces the task's model error and payload.
     """
 
     robot: str
@@ -88,6 +92,7 @@ class Job:
     payload_mass: str | None = None
     payload_com: str | None = None
     torque_box: bool = False
+    robot_uncertainty: dict | None = None
 
     @property
     def name(self) -> str:
@@ -248,7 +253,17 @@ def job_robot_and_domain(job: Job):
     else:
         fields = {k: getattr(job, k) for k in _TASK_FIELDS}
         inner, error = job.inner or "none", job.model_error or 0.0
-    if inner != "none" or error or payload is not None:
+    if job.robot_uncertainty is not None:  # the stated set replaces the task's model error and payload
+        from polyrob.model.inner import inner_loop_of_set
+        from polyrob.uncertainty_set.spec import RobotUncertainty
+
+        if inner != "computed-torque" or job.model_error is not None or job.payload_mass is not None:
+            raise ArgumentError(
+                f"job {job.name}: a robot-uncertainty set is carried on a computed-torque inner layer only, "
+                "without model_error or payload_mass beside it"
+            )
+        robot = inner_loop_of_set(robot, inner, RobotUncertainty.from_dict(job.robot_uncertainty))
+    elif inner != "none" or error or payload is not None:
         from polyrob.model.inner import inner_loop
 
         robot = inner_loop(robot, inner, payload=payload, model_error=float(error))
