@@ -172,6 +172,7 @@ def moving_robot_certificate(
     cell_time_limit: float | None = None,
     symmetric: bool = False,
     progress: bool = False,
+    lower_bound: bool | dict | None = None,
 ) -> MovingRobotCertificate:
     """The moving-robot certificate of ``K`` on ``problem`` (its robot, domain and weights).
 
@@ -221,6 +222,10 @@ def moving_robot_certificate(
         (:func:`~polyrob.analysis.lpv.robot.even_half`): ``points[0]`` counts
         the whole position axis, so the grid is as dense for half the points.
         ``"auto"``: the half box when the loop is even, else the whole box.
+    lower_bound : bool or dict, optional
+        Also the largest gain found along admissible trajectories of the box
+        (:func:`~polyrob.analysis.lpv.lower.trajectory_lower_bound`; a dict:
+        its options), printed beside the proved bound; default: with ``cells``.
 
     Returns
     -------
@@ -238,6 +243,7 @@ def moving_robot_certificate(
     try:
         model = scheduling(problem.robot, domain, points=points)
         system = closed_loop_system(model, K, P.W_S, P.W_T, P.W_KS)
+        whole = model  # the trajectories of the lower bound run on the whole box
         if symmetric:
             try:
                 model = even_half(model, system)
@@ -275,6 +281,15 @@ def moving_robot_certificate(
             g_cells = float(level) if level is not None and level >= g_grid else 0.5 * (g_grid + 1.0)
             between = check_cells(model, system, result.X, basis, used, g_cells, similarity=getattr(sysf, "similarity",
                                   None), c=cs, time_limit=cell_time_limit, progress=progress)  # fmt: skip
+        found = {}
+        if lower_bound or (lower_bound is None and cells):
+            from polyrob.analysis.lpv.lower import trajectory_lower_bound
+
+            try:
+                opts = lower_bound if isinstance(lower_bound, dict) else {}
+                found = trajectory_lower_bound(whole, system, used, **opts).summary()
+            except NotApplicable:  # a frozen loop at rest is unstable: no gain to find, the bound says so already
+                found = {}
     except NotApplicable as exc:
         return MovingRobotCertificate.not_computed(str(exc))
     base = problem.scope() if hasattr(problem, "scope") else Scope()
@@ -327,5 +342,6 @@ def moving_robot_certificate(
         notes=why,
         finer=finer,
         cells={} if between is None else between.summary(),
+        lower=found,
         seconds=time.perf_counter() - t0,
     )

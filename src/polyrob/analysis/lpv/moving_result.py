@@ -60,6 +60,9 @@ class MovingRobotCertificate:
     cells : dict
         The same ``X`` proved between the grid points
         (:meth:`polyrob.analysis.lpv.cells.CellCheck.summary`); empty when not tried.
+    lower : dict
+        The largest gain found along admissible trajectories
+        (:meth:`polyrob.analysis.lpv.lower.TrajectoryLowerBound.summary`); empty when not computed.
     seconds : float
     decided : Certificate or None
         The certificate when another test decided it (μ, :mod:`polyrob.analysis.lpv.constant`).
@@ -79,6 +82,7 @@ class MovingRobotCertificate:
     notes: tuple = ()
     finer: dict = field(default_factory=dict)
     cells: dict = field(default_factory=dict)
+    lower: dict = field(default_factory=dict)
     seconds: float = 0.0
     decided: object = None
 
@@ -107,7 +111,8 @@ class MovingRobotCertificate:
         """``moving robot with rates <= ...: robust performance ...``."""
         if not self.computed:
             return f"moving robot: robust performance not computed ({self.notes[0] if self.notes else 'not asked'})"
-        return f"moving robot with rates {self.rate_words}: {self.certificate.verdict}"
+        found = f"; L2 gain {self.lower['words']}" if self.lower else ""
+        return f"moving robot with rates {self.rate_words}: {self.certificate.verdict}{found}"
 
     def details(self) -> str:
         """What it covers, the frozen peak beside it."""
@@ -158,6 +163,7 @@ class MovingRobotCertificate:
             "notes": list(self.notes),
             "finer_grid": {k: finite_or_none(v) if isinstance(v, float) else v for k, v in self.finer.items()},
             "cells": dict(self.cells),
+            "lower": dict(self.lower),
             "seconds": round(float(self.seconds), 3),
             "verdict": self.verdict,
         }

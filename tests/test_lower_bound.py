@@ -1,0 +1,93 @@
+"""The moving robot's gain from below: gains found along admissible trajectories never exceed the proved bound.
+
+The finite-horizon gain of a frozen loop stays below its H-infinity norm even on a coarse step (the output's
+energy integrated exactly, no aliasing); the trajectories keep ``dq/dt = qdot``, the velocity box and the
+acceleration bounds; on paper_2r the gain found lies between the frozen peak at rest and the proved bound;
+a loop whose gain exceeds 1 along a trajectory of the domain is not certified and its lower bound shows it.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace as NS
+
+import numpy as np
+import pytest
+from test_moving_robot import pd_controller
+
+import polyrob
+from polyrob.analysis.certificate import Status
+from polyrob.analysis.lpv.lower import admissible_trajectories, trajectory_gains
+from polyrob.analysis.lpv.moving import moving_robot_certificate
+from polyrob.analysis.lpv.robot import rate_bounds, scheduling
+from polyrob.analysis.norms import hinf_norm
+from polyrob.domains.torque_box import Domain
+
+
+#: A short search for the tests (the defaults are the benchmark's).
+FAST = {"horizon": 4.0, "iterations": 8, "random_runs": 1}
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return polyrob.load_robot("paper_2r")
+
+
+@pytest.fixture(scope="module")
+def small(robot):
+    d = Domain.from_robot(robot, "paper")
+    return d.with_bounds(q_lower=np.full(2, -0.3), q_upper=np.full(2, 0.3), qdot_lower=d.qdot_lower * 0.05,
+                         qdot_upper=d.qdot_upper * 0.05)  # fmt: skip
+
+
+def test_a_frozen_loop_gains_at_most_its_hinf_norm_even_on_a_coarse_step():
+    """A resonance at 2 rad/s, 0.4 s steps: the output's energy sampled at the steps would overshoot."""
+    A = np.array([[0.0, 1.0], [-4.0, -0.2]])
+    B, C, D = np.array([[0.0], [1.0]]), np.array([[4.0, 0.0]]), np.zeros((1, 1))
+    norm = hinf_norm((A, B, C, D))
+    t = np.arange(200) * 0.4
+    g = trajectory_gains(lambda rho: (A, B, C, D), [("rest", np.zeros((t.size, 1)))], 0.4, iterations=40)
+    assert 0.8 * norm < g[0] <= norm * (1 + 1e-9)
+
+
+def test_the_trajectories_are_admissible(robot):
+    domain = Domain.from_robot(robot, "paper")
+    model = scheduling(robot, domain, points=(5, 3))
+    rates, _ = rate_bounds(model, domain)
+    h = 1e-3
+    t = np.arange(1500) * h
+    trajs = admissible_trajectories(model, rates, t)
+    assert len(trajs) >= 10
+    lo = np.array([a[0] for a in model.axes])
+    hi = np.array([a[-1] for a in model.axes])
+    for name, rho in trajs:
+        assert np.all(rho >= lo - 1e-12) and np.all(rho <= hi + 1e-12), name
+        for i, kind in enumerate(model.kinds):
+            if kind == "qdot":  # accelerations within the rate bound (finite differences of the velocity)
+                assert np.abs(np.diff(rho[:, i])).max() <= rates[i][1] * h * (1 + 1e-9), name
+        dq = np.angle(np.exp(1j * np.diff(rho[:, 0])))  # q2 moves at qdot2 (wrapped on the circle)
+        v = 0.5 * (rho[1:, 2] + rho[:-1, 2])
+        assert np.allclose(dq, v * h, atol=1e-9), name
+
+
+def test_the_lower_bound_never_exceeds_the_proved_bound(robot, small):
+    problem = NS(robot=robot, domain=small, P=NS(W_S=0.5 * np.eye(2), W_T=None, W_KS=None))
+    c = moving_robot_certificate(problem, pd_controller(), points=(4, 2), tensor=False, velocities="bounded",
+                                 recheck=None, lower_bound=FAST)  # fmt: skip
+    assert c.result.proved and c.lower
+    low = c.lower["gamma"]
+    assert c.lower["frozen_gamma"] <= low <= c.gamma
+    assert low > 0.5 * c.gamma  # a real gain, not a token
+    assert all(g <= c.gamma for _, g in c.lower["gains"])
+    assert f"L2 gain >= {low:.4g} found along" in c.verdict
+    assert c.summary()["lower"]["gamma"] == low
+
+
+def test_a_loop_whose_gain_exceeds_1_along_a_trajectory_is_not_certified(robot, small):
+    problem = NS(robot=robot, domain=small, P=NS(W_S=4.0 * np.eye(2), W_T=None, W_KS=None))
+    c = moving_robot_certificate(problem, pd_controller(), points=(4, 2), tensor=False, velocities="bounded",
+                                 recheck=None, lower_bound=FAST)  # fmt: skip
+    moving = max(g for _, g in c.lower["gains"])
+    assert moving > 1.0 and c.lower["gamma"] > 1.0  # a trajectory of the domain along which the gain exceeds 1
+    assert c.certificate.status is Status.NOT_CERTIFIED
+    assert not c.certificate.certified
+    assert not (c.gamma < 1.0)
