@@ -22,7 +22,6 @@ from polyrob.analysis.lpv.robot import rate_bounds, scheduling
 from polyrob.analysis.norms import hinf_norm
 from polyrob.domains.torque_box import Domain
 
-
 #: A short search for the tests (the defaults are the benchmark's).
 FAST = {"horizon": 4.0, "iterations": 8, "random_runs": 1}
 

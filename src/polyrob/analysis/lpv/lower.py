@@ -230,6 +230,25 @@ def admissible_trajectories(model, rates, t, *, seed: int = 0, random_runs: int 
     return out
 
 
+def _expm_batch(M: np.ndarray) -> np.ndarray:
+    """Matrix exponentials of a stack (scaling and squaring, Taylor of degree 12 at 1-norm <= 1/2: error < 3e-14).
+
+    One scaling for the stack, numpy's batched products throughout (scipy's
+    ``expm`` of a stack goes matrix by matrix).
+    """
+    norm = float(np.abs(M).sum(axis=-2).max()) if M.size else 0.0
+    s = max(0, int(np.ceil(np.log2(norm / 0.5)))) if norm > 0 else 0
+    X = M / 2.0**s
+    E = np.broadcast_to(np.eye(M.shape[-1]), M.shape) + X
+    term = X
+    for k in range(2, 13):
+        term = term @ X / k
+        E = E + term
+    for _ in range(s):
+        E = E @ E
+    return E
+
+
 def _step_matrices(system, rhos, h: float, scale):
     """``Phi_k, Gamma_k, Rx_k, Rd_k`` of the loop frozen at ``rhos[k]`` over a step ``h``, input held.
 
@@ -240,8 +259,6 @@ def _step_matrices(system, rhos, h: float, scale):
     loop's own, with no aliasing of the sampled output.  ``scale``: the
     power-of-two state scaling (``x = diag(scale) x~``; exact).
     """
-    from scipy.linalg import expm
-
     mats = [system(r) for r in rhos]
     A = np.array([m[0] for m in mats]) / scale[None, :, None] * scale[None, None, :]
     B = np.array([m[1] for m in mats]) / scale[None, :, None]
@@ -259,7 +276,7 @@ def _step_matrices(system, rhos, h: float, scale):
     w = 2.0 ** np.round(np.log2(max(np.abs(F).max(), 1e-300) / max(np.abs(HH).max(), 1e-300)))
     M[:, :N, N:] = HH * w
     M[:, N:, N:] = F
-    E = expm(M * h)
+    E = _expm_batch(M * h)
     Q = np.einsum("kji,kjl->kil", E[:, N:, N:], E[:, :N, N:]) / w
     lam, V = np.linalg.eigh(0.5 * (Q + np.transpose(Q, (0, 2, 1))))
     R = np.sqrt(np.maximum(lam, 0.0))[:, :, None] * np.transpose(V, (0, 2, 1))  # R^T R = Q
