@@ -18,6 +18,7 @@ Prints one JSON document (with the machine, the date and the load average).
     python benchmarks/moving_robot.py [--runs 4:tests/fixtures/paper_2r_tf3_alpha4_K.json,1:paper]
                                       [--velocities auto|bounded|arbitrary] [--points 5,3] [--full]
                                       [--separable] [--recheck 9,5|none]
+    python benchmarks/moving_robot.py --lower-only    # the gain found along admissible trajectories, alone
     python benchmarks/moving_robot.py --slice 3.9564,9.9561 --harmonics 1,2 [--q-points 12] [--slice-rate 0]
 """
 
@@ -101,6 +102,7 @@ def run(
         "grid": s["grid"],
         "rates": s["rate_words"],
         "cells": s["cells"],
+        "lower": s["lower"],
         "solver_status": None if mv.result is None else mv.result.solver_status,
         "n_states": None if mv.result is None else mv.result.n_states,
         "seconds": round(time.perf_counter() - t, 1),
@@ -175,7 +177,24 @@ def saved_x_between(factor: float, spec: str, path: str, *, recheck, cell_time_l
         chk = check_cells(model, system, saved["X"], basis, rates, g_cells, similarity=sysf.similarity, c=c,
                           time_limit=cell_time_limit, progress=True)  # fmt: skip
         out["cells"] = chk.summary()
+    out["lower"] = found_along_trajectories(factor, spec)
     return out
+
+
+def found_along_trajectories(factor: float, spec: str) -> dict:
+    """The largest gain found along admissible trajectories of the whole box (:mod:`polyrob.analysis.lpv.lower`)."""
+    from polyrob import load_robot
+    from polyrob.analysis.lpv.lower import trajectory_lower_bound
+    from polyrob.analysis.lpv.robot import closed_loop_system, rate_bounds, scheduling
+    from polyrob.domains.torque_box import Domain
+
+    robot = load_robot("paper_2r")
+    domain = Domain.from_robot(robot, "paper")
+    P = _light_problem(robot, domain, factor).P
+    model = scheduling(robot, domain, points=(5, 3))
+    rates, _ = rate_bounds(model, domain)
+    return trajectory_lower_bound(model, closed_loop_system(model, _controller(spec), P.W_S, P.W_T, P.W_KS),
+                                  rates).summary()  # fmt: skip
 
 
 def position_slice(factor: float, spec: str, velocity, harmonics: int, q_points: int, rate: float = 0.0) -> dict:
@@ -250,6 +269,7 @@ def main(argv=None) -> int:
     ap.add_argument("--symmetric", action="store_true", help="the half box and an even X (the loop is even in rho)")
     ap.add_argument("--cell-time-limit", type=float, default=900.0, help="seconds for --cells")
     ap.add_argument("--load-x", default=None, metavar="FILE.npz", help="no search: the saved X, re-checked and --cells")
+    ap.add_argument("--lower-only", action="store_true", help="only the largest gain found along admissible trajectories")
     add_results_option(ap)
     args = ap.parse_args(argv)
     points = tuple(int(x) for x in args.points.split(","))
@@ -263,6 +283,12 @@ def main(argv=None) -> int:
     }
     for item in args.runs.split(","):
         factor, spec = item.split(":", 1)
+        if args.lower_only:
+            t = time.perf_counter()
+            doc["runs"].append({"bandwidth_factor": float(factor), "controller": spec,
+                                "lower": found_along_trajectories(float(factor), spec),
+                                "seconds": round(time.perf_counter() - t, 1)})  # fmt: skip
+            continue
         if args.load_x:
             doc["runs"].append(saved_x_between(float(factor), spec, args.load_x, recheck=recheck if recheck != "auto"
                                else (33, 5), cell_time_limit=args.cell_time_limit, level=args.level))  # fmt: skip
