@@ -78,7 +78,10 @@ def test_the_lower_bound_never_exceeds_the_proved_bound(robot, small):
     assert low > 0.5 * c.gamma  # a real gain, not a token
     assert all(g <= c.gamma for _, g in c.lower["gains"])
     assert f"L2 gain >= {low:.4g} found along" in c.verdict
-    assert c.summary()["lower"]["gamma"] == low
+    assert c.summary()["lower"]["gamma"] == low and c.summary()["lower_bound"] == low
+    from polyrob.report.certificates import lower_bound_words
+
+    assert lower_bound_words({"moving": c.summary(), "scope": {}}).startswith(f"gain >= {low:.4g}")
 
 
 def test_a_loop_whose_gain_exceeds_1_along_a_trajectory_is_not_certified(robot, small):

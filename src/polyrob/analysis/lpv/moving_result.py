@@ -164,6 +164,8 @@ class MovingRobotCertificate:
             "finer_grid": {k: finite_or_none(v) if isinstance(v, float) else v for k, v in self.finer.items()},
             "cells": dict(self.cells),
             "lower": dict(self.lower),
+            # the number the report's verdict table shows beside the bound (report.certificates.lower_bound_words)
+            "lower_bound": finite_or_none(float(self.lower["gamma"])) if self.lower else None,
             "seconds": round(float(self.seconds), 3),
             "verdict": self.verdict,
         }
