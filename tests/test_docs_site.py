@@ -185,6 +185,7 @@ MEASURED_TIME = re.compile(r"\d\s?(?:s|min|GB)\b")
 # The tables the docs may write by hand: definitions (what a status, field, option or stage means), never a
 # measurement.  A new hand-written table must be a results record shown by a marker, or a definition added here.
 DEFINITION_TABLES = {
+    ("synthesis.md", "| channel | signal, unit | weight | what `‖·‖ < 1` means |"),
     ("api.md", "| function | returns |"),
     ("api.md", "| name | what it holds |"),
     ("certificates.md", "| status | meaning |"),

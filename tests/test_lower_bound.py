@@ -16,7 +16,7 @@ from test_moving_robot import pd_controller
 
 import polyrob
 from polyrob.analysis.certificate import Status
-from polyrob.analysis.lpv.lower import admissible_trajectories, trajectory_gains
+from polyrob.analysis.time_varying.trajectory_gains import admissible_trajectories, trajectory_gains
 from polyrob.analysis.lpv.moving import moving_robot_certificate
 from polyrob.analysis.lpv.robot import rate_bounds, scheduling
 from polyrob.analysis.norms import hinf_norm

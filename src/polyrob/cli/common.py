@@ -23,7 +23,6 @@ from polyrob.cli.options import (
     uncertainty_options_clash,
 )
 from polyrob.errors import ArgumentError, DomainError
-from polyrob.fleet.outputs import plain
 
 __all__ = [
     "DEFAULT_ROBOT",
@@ -65,6 +64,8 @@ class HelpFormatter(argparse.HelpFormatter):
 
 
 def to_json(doc) -> str:
+    from polyrob.fleet.outputs import plain  # here, not at the top: importing the fleet loads numpy, and --help must not
+
     return json.dumps(plain(doc), indent=2, allow_nan=False)
 
 

@@ -224,7 +224,7 @@ def moving_robot_certificate(
         ``"auto"``: the half box when the loop is even, else the whole box.
     lower_bound : bool or dict, optional
         Also the largest gain found along admissible trajectories of the box
-        (:func:`~polyrob.analysis.lpv.lower.trajectory_lower_bound`; a dict:
+        (:func:`~polyrob.analysis.time_varying.trajectory_gains.trajectory_lower_bound`; a dict:
         its options), printed beside the proved bound; default: with ``cells``.
 
     Returns
@@ -283,7 +283,7 @@ def moving_robot_certificate(
                                   None), c=cs, time_limit=cell_time_limit, progress=progress)  # fmt: skip
         found = {}
         if lower_bound or (lower_bound is None and cells):
-            from polyrob.analysis.lpv.lower import trajectory_lower_bound
+            from polyrob.analysis.time_varying.trajectory_gains import trajectory_lower_bound
 
             try:
                 opts = lower_bound if isinstance(lower_bound, dict) else {}

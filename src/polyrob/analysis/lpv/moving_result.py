@@ -62,7 +62,7 @@ class MovingRobotCertificate:
         (:meth:`polyrob.analysis.lpv.cells.CellCheck.summary`); empty when not tried.
     lower : dict
         The largest gain found along admissible trajectories
-        (:meth:`polyrob.analysis.lpv.lower.TrajectoryLowerBound.summary`); empty when not computed.
+        (:meth:`polyrob.analysis.time_varying.trajectory_gains.TrajectoryLowerBound.summary`); empty when not computed.
     seconds : float
     decided : Certificate or None
         The certificate when another test decided it (μ, :mod:`polyrob.analysis.lpv.constant`).

@@ -308,7 +308,7 @@ def residual_blocks(spread: np.ndarray, n: int) -> list[dict]:
     return out
 
 
-def _reached(unc: UncertainPlant) -> np.ndarray:
+def reached_entries(unc: UncertainPlant) -> np.ndarray:
     """The entries of the factor that a residual block carries."""
     reached = np.zeros(unc.info["K_centres"].shape[1:], bool)
     for b in unc.info["residual_blocks"]:
@@ -336,7 +336,7 @@ def scaled_residuals(unc: UncertainPlant, E: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def _scaled_residual(unc: UncertainPlant, K_raw, theta, rtol: float, reached) -> float:
+def scaled_residual_norm(unc: UncertainPlant, K_raw, theta, rtol: float, reached) -> float:
     """The largest scaled norm of the residual ``K_raw - sum theta_k K_k,c`` over its blocks (convex in ``theta``).
 
     An entry that no residual block reaches (``~reached``) must
@@ -383,7 +383,7 @@ def inner_factors_contains(unc: UncertainPlant, A, B, *, rtol: float = 1e-9) -> 
     m = unc.m
     r = np.asarray(unc.info["theta_range"], float)
     centres = unc.info["K_centres"].reshape(len(r), -1).T
-    reached = _reached(unc)
+    reached = reached_entries(unc)
     out = np.ones(len(A), bool)
     for i in range(len(A)):
         if not (np.allclose(A[i, :m], unc.A_mid[:m], atol=rtol) and np.allclose(B[i, :m], 0.0, atol=rtol)):
@@ -393,7 +393,7 @@ def inner_factors_contains(unc: UncertainPlant, A, B, *, rtol: float = 1e-9) -> 
         K_raw = np.hstack([inverse @ A[i, m:], np.eye(m) - inverse])
 
         def f(theta, K_raw=K_raw):
-            return _scaled_residual(unc, K_raw, np.atleast_1d(np.asarray(theta, float)), rtol, reached)
+            return scaled_residual_norm(unc, K_raw, np.atleast_1d(np.asarray(theta, float)), rtol, reached)
 
         shifted = (K_raw - unc.info.get("K_offset", 0.0)).ravel()
         start = np.clip(np.linalg.lstsq(centres, shifted, rcond=None)[0], -r, r)

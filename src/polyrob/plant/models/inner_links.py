@@ -553,13 +553,13 @@ def set_witness(unc: UncertainPlant, robot, true, q, qdot, a) -> float:
     Also ``max |t_k| / range_k`` must be at most 1, which holds inside the
     set by construction; the larger of the two is returned.
     """
-    from polyrob.plant.models.inner_factors import _reached, _scaled_residual
+    from polyrob.plant.models.inner_factors import reached_entries, scaled_residual_norm
 
     names = [s.name for s in set_scalars(robot)]
     u = dict(zip(names, scalars_of_true(robot, true)))
     t = unc.info["directions"].T @ np.array([u[name] for name in unc.info["scalars"]])
     worst = float(np.max(np.abs(t) / unc.info["theta_range"]))
-    reached = _reached(unc)
+    reached = reached_entries(unc)
     for K in factor_of(robot, true.robot, q, qdot, a):
-        worst = max(worst, _scaled_residual(unc, K, t, 1e-9, reached))
+        worst = max(worst, scaled_residual_norm(unc, K, t, 1e-9, reached))
     return worst
