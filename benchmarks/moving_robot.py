@@ -184,8 +184,8 @@ def saved_x_between(factor: float, spec: str, path: str, *, recheck, cell_time_l
 def found_along_trajectories(factor: float, spec: str) -> dict:
     """The largest gain found along admissible trajectories of the whole box (:mod:`polyrob.analysis.time_varying.trajectory_gains`)."""
     from polyrob import load_robot
-    from polyrob.analysis.time_varying.trajectory_gains import trajectory_lower_bound
     from polyrob.analysis.lpv.robot import closed_loop_system, rate_bounds, scheduling
+    from polyrob.analysis.time_varying.trajectory_gains import trajectory_lower_bound
     from polyrob.domains.torque_box import Domain
 
     robot = load_robot("paper_2r")

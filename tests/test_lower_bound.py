@@ -16,10 +16,10 @@ from test_moving_robot import pd_controller
 
 import polyrob
 from polyrob.analysis.certificate import Status
-from polyrob.analysis.time_varying.trajectory_gains import admissible_trajectories, trajectory_gains
 from polyrob.analysis.lpv.moving import moving_robot_certificate
 from polyrob.analysis.lpv.robot import rate_bounds, scheduling
 from polyrob.analysis.norms import hinf_norm
+from polyrob.analysis.time_varying.trajectory_gains import admissible_trajectories, trajectory_gains
 from polyrob.domains.torque_box import Domain
 
 #: A short search for the tests (the defaults are the benchmark's).

@@ -64,7 +64,8 @@ class HelpFormatter(argparse.HelpFormatter):
 
 
 def to_json(doc) -> str:
-    from polyrob.fleet.outputs import plain  # here, not at the top: importing the fleet loads numpy, and --help must not
+    # imported here, not at the top: importing the fleet loads numpy, and --help must not
+    from polyrob.fleet.outputs import plain
 
     return json.dumps(plain(doc), indent=2, allow_nan=False)
 
