@@ -98,7 +98,7 @@ def test_analyze_says_nothing_when_robot_and_problem_match(synthesised, capsys):
         capsys, "analyze", "planar_2r", "--pldi", d / "pldi.json", "--controller", d / "K.json", *ANALYZE
     )
     assert code == 1 and "verdict:" in out  # analysed (VIOLATED)
-    assert "certified for" not in out and "differ" not in out
+    assert "made for" not in out and "differ" not in out
 
 
 def _stub_analysis(monkeypatch):
@@ -123,7 +123,7 @@ def test_analyze_names_another_urdf(synthesised, tmp_path, capsys, monkeypatch):
     assert code == 2 and "stubbed" in err
     lines = [line for line in out.splitlines() if line.startswith(f"{d / 'K.json'}:")]
     assert len(lines) == 1, out
-    assert "URDF differs from the one it was certified for" in lines[0]
+    assert "URDF differs from the one the file was made for" in lines[0]
     assert sha256_of(edited)[:12] in lines[0] and sha256_of(PLANAR_URDF)[:12] in lines[0]
 
 
@@ -133,7 +133,7 @@ def test_analyze_names_another_robot_and_domain(synthesised, capsys):
     code, out, err = run(capsys, "analyze", "paper_2r", "--controller", d / "K.json", *ANALYZE)
     assert code == 2 and "another problem" in err
     lines = [line for line in out.splitlines() if line.startswith(f"{d / 'K.json'}:")]
-    assert any("robot 'paper_2r' given, certified for 'planar_2r'" in line for line in lines), out
+    assert any("robot 'paper_2r' given, the file was made for 'planar_2r'" in line for line in lines), out
     assert any("problem inputs differ" in line and "domain" in line for line in lines), out
 
 
@@ -145,8 +145,8 @@ def test_analyze_names_other_domain_options(synthesised, capsys):
     assert code == 2 and "another problem" in err  # refused, as before
     lines = [line for line in out.splitlines() if line.startswith(f"{d / 'K.json'}:")]
     assert len(lines) == 1, out
-    assert "problem inputs differ from those it was certified for (domain qdot)" in lines[0]
-    assert f"{stored['inputs_sha256'][:12]} certified" in lines[0]
+    assert "problem inputs differ from those the file was made for (domain qdot)" in lines[0]
+    assert f"{stored['inputs_sha256'][:12]} recorded" in lines[0]
 
 
 def test_report_and_certificate_record_the_command_and_hashes(synthesised, tmp_path, capsys, monkeypatch):
@@ -227,7 +227,7 @@ def test_round_trip_and_differences():
     wider = domain.with_bounds(u_lower=domain.u_lower * 2, u_upper=domain.u_upper * 2)
     other = Provenance.capture(robot=robot, description=dict(description, domain=wider.to_dict()), function="f")
     (line,) = differences(p, other)
-    assert line.startswith("problem inputs differ from those it was certified for (domain u): sha256 ")
+    assert line.startswith("problem inputs differ from those the file was made for (domain u): sha256 ")
 
 
 def test_srdf_is_hashed_and_compared():
@@ -240,5 +240,5 @@ def test_srdf_is_hashed_and_compared():
     assert p.srdf_sha256 == sha256_of(Path(robot.srdf)) and p.urdf_sha256 == sha256_of(Path(robot.source))
     edited = dataclasses.replace(p, srdf_sha256="0" * 64)
     (line,) = differences(edited, p)
-    assert line.startswith("SRDF differs from the one it was certified for: sha256 " + p.srdf_sha256[:12])
-    assert line.endswith(f"{'0' * 12} ({robot.srdf}) certified")
+    assert line.startswith("SRDF differs from the one the file was made for: sha256 " + p.srdf_sha256[:12])
+    assert line.endswith(f"{'0' * 12} ({robot.srdf}) recorded")

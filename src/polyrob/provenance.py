@@ -42,7 +42,7 @@ Examples
 True
 >>> q = Provenance.capture(description={"weights": {"omega_b": [2.0]}}, function="example", now=when)
 >>> differences(p, q)  # doctest: +ELLIPSIS
-['problem inputs differ from those it was certified for (weights omega_b): sha256 ... given, ... certified']
+['problem inputs differ from those the file was made for (weights omega_b): sha256 ... given, ... recorded']
 """
 
 from __future__ import annotations
@@ -412,8 +412,8 @@ def _file_line(what: str, stored_hash, stored_path, given_hash, given_path) -> s
     if stored_hash == given_hash:
         return None
     given = f"sha256 {_short(given_hash)} ({given_path})" if given_hash else "none"
-    certified = f"sha256 {_short(stored_hash)} ({stored_path})" if stored_hash else "none"
-    return f"{what} differs from the one it was certified for: {given} given, {certified} certified"
+    recorded = f"sha256 {_short(stored_hash)} ({stored_path})" if stored_hash else "none"
+    return f"{what} differs from the one the file was made for: {given} given, {recorded} recorded"
 
 
 def differences(stored: Provenance, current: Provenance) -> list[str]:
@@ -427,7 +427,7 @@ def differences(stored: Provenance, current: Provenance) -> list[str]:
     """
     lines = []
     if stored.robot and current.robot and stored.robot != current.robot:
-        lines.append(f"robot '{current.robot}' given, certified for '{stored.robot}'")
+        lines.append(f"robot '{current.robot}' given, the file was made for '{stored.robot}'")
     if stored.urdf_sha256 and current.urdf_sha256:  # two URDF robots (an analytic one differs by its name)
         lines.append(_file_line("URDF", stored.urdf_sha256, stored.urdf, current.urdf_sha256, current.urdf))
         # the SRDF beside each URDF: its rotors and poses are part of the robot
@@ -439,8 +439,8 @@ def differences(stored: Provenance, current: Provenance) -> list[str]:
         if which or (whole_differs and set(stored.inputs) == set(current.inputs)):
             named = f" ({', '.join(which)})" if which else ""
             lines.append(
-                f"problem inputs differ from those it was certified for{named}: sha256 {_short(current.inputs_sha256)} given, "
-                f"{_short(stored.inputs_sha256)} certified"
+                f"problem inputs differ from those the file was made for{named}: sha256 {_short(current.inputs_sha256)} given, "
+                f"{_short(stored.inputs_sha256)} recorded"
             )
     for label in sorted(set(stored.input_files) & set(current.input_files)):
         a, b = stored.input_files[label], current.input_files[label]

@@ -100,7 +100,7 @@ def cmd_analyze(args) -> int:
     stored, mismatches = Provenance.of_file(args.controller), []
 
     def check(known):  # robot, domain and weights are known before the bounding step
-        if stored is not None:  # what differs from what the file was certified for, one line each
+        if stored is not None:  # what differs from what the file was made for, one line each
             uncertainty = {"requested": args.uncertainty, "merge_symmetric": bool(args.merge_symmetric)}
             now = Provenance.capture(robot=robot, description={**known, "uncertainty": uncertainty})
             for line in differences(stored, now):
