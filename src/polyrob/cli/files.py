@@ -130,6 +130,71 @@ def _exported_from(controller) -> dict:
     return {"provenance": made, "controller_file": {**source, "provenance": stored and stored.to_dict()}}
 
 
+def certified_sampling(controller) -> dict | None:
+    """The sampled loop a controller file's certificate covers: ``{"rate_hz", "delay_samples", "hold"}``, or ``None``.
+
+    ``synth --rate`` records it (:mod:`polyrob.analysis.sampled_data`); a file
+    certified for the continuous-time loop, or ``paper``, records none.
+    """
+    from pathlib import Path
+
+    from polyrob.io.controller import read_controller_file
+
+    if not Path(str(controller)).is_file():
+        return None
+    sampled = (read_controller_file(controller).get("certificate") or {}).get("sampled")
+    if not sampled or sampled.get("rate_hz") is None:
+        return None
+    return {k: sampled.get(k) for k in ("rate_hz", "delay_samples", "hold")}
+
+
+def export_rate(args, certified: dict | None, warnings: list) -> float:
+    """The rate to export at: ``--rate``, else the certified one; a rate other than the certified one is refused.
+
+    A certificate of the sampled loop holds at its own rate and delay only
+    (a lower rate can lose it, a higher one changes the discrete controller
+    that was certified), so another ``--rate`` needs ``--force``.
+    """
+    if certified is None:
+        if args.rate is None:
+            raise ArgumentError(
+                f"--rate: {args.controller} records no certified sample rate (its certificate is for the "
+                "continuous-time loop); give --rate HZ, or certify the sampled loop with `polyrob synth ... --rate HZ`"
+            )
+        return args.rate
+    rate = float(certified["rate_hz"])
+    if args.rate is None or args.rate == rate:
+        return rate
+    line = (
+        f"--rate {args.rate:g}: {args.controller} is certified for the loop sampled at {rate:g} Hz "
+        f"({delay_words(certified, rate)}), not at {args.rate:g} Hz"
+    )
+    if not args.force:
+        raise ArgumentError(
+            f"{line}; give --rate {rate:g}, or certify again with `polyrob synth ... --rate {args.rate:g}` "
+            "(--force writes it anyway, with a warning)"
+        )
+    warnings.append(f"{line}; written anyway (--force): the certificate does not cover this loop")
+    return args.rate
+
+
+def delay_words(certified: dict | None, rate: float) -> str:
+    """The header's computation-delay line: what the certificate assumed, or that it assumed none."""
+    if certified is None:
+        return (
+            "none in the certificate (it covers the continuous-time loop): u[k] is computed from e[k] and applied "
+            "at once; the export's own rate checks assume no delay"
+        )
+    d = int(certified.get("delay_samples") or 0)
+    if d == 0:
+        return f"none: the certificate (sampled at {float(certified['rate_hz']):g} Hz) assumes u[k] applied at sample k"
+    samples = "one sample" if d == 1 else f"{d} samples"
+    return (
+        f"{samples} ({d / rate * 1e3:.4g} ms), as certified at {float(certified['rate_hz']):g} Hz: u[k], computed "
+        f"from e[k], is applied at sample k+{d} and held (zero-order hold) until the next"
+    )
+
+
 def cmd_export(args) -> int:
     import sys
 
@@ -156,6 +221,8 @@ def cmd_export(args) -> int:
     out_dir = check_output_dir(args.output)
     K, info, _ = load_controller_args(args.controller)
     warnings = []
+    certified = certified_sampling(args.controller)
+    args.rate = export_rate(args, certified, warnings)
 
     # the rate: refused below the lowest rate for this controller (--allow-low-rate writes it, with a warning)
     low = lowest_rate_of_controller(K, nominal_plant(info, K))
@@ -239,6 +306,7 @@ def cmd_export(args) -> int:
             f"μ of the discretised loop with these coefficients: {'kept' if check_doc['ok'] else 'NOT kept'}"
         )
     signals = Signals(
+        delay=delay_words(certified, args.rate),
         inner=info.get("inner"),
         lower=lower,
         upper=upper,
@@ -281,6 +349,7 @@ def cmd_export(args) -> int:
                 "anti_windup": "conditional integration: an output's section states hold while it saturates",
             },
             "lowest_rate_hz": lowest,
+            "certified_sampling": certified,
             "smallest_word_length": smallest,
             "accuracy": accuracy.summary(),
             "warnings": list(warnings),
@@ -288,6 +357,7 @@ def cmd_export(args) -> int:
     )
     doc = res.summary()
     doc["lowest_rate_hz"] = lowest
+    doc["certified_sampling"] = certified
     doc["smallest_word_length"] = smallest
     doc["accuracy"] = accuracy.summary()
     doc["output_limits"] = {"lower": lower, "upper": upper, "source": limit_source}
@@ -316,7 +386,13 @@ def register(sub) -> None:
 
     p = sub.add_parser("export", help="discretise a controller and write it as C (second-order sections)")
     p.add_argument("controller", help="controller file (JSON or MATLAB .mat)")
-    p.add_argument("--rate", type=positive_float, required=True, help="sample rate in Hz")
+    p.add_argument(
+        "--rate",
+        type=positive_float,
+        default=None,
+        help="sample rate in Hz (default: the rate the controller file's certificate covers, from "
+        "`synth --rate`; another rate is refused unless --force)",
+    )
     p.add_argument(
         "--word-length",
         type=int_at_least(2),
@@ -337,7 +413,8 @@ def register(sub) -> None:
     p.add_argument(
         "--force",
         action="store_true",
-        help="write coefficients that the checks find too short (--word-length, --real float), with a warning",
+        help="write coefficients that the checks find too short (--word-length, --real float), or at a --rate "
+        "other than the certified one, with a warning",
     )
     p.add_argument(
         "--allow-low-rate",

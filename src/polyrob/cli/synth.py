@@ -219,8 +219,11 @@ def cmd_synth(args) -> int:
         print_design(design, out)
         extra = None
     doc["synthesis"] = design.summary()
+    sampled_record = None
     if sampling is not None:  # the loop as it runs: its certificate is the design's verdict
         design, doc["sampled"] = sampled_check(problem, design, sampling, out)
+        # export reads the rate, delay and hold the certificate covers (cli/files.py certified_sampling)
+        sampled_record = {k: doc["sampled"][k] for k in ("rate_hz", "delay_samples", "hold", "words")}
     moving = moving_check(problem, design.controller, out, moving_options(args)) if args.moving else None
     if moving is not None:
         doc["moving"] = moving
@@ -231,7 +234,11 @@ def cmd_synth(args) -> int:
             args,
             out,
             info_extra=extra,
-            certificate_extra=None if moving is None else {"moving": moving},
+            certificate_extra={
+                **({} if moving is None else {"moving": moving}),
+                **({} if sampled_record is None else {"sampled": sampled_record}),
+            }
+            or None,
         )
     if at_rate is not None:  # after the controller file: a stop during the simulations keeps it
         doc["validation_at_rate"] = validation_at_rate_stage(problem, design.controller, at_rate, args, out)
