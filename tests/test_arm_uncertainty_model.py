@@ -152,6 +152,11 @@ def test_channels_and_the_sizes_mu_sees():
     assert len(unc.info["scalars"]) < 34  # scalars that move nothing (a first moment on a joint's axis) dropped
     text = MODELS["inner-links"].describe(unc)
     assert "per-link ±10 %" in text and "payload 0-1.5 kg" in text and "sampled enclosure" in text
+    # the payload's CoM ball is sampled, not proved: the description and the certificate's scope note say how
+    sampled = "sampled at its 2 end masses x 641 centres of mass (the ball's centre and 4 spheres of 160 points)"
+    assert sampled in text
+    loop, _, _ = carried_model("ur5")
+    assert sampled in loop.words()
 
 
 def test_the_model_computes_with_the_middle_of_the_payload_set():

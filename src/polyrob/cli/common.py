@@ -235,9 +235,12 @@ def robot_from_args(args):
         uncertainty_options_clash(args, {k: getattr(args, k.strip("-").replace("-", "_"), None)
                                          for k in ("--payload-mass", "--payload-com", "--model-error")})  # fmt: skip
     args.uncertainty_words = None if spec is None else spec.words()
-    apply_default_task(robot, args)
+    # with a set, a refusal (what the model cannot carry) comes before the task's log line
+    apply_default_task(robot, args, say=spec is None)
     if spec is not None:
-        return robot_of_set(robot, spec, args)
+        loop = robot_of_set(robot, spec, args)
+        say_default_task(robot, args)
+        return loop
     inner, payload = inner_options(args)
     if inner is None:
         return robot
@@ -246,17 +249,16 @@ def robot_from_args(args):
     return inner_loop(robot, inner["inner"], payload=payload, model_error=inner["model_error"])
 
 
-def apply_default_task(robot, args) -> bool:
+def apply_default_task(robot, args, *, say: bool = True) -> bool:
     """Fill ``args`` with the robot's default task (:mod:`polyrob.domains.default_task`) when it applies.
 
     It applies to a robot of ``MIN_JOINTS`` joints or more when no domain
     option, no inner-layer/payload/model-error option, no ``--pldi`` and no
     ``--torque-box`` is given (``--certify`` proves the task's factor ranges:
     it keeps the task).  Sets ``args.default_task`` to the task's
-    words (``None`` when it does not apply) and returns whether it applied.
+    words (``None`` when it does not apply) and returns whether it applied;
+    ``say``: log them now (else :func:`say_default_task` does, later).
     """
-    import logging
-
     from polyrob.domains.default_task import DEFAULT_TASK, applies_to
 
     args.default_task = None
@@ -278,11 +280,20 @@ def apply_default_task(robot, args) -> bool:
     if getattr(args, "uncertainty_words", None):  # a robot-uncertainty set replaces the task's model error and payload
         args.default_task = replace(t, model_error=0.0, payload_fraction=0.0).words() + "; " + args.uncertainty_words
     args.bound_options = t.bound_options
-    logging.getLogger("polyrob").info(
-        f"default task of {robot.name} ({robot.m} joints, no domain given): {args.default_task}; "
-        "--torque-box for the URDF torque box without an inner layer"
-    )
+    if say:
+        say_default_task(robot, args)
     return True
+
+
+def say_default_task(robot, args) -> None:
+    """The default task's line on the ``polyrob`` log (stderr), when it applies."""
+    import logging
+
+    if getattr(args, "default_task", None):
+        logging.getLogger("polyrob").info(
+            f"default task of {robot.name} ({robot.m} joints, no domain given): {args.default_task}; "
+            "--torque-box for the URDF torque box without an inner layer"
+        )
 
 
 def inner_options_given(args) -> bool:

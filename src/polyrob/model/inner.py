@@ -311,6 +311,11 @@ class SetLoopRobot(InnerLoopRobot):
     def words(self) -> str:
         parts = [f"inner layer: {self.inner}" + ("" if self.inner == "none" else f" ({runtime_needs(self.inner)})")]
         parts.append(self.uncertainty.words() + " (model: nominal links, the middle payload and viscous friction)")
+        body = self.uncertainty.payload
+        if body is not None and body.mass_upper > 0:
+            from polyrob.plant.models.inner_links import payload_sampling_words
+
+            parts.append(payload_sampling_words(body).replace("extremes", "inertia and torque extremes", 1))
         if any(f.coulomb > 0 for f in self.uncertainty.friction):
             parts.append("Coulomb friction as stated, no term of the frozen loop's Jacobians: not covered")
         if len(self._scenarios):

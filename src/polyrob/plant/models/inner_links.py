@@ -69,6 +69,7 @@ __all__ = [
     "set_scalars",
     "payload_points",
     "payload_coordinates",
+    "payload_sampling_words",
     "unit_factors",
     "factor_of",
     "inner_links_plant",
@@ -188,6 +189,14 @@ def payload_points(body, shells: int = 4, per_shell: int = 160) -> list[tuple[fl
         axes = [np.linspace(lo, hi, 7) for lo, hi in zip(body.com_lower, body.com_upper)]
         coms = np.array(np.meshgrid(*axes, indexing="ij")).reshape(3, -1).T
     return [(mass, c) for mass in (body.mass_lower, body.mass_upper) for c in coms]
+
+
+def payload_sampling_words(body, shells: int = 4, per_shell: int = 160) -> str:
+    """What :func:`payload_points` samples of the payload's set, in words (the covers line names it)."""
+    if body.com_radius is not None:
+        return (f"the payload's extremes sampled at its 2 end masses x {1 + shells * per_shell} centres of mass "
+                f"(the ball's centre and {shells} spheres of {per_shell} points)")  # fmt: skip
+    return "the payload's extremes sampled at its 2 end masses x 343 centres of mass (a 7-point grid per axis of the box)"
 
 
 def payload_coordinates(body, mass: float, com) -> dict[str, float]:
@@ -406,6 +415,7 @@ def inner_links_plant(pldi, robot, *, n_directions: int | None = None, samples: 
             "samples": int(samples),
             "spread_margin": SPREAD_MARGIN,
             "inertia_ratio": inertia,
+            **({"payload_sampling": payload_sampling_words(body)} if on_payload.any() else {}),
         },
     )
 

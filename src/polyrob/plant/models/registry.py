@@ -343,7 +343,9 @@ class InnerLinksModel(UncertaintyModel):
             f"directions (one repeated real each: {ranges}) and the rest in residual blocks of total size {size} "
             f"(the inertia's M_hat^1/2-weighted block of norm <= {unc.info.get('residual_g_norm', 0.0):.3g} around "
             f"I - G = {1.0 - float(unc.info['K_offset'][0, -1]):.3g} I); "
-            f"set: {unc.info['set']} ({self.enclosure(unc)} enclosure over the task domain)."
+            f"set: {unc.info['set']} ({self.enclosure(unc)} enclosure over the task domain"
+            + (f"; {unc.info['payload_sampling']}" if unc.info.get("payload_sampling") else "")
+            + ")."
         )
 
 
