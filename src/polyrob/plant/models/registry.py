@@ -342,7 +342,7 @@ class InnerLinksModel(UncertaintyModel):
             f"{len(unc.info['scalars'])} scalars of the set's parameter box, as {len(unc.info['factors'])} principal "
             f"directions (one repeated real each: {ranges}) and the rest in residual blocks of total size {size} "
             f"(the inertia's M_hat^1/2-weighted block of norm <= {unc.info.get('residual_g_norm', 0.0):.3g} around "
-            f"I - G = {1.0 - float(unc.info['K_offset'][0, -1]):.3g} I); "
+            f"I - G = {1.0 - float(unc.info['K_offset'][-1, -1]):.3g} I); "
             f"set: {unc.info['set']} ({self.enclosure(unc)} enclosure over the task domain"
             + (f"; {unc.info['payload_sampling']}" if unc.info.get("payload_sampling") else "")
             + ")."
