@@ -63,7 +63,9 @@ def test_synth_options_pose_the_default_task_and_say_so(capsys):
     assert doc["domain"]["kind"] == "task"
 
 
-@pytest.mark.parametrize("argv", [["--torque-box"], ["--qdot-max", "1"], ["--inner", "gravity"]])
+@pytest.mark.parametrize(
+    "argv", [["--torque-box"], ["--qdot-max", "1"], ["--inner", "gravity"], ["--inner", "none"]]  # none: the paper's layer
+)
 def test_any_domain_or_inner_option_keeps_todays_behaviour(capsys, argv):
     doc, err = _info(capsys, "ur5", *argv)
     assert "default task" not in err

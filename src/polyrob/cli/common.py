@@ -173,9 +173,10 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--inner",
-        default="none",
+        default=None,  # not given: an arm's default task (computed torque); --inner none is the paper's single layer
         choices=("none", "gravity", "computed-torque"),
-        help="none (the paper: v = u), gravity (u = g_hat(q) + v), computed-torque (u = M_hat(q) v + h_hat(q, qdot))",
+        help="none (the paper: v = u), gravity (u = g_hat(q) + v), computed-torque (u = M_hat(q) v + h_hat(q, qdot)); "
+        "default: an arm's default task (computed torque), else none",
     )
     g.add_argument("--payload-mass", default=None, help="payload at the tool flange, kg: LO:HI or M")
     g.add_argument(
@@ -297,8 +298,9 @@ def say_default_task(robot, args) -> None:
 
 
 def inner_options_given(args) -> bool:
-    """Whether ``--inner`` (other than none) or ``--model-error`` is given (a payload rides on the default task)."""
-    return (getattr(args, "inner", None) or "none") != "none" or getattr(args, "model_error", None) is not None
+    """Whether ``--inner`` (``none`` too: the paper's single layer) or ``--model-error`` is given (a payload rides on
+    the default task), as the batch reads its jobs."""
+    return getattr(args, "inner", None) is not None or getattr(args, "model_error", None) is not None
 
 
 def inner_options(args):
