@@ -348,13 +348,16 @@ def scaled_residual_norm(unc: UncertainPlant, K_raw, theta, rtol: float, reached
     return max([mismatch, *norms])
 
 
-def convex_box_minimum(f, start, r, points: int = 9) -> float:
+def convex_box_minimum(f, start, r, points: int = 9, max_grid: int = 729) -> float:
     """The minimum of a convex, non-smooth ``f`` over the box ``|theta_k| <= r_k`` (a few scalars).
 
     Nelder-Mead alone stalls at the kinks of a largest singular value (ur5
     with a payload: 5 % of its own true robots' Jacobians refused), so it
-    polishes the best point of a ``points^P`` grid as well as ``start``.
+    polishes the best point of a ``points^P`` grid as well as ``start``;
+    the grid has at most ``max_grid`` points (fewer per axis for many
+    scalars: 9^6 would be half a million residual norms per Jacobian).
     """
+    points = max(2, min(points, int(round(max_grid ** (1.0 / max(len(r), 1))))))
     axes = [np.linspace(-rk, rk, points) for rk in r]
     grid = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(r), -1).T
     values = np.array([f(t) for t in grid])
