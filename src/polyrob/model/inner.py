@@ -313,7 +313,7 @@ class SetLoopRobot(InnerLoopRobot):
         parts.append(self.uncertainty.words() + " (model: nominal links, the middle payload and viscous friction)")
         body = self.uncertainty.payload
         if body is not None and body.mass_upper > 0:
-            from polyrob.plant.models.inner_links import payload_sampling_words
+            from polyrob.uncertainty_set.payload_body import payload_sampling_words
 
             parts.append(payload_sampling_words(body).replace("extremes", "inertia and torque extremes", 1))
         if any(f.coulomb > 0 for f in self.uncertainty.friction):

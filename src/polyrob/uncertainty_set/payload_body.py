@@ -22,7 +22,14 @@ import numpy as np
 
 from polyrob.uncertainty_set.checks import fail, finite, pair, vector3
 
-__all__ = ["PayloadBody", "RatedPayload", "RATED_PAYLOAD", "SECOND_MOMENT_ENTRIES", "second_moment"]
+__all__ = [
+    "PayloadBody",
+    "RatedPayload",
+    "RATED_PAYLOAD",
+    "SECOND_MOMENT_ENTRIES",
+    "second_moment",
+    "payload_sampling_words",
+]
 
 #: The six entries ``(i, j)`` of a symmetric 3 x 3 matrix, in ``toDynamicParameters()``'s inertia order.
 SECOND_MOMENT_ENTRIES = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))
@@ -234,3 +241,13 @@ def _product_range(*intervals) -> tuple[float, float]:
 def _square_range(lo: float, hi: float) -> tuple[float, float]:
     low = 0.0 if lo <= 0.0 <= hi else min(lo * lo, hi * hi)
     return low, max(lo * lo, hi * hi)
+
+
+def payload_sampling_words(body, shells: int = 4, per_shell: int = 160) -> str:
+    """What :func:`polyrob.plant.models.inner_links.payload_points` samples of the payload's set, in words (the covers line names it)."""
+    if body.com_radius is not None:
+        return (f"the payload's extremes sampled at its 2 end masses x {1 + shells * per_shell} centres of mass "
+                f"(the ball's centre and {shells} spheres of {per_shell} points)")  # fmt: skip
+    return (
+        "the payload's extremes sampled at its 2 end masses x 343 centres of mass (a 7-point grid per axis of the box)"
+    )

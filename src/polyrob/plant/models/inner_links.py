@@ -68,7 +68,7 @@ import pinocchio
 from polyrob.errors import NotApplicable
 from polyrob.plant.lftplant import UncertainPlant
 from polyrob.plant.models.inner_links_inertia import exactly_weighted, g_norm_bound, inertia_ratio
-from polyrob.uncertainty_set.payload_body import SECOND_MOMENT_ENTRIES, second_moment
+from polyrob.uncertainty_set.payload_body import SECOND_MOMENT_ENTRIES, payload_sampling_words, second_moment
 
 __all__ = [
     "SPREAD_MARGIN",
@@ -200,16 +200,6 @@ def payload_points(body, shells: int = 4, per_shell: int = 160) -> list[tuple[fl
         axes = [np.linspace(lo, hi, 7) for lo, hi in zip(body.com_lower, body.com_upper)]
         coms = np.array(np.meshgrid(*axes, indexing="ij")).reshape(3, -1).T
     return [(mass, c) for mass in (body.mass_lower, body.mass_upper) for c in coms]
-
-
-def payload_sampling_words(body, shells: int = 4, per_shell: int = 160) -> str:
-    """What :func:`payload_points` samples of the payload's set, in words (the covers line names it)."""
-    if body.com_radius is not None:
-        return (f"the payload's extremes sampled at its 2 end masses x {1 + shells * per_shell} centres of mass "
-                f"(the ball's centre and {shells} spheres of {per_shell} points)")  # fmt: skip
-    return (
-        "the payload's extremes sampled at its 2 end masses x 343 centres of mass (a 7-point grid per axis of the box)"
-    )
 
 
 def payload_coordinates(body, mass: float, com) -> dict[str, float]:
