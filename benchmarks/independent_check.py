@@ -41,6 +41,11 @@ def main() -> None:
         default=None,
         help="draw from the set today's certificates cover instead: one factor on every link within ±P %%",
     )
+    ap.add_argument(
+        "--paper-block",
+        action="store_true",
+        help="a controller made with limit weights: the norm of its W_S/W_T sub-block only (a lower bound)",
+    )
     add_results_option(ap)
     args = ap.parse_args()
 
@@ -67,7 +72,14 @@ def main() -> None:
 
     factor = None if args.common_factor is None else args.common_factor / 100.0
     check = frozen_check(
-        args.controller, spec, n=args.n, points=args.points, seed=args.seed, common_factor=factor, on_loop=progress
+        args.controller,
+        spec,
+        n=args.n,
+        points=args.points,
+        seed=args.seed,
+        common_factor=factor,
+        on_loop=progress,
+        paper_block=args.paper_block,
     )
     out = check.summary()
     out["seconds"] = round(time.perf_counter() - t0, 1)

@@ -88,3 +88,22 @@ def test_on_the_certified_set_every_loop_is_below_the_bound_and_the_per_link_set
     assert own["unstable"] == 0 and own["above_bound"] == 0 and own["weighted_norm_worst"] < own["bound"]
     wider = frozen_check(FIXTURE, RobotUncertainty(link_error=0.3), n=100, points=2).summary()
     assert wider["above_bound"] > 0 and not wider["every_loop_stable_and_below_bound"]
+
+
+def test_a_file_with_limit_weights_is_checked_on_its_paper_block_as_a_lower_bound(tmp_path):
+    import json
+
+    from polyrob.errors import ArgumentError
+
+    doc = json.loads(FIXTURE.read_text(encoding="utf-8"))
+    doc["info"]["weights"].update({"effort": [1.3, 1.3], "noise": [1.2e-5, 1.2e-5]})
+    path = tmp_path / "K.json"
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    with pytest.raises(ArgumentError, match="rebuilds the paper's"):
+        frozen_check(path, RobotUncertainty(link_error=0.0), nominal_only=True, at_pose=True)
+    plain = frozen_check(FIXTURE, RobotUncertainty(link_error=0.0), nominal_only=True, at_pose=True)
+    block = frozen_check(path, RobotUncertainty(link_error=0.0), nominal_only=True, at_pose=True, paper_block=True)
+    assert block.weighted_norm[0] == pytest.approx(plain.weighted_norm[0], rel=1e-12)  # the same W_S/W_T loop
+    out = block.summary()
+    assert "a lower bound" in out["weighted_norm_of"] and "effort, noise" in out["weighted_norm_of"]
+    assert out["every_loop_stable_and_below_bound"] is False  # a sub-block's norm proves nothing below the bound
