@@ -50,6 +50,7 @@ import numpy as np
 
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, lower, upper
 from polyrob.bounds.certified.jet_rnea import PARAMETER_RTOL, Chain, rnea
+from polyrob.bounds.certified.slope_form import residuals, slope_spread
 from polyrob.errors import CertificationError
 
 __all__ = [
@@ -236,8 +237,14 @@ class FactorProblem:
         radius = np.concatenate([Y0.rad] + [g.rad for g in grads] + [zeros])
         return BallJet(mid, radius, 2 * m, 1), singular
 
-    def _factors(self, M, h, Y_centre=None, radii=None):
-        """``(K0, Ka, singular)``: the factor at ``a = 0`` ``(B, F, m, 3m)`` and its ``a``-coefficients ``(B, F, m, m_p, m_j)``, one order below ``M``, ``h``, in ``(q, qdot)``."""
+    def _factors(self, M, h, Y_centre=None, radii=None, residual=None):
+        """``(K0, Ka, singular)``: the factor at ``a = 0`` ``(B, F, m, 3m)`` and its ``a``-coefficients ``(B, F, m, m_p, m_j)``, one order below ``M``, ``h``, in ``(q, qdot)``.
+
+        With ``residual = (K0c, Kac)`` (the factor's balls at the box's
+        centre): ``(g0, ga, Y)`` instead, the residuals ``g = W - M_hat K_c``
+        of ``M_hat K = W`` (``K = Y W``) and ``Y``'s value over the box, for
+        :func:`polyrob.bounds.certified.slope_form.slope_spread`.
+        """
         m = self.m
         nv = 2 * m
         Y, singular = self._inverse(M, Y_centre, radii)
@@ -256,11 +263,12 @@ class FactorProblem:
         Jqd = -(Yb[:, None].form("matvec", dhv[:, :, 1:]))  # (B, l, F, i)
         G = -psi_a  # (B, F, i, j)
         # the a-coefficients of J_q: Y (dM_hat/dq_p Psi - dM_k/dq_p)
-        Ja = Yb[:, None] @ (dMh[:, :, None] @ psi_a[:, None] - dMd)  # (B, p, F, i, j)
-        K0 = BallJet.stack([Jq0.transpose(0, 2, 3, 1), Jqd.transpose(0, 2, 3, 1), G], 3)  # (B, F, i, 3, m)
-        n0 = K0.mid.shape
-        K0 = BallJet(K0.mid.reshape(*n0[:4], 3 * m), K0.rad.reshape(*n0[:4], 3 * m), K0.n, K0.order)
-        return K0, Ja.transpose(0, 2, 3, 1, 4), singular  # (B, F, i, p, j)
+        Wa = dMh[:, :, None] @ psi_a[:, None] - dMd  # (B, p, F, i, j)
+        if residual is not None:
+            W0 = _columns(inner0.transpose(0, 2, 3, 1), -(dhv[:, :, 1:].transpose(0, 2, 3, 1)), -Md, m)
+            return residuals(Mv[:, 0], W0, Wa.transpose(0, 2, 3, 1, 4), *residual) + (Y.value(),)
+        Ja = Yb[:, None] @ Wa  # (B, p, F, i, j)
+        return _columns(Jq0.transpose(0, 2, 3, 1), Jqd.transpose(0, 2, 3, 1), G, m), Ja.transpose(0, 2, 3, 1, 4), singular
 
     def enclose(self, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi):
         """Proved bounds of every factor entry on each box: ``(lower, upper, contribution)``.
@@ -283,7 +291,9 @@ class FactorProblem:
         K0c, Kac, singular_c = self._factors(Mc, hc)
         Yc, _ = self._inverse(Mc, None, None)
         radii = np.concatenate([qr, vr], -1)  # (B, 2m)
-        K0b, Kab, singular_b = self._factors(*self._dynamics(qc, qr, vc, vr, 2), (Yc.mid[0], Yc.rad[0]), radii)
+        Mb, hb = self._dynamics(qc, qr, vc, vr, 2)
+        K0b, Kab, singular_b = self._factors(Mb, hb, (Yc.mid[0], Yc.rad[0]), radii)
+        g0, ga, Yb = self._factors(Mb, hb, (Yc.mid[0], Yc.rad[0]), radii, residual=(K0c, Kac))
         unbounded = singular_c | singular_b
         # a-vertices: the factor is affine in a, so its extremes over the a-box are at them
         a_lo, a_hi = np.asarray(a_lo, float), np.asarray(a_hi, float)
@@ -313,11 +323,23 @@ class FactorProblem:
         gabs = np.abs(gm) + (gr + GAMMA * k * (gmag + np.abs(gm))) * (1 + GAMMA) + TINY
         spread = np.einsum("pbfiev,bp->bfiev", gabs, radii)
         spread = spread * (1 + 8 * m * GAMMA) + TINY
+        contribution = (gabs.max(-1) * radii.T[:, :, None, None, None]).transpose(1, 2, 3, 4, 0)  # (B, F, i, e, 2m)
+        # the slope form (slope_form.py): both forms are proved, so each entry keeps the narrower one
+        slope, slope_contribution = slope_spread(g0, ga, Yb, V, radii)
+        narrower = slope < spread
+        spread = np.where(narrower, slope, spread)
+        contribution = np.where(narrower.all(-1)[..., None], slope_contribution, contribution)
         hi = upper(vm, vrad + spread).max(-1)
         lo = lower(vm, vrad + spread).min(-1)
         hi[unbounded], lo[unbounded] = np.inf, -np.inf
-        contribution = (gabs.max(-1) * radii.T[:, :, None, None, None]).transpose(1, 2, 3, 4, 0)  # (B, F, i, e, 2m)
         return lo, hi, contribution
+
+
+def _columns(Jq, Jqd, G, m):
+    """``[J_q J_qd G]``: three ``(B, F, i, m)`` jets side by side, ``(B, F, i, 3m)``."""
+    K = BallJet.stack([Jq, Jqd, G], 3)  # (B, F, i, 3, m)
+    n0 = K.mid.shape
+    return BallJet(K.mid.reshape(*n0[:4], 3 * m), K.rad.reshape(*n0[:4], 3 * m), K.n, K.order)
 
 
 def _inflate_rad(rad, mag):
