@@ -14,10 +14,19 @@ Prints JSON, per robot (ur5, panda):
 
 "Sampled" widths: the extremes of ``--samples`` points of the box with
 ``qdot`` and ``qddot`` at random vertices (attained values, a lower bound
-of the true width).  Entries whose sampled width is below 1e-6 of the
-factor's largest entry are left out of the ratios (constant entries).
+of the true width).  Ratios (:func:`polyrob.bounds.certified.width_ratio.width_ratios`)
+are taken on the entries whose sampled width is at least ``--floor`` of
+their factor's largest entry; on the others the excess of the proved width
+over the sampled one is reported relative to that scale (``excess_max``).
 
-Usage: ``python benchmarks/certified_arms.py [--robots ur5,panda] [--max-boxes N] [--samples N]``.
+- ``wrapping`` (at the scale ``--wrapping-scale``): the radius of the
+  mean-value form's interval gradient per unit of the box's half-width
+  (the second-derivative bound that form uses: max and median over the
+  entries and coordinates) against the largest second difference of the
+  factors in ``q`` sampled at 16 points of the box (step 1e-4): how much of
+  the over-estimation is the ball arithmetic's, not the function's.
+
+Usage: ``python benchmarks/certified_arms.py [--robots ur5,panda] [--max-boxes N] [--samples N] [--floor F]``.
 """
 
 from __future__ import annotations
@@ -33,17 +42,29 @@ from _results import add_results_option, save_run
 
 from polyrob import load_robot
 from polyrob.bounds.certified.factors import MAX_BOXES, FactorProblem, attained_range, prove_factor_ranges
+from polyrob.bounds.certified.width_ratio import FLOOR, width_ratios
 from polyrob.domains.default_task import default_task_domain, default_task_robot
 from polyrob.errors import CertificationError
 from polyrob.plant.models.inner_factors import factor_parameters
 
 
-def ratios(lower, upper, s_lo, s_hi) -> dict:
-    width, sampled = upper - lower, s_hi - s_lo
-    scale = np.maximum(np.abs(s_lo), np.abs(s_hi)).max(axis=(1, 2), keepdims=True)
-    keep = sampled > 1e-6 * scale
-    r = width[keep] / sampled[keep]
-    return {"max": float(r.max()), "median": float(np.median(r)), "entries": int(keep.sum())}
+def wrapping(problem, box, rng) -> dict:
+    """The mean-value form's second-derivative bound against sampled second differences in ``q``."""
+    m, r = problem.m, 0.5 * (box.q_upper - box.q_lower)
+    mid, rad = problem.interval_gradient(box.q_lower[None], box.q_upper[None], box.qdot_lower[None],
+                                         box.qdot_upper[None])  # fmt: skip
+    per_r = rad[:m, 0] / r.max()
+    h, E, largest = 1e-4, np.eye(m), 0.0
+    for _ in range(16):
+        q0 = rng.uniform(box.q_lower, box.q_upper)
+        v0 = np.zeros((1, m))
+        for p in range(m):
+            for k in range(p, m):
+                pts = np.array([q0 + h * (sp * E[p] + sk * E[k]) for sp, sk in ((1, 1), (1, -1), (-1, 1), (-1, -1))])
+                K = problem.values(pts, np.repeat(v0, 4, 0), np.zeros((4, m)))
+                largest = max(largest, float(np.abs(K[0] - K[1] - K[2] + K[3]).max() / (4 * h * h)))
+    return {"gradient_radius_per_r_max": float(per_r.max()), "gradient_radius_per_r_median": float(np.median(per_r)),
+            "sampled_second_difference_max": largest}  # fmt: skip
 
 
 def scaled(domain, s):
@@ -66,6 +87,8 @@ def main() -> None:
     parser.add_argument("--max-boxes", type=int, default=MAX_BOXES)
     parser.add_argument("--samples", type=int, default=4000)
     parser.add_argument("--scales", default="1,0.25,0.05,0.01")
+    parser.add_argument("--floor", type=float, default=FLOOR)
+    parser.add_argument("--wrapping-scale", type=float, default=0.01)
     add_results_option(parser)
     args = parser.parse_args()
     out = {"machine": f"{os.cpu_count()} cores", "load_average": os.getloadavg()[0], "robots": {}}
@@ -75,6 +98,8 @@ def main() -> None:
         domain = default_task_domain(robot)
         problem = FactorProblem.from_loops(loops)
         row = {"joints": robot.m, "factors": [n for n, _ in loops], "one_box": []}
+        row["wrapping"] = wrapping(problem, scaled(domain, args.wrapping_scale), np.random.default_rng(2))
+        row["wrapping"]["scale"] = args.wrapping_scale
         for s in map(float, args.scales.split(",")):
             box = scaled(domain, s)
             s_lo, s_hi = attained_range(
@@ -85,7 +110,7 @@ def main() -> None:
                                         box.qdot_upper[None], box.qddot_lower, box.qddot_upper)  # fmt: skip
             entry = {"scale": s, "seconds": round(time.perf_counter() - t0, 3)}
             if np.all(np.isfinite(hi)):
-                entry.update(ratios(lo[0], hi[0], s_lo, s_hi))
+                entry.update(width_ratios(lo[0], hi[0], s_lo, s_hi, args.floor))
             else:
                 entry["note"] = "M_hat not provably invertible on the whole box: no enclosure without splitting"
             row["one_box"].append(entry)
@@ -96,7 +121,7 @@ def main() -> None:
                 problem, domain.q_lower, domain.q_upper, domain.qdot_lower, domain.qdot_upper,
                 domain.qddot_lower, domain.qddot_upper, args.samples, np.random.default_rng(1))  # fmt: skip
             row["proof"] = {"status": "proved", "boxes": enc.boxes, "seconds": round(enc.seconds, 1),
-                            "ratio": ratios(enc.lower, enc.upper, s_lo, s_hi)}  # fmt: skip
+                            "ratio": width_ratios(enc.lower, enc.upper, s_lo, s_hi, args.floor)}  # fmt: skip
         except CertificationError as exc:
             row["proof"] = {"status": "gave up", "seconds": round(time.perf_counter() - t0, 1), "message": str(exc)}
         out["robots"][name] = row

@@ -159,6 +159,22 @@ class FactorProblem:
         K[..., :m] += np.einsum("bfipj,bj->bfip", Ka.mid[0], a)
         return K
 
+    def interval_gradient(self, q_lo, q_hi, qd_lo, qd_hi):
+        """``(mid, rad)`` of the factors' gradients in ``(q, qdot)`` over boxes ``(B, m)``, at ``a = 0``: ``(2m, B, F, m, 3m)``.
+
+        The gradient enclosure of the mean-value form (ball arithmetic over
+        the box), for diagnosis: its radius against the box's half-width is
+        the over-estimation that form adds per unit of width.
+        """
+        qc, qr = _radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
+        vc, vr = _radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
+        zero = np.zeros_like(qr)
+        Yc, _ = self._inverse(self._dynamics(qc, zero, vc, zero, 1)[0], None, None)
+        radii = np.concatenate([qr, vr], -1)
+        with np.errstate(over="ignore", invalid="ignore"):
+            K0b, _, _ = self._factors(*self._dynamics(qc, qr, vc, vr, 2), (Yc.mid[0], Yc.rad[0]), radii)
+        return K0b.mid[1:], K0b.rad[1:]
+
     # ------------------------------------------------------------------ one batch of boxes
     def _dynamics(self, qc, qr, vc, vr, order):
         """``(M, h)``: jets (``order``) of the mass matrices ``(B, P, m, m)`` (in ``q``) and torques ``(B, P, m)`` (in ``q, qdot``)."""
@@ -268,7 +284,11 @@ class FactorProblem:
             W0 = _columns(inner0.transpose(0, 2, 3, 1), -(dhv[:, :, 1:].transpose(0, 2, 3, 1)), -Md, m)
             return residuals(Mv[:, 0], W0, Wa.transpose(0, 2, 3, 1, 4), *residual) + (Y.value(),)
         Ja = Yb[:, None] @ Wa  # (B, p, F, i, j)
-        return _columns(Jq0.transpose(0, 2, 3, 1), Jqd.transpose(0, 2, 3, 1), G, m), Ja.transpose(0, 2, 3, 1, 4), singular
+        return (
+            _columns(Jq0.transpose(0, 2, 3, 1), Jqd.transpose(0, 2, 3, 1), G, m),
+            Ja.transpose(0, 2, 3, 1, 4),
+            singular,
+        )
 
     def enclose(self, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi):
         """Proved bounds of every factor entry on each box: ``(lower, upper, contribution)``.

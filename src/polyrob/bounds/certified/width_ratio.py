@@ -1,0 +1,64 @@
+"""How tight proved factor ranges are: the ratio of proved to sampled widths, on the entries where it means something.
+
+A ratio ``proved width / sampled width`` is ill-defined on entries whose
+true width is (nearly) zero: constant entries, structural zeros, entries
+that do not depend on the box's variables.  An enclosure's over-estimation
+there is an absolute amount (rounding margins, the dependency of the ball
+arithmetic), and dividing it by a sampled width of 1e-6 makes a ratio of
+thousands out of an excess the model never feels.  So:
+
+* an entry is *significant* when its sampled width is at least ``floor``
+  times its factor's scale (the largest magnitude sampled in any entry of
+  that factor); the ratio is reported on those (max and median);
+* on the others the excess ``proved width - sampled width`` is reported
+  relative to the factor's scale (max).
+
+The sampled width is attained (a lower bound of the true width), so both
+figures are upper bounds of the true over-estimation, up to sampling.
+
+Examples
+--------
+>>> import numpy as np
+>>> lo, hi = np.array([[[0.0, -1e-3]]]), np.array([[[1.1, 1e-3]]])
+>>> r = width_ratios(lo, hi, np.array([[[0.0, -1e-7]]]), np.array([[[1.0, 1e-7]]]))
+>>> r["max"], r["entries"], r["excess_max"]
+(1.1, 1, 0.0019998)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["width_ratios", "FLOOR"]
+
+#: An entry whose sampled width is below this fraction of its factor's scale is reported by its excess, not its ratio.
+FLOOR = 1e-3
+
+
+def width_ratios(lower, upper, sampled_lower, sampled_upper, floor: float = FLOOR) -> dict:
+    """Ratios of proved to sampled widths of factor entries ``(F, ...)``, and the excess on the thin entries.
+
+    Returns
+    -------
+    dict
+        ``max``, ``median`` (ratios on the significant entries, ``nan`` if
+        none), ``entries`` (how many), ``floor``, ``excess_max`` (largest
+        ``(proved - sampled width) / scale`` on the other entries, 0 if none)
+        and ``thin_entries`` (how many).
+    """
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    s_lo, s_hi = np.asarray(sampled_lower, float), np.asarray(sampled_upper, float)
+    axes = tuple(range(1, s_lo.ndim))
+    scale = np.maximum(np.abs(s_lo), np.abs(s_hi)).max(axis=axes, keepdims=True)
+    width, sampled = upper - lower, s_hi - s_lo
+    significant = sampled >= floor * scale
+    ratio = width[significant] / sampled[significant]
+    excess = ((width - sampled) / np.where(scale > 0, scale, 1.0))[~significant]
+    return {
+        "max": float(ratio.max()) if ratio.size else float("nan"),
+        "median": float(np.median(ratio)) if ratio.size else float("nan"),
+        "entries": int(significant.sum()),
+        "floor": floor,
+        "excess_max": round(float(excess.max()), 12) if excess.size else 0.0,
+        "thin_entries": int((~significant).sum()),
+    }
