@@ -15,8 +15,9 @@ import pytest
 
 from polyrob import load_robot
 from polyrob.bounds.certified.ball_jets import BallJet, ball_inverse, ball_sin_cos, lower, upper
-from polyrob.bounds.certified.factors import FactorProblem, factor_directions, prove_factor_ranges
+from polyrob.bounds.certified.factors import FactorProblem, attained_range, factor_directions, prove_factor_ranges
 from polyrob.bounds.certified.jet_rnea import Chain, rnea
+from polyrob.bounds.certified.width_ratio import width_ratios
 from polyrob.domains.default_task import default_task_domain, default_task_robot
 from polyrob.errors import CertificationError
 from polyrob.plant.models.inner_factors import factor_parameters
@@ -141,3 +142,33 @@ def test_branch_and_bound_proves_a_small_box_and_gives_up_on_counted_work(ur5):
     assert reports and reports[-1][0] == pytest.approx(1.0)  # the whole job's fraction ends at 1
     with pytest.raises(CertificationError, match="limit of 1 boxes"):
         prove_factor_ranges(loops, _small_box(domain, 0.2, 0.5, 2.0), rel_tol=1e-3, max_boxes=1)
+
+
+def test_the_slope_form_tightens_the_acceleration_columns_and_still_holds_every_point(ur5):
+    _, loops, problem, domain = ur5
+    m = problem.m
+    box = _small_box(domain, 2e-3, 5e-3, 0.02)
+    lo, hi, _ = problem.enclose(box.q_lower[None], box.q_upper[None], box.qdot_lower[None], box.qdot_upper[None],
+                                box.qddot_lower, box.qddot_upper)  # fmt: skip
+    s_lo, s_hi = attained_range(problem, box.q_lower, box.q_upper, box.qdot_lower, box.qdot_upper, box.qddot_lower,
+                                box.qddot_upper, 200, np.random.default_rng(5))  # fmt: skip
+    assert np.all(lo[0] <= s_lo) and np.all(s_hi <= hi[0])
+    # G = -Y M_k: the mean-value form alone gave a ratio of 5.2 and an excess of 1.2 % of the factor's scale here,
+    # the slope form (Y once, against M_hat's and M_k's own derivatives) 2.3 and 0.15 %
+    G = width_ratios(lo[0][..., 2 * m :], hi[0][..., 2 * m :], s_lo[..., 2 * m :], s_hi[..., 2 * m :])
+    assert G["entries"] >= 10 and G["max"] <= 3.0 and G["excess_max"] <= 4e-3
+    q, qd, a = _points(box, 100, seed=6)
+    assert np.all((_reference(loops, q, qd, a) >= lo[0]) & (_reference(loops, q, qd, a) <= hi[0]))
+
+
+def test_width_ratios_leave_thin_entries_to_their_excess():
+    # entry 0 varies (ratio 1.1); entry 1 is 1e-7 wide, far below 1e-3 of the scale 1: its 2e-3 excess is reported
+    # relative to the scale, not as a ratio of 1e4
+    r = width_ratios(np.array([[0.0, -1e-3]]), np.array([[1.1, 1e-3]]), np.array([[0.0, -5e-8]]),
+                     np.array([[1.0, 5e-8]]))  # fmt: skip
+    assert r["max"] == pytest.approx(1.1) and r["entries"] == 1 and r["thin_entries"] == 1
+    assert r["excess_max"] == pytest.approx(2e-3 - 1e-7)
+    # each factor has its own scale: the same 1e-7 wide entry in a factor of its own is significant (ratio 2)
+    r = width_ratios(np.array([[0.0], [-1e-7]]), np.array([[1.1], [1e-7]]), np.array([[0.0], [-5e-8]]),
+                     np.array([[1.0], [5e-8]]))  # fmt: skip
+    assert r["entries"] == 2 and r["max"] == pytest.approx(2.0) and r["thin_entries"] == 0
