@@ -1,13 +1,13 @@
-"""Vectorised ball arithmetic with derivatives: enclosures of a value, its gradient and its Hessian over a box.
+"""Vectorised ball arithmetic with derivatives: enclosures of a value and its derivatives up to the third over a box.
 
 A :class:`BallJet` holds, for every element of an array, balls (midpoint,
-radius) enclosing a function's value and its first and (``order=2``)
-second derivatives with respect to ``n`` variables, *over a box* of those
+radius) enclosing a function's value and its first, (``order=2``) second
+and (``order=3``) third derivatives with respect to ``n`` variables, *over a box* of those
 variables: evaluating a computation on jets seeded at a box encloses the
 derivatives of its result at every point of the box (interval automatic
 differentiation); seeded at one point it encloses the derivatives there.
 The jet components sit on the first axis (``value, gradient (n),
-Hessian (n x n)``), so that numpy's broadcasting and ``einsum`` act on the
+Hessian (n x n), third derivatives (n x n x n)``), so that numpy's broadcasting and ``einsum`` act on the
 array's own axes after it.
 
 Outward rounding is by directed margins (no change of the FPU's rounding
@@ -78,11 +78,12 @@ def _inflate(rad, mag):
 
 
 class BallJet:
-    """Balls of a value and its derivatives (order 0, 1 or 2 in ``n`` variables), vectorised.
+    """Balls of a value and its derivatives (order 0 to 3 in ``n`` variables), vectorised.
 
-    ``mid`` and ``rad`` have shape ``(C, *shape)`` with ``C = 1``, ``1 + n`` or
-    ``1 + n + n^2``: component 0 is the value, ``1 .. n`` the gradient, the
-    rest the Hessian (row-major).
+    ``mid`` and ``rad`` have shape ``(C, *shape)`` with ``C = 1``, ``1 + n``,
+    ``1 + n + n^2`` or ``1 + n + n^2 + n^3``: component 0 is the value,
+    ``1 .. n`` the gradient, then the Hessian and the third derivatives
+    (row-major).
     """
 
     __slots__ = ("mid", "rad", "n", "order")
@@ -94,7 +95,7 @@ class BallJet:
     @staticmethod
     def size(n: int, order: int) -> int:
         """Number of components of a jet."""
-        return 1 + (n if order >= 1 else 0) + (n * n if order >= 2 else 0)
+        return 1 + (n if order >= 1 else 0) + (n * n if order >= 2 else 0) + (n**3 if order >= 3 else 0)
 
     @classmethod
     def constant(cls, mid, rad, n: int, order: int) -> BallJet:
@@ -125,22 +126,52 @@ class BallJet:
         n = self.n
         v = arr[:1]
         g = arr[1 : 1 + n] if self.order >= 1 else None
-        H = arr[1 + n :].reshape(n, n, *arr.shape[1:]) if self.order >= 2 else None
+        H = arr[1 + n : 1 + n + n * n].reshape(n, n, *arr.shape[1:]) if self.order >= 2 else None
+        if self.order >= 3:
+            return v, g, H, arr[1 + n + n * n :].reshape(n, n, n, *arr.shape[1:])
         return v, g, H
 
     def lowered(self, index: int | None, nvars: int) -> BallJet:
-        """An order-1 jet in the first ``nvars`` variables of this order-2 jet's value (``index=None``) or of its derivative ``index``."""
-        n = self.n
-        C = np.concatenate
-        if index is None:
-            sl = [slice(0, 1), slice(1, 1 + nvars)]
-            mid, rad = C([self.mid[s] for s in sl]), C([self.rad[s] for s in sl])
-        else:
-            Hm = self.mid[1 + n :].reshape(n, n, *self.mid.shape[1:])
-            Hr = self.rad[1 + n :].reshape(n, n, *self.rad.shape[1:])
-            mid = C([self.mid[1 + index : 2 + index], Hm[index, :nvars]])
-            rad = C([self.rad[1 + index : 2 + index], Hr[index, :nvars]])
-        return BallJet(mid, rad, nvars, 1)
+        """A jet one order lower in the first ``nvars`` variables: of this jet's value (``index=None``) or of its derivative ``index``."""
+        k = nvars
+
+        def parts(arr):
+            pieces = self._pieces(arr)
+            tail = arr.shape[1:]
+            if index is None:
+                out = [pieces[0], pieces[1][:k]]
+                if self.order >= 3:
+                    out.append(pieces[2][:k, :k].reshape(k * k, *tail))
+            else:
+                out = [pieces[1][index : index + 1], pieces[2][index, :k]]
+                if self.order >= 3:
+                    out.append(pieces[3][index, :k, :k].reshape(k * k, *tail))
+            return np.concatenate(out)
+
+        return BallJet(parts(self.mid), parts(self.rad), nvars, self.order - 1)
+
+    def padded(self, nvars: int) -> BallJet:
+        """The same jet in ``nvars >= n`` variables, the new ones last (derivatives in them zero)."""
+        n, k = self.n, nvars
+        if k == n or self.order == 0:
+            return BallJet(self.mid, self.rad, k, self.order)
+
+        def pad(arr):
+            pieces = self._pieces(arr)[: 1 + self.order]
+            tail = arr.shape[1:]
+            out = [pieces[0]]
+            for d, piece in enumerate(pieces[1:], start=1):
+                full = np.zeros((k,) * d + tail)
+                full[(slice(0, n),) * d] = piece
+                out.append(full.reshape(k**d, *tail))
+            return np.concatenate(out)
+
+        return BallJet(pad(self.mid), pad(self.rad), k, self.order)
+
+    def truncated(self, order: int) -> BallJet:
+        """The same jet up to ``order`` (its lower components do not depend on the higher ones)."""
+        C = self.size(self.n, order)
+        return BallJet(self.mid[:C], self.rad[:C], self.n, order)
 
     def derivative_value(self, index: int) -> BallJet:
         """The derivative ``index`` as an order-0 ball."""
@@ -222,10 +253,10 @@ class BallJet:
             xm, ym = np.abs(x), np.abs(y)
             return f(x, y), fa(xm, yr) + fa(xr, ym + yr), fa(xm, ym)
 
-        av, ag, aH = self._pieces(self.mid)
-        bv, bg, bH = other._pieces(other.mid)
-        avr, agr, aHr = self._pieces(self.rad)
-        bvr, bgr, bHr = other._pieces(other.rad)
+        av, ag, aH, *aT = self._pieces(self.mid)
+        bv, bg, bH, *bT = other._pieces(other.mid)
+        avr, agr, aHr, *aTr = self._pieces(self.rad)
+        bvr, bgr, bHr, *bTr = other._pieces(other.rad)
         parts = [ball(av, bv, avr, bvr)]
         if order >= 1:
             t1, t2 = ball(av, bg, avr, bgr), ball(ag, bv, agr, bvr)
@@ -239,6 +270,24 @@ class BallJet:
             ]
             H = [sum(t[k] for t in terms) for k in range(3)]
             parts.append(tuple(x.reshape(n * n, *x.shape[2:]) for x in H))
+        if order >= 3:  # d_pqr (ab): a T^b + T^a b + the three g H and the three H g pairings
+            g_a, g_ar, H_a, H_ar = ag, agr, aH, aHr
+            g_b, g_br, H_b, H_br = bg, bgr, bH, bHr
+            P, Q, R = (slice(None), None, None), (None, slice(None), None), (None, None, slice(None))
+            QR, PR, PQ = (
+                (None, slice(None), slice(None)),
+                (slice(None), None, slice(None)),
+                (slice(None), slice(None), None),
+            )
+            terms = [
+                ball(av[None, None], bT[0], avr[None, None], bTr[0]),
+                ball(aT[0], bv[None, None], aTr[0], bvr[None, None]),
+            ]
+            for gi, Hi in ((P, QR), (Q, PR), (R, PQ)):
+                terms.append(ball(g_a[gi], H_b[Hi], g_ar[gi], H_br[Hi]))
+                terms.append(ball(H_a[Hi], g_b[gi], H_ar[Hi], g_br[gi]))
+            T = [sum(t[k] for t in terms) for k in range(3)]
+            parts.append(tuple(x.reshape(n**3, *x.shape[3:]) for x in T))
         mid = np.concatenate([p[0] for p in parts])
         rad = np.concatenate([p[1] for p in parts])
         mag = np.concatenate([p[2] for p in parts])
@@ -270,6 +319,9 @@ def ball_sin_cos(centre, radius, order: int):
             if order >= 2:  # d2 sin = -sin, d2 cos = -cos
                 jet.mid[1 + n + p * n + p, ..., p] = -second[0][..., p]
                 jet.rad[1 + n + p * n + p, ..., p] = second[1][..., p]
+            if order >= 3:  # d3 sin = -cos, d3 cos = sin
+                jet.mid[1 + n + n * n + p * (n * n + n + 1), ..., p] = -sign1 * first[0][..., p]
+                jet.rad[1 + n + n * n + p * (n * n + n + 1), ..., p] = first[1][..., p]
         out.append(jet)
     return tuple(out)
 
