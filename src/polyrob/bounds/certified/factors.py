@@ -52,6 +52,7 @@ from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_invers
 from polyrob.bounds.certified.jet_rnea import PARAMETER_RTOL, Chain, rnea
 from polyrob.bounds.certified.slope_form import residuals, slope_spread
 from polyrob.bounds.certified.taylor2 import at_vertices, taylor2_bounds
+from polyrob.bounds.certified.width_ratio import FLOOR
 from polyrob.errors import CertificationError
 
 __all__ = [
@@ -65,9 +66,9 @@ __all__ = [
     "BATCH",
 ]
 
-#: Boxes the branch and bound evaluates before giving up (a count of work, not of seconds): a few
-#: minutes of a loaded 2-core machine.
-MAX_BOXES = 1_000
+#: Boxes the branch and bound evaluates before giving up (a count of work, not of seconds): with the
+#: Taylor form (about 2 s a box for a 6-joint arm on a loaded 2-core machine), about ten minutes.
+MAX_BOXES = 300
 #: Default tolerance: a side closes within 2 % of its entry's width of the inner value.
 REL_TOL = 0.02
 #: Boxes evaluated together (vectorised).
@@ -294,17 +295,22 @@ class FactorProblem:
             singular,
         )
 
-    def enclose(self, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, *, taylor: bool = False):
+    def enclose(self, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, *, taylor: bool = False, attained: bool = False):
         """Proved bounds of every factor entry on each box: ``(lower, upper, contribution)``.
 
         ``q_lo`` ... ``qd_hi``: ``(B, m)``; ``a_lo``, ``a_hi``: ``(m,)`` (the
         acceleration box is never split).  ``lower``, ``upper``: ``(B, F, m, 3m)``
         (``inf`` where ``M_hat`` is not provably invertible on the box);
         ``contribution``: ``(B, F, m, 3m, 2m)``, the over-estimation bound
-        each coordinate (``q``, then ``qdot``) adds to each entry.
+        each coordinate (``q``, then ``qdot``) adds to each entry (of the
+        mean-value or slope form).  ``taylor``: intersect with the
+        second-order Taylor form (:mod:`polyrob.bounds.certified.taylor2`).
+        ``attained``: also return the smallest and largest values attained
+        at the box's centre and the acceleration vertices ``(B, F, m, 3m)``.
         """
         with np.errstate(over="ignore", invalid="ignore"):  # a box whose M_hat may be singular gets inf
-            return self._enclose(q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor)
+            out = self._enclose(q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor)
+        return out if attained else out[:3]
 
     def _taylor2(self, M3, h3, qc, vc, Y_centre, radii, V):
         """Per-vertex ``(lower, upper)`` ``(B, F, i, 3m, nv)`` of the second-order Taylor form (taylor2.py)."""
@@ -378,7 +384,8 @@ class FactorProblem:
             hi, lo = np.minimum(hi, t_hi), np.maximum(lo, t_lo)
         hi, lo = hi.max(-1), lo.min(-1)
         hi[unbounded], lo[unbounded] = np.inf, -np.inf
-        return lo, hi, contribution
+        # values attained at the box's centre and the a-vertices (float midpoints of thin balls): they only steer
+        return lo, hi, contribution, vm.min(-1), vm.max(-1)
 
 
 def _columns(Jq, Jqd, G, m):
@@ -474,7 +481,9 @@ def prove_factor_ranges(
         by default a pilot of ``pilot`` points.  They never enter the bounds.
     rel_tol : float
         A side of an entry is closed on a box when its bound is within
-        ``rel_tol`` of the entry's (inner) width of the inner value.
+        ``rel_tol`` of the entry's (inner) width of the inner value; for an
+        entry thinner than :data:`~polyrob.bounds.certified.width_ratio.FLOOR`
+        of its factor's scale, within ``rel_tol`` of that floor.
     max_boxes : int
         Give up (:class:`~polyrob.errors.CertificationError`) after this many boxes.
     time_limit : float, optional
@@ -499,8 +508,10 @@ def prove_factor_ranges(
         p_lo, p_hi = np.minimum(p_lo, inner[0]), np.maximum(p_hi, inner[1])
     width = p_hi - p_lo
     scale = np.maximum(np.abs(p_lo), np.abs(p_hi))
-    # a floor far above the propagated rounding margins (about 1e-10 of a factor's largest entry)
-    tol = rel_tol * width + 1e-8 * np.maximum(scale.max(axis=(1, 2), keepdims=True), 1e-300)
+    # an entry thinner than FLOOR of its factor's scale is judged by its excess against that scale (width_ratio.py);
+    # the last floor is far above the propagated rounding margins (about 1e-10 of a factor's largest entry)
+    factor_scale = np.maximum(scale.max(axis=(1, 2), keepdims=True), 1e-300)
+    tol = rel_tol * np.maximum(width, FLOOR * factor_scale) + 1e-8 * factor_scale
     F = len(problem.names)
     out_lo, out_hi = np.full((F, m, 3 * m), np.inf), np.full((F, m, 3 * m), -np.inf)
     root_q, root_v = np.where(q_hi > q_lo, q_hi - q_lo, 1.0), np.where(v_hi > v_lo, v_hi - v_lo, 1.0)
@@ -523,7 +534,14 @@ def prove_factor_ranges(
         batch, stack = stack[-BATCH:], stack[:-BATCH]
         boxes += len(batch)
         ql, qh, vl, vh = (np.array([b[k] for b in batch]) for k in range(4))
-        lo, hi, contribution = problem.enclose(ql, qh, vl, vh, a_lo, a_hi, taylor=taylor)
+        lo, hi, contribution, seen_lo, seen_hi = problem.enclose(
+            ql, qh, vl, vh, a_lo, a_hi, taylor=taylor, attained=True
+        )
+        # the inner values grow with every box's centre: an entry's side closes against the best value attained
+        finite = np.isfinite(hi).all((1, 2, 3))
+        if finite.any():
+            p_lo = np.minimum(p_lo, seen_lo[finite].min(0))
+            p_hi = np.maximum(p_hi, seen_hi[finite].max(0))
         for b, (bql, bqh, bvl, bvh, open_, share) in enumerate(batch):
             done_hi = hi[b] <= p_hi + tol
             done_lo = lo[b] >= p_lo - tol
