@@ -3,14 +3,16 @@
 Prints JSON, per robot (ur5, panda):
 
 - ``proof``: :func:`polyrob.bounds.certified.factors.prove_factor_ranges` on the
-  default task (the same call as ``polyrob bounds ROBOT --certify``) with
-  ``--max-boxes`` of counted work: its time, its number of boxes and, when
-  it finishes, the ratio of every proved interval's width to the sampled
-  one (max and median; the bar is 1.10); when it gives up, its message
-  (the fraction of the work done);
+  default task (the same call as ``polyrob bounds ROBOT --certify``) and on
+  the task scaled by each of ``--proof-scales``, with ``--max-boxes`` of
+  counted work: its time, its number of boxes and, when it finishes, the
+  ratios of the proved widths to the sampled ones (the bar is 1.10); when
+  it gives up, its message (the fraction of the work done);
 - ``one_box``: the enclosure of one box around the reference pose, the
   task scaled by ``s`` (q ±0.2 s rad, qdot ±0.5 s, qddot ±2 s), against the
-  sampled widths of that box: how the over-estimation falls with the box.
+  sampled widths of that box, by the mean-value and slope forms alone and
+  with the second-order Taylor form: how the over-estimation falls with
+  the box.
 
 "Sampled" widths: the extremes of ``--samples`` points of the box with
 ``qdot`` and ``qddot`` at random vertices (attained values, a lower bound
@@ -26,7 +28,8 @@ over the sampled one is reported relative to that scale (``excess_max``).
   factors in ``q`` sampled at 16 points of the box (step 1e-4): how much of
   the over-estimation is the ball arithmetic's, not the function's.
 
-Usage: ``python benchmarks/certified_arms.py [--robots ur5,panda] [--max-boxes N] [--samples N] [--floor F]``.
+Usage: ``python benchmarks/certified_arms.py [--robots ur5,panda] [--max-boxes N] [--samples N] [--floor F]
+[--proof-scales 1,0.05]``.
 """
 
 from __future__ import annotations
@@ -89,6 +92,7 @@ def main() -> None:
     parser.add_argument("--scales", default="1,0.25,0.05,0.01")
     parser.add_argument("--floor", type=float, default=FLOOR)
     parser.add_argument("--wrapping-scale", type=float, default=0.01)
+    parser.add_argument("--proof-scales", default="1", help="task scales the branch and bound is run on (1: the task)")
     add_results_option(parser)
     args = parser.parse_args()
     out = {"machine": f"{os.cpu_count()} cores", "load_average": os.getloadavg()[0], "robots": {}}
@@ -105,29 +109,41 @@ def main() -> None:
             s_lo, s_hi = attained_range(
                 problem, box.q_lower, box.q_upper, box.qdot_lower, box.qdot_upper, box.qddot_lower,
                 box.qddot_upper, args.samples, np.random.default_rng(1))  # fmt: skip
-            t0 = time.perf_counter()
-            lo, hi, _ = problem.enclose(box.q_lower[None], box.q_upper[None], box.qdot_lower[None],
-                                        box.qdot_upper[None], box.qddot_lower, box.qddot_upper)  # fmt: skip
-            entry = {"scale": s, "seconds": round(time.perf_counter() - t0, 3)}
-            if np.all(np.isfinite(hi)):
-                entry.update(width_ratios(lo[0], hi[0], s_lo, s_hi, args.floor))
-            else:
-                entry["note"] = "M_hat not provably invertible on the whole box: no enclosure without splitting"
+            entry = {"scale": s}
+            for form, taylor in (("mean_value_and_slope", False), ("taylor", True)):
+                t0 = time.perf_counter()
+                lo, hi, _ = problem.enclose(box.q_lower[None], box.q_upper[None], box.qdot_lower[None],
+                                            box.qdot_upper[None], box.qddot_lower, box.qddot_upper, taylor=taylor)  # fmt: skip
+                entry[form] = {"seconds": round(time.perf_counter() - t0, 3)}
+                if np.all(np.isfinite(hi)):
+                    entry[form].update(width_ratios(lo[0], hi[0], s_lo, s_hi, args.floor))
+                else:
+                    entry[form]["note"] = (
+                        "M_hat not provably invertible on the whole box: no enclosure without splitting"
+                    )
             row["one_box"].append(entry)
-        t0 = time.perf_counter()
-        try:
-            enc = prove_factor_ranges(loops, domain, max_boxes=args.max_boxes)
-            s_lo, s_hi = attained_range(
-                problem, domain.q_lower, domain.q_upper, domain.qdot_lower, domain.qdot_upper,
-                domain.qddot_lower, domain.qddot_upper, args.samples, np.random.default_rng(1))  # fmt: skip
-            row["proof"] = {"status": "proved", "boxes": enc.boxes, "seconds": round(enc.seconds, 1),
-                            "ratio": width_ratios(enc.lower, enc.upper, s_lo, s_hi, args.floor)}  # fmt: skip
-        except CertificationError as exc:
-            row["proof"] = {"status": "gave up", "seconds": round(time.perf_counter() - t0, 1), "message": str(exc)}
+        row["proof"] = []
+        for s in map(float, args.proof_scales.split(",")):
+            box = scaled(domain, s)
+            t0 = time.perf_counter()
+            try:
+                enc = prove_factor_ranges(loops, box, max_boxes=args.max_boxes)
+                s_lo, s_hi = attained_range(
+                    problem, box.q_lower, box.q_upper, box.qdot_lower, box.qdot_upper,
+                    box.qddot_lower, box.qddot_upper, args.samples, np.random.default_rng(1))  # fmt: skip
+                row["proof"].append({"scale": s, "status": "proved", "boxes": enc.boxes, "seconds": round(enc.seconds, 1),
+                                     "ratio": width_ratios(enc.lower, enc.upper, s_lo, s_hi, args.floor)})  # fmt: skip
+            except CertificationError as exc:
+                row["proof"].append({"scale": s, "status": "gave up", "seconds": round(time.perf_counter() - t0, 1),
+                                     "message": str(exc)})  # fmt: skip
         out["robots"][name] = row
     out["load_average_end"] = os.getloadavg()[0]
     print(json.dumps(out, indent=1))
-    figure = "; ".join(f"{n}: {r['proof']['status']} in {r['proof']['seconds']} s" for n, r in out["robots"].items())
+    figure = "; ".join(
+        f"{n} at scale {p['scale']:g}: {p['status']} in {p['seconds']} s"
+        for n, r in out["robots"].items()
+        for p in r["proof"]
+    )
     save_run(args.results, "certified_arms", "proved factor ranges of the arms' default tasks", figure, out)
 
 
