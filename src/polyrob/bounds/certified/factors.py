@@ -20,25 +20,28 @@ How a box is enclosed (:meth:`FactorProblem.enclose`):
 * ``M_hat``, ``M_k`` (the torques of unit accelerations) and ``R_k`` at
   rest in acceleration are computed by Newton-Euler
   (:mod:`polyrob.bounds.certified.jet_rnea`) in ball arithmetic with
-  derivatives: at the box's centre in ``q`` (value and first derivatives,
-  ``qdot`` over its whole box) and over the box (values, first and second
-  derivatives); ``Y`` by a preconditioned ball inverse;
-* mean-value form in ``q``: ``K(q, qdot, a)`` lies in
-  ``K(q_c, Qdot, a) + sum_p dK/dq_p(Q, Qdot, a) [q_p - q_c,p]``, so the
-  over-estimation is second order in the box's size;
+  derivatives: at the box's centre (values and derivatives, thin) and over
+  the box (values and derivatives up to the third); ``Y`` by a
+  preconditioned ball inverse at the centre, by a fixed point over the box;
+* three proved enclosures of every entry, intersected: the mean-value form
+  ``K(c, a) + sum_p dK/dx_p(Q, a) [-r_p, r_p]`` in ``x = (q, qdot)``; the
+  slope form of :mod:`polyrob.bounds.certified.slope_form` (``Y`` enters
+  once); and (``taylor=True``, the branch and bound's default) the
+  second-order Taylor form of :mod:`polyrob.bounds.certified.taylor2`
+  (value and gradient exact at the centre, Hessian over the box);
 * ``K`` is affine in the acceleration ``a``: every ``K`` is a convex
   combination of its values at the vertices of the ``a``-box, which are
   enumerated (``2^m``), never split;
-* ``qdot`` enters as a ball (``J`` is quadratic in it, with small
-  coefficients at an arm's task speeds) and is split like ``q``.
+* ``qdot`` is split like ``q``.
 
 Branch and bound: an entry's side is closed on a box when its bound is
-within ``rel_tol`` of the entry's width of the *inner* value (one attained
-at a point: the sampled search's, or this module's pilot); a box with an
-open side is split along the coordinate that carries most of the
-over-estimation.  The result is the union of the leaves' enclosures:
-rigorous whatever the inner values are (they only steer), and the work is
-counted in boxes (:data:`MAX_BOXES`), never in seconds.
+within ``rel_tol`` of the entry's width of the *inner* value (the largest
+attained at a point so far: the sampled search's, this module's pilot, and
+every box's centre); a box with an open side is split along the
+coordinate that carries most of the over-estimation.  The result is the
+union of the leaves' enclosures: rigorous whatever the inner values are
+(they only steer), and the work is counted in boxes (:data:`MAX_BOXES`),
+never in seconds.
 """
 
 from __future__ import annotations
