@@ -16,7 +16,7 @@ Prints JSON, per robot (ur5, panda):
 
 "Sampled" widths: the extremes of ``--samples`` points of the box with
 ``qdot`` and ``qddot`` at random vertices (attained values, a lower bound
-of the true width).  Ratios (:func:`polyrob.bounds.certified.width_ratio.width_ratios`)
+of the true width).  Ratios (:func:`polyrob.bounds.certified.factors.width_ratio.width_ratios`)
 are taken on the entries whose sampled width is at least ``--floor`` of
 their factor's largest entry; on the others the excess of the proved width
 over the sampled one is reported relative to that scale (``excess_max``).
@@ -45,7 +45,7 @@ from _results import add_results_option, save_run
 
 from polyrob import load_robot
 from polyrob.bounds.certified.factors import MAX_BOXES, FactorProblem, attained_range, prove_factor_ranges
-from polyrob.bounds.certified.width_ratio import FLOOR, width_ratios
+from polyrob.bounds.certified.factors.width_ratio import FLOOR, width_ratios
 from polyrob.domains.default_task import default_task_domain, default_task_robot
 from polyrob.errors import CertificationError
 from polyrob.plant.models.inner_factors import factor_parameters

@@ -1,4 +1,4 @@
-"""Proved factor ranges of an arm's computed-torque loop (bounds/certified/factors.py and its ball arithmetic).
+"""Proved factor ranges of an arm's computed-torque loop (bounds/certified/factors/ and its ball arithmetic).
 
 Small boxes of ur5's default task keep every test within seconds; the full
 task is the benchmark's (benchmarks/certified_arms.py).
@@ -16,8 +16,8 @@ import pytest
 from polyrob import load_robot
 from polyrob.bounds.certified.ball_jets import BallJet, ball_inverse, ball_sin_cos, lower, upper
 from polyrob.bounds.certified.factors import FactorProblem, attained_range, factor_directions, prove_factor_ranges
+from polyrob.bounds.certified.factors.width_ratio import width_ratios
 from polyrob.bounds.certified.jet_rnea import Chain, rnea
-from polyrob.bounds.certified.width_ratio import width_ratios
 from polyrob.domains.default_task import default_task_domain, default_task_robot
 from polyrob.errors import CertificationError
 from polyrob.plant.models.inner_factors import factor_parameters

@@ -25,9 +25,9 @@ How a box is enclosed (:meth:`FactorProblem.enclose`):
   preconditioned ball inverse at the centre, by a fixed point over the box;
 * three proved enclosures of every entry, intersected: the mean-value form
   ``K(c, a) + sum_p dK/dx_p(Q, a) [-r_p, r_p]`` in ``x = (q, qdot)``; the
-  slope form of :mod:`polyrob.bounds.certified.slope_form` (``Y`` enters
+  slope form of :mod:`polyrob.bounds.certified.factors.slope_form` (``Y`` enters
   once); and (``taylor=True``, the branch and bound's default) the
-  second-order Taylor form of :mod:`polyrob.bounds.certified.taylor2`
+  second-order Taylor form of :mod:`polyrob.bounds.certified.factors.taylor2`
   (value and gradient exact at the centre, Hessian over the box);
 * ``K`` is affine in the acceleration ``a``: every ``K`` is a convex
   combination of its values at the vertices of the ``a``-box, which are
@@ -52,10 +52,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, lower, upper
+from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread
+from polyrob.bounds.certified.factors.taylor2 import at_vertices, taylor2_bounds
+from polyrob.bounds.certified.factors.width_ratio import FLOOR
 from polyrob.bounds.certified.jet_rnea import PARAMETER_RTOL, Chain, rnea
-from polyrob.bounds.certified.slope_form import residuals, slope_spread
-from polyrob.bounds.certified.taylor2 import at_vertices, taylor2_bounds
-from polyrob.bounds.certified.width_ratio import FLOOR
 from polyrob.errors import CertificationError
 
 __all__ = [
@@ -268,7 +268,7 @@ class FactorProblem:
         With ``residual = (K0c, Kac)`` (the factor's balls at the box's
         centre): ``(g0, ga, Y)`` instead, the residuals ``g = W - M_hat K_c``
         of ``M_hat K = W`` (``K = Y W``) and ``Y``'s value over the box, for
-        :func:`polyrob.bounds.certified.slope_form.slope_spread`.
+        :func:`polyrob.bounds.certified.factors.slope_form.slope_spread`.
         """
         m = self.m
         nv = 2 * m
@@ -308,7 +308,7 @@ class FactorProblem:
         ``contribution``: ``(B, F, m, 3m, 2m)``, the over-estimation bound
         each coordinate (``q``, then ``qdot``) adds to each entry (of the
         mean-value or slope form).  ``taylor``: intersect with the
-        second-order Taylor form (:mod:`polyrob.bounds.certified.taylor2`).
+        second-order Taylor form (:mod:`polyrob.bounds.certified.factors.taylor2`).
         ``attained``: also return the smallest and largest values attained
         at the box's centre and the acceleration vertices ``(B, F, m, 3m)``.
         """
@@ -491,7 +491,7 @@ def prove_factor_ranges(
     rel_tol : float
         A side of an entry is closed on a box when its bound is within
         ``rel_tol`` of the entry's (inner) width of the inner value; for an
-        entry thinner than :data:`~polyrob.bounds.certified.width_ratio.FLOOR`
+        entry thinner than :data:`~polyrob.bounds.certified.factors.width_ratio.FLOOR`
         of its factor's scale, within ``rel_tol`` of that floor.
     max_boxes : int
         Give up (:class:`~polyrob.errors.CertificationError`) after this many boxes.
@@ -502,7 +502,7 @@ def prove_factor_ranges(
         of open volume closed.
     taylor : bool
         Intersect each box's mean-value and slope forms with the
-        second-order Taylor form (:mod:`polyrob.bounds.certified.taylor2`):
+        second-order Taylor form (:mod:`polyrob.bounds.certified.factors.taylor2`):
         about six times the work per box, far fewer boxes.
     """
     t0 = time.perf_counter()

@@ -1,6 +1,6 @@
 """The slope form of a factor over a box: ``K(q) - K(c) = Y(q) (g(q) - g(c))`` with ``g = W - M_hat K(c)``.
 
-Every factor of :mod:`polyrob.bounds.certified.factors` is ``K = Y W``
+Every factor of :mod:`polyrob.bounds.certified.factors.ranges` is ``K = Y W``
 with ``Y = M_hat^-1``: ``M_hat(q) K(q) = W(q)`` at every point.  Hence, for
 the centre ``c`` of a box and ``g(q) = W(q) - M_hat(q) K(c)`` (so that
 ``g(c) = 0``), exactly::

@@ -1,0 +1,32 @@
+"""Proved ranges of the factors of a computed-torque inner loop over an arm's task box (5-7 joints).
+
+:mod:`~polyrob.bounds.certified.factors.ranges` (the factors, one box's
+enclosure, the branch and bound), with the forms it intersects on a box
+(:mod:`~polyrob.bounds.certified.factors.slope_form`,
+:mod:`~polyrob.bounds.certified.factors.taylor2`) and how tightness is
+measured (:mod:`~polyrob.bounds.certified.factors.width_ratio`).
+"""
+
+from polyrob.bounds.certified.factors.ranges import (
+    BATCH,
+    MAX_BOXES,
+    REL_TOL,
+    Direction,
+    FactorEnclosure,
+    FactorProblem,
+    attained_range,
+    factor_directions,
+    prove_factor_ranges,
+)
+
+__all__ = [
+    "FactorProblem",
+    "FactorEnclosure",
+    "Direction",
+    "prove_factor_ranges",
+    "attained_range",
+    "factor_directions",
+    "MAX_BOXES",
+    "REL_TOL",
+    "BATCH",
+]
