@@ -70,7 +70,7 @@ __all__ = [
 ]
 
 #: Boxes the branch and bound evaluates before giving up (a count of work, not of seconds): with the
-#: Taylor form (about 2 s a box for a 6-joint arm on a loaded 2-core machine), about ten minutes.
+#: Taylor form (1-2 s a box for ur5 and panda on a loaded 2-core machine), five to ten minutes.
 MAX_BOXES = 300
 #: Default tolerance: a side closes within 4 % of its entry's width of the inner value (both sides: a ratio
 #: of at most 1.08 to the attained width, under issue 41's bar of 1.10).
