@@ -8,6 +8,7 @@ The controller ``tests/fixtures/planar_2r_ct_pid_K.json`` is the computed-torque
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +28,13 @@ from polyrob.validate.at_rate.loop import (
     quantize_position,
     simulate_real_loop,
 )
-from polyrob.validate.at_rate.runs import default_uncertainty, task_references, true_plants, validate_at_rate
+from polyrob.validate.at_rate.runs import (
+    default_uncertainty,
+    set_words,
+    task_references,
+    true_plants,
+    validate_at_rate,
+)
 from polyrob.validate.discretize import discretize
 
 FIXTURE = Path(__file__).parent / "fixtures" / "planar_2r_ct_pid_K.json"
@@ -115,6 +122,14 @@ def test_the_default_set_of_ur5_is_the_instrument_off_the_flange():
     spec = default_uncertainty(inner_loop(load_robot("ur5"), "computed-torque", model_error=0.1))
     assert spec.link_error == pytest.approx(0.1)
     assert (spec.payload.mass_lower, spec.payload.mass_upper, spec.payload.com_radius) == (0.0, 1.5, 0.1)
+
+
+def test_the_set_words_name_the_friction_the_runs_apply():
+    """A set without friction: the words said "friction: not stated" while every run had the loop's friction."""
+    spec = default_uncertainty(inner_loop(load_robot("planar_2r"), "computed-torque", model_error=0.1))
+    words = set_words(replace(spec, friction=()), RealLoopConditions(friction_viscous=1.0, friction_coulomb=2.0))
+    assert "not stated" not in words
+    assert "every run applies the validation's own (viscous 1 N m s/rad + Coulomb 2 N m per joint" in words
 
 
 def test_true_plants_keep_the_nominal_inner_model(arm):

@@ -236,6 +236,21 @@ class RateValidation:
         }
 
 
+def set_words(spec, conditions) -> str:
+    """The drawn set's words, with the friction the loop applies where the set states none.
+
+    The set's own words say "friction: not stated" when it has no friction;
+    the validation still applies its conditions' friction to every run.
+    """
+    words = spec.words()
+    return words.replace(
+        "friction: not stated",
+        f"friction: none in the set; every run applies the validation's own (viscous "
+        f"{conditions.friction_viscous:g} N m s/rad + Coulomb {conditions.friction_coulomb:g} N m per joint, "
+        "not in the inner model)",
+    )
+
+
 def validate_at_rate(
     robot,
     K,
@@ -317,7 +332,7 @@ def validate_at_rate(
             )
     return RateValidation(
         conditions=conditions,
-        uncertainty=spec.words()
+        uncertainty=set_words(spec, conditions)
         if getattr(base, "model", None) is not None
         else "the model itself (an analytic robot: no links to draw)",
         true_robots=len(plants),
