@@ -478,3 +478,24 @@ def test_the_batch_search_bisects_to_its_own_tolerance_and_time_limit(monkeypatc
     # the search is bounded by its factors and its bisection: no wall-clock limit unless the user sets one
     assert seen["rtol"] == 0.25 and seen["search_time_limit"] is None
     assert Settings().validate_budget is None and Settings().validate_evaluations >= 10**6
+
+
+def test_the_batch_noise_weight_uses_the_validation_encoder(monkeypatch):
+    """`batch --encoder-bits 12`: the weights' encoder noise is 12-bit too (before: always 18 bits)."""
+    import polyrob.fleet.autoweights as autoweights
+    from polyrob.fleet.jobs import Job, Settings, _problem
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def fake(m, domain, overrides=None, *, robot=None, encoder_bits=None):
+        seen["bits"] = encoder_bits
+        raise Stop
+
+    monkeypatch.setattr(autoweights, "automatic_hyperparameters", fake)
+    for at_rate, bits in (({"encoder_bits": 12, "rate": 1000.0}, 12), ({}, None)):
+        with pytest.raises(Stop):
+            _problem(Job(robot="planar_2r"), Settings(at_rate=at_rate), {})
+        assert seen["bits"] == bits

@@ -294,7 +294,11 @@ def _problem(job: Job, settings: Settings, timings: dict):
     robot, domain, task = job_robot_and_domain(job)
     if job.auto_weights:
         # on a task the automatic weights carry the effort limit and the encoder noise (docs/synthesis.md)
-        h = automatic_hyperparameters(robot.m, domain, job.weights, robot=robot if task is not None else None)
+        # the noise weight's encoder is the one the validation quantises with (--encoder-bits)
+        bits = settings.at_rate.get("encoder_bits") if settings.at_rate else None
+        h = automatic_hyperparameters(
+            robot.m, domain, job.weights, robot=robot if task is not None else None, encoder_bits=bits
+        )
     else:
         h = default_hyperparameters(robot.m, job.weights)
     if job.bandwidth_scale != 1.0:
