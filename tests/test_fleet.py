@@ -499,3 +499,14 @@ def test_the_batch_noise_weight_uses_the_validation_encoder(monkeypatch):
         with pytest.raises(Stop):
             _problem(Job(robot="planar_2r"), Settings(at_rate=at_rate), {})
         assert seen["bits"] == bits
+
+
+def test_the_summary_table_has_the_validation_at_the_rate():
+    """summary.md had no column for the validation at the rate (only the JSON rows had it)."""
+    from polyrob.fleet.outputs import markdown_table
+
+    row = {"robot": "ur5", "ok": True, "status": "CERTIFIED", "validation": "settles"}
+    verdict = "1000 Hz, one sample of delay: 20 of 20 settle; chatter <= 5 %: yes"
+    lines = markdown_table([dict(row, validation_at_rate={"verdict": verdict}), row]).splitlines()
+    assert lines[0].endswith("| validation | validation at the rate |")
+    assert lines[2].endswith(f"| settles | {verdict} |") and lines[3].endswith("| settles | - |")

@@ -37,6 +37,7 @@ COLUMNS = (
     ("seconds", "time (s)"),
     ("status", "status"),
     ("validation", "validation"),
+    ("at_rate", "validation at the rate"),
 )
 
 
@@ -119,7 +120,8 @@ def markdown_table(rows) -> str:
     """The summary rows as a Markdown table (one line per robot)."""
     lines = ["| " + " | ".join(title for _, title in COLUMNS) + " |", "|" + "|".join("---" for _ in COLUMNS) + "|"]
     for row in rows:
-        row = dict(row, status=_status(row))
+        at_rate = row.get("validation_at_rate") or {}
+        row = dict(row, status=_status(row), at_rate=at_rate.get("verdict"))
         lines.append("| " + " | ".join(_cell(row.get(key)) for key, _ in COLUMNS) + " |")
     return "\n".join(lines) + "\n"
 
