@@ -52,7 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, lower, upper
-from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread
+from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread, vertex_gradients
 from polyrob.bounds.certified.factors.taylor2 import at_vertices, taylor2_bounds
 from polyrob.bounds.certified.factors.width_ratio import FLOOR
 from polyrob.bounds.certified.jet_rnea import PARAMETER_RTOL, Chain, rnea
@@ -368,14 +368,8 @@ class FactorProblem:
         vmag[:, :, :, :m] += np.abs(am) @ Va.T
         vrad = (vrad + GAMMA * k * (vmag + np.abs(vm))) * (1 + GAMMA) + TINY
         # the gradient in (q, qdot) over the box, at each vertex: sup |dK/dx_p|
-        gm = K0b.mid[1:][..., None].repeat(len(V), -1)  # (2m, B, F, i, 3m, nv)
-        gr = K0b.rad[1:][..., None].repeat(len(V), -1)
-        gmag = np.abs(gm).copy()
-        bm, br = np.moveaxis(Kab.mid[1:], 0, -2), np.moveaxis(Kab.rad[1:], 0, -2)  # (B, F, i, p, 2m, j)
-        gm[:, :, :, :, :m] += np.moveaxis(bm @ V.T, -2, 0)
-        gr[:, :, :, :, :m] += np.moveaxis(br @ Va.T, -2, 0)
-        gmag[:, :, :, :, :m] += np.moveaxis(np.abs(bm) @ Va.T, -2, 0)
-        gabs = np.abs(gm) + (gr + GAMMA * k * (gmag + np.abs(gm))) * (1 + GAMMA) + TINY
+        gm, gr = vertex_gradients(K0b, Kab, V, k)
+        gabs = np.abs(gm) + gr
         spread = np.einsum("pbfiev,bp->bfiev", gabs, radii)
         spread = spread * (1 + 8 * m * GAMMA) + TINY
         contribution = (gabs.max(-1) * radii.T[:, :, None, None, None]).transpose(1, 2, 3, 4, 0)  # (B, F, i, e, 2m)

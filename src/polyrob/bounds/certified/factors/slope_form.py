@@ -32,7 +32,7 @@ import numpy as np
 
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet
 
-__all__ = ["residuals", "slope_spread"]
+__all__ = ["residuals", "slope_spread", "vertex_gradients"]
 
 
 def residuals(M_hat: BallJet, W0: BallJet, Wa: BallJet, K0c: BallJet, Kac: BallJet):
@@ -48,6 +48,23 @@ def residuals(M_hat: BallJet, W0: BallJet, Wa: BallJet, K0c: BallJet, Kac: BallJ
     flat = Mb.const_form("matmul", Kac.mid[0].reshape(B, F, m, p * j), Kac.rad[0].reshape(B, F, m, p * j), left=False)
     ga = Wa - BallJet(flat.mid.reshape(-1, B, F, m, p, j), flat.rad.reshape(-1, B, F, m, p, j), flat.n, flat.order)
     return g0, ga
+
+
+def vertex_gradients(F0: BallJet, Fa: BallJet, V: np.ndarray, k: int):
+    """``dF/dx_p`` over the box at each ``a``-vertex, for ``F = F0 + Fa a`` (``Fa`` on the ``q`` columns only).
+
+    Returns ``(mid, rad)``, each ``(2m, B, F, i, 3m, nv)``: the ball of each
+    gradient, its radius rounded outward for the ``k`` operations behind it.
+    """
+    m, Va = V.shape[1], np.abs(V)
+    gm = F0.mid[1:][..., None].repeat(len(V), -1)
+    gr = F0.rad[1:][..., None].repeat(len(V), -1)
+    gmag = np.abs(gm).copy()
+    bm, br = np.moveaxis(Fa.mid[1:], 0, -2), np.moveaxis(Fa.rad[1:], 0, -2)  # (B, F, i, p, 2m, j)
+    gm[:, :, :, :, :m] += np.moveaxis(bm @ V.T, -2, 0)
+    gr[:, :, :, :, :m] += np.moveaxis(br @ Va.T, -2, 0)
+    gmag[:, :, :, :, :m] += np.moveaxis(np.abs(bm) @ Va.T, -2, 0)
+    return gm, (gr + GAMMA * k * (gmag + np.abs(gm))) * (1 + GAMMA) + TINY
 
 
 def slope_spread(g0: BallJet, ga: BallJet, Y: BallJet, V: np.ndarray, radii: np.ndarray):
@@ -72,16 +89,7 @@ def slope_spread(g0: BallJet, ga: BallJet, Y: BallJet, V: np.ndarray, radii: np.
     """
     m = V.shape[1]
     k = 2 * m + 2
-    Va = np.abs(V)
-    # dg/dx_p over the box at each vertex: g0's gradient plus ga's times a (q columns only)
-    gm = g0.mid[1:][..., None].repeat(len(V), -1)  # (2m, B, F, i, 3m, nv)
-    gr = g0.rad[1:][..., None].repeat(len(V), -1)
-    gmag = np.abs(gm).copy()
-    bm, br = np.moveaxis(ga.mid[1:], 0, -2), np.moveaxis(ga.rad[1:], 0, -2)  # (B, F, i, p, 2m, j)
-    gm[:, :, :, :, :m] += np.moveaxis(bm @ V.T, -2, 0)
-    gr[:, :, :, :, :m] += np.moveaxis(br @ Va.T, -2, 0)
-    gmag[:, :, :, :, :m] += np.moveaxis(np.abs(bm) @ Va.T, -2, 0)
-    gr = (gr + GAMMA * k * (gmag + np.abs(gm))) * (1 + GAMMA) + TINY
+    gm, gr = vertex_gradients(g0, ga, V, k)  # dg/dx_p over the box at each vertex
     # Y(Q) times each column of dg/dx_p, a ball product over the rows l
     Ym, Yr = Y.mid[0], Y.rad[0]  # (B, i, l)
     prod = np.einsum("bil,xbflev->xbfiev", Ym, gm)
