@@ -38,7 +38,10 @@ def test_paper_controller_robust_stability_is_not_certified(paper):
     assert rs.mu_lower == pytest.approx(1.5366, rel=2e-3) and rs.mu_upper_grid == pytest.approx(1.7372, rel=2e-3)
     # a lower bound >= 1 disproves robust stability: VIOLATED, not merely "not certified"
     assert not rs.robust and rs.certificate.status.value == "VIOLATED"
-    assert rs.failed == (f"mu lower bound {rs.mu_lower:.4g} >= 1: some parameters in the set break it",)
+    assert rs.failed == (
+        f"mu lower bound {rs.mu_lower:.4g} >= 1: a member of the uncertainty model's set breaks it "
+        "(the model holds the robot's set, maybe more)",
+    )
     # the perturbation the lower bound returns has size 1/mu_lower and puts a
     # closed-loop pole on the jw axis, checked on the plant G(delta) itself
     assert np.max(np.abs(rs.worst_delta)) == pytest.approx(1 / rs.mu_lower, rel=1e-6)

@@ -110,7 +110,10 @@ def test_dkpy_distillation_controller_mu_matches_independent_value():
     assert r.mu_upper_grid == pytest.approx(1.036, rel=5e-3)
     assert r.mu_lower <= r.mu_upper_grid and r.mu_lower == pytest.approx(1.036, rel=5e-3)
     assert not r.robust and r.certificate.status.value == "VIOLATED"
-    assert r.failed == (f"mu lower bound {r.mu_lower:.4g} >= 1: some parameters in the set break it",)
+    assert r.failed == (
+        f"mu lower bound {r.mu_lower:.4g} >= 1: a member of the uncertainty model's set breaks it "
+        "(the model holds the robot's set, maybe more)",
+    )
 
 
 def test_double_precision_response_checked_against_extended_precision():

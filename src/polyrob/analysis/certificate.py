@@ -19,7 +19,9 @@ reads :attr:`Certificate.status`, decided here and nowhere else:
     undecided, the model misses Jacobians of the robot, ...).
 ``VIOLATED``
     Disproved: the loop at ``Δ = 0`` (a member of the set) is proved
-    unstable, or the μ lower bound is ``>= 1`` (a member of the set breaks it).
+    unstable, or the μ lower bound is ``>= 1`` (a member of the set breaks it).  The set is the
+    uncertainty model's, which holds the robot's set and may hold more: VIOLATED disproves the
+    model's robust property, as MATLAB's ``robstab`` lower bound does, not each robot of a wider model.
 
 A certificate also says what it covers (:class:`Scope`): which property, for
 which variation of the parameters, on which frequencies, for which model and
@@ -232,7 +234,10 @@ def decide_mu(
                 f"this test cannot prove it: mu lower bound {mu_lower:.4g} >= 1 of the scaled structure "
                 "(a sufficient test; no robot of the set is shown to violate it)",
             )
-        return Status.VIOLATED, (f"mu lower bound {mu_lower:.4g} >= 1: some parameters in the set break it",)
+        return Status.VIOLATED, (
+            f"mu lower bound {mu_lower:.4g} >= 1: a member of the uncertainty model's set breaks it "
+            "(the model holds the robot's set, maybe more)",
+        )
     if not mu_upper_grid < 1.0:
         reasons.append(f"mu in [{mu_lower:.4g}, {mu_upper_grid:.4g}] on the grid: not below 1")
         return Status.NOT_CERTIFIED, tuple(reasons)
