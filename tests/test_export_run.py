@@ -127,7 +127,6 @@ def test_rate_too_low_is_refused_in_one_line(tmp_path, capsys):
     assert code == 0 and "warning" not in err
 
 
-
 def _certified_at(tmp_path, rate, delay) -> Path:
     """SYNTH_FILE as `synth --rate RATE --delay DELAY -o` records it: the sampled loop's rate, delay and hold."""
     doc = json.loads(SYNTH_FILE.read_text())
@@ -143,11 +142,28 @@ def test_export_runs_at_the_certified_rate_and_says_its_delay(tmp_path, capsys):
     path = _certified_at(tmp_path, 1000.0, 1)
     code, stdout, _ = _export(capsys, path, "-o", tmp_path / "ctrl", "--json")
     doc = json.loads(stdout)
-    assert code == 0 and doc["certified_sampling"] == {"rate_hz": 1000.0, "delay_samples": 1, "hold": "zero-order"}
+    assert code == 0 and doc["certificate_sampling"] == {
+        "rate_hz": 1000.0,
+        "delay_samples": 1,
+        "hold": "zero-order",
+        "status": "CERTIFIED",
+    }
     head = (tmp_path / "ctrl" / "controller.h").read_text()
     assert "sample rate: 1000 Hz" in head
-    assert "computation delay: one sample (1 ms), as certified at 1000 Hz: u[k], computed" in head
+    assert "computation delay: one sample (1 ms), the delay of the certificate (CERTIFIED) at 1000 Hz: u[k]," in head
     assert "applied at sample k+1" in head and "none modelled" not in head
+
+
+def test_export_names_the_status_the_file_records_not_certified(tmp_path, capsys):
+    """`synth --rate` records the sampled loop whatever its verdict: a NOT_CERTIFIED file is not called certified."""
+    doc = json.loads(_certified_at(tmp_path, 1000.0, 1).read_text())
+    doc["certificate"]["status"] = "NOT_CERTIFIED"
+    path = tmp_path / "K_not.json"
+    path.write_text(json.dumps(doc))
+    code, _, _ = _export(capsys, path, "-o", tmp_path / "ctrl", "--quiet")
+    head = (tmp_path / "ctrl" / "controller.h").read_text()
+    assert code == 0 and "the delay of the certificate (NOT_CERTIFIED) at 1000 Hz" in head
+    assert "as certified" not in head
 
 
 def test_export_refuses_a_rate_other_than_the_certified_one(tmp_path, capsys):
@@ -155,20 +171,26 @@ def test_export_refuses_a_rate_other_than_the_certified_one(tmp_path, capsys):
     path, out = _certified_at(tmp_path, 1000.0, 1), tmp_path / "ctrl"
     code, _, err = _export(capsys, path, "--rate", "500", "-o", out)
     assert code == 2 and err.count("\n") == 1
-    assert "is certified for the loop sampled at 1000 Hz" in err and "give --rate 1000" in err
+    assert (
+        "certificate of" in err
+        and "(CERTIFIED) is for the loop sampled at 1000 Hz" in err
+        and "give --rate 1000" in err
+    )
     assert not out.exists() or not list(out.iterdir())
     code, _, err = _export(capsys, path, "--rate", "500", "--force", "-o", out, "--quiet")
-    assert code == 0 and "the certificate does not cover this loop" in err
+    assert code == 0 and "the certificate is not about this loop" in err
     assert "WARNING: --rate 500" in (out / "controller.h").read_text()
 
 
 def test_export_of_a_continuous_certificate_needs_a_rate(tmp_path, capsys):
     """No rate in the certificate and no --rate: refused in one line naming --rate; the header says no delay."""
     code, _, err = _export(capsys, SYNTH_FILE, "-o", tmp_path / "ctrl")
-    assert code == 2 and err.count("\n") == 1 and "records no certified sample rate" in err and "--rate HZ" in err
+    assert (
+        code == 2 and err.count("\n") == 1 and "records no sample rate in its certificate" in err and "--rate HZ" in err
+    )
     code, _, _ = _export(capsys, SYNTH_FILE, "--rate", "1000", "-o", tmp_path / "ctrl", "--quiet")
     head = (tmp_path / "ctrl" / "controller.h").read_text()
-    assert code == 0 and "computation delay: none in the certificate (it covers the continuous-time loop)" in head
+    assert code == 0 and "computation delay: none in the certificate (it is for the continuous-time loop)" in head
 
 
 def test_lowest_rate_rests_on_the_crossover_not_on_fast_modes():

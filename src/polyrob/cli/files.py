@@ -130,68 +130,76 @@ def _exported_from(controller) -> dict:
     return {"provenance": made, "controller_file": {**source, "provenance": stored and stored.to_dict()}}
 
 
-def certified_sampling(controller) -> dict | None:
-    """The sampled loop a controller file's certificate covers: ``{"rate_hz", "delay_samples", "hold"}``, or ``None``.
+def certificate_sampling(controller) -> dict | None:
+    """The sampled loop a controller file's certificate is about, with that certificate's status, or ``None``.
 
-    ``synth --rate`` records it (:mod:`polyrob.analysis.sampled_data`); a file
-    certified for the continuous-time loop, or ``paper``, records none.
+    ``{"rate_hz", "delay_samples", "hold", "status"}``: ``synth --rate``
+    records the loop (:mod:`polyrob.analysis.sampled_data`) whatever its
+    verdict, so the status is read from the file's certificate
+    (:class:`polyrob.analysis.certificate.Status`), never assumed here.  A
+    file whose certificate is for the continuous-time loop, or ``paper``,
+    records none.
     """
     from pathlib import Path
 
+    from polyrob.analysis.certificate import Status
     from polyrob.io.controller import read_controller_file
 
     if not Path(str(controller)).is_file():
         return None
-    sampled = (read_controller_file(controller).get("certificate") or {}).get("sampled")
+    record = read_controller_file(controller).get("certificate") or {}
+    sampled = record.get("sampled")
     if not sampled or sampled.get("rate_hz") is None:
         return None
-    return {k: sampled.get(k) for k in ("rate_hz", "delay_samples", "hold")}
+    status = record.get("status") or (record.get("certificate") or {}).get("status")
+    status = Status(status).value if status in {s.value for s in Status} else "status not recorded"
+    return {**{k: sampled.get(k) for k in ("rate_hz", "delay_samples", "hold")}, "status": status}
 
 
-def export_rate(args, certified: dict | None, warnings: list) -> float:
-    """The rate to export at: ``--rate``, else the certified one; a rate other than the certified one is refused.
+def export_rate(args, sampling: dict | None, warnings: list) -> float:
+    """The rate to export at: ``--rate``, else the certificate's; a rate other than the certificate's is refused.
 
-    A certificate of the sampled loop holds at its own rate and delay only
+    A certificate of the sampled loop is about its own rate and delay only
     (a lower rate can lose it, a higher one changes the discrete controller
-    that was certified), so another ``--rate`` needs ``--force``.
+    it was decided for), so another ``--rate`` needs ``--force``.
     """
-    if certified is None:
+    if sampling is None:
         if args.rate is None:
             raise ArgumentError(
-                f"--rate: {args.controller} records no certified sample rate (its certificate is for the "
+                f"--rate: {args.controller} records no sample rate in its certificate (it is for the "
                 "continuous-time loop); give --rate HZ, or certify the sampled loop with `polyrob synth ... --rate HZ`"
             )
         return args.rate
-    rate = float(certified["rate_hz"])
+    rate = float(sampling["rate_hz"])
     if args.rate is None or args.rate == rate:
         return rate
     line = (
-        f"--rate {args.rate:g}: {args.controller} is certified for the loop sampled at {rate:g} Hz "
-        f"({delay_words(certified, rate)}), not at {args.rate:g} Hz"
+        f"--rate {args.rate:g}: the certificate of {args.controller} ({sampling['status']}) is for the loop sampled "
+        f"at {rate:g} Hz ({delay_words(sampling, rate)}), not at {args.rate:g} Hz"
     )
     if not args.force:
         raise ArgumentError(
             f"{line}; give --rate {rate:g}, or certify again with `polyrob synth ... --rate {args.rate:g}` "
             "(--force writes it anyway, with a warning)"
         )
-    warnings.append(f"{line}; written anyway (--force): the certificate does not cover this loop")
+    warnings.append(f"{line}; written anyway (--force): the certificate is not about this loop")
     return args.rate
 
 
-def delay_words(certified: dict | None, rate: float) -> str:
-    """The header's computation-delay line: what the certificate assumed, or that it assumed none."""
-    if certified is None:
+def delay_words(sampling: dict | None, rate: float) -> str:
+    """The header's computation-delay line: the delay of the file's certificate (with its status), or none."""
+    if sampling is None:
         return (
-            "none in the certificate (it covers the continuous-time loop): u[k] is computed from e[k] and applied "
+            "none in the certificate (it is for the continuous-time loop): u[k] is computed from e[k] and applied "
             "at once; the export's own rate checks assume no delay"
         )
-    d = int(certified.get("delay_samples") or 0)
+    d, at = int(sampling.get("delay_samples") or 0), float(sampling["rate_hz"])
     if d == 0:
-        return f"none: the certificate (sampled at {float(certified['rate_hz']):g} Hz) assumes u[k] applied at sample k"
+        return f"none: the certificate ({sampling['status']}, sampled at {at:g} Hz) assumes u[k] applied at sample k"
     samples = "one sample" if d == 1 else f"{d} samples"
     return (
-        f"{samples} ({d / rate * 1e3:.4g} ms), as certified at {float(certified['rate_hz']):g} Hz: u[k], computed "
-        f"from e[k], is applied at sample k+{d} and held (zero-order hold) until the next"
+        f"{samples} ({d / rate * 1e3:.4g} ms), the delay of the certificate ({sampling['status']}) at {at:g} Hz: "
+        f"u[k], computed from e[k], is applied at sample k+{d} and held (zero-order hold) until the next"
     )
 
 
@@ -221,8 +229,8 @@ def cmd_export(args) -> int:
     out_dir = check_output_dir(args.output)
     K, info, _ = load_controller_args(args.controller)
     warnings = []
-    certified = certified_sampling(args.controller)
-    args.rate = export_rate(args, certified, warnings)
+    sampling = certificate_sampling(args.controller)
+    args.rate = export_rate(args, sampling, warnings)
 
     # the rate: refused below the lowest rate for this controller (--allow-low-rate writes it, with a warning)
     low = lowest_rate_of_controller(K, nominal_plant(info, K))
@@ -306,7 +314,7 @@ def cmd_export(args) -> int:
             f"μ of the discretised loop with these coefficients: {'kept' if check_doc['ok'] else 'NOT kept'}"
         )
     signals = Signals(
-        delay=delay_words(certified, args.rate),
+        delay=delay_words(sampling, args.rate),
         inner=info.get("inner"),
         lower=lower,
         upper=upper,
@@ -349,7 +357,7 @@ def cmd_export(args) -> int:
                 "anti_windup": "conditional integration: an output's section states hold while it saturates",
             },
             "lowest_rate_hz": lowest,
-            "certified_sampling": certified,
+            "certificate_sampling": sampling,
             "smallest_word_length": smallest,
             "accuracy": accuracy.summary(),
             "warnings": list(warnings),
@@ -357,7 +365,7 @@ def cmd_export(args) -> int:
     )
     doc = res.summary()
     doc["lowest_rate_hz"] = lowest
-    doc["certified_sampling"] = certified
+    doc["certificate_sampling"] = sampling
     doc["smallest_word_length"] = smallest
     doc["accuracy"] = accuracy.summary()
     doc["output_limits"] = {"lower": lower, "upper": upper, "source": limit_source}
@@ -390,7 +398,7 @@ def register(sub) -> None:
         "--rate",
         type=positive_float,
         default=None,
-        help="sample rate in Hz (default: the rate the controller file's certificate covers, from "
+        help="sample rate in Hz (default: the rate of the controller file's certificate, from "
         "`synth --rate`; another rate is refused unless --force)",
     )
     p.add_argument(
@@ -414,7 +422,7 @@ def register(sub) -> None:
         "--force",
         action="store_true",
         help="write coefficients that the checks find too short (--word-length, --real float), or at a --rate "
-        "other than the certified one, with a warning",
+        "other than its certificate's, with a warning",
     )
     p.add_argument(
         "--allow-low-rate",
