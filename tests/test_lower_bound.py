@@ -48,6 +48,22 @@ def test_a_frozen_loop_gains_at_most_its_hinf_norm_even_on_a_coarse_step():
     assert 0.8 * norm < g[0] <= norm * (1 + 1e-9)
 
 
+
+def test_a_stiff_loop_gains_at_most_its_hinf_norm():
+    """Poles at 0.01 and 5000 rad/s on 0.05 s steps (|A| h = 250): the step's Gramian must not overflow.
+
+    Van Loan's exponential on the whole step forms exp(5000 * 0.05): the main job's 16-state loop read a
+    gain of 5e13 that way.  Its peak sits at 0 rad/s: 0.9 (the slow pole's DC gain).
+    """
+    A = np.diag([-0.01, -5000.0])
+    B, C, D = np.array([[0.01], [5000.0]]), np.array([[0.9, 0.5]]), np.zeros((1, 1))
+    norm = hinf_norm((A, B, C, D))
+    assert 1.39 < norm < 1.41  # both paths in phase at 0 rad/s: 0.9 + 0.5
+    t = np.arange(400) * 0.05
+    g = trajectory_gains(lambda rho: (A, B, C, D), [("rest", np.zeros((t.size, 1)))], 0.05, iterations=30)
+    assert g[0] <= norm * (1 + 1e-9)
+    assert g[0] > 0.5  # the fast path alone passes 0.5 at every frequency below 5000 rad/s
+
 def test_the_trajectories_are_admissible(robot):
     domain = Domain.from_robot(robot, "paper")
     model = scheduling(robot, domain, points=(5, 3))

@@ -397,3 +397,23 @@ def test_a_fixed_level_maximises_the_margin_and_still_proves_a_bound_below_it():
     assert any("margin maximised" in n for n in fixed.notes)
     with pytest.raises(ArgumentError, match="level"):
         polyrob.lpvnorm(system, grid, [(-0.1, 0.1)], basis, level=1.0, solver="cvxpy")
+
+
+def test_a_parameter_the_basis_does_not_use_adds_no_rate_vertices():
+    """A second parameter the basis ignores: its rate's two ends give one LMI, so one vertex, and the same bound."""
+    from polyrob.analysis.lpv.data import evaluate
+
+    loop = lpvtools_demo_loop()
+
+    def system(rho):  # the demo loop, scheduled on p only; rho_2 moves but nothing depends on it
+        return loop(rho[:1])
+
+    basis = [(f, lambda r, g=g: [g(r)[0], 0.0]) for f, g in BASIS2]
+    grid = [GRID[0], np.array([0.0, 1.0])]
+    rates = [(-0.1, 0.1), (-5.0, 5.0)]
+    ev = evaluate(system, grid, rates, basis)
+    assert ev.data.nus.shape == (2, 2)  # (-0.1, 0.1) only: the ignored rate is not enumerated
+    two = polyrob.lpvnorm(system, grid, rates, basis)
+    one = polyrob.lpvnorm(loop, GRID, rates[:1], BASIS2)
+    assert two.proved and two.gamma == pytest.approx(one.gamma, rel=1e-3)
+    assert "[-5, 5]" in two.variation  # the stated rate box is the user's

@@ -143,6 +143,17 @@ def _basis_values(basis, points: np.ndarray):
     return F, G
 
 
+def _collapse_unused(bounds, G) -> list[tuple[float, float]]:
+    """``bounds`` with one value for each parameter no basis function depends on (zero gradient at every point).
+
+    Its rate multiplies ``dX/drho_i = 0`` in the LMIs, so both ends of its
+    interval give the same LMI: enumerating them would only repeat it (the
+    task's jerk doubled the LMIs per acceleration for an ``X`` free of them).
+    """
+    unused = ~np.any(G != 0, axis=(0, 1))
+    return [(lo, lo) if unused[i] and np.isfinite(lo) else (lo, hi) for i, (lo, hi) in enumerate(bounds)]
+
+
 def _rates_per_point(rates_at, points, rb, G) -> np.ndarray:
     """``(N, V, p)`` rate vertices from ``rates_at(rho)``, each box inside ``rb`` (shorter lists padded)."""
     p = points.shape[1]
@@ -159,7 +170,7 @@ def _rates_per_point(rates_at, points, rb, G) -> np.ndarray:
                 )
             if not (np.isfinite(lo) and np.isfinite(hi)) and np.any(G[a, :, i] != 0):
                 raise ArgumentError(f"rates_at: the rate of rho_{i + 1} is unbounded, but the basis depends on it")
-        per.append(rate_vertices(here))
+        per.append(rate_vertices(_collapse_unused(here, G)))
     V = max(len(v) for v in per)
     return np.array([np.vstack([v] + [v[-1:]] * (V - len(v))) for v in per])
 
@@ -215,5 +226,5 @@ def evaluate(system, grid, rate_bounds=None, basis=None, rates_at=None) -> Evalu
     for i, (rlo, rhi) in enumerate(rb):
         if not (np.isfinite(rlo) and np.isfinite(rhi)) and np.any(G[:, :, i] != 0):
             raise ArgumentError(f"the rate of rho_{i + 1} is unbounded, but the basis depends on it (nonzero gradient)")
-    nus = rate_vertices(rb) if rates_at is None else _rates_per_point(rates_at, points, rb, G)
+    nus = rate_vertices(_collapse_unused(rb, G)) if rates_at is None else _rates_per_point(rates_at, points, rb, G)
     return Evaluated(GridData(A, B, C, D, F, G, nus, points), lo, hi, False)

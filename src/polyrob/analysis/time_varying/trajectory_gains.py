@@ -276,8 +276,19 @@ def _step_matrices(system, rhos, h: float, scale):
     w = 2.0 ** np.round(np.log2(max(np.abs(F).max(), 1e-300) / max(np.abs(HH).max(), 1e-300)))
     M[:, :N, N:] = HH * w
     M[:, N:, N:] = F
-    E = _expm_batch(M * h)
-    Q = np.einsum("kji,kjl->kil", E[:, N:, N:], E[:, :N, N:]) / w
+    # Van Loan's block holds exp(-F^T h): on a stiff loop (|F| h >> 1) its growth wipes out the Gramian in
+    # cancellation (gains of 1e13 on the main job's loop).  So Van Loan on h / 2^j, |F| h / 2^j <= 1/2, then
+    # doubling, Q(2t) = Q(t) + Phi(t)^T Q(t) Phi(t), Phi(2t) = Phi(t)^2: only the stable exp(F t) is formed.
+    growth = float(np.abs(F).sum(axis=-2).max()) * h
+    halvings = max(0, int(np.ceil(np.log2(growth / 0.5)))) if growth > 0 else 0
+    E = _expm_batch(M * (h / 2.0**halvings))
+    Phi = E[:, N:, N:]
+    Q = np.einsum("kji,kjl->kil", Phi, E[:, :N, N:]) / w
+    for _ in range(halvings):
+        Q = Q + np.einsum("kji,kjl,klm->kim", Phi, Q, Phi)
+        Phi = Phi @ Phi
+    E = np.zeros_like(M)
+    E[:, N:, N:] = Phi
     lam, V = np.linalg.eigh(0.5 * (Q + np.transpose(Q, (0, 2, 1))))
     R = np.sqrt(np.maximum(lam, 0.0))[:, :, None] * np.transpose(V, (0, 2, 1))  # R^T R = Q
     Ed = E[:, N:, N:]
