@@ -6,6 +6,7 @@ A few seconds: no bounds are computed here (the CLI tests read ``info --json``).
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -63,13 +64,21 @@ def test_synth_options_pose_the_default_task_and_say_so(capsys):
     assert doc["domain"]["kind"] == "task"
 
 
-@pytest.mark.parametrize(
-    "argv", [["--torque-box"], ["--qdot-max", "1"], ["--inner", "gravity"], ["--inner", "none"]]  # none: the paper's layer
-)
-def test_any_domain_or_inner_option_keeps_todays_behaviour(capsys, argv):
+@pytest.mark.parametrize("argv", [["--torque-box"], ["--qdot-max", "1"], ["--model-error", "5"]])
+def test_any_domain_or_model_error_option_keeps_todays_behaviour(capsys, argv):
     doc, err = _info(capsys, "ur5", *argv)
     assert "default task" not in err
     assert doc["domain"].get("kind", "box") != "task"
+
+
+@pytest.mark.parametrize("layer", ["gravity", "none"])  # none: the paper's single layer
+def test_an_inner_layer_alone_keeps_the_default_task_with_that_layer(capsys, layer):
+    doc, err = _info(capsys, "ur5", "--inner", layer)
+    assert "default task of ur5" in err and f"inner layer {layer}," in err
+    assert doc["domain"]["kind"] == "task"
+    robot, dom, task = job_robot_and_domain(Job(robot="ur5", inner=layer))
+    assert task == replace(DEFAULT_TASK, inner=layer) and isinstance(dom, TaskDomain)
+    assert robot.inner == layer and robot.model_error == 0.1 and robot.payload.mass_upper > 0.1
 
 
 def test_a_payload_rides_on_the_default_task(capsys):

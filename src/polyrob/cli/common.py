@@ -176,7 +176,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,  # not given: an arm's default task (computed torque); --inner none is the paper's single layer
         choices=("none", "gravity", "computed-torque"),
         help="none (the paper: v = u), gravity (u = g_hat(q) + v), computed-torque (u = M_hat(q) v + h_hat(q, qdot)); "
-        "default: an arm's default task (computed torque), else none",
+        "default: an arm's default task (computed torque), else none; on an arm, given alone, its default task "
+        "with this layer",
     )
     g.add_argument("--payload-mass", default=None, help="payload at the tool flange, kg: LO:HI or M")
     g.add_argument(
@@ -254,10 +255,12 @@ def apply_default_task(robot, args, *, say: bool = True) -> bool:
     """Fill ``args`` with the robot's default task (:mod:`polyrob.domains.default_task`) when it applies.
 
     It applies to a robot of ``MIN_JOINTS`` joints or more when no domain
-    option, no inner-layer/payload/model-error option, no ``--pldi`` and no
-    ``--torque-box`` is given (``--certify`` proves the task's factor ranges:
-    it keeps the task).  Sets ``args.default_task`` to the task's
-    words (``None`` when it does not apply) and returns whether it applied;
+    option, no ``--model-error``, no ``--pldi`` and no ``--torque-box`` is
+    given (``--certify`` proves the task's factor ranges: it keeps the
+    task).  A payload rides on it; ``--inner LAYER`` alone poses the same
+    task with that layer (``none``: the paper's single layer on the task's
+    domain and uncertainty; ``--torque-box`` is the URDF torque box).
+    Sets ``args.default_task`` to the task's words (``None`` when it does not apply) and returns whether it applied;
     ``say``: log them now (else :func:`say_default_task` does, later).
     """
     from polyrob.domains.default_task import DEFAULT_TASK, applies_to
@@ -266,12 +269,12 @@ def apply_default_task(robot, args, *, say: bool = True) -> bool:
     args.bound_options = None
     given = (
         domain_options_given(args)
-        or inner_options_given(args)
+        or getattr(args, "model_error", None) is not None
         or any(getattr(args, k, None) for k in ("pldi", "torque_box"))
     )
     if given or not applies_to(robot.m):
         return False
-    t = DEFAULT_TASK
+    t = DEFAULT_TASK if getattr(args, "inner", None) is None else replace(DEFAULT_TASK, inner=args.inner)
     args.q_radius, args.qdot_max, args.qddot_max = f"{t.q_radius!r}", f"{t.qdot_max!r}", f"{t.qddot_max!r}"
     args.inner, args.model_error = t.inner, f"{100 * t.model_error!r}"
     user_payload = getattr(args, "payload_mass", None)  # a user's payload rides on the default task

@@ -236,8 +236,9 @@ def job_robot_and_domain(job: Job):
     from polyrob.domains.torque_box import Domain
 
     robot = polyrob.load_robot(job.robot, lock=None if job.lock is None else list(job.lock))
-    # a payload alone rides on the default task (an instrument on the arm's usual problem)
-    posed = _BOX_FIELDS + _TASK_FIELDS + ("inner", "model_error", "qdot_max")
+    # a payload alone rides on the default task (an instrument on the arm's usual problem), and so does an inner
+    # layer alone (the same task with that layer; none: the paper's single layer)
+    posed = _BOX_FIELDS + _TASK_FIELDS + ("model_error", "qdot_max")
     given = any(getattr(job, k) is not None for k in posed) or job.qdot_scale != 1.0 or job.u_scale != 1.0
     task = None
     payload = None
@@ -246,7 +247,7 @@ def job_robot_and_domain(job: Job):
 
         payload = PayloadRange.parse(str(job.payload_mass), job.payload_com)
     if not (given or job.torque_box) and applies_to(robot.m):
-        task = DEFAULT_TASK
+        task = DEFAULT_TASK if job.inner is None else replace(DEFAULT_TASK, inner=job.inner)
         fields = {"q_radius": task.q_radius, "qdot_max": task.qdot_max, "qddot_max": task.qddot_max}
         inner, error = task.inner, task.model_error
         payload = payload or task.payload_range(robot)
