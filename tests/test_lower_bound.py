@@ -84,6 +84,42 @@ def test_the_trajectories_are_admissible(robot):
         assert np.allclose(dq, v * h, atol=1e-9), name
 
 
+
+def test_a_tasks_accelerations_follow_its_velocities_and_rest_means_none():
+    """On a task the loop depends on qddot: a trajectory whose qddot is not d qdot/dt is not one the robot makes."""
+    from polyrob.analysis.lpv.task import task_rate_bounds, task_scheduling
+    from polyrob.analysis.time_varying.trajectory_gains import rest_peak
+    from polyrob.domains.task import TaskDomain
+
+    robot = polyrob.load_robot("planar_2r")
+    task = TaskDomain.from_robot(robot, pose=[0.0, 1.5708], q_radius=0.5, qdot_max=1.0, qddot_max=2.0)
+    model = task_scheduling(robot, task, points=(3, 3))
+    rates = task_rate_bounds(model, task)
+    h = 2e-3
+    t = np.arange(3000) * h
+    trajs = admissible_trajectories(model, rates, t)
+    assert len(trajs) >= 4
+    pairs = [(model.names.index(f"qdot{j}"), model.names.index(f"qddot{j}")) for j in (1, 2)]
+    for name, rho in trajs:
+        for v, a in pairs:
+            assert np.abs(rho[:, a]).max() <= 2.0 * (1 + 1e-9), name
+            slope = np.diff(rho[:, v]) / h  # the velocity's change over each step
+            mean = 0.5 * (rho[1:, a] + rho[:-1, a])
+            off = np.abs(slope - mean) > 2e-3 * 2.0 + 1e-9
+            assert off.mean() < 0.01, (name, v, off.mean())  # a switch of a bang-bang or random run at most
+    A, B, C, D = np.eye(1) * -1.0, np.ones((1, 1)), np.ones((1, 1)), np.zeros((1, 1))
+    seen = []
+
+    def system(rho):
+        seen.append(np.array(rho))
+        return A, B, C, D
+
+    rest_peak(model, system, points=3)
+    at_rest = np.array(seen)
+    for _v, a in pairs:
+        assert np.all(at_rest[:, a] == 0.0)  # at rest every acceleration is 0
+    assert np.all(at_rest[:, model.names.index("qdot2")] == 0.0)  # q2 enters: its velocity is 0 at rest
+
 def test_the_lower_bound_never_exceeds_the_proved_bound(robot, small):
     problem = NS(robot=robot, domain=small, P=NS(W_S=0.5 * np.eye(2), W_T=None, W_KS=None))
     c = moving_robot_certificate(problem, pd_controller(), points=(4, 2), tensor=False, velocities="bounded",

@@ -18,7 +18,10 @@ trajectories really reach, so the user sees how much of ``gamma`` is left.
   bang-bang velocities (triangle waves at the acceleration limit), chirps,
   and random runs (piecewise-constant accelerations within the bounds).
   Every trajectory keeps ``dq_i/dt = qdot_i`` exactly, its velocities in
-  the box and ``|dqdot_i/dt|`` within the rate bounds.
+  the box and ``|dqdot_i/dt|`` within the rate bounds; on a task
+  (:class:`~polyrob.analysis.lpv.task.TaskMotionModel`) its acceleration
+  parameters are the velocities' derivatives (0 where a velocity is not
+  scheduled), so the loop is the robot's along a motion it can make.
 * **The gain along a trajectory** (:func:`trajectory_gains`): the loop
   ``xdot = A(rho(t)) x + B(rho(t)) d, e = C x + D d`` on a finite horizon,
   frozen over each step of length ``h`` and integrated exactly there (zero-
@@ -157,11 +160,23 @@ def admissible_trajectories(model, rates, t, *, seed: int = 0, random_runs: int 
     rng = np.random.default_rng(seed)
     T = float(t[-1] - t[0]) if t.size > 1 else 1.0
 
-    def with_positions(name, v, start=None):
-        """``rho`` from velocity profiles ``v`` (``(len(t), p)``, velocity columns set): positions integrated."""
+    # a task's accelerations (kind qddot): the derivative of their joint's velocity, 0 for a velocity not scheduled
+    acc_of = {i: next((w for w in vel if model.joints[w] == model.joints[i]), None)
+              for i, k in enumerate(model.kinds) if k == "qddot"}  # fmt: skip
+
+    def with_positions(name, v, start=None, a=None):
+        """``rho`` from velocity profiles ``v`` and their derivatives ``a`` (``(len(t), p)``, velocity columns set).
+
+        Positions integrated, accelerations ``a`` (``None``: constant velocities, ``0``).
+        """
         rho = np.tile(mid if start is None else start, (t.size, 1))
         for i in vel:
             rho[:, i] = v[:, i]
+        for i, w in acc_of.items():
+            rho[:, i] = 0.0 if a is None or w is None else a[:, w]
+            if np.any(rho[:, i] < lo[i] - 1e-9 * (1 + abs(lo[i]))) or np.any(rho[:, i] > hi[i] + 1e-9 * (1 + abs(hi[i]))):
+                return None  # an acceleration outside the task's box: not a trajectory of it
+            rho[:, i] = np.clip(rho[:, i], lo[i], hi[i])
         dt = np.diff(t, prepend=t[0])
         for i, w in vel_of.items():
             q = rho[0, i] + np.cumsum(0.5 * (v[:, w] + np.concatenate([v[:1, w], v[:-1, w]])) * dt)
@@ -188,45 +203,50 @@ def admissible_trajectories(model, rates, t, *, seed: int = 0, random_runs: int 
     # swings at the acceleration limit: the largest sinusoid the velocity, acceleration and position bounds allow
     for periods in (1.0, 2.0, 4.0, 8.0):
         om = 2 * np.pi * periods / T
-        v = np.zeros((t.size, p))
+        v, a = np.zeros((t.size, p)), np.zeros((t.size, p))
         for i in vel:
             amp = min(vmax[i], acc[i] / om)
             for q, w in vel_of.items():
                 if w == i and not _periodic(model, q):
                     amp = min(amp, 0.5 * (hi[q] - lo[q]) * om)
             v[:, i] = amp * np.sin(om * (t - t[0]))
+            a[:, i] = amp * om * np.cos(om * (t - t[0]))
         start = mid.copy()
         for q, w in vel_of.items():
             if not _periodic(model, q):
                 start[q] = mid[q] - v[:, w].max() / om if v[:, w].max() > 0 else mid[q]
-        add(with_positions(f"swing at {om:.3g} rad/s", v, start))
+        add(with_positions(f"swing at {om:.3g} rad/s", v, start, a))
     # bang-bang velocities: triangle waves at the acceleration limit between the velocity bounds
     for i in vel:
-        v = np.zeros((t.size, p))
+        v, a = np.zeros((t.size, p)), np.zeros((t.size, p))
         phase = np.mod(acc[i] * (t - t[0]) / (2 * vmax[i]) + 0.25, 2.0)
         v[:, i] = vmax[i] * (2 * np.abs(phase - 1.0) - 1.0)
-        add(with_positions(f"bang-bang {model.names[i]} (|d/dt| = {acc[i]:.4g})", v))
+        a[:, i] = np.where(phase >= 1.0, acc[i], -acc[i])
+        add(with_positions(f"bang-bang {model.names[i]} (|d/dt| = {acc[i]:.4g})", v, None, a))
     # chirp: a velocity sweeping 0.5 to 16 oscillations over the horizon, within the acceleration bound
-    v = np.zeros((t.size, p))
+    v, a = np.zeros((t.size, p)), np.zeros((t.size, p))
     tau = (t - t[0]) / T
     for i in vel:
         phase = 2 * np.pi * (0.5 * tau + 7.75 * tau**2)
         rate = 2 * np.pi * (0.5 + 15.5 * tau) / T
-        v[:, i] = np.minimum(vmax[i], acc[i] / rate.max()) * np.sin(phase)
-    add(with_positions("chirp", v))
+        amp = np.minimum(vmax[i], acc[i] / rate.max())
+        v[:, i], a[:, i] = amp * np.sin(phase), amp * rate * np.cos(phase)
+    add(with_positions("chirp", v, None, a))
     # random runs: piecewise-constant accelerations within the bounds, the velocities kept in the box
     for r in range(random_runs):
-        v = np.zeros((t.size, p))
+        v, a = np.zeros((t.size, p)), np.zeros((t.size, p))
         for i in vel:
             knots = rng.uniform(-1, 1, size=16) * acc[i]
-            a = knots[np.minimum((16 * (t - t[0]) / T).astype(int), 15)]
+            ak = knots[np.minimum((16 * (t - t[0]) / T).astype(int), 15)]
             x = rng.uniform(lo[i], hi[i])
             for k in range(t.size):
                 v[k, i] = x
                 if k + 1 < t.size:
-                    x = float(np.clip(x + a[k] * (t[k + 1] - t[k]), lo[i], hi[i]))
+                    step = float(np.clip(x + ak[k] * (t[k + 1] - t[k]), lo[i], hi[i]))
+                    a[k, i] = (step - x) / (t[k + 1] - t[k])  # the velocity's slope over the step (0 at a bound)
+                    x = step
         start = np.where([model.kinds[i] == "q" for i in range(p)], rng.uniform(lo, hi), mid)
-        add(with_positions(f"random run {r + 1}", v, start))
+        add(with_positions(f"random run {r + 1}", v, start, a))
     return out
 
 
@@ -353,7 +373,9 @@ def trajectory_gains(system, trajectories, h: float, *, iterations: int = ITERAT
 def _sweep_peak(A, B, C, D, w) -> tuple[float, float]:
     """``(largest singular value of the frequency response over w, its frequency)``: a gain a sinusoid reaches."""
     n = A.shape[0]
-    sv = [np.linalg.svd(C @ np.linalg.solve(1j * x * np.eye(n) - A, B) + D, compute_uv=False)[0] for x in w]
+    resolvent = 1j * np.asarray(w)[:, None, None] * np.eye(n)[None] - A[None]
+    sv = np.linalg.svd(C[None] @ np.linalg.solve(resolvent, np.broadcast_to(B, (len(w),) + B.shape)) + D[None],
+                       compute_uv=False)[:, 0]  # fmt: skip
     i = int(np.argmax(sv))
     return float(sv[i]), float(w[i])
 
@@ -361,17 +383,19 @@ def _sweep_peak(A, B, C, D, w) -> tuple[float, float]:
 def rest_peak(model, system, points: int = 9) -> tuple[float, np.ndarray, float]:
     """``(peak, rho, frequency)``: the largest frozen gain at rest found on a grid of the box and of frequencies.
 
-    At rest: every scheduled position's velocity is 0 (the other parameters on
-    a grid of ``points`` values).  The frequency response's largest singular
+    At rest: every scheduled position's velocity is 0 and every acceleration
+    of a task is 0 (a velocity that stays put; the other parameters on a grid
+    of ``points`` values).  The frequency response's largest singular
     value on a logarithmic grid, refined about its peak: a gain a sinusoid
     reaches (at most the H-infinity norm); ``inf`` for an unstable loop.
     """
     vel_of = _velocity_index(model)
+    still = set(vel_of.values()) | {i for i, k in enumerate(model.kinds) if k == "qddot"}  # constant velocities
     axes = []
     for i, a in enumerate(model.axes):
-        if i in vel_of.values() and a[0] <= 0.0 <= a[-1]:
+        if i in still and a[0] <= 0.0 <= a[-1]:
             axes.append(np.zeros(1))
-        elif i in vel_of.values():
+        elif i in still:
             return float("nan"), np.array([]), float("nan")  # no rest in the box: no constant trajectory
         else:
             axes.append(np.linspace(a[0], a[-1], points) if a.size > 1 else a)
