@@ -25,6 +25,10 @@ def robot():
     return polyrob.load_robot("planar_2r")
 
 
+#: A short search for the gain found along the task's motions (the defaults are the benchmark's).
+FAST = {"horizon": 4.0, "iterations": 8, "random_runs": 1}
+
+
 def _task(robot, radius=0.2, v=0.3, a=0.5):
     return TaskDomain.from_robot(robot, pose=[0.0, 1.5708], q_radius=radius, qdot_max=v, qddot_max=a)
 
@@ -124,14 +128,30 @@ def _small_problem(robot, gain):
 
 def test_a_loop_made_to_fail_is_not_certified_and_no_bound_is_below_its_frozen_peak(robot):
     problem, K = _small_problem(robot, 200.0)
-    good = task_motion_certificate(problem, K, points=(3, 2), recheck=None, velocities="arbitrary")
+    good = task_motion_certificate(problem, K, points=(3, 2), recheck=None, velocities="arbitrary", lower_bound=FAST)
     assert good.computed and good.result.proved and 0.3 < good.frozen_gamma <= good.gamma < np.inf
     assert good.certificate.status.value in ("GRID_ONLY", "NOT_CERTIFIED")  # a grid: never CERTIFIED
     assert "dqdot2/dt any" not in good.rate_words and "jerk not needed" in good.rate_words
+    # found along motions of the task (at rest: 0.148; the grid's frozen peak 0.506 is at points no motion stays at)
+    assert good.lower["frozen_gamma"] <= good.lower["gamma"] <= good.gamma and good.lower["gamma"] > 0.14
     problem, K = _small_problem(robot, 50.0)  # a quarter of the gain: the frozen loops' gain is above 1
-    bad = task_motion_certificate(problem, K, points=(3, 2), recheck=None, velocities="arbitrary")
+    bad = task_motion_certificate(problem, K, points=(3, 2), recheck=None, velocities="arbitrary", lower_bound=FAST)
     assert bad.computed and bad.frozen_gamma > 1 and bad.gamma >= bad.frozen_gamma
     assert bad.certificate.status.value == "NOT_CERTIFIED"
+    assert bad.lower["frozen_gamma"] <= bad.lower["gamma"] <= bad.gamma and "L2 gain >= " in bad.verdict
+    assert bad.lower["gamma"] > 2 * good.lower["gamma"]  # a quarter of the controller's gain: a larger gain found
+
+
+def test_a_loop_too_large_for_the_search_still_gets_the_gain_found(robot, monkeypatch):
+    import polyrob.analysis.lpv.task as task_module
+
+    monkeypatch.setattr(task_module, "AUTO_STATES", 2)
+    problem, K = _small_problem(robot, 200.0)
+    mv = task_motion_certificate(problem, K, points=(3, 2), recheck=None, auto=True, lower_bound=FAST)
+    assert not mv.computed and mv.certificate is None
+    assert "runs up to 2" in mv.verdict and "L2 gain >= " in mv.verdict
+    assert mv.summary()["lower_bound"] == mv.lower["gamma"] > 0.14
+    assert task_motion_certificate(problem, K, auto=True, lower_bound=False).lower == {}
 
 
 @pytest.mark.slow
@@ -152,7 +172,7 @@ def test_a_certified_arbitrarily_fast_certificate_decides_the_moving_robot(robot
         cert = gain_certificate(scope, stable=holds, checked=True, gamma=0.8)
         tv = SimpleNamespace(certificate=cert, method="vertices", seconds=1.0)
         mv = task_motion_certificate(
-            problem, K, points=(3, 2), recheck=None, velocities="arbitrary", auto=True, time_varying=tv
+            problem, K, points=(3, 2), recheck=None, velocities="arbitrary", auto=True, time_varying=tv, lower_bound=False
         )
         if holds:
             assert mv.certificate.certified and mv.gamma == 0.8 and "at any rate" in mv.certificate.scope.variation
@@ -186,8 +206,17 @@ def test_the_report_shows_three_rows_with_their_lower_bounds(robot):
     assert rows[2][2] == pytest.approx(moving.gamma) and "qddot" in rows[2][3]
     words = "(mu itself is at least this: no bound of this kind goes below)"
     assert [lower_bound_words(v) for v in records.values()][0] == f"mu >= 0.93 {words}"
-    assert [lower_bound_words(v) for v in records.values()][1:] == ["not computed", "not computed"]
+    found = f"gain >= {moving.lower['gamma']:.4g} (the largest found along admissible trajectories)"
+    assert [lower_bound_words(v) for v in records.values()][1:] == ["not computed", found]
     # a moving robot not computed is a row too, saying why
     a = SimpleNamespace(certificate=frozen, time_varying=None, moving=MovingRobotCertificate.not_computed("too big"))
     rows = certificate_rows(report_certificates(a))
     assert len(rows) == 3 and rows[2][1] == "NOT_CERTIFIED"
+    # not computed, but with the gain found along the task's motions: the row shows it as its lower bound
+    from dataclasses import replace
+
+    found = replace(MovingRobotCertificate.not_computed("too big"), lower={"gamma": 0.7087, "words": ">= 0.7087 found"})
+    records = report_certificates(SimpleNamespace(certificate=frozen, time_varying=None, moving=found))
+    rows = certificate_rows(records)
+    assert len(rows) == 3 and rows[2][1] == "NOT_CERTIFIED"
+    assert lower_bound_words(list(records.values())[2]).startswith("gain >= 0.7087 (the largest found")

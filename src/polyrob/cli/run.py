@@ -238,7 +238,12 @@ def report_certificates(analysis) -> dict:
         certs[f"{MOVING_ROW} ({_short_rates(mv.rate_words)})"] = mv
     else:
         why = mv.notes[0] if mv is not None and mv.notes else "not asked for"
-        certs[f"{MOVING_ROW} (the domain's rates)"] = not_computed("the robot moving with the domain's rates", why)
+        cert = not_computed("the robot moving with the domain's rates", why)
+        if mv is not None and mv.lower:  # the gain found along the task's motions is shown even without a bound
+            from polyrob.report.certificates import certificate_record
+
+            cert = {**certificate_record(cert), "moving": mv.summary()}
+        certs[f"{MOVING_ROW} (the domain's rates)"] = cert
     return certs
 
 

@@ -109,9 +109,10 @@ class MovingRobotCertificate:
     @property
     def verdict(self) -> str:
         """``moving robot with rates <= ...: robust performance ...``."""
-        if not self.computed:
-            return f"moving robot: robust performance not computed ({self.notes[0] if self.notes else 'not asked'})"
         found = f"; L2 gain {self.lower['words']}" if self.lower else ""
+        if not self.computed:
+            why = self.notes[0] if self.notes else "not asked"
+            return f"moving robot: robust performance not computed ({why}){found}"
         return f"moving robot with rates {self.rate_words}: {self.certificate.verdict}{found}"
 
     def details(self) -> str:

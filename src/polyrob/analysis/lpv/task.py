@@ -295,6 +295,7 @@ def task_motion_certificate(
     velocities: str = "auto",
     recheck=DEFAULT_RECHECK,
     time_varying=None,
+    lower_bound: bool | dict = True,
 ):
     """The moving-robot certificate of ``K`` on a task-domain ``problem``.
 
@@ -324,6 +325,12 @@ def task_motion_certificate(
     recheck : (int, int) or None
         The finer grid (points per position, per velocity) the ``X`` is re-checked on.
     time_varying : TimeVaryingCertificate, optional
+    lower_bound : bool or dict
+        The largest gain found along admissible motions of the task
+        (:func:`~polyrob.analysis.time_varying.trajectory_gains.trajectory_lower_bound`;
+        a dict: its options), computed whether or not the search runs: what
+        no bound can go below, and on a loop too large for the search the
+        one figure of the moving robot there is.
 
     Returns
     -------
@@ -344,6 +351,7 @@ def task_motion_certificate(
     decided = any_rate_motion_certificate(time_varying, getattr(domain, "name", ""))
     if decided is not None:
         return decided
+    model = system = None
     try:
         model = task_scheduling(problem.robot, domain, points=points, jerk=jerk)
         system = closed_loop_system(model, K, P.W_S, P.W_T, P.W_KS)
@@ -368,7 +376,9 @@ def task_motion_certificate(
                                    kinematic_rates)  # fmt: skip
         finer = {} if recheck is None else finer_recheck(sysf, model, result, rates, basis, points=recheck, c=cs)
     except NotApplicable as exc:
-        return MovingRobotCertificate.not_computed(str(exc))
+        found = _found(model, system, domain, lower_bound) if system is not None else {}
+        return replace(MovingRobotCertificate.not_computed(str(exc)), lower=found, seconds=time.perf_counter() - t0)
+    found = _found(model, system, domain, lower_bound)
     x_on_acc = False  # default_basis has no acceleration functions: the LMI is affine in qddot
     words = _rate_words(model, task_rate_bounds(model, domain), x_on_acc) + (
         "; the velocities at any rate (X on the positions only)" if velocities == "arbitrary" else ""
@@ -394,8 +404,21 @@ def task_motion_certificate(
     return MovingRobotCertificate(
         computed=True, gamma=gamma, frozen_gamma=float(result.frozen_gamma),
         rates=tuple(task_rate_bounds(model, domain)), rate_words=words, grid_words=model.words(), result=result,
-        scope=scope, notes=why, finer=finer, seconds=time.perf_counter() - t0,
+        scope=scope, notes=why, finer=finer, lower=found, seconds=time.perf_counter() - t0,
     )  # fmt: skip
+
+
+def _found(model, system, domain, lower_bound) -> dict:
+    """The summary of the largest gain found along the task's admissible motions (``{}`` when not asked or none)."""
+    if not lower_bound:
+        return {}
+    from polyrob.analysis.time_varying.trajectory_gains import trajectory_lower_bound
+
+    opts = lower_bound if isinstance(lower_bound, dict) else {}
+    try:
+        return trajectory_lower_bound(model, system, task_rate_bounds(model, domain), **opts).summary()
+    except NotApplicable:  # a frozen loop at rest is unstable: no finite gain to find
+        return {}
 
 
 def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinematic_rates):
