@@ -46,7 +46,9 @@ class MovingRobotCertificate:
     gamma : float
         Proved bound of the ``r -> z`` induced L2 gain on the grid (``inf``: none).
     frozen_gamma : float
-        Largest frozen (LTI) H-infinity norm over the grid points: no rate bound gives less (NaN on the μ route).
+        Largest frozen (LTI) H-infinity norm over the grid points (NaN on the μ route).  Not a lower bound
+        of the moving robot's gain: at a grid point where a scheduled position's velocity or an acceleration
+        is not 0 the robot cannot stay, so that frozen loop is no motion of it (:attr:`lower` is the gain found).
     rates : tuple of (float, float)
     rate_words : str
     grid_words : str
@@ -125,7 +127,7 @@ class MovingRobotCertificate:
                 lines + [f"mu lower bound {self.decided.mu_lower:.4g}; {self.grid_words}; {self.seconds:.0f} s"]
             )
         lines.append(
-            f"frozen peak over the grid {self.frozen_gamma:.4g} (no rate bound gives less); "
+            f"frozen peak over the grid {self.frozen_gamma:.4g} (not a lower bound: the robot cannot rest at most grid points); "
             f"{self.grid_words}; {self.seconds:.0f} s"
         )
         if self.finer.get("points"):
