@@ -305,7 +305,7 @@ def _step_matrices(system, rhos, h: float, scale):
     Phi = E[:, N:, N:]
     Q = np.einsum("kji,kjl->kil", Phi, E[:, :N, N:]) / w
     for _ in range(halvings):
-        Q = Q + np.einsum("kji,kjl,klm->kim", Phi, Q, Phi)
+        Q = Q + np.swapaxes(Phi, 1, 2) @ Q @ Phi
         Phi = Phi @ Phi
     E = np.zeros_like(M)
     E[:, N:, N:] = Phi
