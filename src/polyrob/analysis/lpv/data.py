@@ -4,9 +4,12 @@ Examples
 --------
 >>> import numpy as np
 >>> sysf = lambda r: (np.array([[-1.0 - r[0]]]), np.ones((1, 1)), np.ones((1, 1)), np.zeros((1, 1)))
->>> ev = evaluate(sysf, [np.linspace(0.0, 1.0, 3)], [(-1.0, 1.0)], [(lambda r: 1.0, lambda r: [0.0])])
+>>> affine = [(lambda r: 1.0, lambda r: [0.0]), (lambda r: r[0], lambda r: [1.0])]
+>>> ev = evaluate(sysf, [np.linspace(0.0, 1.0, 3)], [(-1.0, 1.0)], affine)
 >>> ev.data.A.shape, ev.data.nus.tolist()
 ((3, 1, 1), [[-1.0], [1.0]])
+>>> evaluate(sysf, [np.linspace(0.0, 1.0, 3)], [(-1.0, 1.0)], affine[:1]).data.nus.tolist()  # X free of r
+[[-1.0]]
 """
 
 from __future__ import annotations
