@@ -300,12 +300,6 @@ def say_default_task(robot, args) -> None:
         )
 
 
-def inner_options_given(args) -> bool:
-    """Whether ``--inner`` (``none`` too: the paper's single layer) or ``--model-error`` is given (a payload rides on
-    the default task), as the batch reads its jobs."""
-    return getattr(args, "inner", None) is not None or getattr(args, "model_error", None) is not None
-
-
 def inner_options(args):
     """``({"inner", "model_error"}, PayloadRange or None)``, or ``(None, None)`` when none of the options is given."""
     layer = getattr(args, "inner", None) or "none"
