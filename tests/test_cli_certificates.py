@@ -1,7 +1,7 @@
 """Every printed CERTIFIED comes from a Certificate whose status is CERTIFIED.
 
 ``synth``, ``analyze`` and ``run`` on the paper's problem (the fast options of
-tests/test_cli_synth.py; its synthesis and analysis are shared, not run
+tests/test_cli_synth.py; its synthesis, analysis and run are shared, not run
 again), with ``--json``: every JSON document is walked, and
 
 - a mapping with ``"certified": true`` has ``"status": "CERTIFIED"`` beside it,
@@ -23,7 +23,7 @@ import json
 import re
 
 import pytest
-from test_cli_synth import BOX, FAST, GRID, analysis_of_synth, cli_json, paper_file, synth_reduced
+from test_cli_synth import BOX, GRID, analysis_of_synth, cli_json, run_full_order, synth_reduced
 
 from polyrob.analysis.certificate import Status
 
@@ -31,7 +31,7 @@ STATUSES = {s.value for s in Status}
 #: how each status reads in a verdict line
 NAMED = {"CERTIFIED": "CERTIFIED", "GRID_ONLY": "GRID_ONLY", "NOT_CERTIFIED": "NOT certified", "VIOLATED": "VIOLATED"}
 WORD = re.compile(r"(?<![A-Za-z_])CERTIFIED(?![A-Za-z_])")  # not NOT_CERTIFIED, not "NOT certified"
-#: analysis options shared by analyze and run here
+#: analyze's options here
 ANALYSIS = ["--mc", "20", *GRID, "--no-time-varying"]
 
 
@@ -134,19 +134,15 @@ def test_synth_and_analyze_of_its_controller_agree(tmp_path_factory):
 
 
 def test_run_json(tmp_path_factory):
-    pldi = paper_file(tmp_path_factory)
-    code, doc, d = cli_json(
-        tmp_path_factory,
-        "certificates_run",
-        lambda d: ["run", "paper_2r", "--pldi", pldi, *FAST, *ANALYSIS, "--json", "--quiet", "-o", d / "K.json"],
-    )
+    """``run --json --full-order`` of tests/test_cli_synth.py (the same run, shared: with its time-varying verdict)."""
+    code, doc, K, _ = run_full_order(tmp_path_factory)
     status = doc["analysis"]["status"]
     check_document(doc, status)
     assert code == (0 if status == "CERTIFIED" else 1)
     assert status == "VIOLATED"  # the full-order controller of one D-K iteration
     # one verdict: the analysis' certificate, also the design's and the saved file's
     assert doc["verdict"] == doc["analysis"]["verdict"] and doc["synthesis"]["status"] == status
-    record = json.loads((d / "K.json").read_text())["certificate"]
+    record = json.loads(K.read_text())["certificate"]
     check_document(record, record["status"])
     assert record["status"] == record["certificate"]["status"] == status
 

@@ -97,6 +97,44 @@ def analysis_of_synth(tmp_path_factory):
     return code, doc
 
 
+def run_full_order(tmp_path_factory):
+    """``run --json --full-order -o K_run.json`` (FAST) on the paper's PLDI file, once per session.
+
+    Returns ``(status, document, K_run.json, stages)``; ``stages`` maps ``"design"`` and
+    ``"analyze"`` to what the command had written to stderr when that stage's function
+    was called.  Shared with tests/test_cli_certificates.py (one run per session).
+    """
+    import io
+
+    import polyrob.pipeline as pipeline
+
+    pldi = paper_file(tmp_path_factory)
+
+    def make(d):
+        err, stages = io.StringIO(), {}
+        real = {"design": pipeline.design_controller, "analyze": pipeline.analyze_controller}
+
+        def when_called(stage):
+            def call(*args, **kwargs):
+                stages[stage] = err.getvalue()
+                return real[stage](*args, **kwargs)
+
+            return call
+
+        argv = ["run", "paper_2r", "--pldi", pldi, *FAST, "--mc", "5", *GRID, "--json", "--full-order"]
+        with pytest.MonkeyPatch.context() as patch, open(d / "stdout", "w") as stdout:
+            patch.setattr(pipeline, "design_controller", when_called("design"))
+            patch.setattr(pipeline, "analyze_controller", when_called("analyze"))
+            with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(err):
+                code = main([str(a) for a in [*argv, "-o", d / "K_run.json"]])
+        (d / "stages.json").write_text(json.dumps(stages))
+        (d / "status").write_text(str(code))
+
+    d = shared(tmp_path_factory, "run_full_order", make)
+    doc = json.loads((d / "stdout").read_text())
+    return int((d / "status").read_text()), doc, d / "K_run.json", json.loads((d / "stages.json").read_text())
+
+
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     """The paper's PLDI file, and a reduced D-K controller made on it (``synth --json``)."""
@@ -203,33 +241,14 @@ def test_analyze_reproduces_the_reduced_certificate(files, tmp_path_factory):
     assert "CERTIFIED" not in report["verdict"]
 
 
-def test_run_json_announces_stages_when_they_start_and_matches_synth(files, tmp_path, capsys, monkeypatch):
-    import polyrob.pipeline as pipeline
-
-    pldi, K, _ = files
-    seen = {}
-    real_design, real_analyze = pipeline.design_controller, pipeline.analyze_controller
-
-    def design(*args, **kwargs):
-        seen["design"] = capsys.readouterr().err
-        return real_design(*args, **kwargs)
-
-    def analyze(*args, **kwargs):
-        seen["analyze"] = capsys.readouterr().err
-        return real_analyze(*args, **kwargs)
-
-    monkeypatch.setattr(pipeline, "design_controller", design)
-    monkeypatch.setattr(pipeline, "analyze_controller", analyze)
-    out_file = tmp_path / "K_run.json"
-    code, out, _ = run(
-        capsys, "run", "paper_2r", "--pldi", pldi, *FAST, "--mc", "5", *GRID, "--json", "--full-order", "-o", out_file
-    )
-    doc = json.loads(out)  # stage lines went to stderr, stdout holds one document
+def test_run_json_announces_stages_when_they_start_and_matches_synth(files, tmp_path_factory):
+    _, K, _ = files
+    code, doc, out_file, seen = run_full_order(tmp_path_factory)  # stdout held one document: stage lines on stderr
     assert code == (0 if doc["analysis"]["certified"] else 1) == 1
     assert doc["analysis"]["status"] == doc["synthesis"]["status"] == "VIOLATED"
     # before: "[1/3] bounds" was printed after the synthesis, nothing during the analysis
     assert seen["design"].startswith("[1/3] ") and "[2/3] synthesis" in seen["design"]
-    assert "[3/3] analysis" in seen["analyze"]
+    assert "[3/3] analysis" not in seen["design"] and "[3/3] analysis" in seen["analyze"]
     assert doc["verdict"] == doc["analysis"]["verdict"] and "CERTIFIED" not in doc["verdict"]
     # not certified: one line of what it certifies instead (the mu level proved at every frequency,
     # read as a share of the parameter ranges) and what stands in the way
