@@ -184,12 +184,18 @@ def _panda_pid_start():
 PANDA_NORMAL_CLOCK = {"level": 0.969904759132365, "points_added": 14, "intervals": 152}
 
 
+@pytest.mark.slow  # minutes on 2 cores; tests/test_time_limits.py covers the same behaviour fast (below)
 @pytest.mark.timeout(3600)  # a hang guard only
 def test_panda_pid_start_has_the_same_certificate_under_a_clock_1000x_faster(monkeypatch):
     """Before: the check between the grid points gave up after 120 s of wall clock, so `polyrob synth panda`'s
     PID start was CERTIFIED on an idle machine and GRID_ONLY (bound 0.9603, the grid's peak) at load 5-10.
     Here every second of work reads as 1000 s (a machine 1000 times as loaded): the same points, the same
-    level as under the normal clock, CERTIFIED."""
+    level as under the normal clock, CERTIFIED.
+
+    Slow (the whole panda check between the grid points): the default run has the same behaviour on a
+    small loop, tests/test_time_limits.py::test_the_check_between_grid_points_is_the_same_under_a_clock_1000x_faster
+    (same points, level and intervals under the slowed clock) and ::test_no_give_up_that_decides_a_status_has_a_default_in_seconds
+    (no default limit in seconds)."""
     from clocks import slowed_clock
 
     from polyrob.analysis.certificate import Status, certificate_of_sweep
