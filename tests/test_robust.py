@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 
 import control
 import numpy as np
@@ -125,12 +124,20 @@ def test_monte_carlo_and_corners_find_unstable_plants(paper):
     np.testing.assert_array_equal(s.worst_delta, [1, 1, 1, 1, 1, 1, -1, -1, -1, -1])
 
 
-def test_cli_analyze_json(capsys):
-    code = main(
-        ["analyze", "paper_2r", "--controller", "paper", "--mc", "20", "--json", "--quiet", "--omega", "0.1:100:25"]
-    )
-    out = capsys.readouterr().out
-    rep = json.loads(out)
+#: ``polyrob analyze`` of K* on the paper's problem (tests/test_time_varying.py prints it as text too)
+PAPER_ANALYZE = ["analyze", "paper_2r", "--controller", "paper", "--mc", "5", "--quiet", "--omega", "0.1:100:25"]
+
+
+def paper_analyze_json(tmp_path_factory):
+    """``PAPER_ANALYZE --json``, once per session (shared with tests/test_time_varying.py): exit status, document."""
+    from test_cli_synth import cli_json
+
+    code, doc, _ = cli_json(tmp_path_factory, "paper_analyze_json", lambda d: [*PAPER_ANALYZE, "--json"])
+    return code, doc
+
+
+def test_cli_analyze_json(tmp_path_factory):
+    code, rep = paper_analyze_json(tmp_path_factory)
     assert code == 1 and rep["status"] == "VIOLATED" and rep["certified"] is False  # K* is not certified
     assert rep["robust_performance"]["mu_upper_grid"] > 2 and rep["nominal_stability"]
 

@@ -84,8 +84,10 @@ def test_small_gain_when_the_vertices_are_too_many_bounds_mu_from_above(paper_pr
     assert tv.stability.gamma == pytest.approx(1.687, rel=2e-3) and not tv.stability_holds
 
 
-def test_cli_analyze_prints_both_verdicts_and_which_covers_the_robot(capsys):
-    argv = ["analyze", "paper_2r", "--controller", "paper", "--mc", "5", "--quiet", "--omega", "0.1:100:25"]
+def test_cli_analyze_prints_both_verdicts_and_which_covers_the_robot(capsys, tmp_path_factory):
+    from test_robust import PAPER_ANALYZE as argv
+    from test_robust import paper_analyze_json
+
     assert main(argv) == 1  # ran; K* is not certified
     out = capsys.readouterr().out
     lines = out.strip().splitlines()
@@ -94,9 +96,8 @@ def test_cli_analyze_prints_both_verdicts_and_which_covers_the_robot(capsys):
     assert lines[tv_line + 1] == "which covers the robot: " + covers_nonlinear("vertices")
     assert lines[tv_line + 2].startswith("verdict: robust performance VIOLATED: mu lower bound")
     assert "covers: for constant parameters (every frozen robot of the set)" in out
-    assert main([*argv, "--json"]) == 1
-    doc = json.loads(capsys.readouterr().out)
-    assert doc["time_varying"]["stability_holds"] is False
+    code, doc = paper_analyze_json(tmp_path_factory)  # the same command with --json (test_robust's run)
+    assert code == 1 and doc["time_varying"]["stability_holds"] is False
     assert main([*argv, "--no-time-varying", "--json"]) == 1
     assert json.loads(capsys.readouterr().out)["time_varying"] is None
 
