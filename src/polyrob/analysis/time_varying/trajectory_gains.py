@@ -307,12 +307,9 @@ def _step_matrices(system, rhos, h: float, scale):
     for _ in range(halvings):
         Q = Q + np.swapaxes(Phi, 1, 2) @ Q @ Phi
         Phi = Phi @ Phi
-    E = np.zeros_like(M)
-    E[:, N:, N:] = Phi
     lam, V = np.linalg.eigh(0.5 * (Q + np.transpose(Q, (0, 2, 1))))
     R = np.sqrt(np.maximum(lam, 0.0))[:, :, None] * np.transpose(V, (0, 2, 1))  # R^T R = Q
-    Ed = E[:, N:, N:]
-    return Ed[:, :n, :n], Ed[:, :n, n:], R[:, :, :n], R[:, :, n:]
+    return Phi[:, :n, :n], Phi[:, :n, n:], R[:, :, :n], R[:, :, n:]
 
 
 def trajectory_gains(system, trajectories, h: float, *, iterations: int = ITERATIONS, start=None, seed: int = 0):
