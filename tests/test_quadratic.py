@@ -55,6 +55,28 @@ def test_quadratically_stable_pair_is_accepted_with_a_verified_P():
     assert "arbitrarily fast" in res.covers
 
 
+def test_a_stiff_loop_gets_its_common_P_from_the_centres_lyapunov_coordinates():
+    # the main job's loop (2R task PLDI, its order-8 controller): time constants from 0.03 to 5000 rad/s.
+    # In the diagonally balanced coordinates the solver stalls at a level of 8.6e-6 >= 0 (the slowest
+    # decay rate's order) and the old code found no P; one with cond 2.5e4 exists.
+    from pathlib import Path
+
+    from polyrob.analysis.time_varying.vertices import closed_loop_vertices
+
+    data = np.load(Path(__file__).parent / "fixtures" / "main_job_stiff_loop_vertices.npz")
+    verts = list(zip(data["A"], data["B"]))
+    K = (data["AK"], data["BK"], data["CK"], data["DK"])
+    res = quadstab(verts, K)
+    assert res.holds and res.margin > 0, res.solver_status
+    assert res.n_vertices == 2432
+    # independent re-check in the loop's own coordinates: P > 0 and every vertex decays
+    P = res.P
+    As = closed_loop_vertices(vertex_set(verts), K)
+    assert np.linalg.eigvalsh(P)[0] > 0
+    decay = np.array([np.linalg.eigvalsh(A.T @ P + P @ A)[-1] for A in As])
+    assert decay.max() < 0
+
+
 def _mass_spring_vertices(gains):
     A = np.array([[0.0, 1.0], [-1.0, -0.5]])
     return [(A, np.array([[0.0], [g]])) for g in gains]

@@ -134,6 +134,31 @@ def _first_vertices(As: np.ndarray, k: int = 24) -> np.ndarray:
 # --------------------------------------------------------------------------- quadstab
 
 
+def _lyapunov_congruence(Ab: np.ndarray):
+    """``(T, T^-1)`` with ``T^T P0 T = I``, ``P0`` the Lyapunov matrix of the vertices' mean (``None``: not Hurwitz).
+
+    A loop whose time constants span many decades (the main job's: 0.03 to
+    5000 rad/s) needs a ``P`` whose condition exceeds :data:`COND_MAX` in
+    the diagonally balanced coordinates, and the interior-point solver then
+    stalls at a level of the order of the slowest decay rate.  In the
+    coordinates where the centre's own Lyapunov matrix is the identity the
+    search starts from a well-scaled point; the candidate is mapped back and
+    verified in the balanced coordinates like any other (a similarity is no
+    part of the proof).
+    """
+    from scipy.linalg import solve_continuous_lyapunov
+
+    A0 = Ab.mean(axis=0)
+    if np.linalg.eigvals(A0).real.max() >= 0:
+        return None
+    P0 = solve_continuous_lyapunov(A0.T, -np.eye(A0.shape[0]))
+    w, V = np.linalg.eigh(0.5 * (P0 + P0.T))
+    if not np.all(np.isfinite(w)) or w[0] <= 0:
+        return None
+    return V @ np.diag(w**-0.5) @ V.T, V @ np.diag(w**0.5) @ V.T
+
+
+
 def _verify_stab(As: np.ndarray, P: np.ndarray) -> float:
     """Verified ``min_i λ_min(-(A_i^T P + P A_i)) / λ_max(P)`` (``<= 0``: not verified)."""
     n = P.shape[0]
@@ -208,6 +233,25 @@ def quadstab(vertices, K, *, which: str = "auto", max_vertices: int = MAX_VERTIC
             return np.linalg.eigvalsh(np.transpose(Ab, (0, 2, 1)) @ P + P @ Ab)[:, -1] + 1e-9 * np.linalg.norm(P, 2)
 
         Pv, status, used = _active_set(len(Ab), solve_subset, violation, first)
+        congruence = _lyapunov_congruence(Ab) if Pv is None else None
+        if congruence is not None:  # a stiff loop: the same LMIs in the coordinates of the centre's Lyapunov matrix
+            T, Ti = congruence
+            At = Ti @ Ab @ T
+            level = T.T @ T  # the identity of the balanced coordinates, seen from the new ones
+
+            def solve_congruent(idx):
+                Pt, t = cp.Variable((n, n), symmetric=True), cp.Variable()
+                cons = [Pt >> 1e-3 * eye, Pt << 1e3 * eye] + [At[i].T @ Pt + Pt @ At[i] << t * level for i in idx]
+                st = _solve(cp.Problem(cp.Minimize(t), cons), "quadstab")
+                if Pt.value is None or t.value is None or t.value >= 0:
+                    return None, st if t.value is None else f"{st}; level {t.value:.3g} >= 0"
+                P = Ti.T @ (0.5 * (Pt.value + Pt.value.T)) @ Ti
+                return 0.5 * (P + P.T), st
+
+            P2, st2, used2 = _active_set(len(Ab), solve_congruent, violation, first)
+            if P2 is not None:
+                Pv, used = P2, used2
+                status = f"{st2} (in the coordinates of the centre's Lyapunov matrix; {status} in the balanced ones)"
     rate = _verify_stab(Ab, Pv) * c if Pv is not None else np.nan
     holds = bool(np.isfinite(rate) and rate > 0)
     P_orig = None if Pv is None else Pv / s[:, None] / s[None, :]  # V = x'^T P x', x' = T^-1 x
