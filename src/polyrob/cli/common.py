@@ -274,7 +274,7 @@ def apply_default_task(robot, args, *, say: bool = True) -> bool:
     )
     if given or not applies_to(robot.m):
         return False
-    t = DEFAULT_TASK if getattr(args, "inner", None) is None else replace(DEFAULT_TASK, inner=args.inner)
+    t = DEFAULT_TASK.with_inner(getattr(args, "inner", None))
     args.q_radius, args.qdot_max, args.qddot_max = f"{t.q_radius!r}", f"{t.qdot_max!r}", f"{t.qddot_max!r}"
     args.inner, args.model_error = t.inner, f"{100 * t.model_error!r}"
     user_payload = getattr(args, "payload_mass", None)  # a user's payload rides on the default task

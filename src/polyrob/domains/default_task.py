@@ -41,7 +41,7 @@ Examples
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 __all__ = ["DefaultTask", "DEFAULT_TASK", "MIN_JOINTS", "applies_to", "default_task_domain", "default_task_robot"]
 
@@ -95,6 +95,16 @@ class DefaultTask:
 
         mass = self.payload_fraction * sum(float(Y.mass) for Y in robot.model.inertias[1:])
         return PayloadRange(0.0, mass).at(robot)
+
+    def with_inner(self, inner: str | None) -> DefaultTask:
+        """The same task behind the inner layer ``inner`` (``None``: this task's own).
+
+        Examples
+        --------
+        >>> DEFAULT_TASK.with_inner("gravity").inner, DEFAULT_TASK.with_inner(None) is DEFAULT_TASK
+        ('gravity', True)
+        """
+        return self if inner is None else replace(self, inner=inner)
 
     def payload_option(self, robot) -> str | None:
         """:meth:`payload_range` as the ``--payload-mass`` option's ``LO:HI`` (``None``: no payload)."""

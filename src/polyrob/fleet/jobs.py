@@ -247,7 +247,7 @@ def job_robot_and_domain(job: Job):
 
         payload = PayloadRange.parse(str(job.payload_mass), job.payload_com)
     if not (given or job.torque_box) and applies_to(robot.m):
-        task = DEFAULT_TASK if job.inner is None else replace(DEFAULT_TASK, inner=job.inner)
+        task = DEFAULT_TASK.with_inner(job.inner)
         fields = {"q_radius": task.q_radius, "qdot_max": task.qdot_max, "qddot_max": task.qddot_max}
         inner, error = task.inner, task.model_error
         payload = payload or task.payload_range(robot)
