@@ -62,6 +62,7 @@ __all__ = [
     "gain_certificate",
     "gridded_gain_certificate",
     "nominal_performance_verdict",
+    "friction_sentence",
     "weakest_enclosure",
     "FROZEN",
     "ARBITRARY",
@@ -311,6 +312,34 @@ def nominal_performance_verdict(hinf_norm: float) -> str:
     ('met', 'not met')
     """
     return "met" if hinf_norm < 1.0 else "not met"
+
+
+def friction_sentence(channel) -> str:
+    """The words of a :class:`~polyrob.synthesis.integral.CoulombChannel`: what Coulomb friction does to the error.
+
+    A statement beside the certificate, not a status: the steady state is
+    proved for every member the certificate keeps stable only with integral
+    action; otherwise, and for the peak, the figures are the nominal loop's.
+    """
+    levels = sorted(set(channel.levels))
+    fc = f"{levels[0]:g} N m" if len(levels) == 1 else f"{levels[0]:g}-{levels[-1]:g} N m"
+    head = f"friction: Coulomb |d| <= {fc} per joint ({channel.source}), not in the model, as a torque disturbance: "
+    if not channel.stable:
+        return head + "no figure (the nominal loop is not stable)"
+    if channel.integral:
+        steady = "integral action on every joint, so a constant friction torque leaves no steady-state error on any robot the loop is stable for"
+    else:
+        worst = max(channel.steady_state)
+        steady = (
+            f"no integral action: a constant friction torque leaves up to {worst:.3g} rad of steady-state error "
+            f"({max(channel.steady_state_per_nm):.3g} rad per N m; nominal model, exact DC gain)"
+        )
+    peak = (
+        f"; at any frequency the error stays within {channel.peak:.3g} rad ({channel.peak_per_nm:.3g} rad per N m; "
+        "H-inf of the nominal loop, proved from above)"
+    )
+    approx = f" ({channel.approximation})" if channel.approximation else ""
+    return head + steady + peak + approx
 
 
 def certify_loop(

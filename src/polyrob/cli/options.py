@@ -32,6 +32,8 @@ __all__ = [
     "add_validation_arguments",
     "rate_conditions_from_args",
     "rate_conditions_dict",
+    "add_coulomb_argument",
+    "coulomb_from_args",
     "add_sampling_arguments",
     "sampling_from_args",
 ]
@@ -467,3 +469,28 @@ def rate_conditions_dict(args) -> dict:
     if c is None:
         return {}
     return {k: getattr(c, k) for k in ("rate", "delay_samples", "encoder_bits", "friction_viscous", "friction_coulomb")}
+
+
+# --------------------------------------------------------------------------- Coulomb friction in the certificate's words
+
+
+def add_coulomb_argument(group) -> None:
+    """``--coulomb N_M``: the Coulomb level the certificate states the tracking error of (docs/synthesis.md)."""
+    group.add_argument(
+        "--coulomb",
+        default=None,
+        metavar="N_M",
+        help="Coulomb friction |d| <= N_M per joint (one value, or one per joint, comma-separated), not in the model: "
+        "the certificate states the tracking error it causes (default: the robot-uncertainty set's friction)",
+    )
+
+
+def coulomb_from_args(args):
+    """The ``--coulomb`` levels (N m, ``>= 0``), or ``None``."""
+    text = getattr(args, "coulomb", None)
+    if text is None:
+        return None
+    vals = parse_list(text, "--coulomb", positive=False)
+    if any(v < 0 for v in vals):
+        raise ArgumentError(f"--coulomb: give levels >= 0 N m, got '{text}'")
+    return vals

@@ -15,8 +15,10 @@ from polyrob.cli.common import (
     scale_names,
 )
 from polyrob.cli.options import (
+    add_coulomb_argument,
     add_sampling_arguments,
     add_validation_arguments,
+    coulomb_from_args,
     int_at_least,
     positive_float,
     rate_conditions_from_args,
@@ -194,6 +196,7 @@ def cmd_synth(args) -> int:
     if args.max_bandwidth:  # option errors before any work
         scale_names(args.scale_only), alphas_from_args(args.alphas)
     at_rate = rate_conditions_from_args(args)
+    coulomb = coulomb_from_args(args)
     stages = ["bounds", "largest bandwidth" if args.max_bandwidth else "synthesis"] + ["moving-robot"] * args.moving
     stages += ["validation"] * (at_rate is not None)
     out = Output(args, stages=len(stages), job=stages)
@@ -248,8 +251,30 @@ def cmd_synth(args) -> int:
     doc["verdict"] = "verdict: " + cert.verdict
     out.line(doc["verdict"])
     out.line(cert.details())
+    friction = friction_statement(problem, design.controller, coulomb)
+    if friction is not None:  # beside the covers line: what Coulomb friction does to the error
+        doc["friction"] = friction
+        out.line(friction["words"])
     out.document(doc)
     return exit_status(cert)
+
+
+def friction_statement(problem, K, given=None) -> dict | None:
+    """The Coulomb channel's figures of ``K`` on ``problem`` (:mod:`polyrob.synthesis.integral`), or None (not stated)."""
+    from polyrob.fleet.autoweights import inverse_inertia_bound
+    from polyrob.synthesis.integral import coulomb_channel, coulomb_levels
+
+    levels, source = coulomb_levels(problem.robot, given)
+    if levels is None:
+        return None
+    inv = inverse_inertia_bound(problem.robot, problem.domain)
+    spec = getattr(problem.robot, "uncertainty", None)  # the relative inertia error the model's M_hat may have
+    p = max(float(getattr(problem.robot, "model_error", 0.0) or 0.0), float(getattr(spec, "link_error", 0.0) or 0.0))
+    p = p if inv is not None else 0.0
+    ch = coulomb_channel(
+        problem.unc.nominal_system(), K, levels, source=source, inverse_inertia=inv, model_error=p
+    )
+    return ch.to_dict()
 
 
 def sampled_check(problem, design, sampling, out):
@@ -270,6 +295,7 @@ def add_synthesis_arguments(p) -> None:
     add_weight_arguments(p)
     add_plant_arguments(p)
     add_sampling_arguments(p)
+    add_coulomb_argument(p)
     g = p.add_argument_group("synthesis")
     g.add_argument(
         "--structure", default="full", help="full (D-K / D-G-K), tfN (e.g. tf3: each K_ij of order N), pid, ss:N"

@@ -49,6 +49,7 @@ __all__ = [
     "automatic_hyperparameters",
     "domain_level",
     "limit_hyperparameters",
+    "inverse_inertia_bound",
     "EffortBudget",
     "PAPER_DOMAIN_RATIO",
     "LEVEL_LIMITS",
@@ -219,6 +220,22 @@ def limit_hyperparameters(robot, domain, *, encoder_bits: int | None = None, sam
         binds=binds,
         u_unit="N m" if gain is None else "rad/s^2",
     )
+
+
+def inverse_inertia_bound(robot, domain, *, samples: int = TASK_TORQUE_SAMPLES):
+    """``N_ij >= |M_hat^-1(q)_ij|`` over ``domain`` for a computed-torque robot (``None`` for any other layer).
+
+    The largest ``|M_hat^-1(q)_ij|`` at ``samples`` points of the domain's
+    positions (the points of the task torque), times :data:`TASK_TORQUE_MARGIN`:
+    sampled, not proved (like the task's torque).  It turns a torque into the
+    acceleration the outer loop sees (:func:`polyrob.plant.weights.coulomb_weight`).
+    """
+    if getattr(robot, "inner", "none") != "computed-torque":
+        return None
+    q, _, _ = _task_points(robot, domain, int(samples))
+    model = robot.model_robot
+    inv = np.array([np.abs(np.linalg.inv(np.asarray(model.mass_matrix(qk), float))) for qk in q])
+    return TASK_TORQUE_MARGIN * inv.max(axis=0)
 
 
 def automatic_hyperparameters(

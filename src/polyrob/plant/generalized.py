@@ -168,7 +168,7 @@ class GeneralizedPlant:
 
 
 def generalized_plant(
-    unc: UncertainPlant, W_S=None, W_T=None, W_KS=None, *, W_n=None, regularize: float | None = None
+    unc: UncertainPlant, W_S=None, W_T=None, W_KS=None, *, W_n=None, W_f=None, regularize: float | None = None
 ) -> GeneralizedPlant:
     """Augment the uncertain plant with weights: the paper's ``P`` (eq. 10).
 
@@ -231,6 +231,8 @@ def generalized_plant(
         eps = None
     if WS is None and WT is None and WKS is None and eps is None:
         raise ArgumentError("give at least one weight (W_S, W_T or W_KS): z would be empty")
+    if W_f is not None:
+        return _with_friction(generalized_plant(unc, W_S, W_T, W_KS, W_n=W_n, regularize=regularize), W_f)
     Wn = weight_ss(W_n, m, "W_n")
     if Wn is not None:
         return _with_noise(generalized_plant(unc, W_S, W_T, W_KS, regularize=regularize), Wn)
@@ -361,3 +363,42 @@ def _with_noise(P: GeneralizedPlant, Wn: control.StateSpace) -> GeneralizedPlant
     blk_rp[-1, 0] = 2 * m
     info = dict(P.info, W_n=Wn, w_labels=("r", "n"))
     return replace(P, system=system, n_w=2 * m, block_structure_rp=blk_rp, info=info)
+
+
+def _with_friction(P: GeneralizedPlant, W_f) -> GeneralizedPlant:
+    """``P`` with the Coulomb input ``f`` (before ``u``): the robot's input is ``u + W_f f``.
+
+    Only the robot's state rows and the uncertainty outputs ``v`` (through
+    ``D_vu``) see ``f``, exactly as they see ``u``; the weights on ``e`` and
+    ``y`` see it through the robot, and ``W_KS`` (on the commanded ``u``) not at all.
+    """
+    m, nd, n = P.n_u, P.n_delta, P.uncertain.n_x
+    Wf = np.asarray(W_f, float)
+    Wf = Wf * np.eye(m) if Wf.ndim == 0 else Wf
+    if Wf.shape != (m, m) or not np.all(np.isfinite(Wf)):
+        raise ArgumentError(f"W_f must be a finite number or a {m}x{m} matrix, got shape {Wf.shape}")
+    A, B, C, D = ss_matrices(P.system)
+    u_cols = slice(B.shape[1] - m, B.shape[1])
+    Bf = np.zeros((A.shape[0], m))
+    Bf[:n] = B[:n, u_cols] @ Wf
+    Df = np.zeros((D.shape[0], m))
+    Df[:nd] = D[:nd, u_cols] @ Wf
+    B2 = np.hstack([B[:, : u_cols.start], Bf, B[:, u_cols]])
+    D2 = np.hstack([D[:, : u_cols.start], Df, D[:, u_cols]])
+    ins = list(P.system.input_labels)
+    inputs = ins[: u_cols.start] + [f"f[{i}]" for i in range(m)] + ins[u_cols.start :]
+    system = control.ss(
+        A,
+        B2,
+        C,
+        D2,
+        inputs=inputs,
+        outputs=list(P.system.output_labels),
+        states=list(P.system.state_labels),
+        name="P",
+        dt=0,
+    )
+    blk_rp = P.block_structure_rp.copy()
+    blk_rp[-1, 0] = P.n_w + m
+    info = dict(P.info, W_f=Wf, w_labels=tuple(P.info.get("w_labels", ("r",))) + ("f",))
+    return replace(P, system=system, n_w=P.n_w + m, block_structure_rp=blk_rp, info=info)

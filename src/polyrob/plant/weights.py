@@ -45,6 +45,7 @@ __all__ = [
     "effort_level",
     "limit_weight",
     "plant_weights",
+    "coulomb_weight",
 ]
 
 #: Hyperparameters of the paper's weights, one entry per joint/output channel.
@@ -425,3 +426,54 @@ def plant_weights(hyperparameters: dict | None = None) -> dict:
     h = dict(PAPER_HYPERPARAMETERS if hyperparameters is None else hyperparameters)
     W_S, W_T = paper_weights(h)
     return {"W_S": W_S, "W_T": W_T, "W_KS": limit_weight(h)}
+
+
+def coulomb_weight(levels, inverse_inertia=None, *, model_error: float = 0.0) -> np.ndarray:
+    """``W_f``: the Coulomb torque ``|d_j| <= F_c,j`` as the diagonal gain of a disturbance ``|f_i| <= 1`` at ``u``.
+
+    Without ``inverse_inertia`` ``u`` is the torque and ``W_f = diag(F_c)``
+    [N m]: exact.  Behind the computed-torque layer (``tau = M_hat v + h_hat``)
+    the robot ``M qddot + h = tau + d`` moves as ``qddot = v + M^-1 d`` when
+    ``M = M_hat`` (the rest, ``(M^-1 M_hat - I) v`` and ``M^-1 (h_hat - h)``,
+    is the model error the uncertainty model carries).  So the outer loop
+    sees ``a = v + M_hat^-1 d`` to first order, and with ``inverse_inertia``
+    the elementwise bound ``N_ij >= |M_hat^-1(q)_ij|`` over the domain
+    ``|(M_hat^-1 d)_i| <= sum_j N_ij F_c,j``: ``W_f = diag(N F_c) / (1 - p)``
+    [rad/s^2], the factor ``1/(1 - p)`` for a true inertia within a relative
+    ``p`` (``model_error``) of the model's (``M^-1 = M_hat^-1 (I + E)^-1``,
+    ``||E|| <= p``; an approximation: ``E`` is bounded in norm, not per entry).
+
+    Parameters
+    ----------
+    levels : sequence of float
+        ``F_c`` per joint [N m] (>= 0).
+    inverse_inertia : (m, m) array_like, optional
+        ``N``, e.g. :func:`polyrob.fleet.autoweights.inverse_inertia_bound`.
+    model_error : float
+        ``p`` in ``[0, 1)``.
+
+    Returns
+    -------
+    ndarray
+        ``(m, m)`` diagonal.
+
+    Examples
+    --------
+    >>> from polyrob.plant.weights import coulomb_weight
+    >>> coulomb_weight([2.0, 1.0]).tolist()
+    [[2.0, 0.0], [0.0, 1.0]]
+    >>> coulomb_weight([2.0, 2.0], [[4.0, 1.0], [1.0, 10.0]]).diagonal().tolist()   # 4*2 + 1*2, 1*2 + 10*2
+    [10.0, 22.0]
+    """
+    fc = np.asarray(levels, float).ravel()
+    if fc.size == 0 or not np.all(np.isfinite(fc) & (fc >= 0)):
+        raise ArgumentError(f"--coulomb: give Coulomb levels >= 0 N m, got {fc.tolist()}")
+    p = float(model_error)
+    if not 0.0 <= p < 1.0:
+        raise ArgumentError(f"the model error must be in [0, 1), got {model_error!r}")
+    if inverse_inertia is None:
+        return np.diag(fc)
+    N = np.abs(np.asarray(inverse_inertia, float))
+    if N.shape != (fc.size, fc.size) or not np.all(np.isfinite(N)):
+        raise ArgumentError(f"inverse_inertia must be a finite {fc.size}x{fc.size} matrix, got shape {N.shape}")
+    return np.diag(N @ fc / (1.0 - p))

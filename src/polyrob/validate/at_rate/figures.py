@@ -11,6 +11,9 @@
 * **the task's bounds**: the largest excursion of ``q`` out of the domain's
   box (rad, 0 inside), and the largest ``|qdot|`` and ``|qddot|`` (at any RK4
   substep) as fractions of the domain's bounds (``<= 1``: inside);
+* **stuck joints**: a joint outside its band at the end whose error moved by
+  less than :data:`STUCK_PROGRESS` of itself over the last :data:`SETTLED_HOLD`
+  s: held by friction (or a dead band) rather than converging slowly;
 * **torque chatter**: after settling (or over the last half of the run after
   the reference stopped, when it never settled), the peak-to-peak of the
   applied torque minus its centred moving average over :data:`CHATTER_WINDOW`
@@ -37,6 +40,7 @@ __all__ = [
     "RunFigures",
     "chatter_peak_to_peak",
     "settling_time",
+    "stuck_joints",
     "run_figures",
 ]
 
@@ -44,6 +48,9 @@ __all__ = [
 SETTLING_BAND = 0.02
 #: A run settled when it stays in its band for at least this long (s) before its end.
 SETTLED_HOLD = 0.5
+#: A joint outside its band whose error changed by less than this fraction of itself over the last
+#: :data:`SETTLED_HOLD` s is stuck (not converging).
+STUCK_PROGRESS = 0.1
 #: Window (s) of the moving average the chatter is measured against: far longer than a sample, far shorter than the loop.
 CHATTER_WINDOW = 0.05
 
@@ -79,6 +86,24 @@ def settling_time(t, error, band) -> float:
     return float(t[idx[-1] + 1])
 
 
+def stuck_joints(t, error, band, *, hold: float = SETTLED_HOLD, progress: float = STUCK_PROGRESS) -> list:
+    """Joints outside their band at the end whose ``|error|`` changed by less than ``progress`` of it over ``hold`` s.
+
+    >>> t = np.arange(0, 2, 0.001)
+    >>> e = np.vstack([np.full(t.size, 0.1), 0.1 * np.exp(-t), np.zeros(t.size)])   # held, converging, settled
+    >>> stuck_joints(t, e, [1e-3] * 3)
+    [0]
+    """
+    t, error = np.asarray(t, float), np.atleast_2d(np.asarray(error, float))
+    if len(t) < 2 or t[-1] - t[0] < hold:
+        return []
+    k = int(np.searchsorted(t, t[-1] - hold))
+    end, before = np.abs(error[:, -1]), np.abs(error[:, k])
+    outside = end > np.asarray(band, float)
+    held = np.abs(end - before) < progress * end
+    return [int(j) for j in np.flatnonzero(outside & held)]
+
+
 @dataclass(frozen=True)
 class RunFigures:
     """One run's figures (see the module's docstring); lists are per joint."""
@@ -90,6 +115,7 @@ class RunFigures:
     final_tracking_error: float
     settling_time: float | None
     settled: bool
+    stuck: list
     q_excess: float
     qdot_fraction: float | None
     qddot_fraction: float | None
@@ -153,6 +179,7 @@ def run_figures(trace, domain, robot, *, reference: str, true_robot: str, move_e
         final_tracking_error=float(np.abs(err[:, -1]).max()) if len(t) else float("nan"),
         settling_time=ts if np.isfinite(ts) else None,
         settled=settled,
+        stuck=stuck_joints(t, err, band) if (len(t) and not settled and trace.success) else [],
         q_excess=excess,
         qdot_fraction=qdot_frac,
         qddot_fraction=qddot_frac,

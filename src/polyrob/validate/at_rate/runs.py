@@ -152,6 +152,8 @@ def _aggregate(figs) -> dict:
     return {
         "runs": len(figs),
         "settled": sum(f.settled for f in figs),
+        "stuck": sum(bool(f.stuck) for f in figs),
+        "stuck_joints": sorted({j for f in figs for j in f.stuck}),
         "inside_task": sum(f.inside_task for f in figs),
         "chatter_within_limit": sum(
             f.chatter_percent_max is not None and f.chatter_percent_max <= CHATTER_LIMIT_PERCENT for f in figs
@@ -208,8 +210,14 @@ class RateValidation:
         for name, a in self.by_reference().items():
             chatter = "n/a" if a["chatter_percent_worst"] is None else f"{a['chatter_percent_worst']:.3g} %"
             qdd = "n/a" if a["qddot_fraction_worst"] is None else f"{a['qddot_fraction_worst']:.3g}"
+            stuck = (
+                f" ({a['stuck']} stuck: joint(s) {', '.join(str(j) for j in a['stuck_joints'])} held outside "
+                "their band, not converging)"
+                if a["stuck"]
+                else ""
+            )
             parts.append(
-                f"{name}: {a['settled']}/{a['runs']} settled, {a['inside_task']}/{a['runs']} inside the task "
+                f"{name}: {a['settled']}/{a['runs']} settled{stuck}, {a['inside_task']}/{a['runs']} inside the task "
                 f"(worst qddot {qdd} of its bound), chatter <= {chatter} of the effort limit"
             )
         bar = "meets" if self.meets_bar else "does not meet"
