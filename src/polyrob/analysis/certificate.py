@@ -327,7 +327,10 @@ def friction_sentence(channel) -> str:
     if not channel.stable:
         return head + "no figure (the nominal loop is not stable)"
     if channel.integral:
-        steady = "integral action on every joint, so a constant friction torque leaves no steady-state error on any robot the loop is stable for"
+        steady = (
+            "integral action on every joint, so a constant friction torque leaves no steady-state error on every "
+            "robot whose loop is stable (every member of the set, when the loop is CERTIFIED)"
+        )
     else:
         worst = max(channel.steady_state)
         steady = (

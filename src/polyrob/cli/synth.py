@@ -202,6 +202,10 @@ def cmd_synth(args) -> int:
     out = Output(args, stages=len(stages), job=stages)
     options = options_from_args(args, out)
     robot = robot_from_args(args)
+    if coulomb is not None:  # one level or one per joint: refused before any work
+        from polyrob.synthesis.integral import coulomb_levels
+
+        coulomb_levels(robot, coulomb)
     problem = problem_from_args(robot, args, out)
     out.line(
         f"robot {robot.name}: {problem.unc.n_params} real parameters ({problem.pldi.enclosure} PLDI, "
@@ -271,9 +275,7 @@ def friction_statement(problem, K, given=None) -> dict | None:
     spec = getattr(problem.robot, "uncertainty", None)  # the relative inertia error the model's M_hat may have
     p = max(float(getattr(problem.robot, "model_error", 0.0) or 0.0), float(getattr(spec, "link_error", 0.0) or 0.0))
     p = p if inv is not None else 0.0
-    ch = coulomb_channel(
-        problem.unc.nominal_system(), K, levels, source=source, inverse_inertia=inv, model_error=p
-    )
+    ch = coulomb_channel(problem.unc.nominal_system(), K, levels, source=source, inverse_inertia=inv, model_error=p)
     return ch.to_dict()
 
 
