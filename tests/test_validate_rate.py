@@ -177,6 +177,14 @@ def test_planar_2r_at_1_khz_settles_without_friction_and_not_with_coulomb(arm, d
     assert not rough.meets_bar
     doc = rough.summary()
     assert doc["by_reference"]["step"]["settled"] == 0 and doc["conditions"]["encoder_bits"] == 18
+    # not converging slowly: held, and the verdict says so with what the friction asks of the joints
+    assert fig.stuck and doc["by_reference"]["step"]["stuck"] == 1
+    budget = doc["friction_budget"]
+    inertia = np.diag(arm.model_robot.mass_matrix(np.array(POSE)))
+    assert np.allclose(budget["coulomb_acceleration"], 2.0 / inertia, rtol=1e-12)
+    assert budget["rest_damping"] == pytest.approx(2.0 / 0.01)
+    assert "stuck" in rough.verdict() and "rad/s^2 on joint" in rough.verdict()
+    assert "friction_budget" in clean.summary() and "rad/s^2 on joint" not in clean.verdict()
 
 
 def test_run_reads_the_validation_options_and_refuses_bad_ones_in_one_line(capsys, tmp_path):

@@ -47,6 +47,7 @@ __all__ = [
     "true_plants",
     "model_with_middle_payload",
     "validate_at_rate",
+    "friction_budget",
 ]
 
 #: The step's size as a fraction of each joint's task range.
@@ -144,6 +145,41 @@ def task_references(domain, q0, *, settle_time: float = 3.0) -> list:
     ]
 
 
+def friction_budget(robot, q0, conditions, domain) -> dict:
+    """What the validation's friction asks of each joint, from the model's inertia at the start.
+
+    ``coulomb_acceleration``: the Coulomb level over the joint's own inertia ``c / M_jj`` (rad/s^2), the
+    acceleration a friction torque the controller has not yet matched gives (a joint whose friction
+    changes by ``c`` faster than the loop follows leaves its acceleration bound by about this much);
+    ``rest_damping``: the smoothed Coulomb term's slope at rest, ``c / v_s`` (N m s/rad), against which a
+    joint creeps at ``K_torque / (c / v_s)`` per second (``K_torque``: the controller's torque per rad).
+    Computed from the model (the inner layer's, else the robot's) at ``q0``; the true robots differ by the set.
+    """
+    model = getattr(robot, "model_robot", None) or _base(robot)
+    M = np.asarray(model.mass_matrix(np.asarray(q0, float)), float)
+    inertia = np.diag(M)
+    c = float(conditions.friction_coulomb)
+    bound = getattr(domain, "qddot_upper", None)
+    return {
+        "inertia": [float(v) for v in inertia],
+        "coulomb": c,
+        "coulomb_acceleration": [float(c / v) for v in inertia],
+        "qddot_bound": None if bound is None else [float(abs(v)) for v in bound],
+        "rest_damping": c / float(conditions.coulomb_velocity),
+    }
+
+
+def _budget_words(budget) -> str:
+    acc = np.asarray(budget["coulomb_acceleration"], float)
+    j = int(np.argmax(acc))
+    bound = budget["qddot_bound"]
+    task = f" (the task's bound: {bound[j]:.3g})" if bound else ""
+    return (
+        f"Coulomb {budget['coulomb']:g} N m is up to {acc[j]:.3g} rad/s^2 on joint {j}'s inertia "
+        f"{budget['inertia'][j]:.3g} kg m^2{task}; near rest it acts as a damper of {budget['rest_damping']:.3g} N m s/rad"
+    )
+
+
 def _aggregate(figs) -> dict:
     def worst(key, pick=max):
         vals = [getattr(f, key) for f in figs if getattr(f, key) is not None and np.isfinite(getattr(f, key))]
@@ -221,6 +257,9 @@ class RateValidation:
                 f"(worst qddot {qdd} of its bound), chatter <= {chatter} of the effort limit"
             )
         bar = "meets" if self.meets_bar else "does not meet"
+        budget = self.info.get("friction_budget")
+        if budget and not self.meets_bar and budget["coulomb"] > 0:
+            parts.append(_budget_words(budget))
         return (
             f"simulated on {self.true_robots} true robot(s) drawn from {self.uncertainty}, at "
             f"{self.conditions.words()}: " + "; ".join(parts) + f" ({bar} settle / inside / chatter <= "
@@ -347,5 +386,9 @@ def validate_at_rate(
         seed=int(seed),
         figures=tuple(figures),
         evaluations=evaluations,
-        info={"inner": getattr(robot, "inner", "none"), "start_q": q0.tolist()},
+        info={
+            "inner": getattr(robot, "inner", "none"),
+            "start_q": q0.tolist(),
+            "friction_budget": friction_budget(robot, q0, conditions, dom),
+        },
     )
