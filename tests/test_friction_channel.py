@@ -62,6 +62,22 @@ class _Pushed:
         return self._robot.acceleration(q, qdot, np.asarray(tau, float) + self._d)
 
 
+def _loop_roots(M, kp, ki, kd, tau):
+    """Roots of ``det(s (tau s + 1) M s^2 + diag(kp s (tau s + 1) + ki (tau s + 1) + kd s^2))`` (all states)."""
+    import numpy.polynomial.polynomial as npp
+
+    m = len(kp)
+    # matrix polynomial entries, coefficients in ascending powers
+    entries = [[npp.polymul([0, 0, 0, 1], [1, tau]) * M[i, j] for j in range(m)] for i in range(m)]
+    for i in range(m):
+        diag = npp.polyadd(
+            npp.polyadd(npp.polymul([0, kp[i]], [1, tau]), npp.polymul([ki[i]], [1, tau])), [0, 0, kd[i]]
+        )
+        entries[i][i] = npp.polyadd(entries[i][i], diag)
+    det = npp.polysub(npp.polymul(entries[0][0], entries[1][1]), npp.polymul(entries[0][1], entries[1][0]))
+    return npp.polyroots(det)
+
+
 def _final_error(robot, K, d, q0, t_final=5.0):
     cond = RealLoopConditions(encoder_bits=None, friction_viscous=0.0, friction_coulomb=0.0, saturate=False)
     Kd = discretize(K, cond.rate).system
@@ -121,6 +137,13 @@ def test_integral_action_leaves_no_steady_state_error(robot, unc):
     ch = coulomb_channel(unc.nominal_system(), K, FC, source="--coulomb")
     assert ch.integral and ch.steady_state == (0.0, 0.0)
     assert "no steady-state error" in friction_sentence(ch)
+    # how fast it fades: the slowest root of the loop's characteristic polynomial, joint by joint
+    # (paper_2r at rest is M qddot = u with M coupled: det(M s^2 + K(s)) with K = Kp + Ki/s + Kd s/(tau s + 1))
+    M = robot.mass_matrix(np.zeros(2))
+    tau = 0.002
+    s_roots = _loop_roots(M, KP, np.array([400.0, 100.0]), KD, tau)
+    assert ch.slowest_rate == pytest.approx(np.min(np.abs(s_roots.real)), rel=1e-6)
+    assert f"{ch.slowest_rate:.3g} 1/s" in friction_sentence(ch)
     e, _ = _final_error(robot, K, FC, np.zeros(2), t_final=3.0)
     assert np.abs(e).max() < 0.1 * (FC / KP).min()  # the PD leaves FC / KP; the integral is removing it
 

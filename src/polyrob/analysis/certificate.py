@@ -341,8 +341,15 @@ def friction_sentence(channel) -> str:
         f"; at any frequency the error stays within {channel.peak:.3g} rad ({channel.peak_per_nm:.3g} rad per N m; "
         "H-inf of the nominal loop, proved from above)"
     )
+    rate = getattr(channel, "slowest_rate", float("nan"))
+    decay = (
+        f"; the nominal loop's slowest pole decays at {rate:.3g} 1/s (time constant {1.0 / rate:.3g} s): "
+        "an error friction leaves fades no faster"
+        if np.isfinite(rate) and rate > 0
+        else ""
+    )
     approx = f" ({channel.approximation})" if channel.approximation else ""
-    return head + steady + peak + approx
+    return head + steady + peak + decay + approx
 
 
 def certify_loop(

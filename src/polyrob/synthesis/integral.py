@@ -93,6 +93,9 @@ class CoulombChannel:
         ``||S G W_f||_inf`` of the nominal loop, proved from above [rad per unit ``f``].
     peak_per_nm : float
         The same with 1 N m on every joint [rad per N m].
+    slowest_rate : float
+        ``min |Re p|`` over the nominal loop's poles [1/s]: how fast the error a friction torque
+        (or any constant offset) leaves decays at best; ``1 / slowest_rate`` is its time constant.
     approximation : str
         What the channel approximates (empty when exact).
     """
@@ -106,6 +109,7 @@ class CoulombChannel:
     steady_state_per_nm: tuple
     peak: float
     peak_per_nm: float
+    slowest_rate: float = float("nan")
     approximation: str = ""
 
     def to_dict(self) -> dict:
@@ -143,11 +147,12 @@ def _figures(G, K, Wf, integral: bool):
     m = Wf.shape[0]
     stable = bool(stability_verdict(cl).stable)
     if not stable:
-        return False, (float("nan"),) * m, float("nan")
+        return False, (float("nan"),) * m, float("nan"), float("nan")
     A, B, C, D = (np.asarray(X, float) for X in (cl.A, cl.B, cl.C, cl.D))
     dc = D - C @ np.linalg.solve(A, B) if A.size else D
     steady = (0.0,) * m if integral else tuple(float(v) for v in np.abs(dc).sum(axis=1))
-    return True, steady, float(hinf_norm_upper(cl))
+    slowest = float(np.min(np.abs(np.linalg.eigvals(A).real))) if A.size else float("inf")
+    return True, steady, float(hinf_norm_upper(cl)), slowest
 
 
 def coulomb_channel(G, K, levels, *, source: str, inverse_inertia=None, model_error: float = 0.0) -> CoulombChannel:
@@ -169,8 +174,8 @@ def coulomb_channel(G, K, levels, *, source: str, inverse_inertia=None, model_er
     Wf = coulomb_weight(fc, inverse_inertia, model_error=model_error)
     W1 = coulomb_weight(np.ones(m), inverse_inertia, model_error=model_error)
     integral = integral_rank(K) == m
-    stable, steady, peak = _figures(G, K, Wf, integral)
-    _, steady1, peak1 = _figures(G, K, W1, integral)
+    stable, steady, peak, slowest = _figures(G, K, Wf, integral)
+    _, steady1, peak1, _ = _figures(G, K, W1, integral)
     approx = ""
     if inverse_inertia is not None:
         approx = (
@@ -187,6 +192,7 @@ def coulomb_channel(G, K, levels, *, source: str, inverse_inertia=None, model_er
         steady_state_per_nm=steady1,
         peak=peak,
         peak_per_nm=peak1,
+        slowest_rate=slowest,
         approximation=approx,
     )
 
