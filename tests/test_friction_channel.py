@@ -171,3 +171,19 @@ def test_a_joint_held_by_friction_is_reported_stuck_not_settled(robot):
 class _Box:
     q_lower, q_upper = [-1.0, -1.0], [1.0, 1.0]
     qdot_lower, qdot_upper = [-5.0, -5.0], [5.0, 5.0]
+
+
+def test_coulomb_levels_of_a_robot_uncertainty_set_follow_its_joint_names():
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from polyrob.uncertainty_set.spec import RobotUncertainty
+
+    spec = RobotUncertainty.from_file(Path(__file__).parents[1] / "examples" / "uncertainty" / "panda.yaml")
+    names = [f"panda_joint{i}" for i in range(1, 8)]
+    # the set's joints in reverse order: the levels must land on the named joints, not in file order
+    robot = SimpleNamespace(m=7, joint_names=names[::-1], uncertainty=spec)
+    levels, source = coulomb_levels(robot)
+    assert source == "the robot-uncertainty set"
+    assert levels.tolist() == [0.565, 0.303, 0.839, 1.279, 0.641, 0.872, 0.546]
+    assert coulomb_levels(robot, [2.0])[0].tolist() == [2.0] * 7  # --coulomb wins
