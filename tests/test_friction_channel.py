@@ -113,6 +113,13 @@ def test_the_friction_input_gain_at_dc_is_minus_the_inverse_proportional_gain(un
     assert np.allclose(dc, -np.diag(FC / KP), rtol=1e-6, atol=1e-12)
     # the reference channel is unchanged by the new input: r -> e at DC is 0 (S(0) = 0)
     assert np.allclose(np.asarray(closed.dcgain())[0:2, 0:2], 0.0, atol=1e-9)
+    # with the encoder noise too: w = [r; n; f], the friction columns the same
+    Pn = generalized_plant(unc, W_S=1.0, W_n=1e-5, W_f=Wf)
+    assert Pn.n_w == 6 and Pn.info["w_labels"] == ("r", "n", "f")
+    f_cols = slice(unc.n_delta + 4, unc.n_delta + 6)
+    assert np.array_equal(
+        Pn.system.B[:, f_cols][: unc.n_x], P.system.B[:, unc.n_delta + 2 : unc.n_delta + 4][: unc.n_x]
+    )
 
 
 def test_a_loop_without_integral_action_states_its_steady_state_error_and_the_arm_agrees(robot, unc):
