@@ -297,7 +297,6 @@ def add_synthesis_arguments(p) -> None:
     add_weight_arguments(p)
     add_plant_arguments(p)
     add_sampling_arguments(p)
-    add_coulomb_argument(p)
     g = p.add_argument_group("synthesis")
     g.add_argument(
         "--structure", default="full", help="full (D-K / D-G-K), tfN (e.g. tf3: each K_ij of order N), pid, ss:N"
@@ -416,4 +415,5 @@ def register(sub) -> None:
     )
     add_moving_harmonics_argument(p)
     add_validation_arguments(p, true_robots=0)  # synth validates only when asked (minutes on an arm)
+    add_coulomb_argument(p)  # synth's statement only (run does not print it: not offered there)
     p.set_defaults(func=cmd_synth)
