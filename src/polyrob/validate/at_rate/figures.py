@@ -11,9 +11,9 @@
 * **the task's bounds**: the largest excursion of ``q`` out of the domain's
   box (rad, 0 inside), and the largest ``|qdot|`` and ``|qddot|`` (at any RK4
   substep) as fractions of the domain's bounds (``<= 1``: inside);
-* **stuck joints**: a joint outside its band at the end whose error moved by
-  less than :data:`STUCK_PROGRESS` of itself over the last :data:`SETTLED_HOLD`
-  s: held by friction (or a dead band) rather than converging slowly;
+* **stuck joints**: a joint outside its band at the end whose error stayed
+  within :data:`STUCK_PROGRESS` of itself over the last :data:`SETTLED_HOLD`
+  s: held by friction (or a dead band) rather than converging or oscillating;
 * **torque chatter**: after settling (or over the last half of the run after
   the reference stopped, when it never settled), the peak-to-peak of the
   applied torque minus its centred moving average over :data:`CHATTER_WINDOW`
@@ -87,20 +87,21 @@ def settling_time(t, error, band) -> float:
 
 
 def stuck_joints(t, error, band, *, hold: float = SETTLED_HOLD, progress: float = STUCK_PROGRESS) -> list:
-    """Joints outside their band at the end whose ``|error|`` changed by less than ``progress`` of it over ``hold`` s.
+    """Joints outside their band at the end whose error stayed within ``progress`` of ``|e_end|`` over ``hold`` s.
 
     >>> t = np.arange(0, 2, 0.001)
-    >>> e = np.vstack([np.full(t.size, 0.1), 0.1 * np.exp(-t), np.zeros(t.size)])   # held, converging, settled
-    >>> stuck_joints(t, e, [1e-3] * 3)
+    >>> e = np.vstack([np.full(t.size, 0.1), 0.1 * np.exp(-t), np.zeros(t.size), 0.1 * np.cos(4 * np.pi * t)])
+    >>> stuck_joints(t, e, [1e-3] * 4)   # held, converging, settled, oscillating (same value 0.5 s apart)
     [0]
     """
     t, error = np.asarray(t, float), np.atleast_2d(np.asarray(error, float))
     if len(t) < 2 or t[-1] - t[0] < hold:
         return []
     k = int(np.searchsorted(t, t[-1] - hold))
-    end, before = np.abs(error[:, -1]), np.abs(error[:, k])
+    end = np.abs(error[:, -1])
     outside = end > np.asarray(band, float)
-    held = np.abs(end - before) < progress * end
+    # held: the error stays within progress * |e_end| over the whole window (an oscillation is not held)
+    held = np.ptp(error[:, k:], axis=1) < progress * end
     return [int(j) for j in np.flatnonzero(outside & held)]
 
 
