@@ -247,8 +247,8 @@ class RateValidation:
             chatter = "n/a" if a["chatter_percent_worst"] is None else f"{a['chatter_percent_worst']:.3g} %"
             qdd = "n/a" if a["qddot_fraction_worst"] is None else f"{a['qddot_fraction_worst']:.3g}"
             stuck = (
-                f" ({a['stuck']} stuck: joint(s) {', '.join(str(j) for j in a['stuck_joints'])} held outside "
-                "their band, not converging)"
+                f" ({a['stuck']} stuck: joint(s) {', '.join(str(j) for j in a['stuck_joints'])} outside their "
+                "band, their error changing by under 10 % in the last 0.5 s: held, or fading over seconds)"
                 if a["stuck"]
                 else ""
             )
