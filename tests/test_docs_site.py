@@ -186,6 +186,7 @@ MEASURED_TIME = re.compile(r"\d\s?(?:s|min|GB)\b")
 # measurement.  A new hand-written table must be a results record shown by a marker, or a definition added here.
 DEFINITION_TABLES = {
     ("synthesis.md", "| channel | signal, unit | weight | what `‖·‖ < 1` means |"),
+    ("synthesis.md", "| plant input `u` | `W_f` | exact? |"),
     ("api.md", "| function | returns |"),
     ("api.md", "| name | what it holds |"),
     ("certificates.md", "| status | meaning |"),
