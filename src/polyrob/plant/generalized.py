@@ -189,6 +189,12 @@ def generalized_plant(
         torque (or ``v``) the noise drives.  ``None`` (default): no noise
         input (the pipeline folds a constant ``W_n`` into ``W_KS`` instead,
         :func:`polyrob.plant.weights.limit_weight`).
+    W_f : array or number, optional
+        Coulomb-friction weight (``m x m`` or a scalar times the identity): a
+        further exogenous input ``f`` (``|f_i| <= 1``, labels ``f[i]``, after
+        ``r`` and ``n``) with the robot's input ``u + W_f f``; it reaches the
+        robot's states and the uncertainty outputs as ``u`` does, not ``W_KS``
+        (:func:`polyrob.plant.weights.coulomb_weight`, docs/synthesis.md).
     regularize : float, optional
         ``ε > 0`` appends ``z_reg = ε u`` so that ``D_zu`` has full column rank
         (needed by H∞/D-K synthesis when ``W_KS`` is omitted: ``G`` is
