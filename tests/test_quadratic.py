@@ -40,6 +40,42 @@ def test_switched_counterexample_is_rejected():
     assert res.n_vertices == 2 and res.vertex_source == "given"
 
 
+def test_a_small_subset_without_a_common_p_ends_the_search_and_a_feasible_one_changes_nothing():
+    """Infeasible on a subset means infeasible on all: 8 vertices refute a common P for the 20 (before: all 20
+    went into one LMI, 30 s on the 2524-vertex tf3 x4 problem of test_time_varying); with a common P the
+    search runs on the same vertices as without the probe."""
+    # convex combinations of the switched pair (each stable), the pair itself at the ends
+    lams = np.linspace(0.0, 1.0, 20)
+    res = quadstab([((1 - t) * A1 + t * A2, NO_B) for t in lams], ZERO_K)
+    assert not res.holds and res.info["lmi_vertices"] <= 8 and "no common P" in res.solver_status
+    # stiffness 1..2: a common P exists; every one of the 20 vertices is in the LMI, as before
+    res = quadstab([(np.array([[0.0, 1.0], [-k, -1.0]]), NO_B) for k in np.linspace(1.0, 2.0, 20)], ZERO_K)
+    assert res.holds and res.info["lmi_vertices"] == 20
+
+
+def test_the_vertex_search_solves_the_probe_first_and_then_its_usual_first_set():
+    from polyrob.analysis.time_varying.quadratic import _active_set
+
+    calls = []
+
+    def solve_subset(feasible):
+        def solve(idx):
+            calls.append(idx.tolist())
+            return (np.zeros(1), "optimal") if feasible else (None, "no common P")
+
+        return solve
+
+    no_violation = lambda sol: np.zeros(10)  # noqa: E731
+    sol, status, used = _active_set(10, solve_subset(False), no_violation, np.arange(6), probe=[0, 9])
+    assert sol is None and status == "no common P" and used == 2 and calls == [[0, 9]]
+    calls.clear()
+    sol, status, used = _active_set(10, solve_subset(True), no_violation, np.arange(6), probe=[0, 9])
+    assert sol is not None and used == 7 and calls == [[0, 9], [0, 1, 2, 3, 4, 5, 9]]
+    calls.clear()  # a probe no smaller than the first set is not solved on its own
+    _active_set(10, solve_subset(True), no_violation, np.arange(2), probe=[0, 1])
+    assert calls == [[0, 1]]
+
+
 def test_quadratically_stable_pair_is_accepted_with_a_verified_P():
     # damped oscillators with stiffness 1..2 and damping 1: V = 1.5 q^2 + q v + v^2 is common
     # (with stiffness 1..4 no quadratic V exists: 4 k b (1 - b) > (a - b - k)^2 fails at k = 1 or 4)
