@@ -103,9 +103,7 @@ def _solve(problem, what: str) -> str:
     return str(problem.status)
 
 
-def _active_set(
-    n_v: int, solve_subset, violation, first: np.ndarray, *, probe=None, add: int = 24, rounds: int = 15
-):
+def _active_set(n_v: int, solve_subset, violation, first: np.ndarray, *, probe=None, add: int = 24, rounds: int = 15):
     """Cutting planes over the vertices: solve on a subset, add the most violated vertices, repeat.
 
     Most vertex inequalities are inactive at the optimum; solving on the
