@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import signal
 
 import pytest
 
@@ -89,6 +90,12 @@ BAD_URDFS = {
     "no_joint": urdf_text(["base", "l1"], [("j1", "fixed", "base", "l1")]),
     "not_urdf": '<?xml version="1.0"?><sdf version="1.6"/>',
 }
+
+
+def default_sigint() -> None:
+    """A ``preexec_fn`` giving a child Ctrl-C back: a child of a shell without job control (CI) starts
+    with SIGINT ignored, and Python then installs no KeyboardInterrupt handler."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def child_pids(pid: int) -> list[int]:

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import describe_processes
+from conftest import default_sigint, describe_processes
 
 from polyrob.bounds.parallel import WorkerPool
 from polyrob.errors import BoundsError
@@ -108,10 +108,6 @@ def _workers(pid: int) -> set[int]:
 
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="reads child processes from /proc (Linux)")
 @pytest.mark.timeout(180)  # 120 s for the workers to start, then 10 s for one SIGINT to end them
-# slow (skipped by default) since 2026-11-28: in two full `.ci/run` suites on an idle machine the bound's parent
-# stayed in poll with both workers running 10 s after the SIGINT, while the test alone passes; the cause is not
-# found (an open question about Ctrl-C during a bound, noted for the next session), run it with -m slow
-@pytest.mark.slow
 def test_one_sigint_ends_a_bound_and_its_workers_within_seconds(tmp_path):
     script = textwrap.dedent(
         """
@@ -123,7 +119,9 @@ def test_one_sigint_ends_a_bound_and_its_workers_within_seconds(tmp_path):
     )
     # stderr to a file, not a pipe nobody reads before the end: a full pipe would block the writers
     err_file = (tmp_path / "stderr.txt").open("w")
-    proc = subprocess.Popen([sys.executable, "-c", script], stderr=err_file, text=True)
+    # SIGINT given back: launched from a shell without job control (two `.ci/run` suites) the child inherited
+    # SIGINT ignored and sat in poll with both workers running 10 s after the SIGINT
+    proc = subprocess.Popen([sys.executable, "-c", script], stderr=err_file, text=True, preexec_fn=default_sigint)
     try:
         deadline = time.monotonic() + 120
         workers: set[int] = set()

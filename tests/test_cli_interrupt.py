@@ -8,12 +8,7 @@ import sys
 import time
 
 import pytest
-from conftest import child_pids, describe_processes, process_running
-
-
-def _default_sigint():
-    """A child of a shell without job control starts with SIGINT ignored: give it Ctrl-C back."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
+from conftest import child_pids, default_sigint, describe_processes, process_running
 
 
 def _start(argv, **kwargs):
@@ -22,7 +17,7 @@ def _start(argv, **kwargs):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-        preexec_fn=_default_sigint,
+        preexec_fn=default_sigint,
         **kwargs,
     )
 
@@ -203,7 +198,7 @@ def test_a_run_stopped_after_its_certificate_keeps_the_controller_and_its_certif
 
     run_dir = tmp_path / "run"
     argv = [sys.executable, "-m", "polyrob.cli", "run", "ur5", "-o", str(run_dir), *UR5_RUN_OPTIONS]
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
     controller = run_dir / "K.json"
     try:
         while not controller.exists() and proc.poll() is None:
