@@ -121,7 +121,7 @@ def run_full_order(tmp_path_factory):
 
             return call
 
-        argv = ["run", "paper_2r", "--pldi", pldi, *FAST, "--mc", "5", *GRID, "--json", "--full-order"]
+        argv = ["run", "paper_2r", "--pldi", pldi, *FAST, "--mc", "5", *GRID, "--json", "--full-order", "--coulomb", "0.5"]
         with pytest.MonkeyPatch.context() as patch, open(d / "stdout", "w") as stdout:
             patch.setattr(pipeline, "design_controller", when_called("design"))
             patch.setattr(pipeline, "analyze_controller", when_called("analyze"))
@@ -264,6 +264,20 @@ def test_run_json_announces_stages_when_they_start_and_matches_synth(files, tmp_
     # run's analysis of its (deterministic) synthesis = synth's certificate of the same synthesis
     assert saved["certificate"]["robust_performance"]["mu_upper_grid"] == pytest.approx(cert_full, rel=2e-3)
     assert saved["info"]["uncertainty"]["model"] == "box" and saved["info"]["weights"]["M_s"] == [2.0, 3.0]
+
+
+def test_run_states_what_coulomb_friction_does_as_synth_does(tmp_path_factory):
+    """Before: only synth took --coulomb and printed the friction statement (run refused the option)."""
+    from polyrob.analysis.certificate import friction_sentence
+    from polyrob.synthesis.integral import CoulombChannel
+
+    _, doc, _, _ = run_full_order(tmp_path_factory)
+    friction = doc["friction"]
+    assert friction["levels"] == [0.5, 0.5] and friction["source"] == "--coulomb"
+    channel = CoulombChannel(**{k: v for k, v in friction.items() if k != "words"})
+    assert friction["words"] == friction_sentence(channel)
+    if friction["stable"]:  # the proved peak scales with the level (one N m on every joint vs 0.5)
+        assert friction["peak"] == pytest.approx(0.5 * friction["peak_per_nm"], rel=1e-6)
 
 
 def _edit(K, tmp_path, **info):

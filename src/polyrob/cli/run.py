@@ -11,7 +11,9 @@ from polyrob.cli.analyze import (
 )
 from polyrob.cli.common import Output, alphas_from_args, exit_status, robot_from_args, scale_names
 from polyrob.cli.options import (
+    add_coulomb_argument,
     add_validation_arguments,
+    coulomb_from_args,
     int_at_least,
     parse_frequencies,
     rate_conditions_from_args,
@@ -102,7 +104,7 @@ def cmd_run(args) -> int:
     atomically (a temporary file, then a rename) and rewritten with the
     analysis' figures at the end.
     """
-    from polyrob.pipeline import analyze_controller, design_controller, frequency_grid, pldi_report
+    from polyrob.pipeline import analyze_controller, design_controller, frequency_grid, friction_statement, pldi_report
 
     omega_spec = parse_frequencies(args.omega)
     sampling = sampling_from_args(args)
@@ -110,11 +112,16 @@ def cmd_run(args) -> int:
         scale_names(args.scale_only), alphas_from_args(args.alphas)
     run_dir = _run_dir(args)
     at_rate = rate_conditions_from_args(args) if run_dir is not None else None  # its refusals before any work
+    coulomb = coulomb_from_args(args)
     stages = ["bounds", "largest bandwidth" if args.max_bandwidth else "synthesis", "analysis"]
     out = Output(args, stages=len(stages) + (run_dir is not None), job=stages + ["validation"] * (run_dir is not None))
     main_job_defaults(args, out)
     options = options_from_args(args, out)
     robot = robot_from_args(args)
+    if coulomb is not None:  # one level or one per joint: refused before any work
+        from polyrob.synthesis.integral import coulomb_levels
+
+        coulomb_levels(robot, coulomb)
     problem = problem_from_args(robot, args, out)
     check_jerk_applies(args, problem)
     pldi = problem.pldi
@@ -178,6 +185,10 @@ def cmd_run(args) -> int:
         "covers": a.covers,
         "verdict": a.verdict,
     }
+    friction = friction_statement(problem, design.controller, coulomb)
+    if friction is not None:  # beside the covers line: what Coulomb friction does to the error
+        doc["friction"] = friction
+        out.line(friction["words"])
     extra = {"robust_stability": a.robust_stability.summary(), "robust_performance": a.robust_performance.summary()}
     if run_dir is not None:
         from polyrob.report.build import write_run_report
@@ -274,6 +285,7 @@ def register(sub) -> None:
     p.add_argument("--omega", default=None, help="analysis frequency grid LO:HI:N in rad/s (default automatic)")
     add_moving_argument(p)
     add_validation_arguments(p)
+    add_coulomb_argument(p)
     p.add_argument(
         "--stability-sweep",
         action="store_true",

@@ -188,7 +188,7 @@ def max_bandwidth_design(problem, args, out, options: dict):
 
 
 def cmd_synth(args) -> int:
-    from polyrob.pipeline import design_controller
+    from polyrob.pipeline import design_controller, friction_statement
 
     check_output(args)
     sampling = sampling_from_args(args)
@@ -261,22 +261,6 @@ def cmd_synth(args) -> int:
         out.line(friction["words"])
     out.document(doc)
     return exit_status(cert)
-
-
-def friction_statement(problem, K, given=None) -> dict | None:
-    """The Coulomb channel's figures of ``K`` on ``problem`` (:mod:`polyrob.synthesis.integral`), or None (not stated)."""
-    from polyrob.fleet.autoweights import inverse_inertia_bound
-    from polyrob.synthesis.integral import coulomb_channel, coulomb_levels
-
-    levels, source = coulomb_levels(problem.robot, given)
-    if levels is None:
-        return None
-    inv = inverse_inertia_bound(problem.robot, problem.domain)
-    spec = getattr(problem.robot, "uncertainty", None)  # the relative inertia error the model's M_hat may have
-    p = max(float(getattr(problem.robot, "model_error", 0.0) or 0.0), float(getattr(spec, "link_error", 0.0) or 0.0))
-    p = p if inv is not None else 0.0
-    ch = coulomb_channel(problem.unc.nominal_system(), K, levels, source=source, inverse_inertia=inv, model_error=p)
-    return ch.to_dict()
 
 
 def sampled_check(problem, design, sampling, out):
@@ -415,5 +399,5 @@ def register(sub) -> None:
     )
     add_moving_harmonics_argument(p)
     add_validation_arguments(p, true_robots=0)  # synth validates only when asked (minutes on an arm)
-    add_coulomb_argument(p)  # synth's statement only (run does not print it: not offered there)
+    add_coulomb_argument(p)
     p.set_defaults(func=cmd_synth)

@@ -400,6 +400,11 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         except Exception as exc:  # noqa: BLE001 - recorded: a failed simulation is a finding about this robot
             at_rate = {"verdict": f"validation at the rate failed: {type(exc).__name__}: {one_line(exc)}"}
         timings["validation at the rate"] = time.perf_counter() - t1
+    from polyrob.pipeline import friction_statement
+
+    friction = friction_statement(problem, design.controller)  # the set's Coulomb levels, as synth and run state them
+    if friction is not None:
+        details["friction"] = friction
     reason = None if cert.certified else why_not_certified(problem, details)
     if reason and skipped:
         reason = f"{reason} (bandwidth search skipped)"

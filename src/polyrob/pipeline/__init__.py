@@ -3,11 +3,13 @@
 :func:`build_problem` (robot, domain, weights -> PLDI -> uncertain plant ->
 generalized plant), :func:`design_controller` (μ-synthesis, reduction),
 :func:`analyze_controller` (μ analysis and the certificate's verdict), and
-:func:`check_controller_problem` (is a controller file made for this problem?).
+:func:`check_controller_problem` (is a controller file made for this problem?) and
+:func:`friction_statement` (what Coulomb friction does to a certified loop).
 """
 
 from polyrob.pipeline.analysis import ControllerAnalysis, analyze_controller, controller_order, frequency_grid
 from polyrob.pipeline.design import Design, design_controller, design_max_bandwidth, reduce_design, synthesis_options
+from polyrob.pipeline.friction import friction_statement
 from polyrob.pipeline.matching import check_controller_problem, controller_differences
 from polyrob.pipeline.problem import (
     UNCERTAINTY_MODELS,
@@ -35,6 +37,7 @@ __all__ = [
     "reduce_design",
     "design_max_bandwidth",
     "synthesis_options",
+    "friction_statement",
     "check_controller_problem",
     "controller_differences",
     "format_matrix",
