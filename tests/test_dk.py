@@ -314,3 +314,53 @@ def test_frequency_grid_ignores_integrators():
     G = control.ss(control.tf([1], [1, 0])) * control.ss(control.tf([1], [1, 10]))
     w = frequency_grid(G)
     assert w.min() == pytest.approx(1.0) and w.max() == pytest.approx(100.0)
+
+
+# -------------------------------------------------------------- the D-step grid of a double integrator
+def _double_integrator_toy():
+    """``k/s^2``, ``k`` in ``1 -+ 0.5`` (a joint behind computed torque), ``W_S`` with a slow pole, ``W_T`` a fast one.
+
+    The plant's poles are the integrators (0, left out of the grid), ``W_S``'s 5e-3 (a near-integrator
+    against the median) and ``W_T``'s 5000 rad/s: its own grid runs from 100 rad/s up, while the loop
+    crosses over at a few rad/s.
+    """
+    s = control.tf("s")
+    W_S = control.ss((s / 2 + 5) / (s + 5e-3))
+    W_T = control.ss((s + 25) / (1e-2 * s + 50))
+    # states: x1, x2 (the joint), then the weights'; inputs [d, r, u]; outputs [v, z_S, z_T, y]
+    joint = control.ss(
+        [[0, 1], [0, 0]], [[0, 0, 0], [1, 0, 1]], [[0, 0], [-1, 0], [1, 0], [-1, 0]],
+        [[0, 0, 0.5], [0, 1, 0], [0, 0, 0], [0, 1, 0]],
+    )  # fmt: skip
+    one = control.ss(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), [[1.0]])  # a static 1, no state
+    weights = control.append(one, W_S, W_T, one)  # v, z_S, z_T, y
+    return weights * joint
+
+
+def test_the_d_steps_see_the_crossover_of_a_double_integrator_loop():
+    """Before: the D-K grid came from the open plant's poles only (100 rad/s up here), the start's
+    peak near its crossover was missed (ur5 behind computed torque: 1.2 on the grid, 2.75 at 15 rad/s)
+    and each K-step fitted scalings to the wrong frequencies."""
+    from polyrob.plant.loops import lower_lft
+    from polyrob.synthesis.dk.iteration import DKIteration
+    from polyrob.synthesis.dk.strategies import HinfStep, MuUpperBound
+    from polyrob.synthesis.pid_tuning import pid_controller
+    from polyrob.synthesis.scalings.dfit import LogMagnitudeFit
+
+    P = _double_integrator_toy()
+    blk = [[-1, 0], [1, 2]]
+    omega = frequency_grid(P)
+    assert omega.min() >= 100.0  # the open plant's grid: no point near the crossover
+    wc = 3.0
+    K0 = pid_controller(np.array([[wc**2, wc**3 / 16, 2 * wc, 1 / (20 * wc)]]))
+    dk = DKIteration(MuUpperBound(), LogMagnitudeFit(), HinfStep(), max_iter=1, progress=False)
+    hist = dk.run(P, 1, 1, blk, omega, mixed=True, initial_controller=K0, start_phase="DG")  # as musyn from a start
+    M = lower_lft(P, K0, 1, 1)
+    A, B, C, D = (np.asarray(X) for X in (M.A, M.B, M.C, M.D))
+
+    def mu_peak(grid):
+        return max(mussv(C @ np.linalg.solve(1j * w * np.eye(len(A)) - A, B) + D, blk, lower=False).upper for w in grid)
+
+    peak = mu_peak(np.concatenate([[0.0], np.logspace(-3, 5, 161)]))
+    assert peak > 1.5 * mu_peak(omega)  # the plant's grid alone misses the peak by far
+    assert hist[0].mu_peak == pytest.approx(peak, rel=0.05)

@@ -1,6 +1,7 @@
 """Frequency tools of μ-synthesis: the D-step grid and the performance floor.
 
 * :func:`frequency_grid` - the default D-K grid from the plant's poles;
+* :func:`loop_grid` - that grid widened to the closed loop's poles, at each iteration;
 * :func:`resonances` - lightly damped natural frequencies the grid must hold;
 * :func:`performance_lower_bound` - what ``W_S`` and ``W_T`` alone force on μ.
 
@@ -19,14 +20,17 @@ import numpy as np
 
 from polyrob.analysis.mu.frequency import freqresp
 
-__all__ = ["frequency_grid", "resonances", "performance_lower_bound"]
+__all__ = ["frequency_grid", "loop_grid", "resonances", "performance_lower_bound"]
 
 
 def frequency_grid(sys, per_decade: int = 8) -> np.ndarray:
     """Default D-K grid: the decades spanned by the plant's poles, one more each side.
 
     Poles at ``s = 0`` and near-integrators (below 1e-4 times the median
-    pole magnitude, e.g. a weight's 1e-5 pole) do not widen the grid.
+    pole magnitude, e.g. a weight's 1e-5 pole) do not widen the grid.  A
+    plant of double integrators (an arm behind computed torque) has no pole
+    where its loop will cross over: the iteration adds the closed loop's
+    decades of a start's loop (:func:`loop_grid`).
 
     Examples
     --------
@@ -36,19 +40,52 @@ def frequency_grid(sys, per_decade: int = 8) -> np.ndarray:
     >>> float(w[0]), float(w[-1]), w.size
     (0.1, 100.0, 25)
     """
-    A = np.asarray(sys.A, float)
+    lo, hi = _pole_decades(np.asarray(sys.A, float))
+    return np.logspace(lo, hi, int(per_decade * (hi - lo)) + 1)
+
+
+def loop_grid(omega, A_loop: np.ndarray, per_decade: int = 8) -> np.ndarray:
+    """``omega`` widened to the decades of the closed loop's poles (the rule of :func:`frequency_grid`).
+
+    μ peaks near the loop's crossover, which the open plant's poles need not
+    reveal: on ur5 behind computed torque the plant's poles are the double
+    integrators' zeros and the weights' fast poles, so the plant's grid ran
+    from 100 rad/s up while the per-joint PID start's μ peaked at 15-20 rad/s
+    (2.75 there, 1.2 on the grid): the D-steps fitted scalings that miss the
+    peak and every K-step made μ worse.  The closed loop's poles sit at the
+    crossover.  Points are added on the same ``per_decade`` lattice, below
+    ``omega``'s lowest point only: a grid that already reaches down to the
+    loop is kept.  The iteration widens its grid once, from the loop of the
+    controller it starts from (:class:`~polyrob.synthesis.dk.iteration.DKIteration`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> w = loop_grid(np.logspace(2, 5, 25), np.diag([-0.5, -10.0, -1e3]))
+    >>> float(w[0]), float(w[-1]), bool(np.all(np.diff(w) > 0))
+    (0.01, 100000.0, True)
+    >>> loop_grid(np.logspace(2, 5, 25), np.diag([-1e3, -1e7])).size  # faster poles: the grid is kept
+    25
+    """
+    omega = np.asarray(omega, float)
+    lo, hi = _pole_decades(A_loop)
+    band = np.logspace(lo, hi, int(per_decade * (hi - lo)) + 1)
+    return np.union1d(omega, band[band < omega.min() * (1 - 1e-9)])
+
+
+def _pole_decades(A: np.ndarray) -> tuple[int, int]:
+    """``(lo, hi)``: the powers of ten spanning the poles of ``A``, one more each side (integrators left out)."""
     f = np.abs(np.linalg.eigvals(A)) if A.size else np.zeros(0)
     f = f[np.isfinite(f) & (f > 0)]
     if f.size:
         f = f[f >= 1e-4 * np.median(f)]
     if f.size == 0:
-        lo, hi = -2.0, 2.0
-    else:
-        lo = math.floor(math.log10(f.min()) + 1e-9) - 1
-        hi = math.ceil(math.log10(f.max()) - 1e-9) + 1
-        if hi - lo < 2:
-            lo, hi = lo - 1, hi + 1
-    return np.logspace(lo, hi, int(per_decade * (hi - lo)) + 1)
+        return -2, 2
+    lo = math.floor(math.log10(f.min()) + 1e-9) - 1
+    hi = math.ceil(math.log10(f.max()) - 1e-9) + 1
+    if hi - lo < 2:
+        lo, hi = lo - 1, hi + 1
+    return lo, hi
 
 
 def resonances(A: np.ndarray, lo: float, hi: float, zeta: float = 0.5) -> np.ndarray:

@@ -56,7 +56,7 @@ from polyrob.errors import ArgumentError, SynthesisError
 from polyrob.plant.generalized import lower_lft_matrices
 from polyrob.progress import report as progress_report
 from polyrob.report.numbers import gamma_text
-from polyrob.synthesis.dk.frequency import frequency_grid, performance_lower_bound, resonances
+from polyrob.synthesis.dk.frequency import frequency_grid, loop_grid, performance_lower_bound, resonances
 from polyrob.synthesis.dk.strategies import HinfStep, MuUpperBound
 from polyrob.synthesis.scalings.data import ScalingData, Scalings, complexified, scaling_data
 from polyrob.synthesis.scalings.dfit import LogMagnitudeFit
@@ -180,6 +180,21 @@ class DKIteration:
             return None
         return hres
 
+    @staticmethod
+    def _start_grid(omega, A, B, C, D, K, n_u, n_y):
+        """``omega`` widened down to the start's closed loop (:func:`~polyrob.synthesis.dk.frequency.loop_grid`).
+
+        Only for a given start: widening at every iteration also followed the
+        slow poles of intermediate H∞ controllers and moved the main job's
+        result (order 11, μ 0.956 instead of 8 and 0.936).
+        """
+        Ak, Bk, Ck, Dk = (np.asarray(X, float) for X in (K.A, K.B, K.C, K.D))
+        try:
+            Acl = lower_lft_matrices(A, B, C, D, Ak, Bk, Ck, Dk, n_u, n_y)[0]
+        except np.linalg.LinAlgError:  # an ill-posed start is reported by the first iteration
+            return omega
+        return loop_grid(omega, Acl)
+
     def run(
         self,
         Psys: control.StateSpace,
@@ -220,6 +235,8 @@ class DKIteration:
         K = initial_controller
         gamma, notes, orders, scal = float("nan"), (), [], None
         t_fit = t_hinf = 0.0
+        if K is not None:  # a start's loop (the arms' tuned PID) crosses over where the plant has no pole
+            omega = self._start_grid(omega, A, B, C, D, K, n_u, n_y)
         if K is None:
             t0 = time.perf_counter()
             hres = self.hinf_step(Psys, n_y, n_u)
