@@ -52,6 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, lower, upper
+from polyrob.bounds.certified.factors.inverse import taylor_neumann_inverse
 from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread, vertex_gradients
 from polyrob.bounds.certified.factors.taylor2 import at_vertices, taylor2_bounds
 from polyrob.bounds.certified.factors.width_ratio import FLOOR
@@ -175,10 +176,11 @@ class FactorProblem:
         qc, qr = _radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
         vc, vr = _radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
         zero = np.zeros_like(qr)
-        Yc, _ = self._inverse(self._dynamics(qc, zero, vc, zero, 1)[0], None, None)
         radii = np.concatenate([qr, vr], -1)
         with np.errstate(over="ignore", invalid="ignore"):
-            K0b, _, _ = self._factors(*self._dynamics(qc, qr, vc, vr, 2), (Yc.mid[0], Yc.rad[0]), radii)
+            Mb, hb = self._dynamics(qc, qr, vc, vr, 2)
+            Y_box = self._box_inverse(self._dynamics(qc, zero, vc, zero, 1)[0], Mb, radii)
+            K0b, _, _ = self._factors(Mb, hb, Y_box)
         return K0b.mid[1:], K0b.rad[1:]
 
     # ------------------------------------------------------------------ one batch of boxes
@@ -200,55 +202,48 @@ class FactorProblem:
             return J.value() if index is None else J.derivative_value(index)
         return J.lowered(index, min(nvars, J.n)).padded(nvars)  # M does not depend on qdot: zeros
 
-    def _inverse(self, M, Y_centre, radii):
+    @staticmethod
+    def _box_inverse(Mc, Mb, radii):
+        """``(mid, rad)`` ``(B, m, m)`` of ``M_hat(q)^-1`` on each box (``rad = inf`` where not proved invertible).
+
+        :func:`~polyrob.bounds.certified.factors.inverse.taylor_neumann_inverse`
+        with the Taylor form of the highest order the jets allow: ``Mc`` the
+        jets at the centre (thin), ``Mb`` over the box, both in ``q``.
+        """
+        k = min(Mb.order, Mc.order + 1)
+
+        def parts(J, upto):
+            m, out, start = J.n, [], 0
+            for j in range(upto + 1):
+                size = m**j
+                shape = (m,) * j + J.mid.shape[1:2] + J.mid.shape[3:]
+                out.append(
+                    (J.mid[start : start + size, :, 0].reshape(shape), J.rad[start : start + size, :, 0].reshape(shape))
+                )
+                start += size
+            return out
+
+        mid, rad, _ = taylor_neumann_inverse(parts(Mc, k - 1), parts(Mb, k)[k], radii[:, : Mc.n])
+        return mid, rad
+
+    def _inverse(self, M, Y_box):
         """``Y = M_hat^-1`` at one order below ``M``, and the boxes where it is not provably enclosed.
 
-        At a point: a preconditioned ball inverse.  Over a box (``Y_centre``
-        the inverse at its centre, ``radii`` its half-widths): the set
-        ``Yhat`` is grown until ``T(Yhat) = Y_c + sum_p (-Yhat dM/dq_p Yhat) [-r_p, r_p]``
-        lies inside it; then ``Y(q)`` stays in ``T(Yhat)`` on every segment from the
-        centre (mean-value theorem; ``Y`` cannot leave ``Yhat`` without crossing
-        its boundary), which is far tighter than inverting the box's ``M``.
+        At a point (``Y_box`` None, ``M`` of order 1): a preconditioned ball
+        inverse.  Over a box: ``Y_box`` (:meth:`_box_inverse`) is ``Y``'s
+        value, and its derivatives follow from ``dY = -Y dM_hat Y``.
         """
         m = self.m
         Mv = self._split_jet(M, None, m)
-        if Mv.order == 0:
+        if Y_box is None:
             Ym, Yr = ball_inverse(Mv.mid[0, :, 0], Mv.rad[0, :, 0])
             singular = ~np.isfinite(Yr).all((-1, -2))
-            return BallJet(Ym[None], np.where(singular[:, None, None], 0.0, Yr)[None], m, 0), singular
+            if Mv.order == 0:
+                return BallJet(Ym[None], np.where(singular[:, None, None], 0.0, Yr)[None], m, 0), singular
+            Y_box = (Ym, Yr)
         dM = [BallJet(Mv.mid[1 + p : 2 + p, :, 0], Mv.rad[1 + p : 2 + p, :, 0], m, 0) for p in range(m)]
-        Yc_mid, Yc_rad = Y_centre
-        r = radii[:, :m]
-
-        def T(Yhat):
-            rad = Yc_rad.copy()
-            for p in range(m):
-                prod = Yhat @ (dM[p] @ Yhat)
-                rad = rad + r[:, p, None, None] * (np.abs(prod.mid[0]) + prod.rad[0])
-            return _inflate_rad(rad, np.abs(Yc_mid))
-
-        absY = np.abs(Yc_mid) + Yc_rad
-        guess = T(BallJet(Yc_mid[None], Yc_rad[None], m, 0))  # the first-order spread, with Y_c's cancellations
-        rad = 2.0 * guess + 1e-12 * absY
-        proved = np.zeros(len(r), bool)
-        final = np.full_like(rad, np.inf)
-        for _ in range(12):
-            new = T(BallJet(Yc_mid[None], rad[None], m, 0))
-            inside = np.all(new < rad, axis=(-1, -2)) & np.all(np.isfinite(new), axis=(-1, -2))
-            final = np.where((inside & ~proved)[:, None, None], new, final)
-            proved |= inside
-            if proved.all():
-                break
-            rad = np.where(proved[:, None, None], rad, 1.5 * np.maximum(new, rad))
-        # T maps an enclosure of Y(Q) to one: iterating it (and intersecting) only tightens
-        for _ in range(6):
-            if not proved.any():
-                break
-            new = T(BallJet(Yc_mid[None], np.where(proved[:, None, None], final, 0.0)[None], m, 0))
-            final = np.where(proved[:, None, None], np.minimum(final, new), final)
-        singular = ~proved
-        final = np.where(singular[:, None, None], 0.0, final)
-        Y0 = BallJet(Yc_mid[None], final[None], m, 0)
+        singular = ~np.isfinite(Y_box[1]).all((-1, -2))
+        Y0 = BallJet(Y_box[0][None], np.where(singular[:, None, None], 0.0, Y_box[1])[None], m, 0)
         # dY/dq_p = -Y dM/dq_p Y, and d2Y/dq_p dq_l = -(dY_l dM_p Y + Y d2M_pl Y + Y dM_p dY_l), with Y in Y0
         grads = [-(Y0 @ (dM[p] @ Y0)) for p in range(m)]
         pieces = [Y0] + grads
@@ -262,7 +257,7 @@ class FactorProblem:
         radius = np.concatenate([piece.rad for piece in pieces])
         return BallJet(mid, radius, m, Mv.order).padded(2 * m), singular  # Y does not depend on qdot
 
-    def _factors(self, M, h, Y_centre=None, radii=None, residual=None):
+    def _factors(self, M, h, Y_box=None, residual=None):
         """``(K0, Ka, singular)``: the factor at ``a = 0`` ``(B, F, m, 3m)`` and its ``a``-coefficients ``(B, F, m, m_p, m_j)``, one order below ``M``, ``h``, in ``(q, qdot)``.
 
         With ``residual = (K0c, Kac)`` (the factor's balls at the box's
@@ -272,7 +267,7 @@ class FactorProblem:
         """
         m = self.m
         nv = 2 * m
-        Y, singular = self._inverse(M, Y_centre, radii)
+        Y, singular = self._inverse(M, Y_box)
         Mv, hv = self._split_jet(M, None, nv), self._split_jet(h, None, nv)
         dM = BallJet.stack([self._split_jet(M, p, nv) for p in range(m)], 1)  # (B, p, P, i, j)
         dhq = BallJet.stack([self._split_jet(h, p, nv) for p in range(m)], 1)  # (B, p, P, i)
@@ -316,12 +311,11 @@ class FactorProblem:
             out = self._enclose(q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor)
         return out if attained else out[:3]
 
-    def _taylor2(self, M3, h3, qc, vc, Y_centre, radii, V):
+    def _taylor2(self, centre, M3, h3, Y_centre, Y_box, radii, V):
         """Per-vertex ``(lower, upper)`` ``(B, F, i, 3m, nv)`` of the second-order Taylor form (taylor2.py)."""
         n = 2 * self.m
-        zero = np.zeros_like(qc)
-        K0p, Kap, _ = self._factors(*self._dynamics(qc, zero, vc, zero, 2), Y_centre, np.zeros_like(radii))
-        K0h, Kah, _ = self._factors(M3, h3, Y_centre, radii)
+        K0p, Kap, _ = self._factors(*centre, Y_centre)
+        K0h, Kah, _ = self._factors(M3, h3, Y_box)
         lows, highs, parts = [], [], []
         for chunk in np.array_split(V, max(1, len(V) // 8)):  # the Hessians at 8 vertices at a time
             vm, vr = at_vertices(K0p.mid[:1], K0p.rad[:1], Kap.mid[:1], Kap.rad[:1], chunk)
@@ -340,15 +334,17 @@ class FactorProblem:
         qc, qr = _radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
         vc, vr = _radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
         zero = np.zeros_like(qr)
-        Mc, hc = self._dynamics(qc, zero, vc, zero, 1)
+        Mc2, hc2 = self._dynamics(qc, zero, vc, zero, 2 if taylor else 1)
+        Mc, hc = Mc2.truncated(1), hc2.truncated(1)
         K0c, Kac, singular_c = self._factors(Mc, hc)
-        Yc, _ = self._inverse(Mc, None, None)
+        Yc, _ = self._inverse(Mc, None)
         radii = np.concatenate([qr, vr], -1)  # (B, 2m)
         Mb, hb = self._dynamics(qc, qr, vc, vr, 3 if taylor else 2)
         M3, h3 = Mb, hb
+        Y_box = self._box_inverse(Mc2, M3, radii)  # the Taylor form of M_hat of the highest order at hand
         Mb, hb = Mb.truncated(2), hb.truncated(2)
-        K0b, Kab, singular_b = self._factors(Mb, hb, (Yc.mid[0], Yc.rad[0]), radii)
-        g0, ga, Yb = self._factors(Mb, hb, (Yc.mid[0], Yc.rad[0]), radii, residual=(K0c, Kac))
+        K0b, Kab, singular_b = self._factors(Mb, hb, Y_box)
+        g0, ga, Yb = self._factors(Mb, hb, Y_box, residual=(K0c, Kac))
         unbounded = singular_c | singular_b
         # a-vertices: the factor is affine in a, so its extremes over the a-box are at them
         a_lo, a_hi = np.asarray(a_lo, float), np.asarray(a_hi, float)
@@ -380,7 +376,8 @@ class FactorProblem:
         contribution = np.where(narrower.all(-1)[..., None], slope_contribution, contribution)
         hi, lo = upper(vm, vrad + spread), lower(vm, vrad + spread)
         if taylor:  # both enclose K at each vertex: their intersection does (M_hat's inverse as proved as above)
-            t_lo, t_hi, t_contribution = self._taylor2(M3, h3, qc, vc, (Yc.mid[0], Yc.rad[0]), radii, V)
+            centre = (Mc2, hc2)
+            t_lo, t_hi, t_contribution = self._taylor2(centre, M3, h3, (Yc.mid[0], Yc.rad[0]), Y_box, radii, V)
             # where the Taylor form is the narrower, its second-order terms say where to split
             narrower = ((t_hi - t_lo) < (hi - lo)).all(-1)
             contribution = np.where(narrower[..., None], t_contribution, contribution)
@@ -396,10 +393,6 @@ def _columns(Jq, Jqd, G, m):
     K = BallJet.stack([Jq, Jqd, G], 3)  # (B, F, i, 3, m)
     n0 = K.mid.shape
     return BallJet(K.mid.reshape(*n0[:4], 3 * m), K.rad.reshape(*n0[:4], 3 * m), K.n, K.order)
-
-
-def _inflate_rad(rad, mag):
-    return (rad + GAMMA * mag) * (1.0 + GAMMA) + TINY
 
 
 @dataclass(frozen=True, eq=False)
