@@ -21,6 +21,15 @@ are taken on the entries whose sampled width is at least ``--floor`` of
 their factor's largest entry; on the others the excess of the proved width
 over the sampled one is reported relative to that scale (``excess_max``).
 
+- ``inverse``: per scale of ``--scales``, the proved enclosure of
+  ``M_hat(q)^-1`` over the box by each method of
+  :meth:`~polyrob.bounds.certified.factors.FactorProblem.inverse_enclosure`
+  (``taylor3``, the branch and bound's; ``taylor2``; ``fixed-point``, the
+  earlier one): whether it proves ``M_hat`` invertible on the whole box,
+  and its widths against those of Pinocchio's ``computeMinverse`` at
+  ``--samples`` points of the box (``width_ratios`` with a floor of
+  :data:`INVERSE_FLOOR`: ``M_hat^-1``'s entries span four decades, and an
+  entry far below the largest still varies);
 - ``wrapping`` (at the scale ``--wrapping-scale``): the radius of the
   mean-value form's interval gradient per unit of the box's half-width
   (the second-derivative bound that form uses: max and median over the
@@ -29,7 +38,7 @@ over the sampled one is reported relative to that scale (``excess_max``).
   the over-estimation is the ball arithmetic's, not the function's.
 
 Usage: ``python benchmarks/certified_arms.py [--robots ur5,panda] [--max-boxes N] [--samples N] [--floor F]
-[--proof-scales 1,0.05]``.
+[--scales 1,0.25,0.05,0.01] [--proof-scales 1,0.05]`` (an empty list skips that part).
 """
 
 from __future__ import annotations
@@ -41,6 +50,7 @@ import time
 from dataclasses import replace
 
 import numpy as np
+import pinocchio as pin
 from _results import add_results_option, save_run
 
 from polyrob import load_robot
@@ -68,6 +78,29 @@ def wrapping(problem, box, rng) -> dict:
                 largest = max(largest, float(np.abs(K[0] - K[1] - K[2] + K[3]).max() / (4 * h * h)))
     return {"gradient_radius_per_r_max": float(per_r.max()), "gradient_radius_per_r_median": float(np.median(per_r)),
             "sampled_second_difference_max": largest}  # fmt: skip
+
+
+#: Entries of ``M_hat^-1`` whose sampled width is below this fraction of its largest entry are judged by their excess.
+INVERSE_FLOOR = 1e-6
+
+
+def inverse_widths(problem, model, box, samples, rng, floor=INVERSE_FLOOR) -> dict:
+    """Each method's enclosure of ``M_hat^-1`` on the box against sampled inverses (Pinocchio)."""
+    data = model.createData()
+    Y = []
+    for q in rng.uniform(box.q_lower, box.q_upper, (samples, problem.m)):
+        pin.computeMinverse(model, data, q)
+        Y.append(np.triu(data.Minv) + np.triu(data.Minv, 1).T)
+    Y = np.array(Y)
+    out = {}
+    for method in ("taylor3", "taylor2", "fixed-point"):
+        mid, rad, proved = problem.inverse_enclosure(box.q_lower[None], box.q_upper[None], method)
+        out[method] = {"proved": bool(proved[0])}
+        if proved[0]:
+            lo, hi = (mid - rad)[:, None], (mid + rad)[:, None]
+            out[method]["holds_samples"] = bool(np.all((Y >= lo[0, 0]) & (Y <= hi[0, 0])))
+            out[method].update(width_ratios(lo[0], hi[0], Y.min(0)[None], Y.max(0)[None], floor))
+    return out
 
 
 def scaled(domain, s):
@@ -101,11 +134,14 @@ def main() -> None:
         loops = [(n, loop) for n, _, loop in factor_parameters(default_task_robot(robot))]
         domain = default_task_domain(robot)
         problem = FactorProblem.from_loops(loops)
-        row = {"joints": robot.m, "factors": [n for n, _ in loops], "one_box": []}
+        row = {"joints": robot.m, "factors": [n for n, _ in loops], "one_box": [], "inverse": []}
+        model_robot = loops[0][1].model_robot
         row["wrapping"] = wrapping(problem, scaled(domain, args.wrapping_scale), np.random.default_rng(2))
         row["wrapping"]["scale"] = args.wrapping_scale
-        for s in map(float, args.scales.split(",")):
+        for s in [float(x) for x in args.scales.split(",") if x]:
             box = scaled(domain, s)
+            inv = inverse_widths(problem, model_robot.model, box, args.samples, np.random.default_rng(3))
+            row["inverse"].append({"scale": s, **inv})
             s_lo, s_hi = attained_range(
                 problem, box.q_lower, box.q_upper, box.qdot_lower, box.qdot_upper, box.qddot_lower,
                 box.qddot_upper, args.samples, np.random.default_rng(1))  # fmt: skip
@@ -123,7 +159,7 @@ def main() -> None:
                     )
             row["one_box"].append(entry)
         row["proof"] = []
-        for s in map(float, args.proof_scales.split(",")):
+        for s in [float(x) for x in args.proof_scales.split(",") if x]:
             box = scaled(domain, s)
             t0 = time.perf_counter()
             try:

@@ -59,6 +59,20 @@ def _ball_product(C, mid, rad):
     return out.mid[0], out.rad[0]
 
 
+def jet_parts(J: BallJet, upto: int):
+    """``[(mid, rad)]`` of a mass-matrix jet's derivatives of orders ``0 .. upto``, of the model (parameter set 0).
+
+    ``J``: ``(C, B, P, m, m)`` in ``m`` variables; the order-``j`` part has shape ``(m,)*j + (B, m, m)``.
+    """
+    m, out, start = J.n, [], 0
+    for j in range(upto + 1):
+        size = m**j
+        shape = (m,) * j + J.mid.shape[1:2] + J.mid.shape[3:]
+        out.append((J.mid[start : start + size, :, 0].reshape(shape), J.rad[start : start + size, :, 0].reshape(shape)))
+        start += size
+    return out
+
+
 def taylor_residual(C, centre, box, radii):
     """``E(q) = I - C M(q)`` over each box: ``(linear, rest)``, ``E(c + d) = sum_p linear_p d_p + rest``.
 

@@ -52,7 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, lower, upper
-from polyrob.bounds.certified.factors.inverse import taylor_neumann_inverse
+from polyrob.bounds.certified.factors.inverse import fixed_point_inverse, jet_parts, taylor_neumann_inverse
 from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread, vertex_gradients
 from polyrob.bounds.certified.factors.taylor2 import at_vertices, taylor2_bounds
 from polyrob.bounds.certified.factors.width_ratio import FLOOR
@@ -211,20 +211,30 @@ class FactorProblem:
         jets at the centre (thin), ``Mb`` over the box, both in ``q``.
         """
         k = min(Mb.order, Mc.order + 1)
-
-        def parts(J, upto):
-            m, out, start = J.n, [], 0
-            for j in range(upto + 1):
-                size = m**j
-                shape = (m,) * j + J.mid.shape[1:2] + J.mid.shape[3:]
-                out.append(
-                    (J.mid[start : start + size, :, 0].reshape(shape), J.rad[start : start + size, :, 0].reshape(shape))
-                )
-                start += size
-            return out
-
-        mid, rad, _ = taylor_neumann_inverse(parts(Mc, k - 1), parts(Mb, k)[k], radii[:, : Mc.n])
+        mid, rad, _ = taylor_neumann_inverse(jet_parts(Mc, k - 1), jet_parts(Mb, k)[k], radii[:, : Mc.n])
         return mid, rad
+
+    def inverse_enclosure(self, q_lo, q_hi, method: str = "taylor3"):
+        """``(mid, rad, proved)`` of ``M_hat(q)^-1`` over boxes ``(B, m)`` in ``q`` (for measurement and tests).
+
+        ``method``: ``taylor3`` or ``taylor2`` (the Taylor form of that order
+        and the Perron-weighted Neumann bound, :mod:`~polyrob.bounds.certified.factors.inverse`;
+        the branch and bound's is ``taylor3``), or ``fixed-point`` (the earlier
+        method, a ball around the centre's inverse).
+        """
+        qc, qr = _radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
+        order = {"taylor3": 3, "taylor2": 2, "fixed-point": 1}[method]
+        zero = np.zeros_like(qr)
+        with np.errstate(over="ignore", invalid="ignore"):
+            Mc = self._dynamics(qc, zero, zero, zero, max(order - 1, 1))[0]
+            Mb = self._dynamics(qc, qr, zero, zero, max(order, 2))[0]
+            if method == "fixed-point":
+                Yc, _ = self._inverse(Mc, None)
+                dM = jet_parts(Mb, 1)[1]
+                rad, proved = fixed_point_inverse((Yc.mid[0], Yc.rad[0]), dM, qr)
+                return Yc.mid[0], rad, proved
+            mid, rad, _ = taylor_neumann_inverse(jet_parts(Mc, order - 1), jet_parts(Mb, order)[order], qr)
+        return mid, rad, np.isfinite(rad).all((-1, -2))
 
     def _inverse(self, M, Y_box):
         """``Y = M_hat^-1`` at one order below ``M``, and the boxes where it is not provably enclosed.
