@@ -129,23 +129,31 @@ def residual_ball(linear, rest, radii):
     return E_mid, E_rad
 
 
-def perron_bound(N, iterations: int = 40):
+def perron_bound(N, iterations: int = 8):
     """``(alpha, v)``: a positive ``v`` and a float ``alpha`` above ``max_i (N v)_i / v_i`` (outward rounding).
 
-    ``N`` ``(B, m, m)`` nonnegative; ``v`` by power iteration on ``N + eps``
-    (the Perron vector where ``N`` is irreducible), kept positive.  Then
-    ``rho(A) <= alpha`` for every ``|A| <= N``.
+    ``N`` ``(B, m, m)`` nonnegative; ``v`` the eigenvector of ``N``'s largest
+    eigenvalue ``rho`` (the Perron vector, kept positive), polished by power
+    steps on ``N + rho I`` (same vector, no oscillation on periodic ``N``).
+    Any positive ``v`` gives a valid ``alpha``; then ``rho(A) <= alpha`` for
+    every ``|A| <= N``.
     """
-    B, m = N.shape[0], N.shape[-1]
-    v = np.ones((B, m))
-    scale = N.max(axis=(-1, -2), keepdims=True)[..., 0] + TINY
+    B = N.shape[0]
+    safe = np.where(np.isfinite(N), N, 0.0)
+    with np.errstate(all="ignore"):
+        values, vectors = np.linalg.eig(safe)
+    top = np.argmax(values.real, axis=-1)
+    rho = np.maximum(values.real[np.arange(B), top], 0.0)
+    v = np.abs(vectors.real[np.arange(B), :, top])
+    v = np.where(np.isfinite(v), v, 1.0)
+    v = v / np.maximum(v.max(-1, keepdims=True), 1e-300)
     for _ in range(iterations):
-        w = np.einsum("bij,bj->bi", N, v) + 1e-3 * scale * v.max(-1, keepdims=True)
+        w = np.einsum("bij,bj->bi", safe, v) + rho[:, None] * v + 1e-9 * (rho[:, None] + TINY)
         v = w / w.max(-1, keepdims=True)
     v = np.maximum(v, 1e-12)
     Nv = upper(np.einsum("bij,bj->bi", N, v), 0.0)
     alpha = upper((Nv / v).max(-1), 0.0)
-    return alpha, v
+    return np.where(np.isfinite(alpha), alpha, np.inf), v
 
 
 def neumann_inverse(C, linear, rest, radii, terms: int = 3):
