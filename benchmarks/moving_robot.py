@@ -69,6 +69,7 @@ def run(
     cells=False,
     cell_time_limit=900.0,
     symmetric=False,
+    cell_workers=None,
 ) -> dict:
     from polyrob import load_robot
     from polyrob.analysis.lpv.moving import moving_robot_certificate
@@ -83,6 +84,7 @@ def run(
     mv = moving_robot_certificate(
         problem, K, velocities=velocities, points=points, tensor=tensor, recheck=recheck, harmonics=harmonics,
         level=level, cells=cells, cell_time_limit=cell_time_limit, progress=cells, symmetric=symmetric,
+        cell_workers=cell_workers,
     )  # fmt: skip
     s = mv.summary()
     if save_x and mv.result is not None and mv.result.proved:
@@ -151,8 +153,10 @@ def saved_search(factor: float, spec: str, path: str):
     return saved, model, system, sysf, c, basis, rates, source
 
 
-def saved_x_between(factor: float, spec: str, path: str, *, recheck, cell_time_limit: float, level=None) -> dict:
-    """The ``X`` a run saved (``--save-x``) re-checked on a finer grid and proved on cells, without searching again."""
+def saved_x_between(factor: float, spec: str, path: str, *, recheck, cell_time_limit: float, level=None,
+                    cell_workers=None) -> dict:  # fmt: skip
+    """The ``X`` a run saved (``--save-x``) re-checked on a finer grid (``recheck=None``: only on its own) and proved
+    on cells, without searching again."""
     from types import SimpleNamespace
 
     import numpy as np
@@ -167,15 +171,16 @@ def saved_x_between(factor: float, spec: str, path: str, *, recheck, cell_time_l
            "gamma_saved": result.gamma, "rates": rates, "rates_source": source}  # fmt: skip
     t = time.perf_counter()
     out["search_grid_recheck"] = finer_recheck(sysf, model, result, rates, basis, points=points, c=c)
-    out["finer_grid"] = finer_recheck(sysf, model, result, rates, basis, points=recheck, c=c)
-    g = out["finer_grid"]["gamma"]
-    for key in ("search_grid_recheck", "finer_grid"):  # strict JSON: no bound is null
+    if recheck is not None:
+        out["finer_grid"] = finer_recheck(sysf, model, result, rates, basis, points=recheck, c=c)
+    g = out["finer_grid" if recheck is not None else "search_grid_recheck"]["gamma"]
+    for key in ("search_grid_recheck", "finer_grid")[: 1 + (recheck is not None)]:  # strict JSON: no bound is null
         out[key]["gamma"] = out[key]["gamma"] if np.isfinite(out[key]["gamma"]) else None
     out["recheck_seconds"] = round(time.perf_counter() - t, 1)
     if np.isfinite(g) and g < 1:
         g_cells = float(level) if level is not None and level >= g else 0.5 * (g + 1.0)
         chk = check_cells(model, system, saved["X"], basis, rates, g_cells, similarity=sysf.similarity, c=c,
-                          time_limit=cell_time_limit, progress=True)  # fmt: skip
+                          time_limit=cell_time_limit, progress=True, workers=cell_workers)  # fmt: skip
         out["cells"] = chk.summary()
     out["lower"] = found_along_trajectories(factor, spec)
     return out
@@ -268,6 +273,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cells", action="store_true", help="prove the X between the grid points, on cells")
     ap.add_argument("--symmetric", action="store_true", help="the half box and an even X (the loop is even in rho)")
     ap.add_argument("--cell-time-limit", type=float, default=900.0, help="seconds for --cells")
+    ap.add_argument("--cell-workers", type=int, default=None, help="processes for --cells (default: the available cores)")
     ap.add_argument("--load-x", default=None, metavar="FILE.npz", help="no search: the saved X, re-checked and --cells")
     ap.add_argument("--lower-only", action="store_true", help="only the largest gain found along admissible trajectories")
     add_results_option(ap)
@@ -291,7 +297,8 @@ def main(argv=None) -> int:
             continue
         if args.load_x:
             doc["runs"].append(saved_x_between(float(factor), spec, args.load_x, recheck=recheck if recheck != "auto"
-                               else (33, 5), cell_time_limit=args.cell_time_limit, level=args.level))  # fmt: skip
+                               else (33, 5), cell_time_limit=args.cell_time_limit, level=args.level,
+                               cell_workers=args.cell_workers))  # fmt: skip
             continue
         if args.slice:
             v = [float(x) for x in args.slice.split(",")]
@@ -313,6 +320,7 @@ def main(argv=None) -> int:
                 cells=args.cells,
                 cell_time_limit=args.cell_time_limit,
                 symmetric=args.symmetric,
+                cell_workers=args.cell_workers,
             )
         )
     doc["load_average_end"] = list(os.getloadavg())

@@ -12,6 +12,7 @@ from polyrob.analysis.lpv.check import GridData, brl_matrices
 from polyrob.analysis.lpv.moving import _search, moving_robot_certificate
 from polyrob.analysis.lpv.robot import closed_loop_system, kinematic_rates, rate_bounds, scheduling
 from polyrob.domains.torque_box import Domain
+from polyrob.workers import available_cores
 
 
 @pytest.fixture(scope="module")
@@ -42,6 +43,7 @@ def robot():
 
 def _check(searched, gamma, **kw):
     model, system, r, sysf, c, basis, used = searched
+    kw.setdefault("workers", 1)  # one process: tests/test_cells_parallel.py compares it with workers
     return check_cells(model, system, r.X, basis, kw.pop("rates", used), gamma, similarity=sysf.similarity, c=c,
                        **kw)  # fmt: skip
 
@@ -92,6 +94,7 @@ def test_the_certificate_with_cells_is_certified_and_says_what_it_covers(robot, 
     c = moving_robot_certificate(problem, pd_controller(), points=(3, 2), velocities="bounded", qddot_max=qddot_max,
                                  level=0.9, cells=True)  # fmt: skip
     assert c.cells["holds"], c.cells
+    assert c.cells["workers"] == available_cores()  # the default reaches check_cells: every core
     cert = c.certificate
     assert cert.status.value == "CERTIFIED" and cert.bound == pytest.approx(0.9)
     assert "cells covering the whole box" in " ".join(cert.scope.notes)
@@ -118,7 +121,7 @@ def test_the_half_box_of_an_even_loop_gives_the_same_verdict_with_half_the_point
     rates, _ = rate_bounds(model, tiny)
     qddot_max = [2 * rates[1][1], 2 * rates[2][1]]
     c = moving_robot_certificate(problem, pd_controller(), points=(5, 2), velocities="bounded", qddot_max=qddot_max,
-                                 level=0.9, cells=True, symmetric=True)  # fmt: skip
+                                 level=0.9, cells=True, symmetric=True, cell_workers=1)  # fmt: skip
     assert c.certificate.status.value == "CERTIFIED" and c.result.n_basis == 4  # 1, cos q2, sin q2 qdot1, sin q2 qdot2
     lopsided = tiny.with_bounds(q_lower=np.array([-0.05, -0.05]), q_upper=np.array([0.05, 0.1]))
     with pytest.raises(NotApplicable, match="not symmetric"):

@@ -29,9 +29,11 @@ Examples
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
-__all__ = ["default_basis", "basis_size", "finer_recheck", "even_functions"]
+__all__ = ["default_basis", "basis_size", "finer_recheck", "even_functions", "constant_function"]
 
 
 def _unit(p: int, i: int, dv: float) -> np.ndarray:
@@ -40,38 +42,87 @@ def _unit(p: int, i: int, dv: float) -> np.ndarray:
     return g
 
 
+# The basis functions are module-level functions bound by functools.partial, not closures: the moving
+# robot's cells check sends the basis to worker processes, which pickle it (polyrob.analysis.lpv.cells).
+def _one(r):
+    return 1.0
+
+
+def _zero_grad(r, p):
+    return np.zeros(p)
+
+
+def _cos(r, i, k):
+    return np.cos(k * r[i])
+
+
+def _cos_grad(r, p, i, k):
+    return _unit(p, i, -k * np.sin(k * r[i]))
+
+
+def _sin(r, i, k):
+    return np.sin(k * r[i])
+
+
+def _sin_grad(r, p, i, k):
+    return _unit(p, i, k * np.cos(k * r[i]))
+
+
+def _coordinate(r, i):
+    return r[i]
+
+
+def _coordinate_grad(r, p, i):
+    return _unit(p, i, 1.0)
+
+
+def _pair(r, a, b):
+    return r[a] * r[b]
+
+
+def _pair_grad(r, p, a, b):
+    return _unit(p, a, r[b]) + _unit(p, b, r[a])
+
+
+def _times(r, fa, fb):
+    return fa(r) * fb(r)
+
+
+def _times_grad(r, fa, ga, fb, gb):
+    return np.asarray(ga(r)) * fb(r) + fa(r) * np.asarray(gb(r))
+
+
+def constant_function(p: int):
+    """The basis function ``1`` on ``p`` parameters, as ``(f, grad)`` (picklable)."""
+    return partial(_one), partial(_zero_grad, p=p)
+
+
 def _position_functions(model, harmonics: int = 1):
     p = len(model.names)
-    out = [(lambda r: 1.0, lambda r: np.zeros(p))]
+    out = [constant_function(p)]
     for i, kind in enumerate(model.kinds):
         if kind == "q":
             for k in range(1, int(harmonics) + 1):
-                out.append(
-                    (lambda r, i=i, k=k: np.cos(k * r[i]), lambda r, i=i, k=k: _unit(p, i, -k * np.sin(k * r[i])))
-                )
-                out.append(
-                    (lambda r, i=i, k=k: np.sin(k * r[i]), lambda r, i=i, k=k: _unit(p, i, k * np.cos(k * r[i])))
-                )
+                out.append((partial(_cos, i=i, k=k), partial(_cos_grad, p=p, i=i, k=k)))
+                out.append((partial(_sin, i=i, k=k), partial(_sin_grad, p=p, i=i, k=k)))
     return out
 
 
 def _velocity_functions(model, quadratic: bool):
     p = len(model.names)
     vel = [i for i, k in enumerate(model.kinds) if k == "qdot"]
-    out = [(lambda r, i=i: r[i], lambda r, i=i: _unit(p, i, 1.0)) for i in vel]
+    out = [(partial(_coordinate, i=i), partial(_coordinate_grad, p=p, i=i)) for i in vel]
     if quadratic:
         for a in vel:
             for b in vel:
                 if b >= a:
-                    out.append(
-                        (lambda r, a=a, b=b: r[a] * r[b], lambda r, a=a, b=b: _unit(p, a, r[b]) + _unit(p, b, r[a]))
-                    )
+                    out.append((partial(_pair, a=a, b=b), partial(_pair_grad, p=p, a=a, b=b)))
     return out
 
 
 def _product(f, g):
     (fa, ga), (fb, gb) = f, g
-    return (lambda r: fa(r) * fb(r), lambda r: np.asarray(ga(r)) * fb(r) + fa(r) * np.asarray(gb(r)))
+    return partial(_times, fa=fa, fb=fb), partial(_times_grad, fa=fa, ga=ga, fb=fb, gb=gb)
 
 
 def default_basis(model, *, quadratic: bool = False, tensor: bool = False, harmonics: int = 1):

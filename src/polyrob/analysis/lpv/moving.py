@@ -170,6 +170,7 @@ def moving_robot_certificate(
     level=None,
     cells: bool = False,
     cell_time_limit: float | None = None,
+    cell_workers: int | None = None,
     symmetric: bool = False,
     progress: bool = False,
     lower_bound: bool | dict | None = None,
@@ -215,7 +216,9 @@ def moving_robot_certificate(
         or else halfway from the grid's bound to 1), bounded by its number of
         cells (``progress``: a bar); when it holds the status is CERTIFIED.
         ``cell_time_limit``: a wall-clock safety net the caller sets (default
-        none), named in the verdict when it fires.
+        none), named in the verdict when it fires.  ``cell_workers``: the
+        processes the cells run on (default: the available cores; 1: this
+        process; the verdict does not depend on it).
     symmetric : bool or "auto"
         When the loop is even in ``rho`` on a symmetric box, search and prove
         on the half box with ``X`` on the even functions of the basis
@@ -280,7 +283,7 @@ def moving_robot_certificate(
             # the search's level, else halfway from the grid's bound to 1: room between the points, and a bound < 1
             g_cells = float(level) if level is not None and level >= g_grid else 0.5 * (g_grid + 1.0)
             between = check_cells(model, system, result.X, basis, used, g_cells, similarity=getattr(sysf, "similarity",
-                                  None), c=cs, time_limit=cell_time_limit, progress=progress)  # fmt: skip
+                                  None), c=cs, time_limit=cell_time_limit, progress=progress, workers=cell_workers)  # fmt: skip
         found = {}
         if lower_bound or (lower_bound is None and cells):
             from polyrob.analysis.time_varying.trajectory_gains import trajectory_lower_bound

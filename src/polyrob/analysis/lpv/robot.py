@@ -272,18 +272,29 @@ def kinematic_rates(model: MovingRobotModel, rates, c: float = 1.0):
         exact = nxt in where and np.isfinite(hi) and peak.get(nxt, 0.0) > 0
         plan.append((where[nxt], hi / peak[nxt]) if exact else None)
 
-    def at(rho):
+    return KinematicRates(tuple(tuple(r) for r in rates), tuple(plan), c)
+
+
+class KinematicRates:
+    """``rho -> rate box at rho`` of :func:`kinematic_rates` (a class, not a closure: the cells' workers pickle it).
+
+    ``exact[i]``: ``None`` (the rate of ``rho_i`` is any value of its box) or ``(w, slope)`` (it is
+    ``slope * rho_w`` while inside its box), in the scaled time; what the cells use.
+    """
+
+    def __init__(self, rates, plan, c):
+        self.rates, self.plan, self.c = rates, plan, c
+        self.exact = [None if how is None else (how[0], how[1] / c) for how in plan]
+
+    def __call__(self, rho):
         out = []
-        for (lo, hi), how in zip(rates, plan):
+        for (lo, hi), how in zip(self.rates, self.plan):
             if how is None:
-                out.append((lo / c, hi / c))
+                out.append((lo / self.c, hi / self.c))
             else:
-                v = min(max(rho[how[0]] * how[1], lo), hi) / c
+                v = min(max(rho[how[0]] * how[1], lo), hi) / self.c
                 out.append((v, v))
         return out
-
-    at.exact = [None if how is None else (how[0], how[1] / c) for how in plan]  # rate = slope * rho_w: the cells
-    return at
 
 
 def closed_loop_system(model: MovingRobotModel, K, W_S=None, W_T=None, W_KS=None):
@@ -293,18 +304,29 @@ def closed_loop_system(model: MovingRobotModel, K, W_S=None, W_T=None, W_KS=None
     (the weights as :func:`polyrob.plant.generalized.generalized_plant`
     realises them, states ``[x, W_S, W_T, W_KS, x_K]``).
     """
-    from polyrob.analysis.time_varying.vertices import controller_mats, performance_vertices, vertex_set
+    from polyrob.analysis.time_varying.vertices import controller_mats
 
-    Kmats = controller_mats(K, model.robot.m)
-
-    def of_plant(A, B):
-        return tuple(x[0] for x in performance_vertices(vertex_set([(A, B)]), Kmats, W_S, W_T, W_KS))
+    of_plant = LoopOfPlant(controller_mats(K, model.robot.m), W_S, W_T, W_KS)
 
     def system(rho):
         return of_plant(*model.plant(rho))
 
     system.of_plant = of_plant  # (A, B) of the robot -> the closed loop: affine (the check between points uses it)
     return system
+
+
+class LoopOfPlant:
+    """``(A, B) of the robot -> (A, B, C, D)`` of the closed loop (a class, not a closure: the cells' workers pickle it)."""
+
+    def __init__(self, Kmats, W_S, W_T, W_KS):
+        self.Kmats, self.W_S, self.W_T, self.W_KS = Kmats, W_S, W_T, W_KS
+
+    def __call__(self, A, B):
+        from polyrob.analysis.time_varying.vertices import performance_vertices, vertex_set
+
+        return tuple(
+            x[0] for x in performance_vertices(vertex_set([(A, B)]), self.Kmats, self.W_S, self.W_T, self.W_KS)
+        )
 
 
 def _brl_solution(A, B, C, D, gamma: float, delta: float = 1e-6):

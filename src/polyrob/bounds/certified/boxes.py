@@ -27,7 +27,7 @@ from collections import deque
 
 import numpy as np
 
-__all__ = ["prove_on_boxes", "box_words"]
+__all__ = ["prove_on_boxes", "prove_on_boxes_in_batches", "box_words"]
 
 
 def _bisect(queue, evaluate, lo, hi, width0, min_width, contrib=None):
@@ -99,6 +99,63 @@ def prove_on_boxes(boxes, evaluate, width0, *, min_width, max_boxes, time_limit=
             return False, leaves, f"{value[-1]} at rho in {box_words(lo, hi)} (a cell at the smallest width)"
         if bar is not None:
             bar.total += 1  # shown at the bar's next update (a refresh per split floods the terminal)
+    return True, leaves, ""
+
+
+def prove_on_boxes_in_batches(boxes, evaluate_many, width0, *, min_width, max_boxes, batch, observe=None,
+                              time_limit=None, bar=None):  # fmt: skip
+    """:func:`prove_on_boxes` with ``by_contribution``, its boxes evaluated ``batch`` at a time by ``evaluate_many``.
+
+    ``evaluate_many(list of (lo, hi)) -> list of values`` may run them in
+    other processes.  The boxes leave the queue in the order the one-by-one
+    search takes them (first in, first out), and the values are then read in
+    that order by the same rules, so the answer is the one of
+    :func:`prove_on_boxes`: the same leaves, the same reason, the same count
+    at which the ``max_boxes`` limit gives up.  Only the work differs: up to
+    ``batch - 1`` boxes past the one that ends a failed search are evaluated
+    and ignored.  ``observe(value)`` is called on each value read, in that
+    order (not on the ignored ones).
+    """
+    t0 = time.perf_counter()
+    queue, leaves = deque((lo, hi) for lo, hi in boxes), []
+    while queue:
+        taken = [queue.popleft() for _ in range(min(batch, len(queue)))]
+        values = evaluate_many(taken)
+        for index, ((lo, hi), value) in enumerate(zip(taken, values)):
+            if observe is not None:
+                observe(value)
+            if value[0] == -np.inf:
+                return False, leaves, value[-1]
+            if value[0] > 0:
+                leaves.append(value)
+                if bar is not None:
+                    bar.update(1)
+                continue
+            waiting = len(taken) - index - 1 + len(queue)  # the one-by-one search's queue at this box
+            if len(leaves) + waiting >= max_boxes:
+                return (
+                    False,
+                    leaves,
+                    (
+                        f"gave up after {len(leaves)} cells (the limit of {max_boxes} cells): {value[-1]} at rho in "
+                        f"{box_words(lo, hi)}"
+                    ),
+                )
+            if time_limit is not None and time.perf_counter() - t0 > time_limit:
+                return (
+                    False,
+                    leaves,
+                    (
+                        f"stopped by the time limit of {time_limit:g} s you set, after {len(leaves)} cells: "
+                        f"{value[-1]} at rho in {box_words(lo, hi)}"
+                    ),
+                )
+            halves = deque()
+            if not _bisect(halves, None, lo, hi, width0, min_width, value[1]):
+                return False, leaves, f"{value[-1]} at rho in {box_words(lo, hi)} (a cell at the smallest width)"
+            queue.extend((a, b) for a, b, _ in halves)
+            if bar is not None:
+                bar.total += 1
     return True, leaves, ""
 
 

@@ -40,9 +40,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyrob.analysis.lpv.cells.first_order import first_order_cell
 from polyrob.analysis.lpv.cells.loop import AffineLoop, acceleration_check, plant_enclosure
-from polyrob.analysis.lpv.cells.second_order import fixed_terms, second_order_cell
+from polyrob.analysis.lpv.cells.parallel import CELLS_PER_ROUND, CELLS_PER_TASK, CellWork, batches, evaluate_cells
+from polyrob.analysis.lpv.cells.second_order import fixed_terms
 from polyrob.bounds.certified.boxes import prove_on_boxes
 from polyrob.errors import ArgumentError
 
@@ -73,6 +73,8 @@ class CellCheck:
         unit of cell width seen (a cell must be narrower than about its inverse):
         the whole matrix's derivative at the cells' centres (second-order test),
         or the sum of its parts' bounds over the cells (first-order test).
+    workers : int
+        Processes the cells ran on (the verdict does not depend on it).
     """
 
     holds: bool
@@ -83,6 +85,7 @@ class CellCheck:
     reason: str
     seconds: float
     sensitivity: tuple = ()
+    workers: int = 1
 
     def words(self) -> str:
         if not self.holds:
@@ -104,6 +107,7 @@ class CellCheck:
             "reason": self.reason,
             "sensitivity": [finite_or_none(x) for x in self.sensitivity],
             "seconds": round(self.seconds, 1),
+            "workers": self.workers,
         }
 
 
@@ -129,7 +133,9 @@ def cell_setting(model, system, Xs, basis, rates, *, similarity=None, c=1.0, cel
     from polyrob.analysis.lpv.robot import kinematic_rates
 
     if basis is None:  # a constant X (arbitrarily fast variation)
-        basis = [(lambda r: 1.0, lambda r: np.zeros(len(model.names)))]
+        from polyrob.analysis.lpv.basis import constant_function
+
+        basis = [constant_function(len(model.names))]
     enclose = plant_enclosure(model)
     lo0 = np.array([a[0] for a in model.axes], float)
     hi0 = np.array([a[-1] for a in model.axes], float)
@@ -167,7 +173,7 @@ def cell_setting(model, system, Xs, basis, rates, *, similarity=None, c=1.0, cel
 
 
 def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.0, cells=None, max_cells=200_000,
-                time_limit=None, min_width=1e-6, progress=False, order=2) -> CellCheck:  # fmt: skip
+                time_limit=None, min_width=1e-6, progress=False, order=2, workers=None) -> CellCheck:  # fmt: skip
     """Prove the bounded-real LMIs of ``X(rho) = sum_j f_j(rho) X_j`` at level ``gamma`` on the whole box of ``rho``.
 
     Parameters
@@ -202,6 +208,11 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
         The cell test: 2 (default) expands the LMI to second order about each
         cell's centre (:mod:`~polyrob.analysis.lpv.cells.second_order`), 1
         bounds its change by first-order parts (:mod:`~polyrob.analysis.lpv.cells.first_order`).
+    workers : int, optional
+        Processes the cells run on (default: the available cores; 1: this
+        process).  The verdict does not depend on it
+        (:mod:`~polyrob.analysis.lpv.cells.parallel`); inside a daemonic
+        process (a pool's worker) the cells run in that process.
 
     Returns
     -------
@@ -228,28 +239,61 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
 
     seen = np.zeros(len(lo0))
 
-    def cell_test(lo, hi):
-        if order == 2:
-            return second_order_cell(loop, model, enclose, basis, Xs, st.rate_plan, st.fixed, gamma, lo, hi)
-        return first_order_cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi)
-
-    def evaluate(lo, hi):
-        out = cell_test(lo, hi)
+    def observe(out):
         if out[1] is not None:  # (margin, contribution, first-order change per unit width, why)
             seen[:] = np.maximum(seen, out[2])
         return out
 
+    work = CellWork(loop, model, enclose, basis, Xs, rates_at, st.rate_plan, st.fixed, gamma, order)
+    n_workers = _workers(workers)
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
         bar = tqdm(total=len(boxes), desc="cells", unit="cell")
     try:
-        ok, leaves, why = prove_on_boxes(boxes, evaluate, width0, bar=bar, by_contribution=True, **opts)
+        if n_workers == 1:
+            ok, leaves, why = prove_on_boxes(boxes, lambda lo, hi: observe(work.test(lo, hi)), width0, bar=bar,
+                                             by_contribution=True, **opts)  # fmt: skip
+        else:
+            n_workers, (ok, leaves, why) = _in_parallel(work, boxes, width0, n_workers, observe, bar, opts)
     finally:
         if bar is not None:
             bar.close()
     smallest = min((v[0] for v in leaves), default=-np.inf)
-    return CellCheck(
-        ok, gamma, len(leaves), smallest, acc, why, time.perf_counter() - t0, tuple(float(x) for x in seen)
-    )
+    return CellCheck(ok, gamma, len(leaves), smallest, acc, why, time.perf_counter() - t0,
+                     tuple(float(x) for x in seen), n_workers)  # fmt: skip
+
+
+def _workers(workers) -> int:
+    import multiprocessing
+
+    from polyrob.workers import available_cores
+
+    n = available_cores() if workers is None else int(workers)
+    if n < 1:
+        raise ArgumentError(f"check_cells: workers must be at least 1, not {workers!r}")
+    if multiprocessing.current_process().daemon:  # a daemonic process may not start processes
+        return 1
+    return n
+
+
+def _in_parallel(work, boxes, width0, n_workers, observe, bar, opts):
+    """``(processes used, prove_on_boxes' answer)`` with the cells evaluated on ``n_workers`` spawned workers."""
+    import logging
+
+    from polyrob.bounds.certified.boxes import prove_on_boxes_in_batches
+    from polyrob.bounds.parallel import WorkerPool
+
+    with WorkerPool(work, workers=n_workers) as pool:
+
+        def evaluate_many(cells):
+            return [v for chunk in pool.map(evaluate_cells, batches(cells, CELLS_PER_TASK)) for v in chunk]
+
+        answer = prove_on_boxes_in_batches(boxes, evaluate_many, width0, batch=CELLS_PER_ROUND * n_workers,
+                                           observe=observe, bar=bar, min_width=opts["min_width"],
+                                           max_boxes=opts["max_boxes"], time_limit=opts["time_limit"])  # fmt: skip
+        if pool.fallback is not None:
+            logging.getLogger("polyrob").warning("cells: %s", pool.fallback)
+            return 1, answer
+    return n_workers, answer

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["AffineLoop", "plant_enclosure", "spectral_norms", "symmetric_norms", "acceleration_check"]
+__all__ = ["AffineLoop", "PlantEnclosure", "plant_enclosure", "spectral_norms", "symmetric_norms", "acceleration_check"]
 
 
 def plant_enclosure(model, order: int = 2):
@@ -23,13 +23,21 @@ def plant_enclosure(model, order: int = 2):
 
     if not isinstance(model.robot, AnalyticRobot):
         return None
-    from polyrob.bounds.certified.analytic import analytic_jacobian_enclosure
+    return PlantEnclosure(model, order)
 
-    def enclose(lo, hi, order=order):
-        (ql, vl), (qh, vh) = model.state(lo), model.state(hi)
-        return analytic_jacobian_enclosure(model.robot, ql, qh, vl, vh, model.u, order=order)
 
-    return enclose
+class PlantEnclosure:
+    """``enclose(lo, hi, order)`` of :func:`plant_enclosure` (a class, not a closure: the cells' workers pickle it)."""
+
+    def __init__(self, model, order: int = 2):
+        self.model, self.order = model, order
+
+    def __call__(self, lo, hi, order=None):
+        from polyrob.bounds.certified.analytic import analytic_jacobian_enclosure
+
+        (ql, vl), (qh, vh) = self.model.state(lo), self.model.state(hi)
+        return analytic_jacobian_enclosure(self.model.robot, ql, qh, vl, vh, self.model.u,
+                                           order=self.order if order is None else order)  # fmt: skip
 
 
 class AffineLoop:
@@ -102,5 +110,3 @@ def acceleration_check(model, enclose, bounds):
         return margin, qdd, "the robot's accelerations may exceed the rate bounds"
 
     return evaluate
-
-
