@@ -77,24 +77,9 @@ def prove_on_boxes(boxes, evaluate, width0, *, min_width, max_boxes, time_limit=
             if bar is not None:
                 bar.update(1)
             continue
-        if len(leaves) + len(queue) >= max_boxes:
-            return (
-                False,
-                leaves,
-                (
-                    f"gave up after {len(leaves)} cells (the limit of {max_boxes} cells): {value[-1]} at rho in "
-                    f"{box_words(lo, hi)}"
-                ),
-            )
-        if time_limit is not None and time.perf_counter() - t0 > time_limit:
-            return (
-                False,
-                leaves,
-                (
-                    f"stopped by the time limit of {time_limit:g} s you set, after {len(leaves)} cells: {value[-1]} "
-                    f"at rho in {box_words(lo, hi)}"
-                ),
-            )
+        stop = _stop(leaves, len(queue), max_boxes, time_limit, t0, value, lo, hi)
+        if stop is not None:
+            return stop
         if not _bisect(queue, evaluate, lo, hi, width0, min_width, value[1] if by_contribution else None):
             return False, leaves, f"{value[-1]} at rho in {box_words(lo, hi)} (a cell at the smallest width)"
         if bar is not None:
@@ -132,24 +117,9 @@ def prove_on_boxes_in_batches(boxes, evaluate_many, width0, *, min_width, max_bo
                     bar.update(1)
                 continue
             waiting = len(taken) - index - 1 + len(queue)  # the one-by-one search's queue at this box
-            if len(leaves) + waiting >= max_boxes:
-                return (
-                    False,
-                    leaves,
-                    (
-                        f"gave up after {len(leaves)} cells (the limit of {max_boxes} cells): {value[-1]} at rho in "
-                        f"{box_words(lo, hi)}"
-                    ),
-                )
-            if time_limit is not None and time.perf_counter() - t0 > time_limit:
-                return (
-                    False,
-                    leaves,
-                    (
-                        f"stopped by the time limit of {time_limit:g} s you set, after {len(leaves)} cells: "
-                        f"{value[-1]} at rho in {box_words(lo, hi)}"
-                    ),
-                )
+            stop = _stop(leaves, waiting, max_boxes, time_limit, t0, value, lo, hi)
+            if stop is not None:
+                return stop
             halves = deque()
             if not _bisect(halves, None, lo, hi, width0, min_width, value[1]):
                 return False, leaves, f"{value[-1]} at rho in {box_words(lo, hi)} (a cell at the smallest width)"
@@ -157,6 +127,17 @@ def prove_on_boxes_in_batches(boxes, evaluate_many, width0, *, min_width, max_bo
             if bar is not None:
                 bar.total += 1
     return True, leaves, ""
+
+
+def _stop(leaves, waiting, max_boxes, time_limit, t0, value, lo, hi):
+    """The give-up answer of both searches at a box that needs splitting, or ``None`` (go on)."""
+    if len(leaves) + waiting >= max_boxes:
+        why = f"gave up after {len(leaves)} cells (the limit of {max_boxes} cells)"
+    elif time_limit is not None and time.perf_counter() - t0 > time_limit:
+        why = f"stopped by the time limit of {time_limit:g} s you set, after {len(leaves)} cells"
+    else:
+        return None
+    return False, leaves, f"{why}: {value[-1]} at rho in {box_words(lo, hi)}"
 
 
 def box_words(lo, hi) -> str:
