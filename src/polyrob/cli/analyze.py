@@ -62,6 +62,8 @@ def print_analysis(a, out) -> None:
     if s.corners_stable is not None:
         out.line(f"corners                {s.corners_stable:.1%} of {s.corners} corners stable")
     out.line(f"worst sampled          max Re(pole) = {s.worst_abscissa:.4g}")
+    if getattr(a, "true_robots", None) is not None:  # the set's own robots: how much of mu is the model's
+        out.line(a.true_robots.words())
     mv = getattr(a, "moving", None)
     if mv is not None:  # the third verdict: the linearised robot moving within the domain's rates
         out.line(mv.verdict)

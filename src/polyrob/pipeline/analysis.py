@@ -129,6 +129,11 @@ class ControllerAnalysis:
     instead : str
         The one line of what the controller certifies instead and what stands
         in the way (:func:`instead_line`); empty when certified.
+    true_robots : TrueRobotCheck or None
+        On a robot-uncertainty set: the controller's frozen loops on true
+        robots drawn from the set (:func:`polyrob.synthesis.true_robots.true_robot_check`),
+        a sampled lower bound of the set's worst case printed beside μ (how
+        much of μ is the model's); ``None`` without a set.
     """
 
     robust_stability: object
@@ -142,6 +147,7 @@ class ControllerAnalysis:
     margin: object = None
     instead: str = ""
     sampled: object = None
+    true_robots: object = None
 
     @property
     def certificate(self):
@@ -179,6 +185,7 @@ class ControllerAnalysis:
             "margin": None if self.margin is None else self.margin.summary(),
             "instead": self.instead or None,
             "sampled": None if self.sampled is None else self.sampled.summary(),
+            "true_robots": None if self.true_robots is None else self.true_robots.to_dict(),
         }
 
 
@@ -260,6 +267,11 @@ def analyze_controller(
     npf = nominal_performance(problem.P, K)
     sampling = sample_stability(problem.unc, K, n=int(mc), seed=seed)
     covers = rp.certificate.scope.sentence()
+    true_robots = None
+    if getattr(problem.robot, "uncertainty", None) is not None and hasattr(problem.robot, "drawn"):
+        from polyrob.synthesis.true_robots import true_robot_check
+
+        true_robots = true_robot_check(problem.robot, problem.domain, K, problem.hyperparameters)
     tv = None
     if time_varying:
         from polyrob.analysis.time_varying.certificate import time_varying_certificate
@@ -300,6 +312,7 @@ def analyze_controller(
         moving=mv,
         margin=margin,
         sampled=sampled,
+        true_robots=true_robots,
     )
     if sampled is not None and not sampled.certificate.certified and margin is None:
         return replace(analysis, instead=sampled.instead_line(rp.certificate))

@@ -21,6 +21,8 @@ __all__ = [
     "reduce_design",
     "synthesis_options",
     "starts_from_tuned_pid",
+    "true_robot_start",
+    "TRUE_ROBOTS",
 ]
 
 
@@ -70,12 +72,63 @@ def synthesis_options(
         options["init"] = "paper"
     elif init == "pid":  # the per-joint PID tuned to the weights (polyrob.synthesis.pid_tuning)
         options["initial_controller"] = "pid"
+    elif init == "true-robots":  # that PID tuned on true robots of the set (resolved by design_controller)
+        if structure not in ("full", "pid"):
+            raise ArgumentError("--init true-robots starts a per-joint PID: use it with --structure full or pid")
+        options["initial_controller"] = TRUE_ROBOTS
     elif init:
         # a controller file: a warm start (continuation from a nearby problem, MATLAB's musyn(P, K0))
         from polyrob.io.controller import controller_from_mapping, read_controller_file
 
         options["initial_controller"] = controller_from_mapping(read_controller_file(init), init)
     return options
+
+
+#: ``initial_controller`` of :func:`synthesis_options`'s ``init="true-robots"``.
+TRUE_ROBOTS = "true-robots"
+
+
+def true_robot_start(problem, options: dict) -> tuple[dict, object]:
+    """``options`` with the start ``init="true-robots"`` resolved, and the synthesis when the start is the answer.
+
+    The per-joint PID tuned to the weights on the model
+    (:func:`polyrob.synthesis.pid_tuning.tuned_pid`), then tuned on the frozen
+    loops of true robots drawn from the set
+    (:func:`polyrob.synthesis.true_robots.tune_on_true_robots`).  With
+    ``max_iter=1`` (or ``structure="pid"`` and ``max_iter=1``) that PID is the
+    answer and its certificate is computed on the model like any other
+    controller's (``None`` otherwise: D-K or the fixed structure goes on from it).
+    """
+    import logging
+    import time
+
+    from polyrob.analysis.certificate import certify_loop
+    from polyrob.synthesis.pid_tuning import tuned_pid
+    from polyrob.synthesis.result import MusynResult
+    from polyrob.synthesis.true_robots import tune_on_true_robots
+
+    t0 = time.perf_counter()
+    start = tuned_pid(problem.P)
+    tuning = tune_on_true_robots(problem.robot, problem.domain, problem.hyperparameters, start.controller)
+    logging.getLogger("polyrob").info(f"musyn: start from a {start.words()}, then {tuning.words()}")
+    options = {**options, "initial_controller": tuning.controller}
+    if options.get("max_iter") != 1:
+        return options, None
+    cert = certify_loop(problem.P, tuning.controller, None, options.get("certify_omega"), sweep_unstable=False)
+    result = MusynResult.certified(
+        tuning.controller,
+        "pid",
+        cert,
+        mu_history=[cert.mu_upper_grid],
+        seconds=time.perf_counter() - t0,
+        info={
+            "method": "per-joint PID tuned on true robots drawn from the set (no D-K step)",
+            "start": f"{start.words()}, then {tuning.words()}",
+            "stopped_by": "max_iter=1: the start only",
+            "true_robots": {**tuning.check.to_dict(), "fitted_draws": tuning.draws, "fitted_worst": tuning.fitted_worst},
+        },
+    )
+    return options, result
 
 
 def _record(result, P) -> dict:
@@ -199,7 +252,12 @@ def design_controller(
 
     if reduce and reduce_max_order < 1:
         raise ArgumentError(f"reduce_max_order must be >= 1, got {reduce_max_order}")
-    result = musyn(problem.P, **with_default_start(problem, options))
+    options = with_default_start(problem, options)
+    result = None
+    if options.get("initial_controller") == TRUE_ROBOTS:
+        options, result = true_robot_start(problem, options)
+    if result is None:
+        result = musyn(problem.P, **options)
     notes = tuple(result.info.get("notes", [])) if isinstance(result.info, dict) else ()
     design = Design(
         controller=result.controller, result=result, reduced=None, record=_record(result, problem.P), notes=notes
@@ -265,6 +323,11 @@ def design_max_bandwidth(
     from polyrob.synthesis import max_bandwidth_scaling
 
     options = with_default_start(problem, dict(options))
+    if options.get("initial_controller") == TRUE_ROBOTS:
+        raise ArgumentError(
+            "--init true-robots tunes one PID on true robots at the given weights; the bandwidth search does not "
+            "take it yet: leave out --max-bandwidth (set --bandwidth-scale) or use --init pid"
+        )
     per_factor = "musyn"
     if options.get("initial_controller") == "pid" and options.get("max_iter") is None:
         # the PID tuned and certified at each factor, no D-K step: D-K at every factor of the scan

@@ -40,7 +40,7 @@ from polyrob.analysis.time_varying.vertices import (
 )
 from polyrob.errors import SynthesisError
 
-__all__ = ["VertexSynthesisResult", "vertex_synthesis", "vertex_peak"]
+__all__ = ["VertexSynthesisResult", "vertex_synthesis", "vertex_peak", "vertex_peaks"]
 
 #: Frequency grid of the optimiser (rad/s).
 DEFAULT_OMEGA = np.logspace(-3, 3, 90)
@@ -166,8 +166,8 @@ def _sub(vs, idx):
     return VertexSet(vs.A[idx], vs.B[idx], vs.C, vs.source, vs.enclosure, vs.note)
 
 
-def vertex_peak(vertices, K, W_S=None, W_T=None, W_KS=None, *, omega=DEFAULT_OMEGA) -> float:
-    """Worst vertex's sampled peak of ``σ_max([W_S S; W_T T])`` on ``omega`` (a lower bound of its H∞ norm)."""
+def vertex_peaks(vertices, K, W_S=None, W_T=None, W_KS=None, *, omega=DEFAULT_OMEGA) -> np.ndarray:
+    """Each vertex's sampled peak of ``σ_max([W_S S; W_T T; W_KS K S])`` on ``omega`` (a lower bound of its H∞ norm)."""
     from polyrob.analysis.time_varying.vertices import controller_mats
 
     vs = vertex_set(vertices)
@@ -175,7 +175,12 @@ def vertex_peak(vertices, K, W_S=None, W_T=None, W_KS=None, *, omega=DEFAULT_OME
     grid = _Grid(vs, W_S, W_T, W_KS, omega)
     s = 1j * np.asarray(omega, float)
     Kw = np.array([Ck @ np.linalg.solve(si * np.eye(len(Ak)) - Ak, Bk) + Dk if len(Ak) else Dk for si in s])
-    return float(grid.peaks(Kw)[0].max())
+    return grid.peaks(Kw)[0].max(axis=1)
+
+
+def vertex_peak(vertices, K, W_S=None, W_T=None, W_KS=None, *, omega=DEFAULT_OMEGA) -> float:
+    """Worst vertex's sampled peak of ``σ_max([W_S S; W_T T])`` on ``omega`` (a lower bound of its H∞ norm)."""
+    return float(vertex_peaks(vertices, K, W_S, W_T, W_KS, omega=omega).max())
 
 
 def vertex_synthesis(

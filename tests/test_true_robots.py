@@ -1,0 +1,102 @@
+"""True robots drawn from a robot-uncertainty set: their frozen loops, the sampled lower bound, the multi-model tuning."""
+
+from __future__ import annotations
+
+import functools
+from types import SimpleNamespace
+
+import control
+import numpy as np
+import pytest
+
+from polyrob import load_robot
+from polyrob.domains.default_task import default_task_domain
+from polyrob.errors import ArgumentError
+from polyrob.model.inner import inner_loop, inner_loop_of_set
+from polyrob.plant.weights import PAPER_HYPERPARAMETERS, plant_weights
+from polyrob.synthesis import true_robots as tr
+from polyrob.synthesis.pid_tuning import pid_controller, pid_gains
+from polyrob.uncertainty_set.spec import RobotUncertainty
+from polyrob.validate.independent import hinf, weighted_loop
+
+WEIGHTS = dict(PAPER_HYPERPARAMETERS)
+
+
+@functools.cache
+def loop_and_task(link_error: float):
+    robot = load_robot("planar_2r")
+    loop = inner_loop_of_set(robot, "computed-torque", RobotUncertainty(link_error=link_error), draws=1)
+    return loop, default_task_domain(loop)
+
+
+def pid(crossover: float, sign: float = 1.0):
+    return sign * pid_controller(pid_gains(np.full(2, crossover), 16.0, 20.0, np.ones(2)))
+
+
+def test_exact_model_plants_are_double_integrators_and_per_link_errors_move_them():
+    loop, task = loop_and_task(0.0)
+    for A, B in tr.true_robot_plants(loop, task, 4, seed=3):
+        np.testing.assert_allclose(A[2:], 0.0, atol=1e-9)  # computed torque with the true model: a = v
+        np.testing.assert_allclose(B[2:], np.eye(2), atol=1e-9)
+    loop, task = loop_and_task(0.1)
+    gains = [B[2:] for _, B in tr.true_robot_plants(loop, task, 20, seed=3)]
+    assert max(np.abs(g - np.eye(2)).max() for g in gains) > 0.01  # each true robot differs from the model
+    assert not np.allclose(gains[0], gains[1])
+    # B_low = M_true^-1 M_hat: its eigenvalues are real and positive (a ratio of inertias)
+    assert all(np.linalg.eigvals(g).real.min() > 0 for g in gains)
+
+
+def test_the_check_reads_the_weighted_norm_of_each_frozen_loop():
+    loop, task = loop_and_task(0.0)  # every draw is the double integrator: one loop, its H-inf norm known
+    K = pid(2.0)
+    check = tr.true_robot_check(loop, task, K, WEIGHTS, n=3)
+    W = plant_weights(WEIGHTS)
+    A, B = tr.true_robot_plants(loop, task, 1, seed=0)[0]
+    mats = [np.atleast_2d(np.asarray(X, float)) for X in (control.ss(K).A, control.ss(K).B, control.ss(K).C, control.ss(K).D)]
+    weight_mats = [tuple(np.atleast_2d(np.asarray(X, float)) for X in (w.A, w.B, w.C, w.D))
+                   for w in (control.ss(W["W_S"]), control.ss(W["W_T"]))]  # fmt: skip
+    _, (Aw, Bw, Cw, Dw) = weighted_loop(A, B, tuple(mats), *weight_mats)
+    exact = hinf(Aw, Bw, Cw, Dw)
+    assert check.unstable == 0
+    # a grid peak: never above the H-inf norm, and the grid is fine enough to come within 2 % of it
+    assert exact * 0.98 <= check.worst <= exact * (1 + 1e-9)
+    assert check.median == pytest.approx(check.worst)
+    assert "lower bound of the set's worst case, not a certificate" in check.words()
+
+
+def test_a_destabilising_controller_is_counted_unstable_and_has_no_finite_figure():
+    loop, task = loop_and_task(0.1)
+    check = tr.true_robot_check(loop, task, pid(2.0, sign=-1.0), WEIGHTS, n=5)
+    assert check.unstable == 5
+    assert check.worst == float("inf")
+    assert "5 UNSTABLE" in check.words()
+
+
+def test_tuning_lowers_the_worst_case_on_its_draws_and_is_checked_on_other_draws():
+    loop, task = loop_and_task(0.1)
+    start = pid(0.5)  # too slow for the weights' 0.5 rad/s bandwidth
+    tuning = tr.tune_on_true_robots(loop, task, WEIGHTS, start, n=12, check_draws=30, max_iter=60)
+    assert tuning.fitted_worst < 0.9 * tuning.start_worst
+    assert tuning.check.draws == 30 and tuning.check.unstable == 0
+    assert tuning.check.seed != tr.TUNING_SEED
+    again = tr.true_robot_check(loop, task, tuning.controller, WEIGHTS, n=30)
+    assert again.worst == pytest.approx(tuning.check.worst)  # the check is reproducible from its seed
+    assert "tuned on 12 true robots" in tuning.words()
+
+
+def test_a_loop_without_a_set_is_refused_in_one_line():
+    robot = load_robot("planar_2r")
+    loop = inner_loop(robot, "computed-torque")
+    with pytest.raises(ArgumentError, match="robot-uncertainty set"):
+        tr.true_robot_plants(loop, loop_and_task(0.0)[1], 3)
+
+
+def test_true_robots_start_is_refused_where_it_does_not_apply():
+    from polyrob.pipeline.design import design_max_bandwidth, synthesis_options
+
+    with pytest.raises(ArgumentError, match="per-joint PID"):
+        synthesis_options(structure="tf3", init="true-robots")
+    assert synthesis_options(init="true-robots")["initial_controller"] == "true-robots"
+    problem = SimpleNamespace(robot=SimpleNamespace(inner="computed-torque"))
+    with pytest.raises(ArgumentError, match="--max-bandwidth"):
+        design_max_bandwidth(problem, **synthesis_options(init="true-robots"))
