@@ -165,3 +165,48 @@ def test_the_model_computes_with_the_middle_of_the_payload_set():
     # the payload's own inertia about the flange's z axis: the solid sphere plus the middle of m (cx^2 + cy^2)
     lo, hi = spec.payload.second_moment_range()
     assert lo[5] == 0.0 and hi[5] == pytest.approx(1.5 * 0.1**2)
+
+
+# ----------------------------------------------------------------------------- inner-links-real
+
+
+@functools.cache
+def real_residual_model(name: str):
+    """The ``inner-links-real`` model of :func:`carried_set` (the state columns' residual one real per entry)."""
+    robot, spec = load_robot(name), carried_set(name)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(links, "inner_links_plant", functools.partial(links.inner_links_plant, residual="real"))
+        return model_of(robot, spec)
+
+
+def test_the_real_residual_holds_drawn_true_robots_and_catches_shrunk_radii():
+    loop, domain, unc = real_residual_model("ur5")
+    assert unc.model == "inner-links-real"
+    entries = unc.info["residual_entries"]
+    assert len(entries) > 30 and unc.n_params == len(unc.info["theta_range"]) + len(entries)
+    trues = draw_true_robots(loop.uncertainty_robot, loop.uncertainty, 20, seed=5)
+    assert witnesses(unc, loop, domain, trues).max() <= 1.0  # every drawn true robot is a member
+    shrunk = replace(unc, info={**unc.info, "residual_entry_radii": 0.1 * unc.info["residual_entry_radii"]})
+    assert witnesses(shrunk, loop, domain, trues).max() > 1.0  # the entries' bounds are what is checked
+
+
+def test_the_real_residual_lowers_robust_stability_mu_of_a_pid_below_the_complex_blocks():
+    # the complex block lets the stiffness residual act as a damping of either sign; real entries cannot
+    from polyrob.analysis.robust import robstab
+    from polyrob.plant.generalized import generalized_plant
+    from polyrob.synthesis.pid_tuning import pid_controller, pid_gains
+
+    K = pid_controller(pid_gains(np.full(6, 9.39), 16.0, 20.0, np.ones(6)))  # ur5's tuned PID start's shape
+    omega = np.array([2.0])  # where the block model's robust stability peaks for it
+    block = robstab(generalized_plant(carried_model("ur5")[2], W_T=1.0), K, omega, refine_peak=False)
+    real = robstab(generalized_plant(real_residual_model("ur5")[2], W_T=1.0), K, omega, refine_peak=False)
+    assert block.mu_lower > 1.2  # a member of the block model's set: not robustly stable
+    assert real.mu_upper_grid < 0.9 * block.mu_lower  # proved below what the block model's members reach
+
+
+def test_the_cli_offers_every_named_model():
+    from polyrob.cli.options import MODEL_CHOICES
+    from polyrob.pipeline.problem import UNCERTAINTY_MODELS
+
+    assert list(UNCERTAINTY_MODELS) == MODEL_CHOICES
+    assert set(MODEL_CHOICES) - {"auto"} <= set(MODELS)

@@ -12,6 +12,7 @@ import json
 
 from polyrob.cli.common import Output, add_output_flags
 from polyrob.cli.options import (
+    MODEL_CHOICES,
     add_robot_uncertainty_arguments,
     add_validation_arguments,
     int_at_least,
@@ -256,7 +257,7 @@ def register(sub) -> None:
     g.add_argument(
         "--uncertainty",
         default="auto",
-        choices=["auto", "box", "axes", "lft", "lft-torque", "inertia"],
+        choices=MODEL_CHOICES,
         help="uncertainty model",
     )
     g = p.add_argument_group("work per robot")

@@ -13,6 +13,7 @@ from dataclasses import replace
 from polyrob.errors import ArgumentError
 
 __all__ = [
+    "MODEL_CHOICES",
     "number",
     "parse_joint_values",
     "parse_list",
@@ -37,6 +38,11 @@ __all__ = [
     "add_sampling_arguments",
     "sampling_from_args",
 ]
+
+
+#: ``--uncertainty``'s choices: :data:`polyrob.pipeline.problem.UNCERTAINTY_MODELS` (kept here so the CLI starts
+#: without importing the pipeline; ``tests/test_arm_uncertainty_model.py`` checks that the two agree).
+MODEL_CHOICES = ["auto", "box", "axes", "lft", "lft-torque", "inertia", "inner-links-real"]
 
 
 def number(text: str, option: str, *, finite: bool = True) -> float:

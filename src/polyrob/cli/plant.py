@@ -8,6 +8,7 @@ from polyrob.cli.common import (
     hyperparameters_from_args,
     limit_weights_from_args,
 )
+from polyrob.cli.options import MODEL_CHOICES
 from polyrob.errors import ArgumentError
 
 __all__ = ["add_plant_arguments", "pldi_path", "problem_from_args", "describe_source"]
@@ -22,9 +23,11 @@ def add_plant_arguments(p) -> None:
     p.add_argument(
         "--uncertainty",
         default="auto",
-        choices=["auto", "box", "axes", "lft", "lft-torque", "inertia"],
+        choices=MODEL_CHOICES,
         help="uncertainty model of the PLDI (box: one independent real parameter per entry, the paper's; "
-        "inertia: M(q) on its L D L^T factors, positive definite in every member, any arm)",
+        "inertia: M(q) on its L D L^T factors, positive definite in every member, any arm; inner-links-real: "
+        "a per-link set's model (auto's inner-links) with its stiffness residual as one real scalar per entry "
+        "instead of a complex block: tighter, slower)",
     )
     p.add_argument("--merge-symmetric", action="store_true", help="one repeated parameter for b_ij = b_ji")
 

@@ -25,7 +25,7 @@ from polyrob.errors import ArgumentError
 __all__ = ["Problem", "build_problem", "default_hyperparameters", "UNCERTAINTY_MODELS", "WEIGHT_KEYS"]
 
 #: Uncertainty models of :func:`polyrob.plant.uncertainty.uncertain_plant` (``box`` is the paper's).
-UNCERTAINTY_MODELS = ("auto", "box", "axes", "lft", "lft-torque", "inertia")
+UNCERTAINTY_MODELS = ("auto", "box", "axes", "lft", "lft-torque", "inertia", "inner-links-real")
 #: The weight hyperparameters, in the order of :func:`polyrob.plant.weights.paper_weights`.
 WEIGHT_KEYS = ("omega_b", "M_s", "A_s", "omega_bt", "M_t", "A_t")
 

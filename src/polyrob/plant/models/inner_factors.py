@@ -51,11 +51,14 @@ from dataclasses import dataclass, fields
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
-from polyrob.errors import NotApplicable
+from polyrob.errors import ArgumentError, NotApplicable
 from polyrob.model.inner import InnerLoopRobot
 from polyrob.plant.lftplant import UncertainPlant
 from polyrob.plant.models.assembly import Channels, arm_state_matrix, into_accelerations, model_plant
 from polyrob.plant.models.axes import entry_layout, residual_of_radii
+
+#: ``residual="real"``: entries of the residual below this (relative to its largest, at least 1) get no scalar.
+NEGLIGIBLE_ENTRY = 1e-12
 
 __all__ = [
     "FactorLoop",
@@ -203,6 +206,7 @@ def factor_lft_plant(
     weighting=None,
     g_norm: float | None = None,
     g_offset: float = 0.0,
+    residual: str = "block",
 ):
     """The LFT ``a = v + sum_k theta_k K_k,c [x; a] + E [x; a]`` (module text) as an :class:`UncertainPlant`.
 
@@ -219,12 +223,30 @@ def factor_lft_plant(
     the LFT is centred at ``K_0 = [0, g0 I]`` (``a = (v + w) / (1 - g0)`` at
     ``Δ = 0``, and the model's nominal there): the set of ``I - G =
     M_hat^-1 M`` of a heavy payload is not centred at the identity.
+    ``residual``: ``"block"`` carries the state columns' residual in a full
+    complex block (:func:`residual_blocks`); ``"real"`` gives each of its
+    entries a real scalar of its own (``|E_ij| <= spread_ij``, weighted as
+    above): what the residual is (a real matrix, each entry bounded), at the
+    price of one μ block per entry.  A complex block lets the stiffness
+    residual act as a damping of either sign, which real scalars cannot.
     """
     m, n = pldi.m, 2 * pldi.m
     ranges = np.asarray(ranges, float)
+    if residual not in ("block", "real"):
+        raise ArgumentError(f"residual must be 'block' or 'real', got {residual!r}")
+    spread = np.array(spread, float)
     if g_norm is not None:
-        spread = np.array(spread, float)
         spread[:, n:] = 0.0
+    carried_spread = spread.copy()
+    entries = np.zeros((0, 2), int)
+    if residual == "real":  # the state columns' entries as real scalars; the acceleration columns as before
+        # an entry whose sampled radius is round-off (1e-35 on ur5) gets no scalar: the membership test
+        # holds it to the factor's own tolerance instead (rtol 1e-9 of the factor's size)
+        entries = np.argwhere(spread[:, :n] > NEGLIGIBLE_ENTRY * max(1.0, float(spread[:, :n].max())))
+        entry_radii = spread[entries[:, 0], entries[:, 1]]
+        spread[:, :n] = 0.0
+    else:
+        entry_radii = np.zeros(0)
     blocks = residual_blocks(spread, n)
     if g_norm is not None and g_norm > 0:
         root = np.sqrt(g_norm)
@@ -241,20 +263,28 @@ def factor_lft_plant(
     sizes = [b["B"].shape[1] for b in blocks]
     Bf = np.hstack([b["B"] for b in blocks]) if blocks else None
     Cf = np.vstack([b["C"] for b in blocks]) if blocks else None
-    k, P = sum(sizes), len(names)
-    # channels: the residual block, then each theta repeated m times; every channel enters the accelerations:
-    # a = u + sum_j d_j + B_f d_f, and every output reads [x; a]
+    k, P, n_e = sum(sizes), len(names), len(entries)
+    # an entry scalar e_ij in [-1, 1] adds spread_ij e_ij to entry (i, j) of the weighted residual:
+    # it reads column j (state columns: the weighting leaves them) and enters row i through W^-1
+    B_e = np.eye(m)[:, entries[:, 0]] if n_e else np.zeros((m, 0))
+    if n_e and weighting is not None:
+        B_e = np.linalg.solve(np.asarray(weighting, float), B_e)
+    C_e = np.zeros((n_e, 3 * m))
+    C_e[np.arange(n_e), entries[:, 1]] = entry_radii
+    # channels: the residual block, then each theta repeated m times, then the entry scalars; every channel
+    # enters the accelerations: a = u + sum_j d_j + B_f d_f, and every output reads [x; a]
     gain = 1.0 / (1.0 - g_offset)  # a = gain (u + to_a d) around K_0 = [0, g0 I]
-    to_a = gain * np.hstack([Bf if k else np.zeros((m, 0)), np.tile(np.eye(m), P)])  # a = gain u + to_a d
-    reads = np.vstack(([Cf] if k else []) + [r * K for r, K in zip(ranges, centres)])
+    to_a = gain * np.hstack([Bf if k else np.zeros((m, 0)), np.tile(np.eye(m), P), B_e])  # a = gain u + to_a d
+    reads = np.vstack(([Cf] if k else []) + [r * K for r, K in zip(ranges, centres)] + [C_e])
     C_v, D_vu, D_vd = reads[:, :n], gain * reads[:, n:], reads[:, n:] @ to_a
+    entry_names = [f"residual[{i},{j}]" for i, j in entries]
     channels = Channels(
         into_accelerations(m) @ to_a,
         C_v,
         D_vu,
-        [[size, size] for size in sizes] + [[-m, 0]] * P,
-        [f"res#{i}" for i in range(k)] + [f"{nm}#{i}" for nm in names for i in range(m)],
-        [-1] * k + [j for j in range(P) for _ in range(m)],
+        [[size, size] for size in sizes] + [[-m, 0]] * P + [[-1, 0]] * n_e,
+        [f"res#{i}" for i in range(k)] + [f"{nm}#{i}" for nm in names for i in range(m)] + entry_names,
+        [-1] * k + [j for j in range(P) for _ in range(m)] + list(range(P, P + n_e)),
         D_vd,
     )
     centre = (arm_state_matrix(np.zeros((m, n))), gain * into_accelerations(m))
@@ -263,7 +293,7 @@ def factor_lft_plant(
         model,
         centre,
         channels,
-        (tuple(names), -ranges, ranges),
+        (tuple(names) + tuple(entry_names), -np.r_[ranges, entry_radii], np.r_[ranges, entry_radii]),
         A_nom=np.asarray(pldi.A0, float) if not g_offset else centre[0],
         B_nom=np.asarray(pldi.B0, float) if not g_offset else centre[1],
         info={
@@ -272,10 +302,13 @@ def factor_lft_plant(
             "factors": tuple(names),
             "theta_range": ranges,
             "K_centres": np.array(centres),
-            "residual_gain": float(np.linalg.norm(spread)),
+            "residual_gain": float(np.linalg.norm(carried_spread)),
             "n_directions": P,
             "residual_blocks": [{key: b[key] for key in ("rows", "cols", "W_l", "W_r")} for b in blocks],
-            "residual_spread": spread,
+            "residual_spread": carried_spread,
+            "residual": residual,
+            "residual_entries": entries,
+            "residual_entry_radii": entry_radii,
             **({} if weighting is None else {"residual_weighting": np.asarray(weighting, float)}),
             **({} if g_norm is None else {"residual_g_norm": float(g_norm)}),
             "K_offset": np.hstack([np.zeros((m, n)), g_offset * np.eye(m)]),
@@ -309,11 +342,24 @@ def residual_blocks(spread: np.ndarray, n: int) -> list[dict]:
 
 
 def reached_entries(unc: UncertainPlant) -> np.ndarray:
-    """The entries of the factor that a residual block carries."""
+    """The entries of the factor that a residual block (or an entry's real scalar) carries."""
     reached = np.zeros(unc.info["K_centres"].shape[1:], bool)
     for b in unc.info["residual_blocks"]:
         reached[np.ix_(b["rows"], b["cols"])] = True
+    entries = np.asarray(unc.info.get("residual_entries", np.zeros((0, 2), int)), int).reshape(-1, 2)
+    reached[entries[:, 0], entries[:, 1]] = True
     return reached
+
+
+def _weighted_residual(unc: UncertainPlant, E: np.ndarray) -> np.ndarray:
+    """``W E diag(I, W^-1)``: the residual in the coordinates its bounds are stated in (``E`` without a weighting)."""
+    W = unc.info.get("residual_weighting")
+    if W is None:
+        return E
+    m = W.shape[0]
+    E = W @ E
+    E[:, 2 * m :] = np.linalg.solve(W.T, E[:, 2 * m :].T).T
+    return E
 
 
 def scaled_residuals(unc: UncertainPlant, E: np.ndarray) -> list[np.ndarray]:
@@ -323,11 +369,7 @@ def scaled_residuals(unc: UncertainPlant, E: np.ndarray) -> list[np.ndarray]:
     member with residual ``E``; it is in the set when each block's norm is
     at most one.
     """
-    W = unc.info.get("residual_weighting")
-    if W is not None:
-        m = W.shape[0]
-        E = W @ E
-        E[:, 2 * m :] = np.linalg.solve(W.T, E[:, 2 * m :].T).T
+    E = _weighted_residual(unc, E)
     out = []
     for b, size in zip(unc.info["residual_blocks"], unc.full_blocks):
         S = np.zeros((size, size))
@@ -345,6 +387,10 @@ def scaled_residual_norm(unc: UncertainPlant, K_raw, theta, rtol: float, reached
     E = K_raw - unc.info.get("K_offset", 0.0) - np.tensordot(theta, unc.info["K_centres"], axes=1)
     mismatch = np.abs(E[~reached]).max(initial=0.0) / (rtol * (1.0 + np.abs(K_raw).max()))
     norms = [float(np.linalg.norm(S, 2)) for S in scaled_residuals(unc, E)]
+    entries = np.asarray(unc.info.get("residual_entries", np.zeros((0, 2), int)), int).reshape(-1, 2)
+    if len(entries):  # each entry within its real scalar's radius
+        weighted = _weighted_residual(unc, E)
+        norms.append(float(np.max(np.abs(weighted[entries[:, 0], entries[:, 1]]) / unc.info["residual_entry_radii"])))
     return max([mismatch, *norms])
 
 

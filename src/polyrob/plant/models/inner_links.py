@@ -320,8 +320,14 @@ def _domain_points(domain, n: int, seed):
     return q, qdot, a
 
 
-def inner_links_plant(pldi, robot, *, n_directions: int | None = None, samples: int = 256) -> UncertainPlant:
+def inner_links_plant(
+    pldi, robot, *, n_directions: int | None = None, samples: int = 256, residual: str = "block"
+) -> UncertainPlant:
     """The ``inner-links`` LFT of the module text for ``robot`` (a :class:`~polyrob.model.inner.SetLoopRobot`).
+
+    ``residual="real"`` (the ``inner-links-real`` model): the state columns'
+    residual as one real scalar per entry instead of a full complex block
+    (:func:`~polyrob.plant.models.inner_factors.factor_lft_plant`).
 
     Raises
     ------
@@ -411,7 +417,7 @@ def inner_links_plant(pldi, robot, *, n_directions: int | None = None, samples: 
     names = tuple(f"t{k}" for k in range(P))
     return factor_lft_plant(
         pldi,
-        "inner-links",
+        "inner-links" if residual == "block" else "inner-links-real",
         names,
         ranges,
         list(centres),
@@ -420,6 +426,7 @@ def inner_links_plant(pldi, robot, *, n_directions: int | None = None, samples: 
         weighting=W,
         g_norm=g_norm,
         g_offset=g0,
+        residual=residual,
         info={
             "set": robot.uncertainty.words(),
             "scalars": tuple(s.name for s in scalars),

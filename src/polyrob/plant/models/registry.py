@@ -311,11 +311,14 @@ class InnerLinksModel(UncertaintyModel):
     """Computed torque over a per-link robot-uncertainty set: the factor exact in the parameters, compressed
     (:mod:`polyrob.plant.models.inner_links`)."""
 
-    name = "inner-links"
     options = ("n_directions",)
     needs_robot = True
     #: Why ``model="auto"`` takes this model when it applies.
     applies = "a computed-torque loop over a per-link robot-uncertainty set: the factor linear in the parameters"
+
+    def __init__(self, name: str = "inner-links", residual: str = "block"):
+        # "inner-links-real": the state columns' residual as one real scalar per entry (tighter, slower μ)
+        self.name, self.residual = name, residual
 
     def build(self, pldi, *, n_directions: int | None = None, **options):
         from polyrob.errors import NotApplicable
@@ -325,7 +328,7 @@ class InnerLinksModel(UncertaintyModel):
         if robot is None or getattr(robot, "uncertainty", None) is None:
             raise NotApplicable("inner-links: no robot-uncertainty set recorded with the PLDI")
         try:
-            return inner_links_plant(pldi, robot, n_directions=n_directions)
+            return inner_links_plant(pldi, robot, n_directions=n_directions, residual=self.residual)
         except NotApplicable as exc:  # a stated set is carried by this model or refused, never by another one
             raise ArgumentError(f"robot uncertainty ({robot.uncertainty.words()}): not carried: {exc}") from None
 
@@ -337,10 +340,14 @@ class InnerLinksModel(UncertaintyModel):
     def describe(self, unc):
         size = sum(int(b[0]) for b in unc.block_structure if b[1] > 0)
         ranges = ", ".join(f"{n} ±{r:.3g}" for n, r in zip(unc.info["factors"], unc.info["theta_range"]))
+        entries = len(unc.info.get("residual_entries", ()))
+        rest = f"residual blocks of total size {size}"
+        if entries:
+            rest = f"{entries} real scalars (the state columns' residual, one per entry) and {rest}"
         return (
-            f"inner-links: the computed-torque factor [B_low^-1 A_low, I - B_low^-1], exactly linear in the "
+            f"{self.name}: the computed-torque factor [B_low^-1 A_low, I - B_low^-1], exactly linear in the "
             f"{len(unc.info['scalars'])} scalars of the set's parameter box, as {len(unc.info['factors'])} principal "
-            f"directions (one repeated real each: {ranges}) and the rest in residual blocks of total size {size} "
+            f"directions (one repeated real each: {ranges}) and the rest in {rest} "
             f"(the inertia's M_hat^1/2-weighted block of norm <= {unc.info.get('residual_g_norm', 0.0):.3g} around "
             f"I - G = {1.0 - float(unc.info['K_offset'][-1, -1]):.3g} I); "
             f"set: {unc.info['set']} ({self.enclosure(unc)} enclosure over the task domain"
@@ -360,6 +367,7 @@ MODELS: dict[str, UncertaintyModel] = {
         InertiaModel(),
         InnerGainModel(),
         InnerLinksModel(),
+        InnerLinksModel("inner-links-real", "real"),
     )
 }
 
