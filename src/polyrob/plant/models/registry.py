@@ -29,7 +29,7 @@ Examples
 >>> import polyrob
 >>> from polyrob.plant.models import MODELS, model_of
 >>> list(MODELS)
-['box', 'axes', 'lft', 'lft-torque', 'inertia', 'inner-gain', 'inner-links']
+['box', 'axes', 'lft', 'lft-torque', 'inertia', 'inner-gain', 'inner-links', 'inner-links-real']
 >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
 >>> unc = MODELS["axes"].build(pldi)
 >>> model_of(unc).name, model_of(unc).enclosure(unc), unc.info["enclosure_inputs"]
