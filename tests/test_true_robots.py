@@ -100,3 +100,17 @@ def test_true_robots_start_is_refused_where_it_does_not_apply():
     problem = SimpleNamespace(robot=SimpleNamespace(inner="computed-torque"))
     with pytest.raises(ArgumentError, match="--max-bandwidth"):
         design_max_bandwidth(problem, **synthesis_options(init="true-robots"))
+
+
+def test_synth_and_analyze_say_the_true_robots_figure_on_a_set_and_nothing_without_one():
+    from polyrob.cli.synth import true_robot_line
+
+    lines = []
+    out = SimpleNamespace(line=lines.append)
+    loop, task = loop_and_task(0.1)
+    problem = SimpleNamespace(robot=loop, domain=task, hyperparameters=WEIGHTS)
+    doc = true_robot_line(problem, pid(2.0), out)
+    assert doc["draws"] == tr.CHECK_DRAWS and doc["unstable"] == 0 and np.isfinite(doc["worst"])
+    assert lines == [doc["words"]] and lines[0].startswith("true robots: worst weighted gain")
+    plain = SimpleNamespace(robot=inner_loop(load_robot("planar_2r"), "computed-torque"), domain=task, hyperparameters=WEIGHTS)
+    assert true_robot_line(plain, pid(2.0), out) is None and len(lines) == 1

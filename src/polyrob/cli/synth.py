@@ -249,6 +249,9 @@ def cmd_synth(args) -> int:
         )
     if at_rate is not None:  # after the controller file: a stop during the simulations keeps it
         doc["validation_at_rate"] = validation_at_rate_stage(problem, design.controller, at_rate, args, out)
+    true_robots = true_robot_line(problem, design.controller, out)
+    if true_robots is not None:
+        doc["true_robots"] = true_robots
     cert = design.certificate
     doc["covers"] = cert.scope.sentence()
     doc["certificate"] = cert.summary()
@@ -261,6 +264,17 @@ def cmd_synth(args) -> int:
         out.line(friction["words"])
     out.document(doc)
     return exit_status(cert)
+
+
+def true_robot_line(problem, K, out) -> dict | None:
+    """On a robot-uncertainty set: the controller on true robots drawn from it, beside μ (a sampled lower bound)."""
+    if getattr(problem.robot, "uncertainty", None) is None or not hasattr(problem.robot, "drawn"):
+        return None
+    from polyrob.synthesis.true_robots import true_robot_check
+
+    check = true_robot_check(problem.robot, problem.domain, K, problem.hyperparameters)
+    out.line(check.words())
+    return check.to_dict()
 
 
 def sampled_check(problem, design, sampling, out):
