@@ -114,3 +114,24 @@ def test_synth_and_analyze_say_the_true_robots_figure_on_a_set_and_nothing_witho
     assert lines == [doc["words"]] and lines[0].startswith("true robots: worst weighted gain")
     plain = SimpleNamespace(robot=inner_loop(load_robot("planar_2r"), "computed-torque"), domain=task, hyperparameters=WEIGHTS)
     assert true_robot_line(plain, pid(2.0), out) is None and len(lines) == 1
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (("synth", "planar_2r", "--init", "true-robots"), "--robot-uncertainty FILE or --link-error P"),
+        (("synth", "ur5", "--link-error", "10", "--init", "true-robots", "--max-bandwidth"), "--max-bandwidth"),
+        (("synth", "ur5", "--link-error", "10", "--init", "true-robots", "--structure", "tf3"), "per-joint PID"),
+    ],
+)
+def test_synth_refuses_a_true_robots_start_it_cannot_make_before_any_work(capsys, argv, words):
+    from polyrob.cli import main
+
+    try:
+        code = main(list(argv))
+    except SystemExit as exc:
+        code = exc.code
+    out, err = capsys.readouterr()
+    lines = [x for x in err.splitlines() if x.strip() and not x.startswith("progress")]
+    assert code == 2 and out == ""
+    assert len(lines) == 1 and words in lines[0] and "bounds" not in err

@@ -25,6 +25,7 @@ from polyrob.cli.options import (
     sampling_from_args,
 )
 from polyrob.cli.plant import add_plant_arguments, problem_from_args
+from polyrob.errors import ArgumentError
 
 __all__ = [
     "register",
@@ -201,6 +202,16 @@ def cmd_synth(args) -> int:
     stages += ["validation"] * (at_rate is not None)
     out = Output(args, stages=len(stages), job=stages)
     options = options_from_args(args, out)
+    if args.init == "true-robots" and args.max_bandwidth:
+        raise ArgumentError(
+            "--init true-robots tunes one PID on true robots at the given weights; the bandwidth search does not "
+            "take it yet: leave out --max-bandwidth (set --bandwidth-scale) or use --init pid"
+        )
+    if args.init == "true-robots" and getattr(args, "robot_uncertainty", None) is None and args.link_error is None:
+        raise ArgumentError(
+            "--init true-robots draws true robots from a robot-uncertainty set: give --robot-uncertainty FILE or "
+            "--link-error P"
+        )
     robot = robot_from_args(args)
     if coulomb is not None:  # one level or one per joint: refused before any work
         from polyrob.synthesis.integral import coulomb_levels
