@@ -203,10 +203,9 @@ def cmd_synth(args) -> int:
     out = Output(args, stages=len(stages), job=stages)
     options = options_from_args(args, out)
     if args.init == "true-robots" and args.max_bandwidth:
-        raise ArgumentError(
-            "--init true-robots tunes one PID on true robots at the given weights; the bandwidth search does not "
-            "take it yet: leave out --max-bandwidth (set --bandwidth-scale) or use --init pid"
-        )
+        from polyrob.pipeline.design import TRUE_ROBOTS_NOT_IN_SEARCH
+
+        raise ArgumentError(TRUE_ROBOTS_NOT_IN_SEARCH)
     if args.init == "true-robots" and getattr(args, "robot_uncertainty", None) is None and args.link_error is None:
         raise ArgumentError(
             "--init true-robots draws true robots from a robot-uncertainty set: give --robot-uncertainty FILE or "

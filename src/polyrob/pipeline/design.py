@@ -86,6 +86,11 @@ def synthesis_options(
 
 #: ``initial_controller`` of :func:`synthesis_options`'s ``init="true-robots"``.
 TRUE_ROBOTS = "true-robots"
+#: Why the bandwidth search refuses that start (``synth`` says it before any bounds).
+TRUE_ROBOTS_NOT_IN_SEARCH = (
+    "--init true-robots tunes one PID on true robots at the given weights; the bandwidth search does not "
+    "take it yet: leave out --max-bandwidth (set --bandwidth-scale) or use --init pid"
+)
 
 
 def true_robot_start(problem, options: dict) -> tuple[dict, object]:
@@ -95,9 +100,9 @@ def true_robot_start(problem, options: dict) -> tuple[dict, object]:
     (:func:`polyrob.synthesis.pid_tuning.tuned_pid`), then tuned on the frozen
     loops of true robots drawn from the set
     (:func:`polyrob.synthesis.true_robots.tune_on_true_robots`).  With
-    ``max_iter=1`` (or ``structure="pid"`` and ``max_iter=1``) that PID is the
-    answer and its certificate is computed on the model like any other
-    controller's (``None`` otherwise: D-K or the fixed structure goes on from it).
+    ``max_iter=1`` that PID is the answer and its certificate is computed on
+    the model like any other controller's; otherwise the result is ``None``
+    and D-K (or the PID structure's μ optimisation) goes on from it.
     """
     import logging
     import time
@@ -324,10 +329,7 @@ def design_max_bandwidth(
 
     options = with_default_start(problem, dict(options))
     if options.get("initial_controller") == TRUE_ROBOTS:
-        raise ArgumentError(
-            "--init true-robots tunes one PID on true robots at the given weights; the bandwidth search does not "
-            "take it yet: leave out --max-bandwidth (set --bandwidth-scale) or use --init pid"
-        )
+        raise ArgumentError(TRUE_ROBOTS_NOT_IN_SEARCH)
     per_factor = "musyn"
     if options.get("initial_controller") == "pid" and options.get("max_iter") is None:
         # the PID tuned and certified at each factor, no D-K step: D-K at every factor of the scan
