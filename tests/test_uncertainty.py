@@ -12,6 +12,9 @@ from polyrob.plant.coverage import model_contains
 from polyrob.plant.models import MODELS, UncertaintyModel, model_of
 from polyrob.plant.uncertainty import CHOICES, UncertainPlant, uncertain_plant, upper_lft
 
+#: Models of a computed-torque inner loop only (their own test files build them).
+INNER_LOOP_MODELS = ("inner-gain", "inner-links", "inner-links-real")
+
 PAPER_ENTRIES = ("a32", "a33", "a34", "a42", "a43", "a44", "b31", "b32", "b41", "b42")
 
 
@@ -211,7 +214,7 @@ def test_input_definiteness_holds_on_the_paper_models_and_fails_on_a_widened_box
 @pytest.fixture(scope="module")
 def built(pldi):
     """Every registered model built on the paper_2r PLDI through its own ``build`` (inner-gain, inner-links: an inner loop only)."""
-    return {name: model.build(pldi) for name, model in MODELS.items() if name not in ("inner-gain", "inner-links")}
+    return {name: model.build(pldi) for name, model in MODELS.items() if name not in INNER_LOOP_MODELS}
 
 
 def _building_jacobians(pldi, n=300):
@@ -226,7 +229,7 @@ def _building_jacobians(pldi, n=300):
 
 
 def test_every_model_contains_the_jacobians_it_was_built_from(pldi, built):
-    assert list(MODELS) == ["box", "axes", "lft", "lft-torque", "inertia", "inner-gain", "inner-links"]
+    assert list(MODELS) == ["box", "axes", "lft", "lft-torque", "inertia", "inner-gain", "inner-links", "inner-links-real"]
     A, B = _building_jacobians(pldi)
     for name, unc in built.items():
         model = model_of(unc)
@@ -264,15 +267,18 @@ def test_enclosure_is_the_weakest_of_the_inputs(pldi, built):
         "inertia": "sampled",
     }
     for name, model in MODELS.items():
-        if name in ("inner-gain", "inner-links"):  # computed-torque inner loops only (their own test files)
+        if name in INNER_LOOP_MODELS:  # computed-torque inner loops only (their own test files)
             continue
         unc = model.build(proved)
         assert model.enclosure(unc) == unc.info["enclosure"] == expected[name], name
 
 
 def test_unknown_models_give_clear_errors(pldi, unc):
-    assert CHOICES == ("auto", "box", "axes", "lft", "lft-torque", "inertia", "inner-gain", "inner-links")
-    msg = "unknown uncertainty model 'cube': use one of auto, box, axes, lft, lft-torque, inertia, inner-gain, inner-links"
+    assert CHOICES == ("auto", "box", "axes", "lft", "lft-torque", "inertia", "inner-gain", "inner-links", "inner-links-real")
+    msg = (
+        "unknown uncertainty model 'cube': use one of auto, box, axes, lft, lft-torque, inertia, inner-gain, "
+        "inner-links, inner-links-real"
+    )
     with pytest.raises(ArgumentError, match=msg):
         uncertain_plant(pldi, model="cube")
     cube = dataclasses.replace(unc, model="cube")
