@@ -91,12 +91,11 @@ def test_a_loop_without_a_set_is_refused_in_one_line():
         tr.true_robot_plants(loop, loop_and_task(0.0)[1], 3)
 
 
-def test_true_robots_start_is_refused_where_it_does_not_apply():
+def test_true_robots_start_is_refused_in_the_bandwidth_search():
     from polyrob.pipeline.design import design_max_bandwidth, synthesis_options
 
-    with pytest.raises(ArgumentError, match="per-joint PID"):
-        synthesis_options(structure="tf3", init="true-robots")
     assert synthesis_options(init="true-robots")["initial_controller"] == "true-robots"
+    assert synthesis_options(structure="ss:4", init="true-robots")["initial_controller"] == "true-robots"
     problem = SimpleNamespace(robot=SimpleNamespace(inner="computed-torque"))
     with pytest.raises(ArgumentError, match="--max-bandwidth"):
         design_max_bandwidth(problem, **synthesis_options(init="true-robots"))
@@ -121,7 +120,6 @@ def test_synth_and_analyze_say_the_true_robots_figure_on_a_set_and_nothing_witho
     [
         (("synth", "planar_2r", "--init", "true-robots"), "--robot-uncertainty FILE or --link-error P"),
         (("synth", "ur5", "--link-error", "10", "--init", "true-robots", "--max-bandwidth"), "--max-bandwidth"),
-        (("synth", "ur5", "--link-error", "10", "--init", "true-robots", "--structure", "tf3"), "per-joint PID"),
     ],
 )
 def test_synth_refuses_a_true_robots_start_it_cannot_make_before_any_work(capsys, argv, words):
@@ -135,3 +133,11 @@ def test_synth_refuses_a_true_robots_start_it_cannot_make_before_any_work(capsys
     lines = [x for x in err.splitlines() if x.strip() and not x.startswith("progress")]
     assert code == 2 and out == ""
     assert len(lines) == 1 and words in lines[0] and "bounds" not in err
+
+
+def test_a_fixed_structure_is_tuned_on_true_robots_from_the_pid():
+    loop, task = loop_and_task(0.1)
+    start = pid(0.5)
+    tuning = tr.tune_on_true_robots(loop, task, WEIGHTS, start, structure="ss:4", n=12, check_draws=30, max_iter=60)
+    assert tuning.structure == "ss:4" and control.ss(tuning.controller).nstates == 4
+    assert tuning.fitted_worst < 0.9 * tuning.start_worst and tuning.check.unstable == 0

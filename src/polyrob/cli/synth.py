@@ -323,8 +323,9 @@ def add_synthesis_arguments(p) -> None:
         metavar="paper|pid|true-robots|FILE",
         help="start from the paper's K* ('paper', fixed structures), from a per-joint PID tuned to the weights "
         "('pid'; the default on an arm's default task), from that PID tuned further on the frozen loops of "
-        "true robots drawn from a robot-uncertainty set ('true-robots', multi-model H-inf; with --max-iter 1 "
-        "it is the answer, certified on the model) or from a controller file (K.json, K.mat), "
+        "true robots drawn from a robot-uncertainty set ('true-robots', multi-model H-inf, in the --structure "
+        "asked for, a PID for full; with --max-iter 1 it is the answer, certified on the model) or from a "
+        "controller file (K.json, K.mat), "
         "e.g. one designed at a nearby bandwidth",
     )
     g.add_argument("--reduce", action="store_true", help="reduce the full-order controller (balanced truncation)")

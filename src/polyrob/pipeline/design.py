@@ -72,9 +72,7 @@ def synthesis_options(
         options["init"] = "paper"
     elif init == "pid":  # the per-joint PID tuned to the weights (polyrob.synthesis.pid_tuning)
         options["initial_controller"] = "pid"
-    elif init == "true-robots":  # that PID tuned on true robots of the set (resolved by design_controller)
-        if structure not in ("full", "pid"):
-            raise ArgumentError("--init true-robots starts a per-joint PID: use it with --structure full or pid")
+    elif init == "true-robots":  # tuned on true robots of the set (resolved by design_controller)
         options["initial_controller"] = TRUE_ROBOTS
     elif init:
         # a controller file: a warm start (continuation from a nearby problem, MATLAB's musyn(P, K0))
@@ -99,10 +97,12 @@ def true_robot_start(problem, options: dict) -> tuple[dict, object]:
     The per-joint PID tuned to the weights on the model
     (:func:`polyrob.synthesis.pid_tuning.tuned_pid`), then tuned on the frozen
     loops of true robots drawn from the set
-    (:func:`polyrob.synthesis.true_robots.tune_on_true_robots`).  With
-    ``max_iter=1`` that PID is the answer and its certificate is computed on
-    the model like any other controller's; otherwise the result is ``None``
-    and D-K (or the PID structure's μ optimisation) goes on from it.
+    (:func:`polyrob.synthesis.true_robots.tune_on_true_robots`) in the
+    structure asked for (a per-joint PID for ``"full"``; ``"ss:N"``, ``"tfN"``
+    from that PID).  With ``max_iter=1`` it is the answer and its certificate
+    is computed on the model like any other controller's; otherwise the
+    result is ``None`` and D-K (or the fixed structure's μ optimisation) goes
+    on from it.
     """
     import logging
     import time
@@ -114,7 +114,10 @@ def true_robot_start(problem, options: dict) -> tuple[dict, object]:
 
     t0 = time.perf_counter()
     start = tuned_pid(problem.P)
-    tuning = tune_on_true_robots(problem.robot, problem.domain, problem.hyperparameters, start.controller)
+    structure = "pid" if options.get("structure", "full") == "full" else options["structure"]
+    tuning = tune_on_true_robots(
+        problem.robot, problem.domain, problem.hyperparameters, start.controller, structure=structure
+    )
     logging.getLogger("polyrob").info(f"musyn: start from a {start.words()}, then {tuning.words()}")
     options = {**options, "initial_controller": tuning.controller}
     if options.get("max_iter") != 1:
@@ -122,12 +125,12 @@ def true_robot_start(problem, options: dict) -> tuple[dict, object]:
     cert = certify_loop(problem.P, tuning.controller, None, options.get("certify_omega"), sweep_unstable=False)
     result = MusynResult.certified(
         tuning.controller,
-        "pid",
+        structure,
         cert,
         mu_history=[cert.mu_upper_grid],
         seconds=time.perf_counter() - t0,
         info={
-            "method": "per-joint PID tuned on true robots drawn from the set (no D-K step)",
+            "method": f"{structure} tuned on true robots drawn from the set from the tuned PID (no D-K step)",
             "start": f"{start.words()}, then {tuning.words()}",
             "stopped_by": "max_iter=1: the start only",
             "true_robots": {**tuning.check.to_dict(), "fitted_draws": tuning.draws, "fitted_worst": tuning.fitted_worst},
