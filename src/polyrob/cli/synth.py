@@ -278,11 +278,11 @@ def cmd_synth(args) -> int:
 
 def true_robot_line(problem, K, out) -> dict | None:
     """On a robot-uncertainty set: the controller on true robots drawn from it, beside μ (a sampled lower bound)."""
-    if getattr(problem.robot, "uncertainty", None) is None or not hasattr(problem.robot, "drawn"):
-        return None
-    from polyrob.synthesis.true_robots import true_robot_check
+    from polyrob.synthesis.true_robots import check_of_problem
 
-    check = true_robot_check(problem.robot, problem.domain, K, problem.hyperparameters)
+    check = check_of_problem(problem, K)
+    if check is None:
+        return None
     out.line(check.words())
     return check.to_dict()
 

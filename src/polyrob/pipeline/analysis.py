@@ -267,11 +267,9 @@ def analyze_controller(
     npf = nominal_performance(problem.P, K)
     sampling = sample_stability(problem.unc, K, n=int(mc), seed=seed)
     covers = rp.certificate.scope.sentence()
-    true_robots = None
-    if getattr(problem.robot, "uncertainty", None) is not None and hasattr(problem.robot, "drawn"):
-        from polyrob.synthesis.true_robots import true_robot_check
+    from polyrob.synthesis.true_robots import check_of_problem
 
-        true_robots = true_robot_check(problem.robot, problem.domain, K, problem.hyperparameters)
+    true_robots = check_of_problem(problem, K)  # None without a robot-uncertainty set
     tv = None
     if time_varying:
         from polyrob.analysis.time_varying.certificate import time_varying_certificate

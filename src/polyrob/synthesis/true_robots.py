@@ -49,6 +49,8 @@ __all__ = [
     "true_robot_check",
     "tune_on_true_robots",
     "check_omega",
+    "has_set",
+    "check_of_problem",
 ]
 
 #: True robots of the held-out check (each at one random point of the task).
@@ -60,8 +62,22 @@ TUNING_DRAWS = 150
 TUNING_SEED, CHECK_SEED = 0, 99
 
 
+def has_set(loop) -> bool:
+    """Whether ``loop`` is the inner loop over a robot-uncertainty set (its true robots can be drawn)."""
+    from polyrob.model.inner import SetLoopRobot
+
+    return isinstance(loop, SetLoopRobot) and loop.uncertainty is not None
+
+
+def check_of_problem(problem, K) -> TrueRobotCheck | None:
+    """:func:`true_robot_check` of ``K`` on ``problem``'s set and task (what ``analyze`` and ``synth`` print), or ``None`` without a set."""
+    if not has_set(problem.robot):
+        return None
+    return true_robot_check(problem.robot, problem.domain, K, problem.hyperparameters)
+
+
 def _needs_set(loop) -> None:
-    if not hasattr(loop, "drawn") or getattr(loop, "uncertainty", None) is None:
+    if not has_set(loop):
         raise ArgumentError(
             "true robots are drawn from a robot-uncertainty set: give --robot-uncertainty FILE or --link-error P "
             "(with a computed-torque inner layer)"
@@ -160,7 +176,7 @@ def _loop_figures(plants, K, W_S, W_T, W_KS, omega) -> tuple[np.ndarray, np.ndar
 
     vs = vertex_set(plants, max_vertices=len(plants))
     abscissa = np.array([np.linalg.eigvals(A).real.max() for A in closed_loop_vertices(vs, K)])
-    return abscissa, vertex_peaks(plants, K, W_S, W_T, W_KS, omega=omega)
+    return abscissa, vertex_peaks(vs, K, W_S, W_T, W_KS, omega=omega)
 
 
 def true_robot_check(loop, domain, K, weights: dict, *, n: int = CHECK_DRAWS, seed: int = CHECK_SEED) -> TrueRobotCheck:

@@ -179,7 +179,7 @@ def vertex_peaks(vertices, K, W_S=None, W_T=None, W_KS=None, *, omega=DEFAULT_OM
 
 
 def vertex_peak(vertices, K, W_S=None, W_T=None, W_KS=None, *, omega=DEFAULT_OMEGA) -> float:
-    """Worst vertex's sampled peak of ``σ_max([W_S S; W_T T])`` on ``omega`` (a lower bound of its H∞ norm)."""
+    """Worst vertex's sampled peak of ``σ_max([W_S S; W_T T; W_KS K S])`` on ``omega`` (a lower bound of its H∞ norm)."""
     return float(vertex_peaks(vertices, K, W_S, W_T, W_KS, omega=omega).max())
 
 
