@@ -108,11 +108,15 @@ def test_synth_and_analyze_say_the_true_robots_figure_on_a_set_and_nothing_witho
     out = SimpleNamespace(line=lines.append)
     loop, task = loop_and_task(0.1)
     problem = SimpleNamespace(robot=loop, domain=task, hyperparameters=WEIGHTS)
-    doc = true_robot_line(problem, pid(2.0), out)
+    design = SimpleNamespace(controller=pid(2.0), result=SimpleNamespace(info={}), reduced=None)
+    doc = true_robot_line(problem, design, out)
     assert doc["draws"] == tr.CHECK_DRAWS and doc["unstable"] == 0 and np.isfinite(doc["worst"])
     assert lines == [doc["words"]] and lines[0].startswith("true robots: worst weighted gain")
     plain = SimpleNamespace(robot=inner_loop(load_robot("planar_2r"), "computed-torque"), domain=task, hyperparameters=WEIGHTS)
-    assert true_robot_line(plain, pid(2.0), out) is None and len(lines) == 1
+    assert true_robot_line(plain, design, out) is None and len(lines) == 1
+    # a controller tuned on true robots brings its check along: said as it was, not drawn again
+    tuned = SimpleNamespace(controller=pid(2.0), result=SimpleNamespace(info={"true_robots": doc}), reduced=None)
+    assert true_robot_line(SimpleNamespace(robot=None), tuned, out) is doc and lines[-1] == doc["words"]
 
 
 @pytest.mark.parametrize(

@@ -259,7 +259,7 @@ def cmd_synth(args) -> int:
         )
     if at_rate is not None:  # after the controller file: a stop during the simulations keeps it
         doc["validation_at_rate"] = validation_at_rate_stage(problem, design.controller, at_rate, args, out)
-    true_robots = true_robot_line(problem, design.controller, out)
+    true_robots = true_robot_line(problem, design, out)
     if true_robots is not None:
         doc["true_robots"] = true_robots
     cert = design.certificate
@@ -276,11 +276,20 @@ def cmd_synth(args) -> int:
     return exit_status(cert)
 
 
-def true_robot_line(problem, K, out) -> dict | None:
-    """On a robot-uncertainty set: the controller on true robots drawn from it, beside μ (a sampled lower bound)."""
+def true_robot_line(problem, design, out) -> dict | None:
+    """On a robot-uncertainty set: the controller on true robots drawn from it, beside μ (a sampled lower bound).
+
+    A controller made by ``--init true-robots`` (``max_iter=1``) was checked on
+    the same draw when it was tuned: that check is said, not computed again.
+    """
     from polyrob.synthesis.true_robots import check_of_problem
 
-    check = check_of_problem(problem, K)
+    info = design.result.info if isinstance(getattr(design.result, "info", None), dict) else {}
+    made = info.get("true_robots")
+    if made is not None and design.reduced is None:
+        out.line(made["words"])
+        return made
+    check = check_of_problem(problem, design.controller)
     if check is None:
         return None
     out.line(check.words())
