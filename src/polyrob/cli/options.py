@@ -211,7 +211,9 @@ def add_robot_uncertainty_arguments(group) -> None:
         default=None,
         metavar="FILE",
         help="a robot-uncertainty file (YAML/JSON: per-link parameter errors, a payload body, joint friction; "
-        "examples/uncertainty/panda.yaml), carried on a computed-torque inner layer (the inner-links model)",
+        "examples/uncertainty/panda.yaml), or 'default': each link ±10 %% on its own and an instrument of 0-1.5 kg "
+        "(capped at the rated payload) with its centre of mass within 0.1 m of the flange; carried on a "
+        "computed-torque inner layer (the inner-links model)",
     )
     group.add_argument(
         "--link-error",
@@ -231,9 +233,13 @@ def robot_uncertainty_from_args(args, robot):
     path, pct = getattr(args, "robot_uncertainty", None), getattr(args, "link_error", None)
     if path is None and pct is None:
         return None
+    from polyrob.uncertainty_set.default_set import DEFAULT_SET, default_set
     from polyrob.uncertainty_set.spec import RobotUncertainty
 
-    spec = RobotUncertainty() if path is None else RobotUncertainty.from_file(path)
+    if path == DEFAULT_SET:  # the engineer's set of the arm, not a file
+        spec = default_set(robot)
+    else:
+        spec = RobotUncertainty() if path is None else RobotUncertainty.from_file(path)
     if pct is not None:
         p = number(pct, "--link-error")
         if not 0.0 <= p < 100.0:

@@ -44,7 +44,7 @@ Examples
 >>> from polyrob import load_robot
 >>> spec = RobotUncertainty(link_error=0.1).bound(load_robot("ur5"))
 >>> spec.words()
-'per-link ±10 % (mass, first moment, inertia about the CoM, each link independently); friction: not stated'
+'per-link ±10 % (mass, first moment, inertia about the CoM, each link independently); no payload; friction: not stated'
 >>> RobotUncertainty.from_dict({"links": {"error_percent": -5}})
 Traceback (most recent call last):
 ...
@@ -332,6 +332,8 @@ class RobotUncertainty:
             parts.append("links exact")
         if self.payload is not None:
             parts.append(self.payload.words())
+        else:
+            parts.append("no payload")
         if self.friction:
             coulomb = max(f.coulomb for f in self.friction)
             viscous = max(f.viscous[1] for f in self.friction)

@@ -54,28 +54,19 @@ __all__ = [
 STEP_FRACTION = 0.002
 #: Torque chatter the issue's bar allows, peak to peak, in percent of the effort limit.
 CHATTER_LIMIT_PERCENT = 5.0
-#: The instrument of the default set: up to this mass (kg; capped at the rated payload), centre of mass within
-#: :data:`DEFAULT_COM_RADIUS` m of the flange.
-DEFAULT_PAYLOAD_KG = 1.5
-DEFAULT_COM_RADIUS = 0.1
 
 
 def default_uncertainty(robot):
-    """The set the validation draws from when none is given.
+    """The set the validation draws from when none is given: :func:`~polyrob.uncertainty_set.default_set.default_set`.
 
     Per-link ``±p`` with ``p`` the inner layer's model error (10 % without
     one); for an arm whose rated payload polyrob knows, an instrument of 0 to
     1.5 kg (capped at the rating) with its centre of mass within 0.1 m of the flange.
     """
-    from polyrob.uncertainty_set.spec import RATED_PAYLOAD, PayloadBody, RobotUncertainty
+    from polyrob.uncertainty_set.default_set import DEFAULT_LINK_ERROR, default_set
 
-    base = _base(robot)
-    p = float(getattr(robot, "model_error", 0.0) or 0.1)
-    rated = RATED_PAYLOAD.get(base.name)
-    payload = None
-    if rated is not None and rated.kg:
-        payload = PayloadBody(0.0, min(DEFAULT_PAYLOAD_KG, rated.kg), com_radius=DEFAULT_COM_RADIUS)
-    return RobotUncertainty(link_error=p, payload=payload, source="the validation's default set")
+    p = float(getattr(robot, "model_error", 0.0) or DEFAULT_LINK_ERROR)
+    return default_set(_base(robot), link_error=p)
 
 
 def _base(robot):
