@@ -67,7 +67,7 @@ import pinocchio
 
 from polyrob.errors import NotApplicable
 from polyrob.plant.lftplant import UncertainPlant
-from polyrob.plant.models.inner_links_inertia import exactly_weighted, g_norm_bound, inertia_ratio
+from polyrob.plant.models.inner_links_inertia import exactly_weighted, g_norm_bound, inertia_range, inertia_ratio
 from polyrob.uncertainty_set.payload_body import SECOND_MOMENT_ENTRIES, payload_sampling_words, second_moment
 
 __all__ = [
@@ -402,10 +402,12 @@ def inner_links_plant(
     g_norm *= G_MARGIN
     margin = _well_posed_margin(ranges, centres, g_norm, n, g0)
     if margin <= 0.0:
+        lo, hi = inertia_range(G_exact[~on_payload], G_exact[on_payload], pay)
         raise NotApplicable(
             f"inner-links: the relative inertia error is too large for one LFT around the model: its bound "
             f"{g_norm:.3g} (M_hat^1/2 coordinates, over the task's positions) is not below the {margin + g_norm:.3g} "
-            "the centre leaves (a smaller payload range or centre-of-mass ball, or smaller link errors)"
+            f"the centre leaves; the true robots' inertia ranges from {lo:.2g} to {hi:.2g} times the model's "
+            "(eigenvalues of M_hat^-1 M, sampled), so the outer loop's gain varies that much"
         )
     centres = _weighted(centres, np.linalg.inv(W), W)  # back to K's own coordinates; the residual stays weighted
     if margin <= 0.0:
