@@ -46,6 +46,26 @@ def test_exact_model_plants_are_double_integrators_and_per_link_errors_move_them
     assert all(np.linalg.eigvals(g).real.min() > 0 for g in gains)
 
 
+def test_a_common_factor_loop_draws_from_the_set_its_certificate_states():
+    """Without a robot-uncertainty set, an inner loop with a model error draws one factor on all links: B_low = I / s."""
+    robot = load_robot("planar_2r")
+    loop = inner_loop(robot, "computed-torque", model_error=0.3)
+    task = default_task_domain(loop)
+    factors = []
+    for _, B in tr.true_robot_plants(loop, task, 12, seed=5):
+        g = B[2:]
+        np.testing.assert_allclose(g, g[0, 0] * np.eye(2), atol=1e-9)  # one factor on every link: M_true = s M_hat
+        factors.append(1.0 / g[0, 0])
+    assert 0.7 - 1e-9 <= min(factors) < max(factors) <= 1.3 + 1e-9
+    assert np.ptp(factors) > 0.2  # spread over the range, not one robot
+    problem = SimpleNamespace(robot=loop, domain=task, hyperparameters=WEIGHTS)
+    check = tr.check_of_problem(problem, pid(2.0))
+    assert check is not None and check.unstable == 0 and np.isfinite(check.worst)
+    # a torque box fixes the outer input, not the acceleration a true robot is drawn at: no figure
+    box = SimpleNamespace(robot=loop, domain=SimpleNamespace(kind="box"), hyperparameters=WEIGHTS)
+    assert tr.check_of_problem(box, pid(2.0)) is None
+
+
 def test_the_check_reads_the_weighted_norm_of_each_frozen_loop():
     loop, task = loop_and_task(0.0)  # every draw is the double integrator: one loop, its H-inf norm known
     K = pid(2.0)

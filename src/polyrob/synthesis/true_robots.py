@@ -63,15 +63,28 @@ TUNING_SEED, CHECK_SEED = 0, 99
 
 
 def has_set(loop) -> bool:
-    """Whether ``loop`` is the inner loop over a robot-uncertainty set (its true robots can be drawn)."""
-    from polyrob.model.inner import SetLoopRobot
+    """Whether true robots can be drawn behind ``loop``: a robot-uncertainty set, or an inner layer's own ranges.
 
-    return isinstance(loop, SetLoopRobot) and loop.uncertainty is not None
+    A :class:`~polyrob.model.inner.SetLoopRobot` draws each link on its own
+    (the engineer's set); any other inner loop with a model error or a
+    payload range draws from the set its certificate states (one factor on
+    all links, the payload range), so an arm's default task says the figure
+    too.  A loop whose model is exact has nothing to draw.
+    """
+    from polyrob.model.inner import InnerLoopRobot, SetLoopRobot
+
+    if isinstance(loop, SetLoopRobot):
+        return loop.uncertainty is not None
+    return isinstance(loop, InnerLoopRobot) and bool(loop.model_error or loop.payload is not None)
 
 
 def check_of_problem(problem, K) -> TrueRobotCheck | None:
-    """:func:`true_robot_check` of ``K`` on ``problem``'s set and task (what ``analyze`` and ``synth`` print), or ``None`` without a set."""
-    if not has_set(problem.robot):
+    """:func:`true_robot_check` of ``K`` on ``problem``'s set and task (what ``analyze`` and ``synth`` print).
+
+    ``None`` without a set to draw from, or off a task domain (a torque
+    box fixes the outer input, not the acceleration a true robot is drawn at).
+    """
+    if not has_set(problem.robot) or getattr(problem.domain, "kind", "") != "task":
         return None
     return true_robot_check(problem.robot, problem.domain, K, problem.hyperparameters)
 
@@ -79,8 +92,8 @@ def check_of_problem(problem, K) -> TrueRobotCheck | None:
 def _needs_set(loop) -> None:
     if not has_set(loop):
         raise ArgumentError(
-            "true robots are drawn from a robot-uncertainty set: give --robot-uncertainty FILE or --link-error P "
-            "(with a computed-torque inner layer)"
+            "true robots are drawn from a robot-uncertainty set (--robot-uncertainty FILE or --link-error P) "
+            "or an inner layer's model error or payload range (--model-error, --payload-mass)"
         )
 
 
@@ -89,8 +102,9 @@ def true_robot_plants(loop, domain, n: int, *, seed: int = 0) -> list[tuple[np.n
 
     Parameters
     ----------
-    loop : SetLoopRobot
-        The inner loop over a robot-uncertainty set (:func:`polyrob.model.inner.inner_loop_of_set`).
+    loop : InnerLoopRobot
+        The inner loop over a robot-uncertainty set (:func:`polyrob.model.inner.inner_loop_of_set`), or
+        one with a model error or a payload range (:func:`polyrob.model.inner.inner_loop`).
     domain : TaskDomain
         Positions, velocities and accelerations; the outer input at a point
         is the one that gives its acceleration on that true robot.
