@@ -92,6 +92,18 @@ def test_a_destabilising_controller_is_counted_unstable_and_has_no_finite_figure
     assert "5 UNSTABLE" in check.words()
 
 
+def test_the_figure_says_whose_a_mu_above_one_is():
+    """Unstable true robots: the controller's; true robots within the weights under a μ lower bound above 1: the
+    model's; nothing to say when μ's lower bound is below 1 and the true robots meet the weights."""
+    loop, task = loop_and_task(0.1)
+    bad = tr.true_robot_check(loop, task, pid(2.0, sign=-1.0), WEIGHTS, n=5).to_dict()
+    assert tr.share_of_mu(bad, 3.0).startswith("the controller fails true robots of the set too (5 of 5 unstable)")
+    good = tr.true_robot_check(loop, task, pid(2.0), WEIGHTS, n=5).to_dict()
+    assert good["worst"] < 1.0
+    assert "a member of the uncertainty model that no drawn robot is" in tr.share_of_mu(good, 3.0)
+    assert tr.share_of_mu(good, 0.9) is None and tr.share_of_mu(good, float("nan")) is None
+
+
 def test_tuning_lowers_the_worst_case_on_its_draws_and_is_checked_on_other_draws():
     loop, task = loop_and_task(0.1)
     start = pid(0.5)  # too slow for the weights' 0.5 rad/s bandwidth

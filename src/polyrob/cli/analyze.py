@@ -81,6 +81,12 @@ def print_analysis(a, out) -> None:
         out.line(sampled.line())
     out.line(a.verdict)
     out.line(a.certificate.details())
+    if getattr(a, "true_robots", None) is not None and not a.certificate.certified:
+        from polyrob.synthesis.true_robots import share_of_mu
+
+        share = share_of_mu(a.true_robots.to_dict(), a.certificate.mu_lower)
+        if share is not None:  # whose the failure is: the controller's or the model's (read, not a status)
+            out.line(share)
     if a.instead:  # not certified: what it certifies instead, and what stands in the way
         out.line(a.instead)
 

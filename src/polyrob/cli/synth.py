@@ -268,6 +268,12 @@ def cmd_synth(args) -> int:
     doc["verdict"] = "verdict: " + cert.verdict
     out.line(doc["verdict"])
     out.line(cert.details())
+    from polyrob.synthesis.true_robots import share_of_mu
+
+    share = None if true_robots is None or cert.certified else share_of_mu(true_robots, cert.mu_lower)
+    if share is not None:  # whose the failure is: the controller's or the model's (read, not a status)
+        doc["share_of_mu"] = share
+        out.line(share)
     friction = friction_statement(problem, design.controller, coulomb)
     if friction is not None:  # beside the covers line: what Coulomb friction does to the error
         doc["friction"] = friction

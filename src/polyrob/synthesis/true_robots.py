@@ -51,6 +51,7 @@ __all__ = [
     "check_omega",
     "has_set",
     "check_of_problem",
+    "share_of_mu",
 ]
 
 #: True robots of the held-out check (each at one random point of the task).
@@ -181,6 +182,40 @@ class TrueRobotCheck:
             "seed": self.seed,
             "words": self.words(),
         }
+
+
+def share_of_mu(check: dict, mu_lower: float | None) -> str | None:
+    """Whose a μ above 1 is, read from the true robots' figure (``check``: :meth:`TrueRobotCheck.to_dict`).
+
+    ``None`` when there is nothing to say (μ's lower bound unknown or below 1
+    and the true robots meet the weights).  Every true robot is a member of
+    the set, so a figure of 1 or more (or an unstable loop) is a robot of the
+    set that the controller fails: the controller's share, which no tighter
+    model removes.  A μ lower bound above every true robot's figure is a
+    member of the *model* that no drawn robot is: the model's share (the
+    draws are a sample, so this says "none drawn", not "none exists").
+
+    Examples
+    --------
+    >>> share_of_mu({"worst": 1.4, "unstable": 0, "draws": 500}, 2.7)[:46]
+    'the controller fails true robots of the set to'
+    >>> share_of_mu({"worst": 0.93, "unstable": 0, "draws": 500}, 3.8)[:39]
+    "mu's lower bound 3.8 is above every one"
+    """
+    worst, unstable, draws = float(check["worst"]), int(check["unstable"]), int(check["draws"])
+    if unstable or worst >= 1.0:
+        what = f"{unstable} of {draws} unstable" if unstable else f"worst weighted gain {worst:.3g}"
+        return (
+            f"the controller fails true robots of the set too ({what}): a better controller is needed before "
+            "any model can certify it"
+        )
+    if mu_lower is not None and np.isfinite(mu_lower) and mu_lower >= 1.0:
+        return (
+            f"mu's lower bound {mu_lower:.3g} is above every one of the {draws} true robots ({worst:.3g}): "
+            "it is a member of the uncertainty model that no drawn robot is, so a tighter model is what stands "
+            "between this controller and a certificate"
+        )
+    return None
 
 
 def _loop_figures(plants, K, W_S, W_T, W_KS, omega) -> tuple[np.ndarray, np.ndarray]:
