@@ -171,6 +171,17 @@ def test_synth_refuses_a_true_robots_start_it_cannot_make_before_any_work(capsys
     assert len(lines) == 1 and words in lines[0] and "bounds" not in err
 
 
+def test_a_state_space_structure_smaller_than_the_pid_is_refused_before_the_bounds(capsys):
+    """panda's PID has 14 states: ss:12 from it stabilised none of the drawn robots, after minutes of work."""
+    from polyrob.cli import main
+
+    code = main(["synth", "panda", "--link-error", "10", "--init", "true-robots", "--structure", "ss:12"])
+    err = capsys.readouterr().err
+    last = [x for x in err.splitlines() if x.strip()][-1]
+    assert code == 2 and "bounds" not in err
+    assert last.endswith("the structure starts from the per-joint PID, 14 states on 7 joints; give --structure ss:14 or more")
+
+
 def test_a_fixed_structure_is_tuned_on_true_robots_from_the_pid():
     loop, task = loop_and_task(0.1)
     start = pid(0.5)
