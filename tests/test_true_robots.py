@@ -102,6 +102,10 @@ def test_the_figure_says_whose_a_mu_above_one_is():
     assert good["worst"] < 1.0
     assert "a member of the uncertainty model that no drawn robot is" in tr.share_of_mu(good, 3.0)
     assert tr.share_of_mu(good, 0.9) is None and tr.share_of_mu(good, float("nan")) is None
+    # both at once (ur5's PID tuned on true robots: 1.02 on the worst drawn robot, mu's lower bound 4.51)
+    both = tr.share_of_mu({"worst": 1.02, "unstable": 0, "draws": 500}, 4.51)
+    assert both.startswith("the controller fails true robots of the set too (worst weighted gain 1.02)")
+    assert "beyond that, mu's lower bound 4.51 is above every one of the 500 true robots" in both
 
 
 def test_tuning_lowers_the_worst_case_on_its_draws_and_is_checked_on_other_draws():

@@ -203,18 +203,22 @@ def share_of_mu(check: dict, mu_lower: float | None) -> str | None:
     "mu's lower bound 3.8 is above every one"
     """
     worst, unstable, draws = float(check["worst"]), int(check["unstable"]), int(check["draws"])
+    above = mu_lower is not None and np.isfinite(mu_lower) and mu_lower >= 1.0 and mu_lower > worst
+    model = (
+        f"mu's lower bound {mu_lower:.3g} is above every one of the {draws} true robots ({worst:.3g}): it is a "
+        "member of the uncertainty model that no drawn robot is"
+        if above
+        else ""
+    )
     if unstable or worst >= 1.0:
         what = f"{unstable} of {draws} unstable" if unstable else f"worst weighted gain {worst:.3g}"
-        return (
+        words = (
             f"the controller fails true robots of the set too ({what}): a better controller is needed before "
             "any model can certify it"
         )
-    if mu_lower is not None and np.isfinite(mu_lower) and mu_lower >= 1.0:
-        return (
-            f"mu's lower bound {mu_lower:.3g} is above every one of the {draws} true robots ({worst:.3g}): "
-            "it is a member of the uncertainty model that no drawn robot is, so a tighter model is what stands "
-            "between this controller and a certificate"
-        )
+        return words + (f"; beyond that, {model}" if model else "")
+    if model:
+        return model + ", so a tighter model is what stands between this controller and a certificate"
     return None
 
 
