@@ -71,3 +71,14 @@ def test_the_cli_refuses_it_in_one_line(tmp_path, capsys):
     assert rc == 2 and not out.exists()
     assert err[-1].startswith("polyrob: error: --robot-uncertainty default (per-link ±10 %")
     assert "not carried on ur10's default task" in err[-1] and "times the model's" in err[-1]
+
+
+def test_a_batch_job_takes_the_default_set_by_name():
+    from polyrob.errors import ArgumentError
+    from polyrob.fleet.jobs import Job, job_robot_and_domain
+
+    loop, domain, _ = job_robot_and_domain(Job(robot="ur5", robot_uncertainty="default"))
+    assert loop.uncertainty.link_error == pytest.approx(0.10) and loop.uncertainty.payload.mass_upper == 1.5
+    assert domain.kind == "task"
+    with pytest.raises(ArgumentError, match="robot_uncertainty is a set's mapping"):
+        job_robot_and_domain(Job(robot="ur5", robot_uncertainty="ur5.yaml"))

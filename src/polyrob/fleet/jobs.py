@@ -65,9 +65,10 @@ class Job:
         Payload range as the ``--payload-mass`` / ``--payload-com`` options take it.
     torque_box : bool
         The URDF torque box without an inner layer even for an arm (no default task).
-    robot_uncertainty : dict, optional
+    robot_uncertainty : dict or "default", optional
         A robot-uncertainty set (the file's mapping,
-        :meth:`~polyrob.uncertainty_set.spec.RobotUncertainty.to_dict`), carried on a
+        :meth:`~polyrob.uncertainty_set.spec.RobotUncertainty.to_dict`, or ``"default"``:
+        :func:`~polyrob.uncertainty_set.default_set.default_set` of the job's robot), carried on a
         computed-torque inner layer by the ``inner-links`` model; it replaces the task's model error and payload.
     """
 
@@ -92,7 +93,7 @@ class Job:
     payload_mass: str | None = None
     payload_com: str | None = None
     torque_box: bool = False
-    robot_uncertainty: dict | None = None
+    robot_uncertainty: dict | str | None = None
 
     @property
     def name(self) -> str:
@@ -263,7 +264,18 @@ def job_robot_and_domain(job: Job):
                 f"job {job.name}: a robot-uncertainty set is carried on a computed-torque inner layer only, "
                 "without model_error or payload_mass beside it"
             )
-        robot = inner_loop_of_set(robot, inner, RobotUncertainty.from_dict(job.robot_uncertainty))
+        from polyrob.uncertainty_set.default_set import DEFAULT_SET, default_set
+
+        if job.robot_uncertainty == DEFAULT_SET:
+            spec = default_set(robot)
+        elif isinstance(job.robot_uncertainty, dict):
+            spec = RobotUncertainty.from_dict(job.robot_uncertainty)
+        else:
+            raise ArgumentError(
+                f"job {job.name}: robot_uncertainty is a set's mapping (a robot-uncertainty file's) or "
+                f"'{DEFAULT_SET}', not {job.robot_uncertainty!r}"
+            )
+        robot = inner_loop_of_set(robot, inner, spec)
     elif inner != "none" or error or payload is not None:
         from polyrob.model.inner import inner_loop
 
