@@ -247,19 +247,31 @@ def cmd_export(args) -> int:
         )
 
     # the realisation in the stated arithmetic: poles and DC gains against the exact discrete controller
-    sos = sos_realization(discretize(K, args.rate, method=args.method, prewarp=args.prewarp))
+    form = args.realization
+    other = "delta" if form == "shift" else "shift"
+    dc = discretize(K, args.rate, method=args.method, prewarp=args.prewarp)
+
+    def accuracy_of(sections_form):
+        exact = sos_realization(dc, form=sections_form)
+        rounded = exact if args.word_length is None else quantize(exact, args.word_length)
+        rounded = round_to_float(rounded) if args.real == "float" else rounded
+        return exact, check_accuracy(exact, rounded)
+
+    sos, accuracy = accuracy_of(form)
     smallest = smallest_accurate_word_length(sos)
-    rounded = sos if args.word_length is None else quantize(sos, args.word_length)
-    if args.real == "float":
-        rounded = round_to_float(rounded)
-    accuracy = check_accuracy(sos, rounded)
+    smallest_other = smallest_accurate_word_length(sos_realization(dc, form=other))
     keep = (
         f"the smallest fixed-point word length that keeps them is {smallest} bits (--word-length {smallest})"
         if smallest is not None
         else "no fixed-point word length up to 53 bits keeps them"
     )
+    keep += f" in {form} sections; in {other} sections " + (
+        f"{smallest_other} bits" if smallest_other is not None else "none up to 53 bits"
+    )
     if not accuracy.ok:
         fix = keep if args.real == "double" else "--real double keeps them"
+        if form == "shift" and accuracy_of("delta")[1].ok:
+            fix = f"--realization delta keeps it in {accuracy.arithmetic}; {fix}"
         line = (
             f"{accuracy.arithmetic} coefficients do not keep the controller's poles (1 % of their distance to "
             f"z = 1) and DC gains (0.1 %): {accuracy.problem}; {fix}"
@@ -294,15 +306,29 @@ def cmd_export(args) -> int:
         check = None
         if rate_check.ok:  # at a rate that already loses μ, no word length can keep it
             check = check_export_word_length(
-                problem.P, K, args.rate, args.word_length, method=args.method, prewarp=args.prewarp
+                problem.P, K, args.rate, args.word_length, method=args.method, prewarp=args.prewarp, form=form
             )
             check_doc = {"checked": True, **check.summary(), **check_doc}
         else:
             check_doc = {"checked": False, "why": "the rate already loses μ (--allow-low-rate)", **check_doc}
         if check is not None and not check.ok:
+            words = check.line()
+            if form == "shift":  # one μ evaluation more: does the delta form keep the loop at this word length?
+                in_delta = check_export_word_length(
+                    problem.P,
+                    K,
+                    args.rate,
+                    args.word_length,
+                    method=args.method,
+                    prewarp=args.prewarp,
+                    longest=args.word_length,
+                    form="delta",
+                )
+                if in_delta.ok:
+                    words += f"; --realization delta keeps it in {args.word_length}-bit fixed point"
             if not args.force:
-                raise ArgumentError(f"export refused: {check.line()}; --force writes it anyway")
-            warnings.append(f"{check.line()}; written anyway (--force)")
+                raise ArgumentError(f"export refused: {words}; --force writes it anyway")
+            warnings.append(f"{words}; written anyway (--force)")
     lower, upper, limit_source = output_limits(info, K.noutputs)
     checked = [f"the rate: {args.rate:g} Hz, {'at or above' if args.rate >= lowest else 'BELOW'} {rate_words}"]
     checked.append(f"the coefficients' poles and DC gains: {'kept' if accuracy.ok else 'NOT kept'}; {keep}")
@@ -324,8 +350,13 @@ def cmd_export(args) -> int:
         realisation=(
             f"{args.method} at {args.rate:g} Hz"
             + (f" pre-warped at {args.prewarp:g} rad/s" if args.prewarp else "")
-            + ", second-order sections per entry (transposed direct form II), integrators in first-order "
-            "sections of their own"
+            + (
+                ", second-order sections per entry (transposed direct form II), integrators in first-order "
+                "sections of their own"
+                if form == "shift"
+                else ", delta-operator second-order sections per entry (d = (z - 1)/T, transposed direct form II), "
+                "integrators exactly at d = 0"
+            )
         ),
     )
     out.stage(
@@ -344,6 +375,7 @@ def cmd_export(args) -> int:
         name=args.name,
         inner=info.get("inner"),
         signals=signals,
+        form=form,
         extra={
             **_exported_from(args.controller),  # the C's JSON names the controller file it came from
             "signals": {
@@ -359,6 +391,7 @@ def cmd_export(args) -> int:
             "lowest_rate_hz": lowest,
             "certificate_sampling": sampling,
             "smallest_word_length": smallest,
+            "smallest_word_length_by_form": {form: smallest, other: smallest_other},
             "accuracy": accuracy.summary(),
             "warnings": list(warnings),
         },
@@ -367,6 +400,7 @@ def cmd_export(args) -> int:
     doc["lowest_rate_hz"] = lowest
     doc["certificate_sampling"] = sampling
     doc["smallest_word_length"] = smallest
+    doc["smallest_word_length_by_form"] = {form: smallest, other: smallest_other}
     doc["accuracy"] = accuracy.summary()
     doc["output_limits"] = {"lower": lower, "upper": upper, "source": limit_source}
     if info.get("inner"):
@@ -411,6 +445,13 @@ def register(sub) -> None:
     p.add_argument("--method", default="tustin", choices=["tustin", "zoh"], help="discretisation")
     p.add_argument("--prewarp", type=positive_float, default=None, help="Tustin pre-warping frequency (rad/s)")
     p.add_argument("--real", default="double", choices=["double", "float"], help="C type of the signals")
+    p.add_argument(
+        "--realization",
+        default="shift",
+        choices=["shift", "delta"],
+        help="the sections' operator: shift (z^-1, the default) or delta ((z - 1)/T: keeps slow poles and "
+        "integral gains in short words, see docs/howto/export.md)",
+    )
     p.add_argument("--name", default="controller", help="base name of the .h/.c/.json files")
     p.add_argument(
         "--pldi",

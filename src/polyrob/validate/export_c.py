@@ -117,6 +117,7 @@ class ExportResult:
             "rate_hz": self.sos.rate,
             "word_length": self.sos.word_length,
             "sections": self.sos.n_sections,
+            "form": self.sos.form,
             "method": self.discrete.method,
             "prewarp_rad_s": self.discrete.prewarp,
         }
@@ -135,13 +136,15 @@ def export_controller(
     extra: dict | None = None,
     inner: str | None = None,
     signals: Signals | None = None,
+    form: str = "shift",
 ) -> ExportResult:
     """``polyrob export``: discretise ``K`` at ``rate`` Hz, biquads per entry, optional quantisation, C + JSON.
 
     Writes ``out_dir/<name>.h``, ``out_dir/<name>.c`` and ``out_dir/<name>.json``.
     ``inner`` (a controller file's ``info["inner"]``, :meth:`polyrob.model.inner.InnerLoopRobot.words`)
     says in the header what the inner layer computes at run time; ``signals`` says more
-    (limits, delay, checks).  With ``real="float"`` the coefficients are those C's ``float``
+    (limits, delay, checks); ``form``: the sections' operator, ``"shift"`` or ``"delta"``
+    (:mod:`~polyrob.validate.delta_sections`).  With ``real="float"`` the coefficients are those C's ``float``
     holds (:func:`~polyrob.validate.quantize.round_to_float`).
 
     Examples
@@ -156,7 +159,7 @@ def export_controller(
     from polyrob.validate.quantize import quantize, round_to_float, sos_realization
 
     dc = discretize(K, rate, method=method, prewarp=prewarp)
-    sos = sos_realization(dc)
+    sos = sos_realization(dc, form=form)
     if word_length is not None:
         sos = quantize(sos, word_length)
     if real == "float":
@@ -332,11 +335,12 @@ def check_export_word_length(
     prewarp: float | None = None,
     omega=None,
     longest: int = LONGEST_WORD,
+    form: str = "shift",
 ) -> WordLengthCheck:
     """The report's word-length analysis on the controller ``polyrob export`` writes.
 
     ``K`` discretised as the export does (``method``, ``prewarp``), in second-order
-    sections, rounded to ``word_length`` bits, closed around ``P`` (the
+    sections (``form``), rounded to ``word_length`` bits, closed around ``P`` (the
     generalized plant) sampled by zero-order hold: stable with μ within 5 % of
     the continuous loop's on ``omega`` (default the report's grid,
     :data:`polyrob.report.build.DISCRETE_GRID`)?  When not, the shortest
@@ -349,7 +353,7 @@ def check_export_word_length(
 
     W = int(word_length)
     grid = DISCRETE_GRID if omega is None else np.asarray(omega, float)
-    sos = sos_realization(discretize(K, rate, method=method, prewarp=prewarp))
+    sos = sos_realization(discretize(K, rate, method=method, prewarp=prewarp), form=form)
     threshold = MU_MARGIN * continuous_mu(P, K, grid)
     ok, mu, stable, _ = check_word_length(P, sos, W, threshold=threshold, omega=grid)
     smallest = None

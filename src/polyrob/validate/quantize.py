@@ -41,6 +41,7 @@ import numpy as np
 import scipy.signal as ss
 
 from polyrob.errors import ArgumentError, PolyrobError
+from polyrob.validate import delta_sections as delta
 
 __all__ = [
     "SOSController",
@@ -57,6 +58,7 @@ __all__ = [
     "smallest_accurate_word_length",
     "POLE_TOLERANCE",
     "DC_TOLERANCE",
+    "FORMS",
 ]
 
 #: How far a rounded pole may move, relative to its distance from z = 1 (1 %: its time constant within 1 %).
@@ -65,6 +67,8 @@ POLE_TOLERANCE = 0.01
 DC_TOLERANCE = 1e-3
 #: A pole (or zero) this close to z = 1 is an integrator (a differentiator): it must stay exactly there.
 AT_ONE = 1e-12
+#: Section forms: ``"shift"`` (rows in z^-1) and ``"delta"`` (rows in δ = (z - 1)/T, :mod:`~polyrob.validate.delta_sections`).
+FORMS = ("shift", "delta")
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,6 +88,10 @@ class SOSController:
     formats : tuple of tuple of ndarray or None
         ``formats[i][j]`` ``(n_sec, 2)``: fractional bits of the numerator
         and of the denominator coefficients of each section.
+    form : str
+        ``"shift"``: rows are polynomials in ``z^-1``; ``"delta"``: rows
+        ``[β0, β1, β2, 1, α1, α2]`` in ``δ = (z - 1)/dt``
+        (:mod:`~polyrob.validate.delta_sections`).
     """
 
     sections: tuple
@@ -91,6 +99,11 @@ class SOSController:
     word_length: int | None = None
     formats: tuple | None = None
     info: dict = field(default_factory=dict)
+    form: str = "shift"
+
+    def __post_init__(self):
+        if self.form not in FORMS:
+            raise ArgumentError(f"the section form must be one of {FORMS}, got '{self.form}'")
 
     @property
     def n_outputs(self) -> int:
@@ -118,8 +131,8 @@ class SOSController:
     def run(self, e, *, lower=None, upper=None, initial=None) -> np.ndarray:
         """Response to the input sequence ``e`` (``n_in x N``): ``u`` (``n_out x N``).
 
-        Transposed direct form II with exactly the operation order of the
-        generated C code (so both agree to rounding, bit for bit on IEEE doubles).
+        Transposed direct form II (in ``δ`` for the delta form: ``s += T w``)
+        with exactly the operation order of the generated C code (so both agree to rounding, bit for bit on IEEE doubles).
         ``lower``/``upper`` (per output): the C code's output saturation with
         its anti-windup (conditional integration: while output ``i``
         saturates, the states of its sections keep their values);
@@ -133,6 +146,7 @@ class SOSController:
         hi = np.full(self.n_outputs, np.inf) if upper is None else np.asarray(upper, float)
         states = np.zeros((max(1, self.n_sections), 2)) if initial is None else np.array(initial, float)
         first = self._first_sections()
+        T, in_delta = self.dt, self.form == "delta"
         for k in range(N):
             before = states.copy()
             for (i, j, secs), f in zip(self.entries(), first):
@@ -140,8 +154,12 @@ class SOSController:
                 for n, (b0, b1, b2, _, a1, a2) in enumerate(secs):
                     st = states[f + n]
                     y = b0 * x + st[0]
-                    st[0] = b1 * x - a1 * y + st[1]
-                    st[1] = b2 * x - a2 * y
+                    if in_delta:
+                        st[0] = st[0] + T * (b1 * x - a1 * y + st[1])
+                        st[1] = st[1] + T * (b2 * x - a2 * y)
+                    else:
+                        st[0] = b1 * x - a1 * y + st[1]
+                        st[1] = b2 * x - a2 * y
                     x = y
                 u[i, k] += x
             for i in range(self.n_outputs):
@@ -181,7 +199,7 @@ class SOSController:
             if i in done:
                 continue
             done.add(i)
-            n = offset_section(secs)
+            n = offset_section(secs, self.form)
             gain = float(np.prod(secs[n + 1 :, 0])) if n + 1 < secs.shape[0] else 1.0
             states[f + n, 0] = (u[i] - v[i]) / gain
         return states
@@ -192,7 +210,7 @@ class SOSController:
         As, Bs, Cs = [], [], []
         D = np.zeros((p, q))
         for i, j, secs in self.entries():
-            A, B, C, d = _cascade_ss(secs)
+            A, B, C, d = delta.delta_cascade_ss(secs, self.dt) if self.form == "delta" else _cascade_ss(secs)
             D[i, j] += d
             if A.shape[0]:
                 b = np.zeros((A.shape[0], q))
@@ -214,7 +232,14 @@ class SOSController:
             "dt": self.dt,
             "rate_hz": self.rate,
             "word_length": self.word_length,
-            "layout": "sections[i][j] = [[b0, b1, b2, 1, a1, a2], ...]; u_i = sum_j K_ij(z) e_j; transposed direct form II",
+            "form": self.form,
+            "layout": (
+                "sections[i][j] = [[b0, b1, b2, 1, a1, a2], ...]; u_i = sum_j K_ij(z) e_j; transposed direct form II"
+                if self.form == "shift"
+                else "sections[i][j] = [[beta0, beta1, beta2, 1, alpha1, alpha2], ...] = (beta0 d^2 + beta1 d + "
+                "beta2)/(d^2 + alpha1 d + alpha2) in d = (z - 1)/dt; u_i = sum_j K_ij e_j; transposed direct form II "
+                "in d: y = beta0 x + s1; s1 += dt (beta1 x - alpha1 y + s2); s2 += dt (beta2 x - alpha2 y)"
+            ),
             "sections": [[s.tolist() for s in row] for row in self.sections],
             "frac_bits": None if self.formats is None else [[f.tolist() for f in row] for row in self.formats],
             "info": self.info,
@@ -225,15 +250,17 @@ class SOSController:
         sections = tuple(tuple(np.asarray(s, float).reshape(-1, 6) for s in row) for row in data["sections"])
         fb = data.get("frac_bits")
         formats = None if fb is None else tuple(tuple(np.asarray(f, int).reshape(-1, 2) for f in row) for row in fb)
-        return cls(sections, float(data["dt"]), data.get("word_length"), formats, dict(data.get("info", {})))
+        info, form = dict(data.get("info", {})), data.get("form", "shift")  # a file without it is shift
+        return cls(sections, float(data["dt"]), data.get("word_length"), formats, info, form)
 
 
-def offset_section(secs) -> int:
+def offset_section(secs, form: str = "shift") -> int:
     """The section whose ``s[0]`` a bumpless start sets: the last integrator section whose later ``b0`` are not zero."""
     n = secs.shape[0] - 1
     for k in range(secs.shape[0] - 1, -1, -1):
         b0, _, _, _, a1, a2 = secs[k]
-        if 1.0 + a1 + a2 == 0.0 and np.all(secs[k + 1 :, 0] != 0.0):
+        integrator = delta.integrates(secs[k]) if form == "delta" else 1.0 + a1 + a2 == 0.0
+        if integrator and np.all(secs[k + 1 :, 0] != 0.0):
             return k
     return n
 
@@ -282,7 +309,7 @@ def _structural_entry(sys, i, j) -> control.StateSpace:
     )
 
 
-def sos_realization(controller, *, tol: float = 1e-9) -> SOSController:
+def sos_realization(controller, *, tol: float = 1e-9, form: str = "shift") -> SOSController:
     """Each entry of a discrete controller as biquads (minimal per entry, scipy's pole/zero pairing).
 
     Parameters
@@ -290,7 +317,13 @@ def sos_realization(controller, *, tol: float = 1e-9) -> SOSController:
     controller : DiscreteController or discrete control.StateSpace
     tol : float
         Tolerance of the per-entry minimal realisation (``control.minreal``).
+    form : {"shift", "delta"}
+        The sections' operator: ``z^-1`` (shift) or ``δ = (z - 1)/T``
+        (:mod:`~polyrob.validate.delta_sections`, accurate in short words
+        for poles near ``z = 1``).
     """
+    if form not in FORMS:
+        raise ArgumentError(f"the section form must be one of {FORMS}, got '{form}'")
     sys = getattr(controller, "system", controller)
     sys = control.ss(sys)
     if sys.dt in (0, None):
@@ -306,20 +339,12 @@ def sos_realization(controller, *, tol: float = 1e-9) -> SOSController:
                 d = float(np.asarray(g.D)[0, 0])
                 row.append(np.array([[d, 0.0, 0.0, 1.0, 0.0, 0.0]]) if d else np.zeros((0, 6)))
                 continue
-            row.append(_entry_sos(g))
+            row.append(delta.delta_entry_sections(g, float(sys.dt), AT_ONE) if form == "delta" else _entry_sos(g))
         rows.append(tuple(row))
-    return SOSController(tuple(rows), float(sys.dt), info={"source_order": int(sys.nstates)})
+    return SOSController(tuple(rows), float(sys.dt), info={"source_order": int(sys.nstates)}, form=form)
 
 
-def _clean_pairs(r):
-    """Roots as exact conjugate pairs and exact reals (scipy's pairing needs them)."""
-    r = np.asarray(r, complex)
-    real = np.abs(r.imag) <= 1e-9 * np.maximum(1.0, np.abs(r))
-    out = list(r[real].real.astype(complex))
-    upper = r[~real & (r.imag > 0)]
-    for z in upper:
-        out += [z, np.conj(z)]
-    return np.array(out, complex)
+_clean_pairs = delta.clean_pairs
 
 
 def _entry_sos(g) -> np.ndarray:
@@ -383,13 +408,13 @@ def quantize(sos: SOSController, word_length: int) -> SOSController:
             fmt_row.append(f)
         rows.append(tuple(out_row))
         fmts.append(tuple(fmt_row))
-    return SOSController(tuple(rows), sos.dt, W, tuple(fmts), dict(sos.info))
+    return SOSController(tuple(rows), sos.dt, W, tuple(fmts), dict(sos.info), sos.form)
 
 
 def round_to_float(sos: SOSController) -> SOSController:
     """The coefficients as C ``float`` holds them (IEEE single precision, 24-bit significand)."""
     rows = tuple(tuple(np.asarray(s, np.float32).astype(float) for s in row) for row in sos.sections)
-    return SOSController(rows, sos.dt, sos.word_length, sos.formats, {**sos.info, "arithmetic": "float"})
+    return SOSController(rows, sos.dt, sos.word_length, sos.formats, {**sos.info, "arithmetic": "float"}, sos.form)
 
 
 def _section_roots(row, part: str) -> np.ndarray:
@@ -454,8 +479,8 @@ def check_accuracy(exact: SOSController, rounded: SOSController, *, arithmetic: 
             arithmetic = "float" if rounded.word_length is None else f"{arithmetic} in float"
     worst_move, worst_dc, problem = 0.0, 0.0, ""
     for (i, j, a), (_, _, b) in zip(exact.entries(), rounded.entries()):
-        pa, ia, da, ga = _entry_gain(a)
-        pb, ib, db, gb = _entry_gain(b)
+        pa, ia, da, ga = delta.delta_entry_gain(a, exact.dt) if exact.form == "delta" else _entry_gain(a)
+        pb, ib, db, gb = delta.delta_entry_gain(b, rounded.dt) if rounded.form == "delta" else _entry_gain(b)
         where = f"K[{i}][{j}]"
         for p in pa:
             q = pb[np.argmin(np.abs(pb - p))] if pb.size else np.inf
