@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from test_export_run import _C, SYNTH_FILE, _export, _library, cc  # noqa: F401 - cc is a fixture
 
+import polyrob
 from polyrob.io.controller import load_controller
 from polyrob.validate.delta_sections import delta_entry_gain, delta_response
 from polyrob.validate.discretize import discretize
@@ -180,3 +181,44 @@ def test_a_file_without_form_is_shift_and_a_bad_form_is_refused():
     assert SOSController.from_dict(data).form == "shift"
     with pytest.raises(ValueError, match="section form"):
         sos_realization(discretize(_pid(), RATE), form="lattice")
+
+
+# the main job's controller: K* on paper_2r -----------------------------------------------------------------
+
+
+def test_paper_controller_keeps_its_poles_in_float_and_18_bits_in_delta():
+    """K* at 1 kHz: shift sections need 35 bits and fail in float (DC gain 14 % off); delta: 18 bits, float passes."""
+    dc = discretize(polyrob.paper_controller(), RATE)
+    shift, delta = sos_realization(dc), sos_realization(dc, form="delta")
+    assert smallest_accurate_word_length(shift) == 35 and smallest_accurate_word_length(delta) == 18
+    assert not check_accuracy(shift, round_to_float(shift)).ok
+    in_float = check_accuracy(delta, round_to_float(delta))
+    assert in_float.ok and in_float.pole_move < 1e-6 and in_float.dc_error < 1e-6
+    # its state space (what the μ check closes the loop with): no spurious pole at z = 1 from first-order sections
+    sys = delta.to_ss()
+    assert sys.nstates == 12 and np.max(np.abs(np.linalg.eigvals(sys.A))) < 1.0
+    e = np.random.default_rng(4).normal(size=(2, 300))
+    ref = control.forced_response(dc.system, U=e).outputs
+    assert np.max(np.abs(control.forced_response(sys, U=e).outputs - ref)) < 1e-9 * np.max(np.abs(ref))
+
+
+@pytest.mark.slow
+def test_word_length_mu_check_in_delta_and_the_refusal_naming_it(tmp_path, capsys):
+    """--word-length 20: the shift form's loop is unstable (μ needs 25 bits), the delta form's keeps μ."""
+    from polyrob.io.controller import save_controller
+    from polyrob.pipeline import build_problem
+
+    robot = polyrob.load_robot("paper_2r")
+    pldi = polyrob.bound_pldi(robot, samples=256, coverage=0, progress=False)
+    pldi.save(tmp_path / "pldi.json")
+    problem = build_problem(robot, pldi=pldi, uncertainty="box")
+    save_controller(polyrob.paper_controller(), tmp_path / "K.json", info=problem.description())
+    argv = [tmp_path / "K.json", "--rate", "1000", "--word-length", "20"]
+    code, _, err = _export(capsys, *argv, "--force", "-o", tmp_path / "s", "--quiet")
+    mu_line = [w for w in err.splitlines() if "discretised loop" in w]
+    assert code == 0 and len(mu_line) == 1 and "(unstable)" in mu_line[0] and "is 25 bits" in mu_line[0]
+    assert "--realization delta keeps it in 20-bit fixed point" in mu_line[0]
+    code, stdout, err = _export(capsys, *argv, "--realization", "delta", "-o", tmp_path / "d", "--json")
+    doc = json.loads(stdout)
+    assert code == 0 and "warning" not in err and doc["form"] == "delta"
+    assert doc["word_length_check"]["ok"] is True and doc["word_length_check"]["stable"] is True

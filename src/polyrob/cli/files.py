@@ -265,11 +265,11 @@ def cmd_export(args) -> int:
         if smallest is not None
         else "no fixed-point word length up to 53 bits keeps them"
     )
-    keep += f" in {form} sections; in {other} sections " + (
+    keep_both = f"{keep} in {form} sections; in {other} sections " + (
         f"{smallest_other} bits" if smallest_other is not None else "none up to 53 bits"
     )
     if not accuracy.ok:
-        fix = keep if args.real == "double" else "--real double keeps them"
+        fix = keep_both if args.real == "double" else "--real double keeps them"
         if form == "shift" and accuracy_of("delta")[1].ok:
             fix = f"--realization delta keeps it in {accuracy.arithmetic}; {fix}"
         line = (
@@ -331,7 +331,8 @@ def cmd_export(args) -> int:
             warnings.append(f"{words}; written anyway (--force)")
     lower, upper, limit_source = output_limits(info, K.noutputs)
     checked = [f"the rate: {args.rate:g} Hz, {'at or above' if args.rate >= lowest else 'BELOW'} {rate_words}"]
-    checked.append(f"the coefficients' poles and DC gains: {'kept' if accuracy.ok else 'NOT kept'}; {keep}")
+    in_form = keep if form == "shift" else f"{keep} in delta sections"
+    checked.append(f"the coefficients' poles and DC gains: {'kept' if accuracy.ok else 'NOT kept'}; {in_form}")
     if check_doc and "rate" in check_doc:
         rate_ok = check_doc["rate"]["ok"]
         checked.append(f"μ of the discretised loop at this rate: {'kept' if rate_ok else 'NOT kept'} within 5 %")
@@ -409,7 +410,7 @@ def cmd_export(args) -> int:
         doc["word_length_check"] = check_doc
     out.document(doc)
     out.line(f"wrote {res.header}, {res.source} and {res.json}")
-    out.line(f"coefficients: {keep} (poles within 1 % of their distance to z = 1, DC gains within 0.1 %)")
+    out.line(f"coefficients: {keep_both} (poles within 1 % of their distance to z = 1, DC gains within 0.1 %)")
     if has_inner_layer(info):
         out.line(f"the controller's output is an inner layer's input v (rad/s^2); at run time: {info['inner']}")
     for w in warnings:  # on stderr, also with --json and --quiet

@@ -125,7 +125,10 @@ def delta_entry_gain(secs, dt: float):
 
 
 def delta_cascade_ss(secs, dt: float):
-    """Shift state space ``(A, B, C, D)`` of a delta cascade: ``A = I + T A_δ`` on the sections' states."""
+    """Shift state space ``(A, B, C, D)`` of a delta cascade: ``A = I + T A_δ`` on the sections' states.
+
+    A first-order section has one state (its ``s2`` never leaves zero).
+    """
     n = 2 * secs.shape[0]
     A = np.eye(n)
     B = np.zeros(n)
@@ -140,7 +143,9 @@ def delta_cascade_ss(secs, dt: float):
         A[2 * k + 1] += dt * (b2 * cin - a2 * cy)
         B[2 * k : 2 * k + 2] = [dt * (b1 * din - a1 * dy), dt * (b2 * din - a2 * dy)]
         cin, din = cy, dy
-    return A, B, cin.copy(), din
+    # a first-order section's s2 (β2 = α2 = 0) stays zero: drop it, else it is a spurious pole at z = 1
+    keep = [k for k in range(n) if k % 2 == 0 or secs[k // 2, 2] != 0.0 or secs[k // 2, 5] != 0.0]
+    return A[np.ix_(keep, keep)], B[keep], cin[keep], din
 
 
 def delta_response(secs, dt: float, omega) -> np.ndarray:
