@@ -5,6 +5,9 @@ controller as a cascade of second-order sections (biquads, transposed
 direct form II), the numerically sensible realisation for short words: a
 section's poles move little when its two coefficients are rounded, whereas
 the roots of a high-order polynomial move a lot.  ``u_i = Σ_j K_ij(z) e_j``.
+``form="delta"`` writes the sections in ``δ = (z - 1)/T`` instead
+(:mod:`~polyrob.validate.delta_sections`): poles near ``z = 1`` then keep
+their accuracy in float and in short words.
 
 :func:`quantize` rounds every coefficient to a signed fixed-point number of
 ``word_length`` bits; the numerator coefficients of a section share one Q
