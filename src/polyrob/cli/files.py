@@ -251,15 +251,15 @@ def cmd_export(args) -> int:
     other = "delta" if form == "shift" else "shift"
     dc = discretize(K, args.rate, method=args.method, prewarp=args.prewarp)
 
-    def accuracy_of(sections_form):
-        exact = sos_realization(dc, form=sections_form)
+    def accuracy_of(exact):
         rounded = exact if args.word_length is None else quantize(exact, args.word_length)
         rounded = round_to_float(rounded) if args.real == "float" else rounded
-        return exact, check_accuracy(exact, rounded)
+        return check_accuracy(exact, rounded)
 
-    sos, accuracy = accuracy_of(form)
+    sos, sos_other = sos_realization(dc, form=form), sos_realization(dc, form=other)
+    accuracy = accuracy_of(sos)
     smallest = smallest_accurate_word_length(sos)
-    smallest_other = smallest_accurate_word_length(sos_realization(dc, form=other))
+    smallest_other = smallest_accurate_word_length(sos_other)
     keep = (
         f"the smallest fixed-point word length that keeps them is {smallest} bits (--word-length {smallest})"
         if smallest is not None
@@ -270,7 +270,7 @@ def cmd_export(args) -> int:
     )
     if not accuracy.ok:
         fix = keep_both if args.real == "double" else "--real double keeps them"
-        if form == "shift" and accuracy_of("delta")[1].ok:
+        if form == "shift" and accuracy_of(sos_other).ok:
             fix = f"--realization delta keeps it in {accuracy.arithmetic}; {fix}"
         line = (
             f"{accuracy.arithmetic} coefficients do not keep the controller's poles (1 % of their distance to "
