@@ -306,7 +306,8 @@ def true_robots_structure_holds_pid(structure: str, m: int) -> None:
 
 
 def true_robot_line(problem, design, out) -> dict | None:
-    """On a robot-uncertainty set: the controller on true robots drawn from it, beside μ (a sampled lower bound).
+    """Where true robots can be drawn (:func:`~polyrob.synthesis.true_robots.check_of_problem`): the controller on
+    them, beside μ (a sampled lower bound).
 
     A controller made by ``--init true-robots`` (``max_iter=1``) was checked on
     the same draw when it was tuned: that check is said, not computed again.

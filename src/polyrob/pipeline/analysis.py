@@ -130,10 +130,12 @@ class ControllerAnalysis:
         The one line of what the controller certifies instead and what stands
         in the way (:func:`instead_line`); empty when certified.
     true_robots : TrueRobotCheck or None
-        On a robot-uncertainty set: the controller's frozen loops on true
-        robots drawn from the set (:func:`polyrob.synthesis.true_robots.true_robot_check`),
-        a sampled lower bound of the set's worst case printed beside μ (how
-        much of μ is the model's); ``None`` without a set.
+        On a task domain behind an inner layer with something to draw (a
+        robot-uncertainty set, or the layer's model error or payload range):
+        the controller's frozen loops on true robots drawn from the set
+        (:func:`polyrob.synthesis.true_robots.check_of_problem`), a sampled
+        lower bound of the set's worst case printed beside μ (how much of μ is
+        the model's); ``None`` otherwise.
     """
 
     robust_stability: object
@@ -269,7 +271,7 @@ def analyze_controller(
     covers = rp.certificate.scope.sentence()
     from polyrob.synthesis.true_robots import check_of_problem
 
-    true_robots = check_of_problem(problem, K)  # None without a robot-uncertainty set
+    true_robots = check_of_problem(problem, K)  # None without true robots to draw
     tv = None
     if time_varying:
         from polyrob.analysis.time_varying.certificate import time_varying_certificate

@@ -299,7 +299,7 @@ def tune_on_true_robots(
     Raises
     ------
     ArgumentError
-        ``loop`` has no robot-uncertainty set.
+        ``loop`` has no true robots to draw (:func:`has_set`).
     SynthesisError
         No gain of ``start`` stabilises every frozen loop of the draw.
     """
