@@ -158,3 +158,29 @@ def test_a_certified_pldi_s_vertex_certificate_says_its_polytope_was_sampled():
     assert tv.certificate.scope.enclosure == "sampled"
     assert "polytope's vertices of the PLDI (sampled)" in tv.certificate.details()
     assert tv.summary()["scope"]["enclosure"] == "sampled"
+
+
+def test_an_exact_model_has_its_loop_s_own_h_infinity_norm_as_the_time_varying_test():
+    """Computed torque with no model error: no uncertainty channel, so nothing varies (it crashed before).
+
+    The small-gain test was handed an empty block structure and raised; the
+    verdict is now the loop's stability and its H-infinity norm, the same
+    figure as the frozen robot's mu (one performance block: mu is the norm).
+    """
+    from polyrob.analysis.norms import hinf_norm
+    from polyrob.domains.task import TaskDomain
+    from polyrob.model.inner import inner_loop
+
+    arm = inner_loop(polyrob.load_robot("planar_2r"), "computed-torque", model_error=0.0)
+    dom = TaskDomain.from_robot(arm, pose=[0.3, 1.2], q_radius=0.2, qdot_max=0.5, qddot_max=1.0)
+    problem = build_problem(arm, dom, progress=False, bound_options={"samples": 64})
+    assert problem.P.input_slices["d"].stop == problem.P.input_slices["d"].start  # no uncertainty channel
+    wc = 2.0  # a PD on the double integrators: u = wc^2 e + 2 wc s e / (s/(20 wc) + 1)
+    pd = control.tf([2 * wc + wc**2 / (20 * wc), wc**2], [1 / (20 * wc), 1])
+    K = control.append(*[control.ss(pd)] * 2)
+    tv = time_varying_certificate(problem, K)
+    assert tv.stability_holds
+    norm = hinf_norm(lft(problem.P, Controller.of(K)))
+    assert tv.gamma == pytest.approx(norm, rel=2e-3) and tv.gamma >= norm * (1 - 1e-9)
+    assert tv.performance_holds == (norm < 1)
+    assert "no uncertainty channel" in " ".join(tv.notes)

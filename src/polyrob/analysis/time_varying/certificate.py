@@ -271,6 +271,35 @@ def _certificate(method: str, stability, performance, notes, t0: float) -> TimeV
     )
 
 
+def _nominal(N, P, performance: bool, t0: float, why: str) -> TimeVaryingCertificate:
+    """The loop of an exact model (no uncertainty channel): one LTI system, so its H∞ norm is the test.
+
+    Nothing in the model varies, so "arbitrarily fast variation" adds nothing:
+    stability is the loop's (:func:`~polyrob.analysis.stability.stability_verdict`,
+    which never reads a bare double-precision sign) and performance its
+    H∞ norm, bounded by the small gain on the performance block alone.
+    """
+    from polyrob.analysis.stability import stability_verdict
+    from polyrob.analysis.time_varying.smallgain import ScaledSmallGainResult, scaled_small_gain
+
+    covers = "the exact model's loop (no uncertainty channel: nothing varies), as far as the model is the robot"
+    verdict = stability_verdict(N)
+    stable = verdict.verdict == "stable"
+    rs = ScaledSmallGainResult(
+        holds=stable, gamma=0.0 if stable else np.inf, scaled_norm=np.nan, unscaled_norm=np.nan, X_r=None,
+        X_c=None, seconds=time.perf_counter() - t0, covers=covers,
+        info={"route": "no uncertainty channel: the loop's own stability", "stability": verdict.verdict},
+    )  # fmt: skip
+    notes, rp = [why, "the model has no uncertainty channel: the loop's stability and H∞ norm decide"], None
+    if not stable:
+        notes.append(f"the loop is {verdict.verdict}")
+    elif performance:
+        rp = replace(scaled_small_gain(N, P.block_structure_rp), covers=covers)
+        if not rp.holds:
+            notes.append(f"performance: H∞ norm bound {rp.gamma:.4g} >= 1")
+    return _certificate("scaled small gain", rs, rp, notes, t0)
+
+
 def _small_gain(P, K, performance: bool, t0: float, why: str) -> TimeVaryingCertificate:
     """Constant-D scaled small gain on the LFT model (too many vertices to enumerate)."""
     from polyrob.analysis.time_varying.smallgain import scaled_small_gain
@@ -284,6 +313,8 @@ def _small_gain(P, K, performance: bool, t0: float, why: str) -> TimeVaryingCert
         )
         return _certificate("not run", None, None, (why, note), t0)
     s_v, s_d = P.output_slices["v"], P.input_slices["d"]
+    if s_d.stop == s_d.start:  # an exact model (e.g. computed torque with no model error): nothing varies
+        return _nominal(N, P, performance, t0, why)
     rs = scaled_small_gain(N[s_v, s_d], P.block_structure_rs)
     notes, rp = [why], None
     if not rs.holds:

@@ -1,0 +1,103 @@
+"""The largest bandwidth certified on each arm's default task, and the bound that stops it (JSON).
+
+    python benchmarks/bandwidth_limits.py [CASE ...] [--results PATH]
+
+A case is an arm and, optionally, more options of ``polyrob synth`` in one
+argument: ``ur5``, ``"ur5 --encoder-bits 14"``, ``"ur5 --rate 2000 --alphas
+22.6,32"`` (default: ur5 and panda, the arms issue 39 names, at the
+defaults).  For each case this runs the command a user types, ``polyrob
+synth ARM --max-bandwidth --json [OPTIONS]`` (the limit weights on: 18-bit
+encoders, the effort limits, 1 kHz and one sample of delay unless the
+options say otherwise), in a child process, and records what it printed: the largest
+certified factor α of the automatic weights' bandwidths, its μ bound, the
+certified loop's crossover in rad/s against the sample rate's cap, the
+bound the search hit (``bound_hit``), the factors tried, the wall time and
+the child's peak memory.  ``--alphas`` in a case narrows the scan (the same
+option of ``polyrob synth``).  Nothing here is timed by a test.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import shlex
+import subprocess
+import sys
+import time
+
+from _results import add_results_option, save_run
+
+DEFAULT_ARMS = ("ur5", "panda")
+
+
+def measure(case: str) -> dict:
+    """One ``polyrob synth ARM --max-bandwidth --json [OPTIONS]`` run, read from its JSON."""
+    arm, *options = shlex.split(case)
+    cmd = [sys.executable, "-m", "polyrob", "synth", arm, "--max-bandwidth", *options, "--json", "--quiet"]
+    t0 = time.perf_counter()
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    seconds = time.perf_counter() - t0
+    peak_gb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6  # the largest child so far
+    if done.returncode not in (0, 1):  # 1: a verdict that is not CERTIFIED, still a result
+        tail = done.stderr.strip().splitlines()[-1:] or ["(no output)"]
+        raise SystemExit(f"{arm}: polyrob synth exited {done.returncode}: {tail[0]}")
+    out = json.loads(done.stdout)
+    b = out["bandwidth_scaling"]
+    return {
+        "robot": arm,
+        "options": " ".join(options),
+        "command": " ".join(["polyrob", *cmd[3:]]),
+        "alpha": b["alpha"],
+        "mu_bound": b["peak_mu"],
+        "bracket": b["bracket"],
+        "crossover_rad_s": b["crossover_rad_s"],
+        "crossover_limit_rad_s": b["crossover_limit_rad_s"],
+        "bound_hit": b["bound_hit"],
+        "stopped_by": b["stopped_by"],
+        "history": b["history"],
+        "order": b.get("order"),
+        "omega_b_rad_s": [min(b["hyperparameters"]["omega_b"]), max(b["hyperparameters"]["omega_b"])],
+        "verdict": out.get("verdict"),
+        "seconds": round(seconds, 1),
+        "peak_gb": round(peak_gb, 2),
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("cases", nargs="*", default=list(DEFAULT_ARMS),
+                    help="an arm and more synth options in one argument (default: ur5 panda)")  # fmt: skip
+    add_results_option(ap)
+    args = ap.parse_args()
+    rows, out = [], []
+    for case in args.cases:
+        entry = measure(case)
+        out.append(entry)
+        bracket = f"{entry['bracket'][0]:.3g}-{entry['bracket'][1]:.3g}"
+        rows.append([
+            entry["robot"], entry["options"] or "(defaults)", f"{entry['alpha']:.3g}", f"{entry['mu_bound']:.4f}",
+            f"{entry['omega_b_rad_s'][0]:.3g}-{entry['omega_b_rad_s'][1]:.3g}",
+            f"{entry['crossover_rad_s']:.1f} (cap {entry['crossover_limit_rad_s']:.0f})",
+            entry["bound_hit"].split(":")[0], bracket, entry["order"], f"{entry['seconds']:.0f} s",
+        ])  # fmt: skip
+        print(f"{case}: alpha {entry['alpha']:.4g}, crossover {entry['crossover_rad_s']:.1f} rad/s, "
+              f"{entry['bound_hit']} ({entry['seconds']:.0f} s)", file=sys.stderr, flush=True)  # fmt: skip
+    doc = {"arms": out}
+    print(json.dumps(doc, indent=1, default=float))
+    table = {
+        "columns": ["arm", "options", "largest certified α", "μ ≤", "ω_B [rad/s]", "crossover [rad/s]", "bound hit",
+                    "bracket of α", "order", "wall time"],
+        "rows": rows,
+    }  # fmt: skip
+    figure = "; ".join(
+        f"{e['robot']} {e['options']}".strip()
+        + f": alpha {e['alpha']:.3g}, crossover {e['crossover_rad_s']:.0f} rad/s, {e['bound_hit'].split(':')[0]}"
+        for e in out
+    )
+    save_run(args.results, "bandwidth_limits", "The largest certified bandwidth on each arm's default task", figure,
+             doc, table)  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
