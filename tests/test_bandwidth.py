@@ -163,3 +163,37 @@ def test_the_stop_rule_reads_a_screen_figure_and_keeps_a_minimum_that_certifies(
     assert res.alpha == 8 and [a for a, _ in calls][:3] == [32, 16, 8]
     with pytest.raises(SynthesisError, match=r"32: synthesis failed \(screen 1\.031\).* 8: NOT_CERTIFIED 3\.000$"):
         _search(lambda a: mu(a) if a > 8 else 3.0)
+
+
+def test_the_whole_job_s_progress_moves_with_each_factor_and_ends_near_the_stage_s_end():
+    """Before: the search reported nothing, so `synth ARM --max-bandwidth` sat at "25 % of the job" for its
+    whole stage while its estimate of the time left grew with the time elapsed (37 min "left" after 12)."""
+    import io
+
+    from polyrob.progress import JobProgress, report
+
+    job = JobProgress(["bounds", "largest bandwidth"], stream=io.StringIO(), clock=lambda: 0.0)
+    job.start()
+    job._stop.set()  # no ticking thread: the test reads the shares itself
+    shares = []  # (before, halfway) of each synthesis: the stage's share when it starts and after its own report
+
+    def synthesize(P, K0):
+        before = job.share
+        report(1, 2)  # the synthesis's own loop, halfway: inside this factor's part of the stage
+        shares.append((before, job.share))
+        return _result(1 + (P.alpha - 3) * (P.alpha - 0.5) / 10, f"K({P.alpha:g})")
+
+    try:
+        job.begin(2, "largest bandwidth factor")
+        res = max_bandwidth_scaling(
+            None, synthesize=synthesize, plant=lambda a, h: SimpleNamespace(alpha=a, h=h), progress=False
+        )
+        end = job.share
+    finally:
+        job.stop()
+    assert len(shares) == len(res.history) >= 5
+    starts = [b for b, _ in shares]
+    assert starts[0] == 0.0 and all(b1 > b0 for b0, b1 in zip(starts, starts[1:]))  # every factor moves it
+    # a synthesis's own report stays inside its factor's part: below where the next factor starts
+    assert all(b0 < h < b1 for (b0, h), b1 in zip(shares, starts[1:]))
+    assert end >= 0.9  # the search's last factor leaves the stage (nearly) done

@@ -18,9 +18,10 @@ from __future__ import annotations
 import sys
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 
-__all__ = ["JobProgress", "LINE_EVERY", "STAGE_WEIGHTS", "report", "current", "duration_words"]
+__all__ = ["JobProgress", "LINE_EVERY", "STAGE_WEIGHTS", "report", "span", "current", "duration_words"]
 
 #: Seconds between two progress lines off a terminal (at most; a line also starts each stage).
 LINE_EVERY = 20.0
@@ -41,6 +42,8 @@ WITHIN_CAP = 0.95
 
 _current: JobProgress | None = None
 _lock = threading.Lock()
+#: The part of the current stage that :func:`report` counts in (:func:`span` narrows it for nested loops).
+_span = (0.0, 1.0)
 
 
 def duration_words(seconds: float) -> str:
@@ -63,10 +66,50 @@ def _short(title: str) -> str:
 
 
 def report(done: float, total: float) -> None:
-    """A library loop's own progress (``done`` of ``total``) inside the current stage of the current job, if any."""
+    """A library loop's own progress (``done`` of ``total``) inside the current stage of the current job, if any.
+
+    Inside a :func:`span` the loop's count fills that span's part of the stage.
+    """
     job = _current
     if job is not None and total > 0:
-        job.within(done / total)
+        lo, hi = _span
+        job.within(lo + (hi - lo) * min(max(done / total, 0.0), 1.0))
+
+
+@contextmanager
+def span(lo: float, hi: float) -> Iterator[None]:
+    """Reports inside the block fill the part ``[lo, hi]`` of the enclosing span (nested loops), then ``hi`` is done.
+
+    An outer loop that runs an inner one per step (the bandwidth search: a
+    synthesis per factor) gives each step its part of the stage; the inner
+    loop's own :func:`report` calls then move the line within that part
+    instead of claiming the whole stage.
+
+    Examples
+    --------
+    >>> import io
+    >>> from polyrob.progress import JobProgress, report, span
+    >>> job = JobProgress(["largest bandwidth"], stream=io.StringIO(), clock=lambda: 0.0)
+    >>> job.start() is job and job._stop.set() is None   # the current job; no ticking thread in the example
+    True
+    >>> job.begin(1, "largest bandwidth")
+    >>> with span(0.5, 0.75):
+    ...     report(1, 2)                  # half of the inner loop: 0.625 of the stage
+    >>> round(job.share, 3)               # the block ended: its part is done
+    0.75
+    >>> job.stop()
+    """
+    global _span
+    outer = _span
+    a, b = outer
+    _span = (a + (b - a) * float(lo), a + (b - a) * float(hi))
+    try:
+        yield
+    finally:
+        _span = outer
+        job = _current
+        if job is not None:
+            job.within(a + (b - a) * float(hi))
 
 
 def current() -> JobProgress | None:

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyrob.errors import ArgumentError, SynthesisError
+from polyrob.progress import span
 from polyrob.synthesis.result import MusynResult
 
 __all__ = [
@@ -485,12 +486,22 @@ def max_bandwidth_scaling(
         log.info(f"bandwidth search stopped by {stopped}")
         return True
 
+    # the whole job's progress line: each factor is one step of a plan that shrinks once a factor certifies
+    # (the scan's remaining points, or none, then the bisection's steps)
+    widest = max((b / a for a, b in zip(grid, grid[1:])), default=2.0)
+    bisection_steps = max(1, math.ceil(math.log2(math.log(widest) / math.log1p(rtol))))
+
+    def counted(alpha, remaining: int) -> float:
+        done = len(history)
+        with span(done / (done + remaining), (done + 1) / (done + remaining)):
+            return run(alpha)
+
     # scan from the largest α down: the first success is the largest on the grid
     ok = fail = None
-    for alpha in grid[::-1]:
+    for i, alpha in enumerate(grid[::-1]):
         if history and (out_of_time(alpha) or rising(alpha)):
             break
-        if run(alpha) < target:
+        if counted(alpha, len(grid) - i + bisection_steps) < target:
             ok = alpha
             break
         fail = alpha
@@ -514,7 +525,8 @@ def max_bandwidth_scaling(
             mid = math.sqrt(lo * hi)
             if out_of_time(mid):
                 break
-            if run(mid) < target:
+            left = max(1, math.ceil(math.log2(math.log(hi / lo) / math.log1p(rtol))))
+            if counted(mid, left) < target:
                 lo = mid
             else:
                 hi = mid
