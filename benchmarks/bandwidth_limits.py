@@ -12,7 +12,11 @@ options say otherwise), in a child process, and records what it printed: the lar
 certified factor α of the automatic weights' bandwidths, its μ bound, the
 certified loop's crossover in rad/s against the sample rate's cap, the
 bound the search hit (``bound_hit``), the factors tried, the wall time and
-the child's peak memory.  ``--alphas`` in a case narrows the scan (the same
+the child's peak memory, the machine's load at the start and the end, and the noise channel's gain at high frequency,
+``σ̄(W_u K(∞) W_n)`` of the certified controller (``K(∞)`` its
+feedthrough ``D``; the channel ``W_u K S W_n`` tends to it where ``S → I``):
+how near the encoder-noise / effort bound is when another bound stops the
+search (1 = binding).  ``--alphas`` in a case narrows the scan (the same
 option of ``polyrob synth``).  Nothing here is timed by a test.
 """
 
@@ -20,12 +24,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import shlex
 import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
+import numpy as np
 from _results import add_results_option, save_run
 
 DEFAULT_ARMS = ("ur5", "panda")
@@ -34,16 +42,24 @@ DEFAULT_ARMS = ("ur5", "panda")
 def measure(case: str) -> dict:
     """One ``polyrob synth ARM --max-bandwidth --json [OPTIONS]`` run, read from its JSON."""
     arm, *options = shlex.split(case)
-    cmd = [sys.executable, "-m", "polyrob", "synth", arm, "--max-bandwidth", *options, "--json", "--quiet"]
-    t0 = time.perf_counter()
-    done = subprocess.run(cmd, capture_output=True, text=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        K_path = Path(tmp) / "K.json"
+        cmd = [sys.executable, "-m", "polyrob", "synth", arm, "--max-bandwidth", *options, "--json", "--quiet"]
+        t0, load0 = time.perf_counter(), os.getloadavg()[0]
+        done = subprocess.run([*cmd, "-o", str(K_path)], capture_output=True, text=True)
+        D = np.asarray(json.loads(K_path.read_text())["D"], float) if K_path.exists() else None
     seconds = time.perf_counter() - t0
+    load = (load0, os.getloadavg()[0])  # the machine's 1-minute load at the start and the end: shared machines
     peak_gb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6  # the largest child so far
     if done.returncode not in (0, 1):  # 1: a verdict that is not CERTIFIED, still a result
         tail = done.stderr.strip().splitlines()[-1:] or ["(no output)"]
         raise SystemExit(f"{arm}: polyrob synth exited {done.returncode}: {tail[0]}")
     out = json.loads(done.stdout)
     b = out["bandwidth_scaling"]
+    h = b["hyperparameters"]
+    noise_hf = None
+    if D is not None and "effort" in h and "noise" in h:
+        noise_hf = float(np.linalg.norm(np.diag(h["effort"]) @ D @ np.diag(h["noise"]), 2))
     return {
         "robot": arm,
         "options": " ".join(options),
@@ -58,8 +74,10 @@ def measure(case: str) -> dict:
         "history": b["history"],
         "order": b.get("order"),
         "omega_b_rad_s": [min(b["hyperparameters"]["omega_b"]), max(b["hyperparameters"]["omega_b"])],
+        "noise_channel_at_high_frequency": noise_hf,
         "verdict": out.get("verdict"),
         "seconds": round(seconds, 1),
+        "load_average": [round(v, 2) for v in load],
         "peak_gb": round(peak_gb, 2),
     }
 
@@ -79,7 +97,9 @@ def main() -> None:
             entry["robot"], entry["options"] or "(defaults)", f"{entry['alpha']:.3g}", f"{entry['mu_bound']:.4f}",
             f"{entry['omega_b_rad_s'][0]:.3g}-{entry['omega_b_rad_s'][1]:.3g}",
             f"{entry['crossover_rad_s']:.1f} (cap {entry['crossover_limit_rad_s']:.0f})",
-            entry["bound_hit"].split(":")[0], bracket, entry["order"], f"{entry['seconds']:.0f} s",
+            entry["bound_hit"].split(":")[0],
+            "-" if entry["noise_channel_at_high_frequency"] is None else f"{entry['noise_channel_at_high_frequency']:.2f}",
+            bracket, entry["order"], f"{entry['seconds']:.0f} s (load {entry['load_average'][0]:.1f}-{entry['load_average'][1]:.1f})",
         ])  # fmt: skip
         print(f"{case}: alpha {entry['alpha']:.4g}, crossover {entry['crossover_rad_s']:.1f} rad/s, "
               f"{entry['bound_hit']} ({entry['seconds']:.0f} s)", file=sys.stderr, flush=True)  # fmt: skip
@@ -87,7 +107,7 @@ def main() -> None:
     print(json.dumps(doc, indent=1, default=float))
     table = {
         "columns": ["arm", "options", "largest certified α", "μ ≤", "ω_B [rad/s]", "crossover [rad/s]", "bound hit",
-                    "bracket of α", "order", "wall time"],
+                    "noise channel at high frequency (1 binds)", "bracket of α", "order", "wall time"],
         "rows": rows,
     }  # fmt: skip
     figure = "; ".join(
