@@ -82,6 +82,12 @@ def measure(case: str) -> dict:
     }
 
 
+def crossover_cell(entry: dict) -> str:
+    """``"99.2 (cap 100)"``; without a rate (the paper's weights alone) there is no cap."""
+    cap = entry["crossover_limit_rad_s"]
+    return f"{entry['crossover_rad_s']:.1f} " + ("(no rate)" if cap is None or cap != cap else f"(cap {cap:.0f})")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("cases", nargs="*", default=list(DEFAULT_ARMS),
@@ -96,7 +102,7 @@ def main() -> None:
         rows.append([
             entry["robot"], entry["options"] or "(defaults)", f"{entry['alpha']:.3g}", f"{entry['mu_bound']:.4f}",
             f"{entry['omega_b_rad_s'][0]:.3g}-{entry['omega_b_rad_s'][1]:.3g}",
-            f"{entry['crossover_rad_s']:.1f} (cap {entry['crossover_limit_rad_s']:.0f})",
+            crossover_cell(entry),
             entry["bound_hit"].split(":")[0],
             "-" if entry["noise_channel_at_high_frequency"] is None else f"{entry['noise_channel_at_high_frequency']:.2f}",
             bracket, entry["order"], f"{entry['seconds']:.0f} s (load {entry['load_average'][0]:.1f}-{entry['load_average'][1]:.1f})",
