@@ -17,6 +17,7 @@ import datetime as _dt
 import json
 import os
 import platform
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -68,7 +69,8 @@ def new_record(record_id: str, title: str, figure: str, *, table: dict | None = 
         "id": record_id,
         "title": title,
         "figure": figure,
-        "command": "python " + " ".join([os.path.relpath(sys.argv[0], ROOT), *sys.argv[1:]]),
+        # quoted as a shell would need it: a case of several words stays one argument
+        "command": "python " + shlex.join([os.path.relpath(sys.argv[0], ROOT), *sys.argv[1:]]),
         "date": _dt.datetime.now(_dt.timezone.utc).date().isoformat(),
         "machine": machine(),
         "commit": commit(),
