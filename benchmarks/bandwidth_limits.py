@@ -107,7 +107,8 @@ def main() -> None:
     for case in args.cases:
         entry = measure(case)
         out.append(entry)
-        bracket = f"{entry['bracket'][0]:.3g}-{entry['bracket'][1]:.3g}"
+        low, high = entry["bracket"]  # high None: the scan's largest factor certified (nothing failed above it)
+        bracket = f"{low:.3g}-{high:.3g}" if high is not None else f"{low:.3g} (the scan's top)"
         rows.append([
             entry["robot"], entry["options"] or "(defaults)", f"{entry['alpha']:.3g}", f"{entry['mu_bound']:.4f}",
             f"{entry['omega_b_rad_s'][0]:.3g}-{entry['omega_b_rad_s'][1]:.3g}",
@@ -116,8 +117,8 @@ def main() -> None:
             "-" if entry["noise_channel_at_high_frequency"] is None else f"{entry['noise_channel_at_high_frequency']:.2f}",
             bracket, entry["order"], f"{entry['seconds']:.0f} s (load {entry['load_average'][0]:.1f}-{entry['load_average'][1]:.1f})",
         ])  # fmt: skip
-        print(f"{case}: alpha {entry['alpha']:.4g}, crossover {entry['crossover_rad_s']:.1f} rad/s, "
-              f"{entry['bound_hit']} ({entry['seconds']:.0f} s)", file=sys.stderr, flush=True)  # fmt: skip
+        print(f"{case}: alpha {entry['alpha']:.4g}, crossover {crossover_cell(entry)} rad/s, {entry['bound_hit']} "
+              f"({entry['seconds']:.0f} s)", file=sys.stderr, flush=True)  # fmt: skip
     doc = {"arms": out}
     print(json.dumps(doc, indent=1, default=float))
     table = {
