@@ -194,6 +194,11 @@ class BallJet:
         full = (0, *(1 + a for a in axes))
         return BallJet(np.transpose(self.mid, full), np.transpose(self.rad, full), self.n, self.order)
 
+    def reshape(self, *shape: int) -> BallJet:
+        """The array's own axes reshaped."""
+        C = self.mid.shape[0]
+        return BallJet(self.mid.reshape(C, *shape), self.rad.reshape(C, *shape), self.n, self.order)
+
     @staticmethod
     def stack(jets, axis: int) -> BallJet:
         """Stack jets of one shape along a new own axis (non-negative ``axis``)."""

@@ -52,6 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, lower, upper
+from polyrob.bounds.certified.factors.hessian import factor_hessians
 from polyrob.bounds.certified.factors.inverse import fixed_point_inverse, jet_parts, taylor_neumann_inverse
 from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread, vertex_gradients
 from polyrob.bounds.certified.factors.taylor2 import at_vertices, taylor2_bounds
@@ -236,6 +237,30 @@ class FactorProblem:
             mid, rad, _ = taylor_neumann_inverse(jet_parts(Mc, order - 1), jet_parts(Mb, order)[order], qr)
         return mid, rad, np.isfinite(rad).all((-1, -2))
 
+    def hessian_enclosure(self, q_lo, q_hi, qd_lo, qd_hi, method: str = "taylor-model"):
+        """``(mid, rad)`` of the factors' Hessians in ``(q, qdot)`` at ``a = 0`` over boxes ``(B, m)``: ``(2m, 2m, B, F, m, 3m)``.
+
+        ``method``: ``taylor-model`` (the branch and bound's:
+        :func:`~polyrob.bounds.certified.factors.hessian.factor_hessians`) or
+        ``balls`` (the earlier one: ball jets over the box, ``Y`` by its
+        proved ball).  For measurement and tests.
+        """
+        qc, qr = _radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
+        vc, vr = _radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
+        zero, n = np.zeros_like(qr), 2 * self.m
+        radii = np.concatenate([qr, vr], -1)
+        with np.errstate(over="ignore", invalid="ignore"):
+            Mc, hc = self._dynamics(qc, zero, vc, zero, 3)
+            Mb, hb = self._dynamics(qc, qr, vc, vr, 3)
+            if method == "taylor-model":
+                K0 = factor_hessians(self, (Mc, hc), (Mb, hb), radii)[0]
+            elif method == "balls":
+                K0 = self._factors(Mb, hb, self._box_inverse(Mc.truncated(2), Mb, radii))[0]
+            else:
+                raise ValueError(f"unknown method {method!r}")
+        shape = (n, n, *K0.mid.shape[1:])
+        return K0.mid[1 + n :].reshape(shape), K0.rad[1 + n :].reshape(shape)
+
     def _inverse(self, M, Y_box):
         """``Y = M_hat^-1`` at one order below ``M``, and the boxes where it is not provably enclosed.
 
@@ -267,7 +292,7 @@ class FactorProblem:
         radius = np.concatenate([piece.rad for piece in pieces])
         return BallJet(mid, radius, m, Mv.order).padded(2 * m), singular  # Y does not depend on qdot
 
-    def _factors(self, M, h, Y_box=None, residual=None):
+    def _factors(self, M, h, Y_box=None, residual=None, Y=None):
         """``(K0, Ka, singular)``: the factor at ``a = 0`` ``(B, F, m, 3m)`` and its ``a``-coefficients ``(B, F, m, m_p, m_j)``, one order below ``M``, ``h``, in ``(q, qdot)``.
 
         With ``residual = (K0c, Kac)`` (the factor's balls at the box's
@@ -277,11 +302,14 @@ class FactorProblem:
         """
         m = self.m
         nv = 2 * m
-        Y, singular = self._inverse(M, Y_box)
+        if Y is None:
+            Y, singular = self._inverse(M, Y_box)
+        else:  # given (a TaylorJet: factors/hessian.py), with its own record of where it is proved
+            singular = None
         Mv, hv = self._split_jet(M, None, nv), self._split_jet(h, None, nv)
-        dM = BallJet.stack([self._split_jet(M, p, nv) for p in range(m)], 1)  # (B, p, P, i, j)
-        dhq = BallJet.stack([self._split_jet(h, p, nv) for p in range(m)], 1)  # (B, p, P, i)
-        dhv = BallJet.stack([self._split_jet(h, m + p, nv) for p in range(m)], 1)  # (B, l, P, i)
+        dM = type(M).stack([self._split_jet(M, p, nv) for p in range(m)], 1)  # (B, p, P, i, j)
+        dhq = type(M).stack([self._split_jet(h, p, nv) for p in range(m)], 1)  # (B, p, P, i)
+        dhv = type(M).stack([self._split_jet(h, m + p, nv) for p in range(m)], 1)  # (B, l, P, i)
         Yb = Y[:, None]  # (B, 1, i, j) against the factors' axis
         Md, hd = Mv[:, 1:], hv[:, 1:]  # (B, F, i, j), (B, F, i)
         dMh, dMd = dM[:, :, 0], dM[:, :, 1:]  # (B, p, i, j), (B, p, F, i, j)
@@ -322,10 +350,17 @@ class FactorProblem:
         return out if attained else out[:3]
 
     def _taylor2(self, centre, M3, h3, Y_centre, Y_box, radii, V):
-        """Per-vertex ``(lower, upper)`` ``(B, F, i, 3m, nv)`` of the second-order Taylor form (taylor2.py)."""
+        """Per-vertex ``(lower, upper)`` ``(B, F, i, 3m, nv)`` of the second-order Taylor form (taylor2.py).
+
+        ``centre``: order-3 jets at the boxes' centres; the value and gradient
+        come from them, the Hessian over the box from Taylor-model jets
+        (:func:`~polyrob.bounds.certified.factors.hessian.factor_hessians`).
+        """
         n = 2 * self.m
-        K0p, Kap, _ = self._factors(*centre, Y_centre)
-        K0h, Kah, _ = self._factors(M3, h3, Y_box)
+        K0p, Kap, _ = self._factors(centre[0].truncated(2), centre[1].truncated(2), Y_centre)
+        # the Hessian over the box by Taylor-model jets (hessian.py): ball jets over the box lose the cancellations
+        # of Y dM Y dM Y (ur5 at 0.2 of the task: 8,000 against a sampled 0.006 on a wrist entry)
+        K0h, Kah = factor_hessians(self, centre, (M3, h3), radii)
         lows, highs, parts = [], [], []
         for chunk in np.array_split(V, max(1, len(V) // 8)):  # the Hessians at 8 vertices at a time
             vm, vr = at_vertices(K0p.mid[:1], K0p.rad[:1], Kap.mid[:1], Kap.rad[:1], chunk)
@@ -344,8 +379,9 @@ class FactorProblem:
         qc, qr = _radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
         vc, vr = _radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
         zero = np.zeros_like(qr)
-        Mc2, hc2 = self._dynamics(qc, zero, vc, zero, 2 if taylor else 1)
-        Mc, hc = Mc2.truncated(1), hc2.truncated(1)
+        Mc3, hc3 = self._dynamics(qc, zero, vc, zero, 3 if taylor else 1)  # the Taylor models take order 3
+        Mc2 = Mc3.truncated(min(2, Mc3.order))
+        Mc, hc = Mc3.truncated(1), hc3.truncated(1)
         K0c, Kac, singular_c = self._factors(Mc, hc)
         Yc, _ = self._inverse(Mc, None)
         radii = np.concatenate([qr, vr], -1)  # (B, 2m)
@@ -386,7 +422,7 @@ class FactorProblem:
         contribution = np.where(narrower.all(-1)[..., None], slope_contribution, contribution)
         hi, lo = upper(vm, vrad + spread), lower(vm, vrad + spread)
         if taylor:  # both enclose K at each vertex: their intersection does (M_hat's inverse as proved as above)
-            centre = (Mc2, hc2)
+            centre = (Mc3, hc3)
             t_lo, t_hi, t_contribution = self._taylor2(centre, M3, h3, (Yc.mid[0], Yc.rad[0]), Y_box, radii, V)
             # where the Taylor form is the narrower, its second-order terms say where to split
             narrower = ((t_hi - t_lo) < (hi - lo)).all(-1)
@@ -400,9 +436,8 @@ class FactorProblem:
 
 def _columns(Jq, Jqd, G, m):
     """``[J_q J_qd G]``: three ``(B, F, i, m)`` jets side by side, ``(B, F, i, 3m)``."""
-    K = BallJet.stack([Jq, Jqd, G], 3)  # (B, F, i, 3, m)
-    n0 = K.mid.shape
-    return BallJet(K.mid.reshape(*n0[:4], 3 * m), K.rad.reshape(*n0[:4], 3 * m), K.n, K.order)
+    K = type(Jq).stack([Jq, Jqd, G], 3)  # (B, F, i, 3, m)
+    return K.reshape(*K.shape[:3], 3 * m)
 
 
 @dataclass(frozen=True, eq=False)

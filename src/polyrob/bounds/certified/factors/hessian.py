@@ -1,0 +1,108 @@
+"""The factors' Hessian over a box by Taylor-model jets: the cancellations of ``Y dM Y dM Y`` kept.
+
+The second-order Taylor form (:mod:`~polyrob.bounds.certified.factors.taylor2`)
+needs the factors' Hessian in ``(q, qdot)`` at every point of a box.
+Evaluated in ball arithmetic over the box (``FactorProblem._factors`` on
+ball jets), every ingredient -- ``Y = M_hat^-1``, the derivatives of
+``M_hat`` and of the torques -- is one ball as wide as its whole variation
+over the box, and the Hessian's terms ``Y dM Y dM Y psi`` multiply five such
+balls: on ur5 at a fifth of the default task (q ±0.04 rad) an entry of the
+wrists' ``J_q`` columns gets a Hessian radius of 8,000 where the sampled
+Hessians vary by 0.006 (``tests/test_certified_hessian.py``).
+
+Here the same computation runs on :class:`~polyrob.bounds.certified.taylor_jets.TaylorJet`
+s: each ingredient is ``const + lin.d ± rest`` in the offset ``d`` of ``q``
+from the box's centre, with thin ``const`` and ``lin`` (``M_hat``'s and the
+torques' jets at the centre, up to the third derivatives) and a ``rest`` of
+second order in the box (or first order, from the third derivatives over
+the box, for the highest component).  ``Y`` is
+
+    Y(c + d) in C + sum_p (-C dM_hat/dq_p(c) C) d_p  ±  (|rest| |C| + |E|^2 |Y|)
+
+from ``Y = C + E C + E^2 Y``, ``E = I - C M_hat = sum_p (-C dM_hat/dq_p(c)) d_p + rest``
+(:mod:`~polyrob.bounds.certified.factors.inverse`: ``C`` the float inverse
+at the centre, ``|E|`` and ``|Y|`` the proved bounds over the box).  The
+products keep their linear parts exact, so the Hessian's own first-order
+variation is what it is at the centre and only second-order terms are
+bounded by magnitudes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, upper
+from polyrob.bounds.certified.factors.inverse import jet_parts, neumann_inverse, residual_ball, taylor_residual
+from polyrob.bounds.certified.taylor_jets import TaylorJet, from_ball_jets
+
+__all__ = ["inverse_model", "inverse_jet", "factor_hessians"]
+
+
+def inverse_model(Mc: BallJet, Mb: BallJet, radii):
+    """The Taylor model of ``Y = M_hat^-1`` over each box (an order-0 :class:`TaylorJet` ``(B, m, m)``, linear in ``q``).
+
+    ``Mc``: the mass matrices' jets at the centres (order >= 2, model set 0
+    on axis 2), ``Mb`` over the boxes (order 3), in ``q``; ``radii``
+    ``(B, >= m)``.  Where ``M_hat`` is not proved invertible the ball is
+    ``inf``.
+    """
+    m = Mc.n
+    rq = np.asarray(radii, float)[:, :m]
+    k = min(Mb.order, Mc.order + 1)
+    centre, box = jet_parts(Mc, k - 1), jet_parts(Mb, k)[k]
+    M0 = centre[0][0]
+    with np.errstate(all="ignore"):
+        C = np.linalg.inv(M0)
+    C = np.where(np.isfinite(C), C, 0.0)
+    linear, rest = taylor_residual(C, centre, box, rq)
+    Y_mid, Y_rad, _ = neumann_inverse(C, linear, rest, rq)  # the proved ball of Y (and where it is proved)
+    E_mid, E_rad = residual_ball(linear, rest, rq)
+    N = upper(np.abs(E_mid), E_rad)  # |E| over the box
+    Y_abs = upper(np.abs(Y_mid), Y_rad)
+    LC = BallJet(linear[0], linear[1], 0, 0).const_form("matmul", C, left=False)  # -C dM/dq_p(c) C, (m, B, m, m)
+    rest_abs = upper(np.abs(rest[0]), rest[1])
+    with np.errstate(over="ignore", invalid="ignore"):
+        tail = upper(rest_abs @ np.abs(C), 0.0) + upper(N @ upper(N @ Y_abs, 0.0), 0.0)
+        lin_rad = (LC.rad[0] * rq.T[:, :, None, None]).sum(0)
+        R = (tail + lin_rad) * (1 + 4 * GAMMA) + TINY
+    R = np.where(np.isfinite(R) & np.isfinite(Y_rad), R, np.inf)
+    return TaylorJet(C[None], LC.mid[:, None], R[None], rq.T.copy(), m, 0)
+
+
+def inverse_jet(M: TaylorJet, Y0: TaylorJet, nvars: int) -> TaylorJet:
+    """``Y``'s jet (order 2, in ``nvars`` variables, ``q`` first) from ``M_hat``'s (order 3, in ``q``) and ``Y``'s value model.
+
+    ``dY/dq_p = -Y dM_p Y`` and ``d2Y/dq_p dq_l = -(dY_l dM_p Y + Y d2M_pl Y + Y dM_p dY_l)``,
+    as :meth:`FactorProblem._inverse <polyrob.bounds.certified.factors.FactorProblem>`
+    does in balls.
+    """
+    m = M.n
+    Mv = M.lowered(None, m)[:, 0]  # the model's mass matrix, order 2: (B, i, j)
+    dM = [Mv.component(1 + p) for p in range(m)]
+    grads = [-(Y0 @ (dM[p] @ Y0)) for p in range(m)]
+    pieces = [Y0] + grads
+    for p in range(m):
+        for ell in range(m):
+            d2M = Mv.component(1 + m + p * m + ell)
+            pieces.append(-(grads[ell] @ (dM[p] @ Y0) + Y0 @ (d2M @ Y0) + Y0 @ (dM[p] @ grads[ell])))
+    return TaylorJet.concatenate(pieces, m, 2).padded(nvars)
+
+
+def factor_hessians(problem, centre, box, radii):
+    """``(K0, Ka)``: ball jets (order 2, over the boxes) of the factors at ``a = 0`` and of their ``a``-coefficients.
+
+    ``centre = (Mc, hc)``, ``box = (Mb, hb)``: order-3 jets of ``M_hat`` (in
+    ``q``) and of the torques (in ``(q, qdot)``) at the boxes' centres and
+    over the boxes (:meth:`FactorProblem._dynamics`); ``radii`` ``(B, 2m)``.
+    Every component is the range of its Taylor model over the box; the
+    Hessian components (``[1 + 2m:]``) are what
+    :func:`~polyrob.bounds.certified.factors.taylor2.taylor2_bounds` takes.
+    """
+    m = problem.m
+    (Mc, hc), (Mb, hb) = centre, box
+    M = from_ball_jets(Mc, Mb, radii, m)
+    h = from_ball_jets(hc, hb, radii, m)
+    Y0 = inverse_model(Mc, Mb, radii)
+    Y = inverse_jet(M, Y0, 2 * m)
+    K0, Ka, _ = problem._factors(M, h, Y=Y)
+    return K0.to_ball(), Ka.to_ball()

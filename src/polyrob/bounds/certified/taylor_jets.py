@@ -1,0 +1,326 @@
+"""Jets of first-order Taylor models: each value and derivative an affine polynomial in the box offset plus a ball.
+
+A :class:`TaylorJet` holds, like :class:`~polyrob.bounds.certified.ball_jets.BallJet`,
+a value and its derivatives (up to the second; the third on inputs) with
+respect to ``n`` variables, for every point of a box ``x = c + d``,
+``|d_p| <= r_p``; but where a ball jet holds each component as one ball over
+the whole box, here each is a *Taylor model* in the first ``k`` box
+variables::
+
+    f(c + d) in  const + sum_{p < k} lin_p d_p + [-rest, rest]     for every |d| <= r
+
+with float (thin) ``const`` and ``lin``.  Products keep the linear parts
+exact: ``(a0 + a.d)(b0 + b.d) = a0 b0 + (a0 b + a b0).d + (a.d)(b.d)``, and
+only the last term (second order in ``r``) goes into the ball, bounded by
+the magnitudes of the linear parts.  Ball arithmetic over the box instead
+multiplies two balls each as wide as the function's whole variation, and
+the cancellations of ``Y dM Y dM Y`` (``Y = M_hat^-1``, entries of tens on
+the arms' wrists) are lost: the dependency problem this module is for
+(:mod:`polyrob.bounds.certified.factors.hessian`).
+
+Outward rounding as in :mod:`~polyrob.bounds.certified.ball_jets`: every
+float error of ``const`` (at most ``GAMMA`` times the magnitude summed) and
+of each ``lin_p`` (the same, times ``r_p``) is added to ``rest``, so the
+statement above holds for the floats stored.
+
+Examples
+--------
+>>> import numpy as np
+>>> x = TaylorJet.variables(np.array([[0.5]]), np.array([[0.1]]), 1)   # x on [0.4, 0.6], one variable, order 0
+>>> y = x * x                                                          # 0.25 + 1.0 d + d^2
+>>> float(y.c[0, 0, 0]), float(y.L[0, 0, 0, 0]), bool(0.01 <= y.R[0, 0, 0] < 0.0100001)
+(0.25, 1.0, True)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from polyrob.bounds.certified.ball_jets import FORMS, GAMMA, TINY, BallJet
+
+__all__ = ["TaylorJet", "from_ball_jets"]
+
+#: Relative margin of a float sum of up to a few thousand nonnegative terms (``k u``, ``u = 2^-53``, ``k <= 9000``).
+SUM_MARGIN = 1e-12
+
+
+def _inflate(rad, mag):
+    return (rad + GAMMA * mag) * (1.0 + GAMMA) + TINY
+
+
+class TaylorJet:
+    """Taylor models ``c + L.d ± R`` of a value and its derivatives (order 0 to 3 in ``n`` variables), vectorised.
+
+    ``c`` and ``R`` have shape ``(C, B, ...)`` (components as in
+    :class:`~polyrob.bounds.certified.ball_jets.BallJet`, then the boxes);
+    ``L`` has shape ``(k, C, B, ...)``: the coefficients of the first ``k``
+    box variables, whose half-widths are ``r`` ``(k, B)``.
+    """
+
+    __slots__ = ("c", "L", "R", "r", "n", "order")
+
+    def __init__(self, c, L, R, r, n: int, order: int):
+        self.c, self.L, self.R, self.r, self.n, self.order = c, L, R, r, int(n), int(order)
+
+    # ------------------------------------------------------------------ construction and conversion
+    @classmethod
+    def variables(cls, centre, radius, order: int) -> TaylorJet:
+        """The ``n`` variables themselves on the boxes ``centre ± radius`` ``(B, n)``, linear in all of them."""
+        centre, radius = np.asarray(centre, float), np.asarray(radius, float)
+        B, n = centre.shape
+        ball = BallJet.variables(centre, np.zeros_like(radius), order)
+        L = np.zeros((n, *ball.mid.shape))
+        for p in range(n):
+            L[p, 0, :, p] = 1.0
+        return cls(ball.mid, L, np.zeros_like(ball.mid), radius.T.copy(), n, order)
+
+    def _rr(self, ndim: int):
+        """The half-widths ``r`` shaped against an array ``(k, C, B, ...)`` of ``ndim`` axes."""
+        k, B = self.r.shape
+        return self.r.reshape(k, 1, B, *([1] * (ndim - 3)))
+
+    def spread(self):
+        """An upper bound of ``sum_p |L_p| r_p`` (shape of ``c``)."""
+        if self.L.shape[0] == 0:
+            return np.zeros_like(self.c)
+        return (np.abs(self.L) * self._rr(self.L.ndim)).sum(0) * (1 + GAMMA)
+
+    def to_ball(self) -> BallJet:
+        """The ball jet holding every component over the whole box: ``c ± (R + sum_p |L_p| r_p)``."""
+        return BallJet(self.c, _inflate(self.R + self.spread(), np.abs(self.c)), self.n, self.order)
+
+    # ------------------------------------------------------------------ array manipulation (as BallJet's)
+    def _with(self, c, L, R, n=None, order=None) -> TaylorJet:
+        return TaylorJet(c, L, R, self.r, self.n if n is None else n, self.order if order is None else order)
+
+    def _on_components(self, fn) -> TaylorJet:
+        """Apply a BallJet operation that acts on the component axis only (to ``c``, ``R`` and each ``L_p``)."""
+        cr = fn(BallJet(self.c, self.R, self.n, self.order))
+        moved = np.moveaxis(self.L, 0, -1)
+        lin = fn(BallJet(moved, moved, self.n, self.order))
+        return TaylorJet(cr.mid, np.moveaxis(lin.mid, -1, 0), cr.rad, self.r, cr.n, cr.order)
+
+    def lowered(self, index: int | None, nvars: int) -> TaylorJet:
+        """As :meth:`BallJet.lowered <polyrob.bounds.certified.ball_jets.BallJet.lowered>`."""
+        return self._on_components(lambda j: j.lowered(index, nvars))
+
+    def padded(self, nvars: int) -> TaylorJet:
+        """As :meth:`BallJet.padded <polyrob.bounds.certified.ball_jets.BallJet.padded>`."""
+        return self._on_components(lambda j: j.padded(nvars))
+
+    def truncated(self, order: int) -> TaylorJet:
+        """The same jet up to ``order``."""
+        C = BallJet.size(self.n, order)
+        return self._with(self.c[:C], self.L[:, :C], self.R[:C], order=order)
+
+    def component(self, index: int) -> TaylorJet:
+        """Component ``index`` (0: the value, ``1 + p``: the derivative ``p``, ...) as an order-0 jet."""
+        s = slice(index, index + 1)
+        return self._with(self.c[s], self.L[:, s], self.R[s], order=0)
+
+    @staticmethod
+    def concatenate(jets, n: int, order: int) -> TaylorJet:
+        """Order-0 jets of one shape, in component order, as one jet of ``order`` in ``n`` variables."""
+        first = jets[0]
+        return TaylorJet(
+            np.concatenate([j.c for j in jets]),
+            np.concatenate([j.L for j in jets], 1),
+            np.concatenate([j.R for j in jets]),
+            first.r,
+            n,
+            order,
+        )
+
+    @property
+    def shape(self):
+        return self.c.shape[1:]
+
+    def __getitem__(self, key) -> TaylorJet:
+        key = key if isinstance(key, tuple) else (key,)
+        return self._with(
+            self.c[(slice(None), *key)], self.L[(slice(None), slice(None), *key)], self.R[(slice(None), *key)]
+        )
+
+    def transpose(self, *axes: int) -> TaylorJet:
+        """Permute the array's own axes (its first, the boxes, stays first)."""
+        full = (0, *(1 + a for a in axes))
+        return self._with(
+            np.transpose(self.c, full), np.transpose(self.L, (0, *(1 + a for a in full))), np.transpose(self.R, full)
+        )
+
+    def reshape(self, *shape: int) -> TaylorJet:
+        """The array's own axes reshaped (the boxes' axis kept first)."""
+        C = self.c.shape[0]
+        return self._with(
+            self.c.reshape(C, *shape), self.L.reshape(self.L.shape[0], C, *shape), self.R.reshape(C, *shape)
+        )
+
+    @staticmethod
+    def stack(jets, axis: int) -> TaylorJet:
+        """Stack jets of one shape along a new own axis (``axis >= 1``: the boxes' axis stays first)."""
+        first = jets[0]
+        return first._with(
+            np.stack([j.c for j in jets], 1 + axis),
+            np.stack([j.L for j in jets], 2 + axis),
+            np.stack([j.R for j in jets], 1 + axis),
+        )
+
+    # ------------------------------------------------------------------ arithmetic
+    def __add__(self, other: TaylorJet) -> TaylorJet:
+        mag = np.abs(self.c) + self.spread() + np.abs(other.c) + other.spread()
+        return self._with(self.c + other.c, self.L + other.L, _inflate(self.R + other.R, mag))
+
+    def __sub__(self, other: TaylorJet) -> TaylorJet:
+        mag = np.abs(self.c) + self.spread() + np.abs(other.c) + other.spread()
+        return self._with(self.c - other.c, self.L - other.L, _inflate(self.R + other.R, mag))
+
+    def __neg__(self) -> TaylorJet:
+        return self._with(-self.c, -self.L, self.R)
+
+    def _pieces(self):
+        """``[(c, L, R, S)]`` of the value, the gradient ``(n, ...)`` and the Hessian ``(n, n, ...)``."""
+        n, S = self.n, self.spread()
+        out = []
+        for start, size, lead in ((0, 1, (1,)), (1, n, (n,)), (1 + n, n * n, (n, n))):
+            if start > 0 and self.order < len(lead):
+                break
+            s = slice(start, start + size)
+            tail = self.c.shape[1:]
+            out.append(
+                (
+                    self.c[s].reshape(*lead, *tail) if len(lead) > 1 else self.c[s],
+                    self.L[:, s].reshape(self.L.shape[0], *lead, *tail) if len(lead) > 1 else self.L[:, s],
+                    self.R[s].reshape(*lead, *tail) if len(lead) > 1 else self.R[s],
+                    S[s].reshape(*lead, *tail) if len(lead) > 1 else S[s],
+                )
+            )
+        return out
+
+    def form(self, form: str, other: TaylorJet) -> TaylorJet:
+        """``f(self, other)`` for a bilinear form of :data:`~polyrob.bounds.certified.ball_jets.FORMS` (orders up to 2).
+
+        Each product of two Taylor models ``(a, A, ra)`` and ``(b, B, rb)``
+        (``A``, ``B`` the linear parts, ``sa = sum_p |A_p| r_p``)::
+
+            f(a, b) + (f(A_p, b) + f(a, B_p)).d  ±  (|f|(sa, sb) + |f|(|a| + sa, rb) + |f|(ra, |b| + sb + rb))
+        """
+        f, fa = FORMS[form]
+        order, n = min(self.order, other.order), self.n
+        if order > 2:
+            raise ValueError("TaylorJet products are implemented up to order 2")
+
+        def at(piece, key):
+            c, L, R, S = piece
+            return c[key], L[(slice(None), *key)], R[key], S[key]
+
+        def prod(x, y):
+            (xc, xL, xR, xS), (yc, yL, yR, yS) = x, y
+            xA, yA = np.abs(xc) + xS, np.abs(yc) + yS
+            c = f(xc, yc)
+            L = f(xL, yc[None]) + f(xc[None], yL)
+            R = fa(xS, yS) + fa(xA, yR) + fa(xR, yA + yR)
+            return c, L, R, fa(xA, yA)
+
+        a, b = self._pieces(), other._pieces()
+        groups = [[prod(a[0], b[0])]]
+        if order >= 1:
+            groups.append([prod(a[0], b[1]), prod(a[1], b[0])])
+        if order >= 2:
+            groups.append(
+                [
+                    prod(at(a[0], (None,)), b[2]),
+                    prod(a[2], at(b[0], (None,))),
+                    prod(at(a[1], (slice(None), None)), at(b[1], (None, slice(None)))),
+                    prod(at(a[1], (None, slice(None))), at(b[1], (slice(None), None))),
+                ]
+            )
+        cs, Ls, Rs = [], [], []
+        for j, g in enumerate(groups):
+            c, L, R, mag = (sum(t[i] for t in g) for i in range(4))
+            lead = max(j, 1)  # the derivative axes of this group, flattened into the component axis
+            cs.append(c.reshape(-1, *c.shape[lead:]))
+            Ls.append(L.reshape(L.shape[0], -1, *L.shape[1 + lead :]))
+            Rs.append(_inflate(R, mag).reshape(-1, *R.shape[lead:]))
+        c, L, R = np.concatenate(cs), np.concatenate(Ls, 1), np.concatenate(Rs)
+        return TaylorJet(c, L, R, self.r, n, order)
+
+    def __mul__(self, other: TaylorJet) -> TaylorJet:
+        return self.form("mul", other)
+
+    def __matmul__(self, other: TaylorJet) -> TaylorJet:
+        return self.form("matmul", other)
+
+
+def from_ball_jets(centre: BallJet, box: BallJet, radii, k: int) -> TaylorJet:
+    """The order-3 :class:`TaylorJet` of a function from its jets at a box's centre and over the box (both order 3).
+
+    For a component ``X_j`` (the ``j``-th derivatives, ``j <= 3``), Taylor's
+    theorem on the segment from the centre ``c`` gives, for ``|d| <= r``::
+
+        X_0(c + d) in X_0(c) + X_1(c).d + 1/2 X_2(Q)[d, d]
+        X_1(c + d) in X_1(c) + X_2(c).d + 1/2 X_3(Q)[d, d]
+        X_2(c + d) in X_2(c) + X_3(c).d + (X_3(Q) - X_3(c)).d
+        X_3(c + d) in X_3(Q)
+
+    with ``Q`` the box.  The linear coefficients kept are the midpoints of
+    ``X_{j+1}(c)`` in the first ``k`` variables; their radii, the
+    coefficients of the other variables and the second-order terms go into
+    the ball.  ``radii``: ``(B, N)`` half-widths of the box's variables
+    (the jets' ``n`` are its first ones); ``centre``, ``box``: ``(C, B, ...)``.
+    """
+    n = box.n
+    B = box.mid.shape[1]
+    tail = box.mid.shape[1:]
+    extra = len(tail) - 1
+    r = np.asarray(radii, float)[:, :n].T.reshape(n, B, *([1] * extra))  # (n, B, 1, ...)
+    kk = min(k, n)
+
+    def parts(J):
+        out, start = [], 0
+        for j in range(4):
+            size = n**j
+            out.append(
+                (
+                    J.mid[start : start + size].reshape(*(n,) * j, *tail),
+                    J.rad[start : start + size].reshape(*(n,) * j, *tail),
+                )
+            )
+            start += size
+        return out
+
+    cen, bx = parts(centre), parts(box)
+
+    def absq(part):
+        return np.abs(part[0]) + part[1]
+
+    comps_c, comps_L, comps_R = [], [], []
+    # order 0: value
+    v, g, H, T = cen
+    Hq, Tq = absq(bx[2]), absq(bx[3])
+    r2 = r[:, None] * r[None, :]  # (n, n, B, 1...)
+    lin_other = (np.abs(g[0][kk:]) * r[kk:]).sum(0) if kk < n else 0.0
+    R0 = v[1] + (g[1] * r).sum(0) + lin_other + 0.5 * (Hq * r2).sum((0, 1))
+    comps_c.append(v[0])
+    comps_L.append(g[0][:kk])  # (k, B, ...)
+    comps_R.append(R0)
+    # order 1: gradient component q
+    lin_other = (np.abs(H[0][:, kk:]) * r[kk:][None]).sum(1) if kk < n else 0.0
+    R1 = g[1] + (H[1] * r[None]).sum(1) + lin_other + 0.5 * (Tq * r2[None]).sum((1, 2))
+    comps_c.append(g[0])
+    comps_L.append(np.moveaxis(H[0][:, :kk], 1, 0))  # (k, n, B, ...)
+    comps_R.append(R1)
+    # order 2: Hessian component (q, s)
+    dev = np.abs(bx[3][0] - T[0]) + bx[3][1]
+    lin_other = (np.abs(T[0][:, :, kk:]) * r[kk:][None, None]).sum(2) if kk < n else 0.0
+    R2 = H[1] + (dev * r[None, None]).sum(2) + lin_other
+    comps_c.append(H[0])
+    comps_L.append(np.moveaxis(T[0][:, :, :kk], 2, 0))  # (k, n, n, B, ...)
+    comps_R.append(R2)
+    # order 3: the box's ball
+    comps_c.append(bx[3][0])
+    comps_L.append(np.zeros((kk, *bx[3][0].shape)))
+    comps_R.append(bx[3][1])
+    c = np.concatenate([x.reshape(-1, *tail) for x in comps_c])
+    L = np.concatenate([x.reshape(kk, -1, *tail) for x in comps_L], 1)
+    R = np.concatenate([(x * (1 + SUM_MARGIN) + TINY).reshape(-1, *tail) for x in comps_R])
+    return TaylorJet(c, L, R, np.asarray(radii, float)[:, :kk].T.copy(), n, 3)
