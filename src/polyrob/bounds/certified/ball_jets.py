@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BallJet", "GAMMA", "TINY", "ball_sin_cos", "ball_inverse", "upper", "lower"]
+__all__ = ["BallJet", "GAMMA", "TINY", "ball_sin_cos", "ball_inverse", "intersect", "upper", "lower"]
 
 #: Relative margin added to every result for the rounding of float sums (``k u`` for ``k`` terms, ``k <= 90``).
 GAMMA = 1e-14
@@ -116,6 +116,10 @@ class BallJet:
             for p in range(n):
                 out.mid[1 + p, ..., p] = 1.0
         return out
+
+    def constant_like(self, mid, rad) -> BallJet:
+        """A ball ``mid ± rad`` with zero derivatives, in this jet's variables and order."""
+        return BallJet.constant(mid, rad, self.n, self.order)
 
     # ------------------------------------------------------------------ pieces
     def value(self) -> BallJet:
@@ -366,3 +370,20 @@ def ball_inverse(mid, rad):
     Ymid = C + EC.mid[0]
     Yrad = _inflate(EC.rad[0] + tail[..., None], np.abs(C) + np.abs(EC.mid[0]))
     return Ymid, np.where(np.isfinite(Yrad), Yrad, np.inf)
+
+
+def intersect(a: BallJet, b: BallJet) -> BallJet:
+    """A ball jet inside both enclosures' union-free common part: each component's ``[lo, hi]`` intersected, rounded out.
+
+    Both ``a`` and ``b`` hold the same function's components (same shape,
+    variables, order), so their intersection does; where they do not meet
+    (they cannot, unless one is wrong) the narrower ball is kept.
+    """
+    lo = np.maximum(lower(a.mid, a.rad), lower(b.mid, b.rad))
+    hi = np.minimum(upper(a.mid, a.rad), upper(b.mid, b.rad))
+    narrower_a = a.rad <= b.rad
+    mid = np.where(lo <= hi, 0.5 * (lo + hi), np.where(narrower_a, a.mid, b.mid))
+    rad = np.where(lo <= hi, np.maximum(hi - mid, mid - lo), np.where(narrower_a, a.rad, b.rad))
+    rad = np.where(np.isfinite(mid), rad * (1 + GAMMA) + GAMMA * np.abs(mid) + TINY, np.inf)
+    mid = np.where(np.isfinite(mid), mid, 0.0)
+    return BallJet(mid, rad, a.n, a.order)

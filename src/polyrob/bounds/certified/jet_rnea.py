@@ -99,9 +99,7 @@ class Chain:
         rad = [1e-15 * (np.abs(Rp) @ np.abs(P0)) for P0 in (np.outer(k, k), np.eye(3) - np.outer(k, k), _skew(k))]
         c4, s4 = cos.expand(-1).expand(-1), sin.expand(-1).expand(-1)
         out = c4.const_form("mul", parts[1], rad[1]) + s4.const_form("mul", parts[2], rad[2])
-        constant = BallJet.constant(
-            np.broadcast_to(parts[0], out.shape), np.broadcast_to(rad[0], out.shape), out.n, out.order
-        )
+        constant = out.constant_like(np.broadcast_to(parts[0], out.shape), np.broadcast_to(rad[0], out.shape))
         return out + constant
 
 
@@ -124,7 +122,8 @@ def rnea(chain: Chain, sin: BallJet, cos: BallJet, qd, acc, gravity: bool, param
     ----------
     chain : Chain
     sin, cos : BallJet, shape (B, m)
-        Of the joint positions.
+        Of the joint positions (or :class:`~polyrob.bounds.certified.taylor_jets.TaylorJet` s: then so is
+        every quantity, ``qd`` included, and the torques).
     qd : BallJet of shape (B, m), or None
         Joint velocities (``None``: at rest).
     acc : ndarray (S, m) or None
@@ -135,19 +134,18 @@ def rnea(chain: Chain, sin: BallJet, cos: BallJet, qd, acc, gravity: bool, param
         Inertial parameters (:meth:`Chain.parameters`); ``params_rad`` their radii.
     """
     m = chain.m
-    n, order = sin.n, sin.order
     params = np.asarray(params, float)
     prad = np.zeros_like(params) if params_rad is None else np.asarray(params_rad, float)
     (mass, mass_r), (h, h_r), (Io, Io_r) = _split(params, prad)
     B = sin.shape[0]
 
     def zero(*shape):
-        return BallJet.constant(np.zeros(shape), 0.0, n, order)
+        return sin.constant_like(np.zeros(shape), 0.0)
 
     # kinematics (B, S, 1, 3) in each body's frame; gravity enters as the base's acceleration -g
     omega = zero(B, 1, 1, 3)
     domega = zero(B, 1, 1, 3)
-    lin = BallJet.constant(np.broadcast_to(-chain.gravity if gravity else np.zeros(3), (B, 1, 1, 3)), 0.0, n, order)
+    lin = sin.constant_like(np.broadcast_to(-chain.gravity if gravity else np.zeros(3), (B, 1, 1, 3)), 0.0)
     rotations, forces, moments = [], [], []
     at_rest = qd is None
     for i in range(m):
@@ -161,7 +159,9 @@ def rnea(chain: Chain, sin: BallJet, cos: BallJet, qd, acc, gravity: bool, param
         lin = Rt.form("matvec", a_par)
         domega = Rt.form("matvec", domega)
         if acc is not None:
-            domega = domega + BallJet.constant(acc[None, :, None, i, None] * k, 0.0, n, order)
+            domega = domega + sin.constant_like(
+                np.broadcast_to(acc[None, :, None, i, None] * k, (B, len(acc), 1, 3)), 0.0
+            )
         if not at_rest:
             qdi = qd[:, i][:, None, None, None]  # (B, 1, 1, 1)
             omega = Rt.form("matvec", omega)
@@ -189,6 +189,4 @@ def rnea(chain: Chain, sin: BallJet, cos: BallJet, qd, acc, gravity: bool, param
         f = forces[i] + Rf
         nm = moments[i] + R.form("matvec", nm) + Rf.const_form("cross", chain.translations[i + 1])
         taus[i] = nm.const_form("dot", chain.axes[i], left=False)
-    mid = np.stack([t.mid for t in taus], axis=-1)
-    rad = np.stack([t.rad for t in taus], axis=-1)
-    return BallJet(mid, rad, n, order)
+    return type(taus[0]).stack(taus, len(taus[0].shape))

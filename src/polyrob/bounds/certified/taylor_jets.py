@@ -38,7 +38,7 @@ import numpy as np
 
 from polyrob.bounds.certified.ball_jets import FORMS, GAMMA, TINY, BallJet
 
-__all__ = ["TaylorJet", "from_ball_jets"]
+__all__ = ["TaylorJet", "from_ball_jets", "taylor_sin_cos"]
 
 #: Relative margin of a float sum of up to a few thousand nonnegative terms (``k u``, ``u = 2^-53``, ``k <= 9000``).
 SUM_MARGIN = 1e-12
@@ -64,15 +64,18 @@ class TaylorJet:
 
     # ------------------------------------------------------------------ construction and conversion
     @classmethod
-    def variables(cls, centre, radius, order: int) -> TaylorJet:
-        """The ``n`` variables themselves on the boxes ``centre ± radius`` ``(B, n)``, linear in all of them."""
+    def variables(cls, centre, radius, order: int, k: int | None = None) -> TaylorJet:
+        """The ``n`` variables themselves on the boxes ``centre ± radius`` ``(B, n)``, linear in the first ``k`` (all)."""
         centre, radius = np.asarray(centre, float), np.asarray(radius, float)
         B, n = centre.shape
+        k = n if k is None else k
         ball = BallJet.variables(centre, np.zeros_like(radius), order)
-        L = np.zeros((n, *ball.mid.shape))
-        for p in range(n):
+        L = np.zeros((k, *ball.mid.shape))
+        for p in range(k):
             L[p, 0, :, p] = 1.0
-        return cls(ball.mid, L, np.zeros_like(ball.mid), radius.T.copy(), n, order)
+        R = np.zeros_like(ball.mid)
+        R[0, :, k:] = radius[:, k:]  # the other variables' offsets: in the ball
+        return cls(ball.mid, L, R, radius[:, :k].T.copy(), n, order)
 
     def _rr(self, ndim: int):
         """The half-widths ``r`` shaped against an array ``(k, C, B, ...)`` of ``ndim`` axes."""
@@ -165,6 +168,35 @@ class TaylorJet:
             np.stack([j.R for j in jets], 1 + axis),
         )
 
+    def constant_like(self, mid, rad) -> TaylorJet:
+        """A ball ``mid ± rad`` (shape ``(B, ...)``) with zero derivatives and no linear part, in this jet's variables."""
+        ball = BallJet.constant(mid, rad, self.n, self.order)
+        return self._with(ball.mid, np.zeros((self.L.shape[0], *ball.mid.shape)), ball.rad)
+
+    def expand(self, axis: int) -> TaylorJet:
+        """Insert a unit axis into the array's own axes (negative: from the end)."""
+        return self._with(np.expand_dims(self.c, axis), np.expand_dims(self.L, axis), np.expand_dims(self.R, axis))
+
+    def swap(self, a: int, b: int) -> TaylorJet:
+        """Swap two of the array's own axes (negative indices only: from the end)."""
+        return self._with(np.swapaxes(self.c, a, b), np.swapaxes(self.L, a, b), np.swapaxes(self.R, a, b))
+
+    def const_form(self, form: str, cmid, crad=0.0, *, left: bool = True) -> TaylorJet:
+        """``f(C, self)`` (``left``) or ``f(self, C)`` for a constant ball ``C = cmid ± crad`` and a bilinear form."""
+        f, fa = FORMS[form]
+        cmid = np.asarray(cmid, float)
+        crad = np.broadcast_to(np.asarray(crad, float), cmid.shape)
+        S = self.spread()
+        A = np.abs(self.c) + S
+
+        def g(fn, c, x):
+            return fn(c, x) if left else fn(x, c)
+
+        c = g(f, cmid, self.c)
+        L = g(f, cmid, self.L)
+        R = g(fa, np.abs(cmid), self.R) + g(fa, crad, A + self.R)
+        return self._with(c, L, _inflate(R, g(fa, np.abs(cmid), A)))
+
     # ------------------------------------------------------------------ arithmetic
     def __add__(self, other: TaylorJet) -> TaylorJet:
         mag = np.abs(self.c) + self.spread() + np.abs(other.c) + other.spread()
@@ -181,7 +213,7 @@ class TaylorJet:
         """``[(c, L, R, S)]`` of the value, the gradient ``(n, ...)`` and the Hessian ``(n, n, ...)``."""
         n, S = self.n, self.spread()
         out = []
-        for start, size, lead in ((0, 1, (1,)), (1, n, (n,)), (1 + n, n * n, (n, n))):
+        for start, size, lead in ((0, 1, (1,)), (1, n, (n,)), (1 + n, n * n, (n, n)), (1 + n + n * n, n**3, (n, n, n))):
             if start > 0 and self.order < len(lead):
                 break
             s = slice(start, start + size)
@@ -206,8 +238,6 @@ class TaylorJet:
         """
         f, fa = FORMS[form]
         order, n = min(self.order, other.order), self.n
-        if order > 2:
-            raise ValueError("TaylorJet products are implemented up to order 2")
 
         def at(piece, key):
             c, L, R, S = piece
@@ -234,6 +264,18 @@ class TaylorJet:
                     prod(at(a[1], (None, slice(None))), at(b[1], (slice(None), None))),
                 ]
             )
+        if order >= 3:  # d_pqr (ab): a T^b + T^a b + the three g H and the three H g pairings (as BallJet.form)
+            P, Q, Rr = (slice(None), None, None), (None, slice(None), None), (None, None, slice(None))
+            QR, PR, PQ = (
+                (None, slice(None), slice(None)),
+                (slice(None), None, slice(None)),
+                (slice(None), slice(None), None),
+            )
+            terms = [prod(at(a[0], (None, None)), b[3]), prod(a[3], at(b[0], (None, None)))]
+            for gi, Hi in ((P, QR), (Q, PR), (Rr, PQ)):
+                terms.append(prod(at(a[1], gi), at(b[2], Hi)))
+                terms.append(prod(at(a[2], Hi), at(b[1], gi)))
+            groups.append(terms)
         cs, Ls, Rs = [], [], []
         for j, g in enumerate(groups):
             c, L, R, mag = (sum(t[i] for t in g) for i in range(4))
@@ -324,3 +366,37 @@ def from_ball_jets(centre: BallJet, box: BallJet, radii, k: int) -> TaylorJet:
     L = np.concatenate([x.reshape(kk, -1, *tail) for x in comps_L], 1)
     R = np.concatenate([(x * (1 + SUM_MARGIN) + TINY).reshape(-1, *tail) for x in comps_R])
     return TaylorJet(c, L, R, np.asarray(radii, float)[:, :kk].T.copy(), n, 3)
+
+
+def taylor_sin_cos(centre, radius, order: int, k: int):
+    """``(sin, cos)`` :class:`TaylorJet` s of the variables ``centre ± radius`` ``(B, n)``, linear in the first ``k``.
+
+    Every component of ``sin`` and ``cos`` of ``x_p = c_p + d_p`` is ``±sin``
+    or ``±cos``: ``f(c_p + d_p) in f(c_p) + f'(c_p) d_p ± r_p^2 / 2`` (for
+    ``p < k``; else ``f(c_p) ± (|f'(c_p)| r_p + r_p^2 / 2)``), plus the
+    library's error on ``f(c_p)`` and ``f'(c_p)`` (:data:`~polyrob.bounds.certified.ball_jets.TRIG_MARGIN` each).
+    """
+    from polyrob.bounds.certified.ball_jets import TRIG_MARGIN
+
+    c, r = np.asarray(centre, float), np.asarray(radius, float)
+    B, n = c.shape
+    s0, c0 = np.sin(c), np.cos(c)
+    # the derivatives of sin: sin, cos, -sin, -cos, sin; of cos: cos, -sin, -cos, sin, cos
+    sin_seq, cos_seq = (s0, c0, -s0, -c0, s0), (c0, -s0, -c0, s0, c0)
+    linear = np.arange(n) < k
+    out = []
+    for seq in (sin_seq, cos_seq):
+        C = BallJet.size(n, order)
+        cm, R, L = np.zeros((C, B, n)), np.zeros((C, B, n)), np.zeros((k, C, B, n))
+        for j in range(order + 1):  # component j of variable p: index of d^j / dx_p^j
+            for p in range(n):
+                idx = 0 if j == 0 else 1 + sum(n**i for i in range(1, j)) + p * sum(n**i for i in range(j))
+                cm[idx, :, p] = seq[j][:, p]
+                rest = 0.5 * r[:, p] ** 2 + TRIG_MARGIN * (1 + r[:, p])
+                if linear[p]:
+                    L[p, idx, :, p] = seq[j + 1][:, p]
+                    R[idx, :, p] = rest
+                else:
+                    R[idx, :, p] = np.abs(seq[j + 1][:, p]) * r[:, p] + rest
+        out.append(TaylorJet(cm, L, (R * (1 + GAMMA) + TINY) * (R > 0), r[:, :k].T.copy(), n, order))
+    return tuple(out)

@@ -33,9 +33,9 @@ import numpy as np
 
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, upper
 from polyrob.bounds.certified.factors.inverse import jet_parts, neumann_inverse, residual_ball, taylor_residual
-from polyrob.bounds.certified.taylor_jets import TaylorJet, from_ball_jets
+from polyrob.bounds.certified.taylor_jets import TaylorJet
 
-__all__ = ["inverse_model", "inverse_jet", "factor_hessians"]
+__all__ = ["inverse_model", "inverse_jet", "factor_hessians", "tighter"]
 
 
 def inverse_model(Mc: BallJet, Mb: BallJet, radii):
@@ -88,21 +88,25 @@ def inverse_jet(M: TaylorJet, Y0: TaylorJet, nvars: int) -> TaylorJet:
     return TaylorJet.concatenate(pieces, m, 2).padded(nvars)
 
 
-def factor_hessians(problem, centre, box, radii):
+def tighter(a: TaylorJet, b: TaylorJet) -> TaylorJet:
+    """Entry by entry, the model of ``a`` or of ``b`` (two Taylor models of one function) with the smaller ball."""
+    pick = a.R <= b.R
+    return a._with(np.where(pick, a.c, b.c), np.where(pick, a.L, b.L), np.where(pick, a.R, b.R))
+
+
+def factor_hessians(problem, Mc: BallJet, M: TaylorJet, h: TaylorJet, radii):
     """``(K0, Ka)``: ball jets (order 2, over the boxes) of the factors at ``a = 0`` and of their ``a``-coefficients.
 
-    ``centre = (Mc, hc)``, ``box = (Mb, hb)``: order-3 jets of ``M_hat`` (in
-    ``q``) and of the torques (in ``(q, qdot)``) at the boxes' centres and
-    over the boxes (:meth:`FactorProblem._dynamics`); ``radii`` ``(B, 2m)``.
+    ``Mc``: ``M_hat``'s jets at the boxes' centres (order 2 or more, in
+    ``q``); ``M``, ``h``: order-3 Taylor-model jets of ``M_hat`` (in ``q``)
+    and of the torques (in ``(q, qdot)``) over the boxes (:meth:`FactorProblem._taylor_dynamics`,
+    or :func:`~polyrob.bounds.certified.taylor_jets.from_ball_jets`); ``radii`` ``(B, 2m)``.
     Every component is the range of its Taylor model over the box; the
     Hessian components (``[1 + 2m:]``) are what
     :func:`~polyrob.bounds.certified.factors.taylor2.taylor2_bounds` takes.
     """
     m = problem.m
-    (Mc, hc), (Mb, hb) = centre, box
-    M = from_ball_jets(Mc, Mb, radii, m)
-    h = from_ball_jets(hc, hb, radii, m)
-    Y0 = inverse_model(Mc, Mb, radii)
+    Y0 = inverse_model(Mc, M.to_ball(), radii)
     Y = inverse_jet(M, Y0, 2 * m)
     K0, Ka, _ = problem._factors(M, h, Y=Y)
     return K0.to_ball(), Ka.to_ball()

@@ -51,13 +51,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, lower, upper
-from polyrob.bounds.certified.factors.hessian import factor_hessians
+from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, intersect, lower, upper
+from polyrob.bounds.certified.factors.hessian import factor_hessians, tighter
 from polyrob.bounds.certified.factors.inverse import fixed_point_inverse, jet_parts, taylor_neumann_inverse
 from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread, vertex_gradients
 from polyrob.bounds.certified.factors.taylor2 import at_vertices, taylor2_bounds
 from polyrob.bounds.certified.factors.width_ratio import FLOOR
 from polyrob.bounds.certified.jet_rnea import PARAMETER_RTOL, Chain, rnea
+from polyrob.bounds.certified.taylor_jets import TaylorJet, from_ball_jets, taylor_sin_cos
 from polyrob.errors import CertificationError
 
 __all__ = [
@@ -196,6 +197,17 @@ class FactorProblem:
         h = rnea(self.chain, s2[:, :m], c2[:, :m], qd, None, True, self.params, self.params_rad)[:, 0]  # (B, P, m)
         return M, h
 
+    def _taylor_dynamics(self, qc, qr, vc, vr, order):
+        """``(M, h)`` as :meth:`_dynamics`, in Taylor-model jets linear in ``q`` (:mod:`~polyrob.bounds.certified.taylor_jets`)."""
+        m = self.m
+        s, c = taylor_sin_cos(qc, qr, order, m)
+        M = rnea(self.chain, s, c, None, np.eye(m), False, self.params, self.params_rad).transpose(0, 2, 3, 1)
+        x_c, x_r = np.concatenate([qc, vc], -1), np.concatenate([qr, vr], -1)
+        s2, c2 = taylor_sin_cos(x_c, np.concatenate([qr, np.zeros_like(vr)], -1), order, m)
+        qd = TaylorJet.variables(x_c, x_r, order, m)[:, m:]
+        h = rnea(self.chain, s2[:, :m], c2[:, :m], qd, None, True, self.params, self.params_rad)[:, 0]
+        return M, h
+
     @staticmethod
     def _split_jet(J, index, nvars):
         """Value (``index=None``) or derivative ``index`` of a jet, one order lower, in ``nvars`` variables (zero-padded)."""
@@ -241,7 +253,7 @@ class FactorProblem:
         """``(mid, rad)`` of the factors' Hessians in ``(q, qdot)`` at ``a = 0`` over boxes ``(B, m)``: ``(2m, 2m, B, F, m, 3m)``.
 
         ``method``: ``taylor-model`` (the branch and bound's:
-        :func:`~polyrob.bounds.certified.factors.hessian.factor_hessians`) or
+        :meth:`_box_models` and :func:`~polyrob.bounds.certified.factors.hessian.factor_hessians`) or
         ``balls`` (the earlier one: ball jets over the box, ``Y`` by its
         proved ball).  For measurement and tests.
         """
@@ -253,7 +265,8 @@ class FactorProblem:
             Mc, hc = self._dynamics(qc, zero, vc, zero, 3)
             Mb, hb = self._dynamics(qc, qr, vc, vr, 3)
             if method == "taylor-model":
-                K0 = factor_hessians(self, (Mc, hc), (Mb, hb), radii)[0]
+                M, h = self._box_models(qc, qr, vc, vr, (Mc, hc), (Mb, hb))
+                K0 = factor_hessians(self, Mc, M, h, radii)[0]
             elif method == "balls":
                 K0 = self._factors(Mb, hb, self._box_inverse(Mc.truncated(2), Mb, radii))[0]
             else:
@@ -349,6 +362,21 @@ class FactorProblem:
             out = self._enclose(q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor)
         return out if attained else out[:3]
 
+    def _box_models(self, qc, qr, vc, vr, centre, box):
+        """Order-3 Taylor-model jets ``(M, h)`` of ``M_hat`` and the torques over the boxes.
+
+        Two models of each: Newton-Euler in Taylor models (:meth:`_taylor_dynamics`)
+        and Taylor's theorem on the ball jets at the centre and over the box
+        (:func:`~polyrob.bounds.certified.taylor_jets.from_ball_jets`); entry by
+        entry the one with the smaller ball (:func:`~polyrob.bounds.certified.factors.hessian.tighter`).
+        ``centre``, ``box``: ``(M, h)`` ball jets of order 3.
+        """
+        m = self.m
+        radii = np.concatenate([qr, vr], -1)
+        Mt, ht = self._taylor_dynamics(qc, qr, vc, vr, 3)
+        Mf, hf = (from_ball_jets(c, b, radii, m) for c, b in zip(centre, box))
+        return tighter(Mt, Mf), tighter(ht, hf)
+
     def _taylor2(self, centre, M3, h3, Y_centre, Y_box, radii, V):
         """Per-vertex ``(lower, upper)`` ``(B, F, i, 3m, nv)`` of the second-order Taylor form (taylor2.py).
 
@@ -360,7 +388,7 @@ class FactorProblem:
         K0p, Kap, _ = self._factors(centre[0].truncated(2), centre[1].truncated(2), Y_centre)
         # the Hessian over the box by Taylor-model jets (hessian.py): ball jets over the box lose the cancellations
         # of Y dM Y dM Y (ur5 at 0.2 of the task: 8,000 against a sampled 0.006 on a wrist entry)
-        K0h, Kah = factor_hessians(self, centre, (M3, h3), radii)
+        K0h, Kah = factor_hessians(self, centre[0], M3, h3, radii)
         lows, highs, parts = [], [], []
         for chunk in np.array_split(V, max(1, len(V) // 8)):  # the Hessians at 8 vertices at a time
             vm, vr = at_vertices(K0p.mid[:1], K0p.rad[:1], Kap.mid[:1], Kap.rad[:1], chunk)
@@ -386,8 +414,10 @@ class FactorProblem:
         Yc, _ = self._inverse(Mc, None)
         radii = np.concatenate([qr, vr], -1)  # (B, 2m)
         Mb, hb = self._dynamics(qc, qr, vc, vr, 3 if taylor else 2)
-        M3, h3 = Mb, hb
-        Y_box = self._box_inverse(Mc2, M3, radii)  # the Taylor form of M_hat of the highest order at hand
+        if taylor:  # Taylor-model jets over the box: the Hessian's (hessian.py), and their ranges tighten the balls
+            M3, h3 = self._box_models(qc, qr, vc, vr, (Mc3, hc3), (Mb, hb))
+            Mb, hb = intersect(Mb, M3.to_ball()), intersect(hb, h3.to_ball())
+        Y_box = self._box_inverse(Mc2, Mb, radii)  # the Taylor form of M_hat of the highest order at hand
         Mb, hb = Mb.truncated(2), hb.truncated(2)
         K0b, Kab, singular_b = self._factors(Mb, hb, Y_box)
         g0, ga, Yb = self._factors(Mb, hb, Y_box, residual=(K0c, Kac))
