@@ -63,11 +63,19 @@ def _mul(x, y):
     return x * y
 
 
+def _matvec(x, y):
+    # a sum over the (short) last axis, not einsum: einsum's broadcasting over the jets' many leading axes is slow
+    out = x[..., 0] * y[..., None, 0]
+    for j in range(1, x.shape[-1]):
+        out = out + x[..., j] * y[..., None, j]
+    return out
+
+
 #: Bilinear forms ``name: (f, |f|)``: ``|f|`` has the absolute values of ``f``'s coefficients.
 FORMS = {
     "mul": (_mul, _mul),
     "cross": (_cross, _cross_abs),
-    "matvec": (lambda x, y: np.einsum("...ij,...j->...i", x, y), lambda x, y: np.einsum("...ij,...j->...i", x, y)),
+    "matvec": (_matvec, _matvec),
     "matmul": (lambda x, y: x @ y, lambda x, y: x @ y),
     "dot": (lambda x, y: np.einsum("...i,...i->...", x, y), lambda x, y: np.einsum("...i,...i->...", x, y)),
 }

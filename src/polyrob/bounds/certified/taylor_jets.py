@@ -96,6 +96,13 @@ class TaylorJet:
     def _with(self, c, L, R, n=None, order=None) -> TaylorJet:
         return TaylorJet(c, L, R, self.r, self.n if n is None else n, self.order if order is None else order)
 
+    def extended(self, r) -> TaylorJet:
+        """The same models linear in more variables: ``r`` ``(k', B)`` the half-widths of all ``k' >= k`` (this jet's first)."""
+        k = self.L.shape[0]
+        L = np.zeros((len(r), *self.L.shape[1:]))
+        L[:k] = self.L
+        return TaylorJet(self.c, L, self.R, np.asarray(r, float), self.n, self.order)
+
     def _on_components(self, fn) -> TaylorJet:
         """Apply a BallJet operation that acts on the component axis only (to ``c``, ``R`` and each ``L_p``)."""
         cr = fn(BallJet(self.c, self.R, self.n, self.order))
@@ -198,11 +205,18 @@ class TaylorJet:
         return self._with(c, L, _inflate(R, g(fa, np.abs(cmid), A)))
 
     # ------------------------------------------------------------------ arithmetic
+    def _same_box(self, other: TaylorJet) -> None:
+        """Refuse to combine models over different boxes (their linear parts would be bounded with the wrong ``r``)."""
+        if self.r is not other.r and not np.array_equal(self.r, other.r):
+            raise ValueError("Taylor models over different boxes (or linear in different variables)")
+
     def __add__(self, other: TaylorJet) -> TaylorJet:
+        self._same_box(other)
         mag = np.abs(self.c) + self.spread() + np.abs(other.c) + other.spread()
         return self._with(self.c + other.c, self.L + other.L, _inflate(self.R + other.R, mag))
 
     def __sub__(self, other: TaylorJet) -> TaylorJet:
+        self._same_box(other)
         mag = np.abs(self.c) + self.spread() + np.abs(other.c) + other.spread()
         return self._with(self.c - other.c, self.L - other.L, _inflate(self.R + other.R, mag))
 
@@ -236,6 +250,7 @@ class TaylorJet:
 
             f(a, b) + (f(A_p, b) + f(a, B_p)).d  ±  (|f|(sa, sb) + |f|(|a| + sa, rb) + |f|(ra, |b| + sb + rb))
         """
+        self._same_box(other)
         f, fa = FORMS[form]
         order, n = min(self.order, other.order), self.n
 
@@ -368,8 +383,12 @@ def from_ball_jets(centre: BallJet, box: BallJet, radii, k: int) -> TaylorJet:
     return TaylorJet(c, L, R, np.asarray(radii, float)[:, :kk].T.copy(), n, 3)
 
 
-def taylor_sin_cos(centre, radius, order: int, k: int):
+def taylor_sin_cos(centre, radius, order: int, k: int, box_radius=None):
     """``(sin, cos)`` :class:`TaylorJet` s of the variables ``centre ± radius`` ``(B, n)``, linear in the first ``k``.
+
+    ``box_radius`` (default ``radius``): the half-widths of the box's
+    variables the models are linear in (a variable whose sine is not taken
+    may have radius 0 here and its own half-width there).
 
     Every component of ``sin`` and ``cos`` of ``x_p = c_p + d_p`` is ``±sin``
     or ``±cos``: ``f(c_p + d_p) in f(c_p) + f'(c_p) d_p ± r_p^2 / 2`` (for
@@ -398,5 +417,6 @@ def taylor_sin_cos(centre, radius, order: int, k: int):
                     R[idx, :, p] = rest
                 else:
                     R[idx, :, p] = np.abs(seq[j + 1][:, p]) * r[:, p] + rest
-        out.append(TaylorJet(cm, L, (R * (1 + GAMMA) + TINY) * (R > 0), r[:, :k].T.copy(), n, order))
+        r_box = r if box_radius is None else np.asarray(box_radius, float)
+        out.append(TaylorJet(cm, L, (R * (1 + GAMMA) + TINY) * (R > 0), r_box[:, :k].T.copy(), n, order))
     return tuple(out)

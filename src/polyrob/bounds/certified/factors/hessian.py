@@ -106,7 +106,7 @@ def factor_hessians(problem, Mc: BallJet, M: TaylorJet, h: TaylorJet, radii):
     :func:`~polyrob.bounds.certified.factors.taylor2.taylor2_bounds` takes.
     """
     m = problem.m
-    Y0 = inverse_model(Mc, M.to_ball(), radii)
+    Y0 = inverse_model(Mc, M.to_ball(), radii).extended(M.r)
     Y = inverse_jet(M, Y0, 2 * m)
     K0, Ka, _ = problem._factors(M, h, Y=Y)
     return K0.to_ball(), Ka.to_ball()

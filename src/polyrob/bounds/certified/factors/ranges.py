@@ -203,10 +203,11 @@ class FactorProblem:
         s, c = taylor_sin_cos(qc, qr, order, m)
         M = rnea(self.chain, s, c, None, np.eye(m), False, self.params, self.params_rad).transpose(0, 2, 3, 1)
         x_c, x_r = np.concatenate([qc, vc], -1), np.concatenate([qr, vr], -1)
-        s2, c2 = taylor_sin_cos(x_c, np.concatenate([qr, np.zeros_like(vr)], -1), order, m)
-        qd = TaylorJet.variables(x_c, x_r, order, m)[:, m:]
+        # the torques are linear in (q, qdot): their quadratic terms in qdot keep their cancellations too
+        s2, c2 = taylor_sin_cos(x_c, np.concatenate([qr, np.zeros_like(vr)], -1), order, 2 * m, x_r)
+        qd = TaylorJet.variables(x_c, x_r, order, 2 * m)[:, m:]
         h = rnea(self.chain, s2[:, :m], c2[:, :m], qd, None, True, self.params, self.params_rad)[:, 0]
-        return M, h
+        return M.extended(x_r.T), h
 
     @staticmethod
     def _split_jet(J, index, nvars):
@@ -374,7 +375,7 @@ class FactorProblem:
         m = self.m
         radii = np.concatenate([qr, vr], -1)
         Mt, ht = self._taylor_dynamics(qc, qr, vc, vr, 3)
-        Mf, hf = (from_ball_jets(c, b, radii, m) for c, b in zip(centre, box))
+        Mf, hf = (from_ball_jets(c, b, radii, 2 * m).extended(radii.T) for c, b in zip(centre, box))
         return tighter(Mt, Mf), tighter(ht, hf)
 
     def _taylor2(self, centre, M3, h3, Y_centre, Y_box, radii, V):
