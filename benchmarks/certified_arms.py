@@ -30,6 +30,14 @@ over the sampled one is reported relative to that scale (``excess_max``).
   ``--samples`` points of the box (``width_ratios`` with a floor of
   :data:`INVERSE_FLOOR`: ``M_hat^-1``'s entries span four decades, and an
   entry far below the largest still varies);
+- ``hessian``: per scale of ``--scales``, the factors' Hessian in ``(q, qdot)``
+  (at ``a = 0``) over the box, by
+  :meth:`~polyrob.bounds.certified.factors.FactorProblem.hessian_enclosure`
+  (``taylor-model``, the Taylor form's since issue 41's Taylor models;
+  ``balls``, the earlier ball jets over the box): the largest radius, the
+  entry where the balls' is largest (both radii and the spread of the
+  second differences sampled there), the median ratio of the two radii,
+  and whether both hold the second differences (step 1e-4) at a few points;
 - ``wrapping`` (at the scale ``--wrapping-scale``): the radius of the
   mean-value form's interval gradient per unit of the box's half-width
   (the second-derivative bound that form uses: max and median over the
@@ -78,6 +86,35 @@ def wrapping(problem, box, rng) -> dict:
                 largest = max(largest, float(np.abs(K[0] - K[1] - K[2] + K[3]).max() / (4 * h * h)))
     return {"gradient_radius_per_r_max": float(per_r.max()), "gradient_radius_per_r_median": float(np.median(per_r)),
             "sampled_second_difference_max": largest}  # fmt: skip
+
+
+def hessian_widths(problem, box, rng, points: int = 6, step: float = 1e-4) -> dict:
+    """The factors' Hessian over the box (at ``a = 0``) by each method against second differences at random points."""
+    m, n = problem.m, 2 * problem.m
+    args = (box.q_lower[None], box.q_upper[None], box.qdot_lower[None], box.qdot_upper[None])
+    E, lo, hi = np.eye(n), None, None
+    for _ in range(points):
+        x0 = np.concatenate([rng.uniform(box.q_lower, box.q_upper), rng.uniform(box.qdot_lower, box.qdot_upper)])
+        pts = np.array([x0 + step * (sp * E[p] + sl * E[k]) for p in range(n) for k in range(n)
+                        for sp, sl in ((1, 1), (1, -1), (-1, 1), (-1, -1))])  # fmt: skip
+        K = problem.values(pts[:, :m], pts[:, m:], np.zeros((len(pts), m))).reshape(n, n, 4, -1)
+        H = (K[:, :, 0] - K[:, :, 1] - K[:, :, 2] + K[:, :, 3]) / (4 * step * step)
+        lo, hi = (H, H) if lo is None else (np.minimum(lo, H), np.maximum(hi, H))
+    out, radii = {"sampled_spread_max": float((hi - lo).max()), "points": points}, {}
+    for method in ("balls", "taylor-model"):
+        t0 = time.perf_counter()
+        mid, rad = problem.hessian_enclosure(*args, method=method)
+        seconds = time.perf_counter() - t0
+        mid, rad = mid[:, :, 0].reshape(n, n, -1), rad[:, :, 0].reshape(n, n, -1)
+        radii[method] = rad
+        out[method] = {"radius_max": float(rad.max()), "holds_samples": bool(np.all((lo >= mid - rad - 1e-4 * (1 + np.abs(lo)))
+                       & (hi <= mid + rad + 1e-4 * (1 + np.abs(hi))))), "seconds": round(seconds, 2)}  # fmt: skip
+    worst = np.unravel_index(np.argmax(radii["balls"]), radii["balls"].shape)
+    live = radii["balls"] > 1e-9
+    out["worst_entry"] = {"balls": float(radii["balls"][worst]), "taylor_model": float(radii["taylor-model"][worst]),
+                          "sampled_spread": float((hi - lo)[worst])}  # fmt: skip
+    out["radius_ratio_median"] = float(np.median(radii["balls"][live] / radii["taylor-model"][live]))
+    return out
 
 
 #: Entries of ``M_hat^-1`` whose sampled width is below this fraction of its largest entry are judged by their excess.
@@ -134,7 +171,7 @@ def main() -> None:
         loops = [(n, loop) for n, _, loop in factor_parameters(default_task_robot(robot))]
         domain = default_task_domain(robot)
         problem = FactorProblem.from_loops(loops)
-        row = {"joints": robot.m, "factors": [n for n, _ in loops], "one_box": [], "inverse": []}
+        row = {"joints": robot.m, "factors": [n for n, _ in loops], "one_box": [], "inverse": [], "hessian": []}
         model_robot = loops[0][1].model_robot
         row["wrapping"] = wrapping(problem, scaled(domain, args.wrapping_scale), np.random.default_rng(2))
         row["wrapping"]["scale"] = args.wrapping_scale
@@ -142,6 +179,7 @@ def main() -> None:
             box = scaled(domain, s)
             inv = inverse_widths(problem, model_robot.model, box, args.samples, np.random.default_rng(3))
             row["inverse"].append({"scale": s, **inv})
+            row["hessian"].append({"scale": s, **hessian_widths(problem, box, np.random.default_rng(5))})
             s_lo, s_hi = attained_range(
                 problem, box.q_lower, box.q_upper, box.qdot_lower, box.qdot_upper, box.qddot_lower,
                 box.qddot_upper, args.samples, np.random.default_rng(1))  # fmt: skip
