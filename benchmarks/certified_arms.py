@@ -32,7 +32,7 @@ over the sampled one is reported relative to that scale (``excess_max``).
   entry far below the largest still varies);
 - ``hessian``: per scale of ``--scales``, the factors' Hessian in ``(q, qdot)``
   (at ``a = 0``) over the box, by
-  :meth:`~polyrob.bounds.certified.factors.FactorProblem.hessian_enclosure`
+  :func:`~polyrob.bounds.certified.factors.hessian.hessian_enclosure`
   (``taylor-model``, the Taylor form's since issue 41's Taylor models;
   ``balls``, the earlier ball jets over the box): the largest radius, the
   entry where the balls' is largest (both radii and the spread of the
@@ -63,6 +63,7 @@ from _results import add_results_option, save_run
 
 from polyrob import load_robot
 from polyrob.bounds.certified.factors import MAX_BOXES, FactorProblem, attained_range, prove_factor_ranges
+from polyrob.bounds.certified.factors.hessian import hessian_enclosure
 from polyrob.bounds.certified.factors.width_ratio import FLOOR, width_ratios
 from polyrob.domains.default_task import default_task_domain, default_task_robot
 from polyrob.errors import CertificationError
@@ -103,7 +104,7 @@ def hessian_widths(problem, box, rng, points: int = 6, step: float = 1e-4) -> di
     out, radii = {"sampled_spread_max": float((hi - lo).max()), "points": points}, {}
     for method in ("balls", "taylor-model"):
         t0 = time.perf_counter()
-        mid, rad = problem.hessian_enclosure(*args, method=method)
+        mid, rad = hessian_enclosure(problem, *args, method=method)
         seconds = time.perf_counter() - t0
         mid, rad = mid[:, :, 0].reshape(n, n, -1), rad[:, :, 0].reshape(n, n, -1)
         radii[method] = rad

@@ -16,6 +16,7 @@ import pytest
 from polyrob import load_robot
 from polyrob.bounds.certified.ball_jets import upper
 from polyrob.bounds.certified.factors import FactorProblem
+from polyrob.bounds.certified.factors.hessian import hessian_enclosure, taylor_dynamics
 from polyrob.bounds.certified.taylor_jets import TaylorJet
 from polyrob.domains.default_task import default_task_domain, default_task_robot
 from polyrob.plant.models.inner_factors import factor_parameters
@@ -75,8 +76,8 @@ def test_it_holds_sampled_hessians_and_beats_the_ball_jets_on_the_wrists(ur5):
     loops, problem, domain = ur5
     m, box = problem.m, _scaled(domain, 0.2)
     args = (box.q_lower[None], box.q_upper[None], box.qdot_lower[None], box.qdot_upper[None])
-    mid, rad = problem.hessian_enclosure(*args)
-    old_mid, old_rad = problem.hessian_enclosure(*args, method="balls")
+    mid, rad = hessian_enclosure(problem, *args)
+    old_mid, old_rad = hessian_enclosure(problem, *args, method="balls")
     rng = np.random.default_rng(1)
     x = np.concatenate([rng.uniform(box.q_lower, box.q_upper, (3, m)),
                         rng.uniform(box.qdot_lower, box.qdot_upper, (3, m))], 1)  # fmt: skip
@@ -98,7 +99,7 @@ def test_at_a_box_of_width_zero_it_is_the_hessian_at_the_point(ur5):
     m = problem.m
     q = 0.5 * (domain.q_lower + domain.q_upper) + 0.03
     qd = np.linspace(-0.4, 0.4, m)
-    mid, rad = problem.hessian_enclosure(q[None], q[None], qd[None], qd[None])
+    mid, rad = hessian_enclosure(problem, q[None], q[None], qd[None], qd[None])
     H = _sampled_hessians(lambda a, b: problem.values(a, b, np.zeros_like(a)), np.concatenate([q, qd])[None], m)[0]
     scale = np.abs(H).max()
     assert np.all(rad[..., 0, :, :, :] <= 1e-9 * scale)
@@ -124,7 +125,7 @@ def test_newton_euler_in_taylor_models_holds_pinocchio_on_a_box(ur5):
     m, box = problem.m, _scaled(domain, 0.5)
     qc, qr = 0.5 * (box.q_lower + box.q_upper), 0.5 * (box.q_upper - box.q_lower)
     vc, vr = 0.5 * (box.qdot_lower + box.qdot_upper), 0.5 * (box.qdot_upper - box.qdot_lower)
-    M, h = problem._taylor_dynamics(qc[None], qr[None], vc[None], vr[None], 1)
+    M, h = taylor_dynamics(problem, qc[None], qr[None], vc[None], vr[None], 1)
     model = loops[0][1].model_robot.model
     data = model.createData()
     rng = np.random.default_rng(4)

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BallJet", "GAMMA", "TINY", "ball_sin_cos", "ball_inverse", "intersect", "upper", "lower"]
+__all__ = ["BallJet", "GAMMA", "TINY", "ball_sin_cos", "ball_inverse", "intersect", "upper", "lower", "centre_radius"]
 
 #: Relative margin added to every result for the rounding of float sums (``k u`` for ``k`` terms, ``k <= 90``).
 GAMMA = 1e-14
@@ -395,3 +395,16 @@ def intersect(a: BallJet, b: BallJet) -> BallJet:
     rad = np.where(np.isfinite(mid), rad * (1 + GAMMA) + GAMMA * np.abs(mid) + TINY, np.inf)
     mid = np.where(np.isfinite(mid), mid, 0.0)
     return BallJet(mid, rad, a.n, a.order)
+
+
+def centre_radius(lo, hi):
+    """``(centre, radius)`` of boxes with ``[lo, hi]`` inside ``centre ± radius`` (the radius rounded up).
+
+    >>> import numpy as np
+    >>> c, r = centre_radius(np.array([0.1]), np.array([0.3]))
+    >>> bool(c[0] - r[0] <= 0.1 and 0.3 <= c[0] + r[0])
+    True
+    """
+    c = 0.5 * (lo + hi)
+    r = np.maximum(hi - c, c - lo)
+    return c, np.where(r > 0, np.nextafter(r, np.inf) * (1 + 4e-16), 0.0)

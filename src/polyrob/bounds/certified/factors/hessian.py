@@ -31,11 +31,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, upper
+from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, centre_radius, upper
 from polyrob.bounds.certified.factors.inverse import jet_parts, neumann_inverse, residual_ball, taylor_residual
-from polyrob.bounds.certified.taylor_jets import TaylorJet
+from polyrob.bounds.certified.jet_rnea import rnea
+from polyrob.bounds.certified.taylor_jets import TaylorJet, from_ball_jets, taylor_sin_cos
+from polyrob.errors import ArgumentError
 
-__all__ = ["inverse_model", "inverse_jet", "factor_hessians", "tighter"]
+__all__ = [
+    "inverse_model",
+    "inverse_jet",
+    "factor_hessians",
+    "tighter",
+    "taylor_dynamics",
+    "box_models",
+    "hessian_enclosure",
+]
 
 
 def inverse_model(Mc: BallJet, Mb: BallJet, radii):
@@ -99,7 +109,7 @@ def factor_hessians(problem, Mc: BallJet, M: TaylorJet, h: TaylorJet, radii):
 
     ``Mc``: ``M_hat``'s jets at the boxes' centres (order 2 or more, in
     ``q``); ``M``, ``h``: order-3 Taylor-model jets of ``M_hat`` (in ``q``)
-    and of the torques (in ``(q, qdot)``) over the boxes (:meth:`FactorProblem._taylor_dynamics`,
+    and of the torques (in ``(q, qdot)``) over the boxes (:func:`taylor_dynamics`,
     or :func:`~polyrob.bounds.certified.taylor_jets.from_ball_jets`); ``radii`` ``(B, 2m)``.
     Every component is the range of its Taylor model over the box; the
     Hessian components (``[1 + 2m:]``) are what
@@ -110,3 +120,58 @@ def factor_hessians(problem, Mc: BallJet, M: TaylorJet, h: TaylorJet, radii):
     Y = inverse_jet(M, Y0, 2 * m)
     K0, Ka, _ = problem._factors(M, h, Y=Y)
     return K0.to_ball(), Ka.to_ball()
+
+
+def taylor_dynamics(problem, qc, qr, vc, vr, order):
+    """``(M, h)`` as :meth:`FactorProblem._dynamics <polyrob.bounds.certified.factors.ranges.FactorProblem._dynamics>`, in Taylor-model jets linear in ``q`` (:mod:`~polyrob.bounds.certified.taylor_jets`)."""
+    m = problem.m
+    s, c = taylor_sin_cos(qc, qr, order, m)
+    M = rnea(problem.chain, s, c, None, np.eye(m), False, problem.params, problem.params_rad).transpose(0, 2, 3, 1)
+    x_c, x_r = np.concatenate([qc, vc], -1), np.concatenate([qr, vr], -1)
+    # the torques are linear in (q, qdot): their quadratic terms in qdot keep their cancellations too
+    s2, c2 = taylor_sin_cos(x_c, np.concatenate([qr, np.zeros_like(vr)], -1), order, 2 * m, x_r)
+    qd = TaylorJet.variables(x_c, x_r, order, 2 * m)[:, m:]
+    h = rnea(problem.chain, s2[:, :m], c2[:, :m], qd, None, True, problem.params, problem.params_rad)[:, 0]
+    return M.extended(x_r.T), h
+
+
+def box_models(problem, qc, qr, vc, vr, centre, box):
+    """Order-3 Taylor-model jets ``(M, h)`` of ``M_hat`` and the torques over the boxes.
+
+    Two models of each: Newton-Euler in Taylor models (:func:`taylor_dynamics`)
+    and Taylor's theorem on the ball jets at the centre and over the box
+    (:func:`~polyrob.bounds.certified.taylor_jets.from_ball_jets`); entry by
+    entry the one with the smaller ball (:func:`~polyrob.bounds.certified.factors.hessian.tighter`).
+    ``centre``, ``box``: ``(M, h)`` ball jets of order 3.
+    """
+    m = problem.m
+    radii = np.concatenate([qr, vr], -1)
+    Mt, ht = taylor_dynamics(problem, qc, qr, vc, vr, 3)
+    Mf, hf = (from_ball_jets(c, b, radii, 2 * m).extended(radii.T) for c, b in zip(centre, box))
+    return tighter(Mt, Mf), tighter(ht, hf)
+
+
+def hessian_enclosure(problem, q_lo, q_hi, qd_lo, qd_hi, method: str = "taylor-model"):
+    """``(mid, rad)`` of ``problem``'s factors' Hessians in ``(q, qdot)`` at ``a = 0`` over boxes ``(B, m)``: ``(2m, 2m, B, F, m, 3m)``.
+
+    ``method``: ``taylor-model`` (the branch and bound's:
+    :func:`box_models` and :func:`factor_hessians`) or
+    ``balls`` (the earlier one: ball jets over the box, ``Y`` by its
+    proved ball).  For measurement and tests.
+    """
+    qc, qr = centre_radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
+    vc, vr = centre_radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
+    zero, n = np.zeros_like(qr), 2 * problem.m
+    radii = np.concatenate([qr, vr], -1)
+    with np.errstate(over="ignore", invalid="ignore"):
+        Mc, hc = problem._dynamics(qc, zero, vc, zero, 3)
+        Mb, hb = problem._dynamics(qc, qr, vc, vr, 3)
+        if method == "taylor-model":
+            M, h = box_models(problem, qc, qr, vc, vr, (Mc, hc), (Mb, hb))
+            K0 = factor_hessians(problem, Mc, M, h, radii)[0]
+        elif method == "balls":
+            K0 = problem._factors(Mb, hb, problem._box_inverse(Mc.truncated(2), Mb, radii))[0]
+        else:
+            raise ArgumentError(f"hessian_enclosure: method must be 'taylor-model' or 'balls' (got {method!r})")
+    shape = (n, n, *K0.mid.shape[1:])
+    return K0.mid[1 + n :].reshape(shape), K0.rad[1 + n :].reshape(shape)

@@ -51,14 +51,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from polyrob.bounds.certified import ball_jets as bj
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, intersect, lower, upper
-from polyrob.bounds.certified.factors.hessian import factor_hessians, tighter
+from polyrob.bounds.certified.factors.hessian import box_models, factor_hessians
 from polyrob.bounds.certified.factors.inverse import fixed_point_inverse, jet_parts, taylor_neumann_inverse
 from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread, vertex_gradients
 from polyrob.bounds.certified.factors.taylor2 import at_vertices, taylor2_bounds
 from polyrob.bounds.certified.factors.width_ratio import FLOOR
 from polyrob.bounds.certified.jet_rnea import PARAMETER_RTOL, Chain, rnea
-from polyrob.bounds.certified.taylor_jets import TaylorJet, from_ball_jets, taylor_sin_cos
 from polyrob.errors import CertificationError
 
 __all__ = [
@@ -80,13 +80,6 @@ MAX_BOXES = 300
 REL_TOL = 0.04
 #: Boxes evaluated together (vectorised).
 BATCH = 16
-
-
-def _radius(lo, hi):
-    """``(centre, radius)`` with ``[lo, hi]`` inside ``centre ± radius`` (radius rounded up)."""
-    c = 0.5 * (lo + hi)
-    r = np.maximum(hi - c, c - lo)
-    return c, np.where(r > 0, np.nextafter(r, np.inf) * (1 + 4e-16), 0.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -175,8 +168,8 @@ class FactorProblem:
         the box), for diagnosis: its radius against the box's half-width is
         the over-estimation that form adds per unit of width.
         """
-        qc, qr = _radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
-        vc, vr = _radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
+        qc, qr = bj.centre_radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
+        vc, vr = bj.centre_radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
         zero = np.zeros_like(qr)
         radii = np.concatenate([qr, vr], -1)
         with np.errstate(over="ignore", invalid="ignore"):
@@ -196,18 +189,6 @@ class FactorProblem:
         qd = BallJet.variables(np.concatenate([qc, vc], -1), np.concatenate([qr, vr], -1), order)[:, m:]
         h = rnea(self.chain, s2[:, :m], c2[:, :m], qd, None, True, self.params, self.params_rad)[:, 0]  # (B, P, m)
         return M, h
-
-    def _taylor_dynamics(self, qc, qr, vc, vr, order):
-        """``(M, h)`` as :meth:`_dynamics`, in Taylor-model jets linear in ``q`` (:mod:`~polyrob.bounds.certified.taylor_jets`)."""
-        m = self.m
-        s, c = taylor_sin_cos(qc, qr, order, m)
-        M = rnea(self.chain, s, c, None, np.eye(m), False, self.params, self.params_rad).transpose(0, 2, 3, 1)
-        x_c, x_r = np.concatenate([qc, vc], -1), np.concatenate([qr, vr], -1)
-        # the torques are linear in (q, qdot): their quadratic terms in qdot keep their cancellations too
-        s2, c2 = taylor_sin_cos(x_c, np.concatenate([qr, np.zeros_like(vr)], -1), order, 2 * m, x_r)
-        qd = TaylorJet.variables(x_c, x_r, order, 2 * m)[:, m:]
-        h = rnea(self.chain, s2[:, :m], c2[:, :m], qd, None, True, self.params, self.params_rad)[:, 0]
-        return M.extended(x_r.T), h
 
     @staticmethod
     def _split_jet(J, index, nvars):
@@ -236,7 +217,7 @@ class FactorProblem:
         the branch and bound's is ``taylor3``), or ``fixed-point`` (the earlier
         method, a ball around the centre's inverse).
         """
-        qc, qr = _radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
+        qc, qr = bj.centre_radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
         order = {"taylor3": 3, "taylor2": 2, "fixed-point": 1}[method]
         zero = np.zeros_like(qr)
         with np.errstate(over="ignore", invalid="ignore"):
@@ -249,31 +230,6 @@ class FactorProblem:
                 return Yc.mid[0], rad, proved
             mid, rad, _ = taylor_neumann_inverse(jet_parts(Mc, order - 1), jet_parts(Mb, order)[order], qr)
         return mid, rad, np.isfinite(rad).all((-1, -2))
-
-    def hessian_enclosure(self, q_lo, q_hi, qd_lo, qd_hi, method: str = "taylor-model"):
-        """``(mid, rad)`` of the factors' Hessians in ``(q, qdot)`` at ``a = 0`` over boxes ``(B, m)``: ``(2m, 2m, B, F, m, 3m)``.
-
-        ``method``: ``taylor-model`` (the branch and bound's:
-        :meth:`_box_models` and :func:`~polyrob.bounds.certified.factors.hessian.factor_hessians`) or
-        ``balls`` (the earlier one: ball jets over the box, ``Y`` by its
-        proved ball).  For measurement and tests.
-        """
-        qc, qr = _radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
-        vc, vr = _radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
-        zero, n = np.zeros_like(qr), 2 * self.m
-        radii = np.concatenate([qr, vr], -1)
-        with np.errstate(over="ignore", invalid="ignore"):
-            Mc, hc = self._dynamics(qc, zero, vc, zero, 3)
-            Mb, hb = self._dynamics(qc, qr, vc, vr, 3)
-            if method == "taylor-model":
-                M, h = self._box_models(qc, qr, vc, vr, (Mc, hc), (Mb, hb))
-                K0 = factor_hessians(self, Mc, M, h, radii)[0]
-            elif method == "balls":
-                K0 = self._factors(Mb, hb, self._box_inverse(Mc.truncated(2), Mb, radii))[0]
-            else:
-                raise ValueError(f"unknown method {method!r}")
-        shape = (n, n, *K0.mid.shape[1:])
-        return K0.mid[1 + n :].reshape(shape), K0.rad[1 + n :].reshape(shape)
 
     def _inverse(self, M, Y_box):
         """``Y = M_hat^-1`` at one order below ``M``, and the boxes where it is not provably enclosed.
@@ -363,21 +319,6 @@ class FactorProblem:
             out = self._enclose(q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor)
         return out if attained else out[:3]
 
-    def _box_models(self, qc, qr, vc, vr, centre, box):
-        """Order-3 Taylor-model jets ``(M, h)`` of ``M_hat`` and the torques over the boxes.
-
-        Two models of each: Newton-Euler in Taylor models (:meth:`_taylor_dynamics`)
-        and Taylor's theorem on the ball jets at the centre and over the box
-        (:func:`~polyrob.bounds.certified.taylor_jets.from_ball_jets`); entry by
-        entry the one with the smaller ball (:func:`~polyrob.bounds.certified.factors.hessian.tighter`).
-        ``centre``, ``box``: ``(M, h)`` ball jets of order 3.
-        """
-        m = self.m
-        radii = np.concatenate([qr, vr], -1)
-        Mt, ht = self._taylor_dynamics(qc, qr, vc, vr, 3)
-        Mf, hf = (from_ball_jets(c, b, radii, 2 * m).extended(radii.T) for c, b in zip(centre, box))
-        return tighter(Mt, Mf), tighter(ht, hf)
-
     def _taylor2(self, centre, M3, h3, Y_centre, Y_box, radii, V):
         """Per-vertex ``(lower, upper)`` ``(B, F, i, 3m, nv)`` of the second-order Taylor form (taylor2.py).
 
@@ -387,8 +328,7 @@ class FactorProblem:
         """
         n = 2 * self.m
         K0p, Kap, _ = self._factors(centre[0].truncated(2), centre[1].truncated(2), Y_centre)
-        # the Hessian over the box by Taylor-model jets (hessian.py): ball jets over the box lose the cancellations
-        # of Y dM Y dM Y (ur5 at 0.2 of the task: 8,000 against a sampled 0.006 on a wrist entry)
+        # the Hessian by Taylor-model jets (hessian.py): ball jets over the box lose the cancellations of Y dM Y dM Y
         K0h, Kah = factor_hessians(self, centre[0], M3, h3, radii)
         lows, highs, parts = [], [], []
         for chunk in np.array_split(V, max(1, len(V) // 8)):  # the Hessians at 8 vertices at a time
@@ -405,8 +345,8 @@ class FactorProblem:
 
     def _enclose(self, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor=False):
         m = self.m
-        qc, qr = _radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
-        vc, vr = _radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
+        qc, qr = bj.centre_radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
+        vc, vr = bj.centre_radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
         zero = np.zeros_like(qr)
         Mc3, hc3 = self._dynamics(qc, zero, vc, zero, 3 if taylor else 1)  # the Taylor models take order 3
         Mc2 = Mc3.truncated(min(2, Mc3.order))
@@ -416,7 +356,7 @@ class FactorProblem:
         radii = np.concatenate([qr, vr], -1)  # (B, 2m)
         Mb, hb = self._dynamics(qc, qr, vc, vr, 3 if taylor else 2)
         if taylor:  # Taylor-model jets over the box: the Hessian's (hessian.py), and their ranges tighten the balls
-            M3, h3 = self._box_models(qc, qr, vc, vr, (Mc3, hc3), (Mb, hb))
+            M3, h3 = box_models(self, qc, qr, vc, vr, (Mc3, hc3), (Mb, hb))
             Mb, hb = intersect(Mb, M3.to_ball()), intersect(hb, h3.to_ball())
         Y_box = self._box_inverse(Mc2, Mb, radii)  # the Taylor form of M_hat of the highest order at hand
         Mb, hb = Mb.truncated(2), hb.truncated(2)
