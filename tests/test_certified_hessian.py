@@ -141,3 +141,15 @@ def test_newton_euler_in_taylor_models_holds_pinocchio_on_a_box(ur5):
     # the balls these models give are tighter than Newton-Euler in ball arithmetic over the box (2.3 and 2.1 times in sum)
     Mb, hb = problem._dynamics(qc[None], qr[None], vc[None], vr[None], 1)
     assert Mb.rad[0].sum() > 1.5 * M.to_ball().rad[0].sum() and hb.rad[0].sum() > 1.5 * h.to_ball().rad[0].sum()
+
+
+def test_two_enclosures_that_do_not_meet_are_an_error_not_a_choice():
+    from polyrob.bounds.certified.ball_jets import BallJet, intersect
+    from polyrob.errors import CertificationError
+
+    a = BallJet.constant(np.array([1.0, 2.0]), np.array([0.1, 0.1]), 1, 1)
+    b = BallJet.constant(np.array([1.05, 2.5]), np.array([0.1, 0.1]), 1, 1)  # the second components are disjoint
+    with pytest.raises(CertificationError, match="do not meet"):
+        intersect(a, b)
+    both = intersect(a, BallJet.constant(np.array([1.05, 2.05]), np.array([0.1, 0.1]), 1, 1))
+    assert np.all(both.mid[0] - both.rad[0] <= [0.95, 1.95]) and np.all(both.mid[0] + both.rad[0] >= [1.1, 2.1])

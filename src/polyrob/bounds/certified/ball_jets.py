@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from polyrob.errors import CertificationError
+
 __all__ = ["BallJet", "GAMMA", "TINY", "ball_sin_cos", "ball_inverse", "intersect", "upper", "lower", "centre_radius"]
 
 #: Relative margin added to every result for the rounding of float sums (``k u`` for ``k`` terms, ``k <= 90``).
@@ -384,11 +386,17 @@ def intersect(a: BallJet, b: BallJet) -> BallJet:
     """A ball jet inside both enclosures' union-free common part: each component's ``[lo, hi]`` intersected, rounded out.
 
     Both ``a`` and ``b`` hold the same function's components (same shape,
-    variables, order), so their intersection does; where they do not meet
-    (they cannot, unless one is wrong) the narrower ball is kept.
+    variables, order), so their intersection does.  Two outward-rounded
+    enclosures of one value always meet: where they do not, one of them is
+    wrong, and that is an error, not a choice between them.  (A component
+    that is not a number keeps the narrower ball, then an infinite radius.)
     """
     lo = np.maximum(lower(a.mid, a.rad), lower(b.mid, b.rad))
     hi = np.minimum(upper(a.mid, a.rad), upper(b.mid, b.rad))
+    if np.any(lo > hi):
+        raise CertificationError(
+            f"two enclosures of the same quantity do not meet ({int(np.sum(lo > hi))} components): one of them is wrong"
+        )
     narrower_a = a.rad <= b.rad
     mid = np.where(lo <= hi, 0.5 * (lo + hi), np.where(narrower_a, a.mid, b.mid))
     rad = np.where(lo <= hi, np.maximum(hi - mid, mid - lo), np.where(narrower_a, a.rad, b.rad))
