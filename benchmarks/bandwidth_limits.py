@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import shlex
 import subprocess
 import sys
@@ -46,15 +45,21 @@ def measure(case: str) -> dict:
         K_path = Path(tmp) / "K.json"
         cmd = [sys.executable, "-m", "polyrob", "synth", arm, "--max-bandwidth", *options, "--json", "--quiet"]
         t0, load0 = time.perf_counter(), os.getloadavg()[0]
-        done = subprocess.run([*cmd, "-o", str(K_path)], capture_output=True, text=True)
+        out_path, err_path = Path(tmp) / "out", Path(tmp) / "err"
+        with out_path.open("w") as fo, err_path.open("w") as fe:
+            child = subprocess.Popen([*cmd, "-o", str(K_path)], stdout=fo, stderr=fe)
+            # wait4: this child's own peak memory (RUSAGE_CHILDREN is the largest of every case run so far)
+            _, status, usage = os.wait4(child.pid, 0)
+        returncode, peak_gb = os.waitstatus_to_exitcode(status), usage.ru_maxrss / 1e6
+        child.returncode = returncode  # reaped here: Popen must not wait for it again
+        stdout, stderr = out_path.read_text(), err_path.read_text()
         D = np.asarray(json.loads(K_path.read_text())["D"], float) if K_path.exists() else None
     seconds = time.perf_counter() - t0
     load = (load0, os.getloadavg()[0])  # the machine's 1-minute load at the start and the end: shared machines
-    peak_gb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6  # the largest child so far
-    if done.returncode not in (0, 1):  # 1: a verdict that is not CERTIFIED, still a result
-        tail = done.stderr.strip().splitlines()[-1:] or ["(no output)"]
-        raise SystemExit(f"{arm}: polyrob synth exited {done.returncode}: {tail[0]}")
-    out = json.loads(done.stdout)
+    if returncode not in (0, 1):  # 1: a verdict that is not CERTIFIED, still a result
+        tail = stderr.strip().splitlines()[-1:] or ["(no output)"]
+        raise SystemExit(f"{arm}: polyrob synth exited {returncode}: {tail[0]}")
+    out = json.loads(stdout)
     b = out["bandwidth_scaling"]
     h = b["hyperparameters"]
     noise_hf = None
