@@ -17,12 +17,18 @@ then bisects between the largest grid point that certifies ``μ < target``
 and the next one, which does not.
 
 Where it stops, :attr:`BandwidthScalingResult.bound_hit` says which bound
-binds there (:func:`binding_bound`): ``"sample rate"`` when the next
-factor's controller crosses over above :func:`crossover_cap` (the rate and
-delay the loop will run at), else the weighted channel with the largest
-nominal peak: ``"tracking (W_S)"``, ``"uncertainty (W_T)"``, or the limit
-weight ``W_KS = W_u W_n`` (``"encoder noise"`` / ``"effort limit"``,
-:mod:`polyrob.plant.weights`).
+binds there: ``"sample rate"`` when the next factor's controller crosses
+over above :func:`crossover_cap` (the rate and delay the loop will run
+at), else the weighted channel μ rests on at the next factor
+(:func:`polyrob.synthesis.channel_mu.channel_mu`: μ on a grid with each
+channel left out of the performance block; the channel without which μ
+falls below 1 binds): ``"tracking (W_S)"``, ``"uncertainty (W_T)"``, or
+the limit weight ``W_KS = W_u W_n`` (``"encoder noise"`` / ``"effort
+limit"``, :mod:`polyrob.plant.weights`).  When the next factor has no
+controller (its synthesis failed), the certified controller's μ on the
+next factor's weights is read.  :func:`binding_bound` is the cheaper
+nominal-peak rule (a hint: a channel slack on the nominal loop can be the
+one the worst plant breaks).
 """
 
 from __future__ import annotations
@@ -429,6 +435,7 @@ def max_bandwidth_scaling(
         K0 = solved[near][0].controller if near is not None and solved[near][0] is not None else None
         try:
             P = plant(alpha, h)
+            plants[alpha] = P  # kept when the synthesis fails too: the stop's diagnosis reads its weights
             res = synthesize(P, K0)
             # the factor counts only when its certificate's status is CERTIFIED (mu < 1 at every
             # frequency, loop stable), never on a grid peak
@@ -436,7 +443,6 @@ def max_bandwidth_scaling(
             mu = float(cert.bound) if cert.certified else math.inf
             status = cert.status
             figure = None if cert.certified else float(cert.bound)
-            plants[alpha] = P
             if cert.certified and cap is not None and _is_plant(P):
                 wc = loop_crossover(P, res.controller)
                 crossovers[alpha] = wc
@@ -572,12 +578,16 @@ def _bound_hit(fail, solved, plants, crossovers, cap, ok, names, stopped, exclud
             f"sample rate: at alpha = {fail:.4g} the certified loop crosses over at {wc:.4g} rad/s, above "
             f"{cap:.4g} rad/s (the hold and delay's phase lag within {RATE_PHASE_BUDGET} rad)"
         )
+    from polyrob.synthesis.channel_mu import channel_mu, channel_words
+
     res_fail = solved.get(fail, (None,))[0]
     if res_fail is not None and getattr(res_fail, "controller", None) is not None and _is_plant(plants.get(fail)):
-        return f"at alpha = {fail:.4g}: " + binding_bound(plants[fail], res_fail.controller, names)
+        return f"at alpha = {fail:.4g}: " + channel_words(channel_mu(plants[fail], res_fail.controller), names)
     res_ok = solved[ok][0]
-    if res_ok is not None and getattr(res_ok, "controller", None) is not None and _is_plant(plants.get(ok)):
-        return f"alpha = {fail:.4g} failed to synthesise; nearest bound at alpha = {ok:.4g}: " + binding_bound(
-            plants[ok], res_ok.controller, names
+    if res_ok is not None and getattr(res_ok, "controller", None) is not None and _is_plant(plants.get(fail)):
+        # no controller at the failing factor: the certified one of alpha = ok on the failing factor's weights
+        return (
+            f"alpha = {fail:.4g} failed to synthesise; alpha = {ok:.4g}'s controller on its weights: "
+            + channel_words(channel_mu(plants[fail], res_ok.controller), names)
         )
     return f"alpha = {fail:.4g} does not certify"
