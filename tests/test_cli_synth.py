@@ -332,3 +332,47 @@ def test_bad_structure_leaves_no_controller_file(tmp_path_factory, tmp_path, cap
     code, _, err = run(capsys, "synth", "paper_2r", "--pldi", pldi, "--structure", "tf0x", "--quiet", "-o", out)
     assert code == 2 and err.count("\n") == 1 and "structure" in err
     assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("moving", ["certified", "not certified", "not computed"])
+def test_synth_moving_decides_the_exit_status_when_it_was_computed(tmp_path, capsys, monkeypatch, moving):
+    """`synth --moving`: exit 0 only when mu and the moving-robot certificate (once computed) both hold.
+
+    Before, the exit status was the mu certificate's alone (0 here in every case).  The synthesis and
+    the moving-robot test are stubbed: the decision is what is tested.
+    """
+    from types import SimpleNamespace
+
+    import polyrob.analysis.lpv.constant as constant
+    import polyrob.pipeline as pipeline
+    from polyrob.analysis.certificate import Certificate, Status, decide_mu
+    from polyrob.pipeline import Design
+
+    paper_pldi().save(tmp_path / "paper.json")
+    result = SimpleNamespace(mu_history=[0.9], gamma_history=[0.9], structure="full", order=8, peak_mu=0.9,
+                             peak_mu_lower=0.89, peak_frequency=1.0, iterations=1, seconds=1.0, info={})  # fmt: skip
+    record = {"structure": "full", "order": 8, "peak_mu_upper": 0.9, "peak_mu_lower": 0.89}
+    stable = SimpleNamespace(stable=True, unstable=False, verdict="stable")
+
+    def design(problem, *args, **kwargs):
+        between = SimpleNamespace(holds=True, level=0.91, peak_upper=0.9, failed_at=None, reason="")
+        status, reasons = decide_mu(stable, 0.9, 0.89, between)
+        assert status is Status.CERTIFIED
+        cert = Certificate(status, 0.9, 0.9, 0.89, stable, problem.scope(), reasons)
+        return Design(controller=None, result=result, reduced=None, record=record).certified_by(cert)
+
+    summary = {
+        "certified": {"computed": True, "certified": True, "status": "CERTIFIED"},
+        "not certified": {"computed": True, "certified": False, "status": "NOT_CERTIFIED"},
+        "not computed": {"computed": False, "certified": False, "status": None},
+    }[moving]
+    fake = SimpleNamespace(verdict=f"moving robot: {moving} (stub)", computed=summary["computed"],
+                           details=lambda: "", summary=lambda: dict(summary))  # fmt: skip
+    monkeypatch.setattr(pipeline, "design_controller", design)
+    monkeypatch.setattr(constant, "robot_in_motion_certificate", lambda *a, **k: fake)
+    code, out, _ = run(capsys, "synth", "paper_2r", "--pldi", tmp_path / "paper.json", "--moving", "--quiet")
+    assert "verdict: robust performance CERTIFIED" in out
+    assert code == (1 if moving == "not certified" else 0)
+    assert ("exit status 1: the moving-robot certificate asked for with --moving is not CERTIFIED" in out) == (
+        moving == "not certified"
+    )

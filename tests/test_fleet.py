@@ -510,3 +510,27 @@ def test_the_summary_table_has_the_validation_at_the_rate():
     lines = markdown_table([dict(row, validation_at_rate={"verdict": verdict}), row]).splitlines()
     assert lines[0].endswith("| validation | validation at the rate |")
     assert lines[2].endswith(f"| settles | {verdict} |") and lines[3].endswith("| settles | - |")
+
+
+def test_the_moving_robot_certificate_is_a_column_and_decides_the_row(pendulums, monkeypatch):
+    """`batch --moving`: each row carries the moving-robot certificate; once computed it decides `certified`."""
+    import polyrob.fleet.jobs as jobs
+    from polyrob.fleet.outputs import markdown_table
+
+    job = Job(robot=pendulums[0], q_radius=0.2, qdot_max=0.5, qddot_max=1.0, inner="computed-torque", model_error=0.1)
+    r = run_job(job, Settings(**dict(FAST, validate=False), moving=True))
+    assert r.ok, r.message
+    row = r.row()
+    assert r.model == "inner-gain" and row["moving"]["computed"]  # the masses constant, the state at any rate
+    assert "at any rate" in r.details["moving"]["verdict"] or "any rate" in str(r.details["moving"]["scope"])
+    assert row["certified"] == (row["status"] == "CERTIFIED" and row["moving"]["certified"])
+    assert "| moving robot |" in markdown_table([row]).splitlines()[0]
+    # a frozen certificate with a moving one that does not hold: the row is not certified
+    refused = {"computed": True, "certified": False, "status": "NOT_CERTIFIED", "gamma": 1.3, "verdict": "stub"}
+    monkeypatch.setattr(jobs, "moving_stage", lambda problem, K: dict(refused))
+    r2 = run_job(job, Settings(**dict(FAST, validate=False), moving=True))
+    assert r2.status == "CERTIFIED" and not r2.certified and r2.row()["certified"] is False
+    assert "NOT_CERTIFIED (<= 1.3)" in markdown_table([r2.row()])
+    # not asked: no column value, and the row is the frozen certificate's
+    r3 = run_job(job, Settings(**dict(FAST, validate=False)))
+    assert r3.moving is None and r3.certified == (r3.status == "CERTIFIED")

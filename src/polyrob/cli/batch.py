@@ -129,6 +129,7 @@ def settings_from_args(args) -> dict:
         "true_robots": args.true_robots,
         "at_rate": rate_conditions_dict(args),
         "reduce_max_order": args.reduce_max_order or None,
+        "moving": args.moving,
     }
 
 
@@ -169,6 +170,8 @@ def cmd_batch(args) -> int:
         result = str(r.status) if r.ok else f"FAILED {r.error}: {r.message}"
         if r.ok and r.validation:
             result += f"; validation: {r.validation}"
+        if r.ok and r.moving:
+            result += f"; {r.moving['verdict']}"
         if r.ok and r.validation_at_rate:
             result += f"; at the rate: {r.validation_at_rate['verdict']}"
         if r.ok and r.reason:
@@ -268,6 +271,14 @@ def register(sub) -> None:
     g.add_argument("--mc", type=int_at_least(1), default=200, help="Monte Carlo parameter sets in the analysis")
     g.add_argument("--no-analysis", action="store_true", help="skip the mu analysis after the synthesis")
     g.add_argument("--no-validate", action="store_true", help="skip the nonlinear closed-loop step")
+    g.add_argument(
+        "--moving",
+        action="store_true",
+        help="also each controller's moving-robot certificate (the masses constant, the state at any rate; "
+        "minutes per arm, docs/certificates.md): a column of the rows, and a row is certified only when mu and, "
+        "once computed, this certificate both are; with --max-bandwidth on an inner-gain model a factor counts "
+        "only when its controller has it too",
+    )
     g.add_argument(
         "--reduce-max-order",
         type=int_at_least(0),

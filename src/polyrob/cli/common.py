@@ -136,9 +136,15 @@ class Output:
             print(to_json(doc), flush=True)
 
 
-def exit_status(certificate) -> int:
-    """The exit status of a command that ends with a certificate: 0 certified, 1 any other status (2 is bad input)."""
-    return 0 if certificate.certified else 1
+def exit_status(certificate, moving: dict | None = None) -> int:
+    """The exit status of a command that ends with a certificate: 0 certified, 1 any other status (2 is bad input).
+
+    ``moving``: the summary of a moving-robot certificate the user asked for (``--moving``); when it was
+    computed, it must be certified too (a verdict that exists decides), when it was not, μ alone decides.
+    """
+    if not certificate.certified:
+        return 1
+    return 1 if moving is not None and moving.get("computed") and not moving.get("certified") else 0
 
 
 def add_output_flags(parser: argparse.ArgumentParser, *, quiet: bool = True) -> None:

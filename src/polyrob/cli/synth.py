@@ -280,8 +280,14 @@ def cmd_synth(args) -> int:
     if friction is not None:  # beside the covers line: what Coulomb friction does to the error
         doc["friction"] = friction
         out.line(friction["words"])
+    if moving is not None and moving.get("computed") and cert.certified and not moving.get("certified"):
+        doc["exit"] = (
+            "exit status 1: the moving-robot certificate asked for with --moving is not CERTIFIED "
+            f"({moving.get('status')}), though mu certifies every frozen robot"
+        )
+        out.line(doc["exit"])
     out.document(doc)
-    return exit_status(cert)
+    return exit_status(cert, moving)
 
 
 def true_robots_structure_holds_pid(structure: str, m: int) -> None:
@@ -459,7 +465,8 @@ def register(sub) -> None:
         "--moving",
         action="store_true",
         help="also the moving-robot certificate of the synthesised controller, printed and saved with -o "
-        "(minutes for a 20-state loop; docs/certificates.md); the exit status stays the mu certificate's. "
+        "(minutes for a 20-state loop; docs/certificates.md); the exit status is 0 only when mu and, once computed, "
+        "the moving-robot certificate are both CERTIFIED. "
         "With --max-bandwidth on an inner-gain model (the arms' default task) a factor counts only when its "
         "controller has the moving-robot certificate too",
     )

@@ -20,7 +20,14 @@ from pathlib import PurePath
 from polyrob.errors import ArgumentError
 from polyrob.fleet.diagnosis import why_not_certified
 from polyrob.fleet.results import RobotResult, controller_data, controller_system  # noqa: F401 (re-exported)
-from polyrob.fleet.stages import design_stage, one_line, rate_validation_stage, reduce_stage, validate_stage
+from polyrob.fleet.stages import (
+    design_stage,
+    moving_stage,
+    one_line,
+    rate_validation_stage,
+    reduce_stage,
+    validate_stage,
+)
 
 __all__ = ["Job", "Settings", "RobotResult", "run_job", "as_job"]
 
@@ -192,6 +199,14 @@ class Settings:
     at_rate : dict
         Its conditions, the fields of :class:`~polyrob.validate.at_rate.loop.RealLoopConditions`
         (empty: the defaults, 1 kHz, one sample of delay, 18-bit encoders, viscous 1 and Coulomb 2 N m).
+    moving : bool
+        Also the moving-robot certificate of each controller (the masses
+        constant, the state at any rate:
+        :func:`polyrob.analysis.lpv.constant.robot_in_motion_certificate`;
+        minutes per arm), in the row's ``moving``; once computed it decides
+        the row's ``certified`` with μ, and with the bandwidth search on an
+        ``inner-gain`` model a factor counts only when its controller has it
+        too (as ``synth --max-bandwidth --moving``).
     reduce_max_order : int or None
         A certified full-order controller is reduced to the smallest order up
         to this one that keeps μ < 1 (:func:`polyrob.pipeline.reduce_design`);
@@ -216,6 +231,7 @@ class Settings:
     true_robots: int = 0
     at_rate: dict = field(default_factory=dict)
     reduce_max_order: int | None = 20
+    moving: bool = False
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
@@ -412,6 +428,12 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         except Exception as exc:  # noqa: BLE001 - recorded: a failed simulation is a finding about this robot
             at_rate = {"verdict": f"validation at the rate failed: {type(exc).__name__}: {one_line(exc)}"}
         timings["validation at the rate"] = time.perf_counter() - t1
+    moving = None
+    if settings.moving:
+        t1 = time.perf_counter()
+        details["moving"] = moving_stage(problem, design.controller)
+        moving = {k: details["moving"].get(k) for k in ("computed", "certified", "status", "gamma", "verdict")}
+        timings["moving robot"] = time.perf_counter() - t1
     from polyrob.pipeline import friction_statement
 
     friction = friction_statement(problem, design.controller)  # the set's Coulomb levels, as synth and run state them
@@ -442,6 +464,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         verdict="verdict: " + cert.verdict,
         validation=validation,
         validation_at_rate=at_rate,
+        moving=moving,
         reason=reason,
         seconds=time.perf_counter() - t0,
         timings=timings,

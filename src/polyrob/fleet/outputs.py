@@ -36,6 +36,7 @@ COLUMNS = (
     ("alpha", "bandwidth factor"),
     ("seconds", "time (s)"),
     ("status", "status"),
+    ("moving_status", "moving robot"),
     ("validation", "validation"),
     ("at_rate", "validation at the rate"),
 )
@@ -108,6 +109,16 @@ def _status(row: dict) -> str:
     return str(row.get("status") or "-")
 
 
+def _moving(moving: dict) -> str | None:
+    """The moving-robot cell: its status and bound, why it was not computed, or nothing (not asked)."""
+    if not moving:
+        return None
+    if not moving.get("computed"):
+        return "not computed"
+    gamma = moving.get("gamma")
+    return f"{moving.get('status')}" + ("" if gamma is None else f" (<= {gamma:.4g})")
+
+
 def _cell(value) -> str:
     if value is None:
         return "-"
@@ -121,7 +132,8 @@ def markdown_table(rows) -> str:
     lines = ["| " + " | ".join(title for _, title in COLUMNS) + " |", "|" + "|".join("---" for _ in COLUMNS) + "|"]
     for row in rows:
         at_rate = row.get("validation_at_rate") or {}
-        row = dict(row, status=_status(row), at_rate=at_rate.get("verdict"))
+        moving = row.get("moving") or {}
+        row = dict(row, status=_status(row), at_rate=at_rate.get("verdict"), moving_status=_moving(moving))
         lines.append("| " + " | ".join(_cell(row.get(key)) for key, _ in COLUMNS) + " |")
     return "\n".join(lines) + "\n"
 

@@ -34,6 +34,9 @@ class RobotResult:
     domain's name (a task domain's says pose, radius and rate bounds),
     ``inner`` the inner layer with its ranges (``"none"``), and
     ``reflected_inertia`` whether and whence rotor inertia is in ``M(q)``.
+    ``moving`` is the moving-robot certificate when the batch computed it
+    (``Settings.moving``): its status, bound and verdict line; once computed
+    it decides :attr:`certified` with μ.
     """
 
     name: str
@@ -58,6 +61,7 @@ class RobotResult:
     verdict: str | None = None
     validation: str | None = None
     validation_at_rate: dict | None = None
+    moving: dict | None = None
     reason: str | None = None
     seconds: float = 0.0
     timings: dict = field(default_factory=dict)
@@ -68,10 +72,12 @@ class RobotResult:
 
     @property
     def certified(self) -> bool:
-        """Reads the status (decided in polyrob.analysis.certificate)."""
+        """Reads the status (decided in polyrob.analysis.certificate) and, once computed, the moving-robot one."""
         from polyrob.analysis.certificate import Status
 
-        return self.status is not None and Status(self.status).certified
+        frozen = self.status is not None and Status(self.status).certified
+        moving = self.moving is None or not self.moving.get("computed") or bool(self.moving.get("certified"))
+        return frozen and moving
 
     def controller_system(self):
         """The controller as a python-control system (``None`` for a failed job)."""
@@ -102,6 +108,7 @@ class RobotResult:
             "verdict",
             "validation",
             "validation_at_rate",
+            "moving",
             "reason",
         )
         out = {k: getattr(self, k) for k in keys}

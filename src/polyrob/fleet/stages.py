@@ -11,7 +11,7 @@ import time
 from polyrob.errors import SynthesisError
 from polyrob.fleet.diagnosis import search_skipped
 
-__all__ = ["design_stage", "reduce_stage", "validate_stage", "rate_validation_stage", "one_line"]
+__all__ = ["design_stage", "moving_stage", "reduce_stage", "validate_stage", "rate_validation_stage", "one_line"]
 
 
 def validate_stage(problem, K, settings) -> dict:
@@ -56,6 +56,13 @@ def rate_validation_stage(problem, K, settings) -> dict:
     return out
 
 
+def moving_stage(problem, K) -> dict:
+    """The moving-robot certificate of ``K`` (the masses constant, the state at any rate), its summary."""
+    from polyrob.analysis.lpv.constant import robot_in_motion_certificate
+
+    return robot_in_motion_certificate(problem, K).summary()
+
+
 def design_stage(problem, settings, timings: dict, details: dict):
     """One synthesis, or the bandwidth search when asked and the model can certify.
 
@@ -74,8 +81,11 @@ def design_stage(problem, settings, timings: dict, details: dict):
     t0 = time.perf_counter()
     skipped = search_skipped(problem, details) if settings.search_bandwidth else None
     if settings.search_bandwidth and skipped is None:
+        from polyrob.analysis.lpv.constant import applies
+
         design, res = design_max_bandwidth(
             problem,
+            moving=bool(settings.moving) and applies(problem) is None,  # as synth --max-bandwidth --moving
             alphas=settings.alphas,
             search_time_limit=settings.search_time_limit,
             rtol=settings.search_rtol,
