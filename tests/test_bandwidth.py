@@ -197,3 +197,52 @@ def test_the_whole_job_s_progress_moves_with_each_factor_and_ends_near_the_stage
     # a synthesis's own report stays inside its factor's part: below where the next factor starts
     assert all(b0 < h < b1 for (b0, h), b1 in zip(shares, starts[1:]))
     assert end >= 0.9  # the search's last factor leaves the stage (nearly) done
+
+
+def test_a_factor_whose_synthesis_fails_counts_when_a_nearby_controller_certifies_on_it():
+    """A factor's own synthesis can miss a controller that exists: ur5 with 14-bit encoders stopped at 5.42 when
+    the PID re-tuned for 5.66 failed its screen, while 5.42's controller has grid mu 0.758 on 5.66's weights.
+    With carry_over the nearest certified factor's controller is certified on the failing factor's plant."""
+    carried = []
+
+    def carry(P, result):
+        carried.append((P.alpha, result.controller))
+        return _result(0.9 if P.alpha <= 6.0 else 1.2, result.controller)  # its own certificate on P
+
+    def mu_of_alpha(a):
+        return 0.8 if a <= 4.0 else 1.5  # the factor's own synthesis fails above 4
+
+    res, calls = _search(mu_of_alpha, alphas=(2.0, 4.0, 8.0), rtol=0.01, carry_over=carry)
+    assert 5.9 < res.alpha <= 6.0 and res.result.controller == "K(4)"  # 4's controller, certified up to 6
+    assert res.bracket[1] <= 6.0 * 1.01
+    # 8 was tried first, with no certified factor yet to lend a controller; the bisection's factors had 4's
+    assert all(K == "K(4)" for a, K in carried) and carried[0][0] == pytest.approx(math.sqrt(32.0))
+    # without it (a given synthesis: off by default) the search stops at the synthesis' own limit
+    res_off, _ = _search(mu_of_alpha, alphas=(2.0, 4.0, 8.0), rtol=0.01)
+    assert 3.96 < res_off.alpha <= 4.0
+
+
+def test_carry_over_certifies_the_controller_on_the_failing_factor_s_plant():
+    """The default carry-over is the controller's own certificate (certify_loop) on a real plant."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    import numpy as np
+    from test_weights_limits import _pd, _plant, one_joint
+
+    from polyrob.analysis.certificate import certify_loop
+    from polyrob.fleet.autoweights import limit_hyperparameters
+    from polyrob.pipeline import default_hyperparameters
+    from polyrob.synthesis.bandwidth import certified_on
+
+    robot, dom, unc = one_joint()
+    M = float(robot.mass_matrix(np.zeros(1))[0, 0])
+    h0 = default_hyperparameters(1, limit_hyperparameters(robot, dom).hyperparameters())
+    P16 = _plant(unc)(16.0, scaled_hyperparameters(16.0, h0))
+    K8 = _pd(M, 8.0)
+    out = certified_on(P16, SimpleNamespace(controller=K8, structure="pd"))
+    direct = certify_loop(P16, K8, sweep_unstable=False)
+    assert out.certificate.status == direct.status and out.certificate.bound == pytest.approx(direct.bound, rel=1e-9)
+    assert np.allclose(out.controller(1j), K8(1j))
+    assert out.info["method"].startswith("carried over")

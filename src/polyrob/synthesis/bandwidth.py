@@ -43,12 +43,24 @@ import numpy as np
 
 from polyrob.errors import ArgumentError, SynthesisError
 from polyrob.progress import span
+from polyrob.synthesis.bandwidth_stop import (
+    CHANNEL_NAMES,
+    DEFAULT_RATE,
+    RATE_PHASE_BUDGET,
+    binding_bound,
+    bound_hit,
+    channel_peaks,
+    crossover_cap,
+    is_plant,
+    loop_crossover,
+)
 from polyrob.synthesis.result import MusynResult
 
 __all__ = [
     "BandwidthScalingResult",
     "scaled_hyperparameters",
     "max_bandwidth_scaling",
+    "certified_on",
     "crossover_cap",
     "loop_crossover",
     "channel_peaks",
@@ -60,19 +72,6 @@ __all__ = [
 
 #: Default scan of the bandwidth factor α (geometric, factor 2).
 DEFAULT_ALPHAS = tuple(2.0**k for k in range(-3, 6))
-#: Phase lag [rad] the hold and the computation delay may add at the loop's crossover (8.6 degrees).
-RATE_PHASE_BUDGET = 0.15
-#: Sample rate [Hz] and delay [samples] assumed when the options give none.
-DEFAULT_RATE = (1000.0, 1.0)
-#: What each weighted channel of the generalized plant bounds, in words.
-CHANNEL_NAMES = {
-    "W_S e": "tracking (W_S)",
-    "W_T y": "uncertainty (W_T)",
-    "W_KS u": "encoder noise against the effort limit (W_u K S W_n)",
-    "reg u": "regularisation",
-}
-#: Frequencies [rad/s] of the nominal channel peaks and the crossover (a diagnosis on a grid, not a bound).
-_GRID = np.logspace(-3, 6, 901)
 
 
 log = logging.getLogger(__name__)
@@ -171,112 +170,18 @@ def scaled_hyperparameters(
     return h
 
 
-def crossover_cap(rate: float = DEFAULT_RATE[0], delay_samples: float = DEFAULT_RATE[1]) -> float:
-    """The largest crossover [rad/s] a loop sampled at ``rate`` Hz with ``delay_samples`` of delay may have.
+def certified_on(P, result) -> MusynResult:
+    """``result``'s controller with its certificate on ``P`` (:func:`~polyrob.analysis.certificate.certify_loop`)."""
+    import control
 
-    A zero-order hold lags like half a sample, the computation delay like
-    ``delay_samples``: at the crossover ``w_c`` they cost the phase
-    ``(delay_samples + 1/2) w_c / rate``, which the continuous-time
-    certificate does not see.  The rule keeps it within
-    :data:`RATE_PHASE_BUDGET` (0.15 rad, 8.6 degrees)::
+    from polyrob.analysis.certificate import certify_loop
 
-        w_c <= 0.15 rate / (delay_samples + 1/2)      (100 rad/s at 1 kHz, one sample)
-
-    A design rule, not a sampled-data certificate.
-
-    Examples
-    --------
-    >>> from polyrob.synthesis.bandwidth import crossover_cap
-    >>> round(crossover_cap(), 6), round(crossover_cap(500.0), 6), round(crossover_cap(1000.0, 0.0), 6)
-    (100.0, 50.0, 300.0)
-    """
-    f = float(rate)
-    d = float(delay_samples)
-    if not (math.isfinite(f) and f > 0):
-        raise ArgumentError(f"the sample rate must be a finite number of Hz > 0, got {rate!r}")
-    if not (math.isfinite(d) and d >= 0):
-        raise ArgumentError(f"the delay must be a finite number of samples >= 0, got {delay_samples!r}")
-    return RATE_PHASE_BUDGET * f / (d + 0.5)
-
-
-def _loop_responses(P, controller, omega):
-    """``(G, K)`` frequency responses (N, m, m) of the nominal plant and the controller."""
-    from polyrob.analysis.mu.frequency import freqresp
-    from polyrob.controller import as_controller_ss
-
-    unc = P.uncertain
-    G = freqresp(unc.nominal_system(), omega)
-    K = freqresp(as_controller_ss(controller, unc.m, unc.m), omega)
-    return G, K
-
-
-def loop_crossover(P, controller, omega=None) -> float:
-    """The largest gain crossover [rad/s] of the nominal loop ``L = G K``: ``max w`` with ``sigma_max(L(jw)) >= 1``.
-
-    Found on a grid (1e-3 to 1e6 rad/s) and refined by bisection between
-    its points; ``0`` when the loop gain never reaches 1, ``inf`` when it
-    still does at the grid's end.
-    """
-    w = _GRID if omega is None else np.asarray(omega, float)
-    G, K = _loop_responses(P, controller, w)
-    gain = np.linalg.norm(G @ K, ord=2, axis=(1, 2))
-    above = np.nonzero(gain >= 1.0)[0]
-    if above.size == 0:
-        return 0.0
-    k = int(above[-1])
-    if k == w.size - 1:
-        return math.inf
-    lo, hi = float(w[k]), float(w[k + 1])
-    for _ in range(40):
-        mid = math.sqrt(lo * hi)
-        Gm, Km = _loop_responses(P, controller, np.array([mid]))
-        if np.linalg.norm(Gm[0] @ Km[0], 2) >= 1.0:
-            lo = mid
-        else:
-            hi = mid
-    return lo
-
-
-def channel_peaks(P, controller, omega=None) -> dict:
-    """``label -> (peak, frequency)`` of each weighted channel of ``P`` on the nominal loop (a grid value).
-
-    ``W_S S``, ``W_T T`` and ``W_KS K S`` of the loop ``u = K (r - y)``
-    around the nominal plant, ``sigma_max`` maximised over the grid: which
-    channel is nearest its bound, not a certificate.
-    """
-    from polyrob.analysis.mu.frequency import freqresp
-
-    w = _GRID if omega is None else np.asarray(omega, float)
-    G, K = _loop_responses(P, controller, w)
-    m = G.shape[1]
-    S = np.linalg.inv(np.eye(m)[None] + G @ K)
-    loops = {"W_S e": S, "W_T y": G @ K @ S, "W_KS u": K @ S}
-    weights = {"W_S e": P.W_S, "W_T y": P.W_T, "W_KS u": P.W_KS}
-    out = {}
-    for label, H in loops.items():
-        if weights[label] is None:
-            continue
-        sv = np.linalg.norm(freqresp(weights[label], w) @ H, ord=2, axis=(1, 2))
-        i = int(np.argmax(sv))
-        out[label] = (float(sv[i]), float(w[i]))
-    return out
-
-
-def binding_bound(P, controller, names: dict | None = None) -> str:
-    """The weighted channel of ``P`` nearest its bound with ``controller``, in words (:func:`channel_peaks`).
-
-    ``names`` maps the labels of ``P.z_labels`` to words (default :data:`CHANNEL_NAMES`).
-    """
-    peaks = channel_peaks(P, controller)
-    if not peaks:
-        return "no weighted channel"
-    label = max(peaks, key=lambda k: peaks[k][0])
-    peak, where = peaks[label]
-    others = ", ".join(f"{lab} {p:.3g}" for lab, (p, _) in peaks.items() if lab != label)
-    return (
-        f"{(names or CHANNEL_NAMES).get(label, label)}: nominal peak {peak:.3g} at {where:.3g} rad/s "
-        f"(grid; {others or 'no other channel'})"
-    )
+    t0 = time.perf_counter()
+    K = result.controller
+    K = control.ss(K) if isinstance(K, control.TransferFunction) else K  # a state space, as a synthesis gives it
+    cert = certify_loop(P, K, sweep_unstable=False)
+    info = {"method": "carried over from a nearby factor", "stopped_by": "no synthesis: the controller as it was"}
+    return MusynResult.certified(K, result.structure, cert, seconds=time.perf_counter() - t0, info=info)
 
 
 def _default_synthesis(initial_controller=None, **musyn_options) -> Callable:
@@ -315,6 +220,7 @@ def max_bandwidth_scaling(
     rate: float | None = None,
     delay_samples: float = DEFAULT_RATE[1],
     channel_names: dict | None = None,
+    carry_over: bool | Callable | None = None,
     **musyn_options,
 ) -> BandwidthScalingResult:
     """The largest factor α on the weights' bandwidths with a certified μ < ``target``.
@@ -377,6 +283,13 @@ def max_bandwidth_scaling(
     channel_names : dict, optional
         Words for the weighted channels in :attr:`BandwidthScalingResult.bound_hit`
         (default :data:`CHANNEL_NAMES`).
+    carry_over : bool or callable ``(P, result) -> MusynResult``, optional
+        A factor whose own synthesis does not certify gets the nearest
+        certified factor's controller, certified on its plant (its own
+        certificate, the same decision): the factor counts when that
+        certifies (and stays within the rate's cap).  ``None`` (default): on
+        with the default synthesis, off with a given ``synthesize``;
+        ``True``: :func:`certify_loop` of the controller; a callable: that.
 
     Returns
     -------
@@ -411,6 +324,7 @@ def max_bandwidth_scaling(
         def plant(alpha, h):
             return generalized_plant(unc, **plant_weights(h))
 
+    synthesize_given = synthesize
     synthesize = synthesize or _default_synthesis(progress=progress, **musyn_options)
     grid = np.asarray(sorted(float(a) for a in alphas))
     if grid.size == 0 or not np.all(np.isfinite(grid)) or grid[0] <= 0:
@@ -443,7 +357,7 @@ def max_bandwidth_scaling(
             mu = float(cert.bound) if cert.certified else math.inf
             status = cert.status
             figure = None if cert.certified else float(cert.bound)
-            if cert.certified and cap is not None and _is_plant(P):
+            if cert.certified and cap is not None and is_plant(P):
                 wc = loop_crossover(P, res.controller)
                 crossovers[alpha] = wc
                 if wc > cap:  # certified in continuous time, too fast for the rate it will run at
@@ -453,6 +367,8 @@ def max_bandwidth_scaling(
             res, mu, status = None, math.inf, f"synthesis failed ({exc})"
             figure = getattr(exc, "figure", None)  # a PID screen's coarse-grid mu, when it has one
             evidence.append(f"{alpha:g}: synthesis failed" + (f" (screen {figure:.3f})" if figure is not None else ""))
+        if not math.isfinite(mu) and carry is not None and alpha in plants:
+            res, mu, status, figure = carried(alpha, res, mu, status, figure)
         if figure is not None:
             figures.append((float(alpha), float(figure)))
         history.append((float(alpha), mu))
@@ -460,6 +376,32 @@ def max_bandwidth_scaling(
         shown = f", mu <= {mu:.4f} at every frequency" if math.isfinite(mu) else ""
         log.info(f"bandwidth alpha = {alpha:.4g}: {status}{shown} ({time.perf_counter() - t0:.0f} s)")
         return mu
+
+    carry = (certified_on if synthesize_given is None else None) if carry_over is None else carry_over
+    carry = certified_on if carry is True else (None if carry is False else carry)
+
+    def carried(alpha, res, mu, status, figure):
+        """The nearest certified factor's controller, certified on this factor's plant: a factor's own synthesis
+        can miss a controller that exists (a PID re-tuned per factor from a fixed candidate set)."""
+        donors = [a for a, (r, m, _) in solved.items() if math.isfinite(m) and r is not None]
+        if not donors:
+            return res, mu, status, figure
+        donor = min(donors, key=lambda a: abs(math.log(a / alpha)))
+        P = plants[alpha]
+        try:
+            other = carry(P, solved[donor][0])
+            cert = other.certificate if judge is None else judge(P, other)
+        except SynthesisError:
+            return res, mu, status, figure
+        if not cert.certified:
+            evidence.append(f"{alpha:g}: alpha = {donor:g}'s controller {cert.status} {float(cert.bound):.3f}")
+            return res, mu, status, figure
+        if cap is not None and is_plant(P):
+            crossovers[alpha] = loop_crossover(P, other.controller)
+            if crossovers[alpha] > cap:
+                return res, mu, status, figure
+        evidence.append(f"{alpha:g}: alpha = {donor:g}'s controller {cert.status} {float(cert.bound):.3f}")
+        return other, float(cert.bound), f"{cert.status} with alpha = {donor:.4g}'s controller", None
 
     cap = None if rate is None else crossover_cap(rate, delay_samples)
     plants: dict = {}
@@ -538,9 +480,9 @@ def max_bandwidth_scaling(
                 hi = mid
         ok, fail = lo, hi
     res, mu, h = solved[ok]
-    hit = _bound_hit(fail, solved, plants, crossovers, cap, ok, channel_names, stopped, excluded)
+    hit = bound_hit(fail, solved, plants, crossovers, cap, ok, channel_names, stopped, excluded)
     wc = crossovers.get(ok)
-    if wc is None and _is_plant(plants.get(ok)) and res is not None:
+    if wc is None and is_plant(plants.get(ok)) and res is not None:
         wc = loop_crossover(plants[ok], res.controller)
     return BandwidthScalingResult(
         alpha=float(ok),
@@ -557,37 +499,3 @@ def max_bandwidth_scaling(
         crossover=math.nan if wc is None else float(wc),
         crossover_limit=math.nan if cap is None else float(cap),
     )
-
-
-def _is_plant(P) -> bool:
-    """A generalized plant (stand-ins of the tests are not: no loop to diagnose)."""
-    return hasattr(P, "uncertain") and hasattr(P, "W_KS")
-
-
-def _bound_hit(fail, solved, plants, crossovers, cap, ok, names, stopped, excluded) -> str:
-    """Which bound stops the search at ``fail`` (the first factor above ``ok`` that did not certify)."""
-    if fail is None:
-        return "none within the scan: its largest factor certifies (larger ones were not tried)"
-    if stopped and fail not in solved:
-        return f"not found: {stopped}"
-    if any(a == fail for a, _ in excluded):
-        return "the performance limit of the robot's unstable poles (no controller certifies there)"
-    wc = crossovers.get(fail)
-    if cap is not None and wc is not None and wc > cap:
-        return (
-            f"sample rate: at alpha = {fail:.4g} the certified loop crosses over at {wc:.4g} rad/s, above "
-            f"{cap:.4g} rad/s (the hold and delay's phase lag within {RATE_PHASE_BUDGET} rad)"
-        )
-    from polyrob.synthesis.channel_mu import channel_mu, channel_words
-
-    res_fail = solved.get(fail, (None,))[0]
-    if res_fail is not None and getattr(res_fail, "controller", None) is not None and _is_plant(plants.get(fail)):
-        return f"at alpha = {fail:.4g}: " + channel_words(channel_mu(plants[fail], res_fail.controller), names)
-    res_ok = solved[ok][0]
-    if res_ok is not None and getattr(res_ok, "controller", None) is not None and _is_plant(plants.get(fail)):
-        # no controller at the failing factor: the certified one of alpha = ok on the failing factor's weights
-        return (
-            f"alpha = {fail:.4g} failed to synthesise; alpha = {ok:.4g}'s controller on its weights: "
-            + channel_words(channel_mu(plants[fail], res_ok.controller), names)
-        )
-    return f"alpha = {fail:.4g} does not certify"
