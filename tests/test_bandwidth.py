@@ -215,11 +215,14 @@ def test_a_factor_whose_synthesis_fails_counts_when_a_nearby_controller_certifie
     res, calls = _search(mu_of_alpha, alphas=(2.0, 4.0, 8.0), rtol=0.01, carry_over=carry)
     assert 5.9 < res.alpha <= 6.0 and res.result.controller == "K(4)"  # 4's controller, certified up to 6
     assert res.bracket[1] <= 6.0 * 1.01
-    # 8 was tried first, with no certified factor yet to lend a controller; the bisection's factors had 4's
-    assert all(K == "K(4)" for a, K in carried) and carried[0][0] == pytest.approx(math.sqrt(32.0))
+    # 8 was tried first, with no certified factor yet to lend a controller: tried again once 4 certified
+    assert all(K == "K(4)" for a, K in carried) and [a for a, _ in carried[:2]] == [8.0, pytest.approx(32**0.5)]
     # without it (a given synthesis: off by default) the search stops at the synthesis' own limit
     res_off, _ = _search(mu_of_alpha, alphas=(2.0, 4.0, 8.0), rtol=0.01)
     assert 3.96 < res_off.alpha <= 4.0
+    # the scan's top tried again and certified with the lent controller: the search goes on above it
+    res_top, _ = _search(mu_of_alpha, alphas=(2.0, 4.0, 5.0), rtol=0.01, carry_over=carry)
+    assert res_top.alpha == 5.0 and res_top.bracket[1] == math.inf and res_top.result.controller == "K(4)"
 
 
 def test_carry_over_certifies_the_controller_on_the_failing_factor_s_plant():

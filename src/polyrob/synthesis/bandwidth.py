@@ -380,12 +380,15 @@ def max_bandwidth_scaling(
     carry = (certified_on if synthesize_given is None else None) if carry_over is None else carry_over
     carry = certified_on if carry is True else (None if carry is False else carry)
 
+    carry_tried: set = set()
+
     def carried(alpha, res, mu, status, figure):
         """The nearest certified factor's controller, certified on this factor's plant: a factor's own synthesis
         can miss a controller that exists (a PID re-tuned per factor from a fixed candidate set)."""
         donors = [a for a, (r, m, _) in solved.items() if math.isfinite(m) and r is not None]
         if not donors:
             return res, mu, status, figure
+        carry_tried.add(alpha)
         donor = min(donors, key=lambda a: abs(math.log(a / alpha)))
         P = plants[alpha]
         try:
@@ -402,6 +405,19 @@ def max_bandwidth_scaling(
                 return res, mu, status, figure
         evidence.append(f"{alpha:g}: alpha = {donor:g}'s controller {cert.status} {float(cert.bound):.3f}")
         return other, float(cert.bound), f"{cert.status} with alpha = {donor:.4g}'s controller", None
+
+    def retried(alpha) -> float:
+        """A factor tried before any factor certified, tried again with the nearest certified factor's controller."""
+        if carry is None or alpha in carry_tried or alpha not in plants:
+            return math.inf
+        done = len(history)
+        with span(done / (done + 1 + bisection_steps), (done + 1) / (done + 1 + bisection_steps)):
+            res, mu, status, _ = carried(alpha, None, math.inf, "", None)
+        if math.isfinite(mu):
+            history.append((float(alpha), mu))
+            solved[alpha] = (res, mu, solved[alpha][2])
+            log.info(f"bandwidth alpha = {alpha:.4g}: {status}, mu <= {mu:.4f} at every frequency")
+        return mu
 
     cap = None if rate is None else crossover_cap(rate, delay_samples)
     plants: dict = {}
@@ -467,6 +483,11 @@ def max_bandwidth_scaling(
             f"no bandwidth factor alpha in [{grid[0]:g}, {grid[-1]:g}] (scaling {', '.join(scale)}) reaches a "
             f"certified mu < {target:g}: {why}; alpha: mu = {', '.join(tried)}"
         )
+    # the factors above tried before any certified (no controller to lend then): again with the nearest one's
+    while fail is not None and not out_of_time(fail) and retried(fail) < target:
+        ok = fail
+        above = grid[grid > ok]
+        fail = float(above[0]) if above.size else None
     if fail is not None:
         lo, hi = ok, fail
         while hi / lo - 1 > rtol:
