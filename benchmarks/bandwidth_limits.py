@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shlex
 import subprocess
 import sys
@@ -88,11 +89,38 @@ def measure(case: str) -> dict:
 
 
 def bound_cell(text: str) -> str:
-    """The bound's name from synth's ``bound_hit`` sentence (``"sample rate: at alpha = ..."`` -> ``"sample rate"``)."""
-    if "nearest bound at" in text:  # the next factor's synthesis failed: the search names a channel by its rule
+    """The bound's name from synth's ``bound_hit`` sentence (``"sample rate: at alpha = ..."`` -> ``"sample rate"``).
+
+    The channel μ rests on (:mod:`polyrob.synthesis.channel_mu`'s words) is shortened to its name and figures.
+    """
+    if "nearest bound at" in text:  # records made before the line read mu: the nominal-peak rule
         name = text.split("nearest bound at", 1)[1].split(":")[1].strip()
         return f"the next factor's synthesis failed; by the nominal-peak rule: {name}"
-    return text.split(":")[0]
+    words = text.split(": ", 1)[1] if text.startswith(("at alpha", "alpha")) and ": " in text else None
+    if words is None:
+        return text.split(":")[0]
+    lent = " (the last certified controller on its weights)" if "controller on its weights" in text else ""
+    m = re.match(r"(.*) binds: grid mu ([\d.]+) with every channel, ([\d.]+) without it", words)
+    if m:
+        return f"{m[1]} binds: grid μ {m[2]}, {m[3]} without it{lent}"
+    m = re.match(r"no single channel: grid mu ([\d.]+) .*the largest drop without (.*), to ([\d.]+) \(", words)
+    if m:
+        return f"μ rests most on {m[2]}: grid μ {m[1]}, {m[3]} without it{lent}"
+    return words.split(":")[0] + lent
+
+
+def table_row(entry: dict) -> list:
+    """The docs' row of one case."""
+    low, high = entry["bracket"]  # high None: the scan's largest factor certified (nothing failed above it)
+    bracket = f"{low:.3g}-{high:.3g}" if high is not None else f"{low:.3g} (the scan's top)"
+    return [
+        entry["robot"], entry["options"] or "(defaults)", f"{entry['alpha']:.3g}", f"{entry['mu_bound']:.4f}",
+        f"{entry['omega_b_rad_s'][0]:.3g}-{entry['omega_b_rad_s'][1]:.3g}",
+        crossover_cell(entry),
+        bound_cell(entry["bound_hit"]),
+        "-" if entry["noise_channel_at_high_frequency"] is None else f"{entry['noise_channel_at_high_frequency']:.2f}",
+        bracket, entry["order"], f"{entry['seconds']:.0f} s (load {entry['load_average'][0]:.1f}-{entry['load_average'][1]:.1f})",
+    ]  # fmt: skip
 
 
 def crossover_cell(entry: dict) -> str:
@@ -112,16 +140,7 @@ def main() -> None:
     for case in args.cases:
         entry = measure(case)
         out.append(entry)
-        low, high = entry["bracket"]  # high None: the scan's largest factor certified (nothing failed above it)
-        bracket = f"{low:.3g}-{high:.3g}" if high is not None else f"{low:.3g} (the scan's top)"
-        rows.append([
-            entry["robot"], entry["options"] or "(defaults)", f"{entry['alpha']:.3g}", f"{entry['mu_bound']:.4f}",
-            f"{entry['omega_b_rad_s'][0]:.3g}-{entry['omega_b_rad_s'][1]:.3g}",
-            crossover_cell(entry),
-            bound_cell(entry["bound_hit"]),
-            "-" if entry["noise_channel_at_high_frequency"] is None else f"{entry['noise_channel_at_high_frequency']:.2f}",
-            bracket, entry["order"], f"{entry['seconds']:.0f} s (load {entry['load_average'][0]:.1f}-{entry['load_average'][1]:.1f})",
-        ])  # fmt: skip
+        rows.append(table_row(entry))
         print(f"{case}: alpha {entry['alpha']:.4g}, crossover {crossover_cell(entry)} rad/s, {entry['bound_hit']} "
               f"({entry['seconds']:.0f} s)", file=sys.stderr, flush=True)  # fmt: skip
     doc = {"arms": out}

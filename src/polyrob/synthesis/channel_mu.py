@@ -4,10 +4,11 @@ The nominal-peak rule (:func:`polyrob.synthesis.bandwidth.binding_bound`)
 names the channel nearest its bound on the *nominal* loop.  μ is a worst
 case over the uncertainty set with every weighted channel in one
 performance block, and a channel that is slack on the nominal loop can be
-the one the worst plant of the set breaks (ur5 with 14-bit encoders: the
-rule says tracking, 0.59 against 0.43 for the noise channel, while the
-search stopped where the noise bound bit; docs/synthesis.md).
-:func:`channel_mu` asks μ itself: the peak μ upper bound of the loop with
+the one the worst plant of the set breaks, and a failed factor may fail
+for its synthesis alone (ur5 with 14-bit encoders: the rule said tracking,
+0.59 against 0.43 for the noise channel, while μ of the last certified
+controller on the failing factor's weights is 0.758: no bound was hit;
+docs/synthesis.md).  :func:`channel_mu` asks μ itself: the peak μ upper bound of the loop with
 every channel, with each channel removed from the performance block, and
 with none (robust stability).  Removing a channel can only lower μ, so
 
