@@ -531,6 +531,17 @@ def test_the_moving_robot_certificate_is_a_column_and_decides_the_row(pendulums,
     r2 = run_job(job, Settings(**dict(FAST, validate=False), moving=True))
     assert r2.status == "CERTIFIED" and not r2.certified and r2.row()["certified"] is False
     assert "NOT_CERTIFIED (<= 1.3)" in markdown_table([r2.row()])
+    # a moving-robot test that cannot run is said in the row, which keeps its frozen certificate
+    from polyrob.errors import SolverError
+
+    def broken(problem, K):
+        raise SolverError("the LMI solver gave up (a stand-in)")
+
+    monkeypatch.setattr(jobs, "moving_stage", broken)
+    r4 = run_job(job, Settings(**dict(FAST, validate=False), moving=True))
+    assert r4.ok and r4.moving["computed"] is False and r4.certified == (r4.status == "CERTIFIED")
+    assert r4.moving["verdict"] == "moving robot: not computed: SolverError: the LMI solver gave up (a stand-in)"
+    assert "not computed" in markdown_table([r4.row()])
     # not asked: no column value, and the row is the frozen certificate's
     r3 = run_job(job, Settings(**dict(FAST, validate=False)))
     assert r3.moving is None and r3.certified == (r3.status == "CERTIFIED")

@@ -431,7 +431,13 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
     moving = None
     if settings.moving:
         t1 = time.perf_counter()
-        details["moving"] = moving_stage(problem, design.controller)
+        try:
+            details["moving"] = moving_stage(problem, design.controller)
+        except Exception as exc:  # noqa: BLE001 - recorded: the row keeps its frozen certificate and says why
+            details["moving"] = {
+                "computed": False, "certified": False, "status": None, "gamma": None,
+                "verdict": f"moving robot: not computed: {type(exc).__name__}: {one_line(exc)}",
+            }  # fmt: skip
         moving = {k: details["moving"].get(k) for k in ("computed", "certified", "status", "gamma", "verdict")}
         timings["moving robot"] = time.perf_counter() - t1
     from polyrob.pipeline import friction_statement
