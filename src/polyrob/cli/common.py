@@ -142,9 +142,9 @@ def exit_status(certificate, moving: dict | None = None) -> int:
     ``moving``: the summary of a moving-robot certificate the user asked for (``--moving``); when it was
     computed, it must be certified too (a verdict that exists decides), when it was not, μ alone decides.
     """
-    if not certificate.certified:
-        return 1
-    return 1 if moving is not None and moving.get("computed") and not moving.get("certified") else 0
+    from polyrob.analysis.lpv.moving_result import refuses
+
+    return 0 if certificate.certified and not refuses(moving) else 1
 
 
 def add_output_flags(parser: argparse.ArgumentParser, *, quiet: bool = True) -> None:

@@ -280,7 +280,9 @@ def cmd_synth(args) -> int:
     if friction is not None:  # beside the covers line: what Coulomb friction does to the error
         doc["friction"] = friction
         out.line(friction["words"])
-    if moving is not None and moving.get("computed") and cert.certified and not moving.get("certified"):
+    from polyrob.analysis.lpv.moving_result import refuses
+
+    if cert.certified and refuses(moving):
         doc["exit"] = (
             "exit status 1: the moving-robot certificate asked for with --moving is not CERTIFIED "
             f"({moving.get('status')}), though mu certifies every frozen robot"

@@ -74,10 +74,9 @@ class RobotResult:
     def certified(self) -> bool:
         """Reads the status (decided in polyrob.analysis.certificate) and, once computed, the moving-robot one."""
         from polyrob.analysis.certificate import Status
+        from polyrob.analysis.lpv.moving_result import refuses
 
-        frozen = self.status is not None and Status(self.status).certified
-        moving = self.moving is None or not self.moving.get("computed") or bool(self.moving.get("certified"))
-        return frozen and moving
+        return self.status is not None and Status(self.status).certified and not refuses(self.moving)
 
     def controller_system(self):
         """The controller as a python-control system (``None`` for a failed job)."""

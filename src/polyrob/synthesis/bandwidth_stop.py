@@ -17,6 +17,7 @@ import math
 import numpy as np
 
 from polyrob.errors import ArgumentError
+from polyrob.synthesis.channel_mu import CHANNEL_NAMES, channel_mu, channel_words
 
 __all__ = [
     "RATE_PHASE_BUDGET",
@@ -34,13 +35,6 @@ __all__ = [
 RATE_PHASE_BUDGET = 0.15
 #: Sample rate [Hz] and delay [samples] assumed when the options give none.
 DEFAULT_RATE = (1000.0, 1.0)
-#: What each weighted channel of the generalized plant bounds, in words.
-CHANNEL_NAMES = {
-    "W_S e": "tracking (W_S)",
-    "W_T y": "uncertainty (W_T)",
-    "W_KS u": "encoder noise against the effort limit (W_u K S W_n)",
-    "reg u": "regularisation",
-}
 #: Frequencies [rad/s] of the nominal channel peaks and the crossover (a diagnosis on a grid, not a bound).
 _GRID = np.logspace(-3, 6, 901)
 
@@ -172,8 +166,6 @@ def bound_hit(fail, solved, plants, crossovers, cap, ok, names, stopped, exclude
             f"sample rate: at alpha = {fail:.4g} the certified loop crosses over at {wc:.4g} rad/s, above "
             f"{cap:.4g} rad/s (the hold and delay's phase lag within {RATE_PHASE_BUDGET} rad)"
         )
-    from polyrob.synthesis.channel_mu import channel_mu, channel_words
-
     res_fail = solved.get(fail, (None,))[0]
     if res_fail is not None and getattr(res_fail, "controller", None) is not None and is_plant(plants.get(fail)):
         return f"at alpha = {fail:.4g}: " + channel_words(channel_mu(plants[fail], res_fail.controller), names)

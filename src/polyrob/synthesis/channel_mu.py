@@ -33,12 +33,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["DEFAULT_OMEGA", "channel_mu", "channel_words"]
+__all__ = ["DEFAULT_OMEGA", "CHANNEL_NAMES", "channel_mu", "channel_words"]
 
 #: The grid the channels' μ is computed on [rad/s]: 8 points a decade over the arms' loops.
 DEFAULT_OMEGA = np.logspace(-2, 4, 49)
-#: Words of each weighted channel (the labels of :attr:`~polyrob.plant.generalized.GeneralizedPlant.z_labels`).
-_NAMES = {
+#: What each weighted channel of the generalized plant bounds, in words (keyed by
+#: :attr:`~polyrob.plant.generalized.GeneralizedPlant.z_labels`).
+CHANNEL_NAMES = {
     "W_S e": "tracking (W_S)",
     "W_T y": "uncertainty (W_T)",
     "W_KS u": "encoder noise against the effort limit (W_u K S W_n)",
@@ -112,7 +113,7 @@ def channel_words(figures: dict, names: dict | None = None) -> str:
 
     ``names`` maps the channels' labels to words (default: the labels' own words).
     """
-    names = {**_NAMES, **(names or {})}
+    names = {**CHANNEL_NAMES, **(names or {})}
     labels = [k for k in figures if k not in ("all", "none")]
     full, alone = figures["all"], figures.get("none", np.nan)
     if not np.isfinite(full):

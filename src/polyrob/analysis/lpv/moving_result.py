@@ -19,7 +19,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-__all__ = ["MovingRobotCertificate", "rate_words"]
+__all__ = ["refuses", "MovingRobotCertificate", "rate_words"]
 
 
 def rate_words(names, rates, source: str) -> str:
@@ -172,3 +172,20 @@ class MovingRobotCertificate:
             "seconds": round(float(self.seconds), 3),
             "verdict": self.verdict,
         }
+
+
+def refuses(summary: dict | None) -> bool:
+    """A moving-robot certificate's summary (:meth:`MovingRobotCertificate.summary`) that was computed and whose
+    status is not CERTIFIED: where it exists, it decides with μ (``synth --moving``, ``batch --moving``).
+
+    >>> refuses(None), refuses({"computed": False}), refuses({"computed": True, "status": "GRID_ONLY"})
+    (False, False, True)
+    >>> refuses({"computed": True, "status": "CERTIFIED"})
+    False
+    """
+    from polyrob.analysis.certificate import Status
+
+    if not summary or not summary.get("computed"):
+        return False
+    status = summary.get("status")
+    return status is None or not Status(status).certified
