@@ -240,7 +240,7 @@ def analyze_controller(
         ``harmonics=2``); not used on an inner-gain model.  ``jerk``: the
         task's jerk bound (``--qdddot-max``), a task domain only
         (:func:`polyrob.analysis.lpv.task.task_motion_certificate`, which
-        takes no other option).
+        takes the grid, basis and cell options and no symmetry).
     limit : dict, optional
         The robot's performance limit (``PerformanceLimit.to_dict()``), quoted
         by :attr:`ControllerAnalysis.instead` when it excludes μ < 1.
@@ -290,7 +290,9 @@ def analyze_controller(
     elif task:  # on a task domain the Jacobians depend on the accelerations too (polyrob.analysis.lpv.task)
         from polyrob.analysis.lpv.task import task_motion_certificate
 
-        mv = task_motion_certificate(problem, K, auto=moving is None, jerk=jerk, time_varying=tv)
+        keep = ("points", "velocities", "harmonics", "level", "cells", "cell_time_limit", "cell_workers", "progress")
+        mv = task_motion_certificate(problem, K, auto=moving is None, jerk=jerk, time_varying=tv,
+                                     **{k: v for k, v in options.items() if k in keep})  # fmt: skip
     else:
         mv = robot_in_motion_certificate(problem, K, auto=moving is None, **options)
     from polyrob.analysis.margins import robust_margin

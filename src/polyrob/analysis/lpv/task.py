@@ -296,6 +296,12 @@ def task_motion_certificate(
     recheck=DEFAULT_RECHECK,
     time_varying=None,
     lower_bound: bool | dict = True,
+    harmonics: int = 1,
+    level=None,
+    cells: bool = False,
+    cell_time_limit: float | None = None,
+    cell_workers: int | None = None,
+    progress: bool = False,
 ):
     """The moving-robot certificate of ``K`` on a task-domain ``problem``.
 
@@ -307,9 +313,12 @@ def task_motion_certificate(
     :data:`~polyrob.analysis.lpv.moving.BOUNDED_VARIABLES` scalars,
     ``velocities="auto"``; else the velocities move arbitrarily fast), the
     rates of :func:`task_rate_bounds` exact at each point, re-checked on a
-    finer grid.  Proved at grid points only: GRID_ONLY at best
-    (:func:`polyrob.analysis.certificate.decide_gridded_gain`), and it covers
-    the linearised robot.
+    finer grid.  Proved at grid points only: GRID_ONLY
+    (:func:`polyrob.analysis.certificate.decide_gridded_gain`); with ``cells``
+    the same ``X`` is proved between them on cells covering the whole box of
+    ``(q_i, qdot, qddot)`` (an analytic robot: the Jacobians' enclosures of
+    :func:`~polyrob.bounds.certified.analytic.task_jacobian_enclosure`), and
+    then the status is CERTIFIED.  It covers the linearised robot.
 
     Parameters
     ----------
@@ -331,6 +340,16 @@ def task_motion_certificate(
         a dict: its options), computed whether or not the search runs: what
         no bound can go below, and on a loop too large for the search the
         one figure of the moving robot there is.
+    harmonics : int
+        ``cos k q_i, sin k q_i`` for ``k <= harmonics`` in the basis of ``X``.
+    level : float, optional
+        Fix the solver's ``gamma`` there and maximise the LMIs' margin: room
+        for the cells between the grid points.
+    cells : bool
+        Prove ``X`` between the grid points (:func:`~polyrob.analysis.lpv.cells.check_cells`,
+        at ``level`` or else halfway from the grid's bound to 1); ``cell_time_limit``
+        (a wall-clock safety net the caller sets), ``cell_workers`` and
+        ``progress`` as for :func:`~polyrob.analysis.lpv.moving.moving_robot_certificate`.
 
     Returns
     -------
@@ -368,13 +387,23 @@ def task_motion_certificate(
             velocities = "bounded" if k * n * (n + 1) // 2 <= BOUNDED_VARIABLES else "arbitrary"
         if velocities not in ("bounded", "arbitrary"):
             raise ArgumentError(f"velocities must be 'auto', 'bounded' or 'arbitrary' (got {velocities!r})")
-        basis = default_basis(model, tensor=True)
+        basis = default_basis(model, tensor=True, harmonics=harmonics)
         if velocities == "arbitrary":
-            basis = basis[: 1 + 2 * sum(kind == "q" for kind in model.kinds)]
+            basis = basis[: 1 + 2 * harmonics * sum(kind == "q" for kind in model.kinds)]
             rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
         result, sysf, cs = _search(model, system, rates, basis, lpvnorm, conditioned, conditioned_time_scale,
-                                   kinematic_rates)  # fmt: skip
+                                   kinematic_rates, level)  # fmt: skip
         finer = {} if recheck is None else finer_recheck(sysf, model, result, rates, basis, points=recheck, c=cs)
+        between = None
+        g_grid = max(result.gamma, finer.get("gamma", result.gamma))
+        if cells and result.proved and g_grid < 1:
+            from polyrob.analysis.lpv.cells import check_cells
+
+            # X is free of the accelerations: their rate (the jerk) does not enter, so no rate box for them
+            used = [(-np.inf, np.inf) if kind == "qddot" else r for r, kind in zip(rates, model.kinds)]
+            g_cells = float(level) if level is not None and level >= g_grid else 0.5 * (g_grid + 1.0)
+            between = check_cells(model, system, result.X, basis, used, g_cells, similarity=getattr(sysf, "similarity",
+                                  None), c=cs, time_limit=cell_time_limit, progress=progress, workers=cell_workers)  # fmt: skip
     except NotApplicable as exc:
         found = _found(model, system, domain, lower_bound) if system is not None else {}
         return replace(MovingRobotCertificate.not_computed(str(exc)), lower=found, seconds=time.perf_counter() - t0)
@@ -384,16 +413,24 @@ def task_motion_certificate(
         "; the velocities at any rate (X on the positions only)" if velocities == "arbitrary" else ""
     )
     again = f" and the same X re-checked at the {finer['points']} points of a finer grid" if finer.get("points") else ""
+    proved_between = between is not None and between.holds
+    if proved_between:
+        grid_note = (f"the LMIs on the grid of {model.words()}{again}, and the same X between the grid points: "
+                     f"{between.words()} (guaranteed enclosures of the Jacobians over each cell)")  # fmt: skip
+    else:
+        grid_note = f"on the grid of {model.words()}{again}; not proved between the grid points" + (
+            f" ({between.reason})" if between is not None else ""
+        )
     notes = (
-        f"on the grid of {model.words()}{again}; not proved between the grid points",
+        grid_note,
         "the linearised robot (LPV family A(rho(t)), B(rho(t))) with the torques of the task's inverse dynamics, "
         "not the nonlinear one",
     ) + tuple(result.notes) + tuple(base.notes)  # fmt: skip
     where = f" inside domain {base.domain!r}" if base.domain else ""
     scope = replace(
         base, variation=f"the linearised robot {base.robot} (LPV family){where} moving with rates {words}",
-        robot="", domain="", model="", coverage=None, coverage_points=0, enclosure="sampled", vertices_from="",
-        notes=notes,
+        robot="", domain="", model="", coverage=None, coverage_points=0,
+        enclosure="proved" if proved_between else "sampled", vertices_from="", notes=notes,
     )  # fmt: skip
     gamma, why = float(result.gamma), () if result.proved else (result.reason,)
     if finer.get("points") and result.proved:
@@ -401,10 +438,13 @@ def task_motion_certificate(
         if not np.isfinite(gamma):
             why = (f"the X proved on the grid fails on the finer grid of {finer['points']} points: "
                    f"{finer.get('reason', '')}",)  # fmt: skip
+    if proved_between:
+        gamma = float(between.gamma)  # proved on the whole box: the number the verdict rests on
     return MovingRobotCertificate(
         computed=True, gamma=gamma, frozen_gamma=float(result.frozen_gamma),
         rates=tuple(task_rate_bounds(model, domain)), rate_words=words, grid_words=model.words(), result=result,
-        scope=scope, notes=why, finer=finer, lower=found, seconds=time.perf_counter() - t0,
+        scope=scope, notes=why, finer=finer, cells={} if between is None else between.summary(), lower=found,
+        seconds=time.perf_counter() - t0,
     )  # fmt: skip
 
 
@@ -421,14 +461,14 @@ def _found(model, system, domain, lower_bound) -> dict:
         return {}
 
 
-def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinematic_rates):
+def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinematic_rates, level=None):
     """``(result, the system it ran on, its time scale)``: the conditioned copy first, then the time-scaled loop."""
     from polyrob.analysis.lpv.result import LpvNormResult
 
     centre = np.array([0.5 * (a[0] + a[-1]) for a in model.axes])
     tries = []
     try:
-        tries.append((*conditioned(system, centre), {"eps": 1e-4}))
+        tries.append((*conditioned(system, centre), {"eps": 1e-4, "level": level}))
     except NotApplicable:
         pass
     c = time_scale(system, centre)
@@ -437,7 +477,7 @@ def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinem
         a, b, cc, d = system(rho)
         return a / c, b / c, cc, d
 
-    tries.append((time_scaled, c, {}))
+    tries.append((time_scaled, c, {"level": level}))
     best = None
     for sysf, cs, options in tries:
         scaled = [(lo / cs, hi / cs) for lo, hi in rates]

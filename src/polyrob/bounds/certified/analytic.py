@@ -46,6 +46,7 @@ __all__ = [
     "Jet",
     "AnalyticEnclosure",
     "analytic_jacobian_enclosure",
+    "task_jacobian_enclosure",
     "interval_cos",
     "interval_sin",
     "function_balls",
@@ -352,6 +353,106 @@ def analytic_jacobian_enclosure(robot, q_lo, q_hi, qdot_lo, qdot_hi, u, order=2)
             up = [Minv_cols[j][i].hess[a][b] for a, b in pairs]
             d2B[:, m + i, j] = np.array([[arb_lower(t) for t in up], [arb_upper(t) for t in up]])[:, pos2]
     return AnalyticEnclosure(Alo, Ahi, Blo, Bhi, qlo, qhi, dA[0], dA[1], dB[0], dB[1], d2A[0], d2A[1], d2B[0], d2B[1])
+
+
+def task_jacobian_enclosure(robot, q_lo, q_hi, qdot_lo, qdot_hi, a_lo, a_hi, order=2) -> AnalyticEnclosure:
+    """Guaranteed bounds of ``A``, ``B`` over a box of a task: the torque by inverse dynamics of the motion.
+
+    On a task domain the torque is ``u = tau(q, qdot, a) = M(q) a + C(q, qdot) qdot
+    + D qdot + g(q)`` (``a = qddot``), so the forward dynamics' Jacobians at
+    ``(q, qdot, u)`` follow from ``M(q) f = u - h`` differentiated at fixed ``u``
+    with ``f = a``: ``M df/dx_l = -(dM/dx_l a + dh/dx_l) = -dtau/dx_l``, i.e.
+    ``A = [[0, I], [-M^-1 dtau/dq, -M^-1 dtau/dqdot]]`` and ``B = [0; M^-1]``,
+    exact functions of ``(q, qdot, a)``, affine in ``a``.  The derivatives
+    ``dA``, ``dB`` (and with ``order=3`` ``d2A``, ``d2B``) are taken with respect to
+    ``z = (q, qdot, a)``: their last axes have ``3m`` entries; ``qddot_lo, qddot_hi``
+    are ``a``'s box.
+
+    Parameters
+    ----------
+    robot : AnalyticRobot
+    q_lo, q_hi, qdot_lo, qdot_hi, a_lo, a_hi : array_like, shape (m,)
+        The box (``lo == hi`` allowed).
+    order : {2, 3}
+
+    Returns
+    -------
+    AnalyticEnclosure
+
+    Raises
+    ------
+    CertificationError, DomainError
+        As :func:`analytic_jacobian_enclosure`.
+
+    Examples
+    --------
+    >>> import numpy as np, polyrob
+    >>> robot = polyrob.load_robot("paper_2r")
+    >>> enc = task_jacobian_enclosure(robot, [0, 1.4], [0, 1.5], [0.5, -1], [0.6, -0.9], [1, -2], [1.2, -1.8])
+    >>> q, qd, a = np.array([0, 1.45]), np.array([0.55, -0.95]), np.array([1.1, -1.9])
+    >>> A, B = robot.jacobians(q, qd, robot.inverse_dynamics(q, qd, a)[0])
+    >>> bool(np.all(enc.A_lo <= A) and np.all(A <= enc.A_hi) and np.all(enc.B_lo <= B) and np.all(B <= enc.B_hi))
+    True
+    >>> enc.dA_lo.shape                             # d A / d (q, qdot, a)
+    (4, 4, 6)
+    """
+    m = robot.m
+    box = [np.asarray(x, float).reshape(-1) for x in (q_lo, q_hi, qdot_lo, qdot_hi, a_lo, a_hi)]
+    if any(x.shape != (m,) or not np.all(np.isfinite(x)) for x in box) or any(
+        np.any(box[i] > box[i + 1]) for i in (0, 2, 4)
+    ):
+        raise DomainError(f"task_jacobian_enclosure: a box of {m} finite values per bound, lo <= hi")
+    if order not in (2, 3):
+        raise DomainError(f"task_jacobian_enclosure: order must be 2 or 3, not {order!r}")
+    k, n = 3 * m, 2 * m
+    t3 = order == 3
+    unit = [tuple(arb(1.0 if i == j else 0.0) for j in range(k)) for i in range(k)]
+    z3 = (arb(0),) * len(_sym(k, 3)[0]) if t3 else None
+    z = [Jet(ball(box[2 * (i // m)][i % m], box[2 * (i // m) + 1][i % m]), unit[i], None, z3) for i in range(k)]
+    q, qd, a = (np.array([z[g * m : (g + 1) * m]], dtype=object) for g in range(3))
+    try:
+        Mq = robot.M(q)[0]
+        Cq = robot.C(q, qd)[0]
+        gq = robot.g(q)[0] if robot.g is not None else [0.0] * m
+    except (TypeError, ValueError, AttributeError) as exc:
+        raise CertificationError(f"{robot.name}: its M, C, g do not evaluate on balls ({exc})") from exc
+    lift = [[Jet._lift(Mq[i][j], k, t3) for j in range(m)] for i in range(m)]
+    tau = []
+    for i in range(m):
+        s = Jet._lift(0.0, k, t3) + float(robot.damping[i]) * qd[0][i] + gq[i]
+        for j in range(m):
+            s = s + lift[i][j] * a[0][j] + Cq[i][j] * qd[0][j]
+        tau.append(s)
+    # dtau_i/dx_l as a jet in z: its value, gradient and (order 3) Hessian are tau's derivatives one order up
+    dtau = [[Jet(t.grad[l], t.hess[l], [[t.d3(l, b, c) for c in range(k)] for b in range(k)] if t3 else None)
+             for l in range(n)] for t in tau]  # fmt: skip
+    plain = [[Jet(x.value, x.grad, x.hess) for x in row] for row in lift]  # M^-1 needs no third derivatives
+    Minv_cols = [_solve(plain, [Jet._lift(1.0 if i == j else 0.0, k) for i in range(m)]) for j in range(m)]
+    Alo, Ahi = np.zeros((n, n)), np.zeros((n, n))
+    Alo[:m, m:] = Ahi[:m, m:] = np.eye(m)
+    Blo, Bhi = np.zeros((n, m)), np.zeros((n, m))
+    dA, dB = np.zeros((2, n, n, k)), np.zeros((2, n, m, k))
+    d2A, d2B = (np.zeros((2, n, n, k, k)), np.zeros((2, n, m, k, k))) if t3 else (None, None)
+    for i in range(m):
+        for col in range(n):
+            y = -Minv_cols[0][i] * dtau[0][col]
+            for j in range(1, m):
+                y = y - Minv_cols[j][i] * dtau[j][col]
+            _fill(y, (m + i, col), Alo, Ahi, dA, d2A)
+        for j in range(m):
+            _fill(Minv_cols[j][i], (m + i, j), Blo, Bhi, dB, d2B)
+    out = (Alo, Ahi, Blo, Bhi, box[4].copy(), box[5].copy(), dA[0], dA[1], dB[0], dB[1])
+    return AnalyticEnclosure(*out, *((d2A[0], d2A[1], d2B[0], d2B[1]) if t3 else ()))
+
+
+def _fill(y: Jet, at, lo, hi, d, d2) -> None:
+    """Write the jet ``y``'s value, gradient and (``d2`` given) Hessian balls outward into the arrays at ``at``."""
+    lo[at], hi[at] = arb_lower(y.value), arb_upper(y.value)
+    d[(0, *at)] = [arb_lower(g) for g in y.grad]
+    d[(1, *at)] = [arb_upper(g) for g in y.grad]
+    if d2 is not None:
+        d2[(0, *at)] = [[arb_lower(h) for h in row] for row in y.hess]
+        d2[(1, *at)] = [[arb_upper(h) for h in row] for row in y.hess]
 
 
 def function_balls(functions, lo, hi, order=1):

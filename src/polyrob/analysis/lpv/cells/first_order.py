@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from polyrob.analysis.lpv.cells.loop import spectral_norms
+from polyrob.analysis.lpv.cells.loop import derivative_columns, spectral_norms
 from polyrob.analysis.lpv.check import GridData, brl_matrices
 from polyrob.bounds.certified.analytic import distance_up, function_balls
 
@@ -29,8 +29,7 @@ def first_order_cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
     A, B, C, D = loop.at(Ap, Bp)
     n, m, q = A.shape[0], B.shape[1], C.shape[0]
     s = n + m + q
-    mm = model.robot.m
-    xcol = [j if kind == "q" else mm + j for kind, j in zip(model.kinds, model.joints)]  # rho_i is x[xcol[i]]
+    xcol = derivative_columns(model)  # rho_i is x[xcol[i]] (z on a task)
     # mean value form: P_e(rho) - P_e(rho_c) = sum_i delta_i dP_e/drho_i(xi), |delta_i| <= half_i
     P = {"A": (Ap, enc.dA_lo, enc.dA_hi), "B": (Bp, enc.dB_lo, enc.dB_hi)}
     dlo = np.array([[P[kd][1][i, j, x] for kd, i, j in loop.entries] for x in xcol])  # (p, E)

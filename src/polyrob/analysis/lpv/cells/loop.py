@@ -11,7 +11,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["AffineLoop", "PlantEnclosure", "plant_enclosure", "spectral_norms", "symmetric_norms", "acceleration_check"]
+__all__ = [
+    "AffineLoop",
+    "PlantEnclosure",
+    "TaskPlantEnclosure",
+    "plant_enclosure",
+    "derivative_columns",
+    "spectral_norms",
+    "symmetric_norms",
+    "acceleration_check",
+]
 
 
 def plant_enclosure(model, order: int = 2):
@@ -23,7 +32,16 @@ def plant_enclosure(model, order: int = 2):
 
     if not isinstance(model.robot, AnalyticRobot):
         return None
+    if hasattr(model, "motion"):  # a task: the torque is the inverse dynamics of (q, qdot, qddot)
+        return TaskPlantEnclosure(model, order)
     return PlantEnclosure(model, order)
+
+
+def derivative_columns(model) -> list[int]:
+    """Per parameter ``rho_i``, its column in the enclosure's derivative axis: ``x = (q, qdot)``, and on a task
+    ``z = (q, qdot, qddot)`` (:func:`~polyrob.bounds.certified.analytic.task_jacobian_enclosure`)."""
+    offset = {"q": 0, "qdot": 1, "qddot": 2}
+    return [offset[kind] * model.robot.m + j for kind, j in zip(model.kinds, model.joints)]
 
 
 class PlantEnclosure:
@@ -38,6 +56,21 @@ class PlantEnclosure:
         (ql, vl), (qh, vh) = self.model.state(lo), self.model.state(hi)
         return analytic_jacobian_enclosure(self.model.robot, ql, qh, vl, vh, self.model.u,
                                            order=self.order if order is None else order)  # fmt: skip
+
+
+class TaskPlantEnclosure:
+    """``enclose(lo, hi, order)`` of a task model (:mod:`polyrob.analysis.lpv.task`): the robot's ``A, B`` over the
+    box of ``rho = (q_i, qdot, qddot)``, derivatives with respect to ``(q, qdot, qddot)``; picklable."""
+
+    def __init__(self, model, order: int = 2):
+        self.model, self.order = model, order
+
+    def __call__(self, lo, hi, order=None):
+        from polyrob.bounds.certified.analytic import task_jacobian_enclosure
+
+        (ql, vl, al), (qh, vh, ah) = self.model.motion(lo), self.model.motion(hi)
+        return task_jacobian_enclosure(self.model.robot, ql, qh, vl, vh, al, ah,
+                                       order=self.order if order is None else order)  # fmt: skip
 
 
 class AffineLoop:

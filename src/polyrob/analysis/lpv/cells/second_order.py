@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyrob.analysis.lpv.cells.loop import symmetric_norms
+from polyrob.analysis.lpv.cells.loop import derivative_columns, symmetric_norms
 from polyrob.analysis.lpv.check import GridData, brl_matrices
 from polyrob.bounds.certified.analytic import function_balls
 
@@ -157,7 +157,7 @@ def expansions(loop, model, enclose, basis, Xs, rate_plan, fixed, gamma, lo, hi)
     A, B, C, D = loop.at(Ap, Bp)
     n, m, q = A.shape[0], B.shape[1], C.shape[0]
     s = n + m + q
-    xcol = [j if kind == "q" else model.robot.m + j for kind, j in zip(model.kinds, model.joints)]
+    xcol = derivative_columns(model)
     Pc, dPc, _ = _robot_terms(loop, enclose(ctr, ctr, 2), xcol)
     Pcell, dPcell, d2Pcell = _robot_terms(loop, enclose(lo, hi, 3), xcol)
     fc, gc, Hc = function_balls(basis, ctr, ctr, order=2)

@@ -1,0 +1,129 @@
+"""The moving robot on a task domain proved between its grid points: the task's Jacobian enclosures and the cells."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from test_moving_robot import pd_controller
+
+import polyrob
+from polyrob.analysis.lpv.check import GridData, brl_matrices
+from polyrob.analysis.lpv.robot import kinematic_rates
+from polyrob.analysis.lpv.task import task_motion_certificate, task_scheduling
+from polyrob.bounds.certified.analytic import task_jacobian_enclosure
+from polyrob.domains.task import TaskDomain
+from polyrob.errors import DomainError
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return polyrob.load_robot("paper_2r")
+
+
+def _jacobians(robot, z):
+    q, qd, a = z[:2], z[2:4], z[4:]
+    return robot.jacobians(q, qd, robot.inverse_dynamics(q, qd, a)[0])
+
+
+def test_the_task_enclosure_holds_the_jacobians_at_random_points_of_its_box(robot):
+    lo, hi = np.array([-0.3, 1.0, -1, -1, -2, -2]), np.array([0.3, 1.6, 1, 1, 2, 2])
+    enc = task_jacobian_enclosure(robot, lo[:2], hi[:2], lo[2:4], hi[2:4], lo[4:], hi[4:], order=3)
+    rng = np.random.default_rng(1)
+    for z in rng.uniform(lo, hi, size=(300, 6)):
+        A, B = _jacobians(robot, z)
+        assert np.all(enc.A_lo <= A) and np.all(A <= enc.A_hi)
+        assert np.all(enc.B_lo <= B) and np.all(B <= enc.B_hi)
+    assert enc.qddot_lo.tolist() == [-2, -2] and enc.qddot_hi.tolist() == [2, 2]  # the accelerations: the box's
+
+
+def test_at_a_point_the_enclosure_is_the_float_jacobians_and_its_derivatives_are_theirs(robot):
+    z0 = np.array([0.2, 1.3, 0.5, -0.7, 1.0, -1.5])
+    enc = task_jacobian_enclosure(robot, z0[:2], z0[:2], z0[2:4], z0[2:4], z0[4:], z0[4:], order=3)
+    A, B = _jacobians(robot, z0)
+    assert np.allclose(enc.A_lo, A, rtol=0, atol=1e-13) and np.allclose(enc.A_hi, A, rtol=0, atol=1e-13)
+    assert np.allclose(enc.B_lo, B, rtol=0, atol=1e-13)
+    h = 1e-6
+    for col in range(6):  # d/d(q, qdot, qddot): central differences of the float Jacobians
+        step = np.eye(6)[col] * h
+        dA = (_jacobians(robot, z0 + step)[0] - _jacobians(robot, z0 - step)[0]) / (2 * h)
+        dB = (_jacobians(robot, z0 + step)[1] - _jacobians(robot, z0 - step)[1]) / (2 * h)
+        assert np.allclose(enc.dA_lo[..., col], dA, atol=1e-8) and np.allclose(enc.dB_lo[..., col], dB, atol=1e-8)
+    # A is affine in the accelerations: its second derivative along them is an exact zero
+    assert np.all(enc.d2A_lo[..., 4:, 4:] == 0) and np.all(enc.d2A_hi[..., 4:, 4:] == 0)
+
+
+def test_a_malformed_task_box_is_refused(robot):
+    with pytest.raises(DomainError):
+        task_jacobian_enclosure(robot, [0, 1], [0, 0.5], [0, 0], [0, 0], [0, 0], [0, 0])
+    with pytest.raises(DomainError):
+        task_jacobian_enclosure(robot, [0, 1], [0, 1], [0, 0], [0, 0], [0, np.nan], [0, 0])
+
+
+@pytest.fixture(scope="module")
+def tiny_task(robot):
+    task = TaskDomain.from_robot(robot, pose=[0.0, 1.5708], q_radius=0.05, qdot_max=0.05, qddot_max=0.1)
+    return SimpleNamespace(robot=robot, domain=task, P=SimpleNamespace(W_S=0.4 * np.eye(2), W_T=None, W_KS=None))
+
+
+@pytest.fixture(scope="module")
+def certified(tiny_task):
+    return task_motion_certificate(tiny_task, pd_controller(), points=(3, 2), velocities="bounded", level=0.9,
+                                   cells=True, cell_workers=1, lower_bound=False)  # fmt: skip
+
+
+def test_the_task_s_moving_robot_is_certified_on_cells_and_says_so(certified):
+    assert certified.cells["holds"], certified.cells
+    assert certified.cells["accelerations"] == [0.1, 0.1]  # the task's own bounds: parameters, not proved rates
+    cert = certified.certificate
+    assert cert.status.value == "CERTIFIED" and cert.bound == pytest.approx(0.9)
+    assert cert.scope.enclosure == "proved"
+    assert "cells covering the whole box" in " ".join(cert.scope.notes)
+
+
+def test_the_proved_x_holds_at_random_points_and_exact_rates_of_the_task(tiny_task):
+    """Soundness: an X the cells prove, at random (q2, qdot, qddot) with dq2/dt = qdot2 and dqdot/dt = qddot."""
+    from polyrob.analysis.lpv.basis import default_basis
+    from polyrob.analysis.lpv.cells import check_cells
+    from polyrob.analysis.lpv.moving import conditioned_time_scale
+    from polyrob.analysis.lpv.norm import lpvnorm
+    from polyrob.analysis.lpv.robot import closed_loop_system, conditioned
+    from polyrob.analysis.lpv.task import _search, task_rate_bounds
+
+    model = task_scheduling(tiny_task.robot, tiny_task.domain, points=(3, 2))
+    system = closed_loop_system(model, pd_controller(), tiny_task.P.W_S, None, None)
+    basis = default_basis(model, tensor=True)
+    rates = task_rate_bounds(model, tiny_task.domain)
+    r, sysf, c = _search(model, system, rates, basis, lpvnorm, conditioned, conditioned_time_scale, kinematic_rates,
+                         0.9)  # fmt: skip
+    used = [(-np.inf, np.inf) if k == "qddot" else b for b, k in zip(rates, model.kinds)]
+    chk = check_cells(model, system, r.X, basis, used, 0.9, similarity=getattr(sysf, "similarity", None), c=c,
+                      workers=1)  # fmt: skip
+    assert chk.holds, chk.reason
+    rates_at = kinematic_rates(model, used, c)
+    lo, hi = np.array([a[0] for a in model.axes]), np.array([a[-1] for a in model.axes])
+    rng = np.random.default_rng(2)
+    for rho in rng.uniform(lo, hi, size=(150, len(lo))):
+        A, B, C, D = sysf(rho)
+        nu = np.array([b[0] if k != "qddot" else 0.0 for b, k in zip(rates_at(rho), model.kinds)])  # X free of qddot
+        assert all(b[0] == b[1] for b, k in zip(rates_at(rho), model.kinds) if k != "qddot")  # the exact rates
+        F = np.array([[f(rho) for f, _ in basis]])
+        G = np.array([[g(rho) for _, g in basis]])
+        M, _, X, _ = brl_matrices(GridData(A[None], B[None], C[None], D[None], F, G, nu[None, None], rho[None]),
+                                  np.asarray(r.X), 0.9)  # fmt: skip
+        assert np.linalg.eigvalsh(M[0])[:, -1].max() < 0 and np.linalg.eigvalsh(X[0])[0] > 0
+
+
+def test_without_cells_the_task_certificate_stays_grid_only(tiny_task):
+    plain = task_motion_certificate(tiny_task, pd_controller(), points=(3, 2), velocities="bounded", level=0.9,
+                                    lower_bound=False)  # fmt: skip
+    assert plain.certificate.status.value == "GRID_ONLY" and not plain.cells
+
+
+def test_a_pinocchio_robot_s_task_cells_say_there_is_no_enclosure():
+    robot = polyrob.load_robot("planar_2r")
+    task = TaskDomain.from_robot(robot, pose=[0.0, 1.5708], q_radius=0.05, qdot_max=0.05, qddot_max=0.1)
+    problem = SimpleNamespace(robot=robot, domain=task, P=SimpleNamespace(W_S=0.4 * np.eye(2), W_T=None, W_KS=None))
+    c = task_motion_certificate(problem, pd_controller(), points=(3, 2), velocities="bounded", level=0.9, cells=True,
+                                cell_workers=1, lower_bound=False)  # fmt: skip
+    assert c.certificate.status.value == "GRID_ONLY"
+    assert c.cells["reason"] == "no guaranteed enclosure for planar_2r"
