@@ -1,6 +1,8 @@
 """Exact symbolic rigid-body dynamics of a serial chain: ``M``, ``Gamma``, ``g`` as polynomials.
 
-Used by :mod:`polyrob.bounds.certified.interval_rbd` and :mod:`polyrob.bounds.certified.enclosure`.
+Used by :mod:`polyrob.bounds.certified.interval_rbd` and :mod:`polyrob.bounds.certified.enclosure`, and,
+evaluated on forward-derivative balls by :class:`SymbolicTwin`, by the moving robot's cells
+(:mod:`polyrob.analysis.lpv.cells`) for URDF robots of up to three joints.
 Pinocchio cannot compute with interval scalars, so the dynamics are rebuilt
 here from the model's joint placements, axes and inertias.
 
@@ -41,9 +43,9 @@ from itertools import combinations_with_replacement
 import numpy as np
 from flint import arb, arb_mat, fmpq, fmpq_mpoly_ctx
 
-from polyrob.errors import CertificationError
+from polyrob.errors import CertificationError, NotApplicable
 
-__all__ = ["SymbolicDynamics", "joint_axes"]
+__all__ = ["SymbolicDynamics", "SymbolicTwin", "joint_axes", "MAX_TWIN_JOINTS"]
 
 
 def _q(x: float) -> fmpq:
@@ -288,7 +290,7 @@ class SymbolicDynamics:
             rows.append(row)
         self.coef = arb_mat(rows) if rows else None
         self.npolys = len(polys)
-        self.Msym, self.V = Msym, V
+        self.Msym, self.V, self.Gam, self.gvec = Msym, V, Gam, gvec
 
     # ---- evaluation ---------------------------------------------------------
     def evaluate(self, qballs):
@@ -325,3 +327,121 @@ class SymbolicDynamics:
             return zero if n is None else y[n, 0]
 
         return get
+
+
+#: Largest chain whose polynomials are built (their number of terms grows quickly with the joints).
+MAX_TWIN_JOINTS = 3
+
+
+class SymbolicTwin:
+    """``M``, ``C``, ``g`` of a URDF robot on :class:`~polyrob.bounds.certified.analytic.Jet` arrays (shape ``(1, m)``).
+
+    Picklable: the polynomials are rebuilt in each process that evaluates them
+    (flint's objects do not pickle).  Why it exists: the moving robot's cells
+    enclose the Jacobians with forward derivatives in ball arithmetic
+    (:func:`~polyrob.bounds.certified.analytic.analytic_jacobian_enclosure`,
+    :func:`~polyrob.bounds.certified.analytic.task_jacobian_enclosure`),
+    which call ``M``, ``C``, ``g`` on Jets; Pinocchio cannot compute with them,
+    the polynomials of :class:`SymbolicDynamics` can.
+
+    Parameters
+    ----------
+    robot : polyrob.model.urdf.Robot
+        A Pinocchio robot of at most :data:`MAX_TWIN_JOINTS` joints.
+
+    Raises
+    ------
+    NotApplicable
+        More joints, or no Pinocchio model.
+
+    Examples
+    --------
+    >>> import numpy as np, polyrob
+    >>> from polyrob.bounds.certified.analytic import analytic_jacobian_enclosure
+    >>> robot = polyrob.load_robot("planar_2r")
+    >>> twin = SymbolicTwin(robot)
+    >>> q, qd, u = np.array([0.1, 1.2]), np.array([0.3, -0.4]), np.array([1.0, 2.0])
+    >>> enc = analytic_jacobian_enclosure(twin, q, q, qd, qd, u)
+    >>> A, B = robot.jacobians(q, qd, u)
+    >>> bool(np.allclose(enc.A_lo, A, atol=1e-10) and np.allclose(enc.B_hi, B, atol=1e-12))
+    True
+    """
+
+    def __init__(self, robot):
+        if getattr(robot, "model", None) is None or not hasattr(robot.model, "jointPlacements"):
+            raise NotApplicable(f"{robot.name}: no Pinocchio model to rebuild as polynomials")
+        if robot.m > MAX_TWIN_JOINTS:
+            raise NotApplicable(f"{robot.name} has {robot.m} joints: the exact polynomials are built for at most "
+                                f"{MAX_TWIN_JOINTS}")  # fmt: skip
+        self.robot, self.name, self.m = robot, robot.name, robot.m
+        self.damping = np.asarray(robot.damping, float)
+        self._sd = None
+
+    def __getstate__(self):
+        return {"robot": self.robot, "name": self.name, "m": self.m, "damping": self.damping, "_sd": None}
+
+    @property
+    def dynamics(self):
+        """The :class:`~polyrob.bounds.certified.symbolic_rbd.SymbolicDynamics` (built on first use)."""
+        if self._sd is None:
+            self._sd = SymbolicDynamics(self.robot.model)
+        return self._sd
+
+    def _variables(self, q):
+        """Per polynomial variable its value: ``cos q_i``, ``sin q_i`` (revolute) or ``q_i`` (prismatic)."""
+        sd = self.dynamics
+        vals = [None] * sd.nvars
+        for i, (ci, si) in enumerate(sd.var_index):
+            if si is None:
+                vals[ci] = q[i]
+            else:
+                vals[ci], vals[si] = q[i].cos(), q[i].sin()
+        return vals
+
+    @staticmethod
+    def _evaluate(P, vals, powers):
+        """The polynomial ``P`` at ``vals`` (exact rational coefficients as balls; ``powers`` caches ``v**k``)."""
+        total = arb(0)
+        for exps, coef in P.to_dict().items():
+            term = arb(coef)
+            for v, e in enumerate(exps):
+                if e:
+                    term = _power(vals, powers, v, e) * term
+            total = term + total
+        return total
+
+    def M(self, q):
+        q = q[0]
+        vals, powers, sd = self._variables(q), {}, self.dynamics
+        return [[[self._evaluate(sd.Msym[i][j], vals, powers) for j in range(self.m)] for i in range(self.m)]]
+
+    def C(self, q, qdot):
+        """``C(q, qdot)`` with ``C qdot`` the Coriolis and centrifugal torque: ``C_rl = sum_j c_rjl qdot_j``."""
+        q, qd = q[0], qdot[0]
+        vals, powers, sd = self._variables(q), {}, self.dynamics
+        christoffel = {}
+        for p, (j, l) in enumerate(sd.pairs):
+            for r in range(self.m):
+                christoffel[r, j, l] = christoffel[r, l, j] = self._evaluate(sd.Gam[r][p], vals, powers)
+        out = []
+        for r in range(self.m):
+            row = []
+            for l in range(self.m):
+                s = arb(0)
+                for j in range(self.m):
+                    s = christoffel[r, j, l] * qd[j] + s
+                row.append(s)
+            out.append(row)
+        return [out]
+
+    def g(self, q):
+        q = q[0]
+        vals, powers, sd = self._variables(q), {}, self.dynamics
+        return [[self._evaluate(sd.gvec[r], vals, powers) for r in range(self.m)]]
+
+
+def _power(vals, powers, v: int, e: int):
+    """``vals[v] ** e`` by repeated products, each power cached in ``powers``."""
+    if (v, e) not in powers:
+        powers[(v, e)] = vals[v] if e == 1 else _power(vals, powers, v, e - 1) * vals[v]
+    return powers[(v, e)]

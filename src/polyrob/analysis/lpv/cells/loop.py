@@ -26,15 +26,25 @@ __all__ = [
 def plant_enclosure(model, order: int = 2):
     """``(lo, hi) box of rho -> enclosure`` of the robot's ``A, B, qddot`` over it, or ``None`` when unavailable.
 
+    An analytic robot's own callables; a URDF robot of at most three joints through its exact polynomials
+    (:class:`~polyrob.bounds.certified.symbolic_rbd.SymbolicTwin`); none for larger ones.
+
     ``order=3`` adds the second derivatives of ``A`` and ``B`` (what a second-order cell test needs).
     """
+    from polyrob.errors import NotApplicable
     from polyrob.model.analytic import AnalyticRobot
 
-    if not isinstance(model.robot, AnalyticRobot):
-        return None
+    dynamics = model.robot
+    if not isinstance(dynamics, AnalyticRobot):
+        from polyrob.bounds.certified.symbolic_rbd import SymbolicTwin
+
+        try:  # a URDF chain of at most three joints: its dynamics as exact polynomials
+            dynamics = SymbolicTwin(model.robot)
+        except NotApplicable:
+            return None
     if hasattr(model, "motion"):  # a task: the torque is the inverse dynamics of (q, qdot, qddot)
-        return TaskPlantEnclosure(model, order)
-    return PlantEnclosure(model, order)
+        return TaskPlantEnclosure(model, order, dynamics)
+    return PlantEnclosure(model, order, dynamics)
 
 
 def derivative_columns(model) -> list[int]:
@@ -47,14 +57,15 @@ def derivative_columns(model) -> list[int]:
 class PlantEnclosure:
     """``enclose(lo, hi, order)`` of :func:`plant_enclosure` (a class, not a closure: the cells' workers pickle it)."""
 
-    def __init__(self, model, order: int = 2):
+    def __init__(self, model, order: int = 2, dynamics=None):
         self.model, self.order = model, order
+        self.dynamics = model.robot if dynamics is None else dynamics  # the robot, or its polynomial twin
 
     def __call__(self, lo, hi, order=None):
         from polyrob.bounds.certified.analytic import analytic_jacobian_enclosure
 
         (ql, vl), (qh, vh) = self.model.state(lo), self.model.state(hi)
-        return analytic_jacobian_enclosure(self.model.robot, ql, qh, vl, vh, self.model.u,
+        return analytic_jacobian_enclosure(self.dynamics, ql, qh, vl, vh, self.model.u,
                                            order=self.order if order is None else order)  # fmt: skip
 
 
@@ -62,14 +73,15 @@ class TaskPlantEnclosure:
     """``enclose(lo, hi, order)`` of a task model (:mod:`polyrob.analysis.lpv.task`): the robot's ``A, B`` over the
     box of ``rho = (q_i, qdot, qddot)``, derivatives with respect to ``(q, qdot, qddot)``; picklable."""
 
-    def __init__(self, model, order: int = 2):
+    def __init__(self, model, order: int = 2, dynamics=None):
         self.model, self.order = model, order
+        self.dynamics = model.robot if dynamics is None else dynamics
 
     def __call__(self, lo, hi, order=None):
         from polyrob.bounds.certified.analytic import task_jacobian_enclosure
 
         (ql, vl, al), (qh, vh, ah) = self.model.motion(lo), self.model.motion(hi)
-        return task_jacobian_enclosure(self.model.robot, ql, qh, vl, vh, al, ah,
+        return task_jacobian_enclosure(self.dynamics, ql, qh, vl, vh, al, ah,
                                        order=self.order if order is None else order)  # fmt: skip
 
 
