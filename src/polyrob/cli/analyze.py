@@ -215,7 +215,8 @@ def add_moving_harmonics_argument(p) -> None:
         "--moving-cells",
         action="store_true",
         help="prove the moving robot's Lyapunov matrix between the grid points too, on cells covering the state "
-        "box (an analytic robot such as paper_2r; the verdict then covers the whole box).  The search is asked for "
+        "box, or a task's box of positions, velocities and accelerations (an analytic robot such as paper_2r, or a "
+        "URDF robot of up to 3 joints; the verdict then covers the whole box).  The search is asked for "
         "room between its points: margin maximised at level 0.95, q2 every pi/8 with --moving-harmonics, the half "
         "box of an even loop; with --moving-harmonics 2 paper_2r's tf3 loop at x 4 is proved between its points in about 30 min "
         "(docs/certificates.md); implies --moving",
