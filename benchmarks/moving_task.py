@@ -1,0 +1,189 @@
+"""The main job's moving-robot verdict on its task: time, peak memory and the bound of each search (JSON).
+
+    python benchmarks/moving_task.py RUN_DIR [--variants arbitrary:1,bounded:1,arbitrary:2] [--points 5,3]
+        [--cells] [--results PATH]
+    python benchmarks/moving_task.py RUN_DIR --parts [--results PATH]
+
+``RUN_DIR`` is what ``polyrob run -o RUN_DIR`` writes (the main job: planar_2r
+on its task); its problem and controller are read back
+(:func:`polyrob.pipeline.rebuild.load_run`).  Each variant ``VELOCITIES:HARMONICS``
+runs :func:`polyrob.analysis.lpv.task.task_motion_certificate` in its own
+process (so that its peak memory is its own, read with ``wait4``): ``arbitrary``
+is ``X`` on the positions only (what ``--moving`` takes for the main job's
+16-state loop), ``bounded`` ``X`` on the positions times ``(1, qdot)`` with
+the velocities' rates bounded by the task's accelerations.  Printed per variant:
+the bound proved on the search grid, on the finer re-check grid, the cells'
+outcome with ``--cells``, the status, the seconds and the peak memory, and
+the machine's load at the start and the end.
+
+``--parts``: which motion the bound pays for.  The same loop, one kind of
+parameter moving at a time, the others frozen at the task's centre: the
+accelerations switching between their ends (one constant ``X``), the
+velocities over their box arbitrarily fast (one constant ``X``), and ``q2``
+over its range at ``|dq2/dt| <= qdot_max`` with ``X(q2)`` on one or two
+harmonics, on 5 to 17 points; beside the frozen peak of the same points.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from _results import add_results_option, save_run
+
+
+def one(run_dir: str, velocities: str, harmonics: int, points, cells: bool) -> dict:
+    """One search in this process: the summary of its certificate."""
+    from polyrob.analysis.lpv.task import task_motion_certificate
+    from polyrob.pipeline.rebuild import load_run
+
+    run = load_run(run_dir)
+    t0 = time.perf_counter()
+    c = task_motion_certificate(run.problem, run.controller, points=points, velocities=velocities,
+                                harmonics=harmonics, cells=cells, level=0.95 if cells else None, cell_workers=1,
+                                lower_bound=True)  # fmt: skip
+    r = c.result
+    return {
+        "velocities": velocities,
+        "harmonics": harmonics,
+        "points": list(points),
+        "status": c.certificate.status.value if c.computed else "not computed",
+        "grid_bound": None if r is None else float(r.gamma),
+        "finer_bound": c.finer.get("gamma"),
+        "cells": c.cells,
+        "lower_bound": (c.lower or {}).get("gamma"),
+        "frozen_peak": None if r is None else float(r.frozen_gamma),
+        "why": list(c.notes),
+        "search_seconds": round(time.perf_counter() - t0, 1),
+    }
+
+
+def parts(run_dir: str) -> list[dict]:
+    """The bound of each single motion (module text), searched on its own grid."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from polyrob.analysis.lpv.basis import default_basis
+    from polyrob.analysis.lpv.norm import lpvnorm
+    from polyrob.analysis.lpv.robot import closed_loop_system, conditioned, kinematic_rates
+    from polyrob.analysis.lpv.task import task_rate_bounds, task_scheduling
+    from polyrob.pipeline.rebuild import load_run
+
+    run = load_run(run_dir)
+    problem, K = run.problem, run.controller
+    base = task_scheduling(problem.robot, problem.domain)
+    centre = {k: 0.5 * (a[0] + a[-1]) for k, a in zip(base.kinds, base.axes)}
+    q_axis = next(a for a, k in zip(base.axes, base.kinds) if k == "q")
+    cases = [
+        ("accelerations at their ends, one X", {"qddot": None}, 0),
+        ("velocities over their box, arbitrarily fast, one X", {"qdot": 3}, 0),
+        ("q2 over its range, X(q2) on 1 harmonic, 5 points", {"q": 5}, 1),
+        ("q2 over its range, X(q2) on 1 harmonic, 9 points", {"q": 9}, 1),
+        ("q2 over its range, X(q2) on 2 harmonics, 9 points", {"q": 9}, 2),
+        ("q2 over its range, X(q2) on 2 harmonics, 17 points", {"q": 17}, 2),
+    ]
+    out = []
+    for name, moving, harmonics in cases:
+        axes = []
+        for a, k in zip(base.axes, base.kinds):
+            if k not in moving:
+                axes.append(np.array([centre[k]]))
+            else:
+                axes.append(a if moving[k] is None else np.linspace(a[0], a[-1], moving[k]))
+        model = replace(base, axes=tuple(axes))
+        system = closed_loop_system(model, K, problem.P.W_S, problem.P.W_T, problem.P.W_KS)
+        sysf, c = conditioned(system, np.array([np.mean(a) for a in axes]))
+        t0 = time.perf_counter()
+        if harmonics == 0:  # one X for every point: the parameters move arbitrarily fast
+            r = lpvnorm(sysf, list(model.axes), None, None, eps=1e-4)
+        else:
+            basis = default_basis(model, harmonics=harmonics)[: 1 + 2 * harmonics]
+            rates = [r if k == "q" else (-np.inf, np.inf) for r, k in zip(task_rate_bounds(model, problem.domain),
+                                                                          model.kinds)]  # fmt: skip
+            r = lpvnorm(sysf, list(model.axes), [(lo / c, hi / c) for lo, hi in rates], basis,
+                        rates_at=kinematic_rates(model, rates, c), eps=1e-4)  # fmt: skip
+        out.append({"motion": name, "bound": float(r.gamma), "why": r.reason, "frozen_peak": float(r.frozen_gamma),
+                    "q2_range": [float(q_axis[0]), float(q_axis[-1])], "seconds": round(time.perf_counter() - t0, 1)})  # fmt: skip
+        print(json.dumps(out[-1]), file=sys.stderr, flush=True)
+    return out
+
+
+def measure(run_dir: str, variant: str, points: str, cells: bool) -> dict:
+    """``variant`` in a child process: its summary, wall seconds, peak memory and the load around it."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "out.json"
+        cmd = [sys.executable, __file__, run_dir, "--one", variant, "--points", points, "--out", str(out)]
+        cmd += ["--cells"] if cells else []
+        t0, load0 = time.perf_counter(), os.getloadavg()[0]
+        child = subprocess.Popen(cmd)
+        _, status, usage = os.wait4(child.pid, 0)
+        child.returncode = os.waitstatus_to_exitcode(status)  # reaped here: Popen must not wait for it again
+        if child.returncode != 0:
+            raise SystemExit(f"{variant}: the child exited {child.returncode}")
+        doc = json.loads(out.read_text())
+    doc.update(seconds=round(time.perf_counter() - t0, 1), peak_gb=round(usage.ru_maxrss / 1e6, 2),
+               load=[round(load0, 2), round(os.getloadavg()[0], 2)])  # fmt: skip
+    return doc
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("run_dir", help="a directory `polyrob run -o DIR` wrote")
+    ap.add_argument("--variants", default="arbitrary:1,bounded:1,arbitrary:2", help="VELOCITIES:HARMONICS, ...")
+    ap.add_argument("--points", default="5,3", help="search grid points per position and per velocity")
+    ap.add_argument("--cells", action="store_true", help="prove a grid bound below 1 between the points")
+    ap.add_argument("--parts", action="store_true", help="the bound of each single motion (module text)")
+    ap.add_argument("--one", default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--out", default=None, help=argparse.SUPPRESS)
+    add_results_option(ap)
+    args = ap.parse_args()
+    points = tuple(int(x) for x in args.points.split(","))
+    if args.parts:
+        import numpy as np
+
+        rows = parts(args.run_dir)
+        doc = {"run_dir": args.run_dir, "parts": rows}
+        print(json.dumps(doc, indent=1, default=float))
+        table = {"columns": ["what moves (the rest at the task's centre)", "bound proved on its grid",
+                             "frozen peak there", "time"],
+                 "rows": [[r["motion"], f"{r['bound']:.4g}" if np.isfinite(r["bound"]) else f"no bound ({r['why']})",
+                           f"{r['frozen_peak']:.4g}", f"{r['seconds']:.0f} s"]
+                          for r in rows]}  # fmt: skip
+        figure = "; ".join(f"{r['motion']}: {r['bound']:.3g}" for r in rows)
+        save_run(args.results, "moving_task", "What each motion of the task costs the main job's moving bound",
+                 figure, doc, table)  # fmt: skip
+        return
+    if args.one:
+        velocities, harmonics = args.one.split(":")
+        Path(args.out).write_text(json.dumps(one(args.run_dir, velocities, int(harmonics), points, args.cells),
+                                             default=float))  # fmt: skip
+        return
+    rows = [measure(args.run_dir, v, args.points, args.cells) for v in args.variants.split(",")]
+    doc = {"run_dir": args.run_dir, "variants": rows}
+    print(json.dumps(doc, indent=1, default=float))
+
+    def bound(x):
+        return "no bound" if x is None or x == float("inf") else f"{x:.4g}"
+
+    table = {
+        "columns": ["X on", "grid", "bound on the grid", "on the finer grid", "found along trajectories (lower)",
+                    "status", "time", "peak memory"],
+        "rows": [[("positions" if r["velocities"] == "arbitrary" else "positions x (1, qdot)")
+                  + f", {r['harmonics']} harmonic(s)", "x".join(map(str, r["points"])), bound(r["grid_bound"]),
+                  bound(r["finer_bound"]), bound(r["lower_bound"]), r["status"], f"{r['seconds']:.0f} s",
+                  f"{r['peak_gb']:.1f} GB"] for r in rows],
+    }  # fmt: skip
+    figure = "; ".join(f"{r['velocities']}:{r['harmonics']} {r['status']} (grid {bound(r['grid_bound'])}, "
+                       f"{r['seconds']:.0f} s, {r['peak_gb']:.1f} GB)" for r in rows)  # fmt: skip
+    save_run(args.results, "moving_task", "The main job's moving robot on its task, per search", figure, doc, table)
+
+
+if __name__ == "__main__":
+    main()
