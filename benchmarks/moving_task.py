@@ -20,8 +20,9 @@ the machine's load at the start and the end.
 parameter moving at a time, the others frozen at the task's centre: the
 accelerations switching between their ends (one constant ``X``), the
 velocities over their box arbitrarily fast (one constant ``X``), and ``q2``
-over its range at ``|dq2/dt| <= qdot_max`` with ``X(q2)`` on one or two
-harmonics, on 5 to 17 points; beside the frozen peak of the same points.
+over its range at ``|dq2/dt| <= qdot_max`` (and at a hundredth of it) with
+``X(q2)`` on one or two harmonics, on 5 to 17 points; beside the frozen peak
+of the same points.
 """
 
 from __future__ import annotations
@@ -82,15 +83,16 @@ def parts(run_dir: str) -> list[dict]:
     centre = {k: 0.5 * (a[0] + a[-1]) for k, a in zip(base.kinds, base.axes)}
     q_axis = next(a for a, k in zip(base.axes, base.kinds) if k == "q")
     cases = [
-        ("accelerations at their ends, one X", {"qddot": None}, 0),
-        ("velocities over their box, arbitrarily fast, one X", {"qdot": 3}, 0),
-        ("q2 over its range, X(q2) on 1 harmonic, 5 points", {"q": 5}, 1),
-        ("q2 over its range, X(q2) on 1 harmonic, 9 points", {"q": 9}, 1),
-        ("q2 over its range, X(q2) on 2 harmonics, 9 points", {"q": 9}, 2),
-        ("q2 over its range, X(q2) on 2 harmonics, 17 points", {"q": 17}, 2),
+        ("accelerations at their ends, one X", {"qddot": None}, 0, 1.0),
+        ("velocities over their box, arbitrarily fast, one X", {"qdot": 3}, 0, 1.0),
+        ("q2 over its range, X(q2) on 1 harmonic, 5 points", {"q": 5}, 1, 1.0),
+        ("q2 over its range, X(q2) on 1 harmonic, 9 points", {"q": 9}, 1, 1.0),
+        ("q2 over its range, X(q2) on 2 harmonics, 9 points", {"q": 9}, 2, 1.0),
+        ("q2 over its range, X(q2) on 2 harmonics, 17 points", {"q": 17}, 2, 1.0),
+        ("q2 over its range at a hundredth of the rate, X(q2) on 2 harmonics, 9 points", {"q": 9}, 2, 0.01),
     ]
     out = []
-    for name, moving, harmonics in cases:
+    for name, moving, harmonics, scale in cases:
         axes = []
         for a, k in zip(base.axes, base.kinds):
             if k not in moving:
@@ -105,8 +107,8 @@ def parts(run_dir: str) -> list[dict]:
             r = lpvnorm(sysf, list(model.axes), None, None, eps=1e-4)
         else:
             basis = default_basis(model, harmonics=harmonics)[: 1 + 2 * harmonics]
-            rates = [r if k == "q" else (-np.inf, np.inf) for r, k in zip(task_rate_bounds(model, problem.domain),
-                                                                          model.kinds)]  # fmt: skip
+            rates = [r if k == "q" else (-np.inf, np.inf)
+                     for r, k in zip(task_rate_bounds(model, problem.domain, scale=scale), model.kinds)]  # fmt: skip
             r = lpvnorm(sysf, list(model.axes), [(lo / c, hi / c) for lo, hi in rates], basis,
                         rates_at=kinematic_rates(model, rates, c), eps=1e-4)  # fmt: skip
         out.append({"motion": name, "bound": float(r.gamma), "why": r.reason, "frozen_peak": float(r.frozen_gamma),
