@@ -120,11 +120,14 @@ def test_without_cells_the_task_certificate_stays_grid_only(tiny_task):
 
 
 def test_a_urdf_robot_s_task_is_proved_through_its_exact_polynomials():
-    """planar_2r (Pinocchio) has no analytic callables: its cells enclose the Jacobians of its SymbolicTwin."""
+    """planar_2r (Pinocchio) has no analytic callables: its cells enclose the Jacobians of its SymbolicTwin (which
+    two spawned workers rebuild from the pickled robot, proving the same cells as one process)."""
     robot = polyrob.load_robot("planar_2r")
     task = TaskDomain.from_robot(robot, pose=[0.0, 1.5708], q_radius=0.05, qdot_max=0.05, qddot_max=0.1)
     problem = SimpleNamespace(robot=robot, domain=task, P=SimpleNamespace(W_S=0.4 * np.eye(2), W_T=None, W_KS=None))
-    c = task_motion_certificate(problem, pd_controller(), points=(3, 2), velocities="bounded", level=0.9, cells=True,
-                                cell_workers=1, lower_bound=False)  # fmt: skip
-    assert c.cells["holds"], c.cells
-    assert c.certificate.status.value == "CERTIFIED"
+    runs = [task_motion_certificate(problem, pd_controller(), points=(3, 2), velocities="bounded", level=0.9,
+                                    cells=True, cell_workers=w, lower_bound=False) for w in (1, 2)]  # fmt: skip
+    for c, workers in zip(runs, (1, 2)):
+        assert c.cells["holds"], c.cells
+        assert c.cells["workers"] == workers and c.certificate.status.value == "CERTIFIED"
+    assert runs[0].cells["cells"] == runs[1].cells["cells"]
