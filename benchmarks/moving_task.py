@@ -82,6 +82,9 @@ def parts(run_dir: str) -> list[dict]:
     base = task_scheduling(problem.robot, problem.domain)
     centre = {k: 0.5 * (a[0] + a[-1]) for k, a in zip(base.kinds, base.axes)}
     q_axis = next(a for a, k in zip(base.axes, base.kinds) if k == "q")
+    whole = closed_loop_system(base, K, problem.P.W_S, problem.P.W_T, problem.P.W_KS)
+    poles = np.abs(np.linalg.eigvals(whole(np.array([centre[k] for k in base.kinds]))[0]))
+    print(json.dumps({"loop_pole_moduli_at_centre": [float(poles.min()), float(poles.max())]}), file=sys.stderr)
     cases = [
         ("accelerations at their ends, one X", {"qddot": None}, 0, 1.0),
         ("velocities over their box, arbitrarily fast, one X", {"qdot": 3}, 0, 1.0),
@@ -114,7 +117,7 @@ def parts(run_dir: str) -> list[dict]:
         out.append({"motion": name, "bound": float(r.gamma), "why": r.reason, "frozen_peak": float(r.frozen_gamma),
                     "q2_range": [float(q_axis[0]), float(q_axis[-1])], "seconds": round(time.perf_counter() - t0, 1)})  # fmt: skip
         print(json.dumps(out[-1]), file=sys.stderr, flush=True)
-    return out
+    return out, [float(poles.min()), float(poles.max())]
 
 
 def measure(run_dir: str, variant: str, points: str, cells: bool) -> dict:
@@ -150,15 +153,17 @@ def main() -> None:
     if args.parts:
         import numpy as np
 
-        rows = parts(args.run_dir)
-        doc = {"run_dir": args.run_dir, "parts": rows}
+        rows, poles = parts(args.run_dir)
+        doc = {"run_dir": args.run_dir, "parts": rows, "loop_pole_moduli_at_centre": poles}
         print(json.dumps(doc, indent=1, default=float))
         table = {"columns": ["what moves (the rest at the task's centre)", "bound proved on its grid",
                              "frozen peak there", "time"],
                  "rows": [[r["motion"], f"{r['bound']:.4g}" if np.isfinite(r["bound"]) else f"no bound ({r['why']})",
                            f"{r['frozen_peak']:.4g}", f"{r['seconds']:.0f} s"]
                           for r in rows]}  # fmt: skip
-        figure = "; ".join(f"{r['motion']}: {r['bound']:.3g}" for r in rows)
+        figure = "; ".join(f"{r['motion']}: {r['bound']:.3g}" for r in rows) + (
+            f"; the loop's poles at the task's centre from {poles[0]:.3g} to {poles[1]:.4g} rad/s"
+        )
         save_run(args.results, "moving_task", "What each motion of the task costs the main job's moving bound",
                  figure, doc, table)  # fmt: skip
         return
