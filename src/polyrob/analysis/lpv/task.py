@@ -462,7 +462,8 @@ def _found(model, system, domain, lower_bound) -> dict:
 
 
 def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinematic_rates, level=None):
-    """``(result, the system it ran on, its time scale)``: the conditioned copy first, then the time-scaled loop."""
+    """``(result, the system it ran on, its time scale)``: the conditioned copy first, then the time-scaled loop; a
+    proved result is searched again in the coordinates of its own ``X`` (:func:`_refined`)."""
     from polyrob.analysis.lpv.result import LpvNormResult
 
     centre = np.array([0.5 * (a[0] + a[-1]) for a in model.axes])
@@ -478,18 +479,50 @@ def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinem
         return a / c, b / c, cc, d
 
     tries.append((time_scaled, c, {"level": level}))
-    best = None
-    for sysf, cs, options in tries:
+
+    def solve(sysf, cs, options):
         scaled = [(lo / cs, hi / cs) for lo, hi in rates]
         try:
-            r = lpvnorm(sysf, list(model.axes), scaled, basis, rates_at=kinematic_rates(model, rates, cs), **options)
+            return lpvnorm(sysf, list(model.axes), scaled, basis, rates_at=kinematic_rates(model, rates, cs), **options)
         except SolverError as exc:
-            r = LpvNormResult(
+            return LpvNormResult(
                 float("inf"), False, float("inf"), float("nan"), "", f"on the grid of {model.n_points} points",
                 model.n_points, 0, 0, 0, "solver error", reason=str(exc),
             )  # fmt: skip
+
+    best = None
+    for sysf, cs, options in tries:
+        r = solve(sysf, cs, options)
         if best is None or r.gamma < best[0].gamma:
-            best = (r, sysf, cs)
+            best = (r, sysf, cs, options)
         if r.proved:
+            break
+    return _refined(best, solve, basis, centre)[:3]
+
+
+#: Searches run again in the coordinates of the last proved ``X`` (:func:`~polyrob.analysis.lpv.robot.reconditioned`),
+#: while each lowers the proved bound by at least :data:`REFINE_GAIN` of it.
+REFINE_PASSES = 3
+REFINE_GAIN = 0.02
+
+
+def _refined(best, solve, basis, centre):
+    """``best = (result, system, time scale, options)`` searched again where its ``X`` is the identity at the centre."""
+    from polyrob.analysis.lpv.robot import reconditioned
+
+    for _ in range(REFINE_PASSES):
+        r, sysf, cs, options = best
+        if not r.proved:
+            break
+        f = np.array([float(fn(centre)) for fn, _ in basis]) if basis is not None else np.ones(1)
+        try:
+            again = reconditioned(sysf, np.einsum("k,kij->ij", f, np.asarray(r.X, float)))
+        except NotApplicable:
+            break
+        r2 = solve(again, cs, options)
+        if not (r2.proved and r2.gamma < r.gamma):
+            break
+        best = (r2, again, cs, options)
+        if r2.gamma > (1.0 - REFINE_GAIN) * r.gamma:
             break
     return best
