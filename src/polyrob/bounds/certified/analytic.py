@@ -242,6 +242,26 @@ class AnalyticEnclosure:
     d2B_hi: np.ndarray = None
 
 
+def _coordinate_jets(lo, hi, t3: bool) -> list:
+    """The box's coordinates as jets: each its ball, a unit gradient, and (``t3``) zero third derivatives."""
+    k = len(lo)
+    unit = [tuple(arb(1.0 if i == j else 0.0) for j in range(k)) for i in range(k)]
+    z3 = (arb(0),) * len(_sym(k, 3)[0]) if t3 else None
+    return [Jet(ball(lo[i], hi[i]), unit[i], None, z3) for i in range(k)]
+
+
+def _dynamics_on_balls(robot, q, qd, k: int, t3: bool):
+    """``(M as lifted jets, C, g)`` of ``robot`` at the jet arrays ``q``, ``qd`` (shape ``(1, m)``)."""
+    m = robot.m
+    try:
+        Mq = robot.M(q)[0]
+        Cq = robot.C(q, qd)[0]
+        gq = robot.g(q)[0] if robot.g is not None else [0.0] * m
+    except (TypeError, ValueError, AttributeError) as exc:
+        raise CertificationError(f"{robot.name}: its M, C, g do not evaluate on balls ({exc})") from exc
+    return [[Jet._lift(Mq[i][j], k, t3) for j in range(m)] for i in range(m)], Cq, gq
+
+
 def _solve(M, b):
     """Gaussian elimination without pivoting on ``M x = b`` (``M`` symmetric positive definite: pivots > 0)."""
     m = len(b)
@@ -305,17 +325,9 @@ def analytic_jacobian_enclosure(robot, q_lo, q_hi, qdot_lo, qdot_hi, u, order=2)
     ql, qh, vl, vh, uu = box
     k = 2 * m
     t3 = order == 3
-    unit = [tuple(arb(1.0 if i == j else 0.0) for j in range(k)) for i in range(k)]
-    z3 = (arb(0),) * len(_sym(k, 3)[0]) if t3 else None
-    q = np.array([[Jet(ball(ql[i], qh[i]), unit[i], None, z3) for i in range(m)]], dtype=object)
-    qd = np.array([[Jet(ball(vl[i], vh[i]), unit[m + i], None, z3) for i in range(m)]], dtype=object)
-    try:
-        Mq = robot.M(q)[0]
-        Cq = robot.C(q, qd)[0]
-        gq = robot.g(q)[0] if robot.g is not None else [0.0] * m
-    except (TypeError, ValueError, AttributeError) as exc:
-        raise CertificationError(f"{robot.name}: its M, C, g do not evaluate on balls ({exc})") from exc
-    lift = [[Jet._lift(Mq[i][j], k, t3) for j in range(m)] for i in range(m)]
+    z = _coordinate_jets(np.r_[ql, vl], np.r_[qh, vh], t3)
+    q, qd = np.array([z[:m]], dtype=object), np.array([z[m:]], dtype=object)
+    lift, Cq, gq = _dynamics_on_balls(robot, q, qd, k, t3)
     rhs = []
     for i in range(m):
         s = Jet._lift(float(uu[i]), k, t3) - float(robot.damping[i]) * qd[0][i] - gq[i]
@@ -406,17 +418,9 @@ def task_jacobian_enclosure(robot, q_lo, q_hi, qdot_lo, qdot_hi, a_lo, a_hi, ord
         raise DomainError(f"task_jacobian_enclosure: order must be 2 or 3, not {order!r}")
     k, n = 3 * m, 2 * m
     t3 = order == 3
-    unit = [tuple(arb(1.0 if i == j else 0.0) for j in range(k)) for i in range(k)]
-    z3 = (arb(0),) * len(_sym(k, 3)[0]) if t3 else None
-    z = [Jet(ball(box[2 * (i // m)][i % m], box[2 * (i // m) + 1][i % m]), unit[i], None, z3) for i in range(k)]
+    z = _coordinate_jets(np.r_[box[0], box[2], box[4]], np.r_[box[1], box[3], box[5]], t3)
     q, qd, a = (np.array([z[g * m : (g + 1) * m]], dtype=object) for g in range(3))
-    try:
-        Mq = robot.M(q)[0]
-        Cq = robot.C(q, qd)[0]
-        gq = robot.g(q)[0] if robot.g is not None else [0.0] * m
-    except (TypeError, ValueError, AttributeError) as exc:
-        raise CertificationError(f"{robot.name}: its M, C, g do not evaluate on balls ({exc})") from exc
-    lift = [[Jet._lift(Mq[i][j], k, t3) for j in range(m)] for i in range(m)]
+    lift, Cq, gq = _dynamics_on_balls(robot, q, qd, k, t3)
     tau = []
     for i in range(m):
         s = Jet._lift(0.0, k, t3) + float(robot.damping[i]) * qd[0][i] + gq[i]
