@@ -23,7 +23,7 @@ velocities over their box arbitrarily fast (one constant ``X``), and ``q2``
 over its range at ``|dq2/dt| <= qdot_max`` (and at a hundredth of it) with
 ``X(q2)`` on one or two harmonics, on 5 to 17 points; each bound as searched
 in the Gramian's coordinates and searched again in its own ``X``'s
-(:func:`polyrob.analysis.lpv.task.refine`); beside the frozen peak of the same
+(:func:`polyrob.analysis.lpv.robot.refine`); beside the frozen peak of the same
 points.
 """
 
@@ -75,8 +75,8 @@ def parts(run_dir: str) -> list[dict]:
 
     from polyrob.analysis.lpv.basis import default_basis
     from polyrob.analysis.lpv.norm import lpvnorm
-    from polyrob.analysis.lpv.robot import closed_loop_system, conditioned, kinematic_rates
-    from polyrob.analysis.lpv.task import refine, task_rate_bounds, task_scheduling
+    from polyrob.analysis.lpv.robot import closed_loop_system, conditioned, kinematic_rates, refine
+    from polyrob.analysis.lpv.task import task_rate_bounds, task_scheduling
     from polyrob.pipeline.rebuild import load_run
 
     run = load_run(run_dir)

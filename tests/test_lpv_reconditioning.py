@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import polyrob
+from polyrob.analysis.lpv import robot as robot_module
 from polyrob.analysis.lpv import task as task_module
 from polyrob.analysis.lpv.basis import default_basis
 from polyrob.analysis.lpv.moving import conditioned_time_scale
@@ -61,6 +62,6 @@ def test_the_search_again_in_its_own_coordinates_reaches_the_frozen_peak(stiff, 
     args = (model, system, rates, basis, lpvnorm, conditioned, conditioned_time_scale, kinematic_rates)
     refined, _, _ = task_module._search(*args)
     assert refined.proved and refined.gamma <= 1.01 * refined.frozen_gamma  # 0.7607 against the frozen 0.7607
-    monkeypatch.setattr(task_module, "REFINE_PASSES", 0)
+    monkeypatch.setattr(robot_module, "REFINE_PASSES", 0)
     first, _, _ = task_module._search(*args)
     assert first.proved and first.gamma > 1.05 * first.frozen_gamma  # the Gramian's coordinates alone: 0.830

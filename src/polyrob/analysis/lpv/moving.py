@@ -106,7 +106,7 @@ def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: b
     from polyrob.analysis.lpv.basis import default_basis, even_functions
     from polyrob.analysis.lpv.norm import lpvnorm
     from polyrob.analysis.lpv.result import LpvNormResult
-    from polyrob.analysis.lpv.robot import conditioned, kinematic_rates
+    from polyrob.analysis.lpv.robot import conditioned, kinematic_rates, refine
 
     centre = np.array([0.5 * (a[0] + a[-1]) for a in model.axes])
     rates = list(rates)
@@ -129,22 +129,28 @@ def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: b
         return a / c, b / c, cc, d
 
     c_sys.append((time_scaled, c, {"level": level}))
-    best = None
-    for sysf, cs, options in c_sys:
+
+    def solve(sysf, cs, options):
         args = (None, None) if fast else ([(lo / cs, hi / cs) for lo, hi in rates], basis)
         extra = {} if fast else {"rates_at": kinematic_rates(model, rates, cs)}
         try:
-            r = lpvnorm(sysf, list(model.axes), *args, **options, **extra)
+            return lpvnorm(sysf, list(model.axes), *args, **options, **extra)
         except SolverError as exc:
-            r = LpvNormResult(
+            return LpvNormResult(
                 float("inf"), False, float("inf"), float("nan"), "", f"on the grid of {model.n_points} points",
                 model.n_points, 0, 0, 0, "solver error", reason=str(exc),
             )  # fmt: skip
+
+    best = None
+    for sysf, cs, options in c_sys:
+        r = solve(sysf, cs, options)
         if best is None or r.gamma < best[0].gamma:
-            best = (r, sysf, cs, None if fast else basis, rates)
+            best = (r, sysf, cs, options)
         if best[0].proved:
             break
-    return best
+    # searched again where its X is the identity at the centre (polyrob.analysis.lpv.robot.refine)
+    r, sysf, cs, _ = refine(best, solve, None if fast else basis, centre)
+    return r, sysf, cs, None if fast else basis, rates
 
 
 def conditioned_time_scale(system, centre) -> float:

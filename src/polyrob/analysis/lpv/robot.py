@@ -39,7 +39,8 @@ import numpy as np
 from polyrob.errors import ArgumentError, NotApplicable
 
 __all__ = ["MovingRobotModel", "scheduling", "rate_bounds", "closed_loop_system", "kinematic_rates", "conditioned",
-           "reconditioned", "even_half", "RATE_SAMPLES", "RATE_MARGIN"]  # fmt: skip
+           "reconditioned", "refine", "REFINE_PASSES", "REFINE_GAIN", "even_half", "RATE_SAMPLES",
+           "RATE_MARGIN"]  # fmt: skip
 
 #: Domain points the acceleration bounds are sampled on (Sobol, plus the grid's corners).
 RATE_SAMPLES = 4096
@@ -451,3 +452,35 @@ def reconditioned(system_c, X_centre, *, floor: float = 1e-9):
 
     system_cc.similarity = getattr(system_c, "similarity", np.eye(Xc.shape[0])) @ T2
     return system_cc
+
+
+#: Searches run again in the coordinates of the last proved ``X`` (:func:`~polyrob.analysis.lpv.robot.reconditioned`),
+#: while each lowers the proved bound by at least :data:`REFINE_GAIN` of it.
+REFINE_PASSES = 3
+REFINE_GAIN = 0.02
+
+
+def refine(best, solve, basis, centre):
+    """``best = (result, system, time scale, options)`` searched again where its ``X`` is the identity at the centre.
+
+    ``solve(system, time scale, options)`` runs the search; ``basis`` the functions of ``X`` (``None``: a constant
+    ``X``); ``centre`` the grid's centre.  At most :data:`REFINE_PASSES` passes, each kept only when it proves a
+    lower bound, stopping once one gains less than :data:`REFINE_GAIN` of it.
+    """
+    for _ in range(REFINE_PASSES):
+        r, sysf, cs, options = best
+        if not r.proved:
+            break
+        f = np.array([float(fn(centre)) for fn, _ in basis]) if basis is not None else np.ones(1)
+        X = np.asarray(r.X, float)
+        try:
+            again = reconditioned(sysf, np.einsum("k,kij->ij", f, X if X.ndim == 3 else X[None]))
+        except NotApplicable:
+            break
+        r2 = solve(again, cs, options)
+        if not (r2.proved and r2.gamma < r.gamma):
+            break
+        best = (r2, again, cs, options)
+        if r2.gamma > (1.0 - REFINE_GAIN) * r.gamma:
+            break
+    return best

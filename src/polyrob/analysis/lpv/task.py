@@ -71,9 +71,6 @@ __all__ = [
     "MIN_JERK_ACCELERATION",
     "MIN_JERK_JERK",
     "AUTO_STATES",
-    "REFINE_PASSES",
-    "REFINE_GAIN",
-    "refine",
 ]
 
 #: Peaks of the minimum-jerk move ``D (10 s^3 - 15 s^4 + 6 s^5)`` per ``D/T``, ``D/T^2``, ``D/T^3``.
@@ -466,7 +463,7 @@ def _found(model, system, domain, lower_bound) -> dict:
 
 def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinematic_rates, level=None):
     """``(result, the system it ran on, its time scale)``: the conditioned copy first, then the time-scaled loop; a
-    proved result is searched again in the coordinates of its own ``X`` (:func:`refine`)."""
+    proved result is searched again in the coordinates of its own ``X`` (:func:`~polyrob.analysis.lpv.robot.refine`)."""
     from polyrob.analysis.lpv.result import LpvNormResult
 
     centre = np.array([0.5 * (a[0] + a[-1]) for a in model.axes])
@@ -500,38 +497,6 @@ def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinem
             best = (r, sysf, cs, options)
         if r.proved:
             break
+    from polyrob.analysis.lpv.robot import refine
+
     return refine(best, solve, basis, centre)[:3]
-
-
-#: Searches run again in the coordinates of the last proved ``X`` (:func:`~polyrob.analysis.lpv.robot.reconditioned`),
-#: while each lowers the proved bound by at least :data:`REFINE_GAIN` of it.
-REFINE_PASSES = 3
-REFINE_GAIN = 0.02
-
-
-def refine(best, solve, basis, centre):
-    """``best = (result, system, time scale, options)`` searched again where its ``X`` is the identity at the centre.
-
-    ``solve(system, time scale, options)`` runs the search; ``basis`` the functions of ``X`` (``None``: a constant
-    ``X``); ``centre`` the grid's centre.  At most :data:`REFINE_PASSES` passes, each kept only when it proves a
-    lower bound, stopping once one gains less than :data:`REFINE_GAIN` of it.
-    """
-    from polyrob.analysis.lpv.robot import reconditioned
-
-    for _ in range(REFINE_PASSES):
-        r, sysf, cs, options = best
-        if not r.proved:
-            break
-        f = np.array([float(fn(centre)) for fn, _ in basis]) if basis is not None else np.ones(1)
-        X = np.asarray(r.X, float)
-        try:
-            again = reconditioned(sysf, np.einsum("k,kij->ij", f, X if X.ndim == 3 else X[None]))
-        except NotApplicable:
-            break
-        r2 = solve(again, cs, options)
-        if not (r2.proved and r2.gamma < r.gamma):
-            break
-        best = (r2, again, cs, options)
-        if r2.gamma > (1.0 - REFINE_GAIN) * r.gamma:
-            break
-    return best
