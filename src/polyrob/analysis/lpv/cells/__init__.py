@@ -24,7 +24,9 @@ fail ends the search (the ``X`` does not hold there).  Before the cells, the
 robot's accelerations are proved inside the rate bounds the ``X`` was built
 for (a sampled bound is not one: ``tests/test_cells.py`` shows a box where
 the sampled peak times 1.05 is below the robot's), so the bound covers every
-trajectory of the linearised robot in the box.
+trajectory of the linearised robot in the box.  On a task the accelerations
+are parameters of the box (each velocity's rate is its acceleration there,
+exactly): there is nothing to prove about them.
 
 Examples
 --------
@@ -226,15 +228,15 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
         return CellCheck(False, gamma, 0, -np.inf, (), f"no guaranteed enclosure for {model.robot.name}", 0.0)
     loop, Xs, basis, rates_at, enclose, boxes, lo0, hi0 = (st.loop, st.Xs, st.basis, st.rates_at, st.enclose,
                                                           st.boxes, st.lo, st.hi)  # fmt: skip
-    acc_bounds = np.full(model.robot.m, np.inf)
-    for (_lo, hi), kind, j in zip(rates, model.kinds, model.joints):
-        if kind == "qdot":
-            acc_bounds[j] = hi
     width0 = np.where(hi0 > lo0, hi0 - lo0, 1.0)
     opts = {"min_width": min_width, "max_boxes": max_cells, "time_limit": time_limit}
     if "qddot" in model.kinds:  # a task: the accelerations are parameters inside their box, nothing to prove
         acc = ()
     else:
+        acc_bounds = np.full(model.robot.m, np.inf)
+        for (_lo, hi), kind, j in zip(rates, model.kinds, model.joints):
+            if kind == "qdot":
+                acc_bounds[j] = hi
         ok, leaves, why = prove_on_boxes([(lo0, hi0)], acceleration_check(model, enclose, acc_bounds), width0, **opts)
         acc = tuple(float(a) for a in np.max([v[1] for v in leaves], axis=0)) if leaves else ()
         if not ok:
