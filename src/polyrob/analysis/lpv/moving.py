@@ -136,10 +136,7 @@ def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: b
         try:
             return lpvnorm(sysf, list(model.axes), *args, **options, **extra)
         except SolverError as exc:
-            return LpvNormResult(
-                float("inf"), False, float("inf"), float("nan"), "", f"on the grid of {model.n_points} points",
-                model.n_points, 0, 0, 0, "solver error", reason=str(exc),
-            )  # fmt: skip
+            return LpvNormResult.solver_failed(model.n_points, str(exc))
 
     best = None
     for sysf, cs, options in c_sys:

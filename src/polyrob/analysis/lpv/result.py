@@ -93,6 +93,12 @@ class LpvNormResult:
     seconds: float = 0.0
     whole_box: bool = False
 
+    @classmethod
+    def solver_failed(cls, n_points: int, reason: str) -> LpvNormResult:
+        """The result of a search whose solver raised: nothing proved, and why."""
+        return cls(float("inf"), False, float("inf"), float("nan"), "", f"on the grid of {n_points} points",
+                   n_points, 0, 0, 0, "solver error", reason=reason)  # fmt: skip
+
     @property
     def status(self) -> str:
         """``"PROVED"`` when :attr:`gamma` is a verified bound, else ``"NOT_PROVED"``."""

@@ -485,10 +485,7 @@ def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinem
         try:
             return lpvnorm(sysf, list(model.axes), scaled, basis, rates_at=kinematic_rates(model, rates, cs), **options)
         except SolverError as exc:
-            return LpvNormResult(
-                float("inf"), False, float("inf"), float("nan"), "", f"on the grid of {model.n_points} points",
-                model.n_points, 0, 0, 0, "solver error", reason=str(exc),
-            )  # fmt: skip
+            return LpvNormResult.solver_failed(model.n_points, str(exc))
 
     best = None
     for sysf, cs, options in tries:
