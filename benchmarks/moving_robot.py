@@ -279,7 +279,8 @@ def main(argv=None) -> int:
     add_results_option(ap)
     args = ap.parse_args(argv)
     points = tuple(int(x) for x in args.points.split(","))
-    recheck = {"none": None, "auto": "auto"}.get(args.recheck) or tuple(int(x) for x in args.recheck.split(","))
+    named = {"none": None, "auto": "auto"}
+    recheck = named[args.recheck] if args.recheck in named else tuple(int(x) for x in args.recheck.split(","))
     doc = {
         "problem": "paper_2r --domain paper",
         "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
