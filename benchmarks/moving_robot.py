@@ -8,7 +8,8 @@ paper's K*), the weights at ``--bandwidth-scale FACTOR``:
   qdot2`` at every grid point, the velocities bounded by the domain's
   accelerations with ``X`` on the tensor basis, or arbitrary:
   docs/certificates.md), its proved gamma (the larger of the search grid's
-  and the finer re-check grid's), status, frozen peak and seconds;
+  and the finer re-check grid's, or the cells' level when they hold), status,
+  frozen peak, seconds and peak memory;
 * with ``--full``: also the frozen-robot μ and the arbitrarily fast verdict
   of :func:`polyrob.pipeline.analyze_controller` (the PLDI bounded on the
   paper's domain, ``lft`` model) -- minutes more per run.
@@ -17,7 +18,7 @@ Prints one JSON document (with the machine, the date and the load average).
 
     python benchmarks/moving_robot.py [--runs 4:tests/fixtures/paper_2r_tf3_alpha4_K.json,1:paper]
                                       [--velocities auto|bounded|arbitrary] [--points 5,3] [--full]
-                                      [--separable] [--recheck 9,5|none]
+                                      [--separable] [--recheck 9,5|none] [--level L --cells --cell-level G]
     python benchmarks/moving_robot.py --lower-only    # the gain found along admissible trajectories, alone
     python benchmarks/moving_robot.py --slice 3.9564,9.9561 --harmonics 1,2 [--q-points 12] [--slice-rate 0]
 """
@@ -66,6 +67,7 @@ def run(
     harmonics=1,
     save_x=None,
     level=None,
+    cell_level=None,
     cells=False,
     cell_time_limit=900.0,
     symmetric=False,
@@ -84,7 +86,7 @@ def run(
     mv = moving_robot_certificate(
         problem, K, velocities=velocities, points=points, tensor=tensor, recheck=recheck, harmonics=harmonics,
         level=level, cells=cells, cell_time_limit=cell_time_limit, progress=cells, symmetric=symmetric,
-        cell_workers=cell_workers,
+        cell_workers=cell_workers, cell_level=cell_level,
     )  # fmt: skip
     s = mv.summary()
     if save_x and mv.result is not None and mv.result.proved:
@@ -108,6 +110,7 @@ def run(
         "solver_status": None if mv.result is None else mv.result.solver_status,
         "n_states": None if mv.result is None else mv.result.n_states,
         "seconds": round(time.perf_counter() - t, 1),
+        "memory": peak_memory(),
     }
     if full:
         from polyrob.pipeline import analyze_controller, build_problem
@@ -122,6 +125,19 @@ def run(
         out["arbitrarily_fast"] = {"verdict": None if tv is None else tv.verdict}
         out["full_seconds"] = round(time.perf_counter() - t, 1)
     return out
+
+
+def peak_memory() -> dict:
+    """Peak resident memory (MB) of this process and of its largest finished child (a cell worker), and their sum
+    over this process and the available cores' workers: a bound of the peak while they ran at once."""
+    import resource
+
+    from polyrob.workers import available_cores
+
+    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
+    child = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
+    return {"process_mb": round(own, 1), "largest_worker_mb": round(child, 1),
+            "bound_mb": round(own + available_cores() * child, 1)}  # fmt: skip
 
 
 def saved_search(factor: float, spec: str, path: str):
@@ -154,7 +170,7 @@ def saved_search(factor: float, spec: str, path: str):
 
 
 def saved_x_between(factor: float, spec: str, path: str, *, recheck, cell_time_limit: float, level=None,
-                    cell_workers=None) -> dict:  # fmt: skip
+                    cell_workers=None, cell_level=None) -> dict:  # fmt: skip
     """The ``X`` a run saved (``--save-x``) re-checked on a finer grid (``recheck=None``: only on its own) and proved
     on cells, without searching again."""
     from types import SimpleNamespace
@@ -178,7 +194,9 @@ def saved_x_between(factor: float, spec: str, path: str, *, recheck, cell_time_l
         out[key]["gamma"] = out[key]["gamma"] if np.isfinite(out[key]["gamma"]) else None
     out["recheck_seconds"] = round(time.perf_counter() - t, 1)
     if np.isfinite(g) and g < 1:
-        g_cells = float(level) if level is not None and level >= g else 0.5 * (g + 1.0)
+        from polyrob.analysis.lpv.robot import cells_level
+
+        g_cells = cells_level(g, level, cell_level)
         chk = check_cells(model, system, saved["X"], basis, rates, g_cells, similarity=sysf.similarity, c=c,
                           time_limit=cell_time_limit, progress=True, workers=cell_workers)  # fmt: skip
         out["cells"] = chk.summary()
@@ -270,6 +288,7 @@ def main(argv=None) -> int:
     )
     ap.add_argument("--save-x", default=None, metavar="FILE.npz", help="save the proved X(rho) of the (last) run")
     ap.add_argument("--level", type=float, default=None, help="fix gamma there and maximise the LMIs' margin")
+    ap.add_argument("--cell-level", type=float, default=None, help="the level the cells prove (default: cells_level's rule)")
     ap.add_argument("--cells", action="store_true", help="prove the X between the grid points, on cells")
     ap.add_argument("--symmetric", action="store_true", help="the half box and an even X (the loop is even in rho)")
     ap.add_argument("--cell-time-limit", type=float, default=900.0, help="seconds for --cells")
@@ -299,7 +318,7 @@ def main(argv=None) -> int:
         if args.load_x:
             doc["runs"].append(saved_x_between(float(factor), spec, args.load_x, recheck=recheck if recheck != "auto"
                                else (33, 5), cell_time_limit=args.cell_time_limit, level=args.level,
-                               cell_workers=args.cell_workers))  # fmt: skip
+                               cell_workers=args.cell_workers, cell_level=args.cell_level))  # fmt: skip
             continue
         if args.slice:
             v = [float(x) for x in args.slice.split(",")]
@@ -318,6 +337,7 @@ def main(argv=None) -> int:
                 harmonics=int(args.harmonics.split(",")[0]),
                 save_x=args.save_x,
                 level=args.level,
+                cell_level=args.cell_level,
                 cells=args.cells,
                 cell_time_limit=args.cell_time_limit,
                 symmetric=args.symmetric,

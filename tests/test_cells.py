@@ -91,7 +91,9 @@ def test_the_certificate_with_cells_is_certified_and_says_what_it_covers(robot, 
     model = scheduling(robot, tiny, points=(3, 2))
     rates, _ = rate_bounds(model, tiny)
     qddot_max = [2 * rates[1][1], 2 * rates[2][1]]
-    c = moving_robot_certificate(problem, pd_controller(), points=(3, 2), velocities="bounded", qddot_max=qddot_max,
+    # three points per velocity: with two, X's slope in each velocity is free between them, and the structured
+    # solver's X (same margin as Clarabel's) fails the finer grid at 2.59 where Clarabel's held at 0.80
+    c = moving_robot_certificate(problem, pd_controller(), points=(3, 3), velocities="bounded", qddot_max=qddot_max,
                                  level=0.9, cells=True)  # fmt: skip
     assert c.cells["holds"], c.cells
     assert c.cells["workers"] == available_cores()  # the default reaches check_cells: every core
@@ -99,7 +101,7 @@ def test_the_certificate_with_cells_is_certified_and_says_what_it_covers(robot, 
     assert cert.status.value == "CERTIFIED" and cert.bound == pytest.approx(0.9)
     assert "cells covering the whole box" in " ".join(cert.scope.notes)
     assert "between the grid points: proved at level 0.9" in c.details()
-    plain = moving_robot_certificate(problem, pd_controller(), points=(3, 2), velocities="bounded",
+    plain = moving_robot_certificate(problem, pd_controller(), points=(3, 3), velocities="bounded",
                                      qddot_max=qddot_max, level=0.9)  # fmt: skip
     assert plain.certificate.status.value == "GRID_ONLY" and not plain.cells
 

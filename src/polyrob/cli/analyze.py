@@ -13,7 +13,13 @@ from polyrob.cli.common import (
     exit_status,
     robot_from_args,
 )
-from polyrob.cli.options import add_sampling_arguments, int_at_least, parse_frequencies, sampling_from_args
+from polyrob.cli.options import (
+    add_sampling_arguments,
+    int_at_least,
+    parse_frequencies,
+    positive_float,
+    sampling_from_args,
+)
 from polyrob.cli.plant import add_plant_arguments, problem_from_args
 from polyrob.errors import PolyrobError
 
@@ -218,8 +224,22 @@ def add_moving_harmonics_argument(p) -> None:
         "box, or a task's box of positions, velocities and accelerations (an analytic robot such as paper_2r, or a "
         "URDF robot of up to 3 joints; the verdict then covers the whole box).  The search is asked for "
         "room between its points: margin maximised at level 0.95, q2 every pi/8 with --moving-harmonics, the half "
-        "box of an even loop; with --moving-harmonics 2 paper_2r's tf3 loop at x 4 is proved between its points in about 30 min "
+        "box of an even loop; with --moving-harmonics 2 paper_2r's tf3 loop at x 4 is proved between its points in minutes "
         "(docs/certificates.md); implies --moving",
+    )
+    p.add_argument(
+        "--moving-level",
+        type=positive_float,
+        default=None,
+        help=f"with --moving-cells: the level at which the search maximises the LMIs' margin (default "
+        f"{MOVING_CELLS_LEVEL}); below the bound wanted, so that X has room between its grid points",
+    )
+    p.add_argument(
+        "--moving-cells-level",
+        type=positive_float,
+        default=None,
+        help="with --moving-cells: the level the cells prove (default: the search's level when the grid's bound is "
+        "below it, else halfway from that bound to 1); the verdict's bound when they hold",
     )
 
 
@@ -250,13 +270,21 @@ def moving_asked(args) -> bool | None:
 def moving_options(args) -> dict | None:
     """The moving-robot search's options from ``--moving-harmonics``, ``--moving-cells`` (``None``: the default)."""
     n = getattr(args, "moving_harmonics", None)
+    for flag in ("moving_level", "moving_cells_level"):
+        if getattr(args, flag, None) is not None and not getattr(args, "moving_cells", False):
+            from polyrob.errors import ArgumentError
+
+            raise ArgumentError(f"--{flag.replace('_', '-')} sets a level of --moving-cells: add --moving-cells, or drop it")
     out = {} if n is None else {"velocities": "bounded", "harmonics": int(n), "points": (9, 3)}
     if getattr(args, "qdddot_max", None) is not None:
         out["jerk"] = args.qdddot_max  # a task domain's (polyrob.analysis.lpv.task); refused on another domain
     if getattr(args, "moving_cells", False):
         # cells need an X with room between the points: its margin maximised at a level, q2 every pi/8 (the
         # half box of an even loop holds as many points as the whole one at (9, 3)); docs/certificates.md
-        out.update(cells=True, progress=True, level=MOVING_CELLS_LEVEL, symmetric="auto")
+        level = getattr(args, "moving_level", None) or MOVING_CELLS_LEVEL
+        out.update(cells=True, progress=True, level=level, symmetric="auto")
+        if getattr(args, "moving_cells_level", None) is not None:
+            out["cell_level"] = args.moving_cells_level
         if n is not None:
             out["points"] = (17, 3)
     return out or None

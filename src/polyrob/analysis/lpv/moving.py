@@ -106,7 +106,7 @@ def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: b
     from polyrob.analysis.lpv.basis import default_basis, even_functions
     from polyrob.analysis.lpv.norm import lpvnorm
     from polyrob.analysis.lpv.result import LpvNormResult
-    from polyrob.analysis.lpv.robot import conditioned, kinematic_rates, refine
+    from polyrob.analysis.lpv.robot import SEARCH_SOLVER, conditioned, kinematic_rates, refine
 
     centre = np.array([0.5 * (a[0] + a[-1]) for a in model.axes])
     rates = list(rates)
@@ -119,7 +119,7 @@ def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: b
     fast = all(not np.isfinite(hi) for _, hi in rates)
     c_sys = []
     try:  # the conditioned copy first: in the loop's own coordinates the solver stalls (docs/certificates.md)
-        c_sys.append((*conditioned(system, centre), {"eps": 1e-4, "level": level}))
+        c_sys.append((*conditioned(system, centre), {"eps": 1e-4, "level": level, "solver": SEARCH_SOLVER}))
     except NotApplicable:
         pass
     c = conditioned_time_scale(system, centre)
@@ -128,7 +128,7 @@ def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: b
         a, b, cc, d = system(rho)
         return a / c, b / c, cc, d
 
-    c_sys.append((time_scaled, c, {"level": level}))
+    c_sys.append((time_scaled, c, {"level": level, "solver": SEARCH_SOLVER}))
 
     def solve(sysf, cs, options):
         args = (None, None) if fast else ([(lo / cs, hi / cs) for lo, hi in rates], basis)
@@ -172,6 +172,7 @@ def moving_robot_certificate(
     recheck="auto",
     level=None,
     cells: bool = False,
+    cell_level: float | None = None,
     cell_time_limit: float | None = None,
     cell_workers: int | None = None,
     symmetric: bool = False,
@@ -215,8 +216,9 @@ def moving_robot_certificate(
         set, which a check between the grid points needs.
     cells : bool
         Prove the returned ``X`` between the grid points, on cells covering the
-        whole box (:func:`~polyrob.analysis.lpv.cells.check_cells`, at ``level``
-        or else halfway from the grid's bound to 1), bounded by its number of
+        whole box (:func:`~polyrob.analysis.lpv.cells.check_cells`, at
+        ``cell_level``, else as :func:`~polyrob.analysis.lpv.robot.cells_level`
+        says), bounded by its number of
         cells (``progress``: a bar); when it holds the status is CERTIFIED.
         ``cell_time_limit``: a wall-clock safety net the caller sets (default
         none), named in the verdict when it fires.  ``cell_workers``: the
@@ -282,9 +284,9 @@ def moving_robot_certificate(
         g_grid = max(result.gamma, finer.get("gamma", result.gamma))
         if cells and result.proved and g_grid < 1:
             from polyrob.analysis.lpv.cells import check_cells
+            from polyrob.analysis.lpv.robot import cells_level
 
-            # the search's level, else halfway from the grid's bound to 1: room between the points, and a bound < 1
-            g_cells = float(level) if level is not None and level >= g_grid else 0.5 * (g_grid + 1.0)
+            g_cells = cells_level(g_grid, level, cell_level)
             between = check_cells(model, system, result.X, basis, used, g_cells, similarity=getattr(sysf, "similarity",
                                   None), c=cs, time_limit=cell_time_limit, progress=progress, workers=cell_workers)  # fmt: skip
         found = {}

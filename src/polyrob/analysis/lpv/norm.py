@@ -232,7 +232,9 @@ def _options(options: dict) -> dict:
     if not (0 < lo < hi):
         raise ArgumentError(f"lpvnorm: x_bounds must satisfy 0 < lo < hi (got {opts['x_bounds']})")
     if opts["level"] is not None and (opts["solver"] == "cvxpy" or not opts["level"] > 0):
-        raise ArgumentError(f"lpvnorm: level must be positive, with solver 'clarabel' or 'scs' (got {opts['level']})")
+        raise ArgumentError(
+            f"lpvnorm: level must be positive, with solver 'clarabel', 'scs' or 'structured' (got {opts['level']})"
+        )
     return opts
 
 

@@ -39,7 +39,7 @@ import numpy as np
 from polyrob.errors import ArgumentError, NotApplicable
 
 __all__ = ["MovingRobotModel", "scheduling", "rate_bounds", "closed_loop_system", "kinematic_rates", "conditioned",
-           "reconditioned", "refine", "REFINE_PASSES", "REFINE_GAIN", "even_half", "RATE_SAMPLES",
+           "reconditioned", "refine", "cells_level", "REFINE_PASSES", "SEARCH_SOLVER", "REFINE_GAIN", "even_half", "RATE_SAMPLES",
            "RATE_MARGIN"]  # fmt: skip
 
 #: Domain points the acceleration bounds are sampled on (Sobol, plus the grid's corners).
@@ -457,7 +457,34 @@ def reconditioned(system_c, X_centre, *, floor: float = 1e-9):
 #: Searches run again in the coordinates of the last proved ``X`` (:func:`~polyrob.analysis.lpv.robot.reconditioned`),
 #: while each lowers the proved bound by at least :data:`REFINE_GAIN` of it.
 REFINE_PASSES = 3
+#: The LMI solver of the fixed-torque moving-robot search: the structured interior point (polyrob.analysis.lpv.sdp)
+#: holds the grid's matrices only; on the x4 search Clarabel's conic data took 5.9-10 GB and 20-40 minutes, this
+#: 0.4 GB and 40 s.  The task search keeps Clarabel: on a small task whose grid has as many positions as X has
+#: position functions, the structured solver's X held on the grid and failed between its points, Clarabel's held.
+SEARCH_SOLVER = "structured"
 REFINE_GAIN = 0.02
+
+
+def cells_level(g_grid: float, level=None, cell_level=None) -> float:
+    """The level the cells prove the searched ``X`` at.
+
+    ``cell_level`` when given; else the search's ``level`` when it is at or
+    above ``g_grid`` (the larger of the search grid's and the finer grid's
+    bounds); else halfway from ``g_grid`` to 1: room between the points, and
+    a bound below 1.
+
+    Examples
+    --------
+    >>> cells_level(0.8155, level=0.8, cell_level=0.85), cells_level(0.9, level=0.95), cells_level(0.9)
+    (0.85, 0.95, 0.95)
+    """
+    if cell_level is not None:
+        if not (np.isfinite(cell_level) and cell_level > 0):
+            raise ArgumentError(f"the cells' level must be a positive number (got {cell_level})")
+        return float(cell_level)
+    if level is not None and level >= g_grid:
+        return float(level)
+    return 0.5 * (g_grid + 1.0)
 
 
 def refine(best, solve, basis, centre):

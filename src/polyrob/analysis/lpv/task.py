@@ -299,6 +299,7 @@ def task_motion_certificate(
     harmonics: int = 1,
     level=None,
     cells: bool = False,
+    cell_level: float | None = None,
     cell_time_limit: float | None = None,
     cell_workers: int | None = None,
     progress: bool = False,
@@ -347,7 +348,7 @@ def task_motion_certificate(
         for the cells between the grid points.
     cells : bool
         Prove ``X`` between the grid points (:func:`~polyrob.analysis.lpv.cells.check_cells`,
-        at ``level`` or else halfway from the grid's bound to 1); ``cell_time_limit``
+        at ``cell_level``, else as :func:`~polyrob.analysis.lpv.robot.cells_level` says); ``cell_time_limit``
         (a wall-clock safety net the caller sets), ``cell_workers`` and
         ``progress`` as for :func:`~polyrob.analysis.lpv.moving.moving_robot_certificate`.
 
@@ -398,10 +399,11 @@ def task_motion_certificate(
         g_grid = max(result.gamma, finer.get("gamma", result.gamma))
         if cells and result.proved and g_grid < 1:
             from polyrob.analysis.lpv.cells import check_cells
+            from polyrob.analysis.lpv.robot import cells_level
 
             # X is free of the accelerations: their rate (the jerk) does not enter, so no rate box for them
             used = [(-np.inf, np.inf) if kind == "qddot" else r for r, kind in zip(rates, model.kinds)]
-            g_cells = float(level) if level is not None and level >= g_grid else 0.5 * (g_grid + 1.0)
+            g_cells = cells_level(g_grid, level, cell_level)
             between = check_cells(model, system, result.X, basis, used, g_cells, similarity=getattr(sysf, "similarity",
                                   None), c=cs, time_limit=cell_time_limit, progress=progress, workers=cell_workers)  # fmt: skip
     except NotApplicable as exc:
