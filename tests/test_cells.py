@@ -149,6 +149,32 @@ def test_moving_cells_asks_for_the_moving_robot_and_its_cells():
     assert moving_options(Namespace(moving=True, moving_harmonics=None, moving_cells=False)) is None
 
 
+def test_the_cli_s_levels_reach_the_certificate_and_need_the_cells(capsys):
+    from polyrob.cli import build_parser, main
+    from polyrob.cli.analyze import moving_options
+
+    argv = ["analyze", "paper_2r", "--controller", "paper", "--moving-harmonics", "2", "--moving-cells",
+            "--moving-level", "0.8", "--moving-cells-level", "0.85"]  # fmt: skip
+    opts = moving_options(build_parser().parse_args(argv))
+    assert opts["level"] == 0.8 and opts["cell_level"] == 0.85 and opts["cells"]
+    assert main(["analyze", "paper_2r", "--controller", "paper", "--moving-level", "0.8"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--moving-level sets a level of --moving-cells" in err[0]
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(argv[:-1] + ["-1"])  # a level is a positive number
+
+
+def test_the_cells_level_rule():
+    from polyrob.analysis.lpv.robot import cells_level
+    from polyrob.errors import ArgumentError
+
+    assert cells_level(0.8155, level=0.8, cell_level=0.85) == 0.85  # asked for
+    assert cells_level(0.9, level=0.95) == 0.95  # the search's level, above the grid's bound
+    assert cells_level(0.9, level=0.85) == pytest.approx(0.95)  # halfway from the grid's bound to 1
+    with pytest.raises(ArgumentError):
+        cells_level(0.8, cell_level=float("nan"))
+
+
 def _setting(searched):
     from polyrob.analysis.lpv.cells import cell_setting
 

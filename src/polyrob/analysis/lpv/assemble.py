@@ -280,8 +280,8 @@ def _solve_structured(data, *, x_bounds, eps, curvature, x_factor, settings, lev
         raise ArgumentError("lpvnorm: solver 'structured' takes neither x_factor nor affine=True; use 'clarabel'")
     family = BoundedRealFamily(data, x_bounds=x_bounds, eps=eps, level=level)
     # with a level the point sought is one well inside every LMI, not the last digits of the margin: stopped at
-    # 1e-4 the iterate stays central, and on the x4 moving robot its X held at 0.853 between the grid points,
-    # against 1.017 for the same search driven to 1e-5 (docs/certificates.md)
+    # 1e-4 the iterate stays central; driven further, X goes to the edge of the feasible set and holds less well
+    # between the grid points (measured on the x4 moving robot, docs/lpvnorm.md)
     res = solve(family, **{"tol": STRUCTURED_LEVEL_TOL if level is not None else 1e-8, **dict(settings or {})})
     if res.status == "infeasible" or not np.all(np.isfinite(res.y)):
         return None, float("inf"), res.status
