@@ -51,7 +51,7 @@ class InteriorPointResult:
         The dual variables (the caller's unknowns).
     status : str
         ``"solved"``, ``"max_iterations"``, ``"stalled"``, ``"numerical_error"`` (a primal block lost
-        definiteness to rounding) or ``"infeasible"`` (the objectives diverge).  Every ``y`` returned
+        definiteness to rounding, or the Schur complement is singular) or ``"infeasible"`` (the objectives diverge).  Every ``y`` returned
         is the last iterate: strictly inside the dual cones once the dual residual is zero.
     iterations : int
     dual_objective, primal_objective : float
@@ -85,6 +85,17 @@ def _nt_scaling(X: np.ndarray, Z: np.ndarray):
     return G, Ginv, np.sqrt(lam2)
 
 
+def _cholesky(H: np.ndarray):
+    """Cholesky factor of ``H``, regularised up to ``1e-8`` of its largest diagonal entry; ``None`` if that fails."""
+    scale = float(np.abs(np.diag(H)).max() or 1.0)
+    for reg in (0.0, 1e-14, 1e-11, 1e-8):
+        try:
+            return sla.cho_factor(H + reg * scale * np.eye(H.shape[0]), lower=True)
+        except np.linalg.LinAlgError:
+            continue
+    return None
+
+
 def _max_step(lam: np.ndarray, Ds: np.ndarray) -> float:
     """Largest ``alpha`` with ``diag(lam) + alpha Ds >= 0`` over a group (``inf`` when every direction is PSD)."""
     r = 1.0 / np.sqrt(lam)
@@ -116,7 +127,7 @@ def solve(family, *, tol: float = 1e-8, max_iterations: int = 100, step: float =
     Raises
     ------
     SolverError
-        The Schur complement is not positive definite even after regularisation.
+        The Schur complement is singular at the starting point (later, the last iterate is returned).
     """
     C, b = family.C, np.asarray(family.b, float)
     norm_c = 1.0 + max(float(np.sqrt(np.einsum("lab,lab->l", c, c).max())) for c in C if c.shape[0])
@@ -158,14 +169,12 @@ def solve(family, *, tol: float = 1e-8, max_iterations: int = 100, step: float =
             break
         W = [g @ np.transpose(g, (0, 2, 1)) for g, _, _ in scal]
         H = family.schur(W)
-        try:
-            factor = sla.cho_factor(H, lower=True)
-        except np.linalg.LinAlgError:
-            reg = 1e-12 * float(np.abs(np.diag(H)).max() or 1.0)
-            try:
-                factor = sla.cho_factor(H + reg * np.eye(H.shape[0]), lower=True)
-            except np.linalg.LinAlgError as exc:
-                raise SolverError(f"interior point: the Schur complement is singular at iteration {it}") from exc
+        factor = _cholesky(H)
+        if factor is None:  # singular even regularised: near the optimum the last y is what there is
+            if it == 1:
+                raise SolverError("interior point: the Schur complement is singular at the starting point")
+            status = "numerical_error"
+            break
         WRdW = [w @ r @ w for w, r in zip(W, Rd)]
 
         def direction(R_scaled):
