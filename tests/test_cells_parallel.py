@@ -123,3 +123,21 @@ def test_a_cell_test_that_raises_in_a_worker_is_a_clear_error(searched):
         _check(searched, 1.2, workers=2, basis=basis)
     with pytest.raises(ArgumentError, match="workers must be at least 1"):
         _check(searched, 1.2, workers=0)
+
+
+def test_a_loop_with_state_space_weights_reaches_the_workers():
+    """python-control's StateSpace does not pickle; the weights of a problem the CLI builds are StateSpace, and the
+    loop the cells' workers receive must pickle anyway (it kept the CLI's cells on one process)."""
+    import control
+
+    robot = polyrob.load_robot("paper_2r")
+    model = scheduling(robot, Domain.from_robot(robot, "paper"), points=(3, 2))
+    W_S = control.ss(-0.01 * np.eye(2), np.eye(2), 0.5 * np.eye(2), 0.5 * np.eye(2))
+    with pytest.raises(Exception):
+        pickle.dumps(W_S)  # the premise: if this ever pickles, the test below proves less
+    system = closed_loop_system(model, pd_controller(), W_S, control.tf([1.0, 1.0], [0.1, 1.0]))
+    again = pickle.loads(pickle.dumps(system.of_plant))
+    rho = np.array([a[1] for a in model.axes])
+    A, B = model.plant(rho)
+    for x, y in zip(system.of_plant(A, B), again(A, B)):
+        assert np.array_equal(x, y)

@@ -290,7 +290,8 @@ def analyze_controller(
     elif task:  # on a task domain the Jacobians depend on the accelerations too (polyrob.analysis.lpv.task)
         from polyrob.analysis.lpv.task import task_motion_certificate
 
-        keep = ("points", "velocities", "harmonics", "level", "cells", "cell_time_limit", "cell_workers", "progress")
+        keep = ("points", "velocities", "harmonics", "level", "cells", "cell_level", "cell_time_limit", "cell_workers",
+                "progress")
         mv = task_motion_certificate(problem, K, auto=moving is None, jerk=jerk, time_varying=tv,
                                      **{k: v for k, v in options.items() if k in keep})  # fmt: skip
     else:

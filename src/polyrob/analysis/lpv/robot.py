@@ -320,7 +320,15 @@ class LoopOfPlant:
     """``(A, B) of the robot -> (A, B, C, D)`` of the closed loop (a class, not a closure: the cells' workers pickle it)."""
 
     def __init__(self, Kmats, W_S, W_T, W_KS):
-        self.Kmats, self.W_S, self.W_T, self.W_KS = Kmats, W_S, W_T, W_KS
+        from polyrob.analysis.time_varying.vertices import weight_mats
+
+        # the weights as (A, B, C, D) arrays: python-control's StateSpace does not pickle (a lambda of its
+        # __init__), and the cells' workers receive this object; a weight that failed to pickle sent the cells
+        # back to one process
+        m = Kmats[3].shape[1]  # D_K: m x m
+        self.Kmats = Kmats
+        self.W_S, self.W_T, self.W_KS = (weight_mats(W, m, name) for W, name in ((W_S, "W_S"), (W_T, "W_T"),
+                                                                                   (W_KS, "W_KS")))
 
     def __call__(self, A, B):
         from polyrob.analysis.time_varying.vertices import performance_vertices, vertex_set

@@ -42,6 +42,7 @@ __all__ = [
     "augmented_vertices",
     "performance_vertices",
     "controller_mats",
+    "weight_mats",
     "POLYTOPE_MAX_DIM",
     "MAX_VERTICES",
 ]
@@ -185,7 +186,7 @@ def _from_pldi(pldi, which: str, max_vertices: int) -> VertexSet:
 # --------------------------------------------------------------------------- closed loops
 
 
-def _weight_mats(W, m: int, name: str):
+def weight_mats(W, m: int, name: str):
     """``(A, B, C, D)`` of an ``m x m`` weight (SISO: one copy per channel); ``None`` omits it."""
     import control
 
@@ -242,9 +243,9 @@ def augmented_vertices(vs: VertexSet, W_S=None, W_T=None, W_KS=None):
     ws = [
         (w, lab)
         for w, lab in (
-            (_weight_mats(W_S, m, "W_S"), "e"),
-            (_weight_mats(W_T, m, "W_T"), "y"),
-            (_weight_mats(W_KS, m, "W_KS"), "u"),
+            (weight_mats(W_S, m, "W_S"), "e"),
+            (weight_mats(W_T, m, "W_T"), "y"),
+            (weight_mats(W_KS, m, "W_KS"), "u"),
         )
         if w is not None
     ]
