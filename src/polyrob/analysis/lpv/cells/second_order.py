@@ -251,11 +251,10 @@ def second_order_cell(loop, model, enclose, basis, Xs, rate_plan, fixed, gamma, 
     if why:
         return -np.inf, None, why
     worst, contrib, slope = np.inf, np.zeros(p), np.zeros(p)
+    signs = np.array(list(itertools.product((-1.0, 1.0), repeat=p)))  # the cell's vertices, one batch of eigenvalues
     for e in ex:
-        top = -np.inf
-        for sigma in itertools.product((-1.0, 1.0), repeat=p):  # lambda_max of the affine part: convex in delta
-            T = e.WLW + np.einsum("a,aij->ij", np.array(sigma) * h, e.D)
-            top = max(top, np.linalg.eigvalsh(T)[-1] + 8 * T.shape[0] * _U * np.linalg.norm(T))
+        T = e.WLW[None] + np.einsum("va,aij->vij", signs * h, e.D)  # lambda_max of the affine part: convex in delta
+        top = float(np.max(np.linalg.eigvalsh(T)[:, -1] + 8 * T.shape[1] * _U * np.linalg.norm(T, axis=(1, 2))))
         worst = min(worst, -(top + e.allowance + 0.5 * h @ e.K @ h))
         nD = symmetric_norms(e.D)
         contrib, slope = np.maximum(contrib, h * (nD + e.K @ h)), np.maximum(slope, 0.5 * nD)
@@ -290,8 +289,7 @@ def _positive_margin(Xs, nX, fc, gc, Hcell, h) -> float:
     Kx = symmetric_norms(np.einsum("jab,jrs->abrs", hmid, WXW).reshape(p * p, n, n)).reshape(p, p) * (1 + 1e-9)
     Kx = Kx + np.einsum("jab,j->ab", hrad, nW) + fl * np.einsum("jab,j->ab", np.abs(hmid), nX)
     allowance = tol / lx[0] + h @ (grad_rad.T @ nW + fl * (np.abs(gmid).T @ nX)) + 0.5 * h @ Kx @ h
-    low = np.inf
-    for sigma in itertools.product((-1.0, 1.0), repeat=p):
-        T = np.eye(n) + np.einsum("a,ars->rs", np.array(sigma) * h, Dx)
-        low = min(low, np.linalg.eigvalsh(T)[0] - 8 * n * _U * np.linalg.norm(T))
+    signs = np.array(list(itertools.product((-1.0, 1.0), repeat=p)))
+    T = np.eye(n)[None] + np.einsum("va,ars->vrs", signs * h, Dx)
+    low = float(np.min(np.linalg.eigvalsh(T)[:, 0] - 8 * n * _U * np.linalg.norm(T, axis=(1, 2))))
     return float(low - allowance)
