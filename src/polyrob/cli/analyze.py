@@ -214,8 +214,8 @@ def add_moving_harmonics_argument(p) -> None:
         type=int_at_least(1),
         default=None,
         help="the rate-bounded search with bounded accelerations, X(rho) on cos k q, sin k q (k <= N) times "
-        "(1, qdot), on a 9 x 3 grid: N = 2 proves paper_2r's tf3 loop at x 4 on the grid (about an hour, "
-        "docs/certificates.md); implies --moving",
+        "(1, qdot), on a 9 x 3 grid: N = 2 proves paper_2r's tf3 loop at x 4 on the grid "
+        "(docs/certificates.md); implies --moving",
     )
     p.add_argument(
         "--moving-cells",
