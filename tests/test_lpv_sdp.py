@@ -118,3 +118,22 @@ def test_an_unstable_loop_is_not_proved():
 def test_options_it_does_not_take_are_refused():
     with pytest.raises(ArgumentError, match="structured"):
         polyrob.lpvnorm(lpvtools_demo_loop(), GRID, solver="structured", x_factor=np.eye(4))
+
+
+def test_a_step_that_overflows_ends_with_the_last_finite_iterate(monkeypatch):
+    """A scaling that overflows (a block near singular) stops the solve; the y returned is the last finite one."""
+    import polyrob.analysis.lpv.sdp.interior as interior
+
+    data = grid_data([np.array([[-1.0]])], [np.array([[1.0]])], [np.array([[1.0]])], [np.array([[0.0]])])
+    calls = {"n": 0}
+    real = interior._nt_scaling
+
+    def overflowing(X, Z):
+        calls["n"] += 1
+        G, Ginv, lam = real(X, Z)
+        return (G * 1e300, Ginv, lam) if calls["n"] > 9 else (G, Ginv, lam)  # from the fourth iteration on
+
+    monkeypatch.setattr(interior, "_nt_scaling", overflowing)
+    res = solve(BoundedRealFamily(data, eps=0.0))
+    assert res.status == "numerical_error" and np.all(np.isfinite(res.y)) and res.iterations == 4
+    assert res.dual_residual < 1e-9  # the last iterate is still inside the dual cones

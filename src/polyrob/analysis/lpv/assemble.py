@@ -282,7 +282,10 @@ def _solve_structured(data, *, x_bounds, eps, curvature, x_factor, settings, lev
     # with a level the point sought is one well inside every LMI, not the last digits of the margin: stopped at
     # 1e-4 the iterate stays central; driven further, X goes to the edge of the feasible set and holds less well
     # between the grid points (measured on the x4 moving robot, docs/lpvnorm.md)
-    res = solve(family, **{"tol": STRUCTURED_LEVEL_TOL if level is not None else 1e-8, **dict(settings or {})})
+    try:
+        res = solve(family, **{"tol": STRUCTURED_LEVEL_TOL if level is not None else 1e-8, **dict(settings or {})})
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        raise SolverError(f"lpvnorm: the structured LMI solver failed: {exc}") from exc
     if res.status == "infeasible" or not np.all(np.isfinite(res.y)):
         return None, float("inf"), res.status
     gamma = float(level) if level is not None else float(res.y[0])

@@ -38,7 +38,6 @@ import scipy.linalg as sla
 from polyrob.errors import SolverError
 
 __all__ = ["InteriorPointResult", "solve"]
-_DEBUG = False
 
 
 @dataclass(frozen=True)
@@ -91,7 +90,7 @@ def _cholesky(H: np.ndarray):
     for reg in (0.0, 1e-14, 1e-11, 1e-8):
         try:
             return sla.cho_factor(H + reg * scale * np.eye(H.shape[0]), lower=True)
-        except np.linalg.LinAlgError:
+        except (np.linalg.LinAlgError, ValueError):  # not positive definite, or not finite
             continue
     return None
 
@@ -167,8 +166,13 @@ def solve(family, *, tol: float = 1e-8, max_iterations: int = 100, step: float =
         except np.linalg.LinAlgError:  # a block lost definiteness to rounding near the optimum: keep the last y
             status = "numerical_error"
             break
-        W = [g @ np.transpose(g, (0, 2, 1)) for g, _, _ in scal]
-        H = family.schur(W)
+        try:
+            with np.errstate(over="raise", invalid="raise"):
+                W = [g @ np.transpose(g, (0, 2, 1)) for g, _, _ in scal]
+                H = family.schur(W)
+        except FloatingPointError:
+            status = "numerical_error"
+            break
         factor = _cholesky(H)
         if factor is None:  # singular even regularised: near the optimum the last y is what there is
             if it == 1:
@@ -199,20 +203,23 @@ def solve(family, *, tol: float = 1e-8, max_iterations: int = 100, step: float =
             ad = min([_max_step(lam, d) for (_, _, lam), d in zip(scal, sz)] + [np.inf])
             return min(1.0, step * ap), min(1.0, step * ad), sx, sz
 
-        lam_sq = [np.einsum("li,ij->lij", lam**2, np.eye(lam.shape[1])) for _, _, lam in scal]
-        dXa, _, dZa = direction([-m for m in lam_sq])
-        ap, ad, sx, sz = steps(dXa, dZa)
-        mu_aff = _inner([x + ap * d for x, d in zip(X, dXa)], [z + ad * d for z, d in zip(Z, dZa)]) / nu
-        sigma = min(1.0, max(0.0, mu_aff / mu)) ** 3
-        R = []
-        for m, a, c in zip(lam_sq, sx, sz):
-            eye = np.broadcast_to(np.eye(m.shape[1]), m.shape)
-            R.append(sigma * mu * eye - m - _sym(a @ c))
-        dX, dy, dZ = direction(R)
-        ap, ad, _, _ = steps(dX, dZ)
+        try:  # overflow or NaN in a step (a scaling near singular): the last finite iterate is what there is
+            with np.errstate(over="raise", invalid="raise", divide="raise"):
+                lam_sq = [np.einsum("li,ij->lij", lam**2, np.eye(lam.shape[1])) for _, _, lam in scal]
+                dXa, _, dZa = direction([-m for m in lam_sq])
+                ap, ad, sx, sz = steps(dXa, dZa)
+                mu_aff = _inner([x + ap * d for x, d in zip(X, dXa)], [z + ad * d for z, d in zip(Z, dZa)]) / nu
+                sigma = min(1.0, max(0.0, mu_aff / mu)) ** 3
+                R = []
+                for m, a, c in zip(lam_sq, sx, sz):
+                    eye = np.broadcast_to(np.eye(m.shape[1]), m.shape)
+                    R.append(sigma * mu * eye - m - _sym(a @ c))
+                dX, dy, dZ = direction(R)
+                ap, ad, _, _ = steps(dX, dZ)
+        except (FloatingPointError, ValueError, np.linalg.LinAlgError):
+            status = "numerical_error"
+            break
         stall = stall + 1 if max(ap, ad) < 1e-4 else 0
-        if _DEBUG:
-            print(f"    pres {pres:.2e} dres {dres:.2e} gap {gap:.2e} mu {mu:.2e} ap {ap:.3f} ad {ad:.3f} sigma {sigma:.2e}")
         X = [x + ap * d for x, d in zip(X, dX)]
         Z = [z + ad * d for z, d in zip(Z, dZ)]
         y = y + ad * dy
