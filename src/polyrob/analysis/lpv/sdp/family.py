@@ -2,9 +2,9 @@
 
 A general conic solver sees each LMI as a dense ``s(s+1)/2 x nv`` matrix
 (``s = n + m + q`` its side, ``nv = k n(n+1)/2 + 1`` variables): on the
-x4 moving-robot search (576 LMIs of side 26, 1471 variables) that is 3-10 GB
-of coefficients, and Clarabel's KKT factorisation over them takes 20-40
-minutes (docs/certificates.md).  Every LMI has the same shape,
+x4 moving-robot search (324-576 LMIs of side 26 on 81-144 points, 1471 variables)
+Clarabel's runs peaked at 5.9-10.2 GB and took 19-39 minutes, most of it
+the search (docs/certificates.md).  Every LMI has the same shape,
 
 .. math::
 
