@@ -62,6 +62,7 @@ from polyrob.errors import ArgumentError, NotApplicable, SolverError
 __all__ = [
     "TaskMotionModel",
     "task_scheduling",
+    "recheck_points",
     "minimum_jerk_bound",
     "jerk_bounds",
     "task_rate_bounds",
@@ -80,9 +81,23 @@ MIN_JERK_JERK = 60.0
 #: Largest closed loop (states) the task's rate-bounded search runs on by default (``analyze``, ``run``): the main
 #: job's 16-state loop took 527 s on 2 cores at load 3-14 (X on the positions), so it runs on ``--moving`` only.
 AUTO_STATES = 8
-#: Search grid (points per position, per velocity; the accelerations: their two ends) and its re-check.
+#: Search grid (points per position, per velocity; the accelerations: their two ends) and its re-check, the least
+#: one (``recheck="auto"``: at least this, and twice as dense along the positions as the search grid).
 DEFAULT_POINTS = (5, 3)
 DEFAULT_RECHECK = (9, 3)
+
+
+def recheck_points(points) -> tuple[int, int]:
+    """The re-check grid of ``recheck="auto"``: :data:`DEFAULT_RECHECK` or finer, positions twice as dense as ``points``.
+
+    A fixed grid is not finer than a search grid as dense as itself: at ``points=(9, 3)`` it was the search grid.
+
+    Examples
+    --------
+    >>> recheck_points((5, 3)), recheck_points((9, 3)), recheck_points((3, 2))
+    ((9, 3), (17, 3), (9, 3))
+    """
+    return max(DEFAULT_RECHECK[0], 2 * (int(points[0]) - 1) + 1), max(DEFAULT_RECHECK[1], int(points[1]))
 
 
 def minimum_jerk_bound(domain) -> np.ndarray:
@@ -293,7 +308,7 @@ def task_motion_certificate(
     jerk=None,
     auto: bool = False,
     velocities: str = "auto",
-    recheck=DEFAULT_RECHECK,
+    recheck="auto",
     time_varying=None,
     lower_bound: bool | dict = True,
     harmonics: int = 1,
@@ -332,8 +347,9 @@ def task_motion_certificate(
     auto : bool
         Run the rate-bounded search only for a loop of at most :data:`AUTO_STATES` states.
     velocities : {"auto", "bounded", "arbitrary"}
-    recheck : (int, int) or None
-        The finer grid (points per position, per velocity) the ``X`` is re-checked on.
+    recheck : "auto", (int, int) or None
+        The finer grid (points per position, per velocity) the ``X`` is re-checked on
+        (``"auto"``: :func:`recheck_points`).
     time_varying : TimeVaryingCertificate, optional
     lower_bound : bool or dict
         The largest gain found along admissible motions of the task
@@ -394,6 +410,8 @@ def task_motion_certificate(
             rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
         result, sysf, cs = _search(model, system, rates, basis, lpvnorm, conditioned, conditioned_time_scale,
                                    kinematic_rates, level)  # fmt: skip
+        if isinstance(recheck, str):
+            recheck = recheck_points(points)
         finer = {} if recheck is None else finer_recheck(sysf, model, result, rates, basis, points=recheck, c=cs)
         between = None
         g_grid = max(result.gamma, finer.get("gamma", result.gamma))
