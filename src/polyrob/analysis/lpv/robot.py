@@ -466,9 +466,10 @@ def reconditioned(system_c, X_centre, *, floor: float = 1e-9):
 #: while each lowers the proved bound by at least :data:`REFINE_GAIN` of it.
 REFINE_PASSES = 3
 #: The LMI solver of the fixed-torque moving-robot search: the structured interior point (polyrob.analysis.lpv.sdp)
-#: holds the grid's matrices only; on the x4 search Clarabel's conic data took 5.9-10 GB and 20-40 minutes, this
-#: 0.4 GB and 40 s.  The task search keeps Clarabel: on a small task whose grid has as many positions as X has
-#: position functions, the structured solver's X held on the grid and failed between its points, Clarabel's held.
+#: holds the grid's matrices only; the x4 certificates with Clarabel peaked at 5.9-10.2 GB and took 19-39 minutes,
+#: mostly the search, which this solver runs in about 40 s and 0.5 GB (benchmarks/results/moving_robot.json).  The
+#: task search keeps Clarabel: on the small tasks of the tests (two points per velocity) the structured solver's X,
+#: of the same margin, held on the grid and failed between its points, where Clarabel's held.
 SEARCH_SOLVER = "structured"
 REFINE_GAIN = 0.02
 
