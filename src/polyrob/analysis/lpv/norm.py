@@ -265,7 +265,9 @@ def lpvnorm(system, grid, rate_bounds=None, basis=None, **options) -> LpvNormRes
         ``x_bounds`` ((1e-6, 1e6)): bounds of ``X(rho)``'s eigenvalues in the
         conditioned coordinates; ``eps`` (1e-7): strictness margin of the LMIs;
         ``solver`` ("clarabel"): "clarabel" or "scs" on the conic data
-        assembled directly (:mod:`polyrob.analysis.lpv.assemble`), or
+        assembled directly (:mod:`polyrob.analysis.lpv.assemble`),
+        "structured" (the interior point of :mod:`polyrob.analysis.lpv.sdp`,
+        no coefficient matrix formed; neither ``x_factor`` nor ``affine``), or
         "cvxpy" (cvxpy + Clarabel, slower to build); ``settings`` (None):
         the solver's settings; ``x_factor`` (None): an ``r x n`` matrix
         ``L``, the basis functions after the first then carry ``L^T Y_j L``
