@@ -66,6 +66,21 @@ def replace_domain(problem, domain):
     return SimpleNamespace(domain=domain, P=problem.P)
 
 
+def test_every_command_s_moving_check_takes_a_task_to_the_task_certificate(robot, monkeypatch):
+    """``synth --moving`` called the fixed-torque certificate, which refuses a task ("the torque varies"), where
+    ``analyze`` and ``run`` called the task's: one dispatch now, and an option it does not take is refused."""
+    import polyrob.analysis.lpv.task as task_module
+    from polyrob.analysis.lpv.constant import robot_in_motion_certificate
+
+    seen = {}
+    monkeypatch.setattr(task_module, "task_motion_certificate", lambda problem, K, **kw: seen.update(kw) or "task")
+    problem = SimpleNamespace(domain=_task(robot), P=SimpleNamespace(uncertain=SimpleNamespace(model="lft")))
+    got = robot_in_motion_certificate(problem, None, jerk=5.0, points=(3, 2), symmetric="auto", cells=True)
+    assert got == "task" and seen["jerk"] == 5.0 and seen["points"] == (3, 2) and "symmetric" not in seen
+    with pytest.raises(ArgumentError, match="takes no rate_samples"):
+        robot_in_motion_certificate(problem, None, rate_samples=4)
+
+
 def test_the_default_jerk_is_the_fastest_minimum_jerk_move_of_the_task(robot):
     # (27/8) a^2 / v when the move reaching both bounds fits in the range
     assert minimum_jerk_bound(_task(robot, 0.5, 1.0, 2.0)) == pytest.approx([13.5, 13.5], rel=1e-12)

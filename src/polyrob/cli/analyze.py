@@ -250,16 +250,9 @@ MOVING_CELLS_LEVEL = 0.95
 
 def check_jerk_applies(args, problem) -> None:
     """Refuse ``--qdddot-max`` on a problem whose moving-robot certificate does not use a jerk bound."""
-    from polyrob.analysis.lpv.constant import applies
-    from polyrob.errors import ArgumentError
+    from polyrob.analysis.lpv.constant import check_jerk
 
-    if getattr(args, "qdddot_max", None) is None:
-        return
-    if getattr(problem.domain, "kind", "") != "task" or applies(problem) is None:
-        raise ArgumentError(
-            "--qdddot-max bounds the jerk of a task domain's moving robot: give a task (--pose, --q-radius, "
-            "--qdot-max, --qddot-max) without an inner layer, or drop it"
-        )
+    check_jerk(problem, getattr(args, "qdddot_max", None))
 
 
 def moving_asked(args) -> bool | None:

@@ -277,25 +277,14 @@ def analyze_controller(
         from polyrob.analysis.time_varying.certificate import time_varying_certificate
 
         tv = time_varying_certificate(problem, K)
-    from polyrob.analysis.lpv.constant import applies, robot_in_motion_certificate
+    from polyrob.analysis.lpv.constant import check_jerk, robot_in_motion_certificate
     from polyrob.analysis.lpv.moving import MovingRobotCertificate
 
-    options = dict(moving_options or {})
-    jerk = options.pop("jerk", None)
-    task = getattr(problem.domain, "kind", "") == "task" and applies(problem) is not None
-    if jerk is not None and not task:
-        raise ArgumentError("--qdddot-max bounds a task's jerk: give a task domain (--pose/--q-radius/--qddot-max)")
+    check_jerk(problem, (moving_options or {}).get("jerk"))  # refused even when the moving robot is not asked for
     if moving is False:
         mv = MovingRobotCertificate.not_computed("not asked for (--no-moving)")
-    elif task:  # on a task domain the Jacobians depend on the accelerations too (polyrob.analysis.lpv.task)
-        from polyrob.analysis.lpv.task import task_motion_certificate
-
-        keep = ("points", "velocities", "harmonics", "level", "cells", "cell_level", "cell_time_limit", "cell_workers",
-                "progress")
-        mv = task_motion_certificate(problem, K, auto=moving is None, jerk=jerk, time_varying=tv,
-                                     **{k: v for k, v in options.items() if k in keep})  # fmt: skip
-    else:
-        mv = robot_in_motion_certificate(problem, K, auto=moving is None, **options)
+    else:  # a task domain's goes to polyrob.analysis.lpv.task (its Jacobians depend on the accelerations too)
+        mv = robot_in_motion_certificate(problem, K, auto=moving is None, time_varying=tv, **dict(moving_options or {}))
     from polyrob.analysis.margins import robust_margin
 
     margin = None if rp.certificate.certified else robust_margin(rp.certificate)

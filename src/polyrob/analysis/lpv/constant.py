@@ -48,7 +48,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError, PolyrobError
 
 __all__ = ["applies", "residual_scalings", "scaled_plant", "constant_parameter_certificate", "robot_in_motion_certificate"]
 
@@ -218,17 +218,60 @@ def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0
     )
 
 
-def robot_in_motion_certificate(problem, K, *, auto: bool = False, **options):
-    """The moving-robot certificate that fits ``problem``'s model.
+#: The options :func:`~polyrob.analysis.lpv.task.task_motion_certificate` takes from the moving search's options.
+TASK_OPTIONS = ("points", "velocities", "harmonics", "level", "cells", "cell_level", "cell_time_limit", "cell_workers",
+                "progress", "solver")
+
+
+def check_jerk(problem, jerk) -> None:
+    """Refuse a jerk bound (``--qdddot-max``) where no certificate reads it: off a task, or on an inner-gain model.
+
+    Raises
+    ------
+    ArgumentError
+    """
+    if jerk is None:
+        return
+    if getattr(getattr(problem, "domain", None), "kind", "") != "task" or applies(problem) is None:
+        raise ArgumentError(
+            "--qdddot-max bounds the jerk of a task domain's moving robot: give a task (--pose, --q-radius, "
+            "--qdot-max, --qddot-max) without an inner layer, or drop it"
+        )
+
+
+def robot_in_motion_certificate(problem, K, *, auto: bool = False, time_varying=None, jerk=None, **options):
+    """The moving-robot certificate that fits ``problem``'s model and domain.
 
     An inner-gain model (physical constants and state-dependent residual
-    blocks): :func:`constant_parameter_certificate`.  Any other model: the
-    robot scheduled on its state with the domain's rates,
-    :func:`polyrob.analysis.lpv.moving.moving_robot_certificate` (``options``
-    go to it).
+    blocks): :func:`constant_parameter_certificate`.  A task domain (the
+    torques by inverse dynamics): the robot scheduled on its positions,
+    velocities and accelerations,
+    :func:`polyrob.analysis.lpv.task.task_motion_certificate` (with the
+    arbitrarily fast certificate ``time_varying``, which decides when it
+    holds, and the jerk bound ``jerk``).  Any other model: the robot
+    scheduled on its state with the domain's rates,
+    :func:`polyrob.analysis.lpv.moving.moving_robot_certificate`.
+    ``options`` go to the one chosen.
+
+    Raises
+    ------
+    ArgumentError
+        ``jerk`` off a task domain, or an option the chosen certificate does
+        not take (``symmetric="auto"`` is dropped on a task: its grid is not
+        halved).
     """
     from polyrob.analysis.lpv.moving import moving_robot_certificate
 
+    check_jerk(problem, jerk)
     if applies(problem) is None:
         return constant_parameter_certificate(problem, K, auto=auto)
-    return moving_robot_certificate(problem, K, auto=auto, **options)
+    if getattr(getattr(problem, "domain", None), "kind", "") != "task":
+        return moving_robot_certificate(problem, K, auto=auto, **options)
+    from polyrob.analysis.lpv.task import task_motion_certificate
+
+    if options.get("symmetric") == "auto":
+        options.pop("symmetric")
+    unknown = sorted(set(options) - set(TASK_OPTIONS))
+    if unknown:
+        raise ArgumentError(f"the task's moving-robot certificate takes no {', '.join(unknown)}: drop it")
+    return task_motion_certificate(problem, K, auto=auto, jerk=jerk, time_varying=time_varying, **options)
