@@ -1,7 +1,7 @@
 """The main job's moving-robot verdict on its task: time, peak memory and the bound of each search (JSON).
 
     python benchmarks/moving_task.py RUN_DIR [--variants arbitrary:1,bounded:1,arbitrary:2] [--points 5,3]
-        [--cells] [--results PATH]
+        [--cells] [--solver clarabel|structured] [--results PATH]
     python benchmarks/moving_task.py RUN_DIR --parts [--results PATH]
 
 ``RUN_DIR`` is what ``polyrob run -o RUN_DIR`` writes (the main job: planar_2r
@@ -11,8 +11,11 @@ runs :func:`polyrob.analysis.lpv.task.task_motion_certificate` in its own
 process (so that its peak memory is its own, read with ``wait4``): ``arbitrary``
 is ``X`` on the positions only (what ``--moving`` takes for the main job's
 16-state loop), ``bounded`` ``X`` on the positions times ``(1, qdot)`` with
-the velocities' rates bounded by the task's accelerations.  Printed per variant:
-the bound proved on the search grid, on the finer re-check grid, the cells'
+the velocities' rates bounded by the task's accelerations.  ``--solver``: the
+search's LMI solver (Clarabel, the task certificate's default, or the
+structured interior point).  Printed per variant: the bound proved on the
+search grid, on the finer re-check grid (twice as dense along positions and
+velocities, :func:`polyrob.analysis.lpv.task.recheck_points`), the cells'
 outcome with ``--cells``, the status, the seconds and the peak memory, and
 the machine's load at the start and the end.
 
@@ -41,7 +44,7 @@ from pathlib import Path
 from _results import add_results_option, save_run
 
 
-def one(run_dir: str, velocities: str, harmonics: int, points, cells: bool) -> dict:
+def one(run_dir: str, velocities: str, harmonics: int, points, cells: bool, solver: str = "clarabel") -> dict:
     """One search in this process: the summary of its certificate."""
     from polyrob.analysis.lpv.task import task_motion_certificate
     from polyrob.pipeline.rebuild import load_run
@@ -50,12 +53,14 @@ def one(run_dir: str, velocities: str, harmonics: int, points, cells: bool) -> d
     t0 = time.perf_counter()
     c = task_motion_certificate(run.problem, run.controller, points=points, velocities=velocities,
                                 harmonics=harmonics, cells=cells, level=0.95 if cells else None, cell_workers=1,
-                                lower_bound=True)  # fmt: skip
+                                lower_bound=True, solver=solver)  # fmt: skip
     r = c.result
     return {
         "velocities": velocities,
         "harmonics": harmonics,
+        "solver": solver,
         "points": list(points),
+        "finer_points": c.finer.get("points"),
         "status": c.certificate.status.value if c.computed else "not computed",
         "grid_bound": None if r is None else float(r.gamma),
         "finer_bound": c.finer.get("gamma"),
@@ -127,11 +132,12 @@ def parts(run_dir: str) -> list[dict]:
     return out, [float(poles.min()), float(poles.max())]
 
 
-def measure(run_dir: str, variant: str, points: str, cells: bool) -> dict:
+def measure(run_dir: str, variant: str, points: str, cells: bool, solver: str = "clarabel") -> dict:
     """``variant`` in a child process: its summary, wall seconds, peak memory and the load around it."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "out.json"
-        cmd = [sys.executable, __file__, run_dir, "--one", variant, "--points", points, "--out", str(out)]
+        cmd = [sys.executable, __file__, run_dir, "--one", variant, "--points", points, "--out", str(out),
+               "--solver", solver]
         cmd += ["--cells"] if cells else []
         t0, load0 = time.perf_counter(), os.getloadavg()[0]
         child = subprocess.Popen(cmd)
@@ -152,6 +158,7 @@ def main() -> None:
     ap.add_argument("--points", default="5,3", help="search grid points per position and per velocity")
     ap.add_argument("--cells", action="store_true", help="prove a grid bound below 1 between the points")
     ap.add_argument("--parts", action="store_true", help="the bound of each single motion (module text)")
+    ap.add_argument("--solver", default="clarabel", choices=("clarabel", "structured"), help="the search's LMI solver")
     ap.add_argument("--one", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--out", default=None, help=argparse.SUPPRESS)
     add_results_option(ap)
@@ -177,10 +184,10 @@ def main() -> None:
         return
     if args.one:
         velocities, harmonics = args.one.split(":")
-        Path(args.out).write_text(json.dumps(one(args.run_dir, velocities, int(harmonics), points, args.cells),
-                                             default=float))  # fmt: skip
+        Path(args.out).write_text(json.dumps(one(args.run_dir, velocities, int(harmonics), points, args.cells,
+                                                 args.solver), default=float))  # fmt: skip
         return
-    rows = [measure(args.run_dir, v, args.points, args.cells) for v in args.variants.split(",")]
+    rows = [measure(args.run_dir, v, args.points, args.cells, args.solver) for v in args.variants.split(",")]
     doc = {"run_dir": args.run_dir, "variants": rows}
     print(json.dumps(doc, indent=1, default=float))
 
@@ -188,15 +195,16 @@ def main() -> None:
         return "no bound" if x is None or x == float("inf") else f"{x:.4g}"
 
     table = {
-        "columns": ["X on", "grid", "bound on the grid", "on the finer grid", "found along trajectories (lower)",
-                    "status", "time", "peak memory"],
+        "columns": ["X on", "grid", "solver", "bound on the grid", "on the finer grid (points)",
+                    "found along trajectories (lower)", "status", "time", "peak memory"],
         "rows": [[("positions" if r["velocities"] == "arbitrary" else "positions x (1, qdot)")
-                  + f", {r['harmonics']} harmonic(s)", "x".join(map(str, r["points"])), bound(r["grid_bound"]),
-                  bound(r["finer_bound"]), bound(r["lower_bound"]), r["status"], f"{r['seconds']:.0f} s",
-                  f"{r['peak_gb']:.1f} GB"] for r in rows],
+                  + f", {r['harmonics']} harmonic(s)", "x".join(map(str, r["points"])), r["solver"],
+                  bound(r["grid_bound"]), f"{bound(r['finer_bound'])} ({r['finer_points']})", bound(r["lower_bound"]),
+                  r["status"], f"{r['seconds']:.0f} s", f"{r['peak_gb']:.1f} GB"] for r in rows],
     }  # fmt: skip
-    figure = "; ".join(f"{r['velocities']}:{r['harmonics']} {r['status']} (grid {bound(r['grid_bound'])}, "
-                       f"{r['seconds']:.0f} s, {r['peak_gb']:.1f} GB)" for r in rows)  # fmt: skip
+    figure = "; ".join(f"{r['velocities']}:{r['harmonics']} {r['status']} (grid {bound(r['grid_bound'])}, finer "
+                       f"{bound(r['finer_bound'])}, {r['solver']}, {r['seconds']:.0f} s, {r['peak_gb']:.1f} GB)"
+                       for r in rows)  # fmt: skip
     save_run(args.results, "moving_task", "The main job's moving robot on its task, per search", figure, doc, table)
 
 

@@ -237,13 +237,14 @@ def test_the_report_shows_three_rows_with_their_lower_bounds(robot):
     assert lower_bound_words(list(records.values())[2]).startswith("gain >= 0.7087 (the largest found")
 
 
-def test_the_task_s_recheck_grid_is_finer_than_its_search_grid_along_the_positions():
+def test_the_task_s_recheck_grid_is_finer_than_its_search_grid_along_positions_and_velocities():
     """A fixed (9, 3) re-check was the search grid itself for a (9, 3) search: the X then failed between its q2
-    points while its "finer grid" bound said 0.9653 (main job with --as 0.3)."""
+    points while its "finer grid" bound said 0.9653 (main job with --as 0.3); and with the velocities' 3 points
+    kept, an X that fails midway between them passed."""
     from polyrob.analysis.lpv.task import DEFAULT_RECHECK, recheck_points
 
     for points in [(3, 2), (5, 3), (9, 3), (17, 5)]:
         q, v = recheck_points(points)
         assert q >= DEFAULT_RECHECK[0] and v >= DEFAULT_RECHECK[1]
-        assert (q - 1) % (points[0] - 1) == 0 and (q - 1) // (points[0] - 1) >= 2  # every search point, and between
-        assert v >= points[1]
+        for n, search in ((q, points[0]), (v, points[1])):  # every search point, and one between each two
+            assert (n - 1) % (search - 1) == 0 and (n - 1) // (search - 1) >= 2

@@ -82,22 +82,28 @@ MIN_JERK_JERK = 60.0
 #: job's 16-state loop took 527 s on 2 cores at load 3-14 (X on the positions), so it runs on ``--moving`` only.
 AUTO_STATES = 8
 #: Search grid (points per position, per velocity; the accelerations: their two ends) and its re-check, the least
-#: one (``recheck="auto"``: at least this, and twice as dense along the positions as the search grid).
+#: one (``recheck="auto"``: at least this, and twice as dense as the search grid along positions and velocities).
 DEFAULT_POINTS = (5, 3)
-DEFAULT_RECHECK = (9, 3)
+DEFAULT_RECHECK = (9, 5)
 
 
 def recheck_points(points) -> tuple[int, int]:
-    """The re-check grid of ``recheck="auto"``: :data:`DEFAULT_RECHECK` or finer, positions twice as dense as ``points``.
+    """The re-check grid of ``recheck="auto"``: :data:`DEFAULT_RECHECK` or finer, twice as dense as ``points``.
 
-    A fixed grid is not finer than a search grid as dense as itself: at ``points=(9, 3)`` it was the search grid.
+    Every search point and one point midway between each two neighbours, along
+    the positions and along the velocities.  A fixed grid is not finer than a
+    search grid as dense as itself (at ``points=(9, 3)`` a fixed 9 x 3 was
+    the search grid), and a re-check that kept the velocities' points passed
+    ``X`` that fail midway between them (the main job's loop: proved 0.893 at
+    its velocity points, not proved at ``qdot = 0.25``).
 
     Examples
     --------
     >>> recheck_points((5, 3)), recheck_points((9, 3)), recheck_points((3, 2))
-    ((9, 3), (17, 3), (9, 3))
+    ((9, 5), (17, 5), (9, 5))
     """
-    return max(DEFAULT_RECHECK[0], 2 * (int(points[0]) - 1) + 1), max(DEFAULT_RECHECK[1], int(points[1]))
+    q, v = (2 * (int(n) - 1) + 1 for n in points)
+    return max(DEFAULT_RECHECK[0], q), max(DEFAULT_RECHECK[1], v)
 
 
 def minimum_jerk_bound(domain) -> np.ndarray:
@@ -318,6 +324,7 @@ def task_motion_certificate(
     cell_time_limit: float | None = None,
     cell_workers: int | None = None,
     progress: bool = False,
+    solver: str = "clarabel",
 ):
     """The moving-robot certificate of ``K`` on a task-domain ``problem``.
 
@@ -367,6 +374,12 @@ def task_motion_certificate(
         at ``cell_level``, else as :func:`~polyrob.analysis.lpv.robot.cells_level` says); ``cell_time_limit``
         (a wall-clock safety net the caller sets), ``cell_workers`` and
         ``progress`` as for :func:`~polyrob.analysis.lpv.moving.moving_robot_certificate`.
+    solver : {"clarabel", "structured", "scs"}
+        The search's LMI solver (:func:`polyrob.lpvnorm`'s).  Clarabel by
+        default: on the tests' small tasks (two points per velocity) the
+        structured one's ``X``, of the same margin, failed between the
+        points where Clarabel's held (:data:`~polyrob.analysis.lpv.robot.SEARCH_SOLVER`);
+        on the main job's 16-state loop it is several times faster.
 
     Returns
     -------
@@ -409,7 +422,7 @@ def task_motion_certificate(
             basis = basis[: 1 + 2 * harmonics * sum(kind == "q" for kind in model.kinds)]
             rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
         result, sysf, cs = _search(model, system, rates, basis, lpvnorm, conditioned, conditioned_time_scale,
-                                   kinematic_rates, level)  # fmt: skip
+                                   kinematic_rates, level, solver)  # fmt: skip
         if isinstance(recheck, str):
             recheck = recheck_points(points)
         finer = {} if recheck is None else finer_recheck(sysf, model, result, rates, basis, points=recheck, c=cs)
@@ -481,7 +494,8 @@ def _found(model, system, domain, lower_bound) -> dict:
         return {}
 
 
-def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinematic_rates, level=None):
+def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinematic_rates, level=None,
+            solver="clarabel"):
     """``(result, the system it ran on, its time scale)``: the conditioned copy first, then the time-scaled loop; a
     proved result is searched again in the coordinates of its own ``X`` (:func:`~polyrob.analysis.lpv.robot.refine`)."""
     from polyrob.analysis.lpv.result import LpvNormResult
@@ -489,7 +503,7 @@ def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinem
     centre = np.array([0.5 * (a[0] + a[-1]) for a in model.axes])
     tries = []
     try:
-        tries.append((*conditioned(system, centre), {"eps": 1e-4, "level": level}))
+        tries.append((*conditioned(system, centre), {"eps": 1e-4, "level": level, "solver": solver}))
     except NotApplicable:
         pass
     c = time_scale(system, centre)
@@ -498,7 +512,7 @@ def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinem
         a, b, cc, d = system(rho)
         return a / c, b / c, cc, d
 
-    tries.append((time_scaled, c, {"level": level}))
+    tries.append((time_scaled, c, {"level": level, "solver": solver}))
 
     def solve(sysf, cs, options):
         scaled = [(lo / cs, hi / cs) for lo, hi in rates]
