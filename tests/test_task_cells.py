@@ -132,3 +132,28 @@ def test_a_urdf_robot_s_task_is_proved_through_its_exact_polynomials():
         assert c.cells["holds"], c.cells
         assert c.cells["workers"] == workers and c.certificate.status.value == "CERTIFIED"
     assert runs[0].cells["cells"] == runs[1].cells["cells"]
+
+
+def test_the_search_and_the_cells_move_the_whole_job_s_progress_line(tiny_task, monkeypatch):
+    """`analyze --moving` sat at one fraction for the minutes of a search: the interior point's gap and the part of
+    the box the cells proved now move the job's line, each inside its part of the stage."""
+    import io
+
+    from polyrob.progress import JobProgress
+
+    job = JobProgress(["moving-robot certificate"], stream=io.StringIO(), clock=lambda: 0.0)
+    job.start()
+    job._stop.set()  # no ticking thread: the test reads the shares itself
+    shares, within = [], job.within
+    monkeypatch.setattr(job, "within", lambda share: (shares.append(share), within(share))[1])
+    try:
+        job.begin(1, "moving-robot certificate")
+        mv = task_motion_certificate(tiny_task, pd_controller(), points=(3, 3), velocities="bounded", level=0.9,
+                                     cells=True, cell_workers=1, lower_bound=False, solver="structured")  # fmt: skip
+    finally:
+        job.stop()
+    assert mv.certificate.status.value == "CERTIFIED", mv.cells
+    search = [s for s in shares if 0.0 < s < 0.4]  # the solves' own reports, inside the search's part
+    cells = [s for s in shares if 0.45 < s < 0.9]  # the volume proved, inside the cells' part
+    assert len(set(search)) >= 5 and len(set(cells)) >= 5, shares
+    assert shares[-1] == 1.0 and job.share >= 0.9

@@ -284,7 +284,11 @@ def analyze_controller(
     if moving is False:
         mv = MovingRobotCertificate.not_computed("not asked for (--no-moving)")
     else:  # a task domain's goes to polyrob.analysis.lpv.task (its Jacobians depend on the accelerations too)
-        mv = robot_in_motion_certificate(problem, K, auto=moving is None, time_varying=tv, **dict(moving_options or {}))
+        from polyrob.progress import span
+
+        with span(0.3, 0.95):  # asked for, the search is most of the stage (minutes); its solves report inside
+            mv = robot_in_motion_certificate(problem, K, auto=moving is None, time_varying=tv,
+                                             **dict(moving_options or {}))  # fmt: skip
     from polyrob.analysis.margins import robust_margin
 
     margin = None if rp.certificate.certified else robust_margin(rp.certificate)

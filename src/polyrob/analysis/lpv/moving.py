@@ -106,7 +106,7 @@ def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: b
     from polyrob.analysis.lpv.basis import default_basis, even_functions
     from polyrob.analysis.lpv.norm import lpvnorm
     from polyrob.analysis.lpv.result import LpvNormResult
-    from polyrob.analysis.lpv.robot import SEARCH_SOLVER, conditioned, kinematic_rates, refine
+    from polyrob.analysis.lpv.robot import SEARCH_SOLVER, conditioned, in_progress_parts, kinematic_rates, refine
 
     centre = np.array([0.5 * (a[0] + a[-1]) for a in model.axes])
     rates = list(rates)
@@ -138,6 +138,7 @@ def _search(model, system, rates, *, quadratic: bool, velocities: str, tensor: b
         except SolverError as exc:
             return LpvNormResult.solver_failed(model.n_points, str(exc))
 
+    solve = in_progress_parts(solve)  # the whole job's line moves with each solve
     best = None
     for sysf, cs, options in c_sys:
         r = solve(sysf, cs, options)
@@ -242,7 +243,8 @@ def moving_robot_certificate(
     """
     from polyrob.analysis.certificate import Scope
     from polyrob.analysis.lpv.basis import finer_recheck
-    from polyrob.analysis.lpv.robot import closed_loop_system, even_half, rate_bounds, scheduling
+    from polyrob.analysis.lpv.robot import closed_loop_system, even_half, phase_parts, rate_bounds, scheduling
+    from polyrob.progress import span
 
     t0 = time.perf_counter()
     domain, P = problem.domain, problem.P
@@ -273,13 +275,16 @@ def moving_robot_certificate(
         mode = _velocity_mode(velocities, model, n, tensor, harmonics)
         if mode == "arbitrary" and not np.isinf(rate_scale):
             rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
-        result, sysf, cs, basis, used = _search(
-            model, system, rates, quadratic=quadratic, velocities=mode, tensor=tensor, harmonics=harmonics,
-            level=level,
-        )  # fmt: skip
+        parts = phase_parts(cells)
+        with span(*parts["search"]):
+            result, sysf, cs, basis, used = _search(
+                model, system, rates, quadratic=quadratic, velocities=mode, tensor=tensor, harmonics=harmonics,
+                level=level,
+            )  # fmt: skip
         if isinstance(recheck, str):
             recheck = (RECHECK_REFINE[0] * (points[0] - 1) + 1, max(5, RECHECK_REFINE[1] * (points[1] - 1) + 1))
-        finer = {} if recheck is None else finer_recheck(sysf, model, result, used, basis, points=recheck, c=cs)
+        with span(*parts["recheck"]):
+            finer = {} if recheck is None else finer_recheck(sysf, model, result, used, basis, points=recheck, c=cs)
         between = None
         g_grid = max(result.gamma, finer.get("gamma", result.gamma))
         if cells and result.proved and g_grid < 1:
@@ -287,15 +292,18 @@ def moving_robot_certificate(
             from polyrob.analysis.lpv.robot import cells_level
 
             g_cells = cells_level(g_grid, level, cell_level)
-            between = check_cells(model, system, result.X, basis, used, g_cells, similarity=getattr(sysf, "similarity",
-                                  None), c=cs, time_limit=cell_time_limit, progress=progress, workers=cell_workers)  # fmt: skip
+            with span(*parts["cells"]):
+                between = check_cells(model, system, result.X, basis, used, g_cells, similarity=getattr(
+                    sysf, "similarity", None), c=cs, time_limit=cell_time_limit, progress=progress,
+                    workers=cell_workers)  # fmt: skip
         found = {}
         if lower_bound or (lower_bound is None and cells):
             from polyrob.analysis.time_varying.trajectory_gains import trajectory_lower_bound
 
             try:
                 opts = lower_bound if isinstance(lower_bound, dict) else {}
-                found = trajectory_lower_bound(whole, system, used, **opts).summary()
+                with span(*parts["lower"]):
+                    found = trajectory_lower_bound(whole, system, used, **opts).summary()
             except NotApplicable:  # a frozen loop at rest is unstable: no gain to find, the bound says so already
                 found = {}
     except NotApplicable as exc:

@@ -39,8 +39,8 @@ import numpy as np
 from polyrob.errors import ArgumentError, NotApplicable
 
 __all__ = ["MovingRobotModel", "scheduling", "rate_bounds", "closed_loop_system", "kinematic_rates", "conditioned",
-           "reconditioned", "refine", "cells_level", "REFINE_PASSES", "SEARCH_SOLVER", "REFINE_GAIN", "even_half", "RATE_SAMPLES",
-           "RATE_MARGIN"]  # fmt: skip
+           "reconditioned", "refine", "in_progress_parts", "phase_parts", "SOLVE_PARTS", "cells_level",
+           "REFINE_PASSES", "SEARCH_SOLVER", "REFINE_GAIN", "even_half", "RATE_SAMPLES", "RATE_MARGIN"]  # fmt: skip
 
 #: Domain points the acceleration bounds are sampled on (Sobol, plus the grid's corners).
 RATE_SAMPLES = 4096
@@ -494,6 +494,56 @@ def cells_level(g_grid: float, level=None, cell_level=None) -> float:
     if level is not None and level >= g_grid:
         return float(level)
     return 0.5 * (g_grid + 1.0)
+
+
+#: The parts of the search's progress its successive solves fill: the first one, then the fallback and the
+#: :func:`refine` passes (a hint for the job's line; the solves' own reports move it inside each part).
+SOLVE_PARTS = (0.45, 0.65, 0.8, 0.9, 1.0)
+
+
+def in_progress_parts(solve, parts=SOLVE_PARTS):
+    """``solve`` whose ``k``-th call fills the part ``[parts[k-1], parts[k]]`` of the enclosing progress span.
+
+    Calls past the last part fill nothing (the line stays where it is).
+
+    Examples
+    --------
+    >>> import io
+    >>> from polyrob.progress import JobProgress, report
+    >>> job = JobProgress(["moving-robot"], stream=io.StringIO(), clock=lambda: 0.0)
+    >>> job.start() is job and job._stop.set() is None
+    True
+    >>> job.begin(1, "moving-robot")
+    >>> solve = in_progress_parts(lambda: report(1, 2), parts=(0.5, 1.0))
+    >>> solve(); round(job.share, 3)       # the first call's part is done
+    0.5
+    >>> job.stop()
+    """
+    from polyrob.progress import span
+
+    calls = [0]
+
+    def run(*args, **kwargs):
+        k = calls[0]
+        calls[0] += 1
+        lo = 0.0 if k == 0 else parts[min(k, len(parts)) - 1]
+        with span(lo, parts[min(k, len(parts) - 1)]):
+            return solve(*args, **kwargs)
+
+    return run
+
+
+def phase_parts(cells: bool) -> dict:
+    """The parts of a moving-robot certificate's progress: the search, the finer re-check, the cells, the lower bound.
+
+    Examples
+    --------
+    >>> phase_parts(True)["cells"], phase_parts(False)["cells"]
+    ((0.45, 0.9), (0.85, 0.85))
+    """
+    if cells:
+        return {"search": (0.0, 0.4), "recheck": (0.4, 0.45), "cells": (0.45, 0.9), "lower": (0.9, 1.0)}
+    return {"search": (0.0, 0.75), "recheck": (0.75, 0.85), "cells": (0.85, 0.85), "lower": (0.85, 1.0)}
 
 
 def refine(best, solve, basis, centre):

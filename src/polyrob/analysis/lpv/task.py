@@ -390,9 +390,11 @@ def task_motion_certificate(
     from polyrob.analysis.lpv.moving import BOUNDED_VARIABLES, MAX_STATES, conditioned_time_scale
     from polyrob.analysis.lpv.moving_result import MovingRobotCertificate
     from polyrob.analysis.lpv.norm import lpvnorm
-    from polyrob.analysis.lpv.robot import closed_loop_system, conditioned, kinematic_rates
+    from polyrob.analysis.lpv.robot import closed_loop_system, conditioned, kinematic_rates, phase_parts
+    from polyrob.progress import span
 
     t0 = time.perf_counter()
+    parts = phase_parts(cells)
     domain, P = problem.domain, problem.P
     base = problem.scope() if hasattr(problem, "scope") else Scope()
     if jerk is not None:
@@ -421,11 +423,13 @@ def task_motion_certificate(
         if velocities == "arbitrary":
             basis = basis[: 1 + 2 * harmonics * sum(kind == "q" for kind in model.kinds)]
             rates = [r if kind == "q" else (-np.inf, np.inf) for r, kind in zip(rates, model.kinds)]
-        result, sysf, cs = _search(model, system, rates, basis, lpvnorm, conditioned, conditioned_time_scale,
-                                   kinematic_rates, level, solver)  # fmt: skip
+        with span(*parts["search"]):
+            result, sysf, cs = _search(model, system, rates, basis, lpvnorm, conditioned, conditioned_time_scale,
+                                       kinematic_rates, level, solver)  # fmt: skip
         if isinstance(recheck, str):
             recheck = recheck_points(points)
-        finer = {} if recheck is None else finer_recheck(sysf, model, result, rates, basis, points=recheck, c=cs)
+        with span(*parts["recheck"]):
+            finer = {} if recheck is None else finer_recheck(sysf, model, result, rates, basis, points=recheck, c=cs)
         between = None
         g_grid = max(result.gamma, finer.get("gamma", result.gamma))
         if cells and result.proved and g_grid < 1:
@@ -435,12 +439,16 @@ def task_motion_certificate(
             # X is free of the accelerations: their rate (the jerk) does not enter, so no rate box for them
             used = [(-np.inf, np.inf) if kind == "qddot" else r for r, kind in zip(rates, model.kinds)]
             g_cells = cells_level(g_grid, level, cell_level)
-            between = check_cells(model, system, result.X, basis, used, g_cells, similarity=getattr(sysf, "similarity",
-                                  None), c=cs, time_limit=cell_time_limit, progress=progress, workers=cell_workers)  # fmt: skip
+            with span(*parts["cells"]):
+                between = check_cells(model, system, result.X, basis, used, g_cells, similarity=getattr(
+                    sysf, "similarity", None), c=cs, time_limit=cell_time_limit, progress=progress,
+                    workers=cell_workers)  # fmt: skip
     except NotApplicable as exc:
-        found = _found(model, system, domain, lower_bound) if system is not None else {}
+        with span(*parts["lower"]):
+            found = _found(model, system, domain, lower_bound) if system is not None else {}
         return replace(MovingRobotCertificate.not_computed(str(exc)), lower=found, seconds=time.perf_counter() - t0)
-    found = _found(model, system, domain, lower_bound)
+    with span(*parts["lower"]):
+        found = _found(model, system, domain, lower_bound)
     x_on_acc = False  # default_basis has no acceleration functions: the LMI is affine in qddot
     words = _rate_words(model, task_rate_bounds(model, domain), x_on_acc) + (
         "; the velocities at any rate (X on the positions only)" if velocities == "arbitrary" else ""
@@ -521,6 +529,9 @@ def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinem
         except SolverError as exc:
             return LpvNormResult.solver_failed(model.n_points, str(exc))
 
+    from polyrob.analysis.lpv.robot import in_progress_parts, refine
+
+    solve = in_progress_parts(solve)  # the whole job's line moves with each solve
     best = None
     for sysf, cs, options in tries:
         r = solve(sysf, cs, options)
@@ -528,6 +539,4 @@ def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinem
             best = (r, sysf, cs, options)
         if r.proved:
             break
-    from polyrob.analysis.lpv.robot import refine
-
     return refine(best, solve, basis, centre)[:3]

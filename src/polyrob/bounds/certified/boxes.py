@@ -58,12 +58,15 @@ def _bisect(queue, evaluate, lo, hi, width0, min_width, contrib=None):
     return True
 
 
-def prove_on_boxes(boxes, evaluate, width0, *, min_width, max_boxes, time_limit=None, bar=None, by_contribution=False):
+def prove_on_boxes(boxes, evaluate, width0, *, min_width, max_boxes, time_limit=None, bar=None, by_contribution=False,
+                   on_proved=None):  # fmt: skip
     """Branch and bound: ``(True, leaves' values, "")`` when every leaf has a positive margin, else ``(False, ..., why)``.
 
     It gives up past ``max_boxes`` boxes (a count of work: the answer does not
     depend on the machine's load), or past ``time_limit`` wall-clock seconds,
     a safety net only a caller sets (``None``: none), which ``why`` then names.
+    ``on_proved(lo, hi)`` is called on each leaf proved (e.g. to report the
+    volume done).
     """
     t0 = time.perf_counter()
     queue, leaves = deque((lo, hi, None) for lo, hi in boxes), []
@@ -76,6 +79,8 @@ def prove_on_boxes(boxes, evaluate, width0, *, min_width, max_boxes, time_limit=
             leaves.append(value)
             if bar is not None:
                 bar.update(1)
+            if on_proved is not None:
+                on_proved(lo, hi)
             continue
         stop = _stop(leaves, len(queue), max_boxes, time_limit, t0, value, lo, hi)
         if stop is not None:
@@ -88,7 +93,7 @@ def prove_on_boxes(boxes, evaluate, width0, *, min_width, max_boxes, time_limit=
 
 
 def prove_on_boxes_in_batches(boxes, evaluate_many, width0, *, min_width, max_boxes, batch, observe=None,
-                              time_limit=None, bar=None):  # fmt: skip
+                              time_limit=None, bar=None, on_proved=None):  # fmt: skip
     """:func:`prove_on_boxes` with ``by_contribution``, its boxes evaluated ``batch`` at a time by ``evaluate_many``.
 
     ``evaluate_many(list of (lo, hi)) -> list of values`` may run them in
@@ -99,7 +104,7 @@ def prove_on_boxes_in_batches(boxes, evaluate_many, width0, *, min_width, max_bo
     at which the ``max_boxes`` limit gives up.  Only the work differs: up to
     ``batch - 1`` boxes past the one that ends a failed search are evaluated
     and ignored.  ``observe(value)`` is called on each value read, in that
-    order (not on the ignored ones).
+    order (not on the ignored ones), ``on_proved(lo, hi)`` on each leaf proved.
     """
     t0 = time.perf_counter()
     queue, leaves = deque((lo, hi) for lo, hi in boxes), []
@@ -115,6 +120,8 @@ def prove_on_boxes_in_batches(boxes, evaluate_many, width0, *, min_width, max_bo
                 leaves.append(value)
                 if bar is not None:
                     bar.update(1)
+                if on_proved is not None:
+                    on_proved(lo, hi)
                 continue
             waiting = len(taken) - index - 1 + len(queue)  # the one-by-one search's queue at this box
             stop = _stop(leaves, waiting, max_boxes, time_limit, t0, value, lo, hi)

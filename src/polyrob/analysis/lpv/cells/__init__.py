@@ -48,7 +48,7 @@ from polyrob.analysis.lpv.cells.second_order import fixed_terms
 from polyrob.bounds.certified.boxes import prove_on_boxes
 from polyrob.errors import ArgumentError
 
-__all__ = ["CellCheck", "CellSetting", "cell_setting", "check_cells", "plant_enclosure"]
+__all__ = ["CellCheck", "CellSetting", "cell_setting", "check_cells", "plant_enclosure", "volume_reporter"]
 
 
 @dataclass(frozen=True)
@@ -256,12 +256,13 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
         from tqdm.auto import tqdm
 
         bar = tqdm(total=len(boxes), desc="cells", unit="cell")
+    done = volume_reporter(lo0, hi0)  # the whole job's progress line: the part of the box proved
     try:
         if n_workers == 1:
             ok, leaves, why = prove_on_boxes(boxes, lambda lo, hi: observe(work.test(lo, hi)), width0, bar=bar,
-                                             by_contribution=True, **opts)  # fmt: skip
+                                             by_contribution=True, on_proved=done, **opts)  # fmt: skip
         else:
-            n_workers, (ok, leaves, why) = _in_parallel(work, boxes, width0, n_workers, observe, bar, opts)
+            n_workers, (ok, leaves, why) = _in_parallel(work, boxes, width0, n_workers, observe, bar, opts, done)
     finally:
         if bar is not None:
             bar.close()
@@ -283,7 +284,39 @@ def _workers(workers) -> int:
     return n
 
 
-def _in_parallel(work, boxes, width0, n_workers, observe, bar, opts):
+def volume_reporter(lo0, hi0):
+    """``on_proved(lo, hi)`` reporting the fraction of the box ``[lo0, hi0]`` proved (:func:`polyrob.progress.report`).
+
+    The volume counts the coordinates that vary (a fixed one has width 0).
+
+    Examples
+    --------
+    >>> import io, numpy as np
+    >>> from polyrob.progress import JobProgress
+    >>> job = JobProgress(["moving-robot"], stream=io.StringIO(), clock=lambda: 0.0)
+    >>> job.start() is job and job._stop.set() is None
+    True
+    >>> job.begin(1, "moving-robot")
+    >>> done = volume_reporter(np.array([0.0, 1.0, 0.0]), np.array([2.0, 1.0, 1.0]))
+    >>> done(np.array([0.0, 1.0, 0.0]), np.array([1.0, 1.0, 0.5]))     # a quarter of the 2 x 1 box
+    >>> round(job.share, 3)
+    0.25
+    >>> job.stop()
+    """
+    from polyrob.progress import report
+
+    varying = np.asarray(hi0, float) > np.asarray(lo0, float)
+    total = float(np.prod((np.asarray(hi0, float) - np.asarray(lo0, float))[varying]))
+    proved = [0.0]
+
+    def on_proved(lo, hi):
+        proved[0] += float(np.prod((np.asarray(hi, float) - np.asarray(lo, float))[varying]))
+        report(proved[0], total)
+
+    return on_proved
+
+
+def _in_parallel(work, boxes, width0, n_workers, observe, bar, opts, on_proved=None):
     """``(processes used, prove_on_boxes' answer)`` with the cells evaluated on ``n_workers`` spawned workers."""
     import logging
 
@@ -297,7 +330,8 @@ def _in_parallel(work, boxes, width0, n_workers, observe, bar, opts):
 
         answer = prove_on_boxes_in_batches(boxes, evaluate_many, width0, batch=CELLS_PER_ROUND * n_workers,
                                            observe=observe, bar=bar, min_width=opts["min_width"],
-                                           max_boxes=opts["max_boxes"], time_limit=opts["time_limit"])  # fmt: skip
+                                           max_boxes=opts["max_boxes"], time_limit=opts["time_limit"],
+                                           on_proved=on_proved)  # fmt: skip
         if pool.fallback is not None:
             logging.getLogger("polyrob").warning("cells: %s", pool.fallback)
             return 1, answer
