@@ -46,6 +46,14 @@ def test_a_negative_or_nan_jerk_bound_is_refused_in_one_line(value, capsys):
     assert exc.value.code == 2 and len(err) == 1 and "--qdddot-max" in err[0], err
 
 
+def test_synth_takes_the_jerk_bound_for_its_moving_check_and_refuses_it_without(capsys):
+    from polyrob.cli import main
+
+    code = main(["synth", "paper_2r", "--qdddot-max", "5"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "add --moving" in err[0], err
+
+
 def test_a_jerk_bound_is_refused_where_the_certificate_does_not_use_it(robot):
     from polyrob.cli.analyze import check_jerk_applies
     from polyrob.domains.torque_box import Domain

@@ -175,6 +175,11 @@ def add_moving_argument(p) -> None:
         "domain); default: computed only for small closed loops (docs/certificates.md)",
     )
     add_moving_harmonics_argument(p)
+    add_jerk_argument(p)
+
+
+def add_jerk_argument(p) -> None:
+    """``--qdddot-max`` (``analyze``, ``run`` and ``synth``)."""
     p.add_argument(
         "--qdddot-max",
         type=jerk_bound,

@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
-from polyrob.cli.analyze import add_moving_harmonics_argument, moving_asked, moving_options
+from polyrob.cli.analyze import (
+    add_jerk_argument,
+    add_moving_harmonics_argument,
+    check_jerk_applies,
+    moving_asked,
+    moving_options,
+)
 from polyrob.cli.common import (
     Output,
     add_domain_arguments,
@@ -218,7 +224,10 @@ def cmd_synth(args) -> int:
         from polyrob.synthesis.integral import coulomb_levels
 
         coulomb_levels(robot, coulomb)
+    if args.qdddot_max is not None and not args.moving:
+        raise ArgumentError("--qdddot-max bounds the jerk in the moving-robot certificate: add --moving, or drop it")
     problem = problem_from_args(robot, args, out)
+    check_jerk_applies(args, problem)  # a task without an inner layer, before the synthesis
     out.line(
         f"robot {robot.name}: {problem.unc.n_params} real parameters ({problem.pldi.enclosure} PLDI, "
         f"{problem.model} model), structure {args.structure}"
@@ -473,6 +482,7 @@ def register(sub) -> None:
         "controller has the moving-robot certificate too",
     )
     add_moving_harmonics_argument(p)
+    add_jerk_argument(p)
     add_validation_arguments(p, true_robots=0)  # synth validates only when asked (minutes on an arm)
     add_coulomb_argument(p)
     p.set_defaults(func=cmd_synth)
