@@ -50,7 +50,8 @@ import numpy as np
 
 from polyrob.errors import ArgumentError, PolyrobError
 
-__all__ = ["applies", "residual_scalings", "scaled_plant", "constant_parameter_certificate", "robot_in_motion_certificate"]
+__all__ = ["applies", "residual_scalings", "scaled_plant", "constant_parameter_certificate", "robot_in_motion_certificate",
+           "check_jerk", "TASK_OPTIONS"]
 
 #: Largest closed loop (states) analysed.
 MAX_STATES = 60
