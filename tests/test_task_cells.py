@@ -157,3 +157,54 @@ def test_the_search_and_the_cells_move_the_whole_job_s_progress_line(tiny_task, 
     cells = [s for s in shares if 0.45 < s < 0.9]  # the volume proved, inside the cells' part
     assert len(set(search)) >= 5 and len(set(cells)) >= 5, shares
     assert shares[-1] == 1.0 and job.share >= 0.9
+
+
+def test_the_cells_allowance_bounds_what_an_inexact_inverse_of_the_similarity_changes(tiny_task):
+    """The cells check X in the coordinates it was searched in (x = T x~), through the float inverse Ti of T: what
+    Ti T != I and the products' rounding change in the LMI is bounded (similarity_allowance), here against a Ti a
+    thousandth off, and the allowance of an accurate inverse on a 1e6-conditioned T is tiny."""
+    from polyrob.analysis.lpv.basis import default_basis
+    from polyrob.analysis.lpv.cells import cell_setting
+    from polyrob.analysis.lpv.cells.loop import AffineLoop, SimilarTransform, similarity_allowance
+    from polyrob.analysis.lpv.robot import closed_loop_system
+    from polyrob.analysis.lpv.task import task_rate_bounds
+    from polyrob.bounds.certified.analytic import function_balls
+
+    model = task_scheduling(tiny_task.robot, tiny_task.domain, points=(3, 2))
+    system = closed_loop_system(model, pd_controller(), tiny_task.P.W_S, None, None)
+    centre = np.array([0.5 * (a[0] + a[-1]) for a in model.axes])
+    n = system(centre)[0].shape[0]
+    basis = default_basis(model, tensor=True)
+    rates = [(-np.inf, np.inf) if k == "qddot" else r for r, k in zip(task_rate_bounds(model, tiny_task.domain),
+                                                                       model.kinds)]  # fmt: skip
+    rng = np.random.default_rng(0)
+    Q = np.linalg.qr(rng.normal(size=(n, n)))[0]
+    T = Q @ np.diag(np.logspace(-3, 3, n)) @ Q.T  # condition 1e6
+    Xs = np.array([np.eye(n)] + [0.1 * np.eye(n)] * (len(basis) - 1))
+    st = cell_setting(model, system, Xs, basis, rates, similarity=T)
+    lo, hi = st.lo, st.hi
+    f_max = np.abs(function_balls(basis, lo, hi)[0]).max(axis=0)
+    original = AffineLoop(system.of_plant, 1.0, np.ones(n), *model.plant(centre))
+    enc = st.enclose(lo, hi)
+    scale = f_max @ np.linalg.norm(st.Xs, axis=(1, 2)) * max(np.linalg.norm(g[0]) for g in st.loop.G + [st.loop.at(
+        *model.plant(centre))])  # fmt: skip
+    assert 0.0 < st.loop.allowance < 1e-6 * scale
+
+    off = SimilarTransform(system.of_plant, T)
+    off.Ti = off.Ti * (1 + 1e-3)  # Ti T = (1 + 1e-3) I
+    exact = SimilarTransform(system.of_plant, np.linalg.inv(off.Ti))  # the loop similar through Ti^-1
+    exact.Ti = off.Ti
+    loop_off = AffineLoop(off, st.loop.c, st.loop.sc, *model.plant(centre))
+    loop_exact = AffineLoop(exact, st.loop.c, st.loop.sc, *model.plant(centre))
+    allowance = similarity_allowance(off, original, loop_off, enc, st.Xs, f_max)
+    worst = 0.0
+    for rho in rng.uniform(lo, hi, size=(20, len(lo))):
+        f = np.array([[float(fn(rho)) for fn, _ in basis]])
+        g = np.array([[np.asarray(gr(rho), float) for _, gr in basis]])
+        mats = []
+        for loop in (loop_off, loop_exact):
+            A, B, C, D = loop.at(*model.plant(rho))
+            data = GridData(A[None], B[None], C[None], D[None], f, g, np.zeros((1, 1, len(lo))), rho[None])
+            mats.append(brl_matrices(data, st.Xs, 0.9)[0][0, 0])
+        worst = max(worst, np.linalg.norm(mats[0] - mats[1], 2))
+    assert 1e-6 * scale < worst <= allowance

@@ -42,7 +42,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyrob.analysis.lpv.cells.loop import AffineLoop, acceleration_check, plant_enclosure
+from polyrob.analysis.lpv.cells.loop import (
+    AffineLoop,
+    SimilarTransform,
+    acceleration_check,
+    plant_enclosure,
+    similarity_allowance,
+)
 from polyrob.analysis.lpv.cells.parallel import CELLS_PER_ROUND, CELLS_PER_TASK, CellWork, batches, evaluate_cells
 from polyrob.analysis.lpv.cells.second_order import fixed_terms
 from polyrob.bounds.certified.boxes import prove_on_boxes
@@ -146,14 +152,13 @@ def cell_setting(model, system, Xs, basis, rates, *, similarity=None, c=1.0, cel
         lo0[0], sizes[0] = -hi0[0], 2 * sizes[0]
     edges = [np.linspace(lo0[i], hi0[i], max(1, sizes[i]) + 1) for i in range(len(lo0))]
     A0, B0 = model.plant(0.5 * (lo0 + hi0))
+    # X is checked in the coordinates it was searched in, x = T x~: the loop is moved there (SimilarTransform),
+    # not X back to the loop's own, where on a stiff loop its margin sinks below the float check's rounding
+    of_plant = system.of_plant if similarity is None else SimilarTransform(system.of_plant, similarity)
     corners = np.array(np.meshgrid(*edges, indexing="ij")).reshape(len(lo0), -1).T
-    sc = state_scaling(np.array([system.of_plant(*model.plant(p))[0] for p in corners]))  # as the grid check
-    loop = AffineLoop(system.of_plant, c, sc, A0, B0)
-    n = sc.size
-    # X back in the loop's own (time-scaled, balanced) coordinates, x = T x~: X = T^-T X~ T^-1.  The float
-    # product is a candidate like any other, and it is what the cells check: no inverse is trusted
-    Ti = np.eye(n) if similarity is None else np.linalg.inv(np.asarray(similarity, float))
-    Xs = np.einsum("ai,kab,bj->kij", Ti, np.asarray(Xs, float), Ti)
+    sc = state_scaling(np.array([of_plant(*model.plant(p))[0] for p in corners]))  # as the grid check
+    loop = AffineLoop(of_plant, c, sc, A0, B0)
+    Xs = np.asarray(Xs, float)
     Xs = 0.5 * (Xs + np.transpose(Xs, (0, 2, 1))) * sc[None, :, None] * sc[None, None, :]
     # a power-of-two diagonal congruence that brings X's diagonal near 1 (exact): the rounding allowances are
     # relative to |X| |A|, and an X with entries from 1e1 to 1e7 left 0.35 of a cell's margin to them (paper_2r x4)
@@ -162,7 +167,13 @@ def cell_setting(model, system, Xs, basis, rates, *, similarity=None, c=1.0, cel
     if np.all(dX > 0) and np.all(np.isfinite(dX)):
         d = 2.0 ** np.round(-0.5 * np.log2(dX))
         sc, Xs = sc * d, Xs * d[None, :, None] * d[None, None, :]
-        loop = AffineLoop(system.of_plant, c, sc, A0, B0)
+        loop = AffineLoop(of_plant, c, sc, A0, B0)
+    if similarity is not None and enclose is not None:
+        from polyrob.bounds.certified.analytic import function_balls
+
+        fb = function_balls(basis, lo0, hi0, order=1)[0]
+        loop.allowance = similarity_allowance(of_plant, AffineLoop(system.of_plant, 1.0, np.ones(sc.size), A0, B0),
+                                              loop, enclose(lo0, hi0), Xs, np.maximum(np.abs(fb[0]), np.abs(fb[1])))  # fmt: skip
     rates_at = kinematic_rates(model, rates, c)
     boxes = [
         (np.array([e[k] for e, k in zip(edges, idx)]), np.array([e[k + 1] for e, k in zip(edges, idx)]))
@@ -170,7 +181,7 @@ def cell_setting(model, system, Xs, basis, rates, *, similarity=None, c=1.0, cel
     ]
     plan = (rates_at.exact, np.array(rates, float) / c)
     _, B, C, _ = loop.at(A0, B0)
-    fixed = fixed_terms(loop, Xs, n, B.shape[1], C.shape[0])
+    fixed = fixed_terms(loop, Xs, sc.size, B.shape[1], C.shape[0])
     return CellSetting(loop, Xs, basis, rates_at, plan, enclose, boxes, lo0, hi0, fixed)
 
 

@@ -74,11 +74,12 @@ def first_order_cell(loop, model, enclose, basis, Xs, rates_at, gamma, lo, hi):
         # so directions where M_c is very negative absorb large changes (a plain norm bound would not); one W per
         # vertex (one W at the rate box's centre left margins of 1e-4 at the vertices of paper_2r's loop)
         mu, V = np.linalg.eigh(-M[0, v])
-        if mu[0] <= err[0, v]:
+        if mu[0] <= err[0, v] + loop.allowance:  # the float loop's LMI against the exact similar loop's
             return -np.inf, None, f"LMI not negative at rho = {tuple(round(float(x), 6) for x in ctr)}, a cell's centre"
         W = (V * mu**-0.5) @ V.T
         WE, ZcW = W[:, :n], Zc @ W
-        lam = np.linalg.eigvalsh(W @ M[0, v] @ W)[-1] + (err[0, v] + 8 * s * _U * np.linalg.norm(M[0, v])) / mu[0]
+        lam = np.linalg.eigvalsh(W @ M[0, v] @ W)[-1] + (err[0, v] + 8 * s * _U * np.linalg.norm(M[0, v])
+                                                          + loop.allowance) / mu[0]  # fmt: skip
         nS, nSi = spectral_norms(W @ S @ W), spectral_norms(W @ Si @ W)
         nZ, nZi = spectral_norms(Z @ W), spectral_norms(Zi @ W)
         b_plant = half @ (nSi + drad @ nS) + eps @ nS

@@ -219,7 +219,7 @@ def expansions(loop, model, enclose, basis, Xs, rate_plan, fixed, gamma, lo, hi)
         M, err, _, _ = brl_matrices(data, Xs, gamma)
         Lc = M[0, 0]
         mu, V = np.linalg.eigh(-Lc)
-        if mu[0] <= err[0, 0]:
+        if mu[0] <= err[0, 0] + loop.allowance:  # the float loop's LMI against the exact similar loop's
             return [], None, f"LMI not negative at rho = {tuple(round(float(x), 6) for x in ctr)}, a cell's centre"
         W = (V * mu**-0.5) @ V.T
         WGW = W @ G @ W
@@ -235,7 +235,7 @@ def expansions(loop, model, enclose, basis, Xs, rate_plan, fixed, gamma, lo, hi)
         # the float G_t against the exact ones, times how far s_t moves over the cell
         ds = np.maximum(np.abs(grad[0]), np.abs(grad[1])) @ h + 0.5 * np.einsum("tab,a,b->t", np.maximum(
             np.abs(hess[0]), np.abs(hess[1])), h, h)  # fmt: skip
-        base = (err[0, 0] + 8 * s * _U * np.linalg.norm(Lc)) / mu[0] + (ds @ gerr) / mu[0] + val_err @ nG
+        base = (err[0, 0] + 8 * s * _U * np.linalg.norm(Lc) + loop.allowance) / mu[0] + (ds @ gerr) / mu[0] + val_err @ nG
         out.append(Expansion(nu_c, W, W @ Lc @ W, Dw, K, float(base + h @ d_err)))
     return out, (fc, gc, Hcell), ""
 
