@@ -181,14 +181,16 @@ def test_the_cells_allowance_bounds_what_an_inexact_inverse_of_the_similarity_ch
     Q = np.linalg.qr(rng.normal(size=(n, n)))[0]
     T = Q @ np.diag(np.logspace(-3, 3, n)) @ Q.T  # condition 1e6
     Xs = np.array([np.eye(n)] + [0.1 * np.eye(n)] * (len(basis) - 1))
-    st = cell_setting(model, system, Xs, basis, rates, similarity=T)
+    st = cell_setting(model, system, Xs, basis, rates)  # the box, its enclosure, the balancing
     lo, hi = st.lo, st.hi
     f_max = np.abs(function_balls(basis, lo, hi)[0]).max(axis=0)
     original = AffineLoop(system.of_plant, 1.0, np.ones(n), *model.plant(centre))
     enc = st.enclose(lo, hi)
-    scale = f_max @ np.linalg.norm(st.Xs, axis=(1, 2)) * max(np.linalg.norm(g[0]) for g in st.loop.G + [st.loop.at(
+    accurate = SimilarTransform(system.of_plant, T)
+    loop = AffineLoop(accurate, st.loop.c, st.loop.sc, *model.plant(centre))
+    scale = f_max @ np.linalg.norm(st.Xs, axis=(1, 2)) * max(np.linalg.norm(g[0]) for g in loop.G + [loop.at(
         *model.plant(centre))])  # fmt: skip
-    assert 0.0 < st.loop.allowance < 1e-6 * scale
+    assert 0.0 < similarity_allowance(accurate, original, loop, enc, st.Xs, f_max) < 1e-6 * scale
 
     off = SimilarTransform(system.of_plant, T)
     off.Ti = off.Ti * (1 + 1e-3)  # Ti T = (1 + 1e-3) I

@@ -135,15 +135,56 @@ class CellSetting:
     fixed: dict
 
 
-def cell_setting(model, system, Xs, basis, rates, *, similarity=None, c=1.0, cells=None) -> CellSetting:
-    """The :class:`CellSetting` of :func:`check_cells` (same arguments); ``enclose`` is ``None`` without enclosures."""
-    from polyrob.analysis.lpv.norm import state_scaling
-    from polyrob.analysis.lpv.robot import kinematic_rates
+def cell_setting(model, system, Xs, basis, rates, *, similarity=None, c=1.0, cells=None, gamma=None) -> CellSetting:
+    """The :class:`CellSetting` of :func:`check_cells` (same arguments); ``enclose`` is ``None`` without enclosures.
 
+    With a ``similarity`` ``T`` (``x = T x~``, the coordinates ``X`` was
+    searched in) the cells can run in either coordinates: the loop's own,
+    ``X`` moved there as the float product ``T^-T X T^-1`` (a candidate like
+    any other: no inverse is trusted), or the search's, the loop moved there
+    through the float inverse of ``T`` with :func:`~polyrob.analysis.lpv.cells.loop.similarity_allowance`
+    added to every cell's rounding allowance.  Both are proofs; the one kept
+    has the larger ratio of the LMI's margin to its allowances at the box's
+    centre (at ``gamma``, default 1): on a stiff loop ``X`` moved back spans
+    many decades and its margin sinks below the rounding (the main job's
+    loop), while on a milder one the whole-box allowance costs more than it
+    saves (paper_2r at four times the bandwidth).
+    """
     if basis is None:  # a constant X (arbitrarily fast variation)
         from polyrob.analysis.lpv.basis import constant_function
 
         basis = [constant_function(len(model.names))]
+    if similarity is None:
+        return _setting(model, system, Xs, basis, rates, None, c, cells, moved=False)
+    own = _setting(model, system, Xs, basis, rates, similarity, c, cells, moved=False)
+    searched = _setting(model, system, Xs, basis, rates, similarity, c, cells, moved=True)
+    level = 1.0 if gamma is None else float(gamma)
+    return max((own, searched), key=lambda st: _centre_ratio(st, model, level))
+
+
+def _centre_ratio(st: CellSetting, model, gamma: float) -> float:
+    """The LMI's smallest margin at the box's centre over its rounding and similarity allowances (all rate vertices)."""
+    from polyrob.analysis.lpv.check import GridData, brl_matrices
+
+    ctr = 0.5 * (st.lo + st.hi)
+    A, B, C, D = st.loop.at(*model.plant(ctr))
+    f = np.array([[float(fn(ctr)) for fn, _ in st.basis]])
+    g = np.array([[np.asarray(gr(ctr), float) for _, gr in st.basis]])
+    rc = np.array(st.rates_at(ctr), float)
+    rc[~np.isfinite(rc).all(axis=1)] = 0.0
+    nus = np.array(np.meshgrid(*[np.unique(x) for x in rc], indexing="ij")).reshape(len(ctr), -1).T
+    data = GridData(A[None], B[None], C[None], D[None], f, g, nus[None], ctr[None])
+    M, err, _, _ = brl_matrices(data, st.Xs, gamma)
+    margins = -np.linalg.eigvalsh(M[0])[:, -1]
+    ratio = float(np.min(margins / (err[0] + st.loop.allowance)))
+    return ratio if np.isfinite(ratio) else -np.inf
+
+
+def _setting(model, system, Xs, basis, rates, similarity, c, cells, *, moved: bool) -> CellSetting:
+    """One :class:`CellSetting`: ``X`` moved to the loop's own coordinates, or (``moved``) the loop to ``X``'s."""
+    from polyrob.analysis.lpv.norm import state_scaling
+    from polyrob.analysis.lpv.robot import kinematic_rates
+
     enclose = plant_enclosure(model)
     lo0 = np.array([a[0] for a in model.axes], float)
     hi0 = np.array([a[-1] for a in model.axes], float)
@@ -152,13 +193,17 @@ def cell_setting(model, system, Xs, basis, rates, *, similarity=None, c=1.0, cel
         lo0[0], sizes[0] = -hi0[0], 2 * sizes[0]
     edges = [np.linspace(lo0[i], hi0[i], max(1, sizes[i]) + 1) for i in range(len(lo0))]
     A0, B0 = model.plant(0.5 * (lo0 + hi0))
-    # X is checked in the coordinates it was searched in, x = T x~: the loop is moved there (SimilarTransform),
-    # not X back to the loop's own, where on a stiff loop its margin sinks below the float check's rounding
-    of_plant = system.of_plant if similarity is None else SimilarTransform(system.of_plant, similarity)
+    of_plant = SimilarTransform(system.of_plant, similarity) if moved else system.of_plant
     corners = np.array(np.meshgrid(*edges, indexing="ij")).reshape(len(lo0), -1).T
     sc = state_scaling(np.array([of_plant(*model.plant(p))[0] for p in corners]))  # as the grid check
     loop = AffineLoop(of_plant, c, sc, A0, B0)
+    n = sc.size
     Xs = np.asarray(Xs, float)
+    if similarity is not None and not moved:
+        # X back in the loop's own (time-scaled, balanced) coordinates, x = T x~: X = T^-T X~ T^-1.  The float
+        # product is a candidate like any other, and it is what the cells check: no inverse is trusted
+        Ti = np.linalg.inv(np.asarray(similarity, float))
+        Xs = np.einsum("ai,kab,bj->kij", Ti, Xs, Ti)
     Xs = 0.5 * (Xs + np.transpose(Xs, (0, 2, 1))) * sc[None, :, None] * sc[None, None, :]
     # a power-of-two diagonal congruence that brings X's diagonal near 1 (exact): the rounding allowances are
     # relative to |X| |A|, and an X with entries from 1e1 to 1e7 left 0.35 of a cell's margin to them (paper_2r x4)
@@ -168,12 +213,14 @@ def cell_setting(model, system, Xs, basis, rates, *, similarity=None, c=1.0, cel
         d = 2.0 ** np.round(-0.5 * np.log2(dX))
         sc, Xs = sc * d, Xs * d[None, :, None] * d[None, None, :]
         loop = AffineLoop(of_plant, c, sc, A0, B0)
-    if similarity is not None and enclose is not None:
+    if moved and enclose is not None:
         from polyrob.bounds.certified.analytic import function_balls
 
         fb = function_balls(basis, lo0, hi0, order=1)[0]
-        loop.allowance = similarity_allowance(of_plant, AffineLoop(system.of_plant, 1.0, np.ones(sc.size), A0, B0),
-                                              loop, enclose(lo0, hi0), Xs, np.maximum(np.abs(fb[0]), np.abs(fb[1])))  # fmt: skip
+        loop.allowance = similarity_allowance(of_plant, AffineLoop(system.of_plant, 1.0, np.ones(n), A0, B0), loop,
+                                              enclose(lo0, hi0), Xs, np.maximum(np.abs(fb[0]), np.abs(fb[1])))  # fmt: skip
+    elif moved:
+        loop.allowance = np.inf  # no enclosure to bound the similarity's effect with: this setting proves nothing
     rates_at = kinematic_rates(model, rates, c)
     boxes = [
         (np.array([e[k] for e, k in zip(edges, idx)]), np.array([e[k + 1] for e, k in zip(edges, idx)]))
@@ -181,7 +228,7 @@ def cell_setting(model, system, Xs, basis, rates, *, similarity=None, c=1.0, cel
     ]
     plan = (rates_at.exact, np.array(rates, float) / c)
     _, B, C, _ = loop.at(A0, B0)
-    fixed = fixed_terms(loop, Xs, sc.size, B.shape[1], C.shape[0])
+    fixed = fixed_terms(loop, Xs, n, B.shape[1], C.shape[0])
     return CellSetting(loop, Xs, basis, rates_at, plan, enclose, boxes, lo0, hi0, fixed)
 
 
@@ -234,7 +281,7 @@ def check_cells(model, system, Xs, basis, rates, gamma, *, similarity=None, c=1.
     if order not in (1, 2):
         raise ArgumentError(f"check_cells: order must be 1 or 2, not {order!r}")
     t0 = time.perf_counter()
-    st = cell_setting(model, system, Xs, basis, rates, similarity=similarity, c=c, cells=cells)
+    st = cell_setting(model, system, Xs, basis, rates, similarity=similarity, c=c, cells=cells, gamma=gamma)
     if st.enclose is None:
         return CellCheck(False, gamma, 0, -np.inf, (), f"no guaranteed enclosure for {model.robot.name}", 0.0)
     loop, Xs, basis, rates_at, enclose, boxes, lo0, hi0 = (st.loop, st.Xs, st.basis, st.rates_at, st.enclose,
