@@ -417,3 +417,19 @@ def test_a_parameter_the_basis_does_not_use_adds_no_rate_vertices():
     one = polyrob.lpvnorm(loop, GRID, rates[:1], BASIS2)
     assert two.proved and two.gamma == pytest.approx(one.gamma, rel=1e-3)
     assert "[-5, 5]" in two.variation  # the stated rate box is the user's
+
+
+def test_extra_points_join_the_grid_s_lmis_and_points_outside_its_box_are_refused():
+    """lpvnorm(points=...): the LMIs of more points join the grid's (their frozen gain counts), inside the box only."""
+
+    def system(rho):  # 1/(s + a(rho)), a from 1 at rho = 0 to 0.5 at rho = 0.5 and back to 1 at rho = 1
+        a = 1.0 - 2.0 * rho[0] * (1.0 - rho[0])
+        return np.array([[-a]]), np.array([[1.0]]), np.array([[1.0]]), np.zeros((1, 1))
+
+    grid = [np.array([0.0, 1.0])]
+    plain = polyrob.lpvnorm(system, grid, solver="structured")
+    more = polyrob.lpvnorm(system, grid, solver="structured", points=[[0.5]])
+    assert plain.gamma == pytest.approx(1.0, rel=1e-4) and more.gamma == pytest.approx(2.0, rel=1e-4)
+    assert more.n_points == 3
+    with pytest.raises(ArgumentError, match="inside the grid's box"):
+        polyrob.lpvnorm(system, grid, points=[[1.5]])

@@ -210,3 +210,13 @@ def test_the_cells_allowance_bounds_what_an_inexact_inverse_of_the_similarity_ch
             mats.append(brl_matrices(data, st.Xs, 0.9)[0][0, 0])
         worst = max(worst, np.linalg.norm(mats[0] - mats[1], 2))
     assert 1e-6 * scale < worst <= allowance
+
+
+def test_constraint_generation_makes_the_structured_search_s_x_hold_between_its_points(tiny_task):
+    """On two points per velocity the structured solver's X, of the same margin as Clarabel's, failed between the
+    points (robot.SEARCH_SOLVER); the re-check grid's failing points added to the search make it hold there, and
+    the cells then prove it on the whole box."""
+    mv = task_motion_certificate(tiny_task, pd_controller(), points=(3, 2), velocities="bounded", level=0.9,
+                                 cells=True, cell_workers=1, lower_bound=False, solver="structured")  # fmt: skip
+    assert mv.certificate.status.value == "CERTIFIED", (mv.finer, mv.cells)
+    assert np.isfinite(mv.finer["gamma"]) and "constraint generation" in " ".join(mv.certificate.scope.notes)

@@ -33,7 +33,7 @@ from functools import partial
 
 import numpy as np
 
-__all__ = ["default_basis", "basis_size", "finer_recheck", "even_functions", "constant_function"]
+__all__ = ["default_basis", "basis_size", "finer_recheck", "failing_points", "even_functions", "constant_function"]
 
 
 def _unit(p: int, i: int, dv: float) -> np.ndarray:
@@ -183,13 +183,26 @@ def finer_recheck(system, model, result, rates, basis, *, points=(9, 5), c: floa
         there: then ``reason``), ``holds_at_gamma`` (the search's level holds
         there too).
     """
-    from polyrob.analysis.lpv.check import GridData, check_solution, proved_gamma
+    from polyrob.analysis.lpv.check import check_solution, proved_gamma
+
+    if not result.proved or not result.X:
+        return {"points": 0, "gamma": float("inf"), "holds_at_gamma": False, "reason": "nothing proved to re-check"}
+    data, Xs = _recheck_data(system, model, result, rates, basis, points, c)
+    at_level = check_solution(data, Xs, result.gamma)
+    gamma, chk = proved_gamma(data, Xs, result.gamma)
+    out = {"points": int(data.A.shape[0]), "gamma": float(gamma), "holds_at_gamma": bool(at_level.holds)}
+    if not np.isfinite(gamma):
+        out["reason"] = chk.reason
+    return out
+
+
+def _recheck_data(system, model, result, rates, basis, points, c):
+    """The finer grid's data on power-of-two balanced states (exact: ``x = S x~``) and ``X_j`` there."""
+    from polyrob.analysis.lpv.check import GridData
     from polyrob.analysis.lpv.data import evaluate
     from polyrob.analysis.lpv.norm import state_scaling
     from polyrob.analysis.lpv.robot import kinematic_rates
 
-    if not result.proved or not result.X:
-        return {"points": 0, "gamma": float("inf"), "holds_at_gamma": False, "reason": "nothing proved to re-check"}
     axes = [
         np.linspace(a[0], a[-1], int(points[0] if kind == "q" else points[1])) if a.size > 1 else a
         for a, kind in zip(model.axes, model.kinds)
@@ -205,10 +218,27 @@ def finer_recheck(system, model, result, rates, basis, *, points=(9, 5), c: floa
         d.A / sc[None, :, None] * sc[None, None, :], d.B / sc[None, :, None], d.C * sc[None, None, :], d.D,
         d.F, d.G, d.nus, d.points,
     )  # fmt: skip
-    Xs = np.asarray(result.X, dtype=float) * sc[None, :, None] * sc[None, None, :]
-    at_level = check_solution(data, Xs, result.gamma)
-    gamma, chk = proved_gamma(data, Xs, result.gamma)
-    out = {"points": int(ev.data.A.shape[0]), "gamma": float(gamma), "holds_at_gamma": bool(at_level.holds)}
-    if not np.isfinite(gamma):
-        out["reason"] = chk.reason
-    return out
+    return data, np.asarray(result.X, dtype=float) * sc[None, :, None] * sc[None, None, :]
+
+
+def failing_points(system, model, result, rates, basis, *, points, c: float, level: float, most: int) -> np.ndarray:
+    """The finer grid's points where the returned ``X`` is not proved at ``level``, worst first (at most ``most``).
+
+    The same check as :func:`finer_recheck` (every rate vertex, the float
+    rounding allowed for), point by point: the points to add to a search
+    whose ``X`` fails between its grid points (constraint generation).
+
+    Returns
+    -------
+    ndarray
+        ``(N, p)`` parameter points.
+    """
+    from polyrob.analysis.lpv.check import brl_matrices
+
+    if not result.proved or not result.X:
+        return np.zeros((0, len(model.axes)))
+    data, Xs = _recheck_data(system, model, result, rates, basis, points, c)
+    M, err, _, _ = brl_matrices(data, Xs, level)
+    worst = (np.linalg.eigvalsh(M)[..., -1] + err).max(axis=1)
+    order = [i for i in np.argsort(-worst)[: int(most)] if worst[i] >= 0]
+    return data.points[order]

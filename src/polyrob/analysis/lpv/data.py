@@ -178,7 +178,7 @@ def _rates_per_point(rates_at, points, rb, G) -> np.ndarray:
     return np.array([np.vstack([v] + [v[-1:]] * (V - len(v))) for v in per])
 
 
-def evaluate(system, grid, rate_bounds=None, basis=None, rates_at=None) -> Evaluated:
+def evaluate(system, grid, rate_bounds=None, basis=None, rates_at=None, extra=None) -> Evaluated:
     """Evaluate the system, basis and rate box on the tensor grid (after checking every input).
 
     Parameters
@@ -193,6 +193,9 @@ def evaluate(system, grid, rate_bounds=None, basis=None, rates_at=None) -> Evalu
         ``rho -> p pairs (lo, hi)``: the rate box at each grid point, inside
         ``rate_bounds`` (e.g. ``d q/dt = qdot`` exactly when ``qdot`` is a
         parameter too).
+    extra : array_like, optional
+        ``(N_extra, p)`` points inside the grid's box, evaluated after the
+        grid's (e.g. where a re-check found the ``X`` of the grid failing).
 
     Returns
     -------
@@ -210,6 +213,12 @@ def evaluate(system, grid, rate_bounds=None, basis=None, rates_at=None) -> Evalu
     axes = check_grid(grid)
     p = len(axes)
     points = np.array(np.meshgrid(*axes, indexing="ij")).reshape(p, -1).T
+    if extra is not None and len(extra):
+        more = np.atleast_2d(np.asarray(extra, dtype=float))
+        lo, hi = np.array([g[0] for g in axes]), np.array([g[-1] for g in axes])
+        if more.shape[1] != p or not np.all(np.isfinite(more)) or np.any(more < lo) or np.any(more > hi):
+            raise ArgumentError(f"extra points must be finite, {p} coordinates each, inside the grid's box")
+        points = np.vstack([points, more])
     mats, shapes = [], None
     for rho in points:
         m = _matrices(system, rho, shapes)

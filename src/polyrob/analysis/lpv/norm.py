@@ -61,6 +61,7 @@ OPTIONS = {
     "settings": None,
     "rates_at": None,
     "level": None,
+    "points": None,
 }
 
 
@@ -276,7 +277,9 @@ def lpvnorm(system, grid, rate_bounds=None, basis=None, **options) -> LpvNormRes
         each grid point, inside ``rate_bounds`` (e.g. ``dq/dt = qdot``
         exactly when both are parameters); ``level`` (None): fix the solver's
         ``gamma`` there and maximise the LMIs' margin (an ``X`` well inside
-        the feasible set, for a check between the grid points).
+        the feasible set, for a check between the grid points); ``points``
+        (None): ``(N, p)`` more parameter points inside the grid's box whose
+        LMIs join the grid's (where a finer re-check found ``X`` failing).
 
     Returns
     -------
@@ -307,7 +310,7 @@ def lpvnorm(system, grid, rate_bounds=None, basis=None, **options) -> LpvNormRes
     """
     t0 = time.perf_counter()
     opts = _options(options)
-    ev = evaluate(system, grid, rate_bounds, basis, opts["rates_at"])
+    ev = evaluate(system, grid, rate_bounds, basis, opts["rates_at"], opts["points"])
     data = ev.data
     N, n = data.A.shape[:2]
     k = data.F.shape[1]

@@ -85,6 +85,11 @@ AUTO_STATES = 8
 #: one (``recheck="auto"``: at least this, and twice as dense as the search grid along positions and velocities).
 DEFAULT_POINTS = (5, 3)
 DEFAULT_RECHECK = (9, 5)
+#: With cells: rounds of adding the re-check grid's points where the searched X fails (constraint generation), and
+#: at most this many points per round: an X fitted at three points per velocity may fail midway between them, and
+#: the cells then stop at once (tests/test_task_cells.py).
+RECHECK_ROUNDS = 3
+ROUND_POINTS = 40
 
 
 def recheck_points(points) -> tuple[int, int]:
@@ -325,6 +330,7 @@ def task_motion_certificate(
     cell_workers: int | None = None,
     progress: bool = False,
     solver: str = "clarabel",
+    recheck_rounds: int | None = None,
 ):
     """The moving-robot certificate of ``K`` on a task-domain ``problem``.
 
@@ -380,6 +386,12 @@ def task_motion_certificate(
         structured one's ``X``, of the same margin, failed between the
         points where Clarabel's held (:data:`~polyrob.analysis.lpv.robot.SEARCH_SOLVER`);
         on the main job's 16-state loop it is several times faster.
+    recheck_rounds : int, optional
+        Rounds of constraint generation: the re-check grid's points where
+        ``X`` is not proved at a level three quarters of the way from the
+        grid's bound to the cells' are added to the search (at most
+        :data:`ROUND_POINTS` a round) and it runs again (default
+        :data:`RECHECK_ROUNDS` with ``cells``, else 0).
 
     Returns
     -------
@@ -430,6 +442,14 @@ def task_motion_certificate(
             recheck = recheck_points(points)
         with span(*parts["recheck"]):
             finer = {} if recheck is None else finer_recheck(sysf, model, result, rates, basis, points=recheck, c=cs)
+            added, rounds = (), (RECHECK_ROUNDS if cells else 0) if recheck_rounds is None else int(recheck_rounds)
+            if recheck is not None and rounds > 0 and result.proved:
+                from polyrob.analysis.lpv.robot import cells_level
+
+                target = result.gamma + 0.75 * (cells_level(result.gamma, level, cell_level) - result.gamma)
+                result, finer, added = _add_failing_points(model, sysf, cs, result, finer, rates, basis, recheck,
+                                                           target, rounds, {"eps": 1e-4, "level": level,
+                                                                            "solver": solver})  # fmt: skip
         between = None
         g_grid = max(result.gamma, finer.get("gamma", result.gamma))
         if cells and result.proved and g_grid < 1:
@@ -462,6 +482,9 @@ def task_motion_certificate(
         grid_note = f"on the grid of {model.words()}{again}; not proved between the grid points" + (
             f" ({between.reason})" if between is not None else ""
         )
+    if len(added):
+        grid_note += (f"; {len(added)} points of the finer grid, where an earlier X failed, added to the search's "
+                      "LMIs (constraint generation)")  # fmt: skip
     notes = (
         grid_note,
         "the linearised robot (LPV family A(rho(t)), B(rho(t))) with the torques of the task's inverse dynamics, "
@@ -487,6 +510,32 @@ def task_motion_certificate(
         scope=scope, notes=why, finer=finer, cells={} if between is None else between.summary(), lower=found,
         seconds=time.perf_counter() - t0,
     )  # fmt: skip
+
+
+def _add_failing_points(model, sysf, cs, result, finer, rates, basis, recheck, target, rounds, options):
+    """Constraint generation: ``(result, finer, points added)`` after up to ``rounds`` searches with the re-check
+    grid's points where ``X`` is not proved at ``target`` added (a round's result is kept only when proved)."""
+    from polyrob.analysis.lpv.basis import failing_points, finer_recheck
+    from polyrob.analysis.lpv.norm import lpvnorm
+    from polyrob.analysis.lpv.robot import kinematic_rates
+
+    added = np.zeros((0, len(model.axes)))
+    scaled = [(lo / cs, hi / cs) for lo, hi in rates]
+    for _ in range(int(rounds)):
+        new = failing_points(sysf, model, result, rates, basis, points=recheck, c=cs, level=target, most=ROUND_POINTS)
+        if not len(new):
+            break
+        more = np.vstack([added, new])
+        try:
+            again = lpvnorm(sysf, list(model.axes), scaled, basis, rates_at=kinematic_rates(model, rates, cs),
+                            points=more, **options)  # fmt: skip
+        except SolverError:
+            break
+        if not again.proved:
+            break
+        result, added = again, more
+        finer = finer_recheck(sysf, model, result, rates, basis, points=recheck, c=cs)
+    return result, finer, added
 
 
 def _found(model, system, domain, lower_bound) -> dict:
