@@ -1,7 +1,7 @@
 """The main job's moving-robot verdict on its task: time, peak memory and the bound of each search (JSON).
 
     python benchmarks/moving_task.py RUN_DIR [--variants arbitrary:1,bounded:1,arbitrary:2] [--points 5,3]
-        [--cells] [--solver clarabel|structured] [--results PATH]
+        [--cells] [--solver clarabel|structured] [--rounds N] [--results PATH]
     python benchmarks/moving_task.py RUN_DIR --parts [--results PATH]
 
 ``RUN_DIR`` is what ``polyrob run -o RUN_DIR`` writes (the main job: planar_2r
@@ -13,7 +13,10 @@ is ``X`` on the positions only (what ``--moving`` takes for the main job's
 16-state loop), ``bounded`` ``X`` on the positions times ``(1, qdot)`` with
 the velocities' rates bounded by the task's accelerations.  ``--solver``: the
 search's LMI solver (Clarabel, the task certificate's default, or the
-structured interior point).  Printed per variant: the bound proved on the
+structured interior point); ``--rounds N``: rounds of constraint generation
+(the re-check grid's failing points added to the search,
+:data:`polyrob.analysis.lpv.task.RECHECK_ROUNDS` by default with ``--cells``,
+else none).  Printed per variant: the bound proved on the
 search grid, on the finer re-check grid (twice as dense along positions and
 velocities, :func:`polyrob.analysis.lpv.task.recheck_points`), the cells'
 outcome with ``--cells``, the status, the seconds and the peak memory, and
@@ -44,7 +47,8 @@ from pathlib import Path
 from _results import add_results_option, save_run
 
 
-def one(run_dir: str, velocities: str, harmonics: int, points, cells: bool, solver: str = "clarabel") -> dict:
+def one(run_dir: str, velocities: str, harmonics: int, points, cells: bool, solver: str = "clarabel",
+        rounds: int | None = None) -> dict:
     """One search in this process: the summary of its certificate."""
     from polyrob.analysis.lpv.task import task_motion_certificate
     from polyrob.pipeline.rebuild import load_run
@@ -53,7 +57,7 @@ def one(run_dir: str, velocities: str, harmonics: int, points, cells: bool, solv
     t0 = time.perf_counter()
     c = task_motion_certificate(run.problem, run.controller, points=points, velocities=velocities,
                                 harmonics=harmonics, cells=cells, level=0.95 if cells else None, cell_workers=1,
-                                lower_bound=True, solver=solver)  # fmt: skip
+                                lower_bound=True, solver=solver, recheck_rounds=rounds)  # fmt: skip
     r = c.result
     return {
         "velocities": velocities,
@@ -61,6 +65,8 @@ def one(run_dir: str, velocities: str, harmonics: int, points, cells: bool, solv
         "solver": solver,
         "points": list(points),
         "finer_points": c.finer.get("points"),
+        "rounds": rounds,
+        "notes": list(c.certificate.scope.notes) if c.computed else [],
         "status": c.certificate.status.value if c.computed else "not computed",
         "grid_bound": None if r is None else float(r.gamma),
         "finer_bound": c.finer.get("gamma"),
@@ -132,12 +138,12 @@ def parts(run_dir: str) -> list[dict]:
     return out, [float(poles.min()), float(poles.max())]
 
 
-def measure(run_dir: str, variant: str, points: str, cells: bool, solver: str = "clarabel") -> dict:
+def measure(run_dir: str, variant: str, points: str, cells: bool, solver: str = "clarabel", rounds=None) -> dict:
     """``variant`` in a child process: its summary, wall seconds, peak memory and the load around it."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "out.json"
         cmd = [sys.executable, __file__, run_dir, "--one", variant, "--points", points, "--out", str(out),
-               "--solver", solver]
+               "--solver", solver] + ([] if rounds is None else ["--rounds", str(rounds)])
         cmd += ["--cells"] if cells else []
         t0, load0 = time.perf_counter(), os.getloadavg()[0]
         child = subprocess.Popen(cmd)
@@ -159,6 +165,7 @@ def main() -> None:
     ap.add_argument("--cells", action="store_true", help="prove a grid bound below 1 between the points")
     ap.add_argument("--parts", action="store_true", help="the bound of each single motion (module text)")
     ap.add_argument("--solver", default="clarabel", choices=("clarabel", "structured"), help="the search's LMI solver")
+    ap.add_argument("--rounds", type=int, default=None, help="rounds of constraint generation (default: 3 with --cells)")
     ap.add_argument("--one", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--out", default=None, help=argparse.SUPPRESS)
     add_results_option(ap)
@@ -185,9 +192,10 @@ def main() -> None:
     if args.one:
         velocities, harmonics = args.one.split(":")
         Path(args.out).write_text(json.dumps(one(args.run_dir, velocities, int(harmonics), points, args.cells,
-                                                 args.solver), default=float))  # fmt: skip
+                                                 args.solver, args.rounds), default=float))  # fmt: skip
         return
-    rows = [measure(args.run_dir, v, args.points, args.cells, args.solver) for v in args.variants.split(",")]
+    rows = [measure(args.run_dir, v, args.points, args.cells, args.solver, args.rounds)
+            for v in args.variants.split(",")]
     doc = {"run_dir": args.run_dir, "variants": rows}
     print(json.dumps(doc, indent=1, default=float))
 
