@@ -99,8 +99,8 @@ def recheck_points(points) -> tuple[int, int]:
     the positions and along the velocities.  A fixed grid is not finer than a
     search grid as dense as itself (at ``points=(9, 3)`` a fixed 9 x 3 was
     the search grid), and a re-check that kept the velocities' points passed
-    ``X`` that fail midway between them (the main job's loop: proved 0.893 at
-    its velocity points, not proved at ``qdot = 0.25``).
+    ``X`` that fail midway between them (the main job's loop with ``--as 0.3``,
+    ``benchmarks/results/moving_task.json``).
 
     Examples
     --------
