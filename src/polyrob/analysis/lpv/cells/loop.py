@@ -135,7 +135,7 @@ class SimilarTransform:
     """``of_plant`` in the coordinates ``x = T x~``: ``(Ti A T, Ti B, C T, D)``, ``Ti`` the float inverse of ``T``.
 
     The cells check a searched ``X`` in the coordinates it was searched in:
-    on a stiff loop (the main job's, poles from 0.03 to 6500 rad/s) the same
+    on a stiff loop (the main job's with ``--as 0.3``) the same
     ``X`` moved back to the loop's own coordinates spans many decades, and its
     LMI's margin sinks below the float check's rounding allowance there.
     ``Ti`` is not the exact inverse: :func:`similarity_allowance` bounds what
