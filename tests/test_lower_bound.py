@@ -145,3 +145,56 @@ def test_a_loop_whose_gain_exceeds_1_along_a_trajectory_is_not_certified(robot, 
     assert c.certificate.status is Status.NOT_CERTIFIED
     assert not c.certificate.certified
     assert not (c.gamma < 1.0)
+
+
+def _mixing_loop(rho, eps=0.01, k=0.02):
+    """A slow state that integrates the velocity times a high-passed input, beside a resonance at 10 rad/s.
+
+    Frozen, no input reaches the slow state at 0 rad/s (the high pass) and the peak is 0.25 (either path);
+    moving, a velocity that switches in step with the input rectifies it, and the slow state (time constant
+    1/eps = 100 s) builds a gain of up to k/eps = 2 over hundreds of seconds.
+    """
+    v = float(rho[0])
+    A = np.array([[-1.0, 0, 0, 0], [-v, -eps, 0, 0], [0, 0, 0, 1.0], [0, 0, -100.0, -2.0]])
+    B = np.array([[1.0], [v], [0.0], [1.0]])
+    C = np.array([[0, k, 0, 0], [0, 0, 0, 0.5]])
+    return A, B, C, np.zeros((2, 1))
+
+
+def test_a_slow_loop_s_gain_along_a_bang_bang_velocity_is_found_by_the_long_runs():
+    """The short horizon (tens of seconds, from the frozen peak at 10 rad/s) sees only the frozen 0.25.
+
+    A bound from above: ||v hp(d)|| <= ||d|| (|v| <= 1, |s/(s+1)| <= 1), so the slow path gains at most
+    k/eps = 2 and the whole loop at most sqrt(2^2 + 0.25^2): no gain found may pass it.
+    """
+    from polyrob.analysis.time_varying.trajectory_gains import trajectory_lower_bound
+
+    model = NS(names=("qdot1",), kinds=("qdot",), joints=(0,), axes=(np.linspace(-1.0, 1.0, 3),))
+    short = trajectory_lower_bound(model, _mixing_loop, [(-2.0, 2.0)], long_horizon=False)
+    assert short.frozen_gamma == pytest.approx(0.25, rel=1e-3)
+    assert short.gamma < 0.26
+    found = trajectory_lower_bound(model, _mixing_loop, [(-2.0, 2.0)])
+    assert found.gamma > 0.8 > 3 * found.frozen_gamma  # the rectified input, built up over the long run
+    assert found.gamma <= np.hypot(2.0, 0.25)
+    assert found.worst.startswith("bang-bang qdot1") and found.worst.endswith("over 400 s")  # 4 time constants
+    assert found.horizon == pytest.approx(400.0) and found.step >= short.step
+
+
+def test_the_long_runs_hold_each_still_position_at_its_ends_and_midpoint():
+    from polyrob.analysis.lpv.task import task_rate_bounds, task_scheduling
+    from polyrob.analysis.time_varying.trajectory_gains import admissible_trajectories
+    from polyrob.domains.task import TaskDomain
+
+    robot = polyrob.load_robot("planar_2r")
+    task = TaskDomain.from_robot(robot, pose=[0.0, 1.5708], q_radius=0.5, qdot_max=1.0, qddot_max=2.0)
+    model = task_scheduling(robot, task, points=(3, 3))
+    t = np.arange(400) * 0.05
+    trajs = dict(admissible_trajectories(model, task_rate_bounds(model, task), t, levels=True,
+                                         families=("bang-bang",)))  # fmt: skip
+    q2, v1, v2, a1 = (model.names.index(n) for n in ("q2", "qdot1", "qdot2", "qddot1"))
+    held = {name: rho for name, rho in trajs.items() if "at q2 =" in name}
+    assert len(held) == 3 and len(trajs) == 4  # qdot1 at three q2; qdot2 moves q2 itself
+    assert sorted(float(rho[0, q2]) for rho in held.values()) == pytest.approx([1.0708, 1.5708, 2.0708])
+    for rho in held.values():
+        assert np.ptp(rho[:, q2]) == 0.0 and np.all(rho[:, v2] == 0.0)
+        assert np.abs(rho[:, v1]).max() == pytest.approx(1.0, abs=0.05) and set(np.abs(rho[:, a1])) == {2.0}

@@ -55,7 +55,7 @@ import numpy as np
 from polyrob.errors import ArgumentError, NotApplicable
 
 __all__ = ["TrajectoryLowerBound", "admissible_trajectories", "trajectory_gains", "trajectory_lower_bound",
-           "rest_peak", "affine_evaluation"]  # fmt: skip
+           "rest_peak", "affine_evaluation", "long_runs"]  # fmt: skip
 
 #: Power iterations per trajectory (each iterate is a gain reached: more only tightens).
 ITERATIONS = 25
@@ -63,6 +63,13 @@ ITERATIONS = 25
 STEPS_PER_PERIOD = 24
 #: Largest number of time steps of one trajectory (the cost bound).
 MAX_STEPS = 1500
+#: The long runs (a loop slower than the short horizon): at most this many seconds and steps, the step at most
+#: this fraction of a bang-bang velocity's period.  The main job's loop has poles at 0.002 and 0.005 rad/s: its
+#: gain along a bang-bang velocity grows over hundreds of seconds, far past the short horizon's tens.
+LONG_HORIZON_MAX = 1000.0
+LONG_STEPS = 6000
+LONG_TIME_CONSTANTS = 4.0
+LONG_STEP_PER_PERIOD = 1.0 / 16.0
 
 
 @dataclass(frozen=True)
@@ -132,7 +139,12 @@ def _velocity_index(model) -> dict:
     return {i: where[("qdot", j)] for (k, j), i in where.items() if k == "q" and ("qdot", j) in where}
 
 
-def admissible_trajectories(model, rates, t, *, seed: int = 0, random_runs: int = 3):
+#: The families of :func:`admissible_trajectories`.
+FAMILIES = ("constant", "swing", "bang-bang", "chirp", "random")
+
+
+def admissible_trajectories(model, rates, t, *, seed: int = 0, random_runs: int = 3, levels: bool = False,
+                            families=FAMILIES):  # fmt: skip
     """Trajectories of ``rho`` in the box with ``dq_i/dt = qdot_i`` and ``|dqdot_i/dt|`` within ``rates``.
 
     Parameters
@@ -144,6 +156,12 @@ def admissible_trajectories(model, rates, t, *, seed: int = 0, random_runs: int 
         The times (physical seconds).
     seed : int
     random_runs : int
+    levels : bool
+        Run each bang-bang velocity with the scheduled positions that stay
+        put at every combination of their lower end, midpoint and upper end
+        (default: at their midpoints only).
+    families : sequence of str
+        Which of :data:`FAMILIES` to build (default: all).
 
     Returns
     -------
@@ -195,13 +213,13 @@ def admissible_trajectories(model, rates, t, *, seed: int = 0, random_runs: int 
 
     vmax = np.maximum(np.abs(lo), np.abs(hi))
     # rotations: constant velocities at the corners of the velocity box
-    for signs in np.ndindex(*([2] * len(vel))):
+    for signs in np.ndindex(*([2] * len(vel))) if "constant" in families else ():
         v = np.zeros((t.size, p))
         for s, i in zip(signs, vel):
             v[:, i] = hi[i] if s else lo[i]
         add(with_positions("constant velocities " + ", ".join(f"{model.names[i]} = {v[0, i]:.4g}" for i in vel), v))
     # swings at the acceleration limit: the largest sinusoid the velocity, acceleration and position bounds allow
-    for periods in (1.0, 2.0, 4.0, 8.0):
+    for periods in (1.0, 2.0, 4.0, 8.0) if "swing" in families else ():
         om = 2 * np.pi * periods / T
         v, a = np.zeros((t.size, p)), np.zeros((t.size, p))
         for i in vel:
@@ -217,23 +235,31 @@ def admissible_trajectories(model, rates, t, *, seed: int = 0, random_runs: int 
                 start[q] = mid[q] - v[:, w].max() / om if v[:, w].max() > 0 else mid[q]
         add(with_positions(f"swing at {om:.3g} rad/s", v, start, a))
     # bang-bang velocities: triangle waves at the acceleration limit between the velocity bounds
-    for i in vel:
+    for i in vel if "bang-bang" in families else ():
         v, a = np.zeros((t.size, p)), np.zeros((t.size, p))
         phase = np.mod(acc[i] * (t - t[0]) / (2 * vmax[i]) + 0.25, 2.0)
         v[:, i] = vmax[i] * (2 * np.abs(phase - 1.0) - 1.0)
         a[:, i] = np.where(phase >= 1.0, acc[i], -acc[i])
-        add(with_positions(f"bang-bang {model.names[i]} (|d/dt| = {acc[i]:.4g})", v, None, a))
+        name = f"bang-bang {model.names[i]} (|d/dt| = {acc[i]:.4g})"
+        still = [q for q, w in vel_of.items() if w != i] if levels else []  # positions that stay put
+        for where in np.ndindex(*([3] * len(still))):
+            start = mid.copy()
+            for q, k in zip(still, where):
+                start[q] = (lo[q], mid[q], hi[q])[k]
+            at = ", ".join(f"{model.names[q]} = {start[q]:.4g}" for q in still)
+            add(with_positions(name + (f" at {at}" if at else ""), v, start, a))
     # chirp: a velocity sweeping 0.5 to 16 oscillations over the horizon, within the acceleration bound
-    v, a = np.zeros((t.size, p)), np.zeros((t.size, p))
-    tau = (t - t[0]) / T
-    for i in vel:
-        phase = 2 * np.pi * (0.5 * tau + 7.75 * tau**2)
-        rate = 2 * np.pi * (0.5 + 15.5 * tau) / T
-        amp = np.minimum(vmax[i], acc[i] / rate.max())
-        v[:, i], a[:, i] = amp * np.sin(phase), amp * rate * np.cos(phase)
-    add(with_positions("chirp", v, None, a))
+    if "chirp" in families:
+        v, a = np.zeros((t.size, p)), np.zeros((t.size, p))
+        tau = (t - t[0]) / T
+        for i in vel:
+            phase = 2 * np.pi * (0.5 * tau + 7.75 * tau**2)
+            rate = 2 * np.pi * (0.5 + 15.5 * tau) / T
+            amp = np.minimum(vmax[i], acc[i] / rate.max())
+            v[:, i], a[:, i] = amp * np.sin(phase), amp * rate * np.cos(phase)
+        add(with_positions("chirp", v, None, a))
     # random runs: piecewise-constant accelerations within the bounds, the velocities kept in the box
-    for r in range(random_runs):
+    for r in range(random_runs if "random" in families else 0):
         v, a = np.zeros((t.size, p)), np.zeros((t.size, p))
         for i in vel:
             knots = rng.uniform(-1, 1, size=16) * acc[i]
@@ -341,27 +367,44 @@ def trajectory_gains(system, trajectories, h: float, *, iterations: int = ITERAT
     from polyrob.analysis.lpv.norm import state_scaling
 
     scale = state_scaling(np.array([system(rho[0])[0] for _, rho in trajectories]))
-    per = [_step_matrices(system, rho, h, scale) for _, rho in trajectories]
-    Phi, Gam, C, D = (np.stack([x[i] for x in per], axis=1) for i in range(4))  # (steps, trajectories, ...)
+    # the step matrices once per distinct rho (a bang-bang velocity on a step that divides its period repeats
+    # every period); rho agreeing to 12 significant digits is the same loop to far below the gain's accuracy
+    stacked = np.concatenate([rho for _, rho in trajectories])
+    top = float(np.abs(stacked).max())
+    decimals = min(12 - int(np.floor(np.log10(top))), 300) if top > 0 else 12
+    _, first, inverse = np.unique(np.round(stacked, decimals), axis=0, return_index=True, return_inverse=True)
+    once = _step_matrices(system, stacked[first], h, scale)
+    index = np.asarray(inverse).reshape(len(trajectories), steps).T  # (steps, trajectories)
+    Phi, Gam, C, D = (x[index] for x in once)  # (steps, trajectories, ...)
     Gam, D = Gam / np.sqrt(h), D / np.sqrt(h)  # the input d~_k = sqrt(h) d_k: ||d~||_2 is d's L2 norm
     L, n, m = Gam.shape[1], Gam.shape[2], Gam.shape[3]
+    p = C.shape[2]
+    # one product per step each way: [y_k; x_k+1] = S_k [x_k; d_k], S_k = [[C_k, D_k], [Phi_k, Gam_k]]
+    S = np.concatenate([np.concatenate([C, D], axis=3), np.concatenate([Phi, Gam], axis=3)], axis=2)
+    St = np.ascontiguousarray(np.swapaxes(S, 2, 3))
     rng = np.random.default_rng(seed)
     d = rng.standard_normal((steps, L, m)) if start is None else np.broadcast_to(start[:, None, :], (steps, L, m)).copy()
     best = np.zeros(L)
+    xd = np.zeros((L, n + m, 1))
+    ylam = np.zeros((L, p + n, 1))
+    y = np.empty((steps, L, p))
+    new = np.empty_like(d)
     for _ in range(int(iterations)):
-        x = np.zeros((L, n))
-        y = np.empty((steps, L, C.shape[2]))
+        xd[:, :n, 0] = 0.0
         for k in range(steps):  # forward: y = T d
-            y[k] = np.einsum("lij,lj->li", C[k], x) + np.einsum("lij,lj->li", D[k], d[k])
-            x = np.einsum("lij,lj->li", Phi[k], x) + np.einsum("lij,lj->li", Gam[k], d[k])
+            xd[:, n:, 0] = d[k]
+            out = S[k] @ xd
+            y[k] = out[:, :p, 0]
+            xd[:, :n] = out[:, p:]
         nd = np.sqrt(np.einsum("kli,kli->l", d, d))
         ny = np.sqrt(np.einsum("kli,kli->l", y, y))
         best = np.maximum(best, np.where(nd > 0, ny / np.where(nd > 0, nd, 1.0), 0.0))
-        lam = np.zeros((L, n))
-        new = np.empty_like(d)
-        for k in range(steps - 1, -1, -1):  # backward: T* y
-            new[k] = np.einsum("lji,lj->li", Gam[k], lam) + np.einsum("lji,lj->li", D[k], y[k])
-            lam = np.einsum("lji,lj->li", Phi[k], lam) + np.einsum("lji,lj->li", C[k], y[k])
+        ylam[:, p:, 0] = 0.0
+        for k in range(steps - 1, -1, -1):  # backward: T* y, the adjoint state lam_k = C_k^T y_k + Phi_k^T lam_k+1
+            ylam[:, :p, 0] = y[k]
+            back = St[k] @ ylam
+            new[k] = back[:, n:, 0]
+            ylam[:, p:] = back[:, :n]
         scale = np.sqrt(np.einsum("kli,kli->l", new, new))
         d = new / np.where(scale > 0, scale, 1.0)[None, :, None]
     return best
@@ -442,7 +485,7 @@ def affine_evaluation(model, system):
 
 
 def trajectory_lower_bound(model, system, rates, *, horizon=None, step=None, iterations: int = ITERATIONS,
-                           seed: int = 0, random_runs: int = 3) -> TrajectoryLowerBound:  # fmt: skip
+                           seed: int = 0, random_runs: int = 3, long_horizon=None) -> TrajectoryLowerBound:  # fmt: skip
     """The largest L2 gain found along admissible trajectories of ``model``'s box with ``rates``.
 
     Parameters
@@ -459,6 +502,11 @@ def trajectory_lower_bound(model, system, rates, *, horizon=None, step=None, ite
         The step (default: :data:`STEPS_PER_PERIOD` per period of the frozen peak's frequency).
     iterations, seed, random_runs
         Power iterations per trajectory; the random runs' seed and number.
+    long_horizon : float, bool or None
+        The long runs' horizon in seconds (:func:`long_runs`); ``None``
+        (default): the frozen loop's slowest time constant at the rest peak,
+        at most :data:`LONG_HORIZON_MAX`, and none when that is within twice
+        the short horizon; ``False``: none.
 
     Returns
     -------
@@ -490,10 +538,46 @@ def trajectory_lower_bound(model, system, rates, *, horizon=None, step=None, ite
     rng = np.random.default_rng(seed)
     start = np.sin(w_peak * t)[:, None] * rng.standard_normal(m)[None, :] + 0.1 * rng.standard_normal((steps, m))
     gains = trajectory_gains(system, trajs, h, iterations=iterations, start=start, seed=seed)
-    named = tuple((name, float(g)) for (name, _), g in zip(trajs, gains))
-    best_name, best = ("at rest (frozen)", frozen if np.isfinite(frozen) else 0.0)
-    for name, g in named:
+    named = [(name, float(g), h, float(steps * h)) for (name, _), g in zip(trajs, gains)]
+    if long_horizon is None:
+        A = system(where if np.size(where) else np.array([0.5 * (a[0] + a[-1]) for a in model.axes]))[0]
+        slowest = float(np.min(np.abs(np.linalg.eigvals(A).real)))
+        long_horizon = min(LONG_TIME_CONSTANTS / slowest, LONG_HORIZON_MAX) if slowest > 0 else LONG_HORIZON_MAX
+        long_horizon = long_horizon if long_horizon > 2.0 * steps * h else False
+    if long_horizon:
+        named += long_runs(model, system, rates, float(long_horizon), h, iterations=iterations, seed=seed)
+    best_name, best, h_best, t_best = ("at rest (frozen)", frozen if np.isfinite(frozen) else 0.0, h, steps * h)
+    for name, g, hk, tk in named:
         if g > best:
-            best_name, best = name, g
-    return TrajectoryLowerBound(float(best), float(frozen), best_name, len(trajs), h, float(steps * h),
-                                time.perf_counter() - t0, named)  # fmt: skip
+            best_name, best, h_best, t_best = name, g, hk, tk
+    return TrajectoryLowerBound(float(best), float(frozen), best_name, len(named), h_best, float(t_best),
+                                time.perf_counter() - t0, tuple((name, g) for name, g, _, _ in named))  # fmt: skip
+
+
+def long_runs(model, system, rates, horizon: float, h: float, *, iterations: int = ITERATIONS, seed: int = 0):
+    """Gains along long runs: ``[(name, gain, step, horizon)]``, the names ending in ``over N s``.
+
+    A loop with a slow pole (the main job's: 0.002 rad/s, from its weights'
+    near-integrators) keeps gaining along a bang-bang velocity for hundreds
+    of seconds, so the short horizon of :func:`trajectory_lower_bound` (tens
+    of seconds) misses it.  The bang-bang velocities of
+    :func:`admissible_trajectories` (triangle waves at the acceleration
+    limit), each with the positions that stay put at their ends and
+    midpoints, over ``horizon`` seconds (slow swings there stayed at the
+    frozen gain on the main job's loop), on a step no finer than ``h`` and at most
+    :data:`LONG_STEPS` steps, at most :data:`LONG_STEP_PER_PERIOD` of the
+    shortest bang-bang period (the horizon shortened when both cannot hold).
+    """
+    acc = [min(abs(r[0]), abs(r[1])) for r, k in zip(rates, model.kinds) if k == "qdot"]
+    vmax = [float(np.abs(a).max()) for a, k in zip(model.axes, model.kinds) if k == "qdot"]
+    periods = [4.0 * v / a for v, a in zip(vmax, acc) if v > 0 and np.isfinite(a) and a > 0]
+    h_long = max(h, horizon / LONG_STEPS)
+    if periods:  # a whole number of steps per shortest period: its bang-bang repeats, step for step
+        shortest = min(periods)
+        h_long = shortest / max(np.ceil(shortest / h_long), 1.0 / LONG_STEP_PER_PERIOD)
+    steps = max(8, min(LONG_STEPS, int(round(horizon / h_long))))
+    t = np.arange(steps) * h_long
+    trajs = admissible_trajectories(model, rates, t, seed=seed, levels=True, families=("bang-bang",))
+    gains = trajectory_gains(system, trajs, h_long, iterations=iterations, seed=seed)
+    over = f" over {steps * h_long:.4g} s"
+    return [(name + over, float(g), h_long, float(steps * h_long)) for (name, _), g in zip(trajs, gains)]
