@@ -179,6 +179,29 @@ def test_a_loop_too_large_for_the_search_still_gets_the_gain_found(robot, monkey
     assert task_motion_certificate(problem, K, auto=True, lower_bound=False).lower == {}
 
 
+def test_the_search_s_solver_is_the_structured_one_above_the_auto_states(robot, monkeypatch):
+    """``solver="auto"``: Clarabel on a small loop, the structured interior point on a large one (ten times faster
+    on the main job's 16-state loop); the small problem's loop has 8 states, the default limit."""
+    import polyrob.analysis.lpv.norm as norm_module
+    import polyrob.analysis.lpv.task as task_module
+
+    seen, real = [], norm_module.lpvnorm
+
+    def spy(*args, **options):
+        seen.append(options.get("solver"))
+        return real(*args, **options)
+
+    monkeypatch.setattr(norm_module, "lpvnorm", spy)
+    problem, K = _small_problem(robot, 200.0)
+    small = task_motion_certificate(problem, K, points=(3, 2), recheck=None, velocities="arbitrary", lower_bound=False)
+    assert small.result.proved and set(seen) == {"clarabel"}
+    seen.clear()
+    monkeypatch.setattr(task_module, "AUTO_STATES", 5)
+    large = task_motion_certificate(problem, K, points=(3, 2), recheck=None, velocities="arbitrary", lower_bound=False)
+    assert large.result.proved and seen and set(seen) == {"structured"}
+    assert large.gamma == pytest.approx(small.gamma, rel=0.05)  # the same loop, the same bound to the solvers' gaps
+
+
 @pytest.mark.slow
 def test_the_rate_bounded_search_proves_the_good_loop_on_the_grid(robot):
     """X on (1, cos q2, sin q2) x (1, qdot): a bound below 1 on the grid (41-91 s measured on 2 cores at load 12-14)."""

@@ -329,7 +329,7 @@ def task_motion_certificate(
     cell_time_limit: float | None = None,
     cell_workers: int | None = None,
     progress: bool = False,
-    solver: str = "clarabel",
+    solver: str = "auto",
     recheck_rounds: int | None = None,
 ):
     """The moving-robot certificate of ``K`` on a task-domain ``problem``.
@@ -380,12 +380,16 @@ def task_motion_certificate(
         at ``cell_level``, else as :func:`~polyrob.analysis.lpv.robot.cells_level` says); ``cell_time_limit``
         (a wall-clock safety net the caller sets), ``cell_workers`` and
         ``progress`` as for :func:`~polyrob.analysis.lpv.moving.moving_robot_certificate`.
-    solver : {"clarabel", "structured", "scs"}
-        The search's LMI solver (:func:`polyrob.lpvnorm`'s).  Clarabel by
-        default: on the tests' small tasks (two points per velocity) the
-        structured one's ``X``, of the same margin, failed between the
-        points where Clarabel's held (:data:`~polyrob.analysis.lpv.robot.SEARCH_SOLVER`);
-        on the main job's 16-state loop it is several times faster.
+    solver : {"auto", "clarabel", "structured", "scs"}
+        The search's LMI solver (:func:`polyrob.lpvnorm`'s).  ``"auto"``
+        (default): the structured interior point for a loop of more than
+        :data:`AUTO_STATES` states, Clarabel up to that.  On the main job's
+        16-state loop the structured one is about ten times faster and uses a
+        fifth of the memory, for a lower bound (the records in
+        docs/certificates.md, ``benchmarks/moving_task.py --solver``); on the
+        small tasks of the tests (two points per velocity) its ``X``, of the
+        same margin, failed between the points where Clarabel's held
+        (:data:`~polyrob.analysis.lpv.robot.SEARCH_SOLVER`).
     recheck_rounds : int, optional
         Rounds of constraint generation: the re-check grid's points where
         ``X`` is not proved at a level three quarters of the way from the
@@ -426,6 +430,8 @@ def task_motion_certificate(
                 f"the closed loop has {n} states (the task's rate-bounded search runs up to {limit}){more}"
             )
         rates = task_rate_bounds(model, domain)
+        if solver == "auto":
+            solver = "structured" if n > AUTO_STATES else "clarabel"
         if velocities == "auto":
             k = basis_size(model, tensor=True)
             velocities = "bounded" if k * n * (n + 1) // 2 <= BOUNDED_VARIABLES else "arbitrary"
