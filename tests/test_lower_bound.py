@@ -128,6 +128,7 @@ def test_the_lower_bound_never_exceeds_the_proved_bound(robot, small):
     low = c.lower["gamma"]
     assert c.lower["frozen_gamma"] <= low <= c.gamma
     assert low > 0.5 * c.gamma  # a real gain, not a token
+    assert "fails" not in c.verdict  # below 1: nothing refuted
     assert all(g <= c.gamma for _, g in c.lower["gains"])
     assert f"L2 gain >= {low:.4g} found along" in c.verdict
     assert c.summary()["lower"]["gamma"] == low and c.summary()["lower_bound"] == low
@@ -145,6 +146,7 @@ def test_a_loop_whose_gain_exceeds_1_along_a_trajectory_is_not_certified(robot, 
     assert c.certificate.status is Status.NOT_CERTIFIED
     assert not c.certificate.certified
     assert not (c.gamma < 1.0)
+    assert "robust performance fails for the linearised robot along that motion (simulated)" in c.verdict
 
 
 def _mixing_loop(rho, eps=0.01, k=0.02):

@@ -112,6 +112,8 @@ class MovingRobotCertificate:
     def verdict(self) -> str:
         """``moving robot with rates <= ...: robust performance ...``."""
         found = f"; L2 gain {self.lower['words']}" if self.lower else ""
+        if self.lower and self.lower["gamma"] >= 1.0:  # no certificate can hold: say so where the user reads
+            found += ": at or above 1, robust performance fails for the linearised robot along that motion (simulated)"
         if not self.computed:
             why = self.notes[0] if self.notes else "not asked"
             return f"moving robot: robust performance not computed ({why}){found}"
