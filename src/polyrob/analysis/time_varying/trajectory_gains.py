@@ -64,8 +64,9 @@ STEPS_PER_PERIOD = 24
 #: Largest number of time steps of one trajectory (the cost bound).
 MAX_STEPS = 1500
 #: The long runs (a loop slower than the short horizon): at most this many seconds and steps, the step at most
-#: this fraction of a bang-bang velocity's period.  The main job's loop has poles at 0.002 and 0.005 rad/s: its
-#: gain along a bang-bang velocity grows over hundreds of seconds, far past the short horizon's tens.
+#: this fraction of a bang-bang velocity's period, over this many of the loop's slowest time constants.  The main
+#: job's loop has the poles of the paper's W_S, 0.002 and 0.005 rad/s: its gain along a bang-bang velocity grows
+#: over hundreds of seconds, far past the short horizon's tens.
 LONG_HORIZON_MAX = 1000.0
 LONG_STEPS = 6000
 LONG_TIME_CONSTANTS = 4.0
@@ -504,8 +505,9 @@ def trajectory_lower_bound(model, system, rates, *, horizon=None, step=None, ite
         Power iterations per trajectory; the random runs' seed and number.
     long_horizon : float, bool or None
         The long runs' horizon in seconds (:func:`long_runs`); ``None``
-        (default): the frozen loop's slowest time constant at the rest peak,
-        at most :data:`LONG_HORIZON_MAX`, and none when that is within twice
+        (default): :data:`LONG_TIME_CONSTANTS` times the frozen loop's
+        slowest time constant at the rest peak, at most
+        :data:`LONG_HORIZON_MAX`, and no long runs when that is within twice
         the short horizon; ``False``: none.
 
     Returns
