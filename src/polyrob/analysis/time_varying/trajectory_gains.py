@@ -376,13 +376,13 @@ def trajectory_gains(system, trajectories, h: float, *, iterations: int = ITERAT
     _, first, inverse = np.unique(np.round(stacked, decimals), axis=0, return_index=True, return_inverse=True)
     once = _step_matrices(system, stacked[first], h, scale)
     index = np.asarray(inverse).reshape(len(trajectories), steps).T  # (steps, trajectories)
-    Phi, Gam, C, D = (x[index] for x in once)  # (steps, trajectories, ...)
+    Phi, Gam, C, D = once
     Gam, D = Gam / np.sqrt(h), D / np.sqrt(h)  # the input d~_k = sqrt(h) d_k: ||d~||_2 is d's L2 norm
-    L, n, m = Gam.shape[1], Gam.shape[2], Gam.shape[3]
-    p = C.shape[2]
-    # one product per step each way: [y_k; x_k+1] = S_k [x_k; d_k], S_k = [[C_k, D_k], [Phi_k, Gam_k]]
-    S = np.concatenate([np.concatenate([C, D], axis=3), np.concatenate([Phi, Gam], axis=3)], axis=2)
-    St = np.ascontiguousarray(np.swapaxes(S, 2, 3))
+    L, n, m, p = len(trajectories), Gam.shape[1], Gam.shape[2], C.shape[1]
+    # one product per step each way: [y_k; x_k+1] = S_k [x_k; d_k], S_k = [[C_k, D_k], [Phi_k, Gam_k]], kept once
+    # per distinct rho and gathered at each step (a copy per step and trajectory would take gigabytes)
+    S = np.concatenate([np.concatenate([C, D], axis=2), np.concatenate([Phi, Gam], axis=2)], axis=1)
+    St = np.ascontiguousarray(np.swapaxes(S, 1, 2))
     rng = np.random.default_rng(seed)
     d = rng.standard_normal((steps, L, m)) if start is None else np.broadcast_to(start[:, None, :], (steps, L, m)).copy()
     best = np.zeros(L)
@@ -394,7 +394,7 @@ def trajectory_gains(system, trajectories, h: float, *, iterations: int = ITERAT
         xd[:, :n, 0] = 0.0
         for k in range(steps):  # forward: y = T d
             xd[:, n:, 0] = d[k]
-            out = S[k] @ xd
+            out = S[index[k]] @ xd
             y[k] = out[:, :p, 0]
             xd[:, :n] = out[:, p:]
         nd = np.sqrt(np.einsum("kli,kli->l", d, d))
@@ -403,7 +403,7 @@ def trajectory_gains(system, trajectories, h: float, *, iterations: int = ITERAT
         ylam[:, p:, 0] = 0.0
         for k in range(steps - 1, -1, -1):  # backward: T* y, the adjoint state lam_k = C_k^T y_k + Phi_k^T lam_k+1
             ylam[:, :p, 0] = y[k]
-            back = St[k] @ ylam
+            back = St[index[k]] @ ylam
             new[k] = back[:, n:, 0]
             ylam[:, p:] = back[:, :n]
         scale = np.sqrt(np.einsum("kli,kli->l", new, new))
