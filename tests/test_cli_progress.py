@@ -145,3 +145,23 @@ def test_synth_shows_the_job_progress_off_a_terminal_and_not_with_quiet(capsys):
     assert current() is None  # the command's end stopped it
     code, _, err = _run(capsys, "synth", "TwoDofs", "--quiet")
     assert code == 1 and "progress:" not in err
+
+
+def test_an_arm_s_proof_moves_the_bounds_job_s_progress_line(capsys, monkeypatch):
+    """`bounds ur5 --certify` ran for minutes with no line off a terminal: now the job's line starts with the
+    stage and the proof's share of work done feeds it (here two boxes, 7 % of the work, then the work limit)."""
+    import polyrob.bounds.pldi as pldi_module
+    from polyrob.progress import current
+
+    seen = []
+
+    def spy(done, total):
+        seen.append((done, total, current() is not None))
+
+    monkeypatch.setattr(pldi_module, "job_report", spy)
+    code, _, err = _run(capsys, "bounds", "ur5", "--certify", "--max-boxes", "2")
+    assert code == 2 and "the limit of 2 boxes reached" in err
+    assert "progress: stage 1 of 2 (bounds), 0 % of the job" in err
+    assert seen and all(inside for _, _, inside in seen)  # reported while the command's job runs
+    assert 0.0 < max(done for done, _, _ in seen) < 1.0
+    assert current() is None  # the command's end stopped it

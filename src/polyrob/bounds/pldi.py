@@ -72,6 +72,8 @@ from polyrob.bounds.polytope import COVERAGE_RTOL, VERTEX_MAX_DIM, Polytope, bui
 from polyrob.bounds.supports import support_values
 from polyrob.domains.torque_box import Domain
 from polyrob.errors import BoundsError, CertificationError
+from polyrob.progress import report as job_report
+from polyrob.progress import span
 
 __all__ = [
     "PLDI",
@@ -151,9 +153,10 @@ def bound_pldi(robot, domain: Domain | None = None, *, options: BoundOptions | N
     if tuple(domain.joint_names) != tuple(robot.joint_names):
         raise BoundsError(f"the domain's joints {domain.joint_names} are not the robot's {robot.joint_names}")
     progress = sys.stderr.isatty() if opts.progress is None else opts.progress
-    factors = _proved_factors(robot, domain, opts, progress) if opts.certify and _factor_task(robot, domain) else None
-    # first: it gives up at once
-    proved = _certified(robot, domain, opts, progress) if opts.certify and factors is None else None
+    with span(0.0, 0.8 if opts.certify else 0.0):  # a proof takes most of the stage; the sampling the rest
+        factors = _proved_factors(robot, domain, opts, progress) if opts.certify and _factor_task(robot, domain) else None
+        # first: it gives up at once
+        proved = _certified(robot, domain, opts, progress) if opts.certify and factors is None else None
     problem = search.Problem(robot, domain)
     rng = np.random.default_rng(opts.seed)
     cloud, index, varying = _varying_entries(problem, proved, opts.seed)
@@ -163,7 +166,7 @@ def bound_pldi(robot, domain: Domain | None = None, *, options: BoundOptions | N
     q = search.position_design(problem, effort.samples, dropped, effort.seed)
     workers = opts.workers or (1 if active_q <= SERIAL_MAX_ACTIVE_POSITIONS else available_cores())
     directions, scale, axes = _search_directions(cloud, len(index))
-    with WorkerPool(problem, workers) as pool:
+    with WorkerPool(problem, workers) as pool, span(0.8 if opts.certify else 0.0, 1.0):
         values, witnesses, sampled_width, stages, rounds, t_sample, t_refine = support_values(
             problem, q, directions, index, dropped, pool, progress, effort
         )
@@ -332,6 +335,7 @@ def _proved_factors(robot, domain, opts: BoundOptions, progress: bool) -> dict:
         )
 
     def report(done, boxes, eta):
+        job_report(done, 1.0)  # the whole job's line (polyrob.progress), a terminal's bar or not
         if bar is not None:
             bar.update(max(0, int(1000 * done) - bar.n))
             bar.set_postfix(boxes=boxes, refresh=False)

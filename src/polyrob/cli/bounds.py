@@ -45,7 +45,8 @@ def cmd_bounds(args) -> int:
         raise ArgumentError(
             "--time-limit, --rel-tol and --max-boxes set the interval-arithmetic proof: use them with --certify"
         )
-    out = Output(args, stages=2 if args.models else 1)
+    # one progress line for the whole job (a --certify proof of an arm runs for minutes)
+    out = Output(args, stages=2 if args.models else 1, job=["bounds"] + (["uncertainty models"] if args.models else []))
     robot = robot_from_args(args)
     domain = domain_from_args(robot, args)
     certify_options = {
