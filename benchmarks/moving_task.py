@@ -12,8 +12,9 @@ process (so that its peak memory is its own, read with ``wait4``): ``arbitrary``
 is ``X`` on the positions only (what ``--moving`` takes for the main job's
 16-state loop), ``bounded`` ``X`` on the positions times ``(1, qdot)`` with
 the velocities' rates bounded by the task's accelerations.  ``--solver``: the
-search's LMI solver (Clarabel, the task certificate's default, or the
-structured interior point); ``--rounds N``: rounds of constraint generation
+search's LMI solver (Clarabel, this script's default and the task
+certificate's on loops of at most 8 states, or the structured interior
+point, the certificate's on larger ones); ``--rounds N``: rounds of constraint generation
 (the re-check grid's failing points added to the search,
 :data:`polyrob.analysis.lpv.task.RECHECK_ROUNDS` by default with ``--cells``,
 else none).  Printed per variant: the bound proved on the
