@@ -78,8 +78,10 @@ __all__ = [
 MIN_JERK_VELOCITY = 1.875
 MIN_JERK_ACCELERATION = 10.0 / np.sqrt(3.0)
 MIN_JERK_JERK = 60.0
-#: Largest closed loop (states) the task's rate-bounded search runs on by default (``analyze``, ``run``): the main
-#: job's 16-state loop took 527 s on 2 cores at load 3-14 (X on the positions), so it runs on ``--moving`` only.
+#: Largest closed loop (states) the task's rate-bounded search runs on by default (``analyze``, ``run``).  The main
+#: job's 16-state loop runs on ``--moving`` only: its search (the structured solver, X on the positions) takes about
+#: as long as the rest of the job and proves no bound below 1 (moving_task records, docs/certificates.md); a larger
+#: loop also takes the structured solver (``solver="auto"``).
 AUTO_STATES = 8
 #: Search grid (points per position, per velocity; the accelerations: their two ends) and its re-check, the least
 #: one (``recheck="auto"``: at least this, and twice as dense as the search grid along positions and velocities).
