@@ -566,9 +566,12 @@ def long_runs(model, system, rates, horizon: float, h: float, *, iterations: int
     :func:`admissible_trajectories` (triangle waves at the acceleration
     limit), each with the positions that stay put at their ends and
     midpoints, over ``horizon`` seconds (slow swings there stayed at the
-    frozen gain on the main job's loop), on a step no finer than ``h`` and at most
-    :data:`LONG_STEPS` steps, at most :data:`LONG_STEP_PER_PERIOD` of the
-    shortest bang-bang period (the horizon shortened when both cannot hold).
+    frozen gain on the main job's loop).  The step: ``h`` or
+    ``horizon / LONG_STEPS``, whichever is longer, then shortened to a whole
+    number of steps per shortest bang-bang period, at least
+    ``1 / LONG_STEP_PER_PERIOD`` of them (finer than ``h`` when that period
+    asks for it); at most :data:`LONG_STEPS` steps, the horizon shortened
+    when it would take more.
     """
     acc = [min(abs(r[0]), abs(r[1])) for r, k in zip(rates, model.kinds) if k == "qdot"]
     vmax = [float(np.abs(a).max()) for a, k in zip(model.axes, model.kinds) if k == "qdot"]
