@@ -4,9 +4,11 @@
 enclosure, the branch and bound), with the forms it intersects on a box
 (:mod:`~polyrob.bounds.certified.factors.slope_form`,
 :mod:`~polyrob.bounds.certified.factors.taylor2`) and how tightness is
-measured (:mod:`~polyrob.bounds.certified.factors.width_ratio`).
+measured (:mod:`~polyrob.bounds.certified.factors.width_ratio`); the values
+attained that steer it (:mod:`~polyrob.bounds.certified.factors.attained`).
 """
 
+from polyrob.bounds.certified.factors.attained import attained_range, vertex_ascent
 from polyrob.bounds.certified.factors.ranges import (
     BATCH,
     MAX_BOXES,
@@ -14,7 +16,6 @@ from polyrob.bounds.certified.factors.ranges import (
     Direction,
     FactorEnclosure,
     FactorProblem,
-    attained_range,
     factor_directions,
     prove_factor_ranges,
 )
@@ -25,6 +26,7 @@ __all__ = [
     "Direction",
     "prove_factor_ranges",
     "attained_range",
+    "vertex_ascent",
     "factor_directions",
     "MAX_BOXES",
     "REL_TOL",

@@ -53,6 +53,7 @@ import numpy as np
 
 from polyrob.bounds.certified import ball_jets as bj
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, intersect, lower, upper
+from polyrob.bounds.certified.factors.attained import attained_range, vertex_ascent
 from polyrob.bounds.certified.factors.hessian import box_models, factor_hessians
 from polyrob.bounds.certified.factors.inverse import fixed_point_inverse, jet_parts, taylor_neumann_inverse
 from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread, vertex_gradients
@@ -65,7 +66,6 @@ __all__ = [
     "FactorProblem",
     "FactorEnclosure",
     "prove_factor_ranges",
-    "attained_range",
     "factor_directions",
     "MAX_BOXES",
     "REL_TOL",
@@ -154,12 +154,15 @@ class FactorProblem:
 
     def values(self, q, qd, a):
         """Float values of every factor at points ``(n, m)``: ``(n, F, m, 3m)`` (midpoints of thin enclosures)."""
-        m = self.m
+        K, Ka = self.value_parts(q, qd)
+        K[..., : self.m] += np.einsum("bfipj,bj->bfip", Ka, a)
+        return K
+
+    def value_parts(self, q, qd):
+        """``K = K0 + Ka a`` at points ``(n, m)``: float ``K0`` ``(n, F, m, 3m)`` and ``Ka`` ``(n, F, m, m, m)`` (its ``q`` columns)."""
         zero = np.zeros_like(q)
         K0, Ka, _ = self._factors(*self._dynamics(q, zero, qd, zero, 1))
-        K = K0.mid[0].copy()
-        K[..., :m] += np.einsum("bfipj,bj->bfip", Ka.mid[0], a)
-        return K
+        return K0.mid[0].copy(), Ka.mid[0]
 
     def interval_gradient(self, q_lo, q_hi, qd_lo, qd_hi):
         """``(mid, rad)`` of the factors' gradients in ``(q, qdot)`` over boxes ``(B, m)``, at ``a = 0``: ``(2m, B, F, m, 3m)``.
@@ -452,21 +455,6 @@ def factor_directions(robot) -> list[tuple[str, Direction]]:
     return out
 
 
-def attained_range(problem, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, n, rng):
-    """Attained (float) values of the factors at ``n`` points with ``qdot`` and ``a`` at vertices: ``(F, m, 3m)`` min and max."""
-    m = problem.m
-    lo = hi = None
-    for start in range(0, n, BATCH * 4):
-        k = min(BATCH * 4, n - start)
-        q = rng.uniform(q_lo, q_hi, (k, m))
-        v = np.where(rng.random((k, m)) < 0.5, qd_lo, qd_hi)
-        a = np.where(rng.random((k, m)) < 0.5, a_lo, a_hi)
-        K = problem.values(q, v, a)
-        lo = K.min(0) if lo is None else np.minimum(lo, K.min(0))
-        hi = K.max(0) if hi is None else np.maximum(hi, K.max(0))
-    return lo, hi
-
-
 def prove_factor_ranges(
     loops,
     domain,
@@ -479,6 +467,7 @@ def prove_factor_ranges(
     pilot: int = 256,
     seed: int = 0,
     taylor: bool = True,
+    ascent_rounds: int = 8,
 ) -> FactorEnclosure:
     """Proved ranges of the factors of ``loops`` over a task ``domain`` (a branch and bound on its ``(q, qdot)`` box).
 
@@ -503,6 +492,9 @@ def prove_factor_ranges(
     progress : callable, optional
         ``progress(fraction, boxes, eta_seconds)``: the whole job's fraction
         of open volume closed.
+    ascent_rounds : int
+        Rounds of :func:`~polyrob.bounds.certified.factors.attained.vertex_ascent`
+        added to the pilot's values (0: the pilot alone).
     taylor : bool
         Intersect each box's mean-value and slope forms with the
         second-order Taylor form (:mod:`polyrob.bounds.certified.factors.taylor2`):
@@ -516,6 +508,10 @@ def prove_factor_ranges(
     a_lo, a_hi = np.asarray(domain.qddot_lower, float), np.asarray(domain.qddot_upper, float)
     rng = np.random.default_rng(seed)
     p_lo, p_hi = attained_range(problem, q_lo, q_hi, v_lo, v_hi, a_lo, a_hi, pilot, rng)
+    if ascent_rounds:  # the extremes at the box's vertices, which no box centre reaches (attained.py)
+        x_lo, x_hi = np.concatenate([q_lo, v_lo]), np.concatenate([q_hi, v_hi])
+        at_lo, at_hi = vertex_ascent(problem, x_lo, x_hi, a_lo, a_hi, rounds=ascent_rounds)
+        p_lo, p_hi = np.minimum(p_lo, at_lo), np.maximum(p_hi, at_hi)
     if inner is not None:
         p_lo, p_hi = np.minimum(p_lo, inner[0]), np.maximum(p_hi, inner[1])
     width = p_hi - p_lo
