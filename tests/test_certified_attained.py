@@ -82,3 +82,32 @@ def test_the_proof_closes_with_the_ascent_where_the_pilot_alone_cannot(finger):
     x_lo, x_hi, a_lo, a_hi = _box(small)
     lo, hi = vertex_ascent(problem, x_lo, x_hi, a_lo, a_hi)
     assert np.all(enclosure.lower <= lo) and np.all(enclosure.upper >= hi)  # the proof holds what is attained
+
+
+def test_the_inner_gain_model_rests_on_the_proved_factor_ranges_alone(finger):
+    from polyrob import bound_pldi
+    from polyrob.pipeline.problem import build_problem
+    from polyrob.plant.models.registry import enclosure_inputs, model_of
+    from polyrob.plant.uncertainty import uncertain_plant
+
+    _, problem, domain = finger
+    small = _scaled(domain, 0.1)
+    robot = default_task_robot(load_robot("finger_edu"))
+    pldi = bound_pldi(robot, small, certify=True, samples=256, coverage=0, workers=1, progress=False)
+    assert pldi.enclosure == "sampled"  # the A, B intervals: the model does not read them
+    unc = uncertain_plant(pldi, model="inner-gain", coverage=300, volume_samples=0)
+    assert model_of(unc).enclosure(unc) == "certified" and enclosure_inputs(unc) == {"factors": "certified"}
+    proof = pldi.info["certify"]["factors"]
+    for k, name in enumerate(unc.info["factors"]):
+        lo, hi = np.asarray(proof[name]["lower"]), np.asarray(proof[name]["upper"])
+        assert np.allclose(unc.info["K_centres"][k], 0.5 * (lo + hi), rtol=0, atol=1e-12 * np.abs(hi).max())
+    assert unc.coverage == 1.0 and unc.coverage_points == 300  # true robots at fresh task points are members
+    # what a certificate on it covers: proved, though the PLDI's own A, B intervals are sampled
+    problem = build_problem(robot, pldi=pldi, progress=False)
+    assert problem.model == "inner-gain"  # auto's choice for a computed-torque task
+    scope = problem.scope()
+    assert scope.enclosure == "certified" and "proved (interval arithmetic)" in scope.sentence()
+    # without the proof the same model is sampled, and says it rests on the PLDI too
+    sampled = uncertain_plant(bound_pldi(robot, small, samples=256, coverage=0, workers=1, progress=False),
+                              model="inner-gain", coverage=0, volume_samples=0)  # fmt: skip
+    assert model_of(sampled).enclosure(sampled) == "sampled" and "PLDI" in enclosure_inputs(sampled)

@@ -173,10 +173,12 @@ class Problem:
         import math
 
         from polyrob.analysis.certificate import FROZEN, Scope, weakest_enclosure
-        from polyrob.plant.models import model_of
+        from polyrob.plant.models.registry import enclosure_inputs, model_of
 
-        # the weakest of every input: the PLDI, and the model's own ranges (an axes model's are sampled)
-        enclosure = weakest_enclosure(self.pldi.enclosure, model_of(self.unc).enclosure(self.unc))
+        # the weakest of every input: the PLDI, and the model's own ranges (an axes model's are sampled); a model
+        # that names its inputs without the PLDI rests on them alone (inner-gain on proved factor ranges)
+        own = model_of(self.unc).enclosure(self.unc)
+        enclosure = own if "PLDI" not in enclosure_inputs(self.unc) else weakest_enclosure(self.pldi.enclosure, own)
         coverage = getattr(self.unc, "coverage", float("nan"))
         points = int(getattr(self.unc, "coverage_points", 0) or 0)
         checked = coverage is not None and not math.isnan(float(coverage)) and points > 0

@@ -36,7 +36,9 @@ is then a member exactly (its ``theta``, and ``E`` its ``[B_low^-1 A_low, I
 ``a``, so each factor's ranges come from one true robot that differs from
 the model in ``theta_k`` alone, ``K_k = [B_low^-1 A_low, I - B_low^-1] /
 theta_k``, bounded by the PLDI's own search on that map
-(:class:`FactorLoop`).  A torque box (``a`` would depend on the ``theta``)
+(:class:`FactorLoop`), or proved, when the PLDI carries the proof of
+``bound_pldi(..., certify=True)`` (:func:`proved_factor_ranges`): the
+model then rests on nothing sampled.  A torque box (``a`` would depend on the ``theta``)
 and a payload whose centre of mass ranges (it enters as ``mass x
 offset``) are refused.
 
@@ -67,6 +69,7 @@ __all__ = [
     "inner_factors_contains",
     "factor_lft_plant",
     "bound_one_robot",
+    "proved_factor_ranges",
     "residual_blocks",
     "scaled_residuals",
     "convex_box_minimum",
@@ -183,15 +186,41 @@ def inner_factors_plant(pldi, robot) -> UncertainPlant:
         raise NotApplicable("inner-gain: with rotor inertia or a payload it needs a task domain, not a torque box")
     n = 2 * pldi.m
     params = factor_parameters(robot)
-    centres, radii = zip(*(_factor_range(pldi, loop) for _, _, loop in params))
+    proved = proved_factor_ranges(pldi, [name for name, _, _ in params])
+    if proved is None:
+        centres, radii = zip(*(_factor_range(pldi, loop) for _, _, loop in params))
+    else:
+        centres, radii = proved
     ranges = np.array([r for _, r, _ in params])
     if sum(r * np.max(np.abs(np.linalg.eigvals(K[:, n:]))) for r, K in zip(ranges, centres)) >= 1.0:
         raise NotApplicable("inner-gain: I - sum theta_k G_k may be singular inside the ranges")
     # the residual sum_k theta_k E_k, within sum_k r_k |E_k| entrywise, as full blocks outside the theta loops
     spread = np.tensordot(ranges, np.array(radii), axes=1)
     names = tuple(name for name, _, _ in params)
-    inputs = {"PLDI": pldi.enclosure, "factors": "sampled"}
+    # the LFT rests on the factors' ranges alone: proved, the A, B intervals of the PLDI do not enter it
+    inputs = {"PLDI": pldi.enclosure, "factors": "sampled"} if proved is None else {"factors": "certified"}
     return factor_lft_plant(pldi, "inner-gain", names, ranges, centres, spread, inputs)
+
+
+def proved_factor_ranges(pldi, names):
+    """``(centres, radii)`` of the factors ``names`` from the PLDI's proof (``bound_pldi(..., certify=True)``), or ``None``.
+
+    The proof (:func:`polyrob.bounds.certified.factors.prove_factor_ranges`)
+    encloses each factor ``K_k = [J_k G_k]`` over the task box with outward
+    rounding, for the same directions as :func:`factor_parameters`; its
+    intervals' midpoints and half-widths are the model's ``K_k,c`` and
+    radii, so every true robot of the ranges is a member over the whole
+    task, not only at sampled points.
+    """
+    proof = ((pldi.info or {}).get("certify") or {}).get("factors")
+    if not proof or set(proof) != set(names):
+        return None
+    lower = [np.asarray(proof[name]["lower"], float) for name in names]
+    upper = [np.asarray(proof[name]["upper"], float) for name in names]
+    centres = tuple(0.5 * (lo + hi) for lo, hi in zip(lower, upper))
+    # the half-width rounded up: the centre's rounding must not leave an end outside
+    radii = tuple(np.maximum(hi - c, c - lo) * (1 + 1e-12) for lo, hi, c in zip(lower, upper, centres))
+    return centres, radii
 
 
 def factor_lft_plant(
