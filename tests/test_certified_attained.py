@@ -111,3 +111,20 @@ def test_the_inner_gain_model_rests_on_the_proved_factor_ranges_alone(finger):
     sampled = uncertain_plant(bound_pldi(robot, small, samples=256, coverage=0, workers=1, progress=False),
                               model="inner-gain", coverage=0, volume_samples=0)  # fmt: skip
     assert model_of(sampled).enclosure(sampled) == "sampled" and "PLDI" in enclosure_inputs(sampled)
+
+
+def test_synth_certify_is_refused_in_one_line_where_it_cannot_run(tmp_path, capsys):
+    from polyrob.cli import main
+
+    assert main(["synth", "finger_edu", "--max-boxes", "3", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "--max-boxes sets the interval-arithmetic proof: use it with --certify" in err and err.count("\n") == 1
+    assert main(["synth", "finger_edu", "--certify", "--pldi", str(tmp_path / "p.json"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "--pldi holds its bounds already" in err and err.count("\n") == 1
+    # a proof out of its counted work: one line naming the option the command has, nothing written
+    out = tmp_path / "K.json"
+    assert main(["synth", "finger_edu", "--certify", "--max-boxes", "1", "--quiet", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "the limit of 1 boxes" in err and "raise the work limit (--max-boxes)" in err and "rel_tol" not in err
+    assert err.count("\n") == 1 and not list(tmp_path.iterdir())

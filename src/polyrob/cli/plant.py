@@ -8,8 +8,8 @@ from polyrob.cli.common import (
     hyperparameters_from_args,
     limit_weights_from_args,
 )
-from polyrob.cli.options import MODEL_CHOICES
-from polyrob.errors import ArgumentError
+from polyrob.cli.options import MODEL_CHOICES, int_at_least
+from polyrob.errors import ArgumentError, CertificationError
 
 __all__ = ["add_plant_arguments", "pldi_path", "problem_from_args", "describe_source"]
 
@@ -30,6 +30,19 @@ def add_plant_arguments(p) -> None:
         "instead of a complex block: tighter, slower)",
     )
     p.add_argument("--merge-symmetric", action="store_true", help="one repeated parameter for b_ij = b_ji")
+    p.add_argument(
+        "--certify",
+        action="store_true",
+        help="prove the bounds the model rests on by interval arithmetic (as `polyrob bounds --certify`): an arm's "
+        "computed-torque factor ranges over its task (the inner-gain model then rests on them alone, and the "
+        "certificate says proved), or the intervals over a torque box (up to 3 joints)",
+    )
+    p.add_argument(
+        "--max-boxes",
+        type=int_at_least(1),
+        default=None,
+        help="--certify: boxes the proof evaluates before giving up (a count of work, not seconds)",
+    )
 
 
 def pldi_path(args):
@@ -55,6 +68,15 @@ def problem_from_args(robot, args, out, *, hyperparameters=None, check=None):
     if args.merge_symmetric and args.uncertainty != "box":
         raise ArgumentError("--merge-symmetric applies to the box model: add --uncertainty box")
     pldi = domain = None
+    bound_options = getattr(args, "bound_options", None)  # the default task's search effort (cli.common)
+    if getattr(args, "max_boxes", None) is not None and not getattr(args, "certify", False):
+        raise ArgumentError("--max-boxes sets the interval-arithmetic proof: use it with --certify")
+    if getattr(args, "certify", False):
+        if args.pldi:
+            raise ArgumentError("--pldi holds its bounds already: drop --certify, or prove them with `polyrob bounds "
+                                "--certify -o STEM` and pass that file")  # fmt: skip
+        proof = {} if args.max_boxes is None else {"max_boxes": args.max_boxes}
+        bound_options = {**(bound_options or {}), "certify": True, "certify_options": proof}
     if args.pldi:
         from polyrob.bounds.pldi import PLDI
 
@@ -81,13 +103,17 @@ def problem_from_args(robot, args, out, *, hyperparameters=None, check=None):
             }
         )
     out.stage(f"{describe_source(robot, args)} over domain '{known_domain.name}', uncertainty model {args.uncertainty}")
-    return build_problem(
-        robot,
-        domain,
-        hyperparameters=h,
-        uncertainty=args.uncertainty,
-        pldi=pldi,
-        merge_symmetric=args.merge_symmetric,
-        progress=out.progress,
-        bound_options=getattr(args, "bound_options", None),  # the default task's search effort (cli.common)
-    )
+    try:
+        return build_problem(
+            robot,
+            domain,
+            hyperparameters=h,
+            uncertainty=args.uncertainty,
+            pldi=pldi,
+            merge_symmetric=args.merge_symmetric,
+            progress=out.progress,
+            bound_options=bound_options,
+        )
+    except CertificationError as exc:  # the library names its parameters; the user typed options
+        text = str(exc).replace("raise the tolerance (rel_tol) or the work limit", "raise the work limit")
+        raise CertificationError(text.replace("max_boxes", "--max-boxes")) from None
