@@ -107,6 +107,8 @@ def test_the_inner_gain_model_rests_on_the_proved_factor_ranges_alone(finger):
     assert problem.model == "inner-gain"  # auto's choice for a computed-torque task
     scope = problem.scope()
     assert scope.enclosure == "certified" and "proved (interval arithmetic)" in scope.sentence()
+    # the PLDI's sampled intervals are named as what they are: not what the certificate rests on
+    assert "are not what the model rests on" in scope.sentence() and "; bounds sampled at" not in scope.sentence()
     # without the proof the same model is sampled, and says it rests on the PLDI too
     sampled = uncertain_plant(bound_pldi(robot, small, samples=256, coverage=0, workers=1, progress=False),
                               model="inner-gain", coverage=0, volume_samples=0)  # fmt: skip

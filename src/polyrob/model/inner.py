@@ -208,15 +208,20 @@ class InnerLoopRobot(Manipulator):
     def _base(self):
         return self.model_robot.__dict__.get("_polyrob_base", self.model_robot)
 
-    def words(self) -> str:
-        """The inner layer and the ranges in one line (a certificate's scope note)."""
+    def words(self, *, bounds_used: bool = True) -> str:
+        """The inner layer and the ranges in one line (a certificate's scope note).
+
+        ``bounds_used=False``: the uncertainty model does not rest on the
+        PLDI's sampled A, B intervals (``inner-gain`` on proved factor
+        ranges), and the note says so.
+        """
         parts = [f"inner layer: {self.inner}" + ("" if self.inner == "none" else f" ({runtime_needs(self.inner)})")]
         if self.payload is not None:
             parts.append(self.payload.words() + " (model: the middle)")
         if self.model_error:
             parts.append(f"link masses/inertias ±{100 * self.model_error:g} % (all links by one factor)")
         if len(self._scenarios):
-            parts.append(f"bounds sampled at {len(self._scenarios) + 1} true robots (range corners)")
+            parts.append(_bounds_words(len(self._scenarios) + 1, "range corners", bounds_used))
         return "; ".join(parts)
 
     def describe(self) -> dict:
@@ -308,7 +313,7 @@ class SetLoopRobot(InnerLoopRobot):
     def with_true(self, mass=None, com=None, scale: float = 1.0):
         raise ArgumentError("a robot-uncertainty set's true robots are drawn (drawn(rng)), not given by one factor")
 
-    def words(self) -> str:
+    def words(self, *, bounds_used: bool = True) -> str:
         parts = [f"inner layer: {self.inner}" + ("" if self.inner == "none" else f" ({runtime_needs(self.inner)})")]
         parts.append(self.uncertainty.words() + " (model: nominal links, the middle payload and viscous friction)")
         body = self.uncertainty.payload
@@ -319,7 +324,7 @@ class SetLoopRobot(InnerLoopRobot):
         if any(f.coulomb > 0 for f in self.uncertainty.friction):
             parts.append("Coulomb friction as stated, no term of the frozen loop's Jacobians: not covered")
         if len(self._scenarios):
-            parts.append(f"bounds sampled at {len(self._scenarios) + 1} true robots (the model and random draws)")
+            parts.append(_bounds_words(len(self._scenarios) + 1, "the model and random draws", bounds_used))
         return "; ".join(parts)
 
     def describe(self) -> dict:
@@ -350,3 +355,10 @@ def inner_loop_of_set(robot, inner: str, uncertainty, *, draws: int = SET_DRAWS,
     trues = draw_true_robots(robot, spec, draws, seed=seed)
     scenarios = tuple(replace(nominal, true_robot=t.robot, scenario=t.words()) for t in trues)
     return replace(nominal, _scenarios=scenarios)
+
+
+def _bounds_words(robots: int, which: str, used: bool) -> str:
+    """How the PLDI's bounds were sampled, and whether the certificate rests on them."""
+    if used:
+        return f"bounds sampled at {robots} true robots ({which})"
+    return f"the PLDI's A, B intervals, sampled at {robots} true robots ({which}), are not what the model rests on"

@@ -178,7 +178,8 @@ class Problem:
         # the weakest of every input: the PLDI, and the model's own ranges (an axes model's are sampled); a model
         # that names its inputs without the PLDI rests on them alone (inner-gain on proved factor ranges)
         own = model_of(self.unc).enclosure(self.unc)
-        enclosure = own if "PLDI" not in enclosure_inputs(self.unc) else weakest_enclosure(self.pldi.enclosure, own)
+        on_pldi = "PLDI" in enclosure_inputs(self.unc)
+        enclosure = weakest_enclosure(self.pldi.enclosure, own) if on_pldi else own
         coverage = getattr(self.unc, "coverage", float("nan"))
         points = int(getattr(self.unc, "coverage_points", 0) or 0)
         checked = coverage is not None and not math.isnan(float(coverage)) and points > 0
@@ -191,7 +192,7 @@ class Problem:
             domain=_domain_words(self.domain),
             notes=tuple(getattr(self.robot, "notes", ()) or ())
             + (f"reflected rotor inertia: {getattr(self.robot, 'reflected_inertia', 'unknown')}",)
-            + ((self.robot.words(),) if hasattr(self.robot, "inner") else ()),
+            + ((self.robot.words(bounds_used=on_pldi),) if hasattr(self.robot, "inner") else ()),
             robot=str(self.robot.name),
         )
 
