@@ -97,6 +97,7 @@ def test_the_inner_gain_model_rests_on_the_proved_factor_ranges_alone(finger):
     assert pldi.enclosure == "sampled"  # the A, B intervals: the model does not read them
     unc = uncertain_plant(pldi, model="inner-gain", coverage=300, volume_samples=0)
     assert model_of(unc).enclosure(unc) == "certified" and enclosure_inputs(unc) == {"factors": "certified"}
+    assert unc.info["enclosure"] == "certified"
     proof = pldi.info["certify"]["factors"]
     for k, name in enumerate(unc.info["factors"]):
         lo, hi = np.asarray(proof[name]["lower"]), np.asarray(proof[name]["upper"])

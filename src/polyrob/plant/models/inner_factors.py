@@ -56,7 +56,13 @@ from scipy.optimize import minimize, minimize_scalar
 from polyrob.errors import ArgumentError, NotApplicable
 from polyrob.model.inner import InnerLoopRobot
 from polyrob.plant.lftplant import UncertainPlant
-from polyrob.plant.models.assembly import Channels, arm_state_matrix, into_accelerations, model_plant
+from polyrob.plant.models.assembly import (
+    Channels,
+    arm_state_matrix,
+    enclosure_info,
+    into_accelerations,
+    model_plant,
+)
 from polyrob.plant.models.axes import entry_layout, residual_of_radii
 
 #: ``residual="real"``: entries of the residual below this (relative to its largest, at least 1) get no scalar.
@@ -326,8 +332,7 @@ def factor_lft_plant(
         A_nom=np.asarray(pldi.A0, float) if not g_offset else centre[0],
         B_nom=np.asarray(pldi.B0, float) if not g_offset else centre[1],
         info={
-            "enclosure": "sampled",
-            "enclosure_inputs": dict(inputs),
+            **enclosure_info(inputs),  # "certified" only on proved factor ranges
             "factors": tuple(names),
             "theta_range": ranges,
             "K_centres": np.array(centres),
