@@ -36,7 +36,8 @@ How a box is enclosed (:meth:`FactorProblem.enclose`):
 
 Branch and bound: an entry's side is closed on a box when its bound is
 within ``rel_tol`` of the entry's width of the *inner* value (the largest
-attained at a point so far: the sampled search's, this module's pilot, and
+attained at a point so far: the sampled search's, this module's pilot, the vertices
+:func:`~polyrob.bounds.certified.factors.attained.vertex_ascent` visits, and
 every box's centre); a box with an open side is split along the
 coordinate that carries most of the over-estimation.  The result is the
 union of the leaves' enclosures: rigorous whatever the inner values are
