@@ -56,7 +56,6 @@ import argparse
 import json
 import os
 import time
-from dataclasses import replace
 
 import numpy as np
 import pinocchio as pin
@@ -148,20 +147,6 @@ def inverse_widths(problem, model, box, samples, rng, floor=INVERSE_FLOOR) -> di
     return out
 
 
-def scaled(domain, s):
-    pose = 0.5 * (domain.q_lower + domain.q_upper)
-    q_half = 0.5 * (domain.q_upper - domain.q_lower)
-    return replace(
-        domain,
-        q_lower=pose - s * q_half,
-        q_upper=pose + s * q_half,
-        qdot_lower=s * domain.qdot_lower,
-        qdot_upper=s * domain.qdot_upper,
-        qddot_lower=s * domain.qddot_lower,
-        qddot_upper=s * domain.qddot_upper,
-    )
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", default="ur5,panda")
@@ -181,10 +166,10 @@ def main() -> None:
         problem = FactorProblem.from_loops(loops)
         row = {"joints": robot.m, "factors": [n for n, _ in loops], "one_box": [], "inverse": [], "hessian": []}
         model_robot = loops[0][1].model_robot
-        row["wrapping"] = wrapping(problem, scaled(domain, args.wrapping_scale), np.random.default_rng(2))
+        row["wrapping"] = wrapping(problem, domain.scaled(args.wrapping_scale), np.random.default_rng(2))
         row["wrapping"]["scale"] = args.wrapping_scale
         for s in [float(x) for x in args.scales.split(",") if x]:
-            box = scaled(domain, s)
+            box = domain.scaled(s)
             inv = inverse_widths(problem, model_robot.model, box, args.samples, np.random.default_rng(3))
             row["inverse"].append({"scale": s, **inv})
             row["hessian"].append({"scale": s, **hessian_widths(problem, box, np.random.default_rng(5))})
@@ -206,7 +191,7 @@ def main() -> None:
             row["one_box"].append(entry)
         row["proof"] = []
         for s in [float(x) for x in args.proof_scales.split(",") if x]:
-            box = scaled(domain, s)
+            box = domain.scaled(s)
             t0 = time.perf_counter()
             try:
                 enc = prove_factor_ranges(loops, box, max_boxes=args.max_boxes)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import itertools
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -26,19 +25,6 @@ def _box(domain):
     x_lo = np.concatenate([domain.q_lower, domain.qdot_lower])
     x_hi = np.concatenate([domain.q_upper, domain.qdot_upper])
     return x_lo, x_hi, np.asarray(domain.qddot_lower, float), np.asarray(domain.qddot_upper, float)
-
-
-def _scaled(domain, s):
-    centre, radius = 0.5 * (domain.q_lower + domain.q_upper), 0.5 * (domain.q_upper - domain.q_lower)
-    return replace(
-        domain,
-        q_lower=centre - s * radius,
-        q_upper=centre + s * radius,
-        qdot_lower=s * domain.qdot_lower,
-        qdot_upper=s * domain.qdot_upper,
-        qddot_lower=s * domain.qddot_lower,
-        qddot_upper=s * domain.qddot_upper,
-    )
 
 
 def test_the_ascent_finds_the_vertex_extremes_and_never_more(finger):
@@ -73,7 +59,7 @@ def test_extremes_over_the_accelerations_are_the_values_at_their_best_vertex(fin
 
 def test_the_proof_closes_with_the_ascent_where_the_pilot_alone_cannot(finger):
     loops, problem, domain = finger
-    small = _scaled(domain, 0.1)
+    small = domain.scaled(0.1)
     # the pilot's random points stay tolerances below the extremes at the box's corners: the corners are split forever
     with pytest.raises(CertificationError, match="limit of 40 boxes"):
         prove_factor_ranges(loops, small, max_boxes=40, ascent_rounds=0)
@@ -91,7 +77,7 @@ def test_the_inner_gain_model_rests_on_the_proved_factor_ranges_alone(finger):
     from polyrob.plant.uncertainty import uncertain_plant
 
     _, problem, domain = finger
-    small = _scaled(domain, 0.1)
+    small = domain.scaled(0.1)
     robot = default_task_robot(load_robot("finger_edu"))
     pldi = bound_pldi(robot, small, certify=True, samples=256, coverage=0, workers=1, progress=False)
     assert pldi.enclosure == "sampled"  # the A, B intervals: the model does not read them

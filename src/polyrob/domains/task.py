@@ -41,7 +41,7 @@ True
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -117,6 +117,25 @@ class TaskDomain(JointBox):
         """Whether points ``(q, qdot, qddot)`` (arrays (n, m)) lie in the box."""
         z = np.concatenate([np.atleast_2d(q), np.atleast_2d(qdot), np.atleast_2d(qddot)], axis=1)
         return np.all((z >= self.lower - atol) & (z <= self.upper + atol), axis=1)
+
+    def scaled(self, factor: float) -> TaskDomain:
+        """The task with every range (``q``, ``qdot``, ``qddot``) scaled by ``factor`` about its midpoint.
+
+        Examples
+        --------
+        >>> from polyrob import load_robot
+        >>> task = TaskDomain.from_robot(load_robot("ur5"), q_radius=0.2, qdot_max=0.5, qddot_max=2.0)
+        >>> small = task.scaled(0.1)
+        >>> float(small.qdot_upper[0]), round(float(small.q_upper[1] - small.q_lower[1]), 6)
+        (0.05, 0.04)
+        """
+        out = {}
+        for g in _BOX:
+            lo, hi = getattr(self, f"{g}_lower"), getattr(self, f"{g}_upper")
+            mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+            out[f"{g}_lower"], out[f"{g}_upper"] = mid - factor * half, mid + factor * half
+        radius = None if self.q_radius is None else factor * self.q_radius
+        return replace(self, q_radius=radius, **out)
 
     # ------------------------------------------------------------------ the map to the dynamics
     def inputs(self, q, qdot, qddot) -> np.ndarray:
