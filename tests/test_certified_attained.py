@@ -117,3 +117,7 @@ def test_synth_certify_is_refused_in_one_line_where_it_cannot_run(tmp_path, caps
     err = capsys.readouterr().err
     assert "the limit of 1 boxes" in err and "raise the work limit (--max-boxes)" in err and "rel_tol" not in err
     assert err.count("\n") == 1 and not list(tmp_path.iterdir())
+    # a torque box's proof names the options of `polyrob bounds`, which this command does not have: it says so
+    assert main(["synth", "planar_2r", "--certify", "--max-boxes", "1", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "--rel-tol and --time-limit are options of `polyrob bounds --certify -o STEM`" in err and err.count("\n") == 1

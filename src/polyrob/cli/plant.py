@@ -116,4 +116,7 @@ def problem_from_args(robot, args, out, *, hyperparameters=None, check=None):
         )
     except CertificationError as exc:  # the library names its parameters; the user typed options
         text = str(exc).replace("raise the tolerance (rel_tol) or the work limit", "raise the work limit")
-        raise CertificationError(text.replace("max_boxes", "--max-boxes")) from None
+        text = text.replace("max_boxes", "--max-boxes")
+        if "--rel-tol" in text or "--time-limit" in text:  # a torque box's proof: those options are bounds'
+            text += " (--rel-tol and --time-limit are options of `polyrob bounds --certify -o STEM`; then --pldi STEM)"
+        raise CertificationError(text) from None
