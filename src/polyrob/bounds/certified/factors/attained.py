@@ -92,11 +92,16 @@ def vertex_ascent(problem, x_lo, x_hi, a_lo, a_hi, *, rounds: int = 8):
     bits[:, free] = (slope.reshape(len(free), -1) > 0).T
     best = np.full(len(bits), -np.inf)
     flips = np.eye(n, dtype=bool)[free]
+    seen: dict[bytes, np.ndarray] = {}  # a vertex is evaluated once, however many rounds and sides visit it
     for _ in range(rounds):
         candidates = np.concatenate([bits[None], bits[None] ^ flips[:, None]])  # (1 + free, S, n)
         unique, where = np.unique(candidates.reshape(-1, n), axis=0, return_inverse=True)
-        low, high = extremes_over_accelerations(problem, np.where(unique, x_hi, x_lo), a_lo, a_hi)
-        values = np.stack([-low, high], -1).reshape(len(unique), -1)
+        new = [u for u in unique if u.tobytes() not in seen]
+        if new:
+            low, high = extremes_over_accelerations(problem, np.where(np.array(new), x_hi, x_lo), a_lo, a_hi)
+            for u, row in zip(new, np.stack([-low, high], -1).reshape(len(new), -1)):
+                seen[u.tobytes()] = row
+        values = np.array([seen[u.tobytes()] for u in unique])
         S = len(bits)
         at = values[where.reshape(len(candidates), S), np.arange(S)]  # (1 + free, S)
         pick = np.argmax(at, 0)
