@@ -164,7 +164,7 @@ def lower_bound_words(record) -> str:
     >>> lower_bound_words({"moving": {"lower_bound": 0.726}, "scope": {}})
     'gain >= 0.726 (the largest found along admissible trajectories)'
     >>> lower_bound_words({"moving": {"lower_bound": 1.271}, "scope": {}})
-    'gain >= 1.271 (the largest found along admissible trajectories: at or above 1, robust performance fails in motion)'
+    'gain >= 1.271 (the largest found along admissible trajectories: at or above 1, robust performance fails for the linearised robot in motion, simulated)'
     >>> lower_bound_words({"scope": {"variation": ARBITRARY}})
     'not computed'
     """
@@ -173,7 +173,7 @@ def lower_bound_words(record) -> str:
     moving = record.get("moving") if isinstance(record.get("moving"), dict) else {}
     found = _bound(moving.get("lower_bound"))
     if found is not None:
-        fails = ": at or above 1, robust performance fails in motion" if found >= 1.0 else ""
+        fails = ": at or above 1, robust performance fails for the linearised robot in motion, simulated" if found >= 1.0 else ""
         return f"gain >= {found:.4g} (the largest found along admissible trajectories{fails})"
     mu_lower = _bound(record.get("mu_lower"))
     if scope.get("variation") == FROZEN and mu_lower is not None:
