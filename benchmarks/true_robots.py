@@ -80,6 +80,7 @@ def main() -> None:
             rs = robstab(P, K, omega, refine_peak=False)
             rp = robperf(P, K, omega, refine_peak=False)
             entry[model] = {
+                "state_residual_norm": problems[key].unc.info.get("state_residual_norm"),
                 "rs": [rs.mu_upper_grid, rs.mu_lower],
                 "rp": [rp.mu_upper_grid, rp.mu_lower],
                 "rp_frequency": rp.critical_frequency,

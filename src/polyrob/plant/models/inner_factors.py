@@ -242,6 +242,7 @@ def factor_lft_plant(
     g_norm: float | None = None,
     g_offset: float = 0.0,
     residual: str = "block",
+    state_residual_norm: float | None = None,
 ):
     """The LFT ``a = v + sum_k theta_k K_k,c [x; a] + E [x; a]`` (module text) as an :class:`UncertainPlant`.
 
@@ -264,6 +265,11 @@ def factor_lft_plant(
     above): what the residual is (a real matrix, each entry bounded), at the
     price of one μ block per entry.  A complex block lets the stiffness
     residual act as a damping of either sign, which real scalars cannot.
+    ``state_residual_norm`` ``rho`` (``residual="block"`` only): the state
+    columns' block covers ``||W_l^-1 E_J W_r^-1|| <= rho`` instead of 1,
+    ``W_l``, ``W_r`` the weights :func:`residual_blocks` gives ``spread``
+    (whose entry box needs ``rho = 1``: a Frobenius covering); for a caller
+    that bounds that norm itself (:func:`~polyrob.plant.models.inner_links.inner_links_plant`).
     """
     m, n = pldi.m, 2 * pldi.m
     ranges = np.asarray(ranges, float)
@@ -283,6 +289,11 @@ def factor_lft_plant(
     else:
         entry_radii = np.zeros(0)
     blocks = residual_blocks(spread, n)
+    if state_residual_norm is not None and residual == "block" and blocks and blocks[0]["cols"].max() < n:
+        if not 0.0 < state_residual_norm <= 1.0:
+            raise ArgumentError(f"state_residual_norm must lie in (0, 1], got {state_residual_norm!r}")
+        # the block's ball shrinks to the stated norm: its left weights carry rho
+        blocks[0]["B"], blocks[0]["W_l"] = state_residual_norm * blocks[0]["B"], state_residual_norm * blocks[0]["W_l"]
     if g_norm is not None and g_norm > 0:
         root = np.sqrt(g_norm)
         C = np.zeros((m, 3 * m))
@@ -339,6 +350,7 @@ def factor_lft_plant(
             "residual_gain": float(np.linalg.norm(carried_spread)),
             "n_directions": P,
             "residual_blocks": [{key: b[key] for key in ("rows", "cols", "W_l", "W_r")} for b in blocks],
+            **({} if state_residual_norm is None else {"state_residual_norm": float(state_residual_norm)}),
             "residual_spread": carried_spread,
             "residual": residual,
             "residual_entries": entries,

@@ -391,6 +391,7 @@ def inner_links_plant(
         payload_rest = np.abs(pay @ rest[on_payload].reshape(int(on_payload.sum()), -1)).max(axis=0)
         worst = worst + payload_rest.reshape(shape)
     spread = SPREAD_MARGIN * worst.max(axis=0)
+    residual_norm = _state_residual_norm(rest[..., :n], on_payload, pay, spread[:, :n]) if residual == "block" else None
     # the acceleration columns: one norm-bounded block (in M_hat^{1/2} coordinates nearly symmetric)
     # two valid bounds of the same block: each sample's symmetric form times what the fixed weighting costs
     # there (kappa), or the fixed weighting's own symmetric and skew parts (panda: 1.68 and 1.20 against the
@@ -429,6 +430,7 @@ def inner_links_plant(
         g_norm=g_norm,
         g_offset=g0,
         residual=residual,
+        state_residual_norm=residual_norm,
         info={
             "set": robot.uncertainty.words(),
             "scalars": tuple(s.name for s in scalars),
@@ -441,6 +443,35 @@ def inner_links_plant(
             **({"payload_sampling": payload_sampling_words(body)} if on_payload.any() else {}),
         },
     )
+
+
+def _state_residual_norm(rest, on_payload, pay, spread, chunk: int = 16) -> float | None:
+    """The state columns' residual block's norm bound ``rho <= 1`` in the weights the entry radii ``spread`` give it.
+
+    The entry box (:func:`~polyrob.plant.models.axes.residual_of_radii`: a
+    Frobenius covering, ``rho = 1``) takes each entry's largest value over the
+    samples, which no single sample reaches.  At each sample ``x`` the
+    residual ``E(u, x) = sum_j u_j R_j(x)`` has, for every ``u`` of the box,
+    ``||W_l^-1 E W_r^-1|| <= sum_j ||W_l^-1 R_j(x) W_r^-1||`` (the triangle
+    inequality; the payload's scalars at the points of its physical set):
+    sampled over the task like the entries, exact over the box scalars.  Its
+    largest value over the samples times :data:`SPREAD_MARGIN`, capped at 1.
+    ``rest``: ``(N, S, m, 2m)`` (weighted); ``spread``: ``(m, 2m)``.
+    """
+    from polyrob.plant.models.axes import residual_of_radii
+
+    _, _, gains = residual_of_radii(spread)
+    rows, cols = gains["residual_rows"], gains["residual_cols"]
+    if not len(rows):
+        return None
+    scaled = rest[:, :, rows][:, :, :, cols] / gains["W_l"][:, None] / gains["W_r"][None, :]  # (N, S, r, c)
+    bound = np.linalg.norm(scaled[~on_payload], 2, axis=(-2, -1)).sum(axis=0)  # (S,)
+    if on_payload.any():
+        on = scaled[on_payload]
+        for start in range(0, on.shape[1], chunk):  # (points, chunk, r, c) at a time: the payload's set is large
+            sums = np.einsum("pi,isab->psab", pay, on[:, start : start + chunk])
+            bound[start : start + chunk] += np.linalg.norm(sums, 2, axis=(-2, -1)).max(axis=0)
+    return float(min(1.0, SPREAD_MARGIN * bound.max()))
 
 
 def _weighting(robot, domain) -> np.ndarray:

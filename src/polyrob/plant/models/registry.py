@@ -344,6 +344,11 @@ class InnerLinksModel(UncertaintyModel):
         rest = f"residual blocks of total size {size}"
         if entries:
             rest = f"{entries} real scalars (the state columns' residual, one per entry) and {rest}"
+        if "state_residual_norm" in unc.info:
+            rest += (
+                f" (the state columns' block of norm <= {unc.info['state_residual_norm']:.3g} in the weights "
+                "of its entries' bounds: the residual's norm at the samples, not their entry box)"
+            )
         return (
             f"{self.name}: the computed-torque factor [B_low^-1 A_low, I - B_low^-1], exactly linear in the "
             f"{len(unc.info['scalars'])} scalars of the set's parameter box, as {len(unc.info['factors'])} principal "
