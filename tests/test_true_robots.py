@@ -192,3 +192,46 @@ def test_a_fixed_structure_is_tuned_on_true_robots_from_the_pid():
     tuning = tr.tune_on_true_robots(loop, task, WEIGHTS, start, structure="ss:4", n=12, check_draws=30, max_iter=60)
     assert tuning.structure == "ss:4" and control.ss(tuning.controller).nstates == 4
     assert tuning.fitted_worst < 0.9 * tuning.start_worst and tuning.check.unstable == 0
+
+
+def test_extreme_draws_sit_at_the_vertices_of_the_set_and_the_corners_of_the_task():
+    from polyrob.uncertainty_set.draw import draw_true_robot
+    from polyrob.uncertainty_set.links import link_names
+
+    robot = load_robot("planar_2r")
+    spec = RobotUncertainty.from_dict({"links": {"error_percent": 10},
+                                       "payload": {"mass": [0.0, 1.0], "com_ball": {"centre": [0, 0, 0], "radius": 0.1},
+                                                   "inertia": {"solid_sphere": 0.05}}})  # fmt: skip
+    rng = np.random.default_rng(4)
+    nominal = {name: robot.model.inertias[j].mass for name, j in link_names(robot).items()}
+    for _ in range(10):
+        true = draw_true_robot(robot, spec, rng, extreme=True)
+        ratios = [true.link_parameters[name][0] / mass for name, mass in nominal.items()]
+        np.testing.assert_allclose(np.abs(np.array(ratios) - 1.0), 0.1, rtol=1e-12)  # every mass factor at an end
+        assert true.payload_mass in (0.0, 1.0)
+        assert np.linalg.norm(true.payload_com) == pytest.approx(0.1)  # on the ball's surface
+    # the check's second half: frozen at corners of the task
+    loop, task = loop_and_task(0.1)
+    plants = tr.true_robot_plants(loop, task, 8, seed=2, extremes=0.5)
+    assert len(plants) == 8
+    with pytest.raises(ArgumentError, match="share at vertices"):
+        tr.true_robot_plants(loop, task, 8, extremes=1.5)
+
+
+def test_vertices_of_ur5s_per_link_set_find_a_worse_frozen_loop_than_uniform_draws():
+    # a PID tuned on uniform draws meets the weights on them; at the set's vertices and the task's corners it does not
+    from pathlib import Path
+
+    from polyrob.io.controller import load_controller, read_controller_file
+
+    root = Path(__file__).resolve().parents[1]
+    path = root / "benchmarks" / "controllers" / "ur5_per_link_true_robots.json"
+    weights = {k: tuple(v) for k, v in read_controller_file(path)["info"]["weights"].items()}
+    spec = RobotUncertainty.from_file(root / "examples" / "uncertainty" / "ur5.yaml")
+    loop = inner_loop_of_set(load_robot("ur5"), "computed-torque", spec, draws=1)
+    task = default_task_domain(loop)
+    K = load_controller(path)
+    inside = tr.true_robot_check(loop, task, K, weights, n=100, extremes=0.0)
+    vertices = tr.true_robot_check(loop, task, K, weights, n=100, extremes=1.0)
+    assert inside.worst < 1.2 < 1.5 < vertices.worst
+    assert vertices.extremes == 100 and "100 at its vertices and the task's corners" in vertices.words()

@@ -198,10 +198,13 @@ class InnerLoopRobot(Manipulator):
         words = f"payload {mass:.4g} kg at ({', '.join(f'{c:.3g}' for c in np.ravel(com))}), links x {scale:.4g}"
         return replace(self, true_robot=true, scenario=words, _scenarios=())
 
-    def drawn(self, rng) -> InnerLoopRobot:
-        """A true robot with a payload and an inertia factor drawn uniformly from their ranges."""
-        mass, com = self.payload.draw(rng) if self.payload is not None else (0.0, np.zeros(3))
-        scale = rng.uniform(1 - self.model_error, 1 + self.model_error)
+    def drawn(self, rng, *, extreme: bool = False) -> InnerLoopRobot:
+        """A true robot with a payload and an inertia factor drawn uniformly from their ranges (``extreme``: at their ends)."""
+        mass, com = self.payload.draw(rng, extreme=extreme) if self.payload is not None else (0.0, np.zeros(3))
+        if extreme:
+            scale = 1 + self.model_error * rng.choice([-1.0, 1.0])
+        else:
+            scale = rng.uniform(1 - self.model_error, 1 + self.model_error)
         return self.with_true(mass, com, float(scale))
 
     @property
@@ -298,11 +301,11 @@ class SetLoopRobot(InnerLoopRobot):
 
     uncertainty: object = field(default=None, repr=False)
 
-    def drawn(self, rng) -> SetLoopRobot:
-        """A true robot drawn at random inside the set."""
+    def drawn(self, rng, *, extreme: bool = False) -> SetLoopRobot:
+        """A true robot drawn at random inside the set (``extreme``: at a random vertex of it)."""
         from polyrob.uncertainty_set.draw import draw_true_robot
 
-        true = draw_true_robot(self.uncertainty_robot, self.uncertainty, rng)
+        true = draw_true_robot(self.uncertainty_robot, self.uncertainty, rng, extreme=extreme)
         return replace(self, true_robot=true.robot, scenario=true.words(), _scenarios=())
 
     @property

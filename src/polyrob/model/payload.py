@@ -162,8 +162,11 @@ class PayloadRange:
             out.append((self.mass_upper, c))
         return [p for k, p in enumerate(out) if self.mass_upper > self.mass_lower or k > 0]
 
-    def draw(self, rng) -> tuple[float, np.ndarray]:
-        """A payload drawn uniformly from the range."""
+    def draw(self, rng, *, extreme: bool = False) -> tuple[float, np.ndarray]:
+        """A payload drawn uniformly from the range (``extreme``: the mass at an end, the COM at a corner)."""
+        if extreme:
+            corner = np.where(rng.integers(0, 2, size=3) == 1, self.com_upper, self.com_lower)
+            return float(self.mass_upper if rng.integers(2) else self.mass_lower), np.asarray(corner, float)
         mass = rng.uniform(self.mass_lower, self.mass_upper)
         return float(mass), rng.uniform(self.com_lower, self.com_upper)
 

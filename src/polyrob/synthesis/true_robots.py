@@ -7,8 +7,14 @@ robot's own set instead, as MATLAB users do with ``usample`` and
 ``systune``:
 
 * :func:`true_robot_check`: the frozen loop of ``n`` true robots drawn
-  inside the set (each at a random point of the task), closed with a
-  controller, and the largest weighted gain among them.  Each true robot is
+  from the set (each at a random point of the task), closed with a
+  controller, and the largest weighted gain among them.  Half are drawn
+  inside the set at random points of the task; half at random *vertices*
+  of the set (every factor at an end, the payload's centre of mass on its
+  ball's surface) at random *corners* of the task: a frozen loop's worst
+  cases lie there, and uniform draws seldom go (``python
+  benchmarks/true_robots.py`` prints both kinds' worst for each controller;
+  ``tests/test_true_robots.py`` checks that the vertices find more).  Each true robot is
   a member of the set, so this worst case is a **lower bound** of the
   set's worst case (sampled, and on a frequency grid: a lower bound of each
   loop's H∞ norm too), never a certificate; printed beside μ, it says how
@@ -43,6 +49,7 @@ from polyrob.errors import ArgumentError
 __all__ = [
     "CHECK_DRAWS",
     "TUNING_DRAWS",
+    "EXTREME_SHARE",
     "TrueRobotCheck",
     "TrueRobotTuning",
     "true_robot_plants",
@@ -59,6 +66,8 @@ CHECK_DRAWS = 500
 #: True robots the multi-model tuning is fitted to (ur5's per-link set: a PID fitted to 150 reached 0.825 on
 #: them and 1.02 on 500 others, docs/uncertainty.md: the held-out check is what to read).
 TUNING_DRAWS = 150
+#: The share of draws at vertices of the set and corners of the task (the rest inside, at random points).
+EXTREME_SHARE = 0.5
 #: Seeds of the tuning's and the check's draws: the check never sees a plant the tuning fitted.
 TUNING_SEED, CHECK_SEED = 0, 99
 
@@ -98,8 +107,14 @@ def _needs_set(loop) -> None:
         )
 
 
-def true_robot_plants(loop, domain, n: int, *, seed: int = 0) -> list[tuple[np.ndarray, np.ndarray]]:
-    """``(A, B)`` of ``n`` frozen loops: each a true robot drawn inside ``loop``'s set, at a random point of ``domain``.
+def true_robot_plants(
+    loop, domain, n: int, *, seed: int = 0, extremes: float = EXTREME_SHARE
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``(A, B)`` of ``n`` frozen loops: each a true robot drawn from ``loop``'s set, at a point of ``domain``.
+
+    The first ``n - round(extremes n)`` are drawn inside the set, each at a
+    random point of ``domain``; the rest at a random vertex of the set
+    (``loop.drawn(rng, extreme=True)``) and a random corner of ``domain``.
 
     Parameters
     ----------
@@ -120,12 +135,18 @@ def true_robot_plants(loop, domain, n: int, *, seed: int = 0) -> list[tuple[np.n
     _needs_set(loop)
     if int(n) < 1:
         raise ArgumentError(f"true robots: need at least one draw, got {n}")
+    if not 0.0 <= extremes <= 1.0:
+        raise ArgumentError(f"true robots: the share at vertices must lie in [0, 1], got {extremes!r}")
     rng = np.random.default_rng(seed)
     points = domain.sample_box(int(n), method="uniform", seed=int(rng.integers(2**31)))
+    inside = int(n) - int(round(extremes * int(n)))
+    lower, upper = np.asarray(domain.lower, float), np.asarray(domain.upper, float)
+    corners = rng.integers(0, 2, size=(int(n) - inside, len(lower))) == 1
+    points[inside:] = np.where(corners, upper, lower)
     q, qdot, a = domain.split(points)
     out = []
     for k in range(int(n)):
-        true = loop.drawn(rng)
+        true = loop.drawn(rng, extreme=k >= inside)
         v = true.inverse_dynamics(q[k : k + 1], qdot[k : k + 1], a[k : k + 1])
         A, B = true.jacobians_batch(q[k : k + 1], qdot[k : k + 1], v)
         out.append((np.asarray(A[0], float), np.asarray(B[0], float)))
@@ -150,6 +171,8 @@ class TrueRobotCheck:
     ----------
     draws : int
         Frozen loops (true robots, each at one random task point).
+    extremes : int
+        Of them, drawn at a vertex of the set and a corner of the task.
     unstable : int
         Loops with a closed-loop pole at ``Re >= 0``.
     worst, median : float
@@ -164,13 +187,15 @@ class TrueRobotCheck:
     worst: float
     median: float
     seed: int
+    extremes: int = 0
 
     def words(self) -> str:
         none = "none unstable" if self.unstable == 0 else f"{self.unstable} UNSTABLE"
+        where = f" ({self.extremes} at its vertices and the task's corners)" if self.extremes else ""
         return (
             f"true robots: worst weighted gain {self.worst:.3g} (median {self.median:.3g}) over {self.draws} "
-            f"frozen loops drawn from the set, {none} (sampled on a frequency grid: a lower bound of the set's "
-            "worst case, not a certificate)"
+            f"frozen loops drawn from the set{where}, {none} (sampled on a frequency grid: a lower bound of the "
+            "set's worst case, not a certificate)"
         )
 
     def to_dict(self) -> dict:
@@ -180,6 +205,7 @@ class TrueRobotCheck:
             "worst": self.worst,
             "median": self.median,
             "seed": self.seed,
+            "extremes": self.extremes,
             "words": self.words(),
         }
 
@@ -232,8 +258,13 @@ def _loop_figures(plants, K, W_S, W_T, W_KS, omega) -> tuple[np.ndarray, np.ndar
     return abscissa, vertex_peaks(vs, K, W_S, W_T, W_KS, omega=omega)
 
 
-def true_robot_check(loop, domain, K, weights: dict, *, n: int = CHECK_DRAWS, seed: int = CHECK_SEED) -> TrueRobotCheck:
+def true_robot_check(
+    loop, domain, K, weights: dict, *, n: int = CHECK_DRAWS, seed: int = CHECK_SEED, extremes: float = EXTREME_SHARE
+) -> TrueRobotCheck:
     """:class:`TrueRobotCheck` of ``K`` on ``n`` true robots of ``loop``'s set over ``domain``.
+
+    ``extremes``: the share drawn at vertices of the set and corners of the
+    task (:func:`true_robot_plants`).
 
     ``weights``: the problem's hyperparameters (:func:`polyrob.plant.weights.plant_weights`
     builds ``W_S``, ``W_T`` and, with the limit keys, ``W_KS``).
@@ -241,12 +272,12 @@ def true_robot_check(loop, domain, K, weights: dict, *, n: int = CHECK_DRAWS, se
     from polyrob.plant.weights import plant_weights
 
     W = plant_weights(weights)
-    plants = true_robot_plants(loop, domain, n, seed=seed)
+    plants = true_robot_plants(loop, domain, n, seed=seed, extremes=extremes)
     abscissa, peaks = _loop_figures(plants, K, W["W_S"], W["W_T"], W["W_KS"], check_omega(weights))
     stable = abscissa < 0
     worst = float(peaks[stable].max()) if stable.all() else float("inf")
     median = float(np.median(peaks[stable])) if stable.any() else float("inf")
-    return TrueRobotCheck(int(n), int((~stable).sum()), worst, median, int(seed))
+    return TrueRobotCheck(int(n), int((~stable).sum()), worst, median, int(seed), int(round(extremes * int(n))))
 
 
 @dataclass(frozen=True, eq=False)

@@ -90,8 +90,15 @@ class TrueRobot:
         return f"payload {self.payload_mass:.3g} kg at ({com}) m, links drawn independently"
 
 
-def draw_true_robot(robot, spec: RobotUncertainty, rng) -> TrueRobot:
+def draw_true_robot(robot, spec: RobotUncertainty, rng, *, extreme: bool = False) -> TrueRobot:
     """One true robot drawn from ``spec`` (bound to ``robot`` when it is not yet).
+
+    ``extreme``: a random vertex of the set instead of a point inside it --
+    each link's factors at ``1 ± p``, a ten-parameter box at a vertex that is
+    a rigid body (inside the box when :data:`MAX_REDRAWS` vertices are none),
+    the payload's mass at an end and its centre of mass on the ball's surface
+    or at a box corner, each viscous coefficient at an end.  A frozen loop's
+    gain is largest near such points, which uniform draws seldom reach.
 
     Raises
     ------
@@ -108,14 +115,14 @@ def draw_true_robot(robot, spec: RobotUncertainty, rng) -> TrueRobot:
     drawn = {}
     for name, j in link_names(robot).items():
         if name in explicit:
-            theta = _draw_box(explicit[name], rng)
+            theta = _draw_box(explicit[name], rng, extreme)
         else:
             nominal = np.asarray(model.inertias[j].toDynamicParameters(), float)
-            a, b, d = rng.uniform(1 - p, 1 + p, size=3)
+            a, b, d = 1 + p * rng.choice([-1.0, 1.0], size=3) if extreme else rng.uniform(1 - p, 1 + p, size=3)
             theta = scaled_parameters(nominal, a, b, d)
         model.inertias[j] = pinocchio.Inertia.FromDynamicParameters(theta)
         drawn[name] = theta
-    mass, com = (0.0, np.zeros(3)) if spec.payload is None else spec.payload.draw(rng)
+    mass, com = (0.0, np.zeros(3)) if spec.payload is None else spec.payload.draw(rng, extreme=extreme)
     if mass > 0:
         _, placement = flange_frame(robot)
         body = pinocchio.Inertia(float(mass), np.asarray(com, float), spec.payload.rotational_inertia(mass))
@@ -125,7 +132,7 @@ def draw_true_robot(robot, spec: RobotUncertainty, rng) -> TrueRobot:
     coulomb = np.zeros(robot.m)
     for f in spec.friction:
         k = robot.joint_names.index(f.joint)
-        viscous[k] = rng.uniform(*f.viscous)
+        viscous[k] = f.viscous[int(rng.integers(2))] if extreme else rng.uniform(*f.viscous)
         coulomb[k] = f.coulomb
     model.damping[:] = viscous
     true = replace(robot, model=model, damping=viscous)
@@ -139,8 +146,13 @@ def draw_true_robots(robot, spec: RobotUncertainty, n: int, seed: int = 0) -> li
     return [draw_true_robot(robot, spec, rng) for _ in range(int(n))]
 
 
-def _draw_box(interval, rng) -> np.ndarray:
+def _draw_box(interval, rng, extreme: bool = False) -> np.ndarray:
     lo, hi = np.array(interval.lower), np.array(interval.upper)
+    if extreme:  # a vertex that is a rigid body; a box whose vertices are none is drawn inside below
+        for _ in range(MAX_REDRAWS):
+            theta = np.where(rng.integers(0, 2, size=lo.shape) == 1, hi, lo)
+            if physically_consistent(theta):
+                return theta
     for _ in range(MAX_REDRAWS):
         theta = rng.uniform(lo, hi)
         if physically_consistent(theta):

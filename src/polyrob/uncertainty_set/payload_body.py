@@ -173,14 +173,24 @@ class PayloadBody:
                 lo[k], hi[k] = _product_range(mass, (-p_hi, -p_lo))
         return lo, hi
 
-    def draw(self, rng) -> tuple[float, np.ndarray]:
-        """``(mass, com)``: the mass uniform in its range, the centre of mass uniform in its box or ball."""
-        mass = float(rng.uniform(self.mass_lower, self.mass_upper))
-        if self.com_radius is None:
-            return mass, rng.uniform(self.com_lower, self.com_upper)
+    def draw(self, rng, *, extreme: bool = False) -> tuple[float, np.ndarray]:
+        """``(mass, com)``: the mass uniform in its range, the centre of mass uniform in its box or ball.
+
+        ``extreme``: the mass at one end of its range, the centre of mass at a
+        corner of its box or on its ball's surface (where a frozen loop's worst
+        cases lie, and uniform draws seldom go).
+        """
+        if extreme:
+            mass = float(self.mass_upper if rng.integers(2) else self.mass_lower)
+            if self.com_radius is None:
+                return mass, np.where(rng.integers(0, 2, size=3) == 1, self.com_upper, self.com_lower).astype(float)
+        else:
+            mass = float(rng.uniform(self.mass_lower, self.mass_upper))
+            if self.com_radius is None:
+                return mass, rng.uniform(self.com_lower, self.com_upper)
         direction = rng.normal(size=3)
         direction /= np.linalg.norm(direction) or 1.0
-        radius = self.com_radius * rng.uniform() ** (1.0 / 3.0)  # uniform in the ball's volume
+        radius = self.com_radius * (1.0 if extreme else rng.uniform() ** (1.0 / 3.0))  # uniform in the ball's volume
         return mass, np.array(self.com_centre) + radius * direction
 
     def words(self) -> str:
