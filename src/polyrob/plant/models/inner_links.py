@@ -34,7 +34,8 @@ exact per-unit direction in parameter space:
 
 Each box is symmetric about the model (an asymmetric range is widened to
 its larger side).  ``K_j(x)`` is computed exactly at sampled points of the
-task domain (one true robot per scalar, at its half range).  Forty-odd
+task domain, uniform points and as many random corners (:func:`_task_samples`;
+one true robot per scalar, at its half range).  Forty-odd
 scalars repeated ``m`` times are far too many for μ, so the model keeps
 ``P`` principal directions ``D_k`` of the state columns ``J_j(x)`` in
 *matrix space*, over the scalars and the samples, with coefficients
@@ -451,7 +452,7 @@ def inner_links_plant(
             "scalar_half_ranges": np.array([s.half_range for s in scalars]),
             "state_directions": D,
             "direction_scale": scale,
-            "samples": int(samples),
+            "samples": int(samples),  # uniform points, and as many corners of the task
             "spread_margin": SPREAD_MARGIN,
             "inertia_ratio": inertia,
             **({"payload_sampling": payload_sampling_words(body)} if on_payload.any() else {}),
