@@ -1,12 +1,13 @@
 """The independent frozen check of a controller file on true robots drawn from a stated set, as JSON.
 
-    python benchmarks/independent_check.py CONTROLLER.json [-n 2000] [--points 1] [--seed 0]
+    python benchmarks/independent_check.py CONTROLLER.json [-n 2000] [--points 1] [--seed 0] [--extremes 0.5]
         [--robot-uncertainty FILE | --link-error 10 --payload-max 1.5 --com-radius 0.1]
 
 For each of ``n`` true robots (each link's mass, first moment and inertia by
 its own factor; a payload body whose centre of mass lies anywhere within the
 radius of the flange; the inner layer computing with the nominal links and
-the middle payload) and ``--points`` random points of the controller's task
+the middle payload; the share ``--extremes`` of them at vertices of the set,
+at random corners of the task) and ``--points`` random points of the controller's task
 domain: the frozen inner+outer loop's Jacobians from Pinocchio's derivative
 routines (not polyrob's bounds or plant code), the closed loop with the
 controller, its largest pole, and the weighted norm ``||N_zw||inf`` with the
@@ -31,6 +32,12 @@ def main() -> None:
     ap.add_argument("-n", type=int, default=2000, help="true robots drawn (default 2000)")
     ap.add_argument("--points", type=int, default=1, help="random task points per robot")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--extremes",
+        type=float,
+        default=None,
+        help="share of the robots drawn at vertices of the set, at corners of the task (default polyrob's 0.5)",
+    )
     ap.add_argument("--robot-uncertainty", default=None, help="a robot-uncertainty file (YAML/JSON)")
     ap.add_argument("--link-error", type=float, default=10.0, help="per-link error in percent (default 10)")
     ap.add_argument("--payload-max", type=float, default=1.5, help="payload up to this many kg (capped at the rated)")
@@ -80,6 +87,7 @@ def main() -> None:
         common_factor=factor,
         on_loop=progress,
         paper_block=args.paper_block,
+        **({} if args.extremes is None else {"extremes": args.extremes}),
     )
     out = check.summary()
     out["seconds"] = round(time.perf_counter() - t0, 1)

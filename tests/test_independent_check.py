@@ -76,18 +76,25 @@ def test_the_check_flags_an_unstable_loop():
     doc = bad.summary()
     assert doc["unstable"] == 10 and doc["worst_pole_real"] > 0
     assert doc["every_loop_stable_and_below_bound"] is False
-    good = frozen_check(FIXTURE, RobotUncertainty(link_error=0.1), n=50, points=2).summary()
+    good = frozen_check(FIXTURE, RobotUncertainty(), n=50, points=2, common_factor=0.1).summary()  # its set
     assert good["loops"] == 100 and good["unstable"] == 0
     assert good["weighted_norm_worst"] < good["bound"] and good["every_loop_stable_and_below_bound"]
 
 
 def test_on_the_certified_set_every_loop_is_below_the_bound_and_the_per_link_set_is_another():
-    """The fixture is certified for one factor on both links within ±10 %: drawn from that set, every frozen
-    loop stays below mu's bound (the certificate's promise); drawn per link at ±30 %, some do not."""
+    """The fixture is certified for one factor on both links within ±10 %: drawn from that set (half at its
+    ends, at the task's corners), every frozen loop stays below mu's bound (the certificate's promise); drawn
+    per link at ±30 %, some do not, and per link at ±10 % the robots at the set's vertices do not either,
+    though those drawn inside it do: the per-link set is another set, and uniform draws miss its worst."""
     own = frozen_check(FIXTURE, RobotUncertainty(), n=100, common_factor=0.1).summary()
     assert own["unstable"] == 0 and own["above_bound"] == 0 and own["weighted_norm_worst"] < own["bound"]
+    assert "50 of 100 at vertices of the set" in own["uncertainty"]
     wider = frozen_check(FIXTURE, RobotUncertainty(link_error=0.3), n=100, points=2).summary()
     assert wider["above_bound"] > 0 and not wider["every_loop_stable_and_below_bound"]
+    inside = frozen_check(FIXTURE, RobotUncertainty(link_error=0.1), n=100, points=2, extremes=0.0).summary()
+    vertices = frozen_check(FIXTURE, RobotUncertainty(link_error=0.1), n=100, points=2, extremes=1.0).summary()
+    assert inside["above_bound"] == 0 and vertices["above_bound"] > 0
+    assert vertices["weighted_norm_worst"] > inside["weighted_norm_worst"]
 
 
 def test_a_file_with_limit_weights_is_checked_on_its_paper_block_as_a_lower_bound(tmp_path):

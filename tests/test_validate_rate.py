@@ -141,6 +141,22 @@ def test_true_plants_keep_the_nominal_inner_model(arm):
         assert not np.allclose(plant.true_robot.mass_matrix(q[0]), arm.true_robot.mass_matrix(q[0]))
 
 
+def test_half_the_validations_true_robots_sit_at_vertices_of_the_set(arm, domain):
+    """Each link's factors at ``1 ± p`` on a vertex robot: its inertia is the nominal one times an end factor."""
+    spec = default_uncertainty(arm).bound(load_robot("planar_2r"))
+    plants = true_plants(arm, spec, 4, seed=3, extremes=0.5)
+    assert [w.endswith("at a vertex of the set") for _, w in plants] == [False, False, True, True]
+    nominal = load_robot("planar_2r").model
+    for plant, words in plants:
+        masses = np.array([plant.true_robot.model.inertias[j].mass / nominal.inertias[j].mass for j in (1, 2)])
+        at_end = np.allclose(np.abs(masses - 1.0), 0.1, rtol=1e-12)
+        assert at_end == words.endswith("at a vertex of the set")
+    refs = task_references(domain, np.array(POSE), settle_time=0.2)[:1]
+    res = validate_at_rate(arm, load_controller(FIXTURE), domain, true_robots=2, q0=POSE, references=refs)
+    assert "2 true robot(s) drawn from" in res.verdict() and "(1 of 2 at vertices of the set)" in res.verdict()
+    assert res.summary()["at_vertices"] == 1
+
+
 def test_task_trajectory_stays_at_half_the_task_bounds(domain):
     (_, step, t_step, _), (_, move, t_move, duration) = task_references(domain, np.array(POSE), settle_time=1.0)
     r = move.bind(np.array(POSE))

@@ -454,7 +454,8 @@ def add_validation_arguments(parser, *, true_robots: int = 20) -> None:
         "--true-robots",
         type=int_at_least(0),
         default=true_robots,
-        help="true robots drawn from the set for the validation at the rate (default %(default)s; 0: skip it)",
+        help="true robots drawn from the set for the validation at the rate, half at its vertices "
+        "(default %(default)s; 0: skip it)",
     )
 
 

@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyrob.errors import ArgumentError
+from polyrob.uncertainty_set.draw import EXTREME_SHARE  # the share at vertices of the set (and corners of the task)
 
 __all__ = [
     "CHECK_DRAWS",
@@ -66,8 +67,6 @@ CHECK_DRAWS = 500
 #: True robots the multi-model tuning is fitted to (ur5's per-link set: a PID fitted to 150 reached 0.825 on
 #: them and 1.02 on 500 others, docs/uncertainty.md: the held-out check is what to read).
 TUNING_DRAWS = 150
-#: The share of draws at vertices of the set and corners of the task (the rest inside, at random points).
-EXTREME_SHARE = 0.5
 #: Seeds of the tuning's and the check's draws: the check never sees a plant the tuning fitted.
 TUNING_SEED, CHECK_SEED = 0, 99
 

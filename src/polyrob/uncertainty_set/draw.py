@@ -48,6 +48,8 @@ __all__ = [
     "Coverage",
     "draw_true_robot",
     "draw_true_robots",
+    "vertex_words",
+    "EXTREME_SHARE",
     "common_factor_covers",
     "model_of_set",
     "payload_middle",
@@ -55,6 +57,11 @@ __all__ = [
 
 #: Draws of a ten-parameter box tried before the box is declared (nearly) empty of rigid bodies.
 MAX_REDRAWS = 1000
+#: The share of true robots drawn at vertices of the set (the rest inside it): the checks', the tuning's and
+#: the validations' default.  A frozen loop's gain is largest near the vertices, which uniform draws seldom
+#: reach (ur5's per-link set: a PID's worst weighted norm 1.02 on 500 uniform draws, 3.04 on 500 at
+#: vertices, record ``true_robots``).
+EXTREME_SHARE = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,6 +79,8 @@ class TrueRobot:
         In the flange frame (m).
     viscous, coulomb : ndarray (m,)
         The drawn viscous coefficients (N m s/rad) and the Coulomb levels (N m) per joint.
+    extreme : bool
+        Drawn at a vertex of the set (``draw_true_robot(extreme=True)``).
     """
 
     robot: object
@@ -80,6 +89,7 @@ class TrueRobot:
     payload_com: np.ndarray
     viscous: np.ndarray
     coulomb: np.ndarray
+    extreme: bool = False
 
     @property
     def model(self) -> pinocchio.Model:
@@ -87,7 +97,8 @@ class TrueRobot:
 
     def words(self) -> str:
         com = ", ".join(f"{c:.3g}" for c in self.payload_com)
-        return f"payload {self.payload_mass:.3g} kg at ({com}) m, links drawn independently"
+        where = "at a vertex of the set" if self.extreme else "links drawn independently"
+        return f"payload {self.payload_mass:.3g} kg at ({com}) m, {where}"
 
 
 def draw_true_robot(robot, spec: RobotUncertainty, rng, *, extreme: bool = False) -> TrueRobot:
@@ -136,14 +147,42 @@ def draw_true_robot(robot, spec: RobotUncertainty, rng, *, extreme: bool = False
         coulomb[k] = f.coulomb
     model.damping[:] = viscous
     true = replace(robot, model=model, damping=viscous)
-    return TrueRobot(true, drawn, float(mass), np.asarray(com, float), viscous, coulomb)
+    return TrueRobot(true, drawn, float(mass), np.asarray(com, float), viscous, coulomb, bool(extreme))
 
 
-def draw_true_robots(robot, spec: RobotUncertainty, n: int, seed: int = 0) -> list[TrueRobot]:
-    """``n`` true robots drawn with ``numpy.random.default_rng(seed)``."""
+def draw_true_robots(robot, spec: RobotUncertainty, n: int, seed: int = 0, *, extremes: float = 0.0) -> list[TrueRobot]:
+    """``n`` true robots drawn with ``numpy.random.default_rng(seed)``: the last ``round(extremes n)`` at vertices.
+
+    Raises
+    ------
+    ArgumentError
+        ``extremes`` outside ``[0, 1]``.
+
+    Examples
+    --------
+    >>> from polyrob import load_robot
+    >>> from polyrob.uncertainty_set.spec import RobotUncertainty
+    >>> so101 = load_robot("so101")
+    >>> drawn = draw_true_robots(so101, RobotUncertainty(link_error=0.1), 4, extremes=0.5)
+    >>> [t.extreme for t in drawn]
+    [False, False, True, True]
+    """
+    if not 0.0 <= float(extremes) <= 1.0:
+        raise ArgumentError(f"true robots: the share at vertices must lie in [0, 1], got {extremes!r}")
     spec = spec.bound(robot)
     rng = np.random.default_rng(seed)
-    return [draw_true_robot(robot, spec, rng) for _ in range(int(n))]
+    inside = int(n) - int(round(float(extremes) * int(n)))
+    return [draw_true_robot(robot, spec, rng, extreme=k >= inside) for k in range(int(n))]
+
+
+def vertex_words(n: int, extremes: float) -> str:
+    """How many of ``n`` draws sit at vertices of the set, in words (empty when none do).
+
+    >>> vertex_words(20, 0.5)
+    ' (10 of 20 at vertices of the set)'
+    """
+    k = int(round(float(extremes) * int(n)))
+    return f" ({k} of {int(n)} at vertices of the set)" if k else ""
 
 
 def _draw_box(interval, rng, extreme: bool = False) -> np.ndarray:

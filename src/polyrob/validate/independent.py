@@ -3,8 +3,10 @@
 :func:`frozen_check` reads a controller file (as ``polyrob synth -o`` writes
 it: the controller, its certificate, its problem), draws ``N`` true robots
 from a :class:`~polyrob.uncertainty_set.spec.RobotUncertainty` (each link's
-parameters independent, a payload body off the flange's axis), and for each,
-at random points of the file's task domain:
+parameters independent, a payload body off the flange's axis; by default
+half of them at vertices of the set, each at random corners of the task:
+:data:`~polyrob.uncertainty_set.draw.EXTREME_SHARE`), and for each, at
+random points of the file's task domain:
 
 1. the frozen Jacobians of the inner and outer loop **computed here**, from
    Pinocchio's ``computeABADerivatives`` on the true model and
@@ -37,6 +39,7 @@ import numpy as np
 import pinocchio
 
 from polyrob.errors import ArgumentError
+from polyrob.uncertainty_set.draw import EXTREME_SHARE
 
 __all__ = ["FrozenCheck", "weights_from_hyperparameters", "frozen_jacobians", "weighted_loop", "frozen_check"]
 
@@ -231,6 +234,7 @@ def frozen_check(
     common_factor: float | None = None,
     on_loop=None,
     paper_block: bool = False,
+    extremes: float = EXTREME_SHARE,
 ) -> FrozenCheck:
     """The frozen check of the controller file ``controller_path`` on ``n`` true robots of ``uncertainty``.
 
@@ -262,12 +266,18 @@ def frozen_check(
         only ``W_S`` and ``W_T``.  The norm is then that of a sub-block of the
         certified loop, a lower bound of its norm: a value above the bound
         disproves it, none below proves it (the summary says so).
+    extremes : float
+        The share of the ``n`` robots drawn at vertices of the set (every link factor
+        at an end, the payload's mass at an end and its centre of mass on the
+        ball's surface), each at random *corners* of the task box (default
+        :data:`~polyrob.uncertainty_set.draw.EXTREME_SHARE`); the rest uniformly
+        inside the set, at random points of the box.
     """
     import control
 
     from polyrob.io.controller import load_controller, read_controller_file
     from polyrob.model.robots import load_robot
-    from polyrob.uncertainty_set.draw import draw_true_robots
+    from polyrob.uncertainty_set.draw import draw_true_robots, vertex_words
     from polyrob.validate.at_rate.runs import default_uncertainty, model_with_middle_payload
 
     doc = read_controller_file(controller_path)
@@ -291,6 +301,10 @@ def frozen_check(
     if robot.model.nv != m:
         raise ArgumentError(f"{robot.name}: its Pinocchio model has {robot.model.nv} velocities for {m} joints")
     model_hat = model_with_middle_payload(robot, spec)
+    if not 0.0 <= float(extremes) <= 1.0:
+        raise ArgumentError(f"true robots: the share at vertices must lie in [0, 1], got {extremes!r}")
+    extremes = 0.0 if nominal_only else float(extremes)
+    inside = int(n) - int(round(extremes * int(n)))
     if nominal_only:
         trues = [(model_hat.model, np.asarray(model_hat.damping, float))]
         words = "the nominal robot (the inner layer's model)"
@@ -299,25 +313,34 @@ def frozen_check(
 
         draw = np.random.default_rng(seed)
         trues = []
-        for _ in range(int(n)):
-            mass, com = (0.0, np.zeros(3)) if spec.payload is None else spec.payload.draw(draw)
-            scale = draw.uniform(1 - common_factor, 1 + common_factor)
+        for i in range(int(n)):
+            extreme = i >= inside
+            mass, com = (0.0, np.zeros(3)) if spec.payload is None else spec.payload.draw(draw, extreme=extreme)
+            scale = (
+                1 + common_factor * draw.choice([-1.0, 1.0])
+                if extreme
+                else draw.uniform(1 - common_factor, 1 + common_factor)
+            )
             trues.append((with_payload(robot, mass, com, scale=scale).model, np.asarray(robot.damping, float)))
         payload = "no payload" if spec.payload is None else spec.payload.words()
         words = f"one factor on every link within ±{100 * common_factor:g} %, {payload}"
     else:
-        drawn = draw_true_robots(robot, spec, int(n), seed=seed)
+        drawn = draw_true_robots(robot, spec, int(n), seed=seed, extremes=extremes)
         trues = [(t.model, np.asarray(t.viscous, float)) for t in drawn]
         words = spec.words()
+    words += vertex_words(len(trues), extremes) + (" (those at random corners of the task)" if extremes else "")
     rng = np.random.default_rng(seed + 1)
     total = len(trues) * int(points)
     poles, norms = np.empty(total), np.empty(total)
     k = 0
-    for true_model, damping in trues:
+    for i, (true_model, damping) in enumerate(trues):
         for _ in range(int(points)):
             if at_pose:
                 q = np.array(info["domain"]["pose"], float)
                 qdot = qddot = np.zeros(m)
+            elif i >= inside:  # a vertex robot at a corner of the task, where its frozen loop's gain is largest
+                q, qdot, qddot = (np.where(rng.integers(0, 2, m) == 1, box[g][:, 1], box[g][:, 0])
+                                  for g in ("q", "qdot", "qddot"))  # fmt: skip
             else:
                 q, qdot, qddot = (rng.uniform(box[g][:, 0], box[g][:, 1]) for g in ("q", "qdot", "qddot"))
             A, B, _ = frozen_jacobians(

@@ -2,7 +2,10 @@
 
 :func:`validate_at_rate` draws ``N`` true robots (:func:`polyrob.uncertainty_set.draw_true_robots`:
 each link's mass, first moment and inertia by its own factor, a payload body
-whose centre of mass lies off the flange), puts each behind the problem's
+whose centre of mass lies off the flange; by default half of them at
+vertices of the set, :data:`~polyrob.uncertainty_set.draw.EXTREME_SHARE`:
+every link factor at ``1 ± p``, the payload's mass at an end of its range
+and its centre of mass on the ball's surface), puts each behind the problem's
 inner layer (which keeps computing with the *nominal* links and the middle
 payload: :class:`~polyrob.model.inner.InnerLoopRobot`), and runs two
 references on each with :func:`polyrob.validate.at_rate.loop.simulate_real_loop`
@@ -34,6 +37,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from polyrob.errors import ArgumentError
+from polyrob.uncertainty_set.draw import EXTREME_SHARE, vertex_words
 from polyrob.validate.at_rate.figures import run_figures
 from polyrob.validate.at_rate.loop import RealLoopConditions, simulate_real_loop
 from polyrob.validate.reference import smooth_reference, step_reference
@@ -96,15 +100,16 @@ def model_with_middle_payload(robot, spec):
     return model
 
 
-def true_plants(robot, spec, n: int, seed: int = 0) -> list:
+def true_plants(robot, spec, n: int, seed: int = 0, *, extremes: float = 0.0) -> list:
     """``[(plant, words)]``: ``n`` true robots of ``spec`` behind ``robot``'s inner layer (the robot itself when it
-    has no Pinocchio model: an analytic robot has no per-link parameters to draw)."""
+    has no Pinocchio model: an analytic robot has no per-link parameters to draw); the last
+    ``round(extremes n)`` at vertices of the set (:func:`~polyrob.uncertainty_set.draw.draw_true_robots`)."""
     from polyrob.uncertainty_set.draw import draw_true_robots
 
     base = _base(robot)
     if getattr(base, "model", None) is None:
         return [(robot, "the model itself (an analytic robot: no links to draw)")]
-    drawn = draw_true_robots(base, spec, n, seed=seed)
+    drawn = draw_true_robots(base, spec, n, seed=seed, extremes=extremes)
     if not hasattr(robot, "true_robot"):
         return [(t.robot, t.words()) for t in drawn]
     model = model_with_middle_payload(robot, spec)
@@ -211,6 +216,7 @@ class RateValidation:
     seed: int
     figures: tuple
     evaluations: int
+    extremes: float = 0.0
     info: dict = field(default_factory=dict)
 
     def by_reference(self) -> dict:
@@ -252,7 +258,8 @@ class RateValidation:
         if budget and not self.meets_bar and budget["coulomb"] > 0:
             parts.append(_budget_words(budget))
         return (
-            f"simulated on {self.true_robots} true robot(s) drawn from {self.uncertainty}, at "
+            f"simulated on {self.true_robots} true robot(s) drawn from {self.uncertainty}"
+            f"{vertex_words(self.true_robots, self.extremes)}, at "
             f"{self.conditions.words()}: " + "; ".join(parts) + f" ({bar} settle / inside / chatter <= "
             f"{CHATTER_LIMIT_PERCENT:g} %; a simulation, not a certificate)"
         )
@@ -263,6 +270,7 @@ class RateValidation:
             "conditions": self.conditions.to_dict(),
             "uncertainty": self.uncertainty,
             "true_robots": self.true_robots,
+            "at_vertices": int(round(self.extremes * self.true_robots)),
             "seed": self.seed,
             "evaluations": self.evaluations,
             "by_reference": self.by_reference(),
@@ -297,6 +305,7 @@ def validate_at_rate(
     conditions: RealLoopConditions | None = None,
     uncertainty=None,
     true_robots: int = 20,
+    extremes: float = EXTREME_SHARE,
     seed: int = 0,
     q0=None,
     settle_time: float = 3.0,
@@ -317,6 +326,9 @@ def validate_at_rate(
     uncertainty : RobotUncertainty, optional
         Default :func:`default_uncertainty`.
     true_robots : int
+    extremes : float
+        The share of them drawn at vertices of the set (default :data:`~polyrob.uncertainty_set.draw.EXTREME_SHARE`:
+        a loop's gain is largest near them); the rest uniformly inside.
     seed : int
     q0 : array_like, optional
         Start (default the PLDI's nominal position, else the domain's centre).
@@ -344,7 +356,9 @@ def validate_at_rate(
     base = _base(robot)
     if getattr(base, "model", None) is not None:
         spec = spec.bound(base)
-    plants = true_plants(robot, spec, int(true_robots), seed=seed)
+    plants = true_plants(robot, spec, int(true_robots), seed=seed, extremes=extremes)
+    analytic = getattr(base, "model", None) is None  # no links to draw: no vertices either
+    extremes = 0.0 if analytic else float(extremes)
     refs = task_references(dom, q0, settle_time=settle_time) if references is None else references
     h = 1.0 / conditions.rate
     per_plant = sum(int(np.ceil(t_final / h - 1e-9)) for _, _, t_final, _ in refs)
@@ -377,6 +391,7 @@ def validate_at_rate(
         seed=int(seed),
         figures=tuple(figures),
         evaluations=evaluations,
+        extremes=extremes,
         info={
             "inner": getattr(robot, "inner", "none"),
             "start_q": q0.tolist(),
