@@ -157,3 +157,44 @@ def test_membership_minimises_over_the_factors_past_a_kink_where_nelder_mead_sta
     start, box = np.array([-1.0, 1.0]), np.array([1.0, 1.0])
     assert minimize(ridge, start, method="Nelder-Mead", bounds=[(-1, 1)] * 2).fun > 1.0  # stalls
     assert convex_box_minimum(ridge, start, box) < 1e-6
+
+
+def test_members_whose_exact_entries_pin_the_factors_are_held_at_interior_factors():
+    """ur5's default task: an entry no residual block reaches (the wrist's own ``G[5, 5]``) is moved by both
+    factors, so a member's factors lie on a line; the box search never landed on it (half of these members,
+    15 % of fresh true robots, were refused) and membership now solves for it."""
+    from polyrob.domains.default_task import default_task_domain, default_task_robot
+    from polyrob.plant.models.inner_factors import reached_entries
+
+    arm = default_task_robot(load_robot("ur5"))
+    dom = default_task_domain(arm)
+    pldi = bound_pldi(
+        arm, dom, samples=32, screen=0, verify_rounds=0, coverage=0, progress=False, workers=1, describe_polytope=False
+    )
+    unc = uncertain_plant(pldi, model="inner-gain", coverage=0, volume_samples=0)
+    unreached = unc.info["K_centres"].reshape(2, -1).T[~reached_entries(unc).ravel()]
+    assert (np.abs(unreached).max(axis=1) > 0).any()  # some exact entry moves with the factors
+    rng = np.random.default_rng(0)
+    members = [unc.matrices_at(rng.uniform(-1, 1, 2), residual=unc.residual_samples(1, seed=i)[0]) for i in range(20)]
+    assert model_contains(unc, np.array([a for a, _ in members]), np.array([b for _, b in members])).all()
+    off = [(a.copy(), b) for a, b in members[:3]]
+    for a, _ in off:
+        a[-1, -1] += 0.5  # a stiffness no factor or block gives
+    assert not model_contains(unc, np.array([a for a, _ in off]), np.array([b for _, b in off])).any()
+
+
+def test_coverage_draws_fresh_true_robots_half_at_vertices(with_payload_problem, monkeypatch):
+    """Half of the coverage's points go to true robots drawn anew (10 each), half of those at vertices of the set."""
+    from polyrob.model.inner import InnerLoopRobot
+
+    arm, dom, unc = with_payload_problem
+    calls = []
+    drawn = InnerLoopRobot.drawn
+
+    def spy(self, rng, *, extreme=False):
+        calls.append(extreme)
+        return drawn(self, rng, extreme=extreme)
+
+    monkeypatch.setattr(InnerLoopRobot, "drawn", spy)
+    assert coverage_fraction(unc, arm, dom, 400) == 1.0
+    assert calls == [False] * 10 + [True] * 10

@@ -3,7 +3,10 @@
 * :func:`model_contains` — whether given Jacobians lie in a model's set
   (each model has its own exact membership test);
 * :func:`coverage_fraction` — the fraction of fresh uniform points of the
-  domain whose Jacobians the model contains (it must be 1.0);
+  domain whose Jacobians the model contains (it must be 1.0); for an inner
+  loop over a set, half of the points on the true robots the bounds were
+  taken over and half on *fresh* true robots of the set, half of those at
+  its vertices frozen at corners of the domain;
 * :func:`volume_ratio` — the model's size over the PLDI polytope's, in the
   polytope's reduced coordinates: ``vol(model ∩ interval box) / vol(polytope)``
   estimated on the same uniform points of the interval box (the polytope
@@ -24,7 +27,10 @@ from polyrob.errors import ArgumentError
 from polyrob.plant.lftplant import UncertainPlant
 from polyrob.plant.models import MODELS
 
-__all__ = ["model_contains", "coverage_fraction", "volume_ratio", "det_b_range", "input_definiteness"]
+__all__ = ["model_contains", "coverage_fraction", "volume_ratio", "det_b_range", "input_definiteness", "FRESH_POINTS"]
+
+#: Points per fresh true robot of the coverage check (its robots are drawn anew: the model must hold them too).
+FRESH_POINTS = 10
 
 
 def model_contains(unc: UncertainPlant, A, B) -> np.ndarray:
@@ -38,22 +44,48 @@ def model_contains(unc: UncertainPlant, A, B) -> np.ndarray:
 
 
 def coverage_fraction(unc: UncertainPlant, robot, domain, n: int = 2000, *, seed: int = 12345) -> float:
-    """Fraction of ``n`` fresh uniform points of ``domain`` whose Jacobians the model contains.
+    """Fraction of ``n`` fresh points of ``domain`` whose Jacobians the model contains.
 
     The points are drawn with a seed of their own, not the PLDI's design.
     For an inner loop (:mod:`polyrob.model.inner`) the points are shared
     among its true robots (``robot.variants()``, each with the inputs of its
-    own inverse dynamics on a task domain), as the bounds were taken over them.
+    own inverse dynamics on a task domain), as the bounds were taken over
+    them.  When its set has more than one robot (a model error, a payload
+    range, a robot-uncertainty set), half of the ``n`` points go instead to
+    true robots drawn anew from the set (``robot.drawn``), :data:`FRESH_POINTS`
+    each: half of those robots inside the set at uniform points, half at its
+    vertices (:data:`~polyrob.uncertainty_set.draw.EXTREME_SHARE`) at random
+    corners of the domain, where a frozen Jacobian is most often extreme.
     """
     from polyrob.bounds.search import Problem
+    from polyrob.uncertainty_set.draw import EXTREME_SHARE
 
     problem = Problem(robot, domain)
-    share = max(1, int(n) // len(problem.variants))
+    fresh = len(problem.variants) > 1 and callable(getattr(robot, "drawn", None)) and int(n) >= 2 * FRESH_POINTS
+    listed = int(n) - int(n) // 2 if fresh else int(n)
+    share = max(1, listed // len(problem.variants))
     inside = []
     for i, (variant, dom) in enumerate(zip(problem.variants, problem.domains)):
         q, qdot, u = dom.sample(share, method="uniform", seed=[seed, i] if i else seed)
         A, B = variant.jacobians_batch(q, qdot, u)
         inside.append(model_contains(unc, A, B))
+    if fresh:
+        rng = np.random.default_rng([seed, 41])
+        robots = (int(n) // 2) // FRESH_POINTS
+        at_inside = robots - int(round(EXTREME_SHARE * robots))
+        m = robot.m
+        for k in range(robots):
+            true = robot.drawn(rng, extreme=k >= at_inside)
+            (dom,) = Problem(true, domain).domains
+            if k < at_inside:
+                q, qdot, u = dom.sample(FRESH_POINTS, method="uniform", seed=int(rng.integers(2**31)))
+            else:
+                lo, hi = np.asarray(domain.lower, float), np.asarray(domain.upper, float)
+                x = np.where(rng.integers(0, 2, size=(FRESH_POINTS, len(lo))) == 1, hi, lo)
+                q, qdot, w = x[:, :m], x[:, m : 2 * m], x[:, 2 * m :]
+                u = dom.inputs(q, qdot, w)
+            A, B = true.jacobians_batch(q, qdot, u)
+            inside.append(model_contains(unc, A, B))
     return float(np.concatenate(inside).mean())
 
 
