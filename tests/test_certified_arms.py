@@ -14,7 +14,7 @@ import pinocchio as pin
 import pytest
 
 from polyrob import load_robot
-from polyrob.bounds.certified.ball_jets import BallJet, ball_inverse, ball_sin_cos, lower, upper
+from polyrob.bounds.certified.ball_jets import BallJet, ball_inverse, ball_sin_cos, jet_layout, lower, upper
 from polyrob.bounds.certified.factors import FactorProblem, attained_range, factor_directions, prove_factor_ranges
 from polyrob.bounds.certified.factors.width_ratio import width_ratios
 from polyrob.bounds.certified.jet_rnea import Chain, rnea
@@ -192,6 +192,28 @@ def test_third_order_jets_agree_with_differences_of_hessians_and_hold_a_box():
     for point in c + np.random.default_rng(7).uniform(-r, r, (30, n)):
         at = f(point, zero, 3).mid[:, 0]
         assert np.all(np.abs(at - box.mid[:, 0]) <= box.rad[:, 0])  # value, gradient, Hessian and third derivatives
+
+
+def test_packed_jets_give_the_whole_products_floats_at_the_sorted_multi_indices():
+    # the Newton-Euler recursion runs on packed jets (ball_jets.symmetric_indices): its inputs' D_pl and D_lp
+    # are the same floats, and so the product rule at p <= l (<= r) gives the whole computation's floats there
+    rng, n, order = np.random.default_rng(4), 4, 3
+    layout = jet_layout(n, order)
+
+    def jet(shape):  # derivatives symmetric as floats: a packed jet made whole
+        C = len(layout.distinct)
+        return BallJet(rng.normal(size=(C, *shape)), rng.uniform(0, 1e-3, (C, *shape)), n, order, True).unpack()
+
+    for form, xs, ys in (("mul", (5,), (5,)), ("cross", (2, 3), (2, 3)), ("matvec", (2, 3, 3), (2, 3))):
+        x, y = jet(xs), jet(ys)
+        whole, packed = x.form(form, y), x.pack().form(form, y.pack())
+        assert packed.packed and np.array_equal(whole.mid[layout.distinct], packed.mid)
+        assert np.array_equal(whole.rad[layout.distinct], packed.rad)
+        back = packed.unpack()  # elsewhere the sorted entry's ball, whose sums are in another order only
+        assert np.allclose(back.mid, whole.mid, rtol=1e-14, atol=1e-15) and np.allclose(back.rad, whole.rad, rtol=1e-13)
+        assert np.array_equal(packed.truncated(2).unpack().mid, back.mid[:21])  # (packed, the orders come in turn)
+    with pytest.raises(ValueError):
+        x.pack().form("mul", y)
 
 
 def test_the_taylor_form_holds_pinocchio_and_is_tight_on_a_small_box(ur5):

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from polyrob import load_robot
-from polyrob.bounds.certified.ball_jets import upper
+from polyrob.bounds.certified.ball_jets import BallJet, jet_layout, upper
 from polyrob.bounds.certified.factors import FactorProblem
 from polyrob.bounds.certified.factors.hessian import hessian_enclosure, taylor_dynamics
 from polyrob.bounds.certified.taylor_jets import TaylorJet
@@ -70,6 +70,33 @@ def test_taylor_jets_hold_a_polynomial_and_its_derivatives_on_a_box():
     x = TaylorJet.variables(centre, 0.1 * radius, 2)
     small = (x[:, 0] * x[:, 1]) * (x[:, 0] - x[:, 1]) * x[:, 1]
     assert np.all(small.R[0] < 0.02 * f.R[0]) and np.allclose(small.L[:, 0], f.L[:, 0])
+
+
+def test_products_skip_zero_linear_coefficients_and_packed_jets_with_the_same_floats():
+    # M_hat's and Y's models do not depend on qdot: their last coefficients are zeros, which products skip
+    rng, n, order, k, B = np.random.default_rng(9), 3, 3, 5, 2
+    layout, r = jet_layout(n, order), rng.uniform(0.01, 0.1, (k, B))
+
+    def jet(shape, live):
+        C = len(layout.distinct)
+        L = rng.normal(size=(k, C, B, *shape))
+        L[live:] = 0.0
+        return TaylorJet(rng.normal(size=(C, B, *shape)), L, rng.uniform(0, 1e-3, (C, B, *shape)), r, n, order, True)
+
+    for form, xs, ys in (("mul", (4,), (4,)), ("matvec", (3, 3), (3,)), ("matmul", (2, 2), (2, 2))):
+        x, y = jet(xs, 2), jet(ys, 3)
+        assert (x.live(), y.live()) == (2, 3)
+        for a, b in ((x, y), (x.unpack(), y.unpack())) + (((y, x),) if form != "matvec" else ()):
+            out = a.form(form, b)
+            a2, b2 = TaylorJet(a.c, a.L, a.R, r, n, order, a.packed), TaylorJet(b.c, b.L, b.R, r, n, order, b.packed)
+            a2._live = b2._live = k  # the whole sum f(L_a, c_b) + f(c_a, L_b), every coefficient computed
+            whole = a2.form(form, b2)
+            assert out.live() == 3 and all(np.array_equal(getattr(out, f), getattr(whole, f)) for f in "cLR")
+        # packed: the whole product's floats at the sorted multi-indices
+        packed, whole = x.form(form, y), x.unpack().form(form, y.unpack())
+        assert all(np.array_equal(getattr(whole, f)[layout.distinct], getattr(packed, f)) for f in "cR")
+        assert np.array_equal(whole.L[:, layout.distinct], packed.L)
+    assert BallJet.size(n, order, True) == len(layout.distinct) == 1 + 3 + 6 + 10
 
 
 def test_it_holds_sampled_hessians_and_beats_the_ball_jets_on_the_wrists(ur5):

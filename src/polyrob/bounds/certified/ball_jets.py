@@ -21,6 +21,12 @@ that, ``u = 2^-53``; :data:`GAMMA` covers ``k`` up to 90), then times
 ``|sin x - sin c| <= |cos c| r + r^2 / 2`` and a margin of 4 ulps for the
 library's own error.
 
+A jet may be *packed* (:meth:`BallJet.pack`): its second and third
+derivatives held at the sorted multi-indices only (``D_pl``, ``p <= l``), as
+the Newton-Euler recursion (:mod:`~polyrob.bounds.certified.jet_rnea`) runs:
+the product rule there reads sorted multi-indices only, so the floats are
+the whole computation's, for a fifth of the third derivatives' work.
+
 Examples
 --------
 >>> import numpy as np
@@ -32,11 +38,27 @@ Examples
 
 from __future__ import annotations
 
+from functools import cache, partial
+from types import SimpleNamespace
+
 import numpy as np
 
 from polyrob.errors import CertificationError
 
-__all__ = ["BallJet", "GAMMA", "TINY", "ball_sin_cos", "ball_inverse", "intersect", "upper", "lower", "centre_radius"]
+__all__ = [
+    "BallJet",
+    "GAMMA",
+    "TINY",
+    "ball_sin_cos",
+    "ball_inverse",
+    "intersect",
+    "upper",
+    "lower",
+    "centre_radius",
+    "symmetric_indices",
+    "jet_layout",
+    "sum_terms",
+]
 
 #: Relative margin added to every result for the rounding of float sums (``k u`` for ``k`` terms, ``k <= 90``).
 GAMMA = 1e-14
@@ -47,18 +69,22 @@ TRIG_MARGIN = 4.5e-16
 
 
 def _cross(x, y):
-    return np.stack(
-        [x[..., 1] * y[..., 2] - x[..., 2] * y[..., 1],
-         x[..., 2] * y[..., 0] - x[..., 0] * y[..., 2],
-         x[..., 0] * y[..., 1] - x[..., 1] * y[..., 0]], axis=-1)  # fmt: skip
+    return _cross_terms(x, y, np.subtract)
 
 
 def _cross_abs(x, y):
     """The bilinear form with the absolute coefficients of the cross product (bounds ``|x × y|``)."""
-    return np.stack(
-        [x[..., 1] * y[..., 2] + x[..., 2] * y[..., 1],
-         x[..., 2] * y[..., 0] + x[..., 0] * y[..., 2],
-         x[..., 0] * y[..., 1] + x[..., 1] * y[..., 0]], axis=-1)  # fmt: skip
+    return _cross_terms(x, y, np.add)
+
+
+def _cross_terms(x, y, sign):
+    """``x_a y_b sign x_b y_a`` for each component: the floats of ``np.stack`` of those expressions, without its copies."""
+    out = np.empty(np.broadcast_shapes(x.shape, y.shape), np.result_type(x, y))
+    for i, (a, b) in enumerate(((1, 2), (2, 0), (0, 1))):
+        o = out[..., i]
+        np.multiply(x[..., a], y[..., b], out=o)
+        sign(o, x[..., b] * y[..., a], out=o)
+    return out
 
 
 def _mul(x, y):
@@ -66,10 +92,11 @@ def _mul(x, y):
 
 
 def _matvec(x, y):
-    # a sum over the (short) last axis, not einsum: einsum's broadcasting over the jets' many leading axes is slow
+    # a sum over the (short) last axis, not einsum: einsum's broadcasting over the jets' many leading axes is slow;
+    # accumulated in place (the first product has the result's whole shape): the same floats, no temporary sums
     out = x[..., 0] * y[..., None, 0]
     for j in range(1, x.shape[-1]):
-        out = out + x[..., j] * y[..., None, j]
+        out += x[..., j] * y[..., None, j]
     return out
 
 
@@ -87,6 +114,86 @@ def _inflate(rad, mag):
     return (rad + GAMMA * mag) * (1.0 + GAMMA) + TINY
 
 
+def _ball_form(f, fa, x, y, xr, yr):
+    """``(mid, rad, mag)`` of a bilinear form on balls ``x ± xr``, ``y ± yr``, before the rounding margins."""
+    xm, ym = np.abs(x), np.abs(y)
+    rad = fa(xm, yr)
+    rad += fa(xr, ym + yr)  # in place: the floats of the sum
+    return f(x, y), rad, fa(xm, ym)
+
+
+def sum_terms(terms):
+    """The float sum ``((t0 + t1) + t2) + ...`` of arrays (``sum``'s floats but a zero's sign), the terms unchanged."""
+    terms = iter(terms)
+    total = next(terms)
+    for k, term in enumerate(terms):
+        if k == 0 or total.shape != np.broadcast_shapes(total.shape, np.shape(term)):
+            total = total + term  # a new array (the first term is the caller's)
+        else:
+            total += term
+    return total
+
+
+@cache
+def symmetric_indices(n: int, order: int):
+    """``(reps, spread)``: the sorted multi-indices ``p <= l <= ...`` of one order (row-major), and each component's among them.
+
+    ``reps``: ``order`` index arrays; ``spread``: for each of the ``n**order``
+    components (row-major), the position in ``reps`` of its sorted multi-index.
+    Why a computation may run on the ``reps`` alone (:meth:`BallJet.pack`):
+    the product rule at a sorted multi-index reads its operands at sorted
+    multi-indices only (``D_pl`` reads ``D_pl``; ``D_pqr``, ``p <= q <= r``,
+    reads ``D_qr``, ``D_pr``, ``D_pq``), so there it gives the whole
+    computation's floats; and a smooth function's derivatives are symmetric,
+    so the enclosure of ``D_pl f`` is one of ``D_lp f``, which
+    :meth:`BallJet.unpack` copies there (the whole computation's ``D_lp``
+    differs only in the order of its float sums).
+
+    >>> reps, spread = symmetric_indices(2, 2)
+    >>> [r.tolist() for r in reps], spread.tolist()
+    ([[0, 0, 1], [0, 1, 1]], [0, 1, 1, 2])
+    """
+    full = np.indices((n,) * order).reshape(order, -1)
+    ordered = np.sort(full, axis=0)
+    is_rep = np.all(full == ordered, axis=0)
+    position = np.full(n**order, -1)
+    position[is_rep] = np.arange(int(is_rep.sum()))
+    out = tuple(row[is_rep] for row in full), position[np.ravel_multi_index(tuple(ordered), (n,) * order)]
+    for arr in (*out[0], out[1]):
+        arr.setflags(write=False)  # cached: shared by every caller
+    return out
+
+
+@cache
+def jet_layout(n: int, order: int) -> SimpleNamespace:
+    """Indices of a jet's distinct components (:func:`symmetric_indices`), for :meth:`BallJet.pack` and its products.
+
+    ``distinct``: their positions on a whole jet's component axis;
+    ``full``: each whole component's position among them (``unpack``);
+    ``blocks[j]``: the slice of the distinct derivatives of order ``j`` in a
+    packed jet; ``pairs`` (order 3): for each distinct ``(p, q, r)``, the
+    positions of ``(q, r)``, ``(p, r)`` and ``(p, q)`` among the distinct
+    second derivatives.
+    """
+    g = 1 + (n if order >= 1 else 0)
+    distinct, full, blocks = [np.arange(g)], [np.arange(g)], [slice(0, 1), slice(1, 1 + n)][: order + 1]
+    start, packed_start = g, g
+    for d in range(2, order + 1):
+        reps, spread = symmetric_indices(n, d)
+        distinct.append(start + np.ravel_multi_index(reps, (n,) * d))
+        full.append(packed_start + spread)
+        blocks.append(slice(packed_start, packed_start + len(reps[0])))
+        start, packed_start = start + n**d, packed_start + len(reps[0])
+    pairs = None
+    if order >= 3:
+        (P, Q, R), spread2 = symmetric_indices(n, 3)[0], symmetric_indices(n, 2)[1]
+        pairs = tuple(spread2[x * n + y] for x, y in ((Q, R), (P, R), (P, Q)))
+    out = SimpleNamespace(distinct=np.concatenate(distinct), full=np.concatenate(full), blocks=blocks, pairs=pairs)
+    for arr in (out.distinct, out.full, *(pairs or ())):
+        arr.setflags(write=False)  # cached: shared by every caller
+    return out
+
+
 class BallJet:
     """Balls of a value and its derivatives (order 0 to 3 in ``n`` variables), vectorised.
 
@@ -96,25 +203,28 @@ class BallJet:
     (row-major).
     """
 
-    __slots__ = ("mid", "rad", "n", "order")
+    __slots__ = ("mid", "rad", "n", "order", "packed")
 
-    def __init__(self, mid, rad, n: int, order: int):
+    def __init__(self, mid, rad, n: int, order: int, packed: bool = False):
         self.mid, self.rad, self.n, self.order = mid, rad, int(n), int(order)
+        self.packed = bool(packed) and self.order >= 2  # (below order 2 both layouts are one)
 
     # ------------------------------------------------------------------ construction
     @staticmethod
-    def size(n: int, order: int) -> int:
-        """Number of components of a jet."""
+    def size(n: int, order: int, packed: bool = False) -> int:
+        """Number of components of a jet (``packed``: of its distinct ones, :meth:`pack`)."""
+        if packed:
+            return len(jet_layout(n, order).distinct)
         return 1 + (n if order >= 1 else 0) + (n * n if order >= 2 else 0) + (n**3 if order >= 3 else 0)
 
     @classmethod
-    def constant(cls, mid, rad, n: int, order: int) -> BallJet:
+    def constant(cls, mid, rad, n: int, order: int, packed: bool = False) -> BallJet:
         """A ball ``mid ± rad`` whose derivatives are zero."""
         mid, rad = np.asarray(mid, float), np.broadcast_to(np.asarray(rad, float), np.shape(mid))
-        C = cls.size(n, order)
+        C = cls.size(n, order, packed)
         M, R = np.zeros((C, *mid.shape)), np.zeros((C, *mid.shape))
         M[0], R[0] = mid, rad
-        return cls(M, R, n, order)
+        return cls(M, R, n, order, packed)
 
     @classmethod
     def variables(cls, centre, radius, order: int) -> BallJet:
@@ -127,9 +237,34 @@ class BallJet:
                 out.mid[1 + p, ..., p] = 1.0
         return out
 
+    def _like(self, mid, rad) -> BallJet:
+        """Arrays in this jet's variables, order and layout."""
+        return BallJet(mid, rad, self.n, self.order, self.packed)
+
     def constant_like(self, mid, rad) -> BallJet:
-        """A ball ``mid ± rad`` with zero derivatives, in this jet's variables and order."""
-        return BallJet.constant(mid, rad, self.n, self.order)
+        """A ball ``mid ± rad`` with zero derivatives, in this jet's variables, order and layout."""
+        return BallJet.constant(mid, rad, self.n, self.order, self.packed)
+
+    def pack(self) -> BallJet:
+        """The same jet at the sorted multi-indices only (:func:`symmetric_indices`); :meth:`unpack` makes it whole.
+
+        Linear operations and :meth:`form` act on it as on the whole jet
+        (the same floats there).  For inputs whose ``D_lp`` and ``D_pl`` are
+        the same floats (the recursion's sines, cosines, velocities): of a
+        jet where they are two enclosures (``Y``'s second derivatives), only
+        ``D_pl`` is kept, proved but possibly wider.
+        """
+        if self.packed or self.order < 2:
+            return self
+        keep = jet_layout(self.n, self.order).distinct
+        return BallJet(self.mid[keep], self.rad[keep], self.n, self.order, True)
+
+    def unpack(self) -> BallJet:
+        """The whole jet of a packed one (each derivative copied to its permuted multi-indices)."""
+        if not self.packed:
+            return self
+        full = jet_layout(self.n, self.order).full
+        return BallJet(self.mid[full], self.rad[full], self.n, self.order)
 
     # ------------------------------------------------------------------ pieces
     def value(self) -> BallJet:
@@ -137,6 +272,8 @@ class BallJet:
         return BallJet(self.mid[:1], self.rad[:1], self.n, 0)
 
     def _pieces(self, arr):
+        if self.packed:
+            raise ValueError("a packed jet: unpack() it first")
         n = self.n
         v = arr[:1]
         g = arr[1 : 1 + n] if self.order >= 1 else None
@@ -184,8 +321,8 @@ class BallJet:
 
     def truncated(self, order: int) -> BallJet:
         """The same jet up to ``order`` (its lower components do not depend on the higher ones)."""
-        C = self.size(self.n, order)
-        return BallJet(self.mid[:C], self.rad[:C], self.n, order)
+        C = self.size(self.n, order, self.packed)  # packed too: its components go by order
+        return BallJet(self.mid[:C], self.rad[:C], self.n, order, self.packed)
 
     def derivative_value(self, index: int) -> BallJet:
         """The derivative ``index`` as an order-0 ball."""
@@ -197,21 +334,21 @@ class BallJet:
 
     def __getitem__(self, key) -> BallJet:
         key = key if isinstance(key, tuple) else (key,)
-        return BallJet(self.mid[(slice(None), *key)], self.rad[(slice(None), *key)], self.n, self.order)
+        return self._like(self.mid[(slice(None), *key)], self.rad[(slice(None), *key)])
 
     def swap(self, a: int, b: int) -> BallJet:
         """Swap two of the array's own axes (negative indices count from its end)."""
-        return BallJet(np.swapaxes(self.mid, a, b), np.swapaxes(self.rad, a, b), self.n, self.order)
+        return self._like(np.swapaxes(self.mid, a, b), np.swapaxes(self.rad, a, b))
 
     def transpose(self, *axes: int) -> BallJet:
         """Permute the array's own axes (``axes`` as for :func:`numpy.transpose` of the array without components)."""
         full = (0, *(1 + a for a in axes))
-        return BallJet(np.transpose(self.mid, full), np.transpose(self.rad, full), self.n, self.order)
+        return self._like(np.transpose(self.mid, full), np.transpose(self.rad, full))
 
     def reshape(self, *shape: int) -> BallJet:
         """The array's own axes reshaped."""
         C = self.mid.shape[0]
-        return BallJet(self.mid.reshape(C, *shape), self.rad.reshape(C, *shape), self.n, self.order)
+        return self._like(self.mid.reshape(C, *shape), self.rad.reshape(C, *shape))
 
     @staticmethod
     def stack(jets, axis: int) -> BallJet:
@@ -219,34 +356,34 @@ class BallJet:
         first = jets[0]
         mid = np.stack([j.mid for j in jets], axis=1 + axis)
         rad = np.stack([j.rad for j in jets], axis=1 + axis)
-        return BallJet(mid, rad, first.n, first.order)
+        return BallJet(mid, rad, first.n, first.order, first.packed)
 
     def expand(self, axis: int) -> BallJet:
         """Insert a unit axis into the array's own axes (negative: from the end)."""
-        return BallJet(np.expand_dims(self.mid, axis), np.expand_dims(self.rad, axis), self.n, self.order)
+        return self._like(np.expand_dims(self.mid, axis), np.expand_dims(self.rad, axis))
 
     def sum(self, axis: int) -> BallJet:
         """Sum along one of the array's own axes (negative: from the end)."""
         k = self.mid.shape[axis]
         mid = self.mid.sum(axis)
-        return BallJet(mid, _inflate(self.rad.sum(axis), k * np.abs(self.mid).sum(axis)), self.n, self.order)
+        return self._like(mid, _inflate(self.rad.sum(axis), k * np.abs(self.mid).sum(axis)))
 
     # ------------------------------------------------------------------ linear operations
     def __add__(self, other: BallJet) -> BallJet:
         mid = self.mid + other.mid
-        return BallJet(mid, _inflate(self.rad + other.rad, np.abs(self.mid) + np.abs(other.mid)), self.n, self.order)
+        return self._like(mid, _inflate(self.rad + other.rad, np.abs(self.mid) + np.abs(other.mid)))
 
     def __sub__(self, other: BallJet) -> BallJet:
         mid = self.mid - other.mid
-        return BallJet(mid, _inflate(self.rad + other.rad, np.abs(self.mid) + np.abs(other.mid)), self.n, self.order)
+        return self._like(mid, _inflate(self.rad + other.rad, np.abs(self.mid) + np.abs(other.mid)))
 
     def __neg__(self) -> BallJet:
-        return BallJet(-self.mid, self.rad, self.n, self.order)
+        return self._like(-self.mid, self.rad)
 
     def scaled(self, c) -> BallJet:
         """Times an exact float array ``c`` (broadcast on the array's axes)."""
         c = np.asarray(c, float)
-        return BallJet(self.mid * c, _inflate(self.rad * np.abs(c), np.abs(self.mid * c)), self.n, self.order)
+        return self._like(self.mid * c, _inflate(self.rad * np.abs(c), np.abs(self.mid * c)))
 
     def const_form(self, form: str, cmid, crad=0.0, *, left: bool = True) -> BallJet:
         """``f(C, self)`` (``left``) or ``f(self, C)`` for a constant ball ``C = cmid ± crad`` and a bilinear form."""
@@ -260,17 +397,21 @@ class BallJet:
 
         mid = g(f, cmid, self.mid)
         rad = g(fa, np.abs(cmid), ar) + g(fa, crad, am + ar)
-        return BallJet(mid, _inflate(rad, g(fa, np.abs(cmid), am)), self.n, self.order)
+        return self._like(mid, _inflate(rad, g(fa, np.abs(cmid), am)))
 
     # ------------------------------------------------------------------ products
     def form(self, form: str, other: BallJet) -> BallJet:
-        """``f(self, other)`` for a bilinear form of :data:`FORMS`, with the product rule on the derivatives."""
+        """``f(self, other)`` for a bilinear form of :data:`FORMS`, with the product rule on the derivatives.
+
+        Of two packed jets (:meth:`pack`): the product rule at the distinct
+        multi-indices only, a packed jet.
+        """
+        if self.packed or other.packed:
+            return self._packed_form(form, other)
         f, fa = FORMS[form]
         order, n = min(self.order, other.order), self.n
 
-        def ball(x, y, xr, yr):
-            xm, ym = np.abs(x), np.abs(y)
-            return f(x, y), fa(xm, yr) + fa(xr, ym + yr), fa(xm, ym)
+        ball = partial(_ball_form, f, fa)
 
         av, ag, aH, *aT = self._pieces(self.mid)
         bv, bg, bH, *bT = other._pieces(other.mid)
@@ -287,7 +428,7 @@ class BallJet:
                 ball(ag[:, None], bg[None, :], agr[:, None], bgr[None, :]),
                 ball(ag[None, :], bg[:, None], agr[None, :], bgr[:, None]),
             ]
-            H = [sum(t[k] for t in terms) for k in range(3)]
+            H = [sum_terms(t[k] for t in terms) for k in range(3)]
             parts.append(tuple(x.reshape(n * n, *x.shape[2:]) for x in H))
         if order >= 3:  # d_pqr (ab): a T^b + T^a b + the three g H and the three H g pairings
             g_a, g_ar, H_a, H_ar = ag, agr, aH, aHr
@@ -305,12 +446,49 @@ class BallJet:
             for gi, Hi in ((P, QR), (Q, PR), (R, PQ)):
                 terms.append(ball(g_a[gi], H_b[Hi], g_ar[gi], H_br[Hi]))
                 terms.append(ball(H_a[Hi], g_b[gi], H_ar[Hi], g_br[gi]))
-            T = [sum(t[k] for t in terms) for k in range(3)]
+            T = [sum_terms(t[k] for t in terms) for k in range(3)]
             parts.append(tuple(x.reshape(n**3, *x.shape[3:]) for x in T))
         mid = np.concatenate([p[0] for p in parts])
         rad = np.concatenate([p[1] for p in parts])
         mag = np.concatenate([p[2] for p in parts])
         return BallJet(mid, _inflate(rad, mag), n, order)
+
+    def _packed_form(self, form: str, other: BallJet) -> BallJet:
+        """:meth:`form` of two packed jets: the whole product rule's floats at the sorted multi-indices."""
+        if not (self.packed and other.packed):
+            raise ValueError("a product of a packed and a whole jet")
+        f, fa = FORMS[form]
+        order, n = min(self.order, other.order), self.n
+
+        ball = partial(_ball_form, f, fa)
+
+        a_blocks, b_blocks = jet_layout(n, self.order).blocks, jet_layout(n, other.order).blocks
+        av, ag, aH, aT = ([self.mid[k] for k in a_blocks] + [None])[:4]
+        bv, bg, bH, bT = ([other.mid[k] for k in b_blocks] + [None])[:4]
+        avr, agr, aHr, aTr = ([self.rad[k] for k in a_blocks] + [None])[:4]
+        bvr, bgr, bHr, bTr = ([other.rad[k] for k in b_blocks] + [None])[:4]
+        t1, t2 = ball(av, bg, avr, bgr), ball(ag, bv, agr, bvr)
+        parts = [ball(av, bv, avr, bvr), tuple(x + y for x, y in zip(t1, t2))]
+        # d_pl (ab) at p <= l: the terms in the order of form's, on the entries it reads there (the same floats)
+        P, L = symmetric_indices(n, 2)[0]
+        terms = [
+            ball(av, bH, avr, bHr),
+            ball(aH, bv, aHr, bvr),
+            ball(ag[P], bg[L], agr[P], bgr[L]),
+            ball(ag[L], bg[P], agr[L], bgr[P]),
+        ]
+        parts.append(tuple(sum_terms(t[k] for t in terms) for k in range(3)))
+        if order >= 3:  # d_pqr (ab) at p <= q <= r: it reads H at (q, r), (p, r), (p, q), all sorted
+            P, Q, R = symmetric_indices(n, 3)[0]
+            terms = [ball(av, bT, avr, bTr), ball(aT, bv, aTr, bvr)]
+            for gi, hi in zip((P, Q, R), jet_layout(n, 3).pairs):
+                terms.append(ball(ag[gi], bH[hi], agr[gi], bHr[hi]))
+                terms.append(ball(aH[hi], bg[gi], aHr[hi], bgr[gi]))
+            parts.append(tuple(sum_terms(t[k] for t in terms) for k in range(3)))
+        mid = np.concatenate([p[0] for p in parts])
+        rad = np.concatenate([p[1] for p in parts])
+        mag = np.concatenate([p[2] for p in parts])
+        return BallJet(mid, _inflate(rad, mag), n, order, True)
 
     def __mul__(self, other: BallJet) -> BallJet:
         return self.form("mul", other)

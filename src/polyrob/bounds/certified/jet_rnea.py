@@ -138,6 +138,9 @@ def rnea(chain: Chain, sin: BallJet, cos: BallJet, qd, acc, gravity: bool, param
     prad = np.zeros_like(params) if params_rad is None else np.asarray(params_rad, float)
     (mass, mass_r), (h, h_r), (Io, Io_r) = _split(params, prad)
     B = sin.shape[0]
+    # the whole recursion on the distinct derivatives only (BallJet.pack): the same floats, fewer of them
+    sin, cos = sin.pack(), cos.pack()
+    qd = None if qd is None else qd.pack()
 
     def zero(*shape):
         return sin.constant_like(np.zeros(shape), 0.0)
@@ -189,4 +192,4 @@ def rnea(chain: Chain, sin: BallJet, cos: BallJet, qd, acc, gravity: bool, param
         f = forces[i] + Rf
         nm = moments[i] + R.form("matvec", nm) + Rf.const_form("cross", chain.translations[i + 1])
         taus[i] = nm.const_form("dot", chain.axes[i], left=False)
-    return type(taus[0]).stack(taus, len(taus[0].shape))
+    return type(taus[0]).stack(taus, len(taus[0].shape)).unpack()

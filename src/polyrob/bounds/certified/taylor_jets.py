@@ -36,7 +36,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from polyrob.bounds.certified.ball_jets import FORMS, GAMMA, TINY, BallJet
+from polyrob.bounds.certified.ball_jets import (
+    FORMS,
+    GAMMA,
+    TINY,
+    BallJet,
+    jet_layout,
+    sum_terms,
+    symmetric_indices,
+)
 
 __all__ = ["TaylorJet", "from_ball_jets", "taylor_sin_cos"]
 
@@ -57,10 +65,13 @@ class TaylorJet:
     box variables, whose half-widths are ``r`` ``(k, B)``.
     """
 
-    __slots__ = ("c", "L", "R", "r", "n", "order")
+    __slots__ = ("c", "L", "R", "r", "n", "order", "packed", "_S", "_live")
 
-    def __init__(self, c, L, R, r, n: int, order: int):
+    def __init__(self, c, L, R, r, n: int, order: int, packed: bool = False):
         self.c, self.L, self.R, self.r, self.n, self.order = c, L, R, r, int(n), int(order)
+        self.packed = bool(packed) and self.order >= 2  # the layout of BallJet.pack
+        self._S = None  # spread(), computed once: a jet's arrays are never changed after it is made
+        self._live = None  # live(), likewise
 
     # ------------------------------------------------------------------ construction and conversion
     @classmethod
@@ -84,9 +95,24 @@ class TaylorJet:
 
     def spread(self):
         """An upper bound of ``sum_p |L_p| r_p`` (shape of ``c``)."""
-        if self.L.shape[0] == 0:
-            return np.zeros_like(self.c)
-        return (np.abs(self.L) * self._rr(self.L.ndim)).sum(0) * (1 + GAMMA)
+        if self._S is None:
+            if self.L.shape[0] == 0:
+                self._S = np.zeros_like(self.c)
+            else:
+                self._S = (np.abs(self.L) * self._rr(self.L.ndim)).sum(0) * (1 + GAMMA)
+        return self._S
+
+    def live(self) -> int:
+        """How many leading box variables the linear parts may depend on: ``L_p`` is exactly zero for ``p >= live()``.
+
+        (``M_hat`` and ``Y`` depend on ``q`` alone: their models' ``qdot``
+        coefficients are zeros, and a product need not compute them.)
+        """
+        if self._live is None:
+            k = self.L.shape[0]
+            nonzero = np.flatnonzero(np.any(self.L != 0, axis=tuple(range(1, self.L.ndim)))) if k else []
+            self._live = int(nonzero[-1]) + 1 if len(nonzero) else 0
+        return self._live
 
     def to_ball(self) -> BallJet:
         """The ball jet holding every component over the whole box: ``c ± (R + sum_p |L_p| r_p)``."""
@@ -94,17 +120,36 @@ class TaylorJet:
 
     # ------------------------------------------------------------------ array manipulation (as BallJet's)
     def _with(self, c, L, R, n=None, order=None) -> TaylorJet:
-        return TaylorJet(c, L, R, self.r, self.n if n is None else n, self.order if order is None else order)
+        order = self.order if order is None else order
+        return TaylorJet(c, L, R, self.r, self.n if n is None else n, order, self.packed)
+
+    def pack(self) -> TaylorJet:
+        """The same models of the distinct components only, as :meth:`BallJet.pack <polyrob.bounds.certified.ball_jets.BallJet.pack>`."""
+        if self.packed or self.order < 2:
+            return self
+        keep = jet_layout(self.n, self.order).distinct
+        return TaylorJet(self.c[keep], self.L[:, keep], self.R[keep], self.r, self.n, self.order, True)
+
+    def unpack(self) -> TaylorJet:
+        """The whole jet of a packed one (each derivative's model copied to its permuted multi-indices)."""
+        if not self.packed:
+            return self
+        full = jet_layout(self.n, self.order).full
+        out = TaylorJet(self.c[full], self.L[:, full], self.R[full], self.r, self.n, self.order)
+        out._S = None if self._S is None else self._S[full]
+        return out
 
     def extended(self, r) -> TaylorJet:
         """The same models linear in more variables: ``r`` ``(k', B)`` the half-widths of all ``k' >= k`` (this jet's first)."""
         k = self.L.shape[0]
         L = np.zeros((len(r), *self.L.shape[1:]))
         L[:k] = self.L
-        return TaylorJet(self.c, L, self.R, np.asarray(r, float), self.n, self.order)
+        return TaylorJet(self.c, L, self.R, np.asarray(r, float), self.n, self.order, self.packed)
 
     def _on_components(self, fn) -> TaylorJet:
         """Apply a BallJet operation that acts on the component axis only (to ``c``, ``R`` and each ``L_p``)."""
+        if self.packed:
+            raise ValueError("a packed jet: unpack() it first")
         cr = fn(BallJet(self.c, self.R, self.n, self.order))
         moved = np.moveaxis(self.L, 0, -1)
         lin = fn(BallJet(moved, moved, self.n, self.order))
@@ -120,7 +165,7 @@ class TaylorJet:
 
     def truncated(self, order: int) -> TaylorJet:
         """The same jet up to ``order``."""
-        C = BallJet.size(self.n, order)
+        C = BallJet.size(self.n, order, self.packed)  # packed too: its components go by order
         return self._with(self.c[:C], self.L[:, :C], self.R[:C], order=order)
 
     def component(self, index: int) -> TaylorJet:
@@ -177,7 +222,7 @@ class TaylorJet:
 
     def constant_like(self, mid, rad) -> TaylorJet:
         """A ball ``mid ± rad`` (shape ``(B, ...)``) with zero derivatives and no linear part, in this jet's variables."""
-        ball = BallJet.constant(mid, rad, self.n, self.order)
+        ball = BallJet.constant(mid, rad, self.n, self.order, self.packed)
         return self._with(ball.mid, np.zeros((self.L.shape[0], *ball.mid.shape)), ball.rad)
 
     def expand(self, axis: int) -> TaylorJet:
@@ -225,6 +270,8 @@ class TaylorJet:
 
     def _pieces(self):
         """``[(c, L, R, S)]`` of the value, the gradient ``(n, ...)`` and the Hessian ``(n, n, ...)``."""
+        if self.packed:
+            raise ValueError("a packed jet: unpack() it first")
         n, S = self.n, self.spread()
         out = []
         for start, size, lead in ((0, 1, (1,)), (1, n, (n,)), (1 + n, n * n, (n, n)), (1 + n + n * n, n**3, (n, n, n))):
@@ -249,8 +296,13 @@ class TaylorJet:
         (``A``, ``B`` the linear parts, ``sa = sum_p |A_p| r_p``)::
 
             f(a, b) + (f(A_p, b) + f(a, B_p)).d  ±  (|f|(sa, sb) + |f|(|a| + sa, rb) + |f|(ra, |b| + sb + rb))
+
+        Of two packed jets (:meth:`pack`): the product rule at the distinct
+        multi-indices only, a packed jet.
         """
         self._same_box(other)
+        if self.packed or other.packed:
+            return self._packed_form(form, other)
         f, fa = FORMS[form]
         order, n = min(self.order, other.order), self.n
 
@@ -262,10 +314,13 @@ class TaylorJet:
             (xc, xL, xR, xS), (yc, yL, yR, yS) = x, y
             xA, yA = np.abs(xc) + xS, np.abs(yc) + yS
             c = f(xc, yc)
-            L = f(xL, yc[None]) + f(xc[None], yL)
-            R = fa(xS, yS) + fa(xA, yR) + fa(xR, yA + yR)
+            L = lin(xL, yc, xc, yL)
+            R = fa(xS, yS)
+            R += fa(xA, yR)  # (in place: the floats of the sum)
+            R += fa(xR, yA + yR)
             return c, L, R, fa(xA, yA)
 
+        lin, live = _linear_part(f, self, other)
         a, b = self._pieces(), other._pieces()
         groups = [[prod(a[0], b[0])]]
         if order >= 1:
@@ -293,19 +348,98 @@ class TaylorJet:
             groups.append(terms)
         cs, Ls, Rs = [], [], []
         for j, g in enumerate(groups):
-            c, L, R, mag = (sum(t[i] for t in g) for i in range(4))
+            c, L, R, mag = (sum_terms(t[i] for t in g) for i in range(4))
             lead = max(j, 1)  # the derivative axes of this group, flattened into the component axis
             cs.append(c.reshape(-1, *c.shape[lead:]))
             Ls.append(L.reshape(L.shape[0], -1, *L.shape[1 + lead :]))
             Rs.append(_inflate(R, mag).reshape(-1, *R.shape[lead:]))
         c, L, R = np.concatenate(cs), np.concatenate(Ls, 1), np.concatenate(Rs)
-        return TaylorJet(c, L, R, self.r, n, order)
+        out = TaylorJet(c, L, R, self.r, n, order)
+        out._live = live
+        return out
+
+    def _packed_form(self, form: str, other: TaylorJet) -> TaylorJet:
+        """:meth:`form` of two packed jets: the whole product rule's floats at the sorted multi-indices (as BallJet's)."""
+        if not (self.packed and other.packed):
+            raise ValueError("a product of a packed and a whole jet")
+        f, fa = FORMS[form]
+        order, n = min(self.order, other.order), self.n
+
+        def blocks(jet):
+            """Each order's distinct components ``(c, L, R, S)``, one component axis: the whole tensors' floats there."""
+            S = jet.spread()
+            return [(jet.c[k], jet.L[:, k], jet.R[k], S[k]) for k in jet_layout(n, jet.order).blocks]
+
+        def at(piece, key):
+            c, L, R, S = piece
+            return c[key], L[:, key], R[key], S[key]
+
+        def prod(x, y):
+            (xc, xL, xR, xS), (yc, yL, yR, yS) = x, y
+            xA, yA = np.abs(xc) + xS, np.abs(yc) + yS
+            c = f(xc, yc)
+            L = lin(xL, yc, xc, yL)
+            R = fa(xS, yS)
+            R += fa(xA, yR)  # (in place: the floats of the sum)
+            R += fa(xR, yA + yR)
+            return c, L, R, fa(xA, yA)
+
+        lin, live = _linear_part(f, self, other)
+        a, b = blocks(self), blocks(other)
+        groups = [[prod(a[0], b[0])]]
+        groups.append([prod(a[0], b[1]), prod(a[1], b[0])])
+        if order >= 2:  # d_pl (ab) at p <= l (packed jets are of order 2 or more)
+            P, L2 = symmetric_indices(n, 2)[0]
+            groups.append([prod(a[0], b[2]), prod(a[2], b[0]), prod(at(a[1], P), at(b[1], L2)),
+                           prod(at(a[1], L2), at(b[1], P))])  # fmt: skip
+        if order >= 3:  # d_pqr (ab): a T^b + T^a b + the three g H and the three H g pairings, at p <= q <= r
+            terms = [prod(a[0], b[3]), prod(a[3], b[0])]
+            for gi, hi in zip(symmetric_indices(n, 3)[0], jet_layout(n, 3).pairs):
+                terms.append(prod(at(a[1], gi), at(b[2], hi)))
+                terms.append(prod(at(a[2], hi), at(b[1], gi)))
+            groups.append(terms)
+        cs, Ls, Rs = [], [], []
+        for g in groups:
+            c, L, R, mag = (sum_terms(t[i] for t in g) for i in range(4))
+            cs.append(c)
+            Ls.append(L)
+            Rs.append(_inflate(R, mag))
+        out = TaylorJet(np.concatenate(cs), np.concatenate(Ls, 1), np.concatenate(Rs), self.r, n, order, True)
+        out._live = live
+        return out
 
     def __mul__(self, other: TaylorJet) -> TaylorJet:
         return self.form("mul", other)
 
     def __matmul__(self, other: TaylorJet) -> TaylorJet:
         return self.form("matmul", other)
+
+
+def _linear_part(f, x: TaylorJet, y: TaylorJet):
+    """``(lin, live)``: ``lin(xL, yc, xc, yL) = f(xL, yc) + f(xc, yL)`` on pieces of ``x`` and ``y``, and its :meth:`~TaylorJet.live`.
+
+    Why only the live rows are computed: where ``xL_p`` is zero and ``yc``
+    finite, ``f(xL_p, yc)`` is exactly zero (a bilinear form of zeros), and
+    adding it changes no float (``a + 0 = a``, ``a + b = b + a``); so the rows
+    are the ones the whole sum gives.  Where a constant part is not finite
+    the whole sum is taken.
+    """
+    k, kx, ky = x.L.shape[0], x.live(), y.live()
+    if min(kx, ky) == k or not (np.isfinite(x.c).all() and np.isfinite(y.c).all()):
+        return (lambda xL, yc, xc, yL: f(xL, yc[None]) + f(xc[None], yL)), None
+
+    def lin(xL, yc, xc, yL):
+        a, b = f(xc[None], yL[:ky]), f(xL[:kx], yc[None])
+        ka, kb = ky, kx
+        if kx > ky:
+            a, b, ka, kb = b, a, kx, ky
+        shape = (k, *np.broadcast_shapes(a.shape[1:], b.shape[1:]))
+        if a.shape != shape:  # padded with the exact zeros of the rows beyond both (no copy when a has all k rows)
+            a = np.concatenate([np.broadcast_to(a, (ka, *shape[1:])), np.zeros((k - ka, *shape[1:]))])
+        a[:kb] += b
+        return a
+
+    return lin, max(kx, ky)
 
 
 def from_ball_jets(centre: BallJet, box: BallJet, radii, k: int) -> TaylorJet:
