@@ -349,6 +349,7 @@ def _proved_factors(robot, domain, opts: BoundOptions, progress: bool) -> dict:
             time_limit=options.get("time_limit"),
             progress=report,
             seed=opts.seed,
+            workers=opts.workers or available_cores(),  # the batches of boxes shared among them
         )
     finally:
         if bar is not None:

@@ -55,12 +55,14 @@ import numpy as np
 from polyrob.bounds.certified import ball_jets as bj
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, intersect, lower, upper
 from polyrob.bounds.certified.factors.attained import attained_range, vertex_ascent
+from polyrob.bounds.certified.factors.box_batches import enclose_batch
 from polyrob.bounds.certified.factors.hessian import box_models, factor_hessians
 from polyrob.bounds.certified.factors.inverse import fixed_point_inverse, jet_parts, taylor_neumann_inverse
 from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread, vertex_gradients
 from polyrob.bounds.certified.factors.taylor2 import at_vertices, taylor2_bounds
 from polyrob.bounds.certified.factors.width_ratio import FLOOR
 from polyrob.bounds.certified.jet_rnea import PARAMETER_RTOL, Chain, rnea
+from polyrob.bounds.parallel import WorkerPool
 from polyrob.errors import CertificationError
 
 __all__ = [
@@ -469,6 +471,7 @@ def prove_factor_ranges(
     seed: int = 0,
     taylor: bool = True,
     ascent_rounds: int = 8,
+    workers: int = 1,
 ) -> FactorEnclosure:
     """Proved ranges of the factors of ``loops`` over a task ``domain`` (a branch and bound on its ``(q, qdot)`` box).
 
@@ -500,6 +503,9 @@ def prove_factor_ranges(
         Intersect each box's mean-value and slope forms with the
         second-order Taylor form (:mod:`polyrob.bounds.certified.factors.taylor2`):
         about six times the work per box, far fewer boxes.
+    workers : int
+        Processes each batch of boxes is shared among (:mod:`~polyrob.bounds.certified.factors.box_batches`):
+        the same result, sooner.
     """
     t0 = time.perf_counter()
     problem = FactorProblem.from_loops(loops)
@@ -528,64 +534,63 @@ def prove_factor_ranges(
     stack = [(q_lo, q_hi, v_lo, v_hi, np.ones((F, m, 3 * m, 2), bool), 1.0)]
     total_sides = F * m * 3 * m * 2
     closed_share, boxes = 0.0, 0
-    while stack:
-        if boxes >= max_boxes or (time_limit is not None and time.perf_counter() - t0 > time_limit):
-            what = (
-                f"the limit of {max_boxes} boxes reached"
-                if boxes >= max_boxes
-                else f"stopped by the time limit of {time_limit:g} s you set"
-            )
-            raise CertificationError(
-                f"proved factor ranges: {what} with {len(stack)} boxes still open "
-                f"({100 * closed_share:.1f} % of the work done); raise the tolerance (rel_tol) or the work "
-                "limit (max_boxes), or shrink the task; or drop --certify (sampled bounds)"
-            )
-        batch, stack = stack[-BATCH:], stack[:-BATCH]
-        boxes += len(batch)
-        ql, qh, vl, vh = (np.array([b[k] for b in batch]) for k in range(4))
-        lo, hi, contribution, seen_lo, seen_hi = problem.enclose(
-            ql, qh, vl, vh, a_lo, a_hi, taylor=taylor, attained=True
-        )
-        # the inner values grow with every box's centre: an entry's side closes against the best value attained
-        finite = np.isfinite(hi).all((1, 2, 3))
-        if finite.any():
-            p_lo = np.minimum(p_lo, seen_lo[finite].min(0))
-            p_hi = np.maximum(p_hi, seen_hi[finite].max(0))
-        for b, (bql, bqh, bvl, bvh, open_, share) in enumerate(batch):
-            done_hi = hi[b] <= p_hi + tol
-            done_lo = lo[b] >= p_lo - tol
-            q_can = (bqh - bql) > 1e-6 * root_q
-            v_can = (bvh - bvl) > 1e-3 * root_v
-            still = open_ & ~np.stack([done_lo, done_hi], -1)
-            if not (q_can.any() or v_can.any()):
-                still[:] = False  # cannot refine further: keep this box's enclosure
-            closing = open_ & ~still
-            out_lo = np.where(closing[..., 0], np.minimum(out_lo, lo[b]), out_lo)
-            out_hi = np.where(closing[..., 1], np.maximum(out_hi, hi[b]), out_hi)
-            if not still.any():
-                continue
-            # split where the open entries' over-estimation comes from (relative to their tolerance)
-            weight = still.any(-1) / tol
-            scores = np.einsum("fie,fiep->p", weight, contribution[b]) * np.concatenate([q_can, v_can])
-            p = int(np.argmax(scores))
-            if not np.isfinite(scores[p]) or scores[p] <= 0:
-                p = int(np.argmax(np.concatenate([(bqh - bql) / root_q * q_can, (bvh - bvl) / root_v * v_can])))
-            for half in (0, 1):
-                nql, nqh, nvl, nvh = bql.copy(), bqh.copy(), bvl.copy(), bvh.copy()
-                if p < m:
-                    mid = 0.5 * (bql[p] + bqh[p])
-                    (nqh if half == 0 else nql)[p] = mid
-                else:
-                    mid = 0.5 * (bvl[p - m] + bvh[p - m])
-                    (nvh if half == 0 else nvl)[p - m] = mid
-                stack.append((nql, nqh, nvl, nvh, still, 0.5 * share))
-        # the whole job's fraction: the open work left is each queued box's volume share times its open sides
-        closed_share = 1.0 - sum(b[5] * b[4].sum() for b in stack) / total_sides
-        if progress is not None:
-            done = closed_share
-            elapsed = time.perf_counter() - t0
-            eta = elapsed * (1 - done) / done if done > 0 else float("nan")
-            progress(done, boxes, eta)
+    with WorkerPool(problem, workers) as pool:
+        while stack:
+            if boxes >= max_boxes or (time_limit is not None and time.perf_counter() - t0 > time_limit):
+                what = (
+                    f"the limit of {max_boxes} boxes reached"
+                    if boxes >= max_boxes
+                    else f"stopped by the time limit of {time_limit:g} s you set"
+                )
+                raise CertificationError(
+                    f"proved factor ranges: {what} with {len(stack)} boxes still open "
+                    f"({100 * closed_share:.1f} % of the work done); raise the tolerance (rel_tol) or the work "
+                    "limit (max_boxes), or shrink the task; or drop --certify (sampled bounds)"
+                )
+            batch, stack = stack[-BATCH:], stack[:-BATCH]
+            boxes += len(batch)
+            ql, qh, vl, vh = (np.array([b[k] for b in batch]) for k in range(4))
+            lo, hi, contribution, seen_lo, seen_hi = enclose_batch(pool, (ql, qh, vl, vh), a_lo, a_hi, taylor=taylor)
+            # the inner values grow with every box's centre: an entry's side closes against the best value attained
+            finite = np.isfinite(hi).all((1, 2, 3))
+            if finite.any():
+                p_lo = np.minimum(p_lo, seen_lo[finite].min(0))
+                p_hi = np.maximum(p_hi, seen_hi[finite].max(0))
+            for b, (bql, bqh, bvl, bvh, open_, share) in enumerate(batch):
+                done_hi = hi[b] <= p_hi + tol
+                done_lo = lo[b] >= p_lo - tol
+                q_can = (bqh - bql) > 1e-6 * root_q
+                v_can = (bvh - bvl) > 1e-3 * root_v
+                still = open_ & ~np.stack([done_lo, done_hi], -1)
+                if not (q_can.any() or v_can.any()):
+                    still[:] = False  # cannot refine further: keep this box's enclosure
+                closing = open_ & ~still
+                out_lo = np.where(closing[..., 0], np.minimum(out_lo, lo[b]), out_lo)
+                out_hi = np.where(closing[..., 1], np.maximum(out_hi, hi[b]), out_hi)
+                if not still.any():
+                    continue
+                # split where the open entries' over-estimation comes from (relative to their tolerance)
+                weight = still.any(-1) / tol
+                scores = np.einsum("fie,fiep->p", weight, contribution[b]) * np.concatenate([q_can, v_can])
+                p = int(np.argmax(scores))
+                if not np.isfinite(scores[p]) or scores[p] <= 0:
+                    p = int(np.argmax(np.concatenate([(bqh - bql) / root_q * q_can, (bvh - bvl) / root_v * v_can])))
+                for half in (0, 1):
+                    nql, nqh, nvl, nvh = bql.copy(), bqh.copy(), bvl.copy(), bvh.copy()
+                    if p < m:
+                        mid = 0.5 * (bql[p] + bqh[p])
+                        (nqh if half == 0 else nql)[p] = mid
+                    else:
+                        mid = 0.5 * (bvl[p - m] + bvh[p - m])
+                        (nvh if half == 0 else nvl)[p - m] = mid
+                    stack.append((nql, nqh, nvl, nvh, still, 0.5 * share))
+            # the whole job's fraction: the open work left is each queued box's volume share times its open sides
+            closed_share = 1.0 - sum(b[5] * b[4].sum() for b in stack) / total_sides
+            if progress is not None:
+                done = closed_share
+                elapsed = time.perf_counter() - t0
+                eta = elapsed * (1 - done) / done if done > 0 else float("nan")
+                progress(done, boxes, eta)
     if not (np.all(np.isfinite(out_lo)) and np.all(np.isfinite(out_hi))):
         raise CertificationError("proved factor ranges: some entry could not be bounded")
     return FactorEnclosure(problem.names, out_lo, out_hi, boxes, time.perf_counter() - t0)

@@ -1,0 +1,62 @@
+"""The branch and bound's batches of boxes, enclosed on worker processes.
+
+:func:`~polyrob.bounds.certified.factors.ranges.prove_factor_ranges` encloses
+its boxes :data:`~polyrob.bounds.certified.factors.ranges.BATCH` at a time
+(vectorised); :func:`enclose_batch` splits each batch among the workers of a
+:class:`~polyrob.bounds.parallel.WorkerPool` (the problem sent to each worker
+once) and joins the parts in the batch's order.  Every box's enclosure is
+computed on its own, so the joined result does not depend on how many
+workers there were, and the refinement that reads it takes the same path;
+only the time changes.
+
+Examples
+--------
+>>> import numpy as np
+>>> from polyrob.bounds.parallel import WorkerPool
+>>> def scaled(scale, item):          # a module-level fn(state, (part, *extra)) returning arrays
+...     part, offset = item
+...     return (scale * part + offset,)
+>>> with WorkerPool(2.0, workers=1) as pool:
+...     split_map(pool, scaled, np.arange(3.0)[:, None], 1.0)[0].ravel().tolist()
+[1.0, 3.0, 5.0]
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["enclose_batch", "split_map"]
+
+
+def split_map(pool, fn, batch, *extra) -> tuple:
+    """``fn(pool.state, (part, *extra))`` on parts of ``batch`` (arrays of one leading length), results joined.
+
+    ``batch`` is one array or a tuple of arrays sharing their first axis; it
+    is cut into at most ``pool.workers`` consecutive parts, and each result
+    (a tuple of arrays with that leading axis) is concatenated in order.
+    With one part the call runs in this process.
+    """
+    arrays = batch if isinstance(batch, tuple) else (batch,)
+    n = len(arrays[0])
+    cuts = [c for c in np.array_split(np.arange(n), max(1, min(pool.workers, n))) if len(c)]
+    one = not isinstance(batch, tuple)
+    items = [((arrays[0][c] if one else tuple(x[c] for x in arrays)), *extra) for c in cuts]
+    if len(items) == 1:
+        return fn(pool.state, items[0])
+    parts = pool.map(fn, items)
+    return tuple(np.concatenate([p[k] for p in parts]) for k in range(len(parts[0])))
+
+
+def _enclose_part(problem, item) -> tuple:
+    boxes, a_lo, a_hi, taylor = item
+    return problem.enclose(*boxes, a_lo, a_hi, taylor=taylor, attained=True)
+
+
+def enclose_batch(pool, boxes, a_lo, a_hi, *, taylor: bool) -> tuple:
+    """``pool.state.enclose(*boxes, a_lo, a_hi, taylor=taylor, attained=True)``, the boxes shared among the workers.
+
+    ``pool``: a :class:`~polyrob.bounds.parallel.WorkerPool` whose state is
+    the :class:`~polyrob.bounds.certified.factors.ranges.FactorProblem`;
+    ``boxes``: ``(q_lo, q_hi, qd_lo, qd_hi)``, each ``(B, m)``.
+    """
+    return split_map(pool, _enclose_part, tuple(boxes), a_lo, a_hi, taylor)
