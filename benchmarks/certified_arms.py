@@ -46,7 +46,7 @@ over the sampled one is reported relative to that scale (``excess_max``).
   factors in ``q`` sampled at 16 points of the box (step 1e-4): how much of
   the over-estimation is the ball arithmetic's, not the function's.
 
-Usage: ``python benchmarks/certified_arms.py [--robots ur5,panda] [--max-boxes N] [--samples N] [--floor F]
+Usage: ``python benchmarks/certified_arms.py [--robots ur5,panda] [--max-boxes N] [--workers N] [--samples N] [--floor F]
 [--scales 1,0.25,0.05,0.01] [--proof-scales 1,0.05]`` (an empty list skips that part).
 """
 
@@ -71,6 +71,7 @@ from polyrob.bounds.certified.factors import (
 )
 from polyrob.bounds.certified.factors.hessian import hessian_enclosure
 from polyrob.bounds.certified.factors.width_ratio import FLOOR, width_ratios
+from polyrob.bounds.parallel import available_cores
 from polyrob.domains.default_task import default_task_domain, default_task_robot
 from polyrob.errors import CertificationError
 from polyrob.plant.models.inner_factors import factor_parameters
@@ -156,9 +157,12 @@ def main() -> None:
     parser.add_argument("--floor", type=float, default=FLOOR)
     parser.add_argument("--wrapping-scale", type=float, default=0.01)
     parser.add_argument("--proof-scales", default="1", help="task scales the branch and bound is run on (1: the task)")
+    parser.add_argument("--workers", type=int, default=None, help="processes the proof's boxes are shared among "
+                        "(default: the cores, as `polyrob bounds --certify`)")  # fmt: skip
     add_results_option(parser)
     args = parser.parse_args()
-    out = {"machine": f"{os.cpu_count()} cores", "load_average": os.getloadavg()[0], "robots": {}}
+    workers = args.workers or available_cores()
+    out = {"machine": f"{os.cpu_count()} cores", "workers": workers, "load_average": os.getloadavg()[0], "robots": {}}
     for name in args.robots.split(","):
         robot = load_robot(name)
         loops = [(n, loop) for n, _, loop in factor_parameters(default_task_robot(robot))]
@@ -194,7 +198,7 @@ def main() -> None:
             box = domain.scaled(s)
             t0 = time.perf_counter()
             try:
-                enc = prove_factor_ranges(loops, box, max_boxes=args.max_boxes)
+                enc = prove_factor_ranges(loops, box, max_boxes=args.max_boxes, workers=workers)
                 s_lo, s_hi = attained_range(
                     problem, box.q_lower, box.q_upper, box.qdot_lower, box.qdot_upper,
                     box.qddot_lower, box.qddot_upper, args.samples, np.random.default_rng(1))  # fmt: skip
