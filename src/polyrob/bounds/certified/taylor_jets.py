@@ -34,6 +34,8 @@ Examples
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from polyrob.bounds.certified.ball_jets import (
@@ -54,6 +56,18 @@ SUM_MARGIN = 1e-12
 
 def _inflate(rad, mag):
     return (rad + GAMMA * mag) * (1.0 + GAMMA) + TINY
+
+
+def _product(f, fa, lin, x, y):
+    """``(c, L, R, magnitude)`` of one product-rule term of two pieces ``(c, L, R, spread)`` (before rounding margins)."""
+    (xc, xL, xR, xS), (yc, yL, yR, yS) = x, y
+    xA, yA = np.abs(xc) + xS, np.abs(yc) + yS
+    c = f(xc, yc)
+    L = lin(xL, yc, xc, yL)
+    R = fa(xS, yS)
+    R += fa(xA, yR)  # (in place: the floats of the sum)
+    R += fa(xR, yA + yR)
+    return c, L, R, fa(xA, yA)
 
 
 class TaylorJet:
@@ -310,17 +324,8 @@ class TaylorJet:
             c, L, R, S = piece
             return c[key], L[(slice(None), *key)], R[key], S[key]
 
-        def prod(x, y):
-            (xc, xL, xR, xS), (yc, yL, yR, yS) = x, y
-            xA, yA = np.abs(xc) + xS, np.abs(yc) + yS
-            c = f(xc, yc)
-            L = lin(xL, yc, xc, yL)
-            R = fa(xS, yS)
-            R += fa(xA, yR)  # (in place: the floats of the sum)
-            R += fa(xR, yA + yR)
-            return c, L, R, fa(xA, yA)
-
         lin, live = _linear_part(f, self, other)
+        prod = partial(_product, f, fa, lin)
         a, b = self._pieces(), other._pieces()
         groups = [[prod(a[0], b[0])]]
         if order >= 1:
@@ -374,17 +379,8 @@ class TaylorJet:
             c, L, R, S = piece
             return c[key], L[:, key], R[key], S[key]
 
-        def prod(x, y):
-            (xc, xL, xR, xS), (yc, yL, yR, yS) = x, y
-            xA, yA = np.abs(xc) + xS, np.abs(yc) + yS
-            c = f(xc, yc)
-            L = lin(xL, yc, xc, yL)
-            R = fa(xS, yS)
-            R += fa(xA, yR)  # (in place: the floats of the sum)
-            R += fa(xR, yA + yR)
-            return c, L, R, fa(xA, yA)
-
         lin, live = _linear_part(f, self, other)
+        prod = partial(_product, f, fa, lin)
         a, b = blocks(self), blocks(other)
         groups = [[prod(a[0], b[0])]]
         groups.append([prod(a[0], b[1]), prod(a[1], b[0])])
