@@ -196,3 +196,12 @@ def test_export_header_says_what_the_inner_layer_needs(tmp_path, pendulum):
     assert header.isascii()
     plain = export_controller(polyrob.paper_controller(), 1000.0, tmp_path / "p", inner=None).header.read_text()
     assert "inner layer" not in plain
+
+
+def test_bounds_say_whose_jacobians_the_pldi_coverage_checks(capsys):
+    """The PLDI's coverage line of an inner loop counts the true robots its bounds were taken over, and says so."""
+    args = ["bounds", "planar_2r", "--inner", "gravity", "--model-error", "10", "--pose", "0.4,0.3", "--q-radius"]
+    args += ["0.2", "--qdot-max", "0.5", "--qddot-max", "2", "--samples", "32", "--coverage", "200", "--no-models"]
+    assert main(args) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("coverage:"))
+    assert line.endswith("fresh points of the 3 true robots the bounds were taken over"), line

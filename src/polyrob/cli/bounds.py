@@ -112,7 +112,10 @@ def cmd_bounds(args) -> int:
             f"({proof['boxes']} boxes, {proof['seconds']:.1f} s); the A, B intervals above are sampled"
         )
     if report["coverage"] is not None:
-        print(f"coverage: {report['coverage']:.4f} of {report['coverage_points']} fresh points")
+        variants = getattr(robot, "variants", None)
+        listed = len(variants()) if callable(variants) else 1
+        among = f" of the {listed} true robots the bounds were taken over" if listed > 1 else ""
+        print(f"coverage: {report['coverage']:.4f} of {report['coverage_points']} fresh points{among}")
     if report["dropped_positions"]:
         print("positions the dynamics do not depend on: " + ", ".join(report["dropped_positions"]))
     for name, m in report.get("uncertainty_models", {}).items():
