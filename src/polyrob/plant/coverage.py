@@ -58,7 +58,7 @@ def coverage_fraction(unc: UncertainPlant, robot, domain, n: int = 2000, *, seed
     corners of the domain, where a frozen Jacobian is most often extreme.
     """
     from polyrob.bounds.search import Problem
-    from polyrob.uncertainty_set.draw import EXTREME_SHARE
+    from polyrob.uncertainty_set.draw import EXTREME_SHARE, at_vertices
 
     problem = Problem(robot, domain)
     fresh = len(problem.variants) > 1 and callable(getattr(robot, "drawn", None)) and int(n) >= 2 * FRESH_POINTS
@@ -72,7 +72,7 @@ def coverage_fraction(unc: UncertainPlant, robot, domain, n: int = 2000, *, seed
     if fresh:
         rng = np.random.default_rng([seed, 41])
         robots = (int(n) // 2) // FRESH_POINTS
-        at_inside = robots - int(round(EXTREME_SHARE * robots))
+        at_inside = robots - at_vertices(robots, EXTREME_SHARE)
         m = robot.m
         for k in range(robots):
             true = robot.drawn(rng, extreme=k >= at_inside)

@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyrob.errors import ArgumentError
-from polyrob.uncertainty_set.draw import EXTREME_SHARE  # the share at vertices of the set (and corners of the task)
+from polyrob.uncertainty_set.draw import EXTREME_SHARE, at_vertices  # the share at vertices, how many that is
 
 __all__ = [
     "CHECK_DRAWS",
@@ -134,11 +134,9 @@ def true_robot_plants(
     _needs_set(loop)
     if int(n) < 1:
         raise ArgumentError(f"true robots: need at least one draw, got {n}")
-    if not 0.0 <= extremes <= 1.0:
-        raise ArgumentError(f"true robots: the share at vertices must lie in [0, 1], got {extremes!r}")
     rng = np.random.default_rng(seed)
     points = domain.sample_box(int(n), method="uniform", seed=int(rng.integers(2**31)))
-    inside = int(n) - int(round(extremes * int(n)))
+    inside = int(n) - at_vertices(n, extremes)
     lower, upper = np.asarray(domain.lower, float), np.asarray(domain.upper, float)
     corners = rng.integers(0, 2, size=(int(n) - inside, len(lower))) == 1
     points[inside:] = np.where(corners, upper, lower)
@@ -276,7 +274,7 @@ def true_robot_check(
     stable = abscissa < 0
     worst = float(peaks[stable].max()) if stable.all() else float("inf")
     median = float(np.median(peaks[stable])) if stable.any() else float("inf")
-    return TrueRobotCheck(int(n), int((~stable).sum()), worst, median, int(seed), int(round(extremes * int(n))))
+    return TrueRobotCheck(int(n), int((~stable).sum()), worst, median, int(seed), at_vertices(n, extremes))
 
 
 @dataclass(frozen=True, eq=False)

@@ -49,6 +49,7 @@ __all__ = [
     "draw_true_robot",
     "draw_true_robots",
     "vertex_words",
+    "at_vertices",
     "EXTREME_SHARE",
     "common_factor_covers",
     "model_of_set",
@@ -167,12 +168,26 @@ def draw_true_robots(robot, spec: RobotUncertainty, n: int, seed: int = 0, *, ex
     >>> [t.extreme for t in drawn]
     [False, False, True, True]
     """
-    if not 0.0 <= float(extremes) <= 1.0:
-        raise ArgumentError(f"true robots: the share at vertices must lie in [0, 1], got {extremes!r}")
+    inside = int(n) - at_vertices(n, extremes)
     spec = spec.bound(robot)
     rng = np.random.default_rng(seed)
-    inside = int(n) - int(round(float(extremes) * int(n)))
     return [draw_true_robot(robot, spec, rng, extreme=k >= inside) for k in range(int(n))]
+
+
+def at_vertices(n: int, extremes: float) -> int:
+    """How many of ``n`` draws a share ``extremes`` puts at vertices (the last ones drawn), ``round(extremes n)``.
+
+    Raises
+    ------
+    ArgumentError
+        ``extremes`` outside ``[0, 1]``.
+
+    >>> at_vertices(20, 0.5), at_vertices(1, 0.5)
+    (10, 0)
+    """
+    if not 0.0 <= float(extremes) <= 1.0:
+        raise ArgumentError(f"true robots: the share at vertices must lie in [0, 1], got {extremes!r}")
+    return int(round(float(extremes) * int(n)))
 
 
 def vertex_words(n: int, extremes: float) -> str:
@@ -181,7 +196,7 @@ def vertex_words(n: int, extremes: float) -> str:
     >>> vertex_words(20, 0.5)
     ' (10 of 20 at vertices of the set)'
     """
-    k = int(round(float(extremes) * int(n)))
+    k = at_vertices(n, extremes)
     return f" ({k} of {int(n)} at vertices of the set)" if k else ""
 
 

@@ -39,7 +39,7 @@ import numpy as np
 import pinocchio
 
 from polyrob.errors import ArgumentError
-from polyrob.uncertainty_set.draw import EXTREME_SHARE
+from polyrob.uncertainty_set.draw import EXTREME_SHARE, at_vertices
 
 __all__ = ["FrozenCheck", "weights_from_hyperparameters", "frozen_jacobians", "weighted_loop", "frozen_check"]
 
@@ -301,10 +301,8 @@ def frozen_check(
     if robot.model.nv != m:
         raise ArgumentError(f"{robot.name}: its Pinocchio model has {robot.model.nv} velocities for {m} joints")
     model_hat = model_with_middle_payload(robot, spec)
-    if not 0.0 <= float(extremes) <= 1.0:
-        raise ArgumentError(f"true robots: the share at vertices must lie in [0, 1], got {extremes!r}")
-    extremes = 0.0 if nominal_only else float(extremes)
-    inside = int(n) - int(round(extremes * int(n)))
+    extremes = 0.0 if nominal_only else extremes
+    inside = int(n) - at_vertices(n, extremes)
     if nominal_only:
         trues = [(model_hat.model, np.asarray(model_hat.damping, float))]
         words = "the nominal robot (the inner layer's model)"

@@ -37,7 +37,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from polyrob.errors import ArgumentError
-from polyrob.uncertainty_set.draw import EXTREME_SHARE, vertex_words
+from polyrob.uncertainty_set.draw import EXTREME_SHARE, at_vertices, vertex_words
 from polyrob.validate.at_rate.figures import run_figures
 from polyrob.validate.at_rate.loop import RealLoopConditions, simulate_real_loop
 from polyrob.validate.reference import smooth_reference, step_reference
@@ -270,7 +270,7 @@ class RateValidation:
             "conditions": self.conditions.to_dict(),
             "uncertainty": self.uncertainty,
             "true_robots": self.true_robots,
-            "at_vertices": int(round(self.extremes * self.true_robots)),
+            "at_vertices": at_vertices(self.true_robots, self.extremes),
             "seed": self.seed,
             "evaluations": self.evaluations,
             "by_reference": self.by_reference(),

@@ -13,11 +13,11 @@ Examples
 --------
 >>> import numpy as np
 >>> from polyrob.bounds.parallel import WorkerPool
->>> def scaled(scale, item):          # a module-level fn(state, (part, *extra)) returning arrays
-...     part, offset = item
+>>> def scaled(scale, item):          # a module-level fn(state, (parts, *extra)) returning arrays
+...     (part,), offset = item
 ...     return (scale * part + offset,)
 >>> with WorkerPool(2.0, workers=1) as pool:
-...     split_map(pool, scaled, np.arange(3.0)[:, None], 1.0)[0].ravel().tolist()
+...     split_map(pool, scaled, (np.arange(3.0),), 1.0)[0].tolist()
 [1.0, 3.0, 5.0]
 """
 
@@ -28,19 +28,16 @@ import numpy as np
 __all__ = ["enclose_batch", "split_map"]
 
 
-def split_map(pool, fn, batch, *extra) -> tuple:
-    """``fn(pool.state, (part, *extra))`` on parts of ``batch`` (arrays of one leading length), results joined.
+def split_map(pool, fn, arrays: tuple, *extra) -> tuple:
+    """``fn(pool.state, (parts, *extra))`` on parts of ``arrays`` (sharing their first axis), results joined.
 
-    ``batch`` is one array or a tuple of arrays sharing their first axis; it
-    is cut into at most ``pool.workers`` consecutive parts, and each result
-    (a tuple of arrays with that leading axis) is concatenated in order.
-    With one part the call runs in this process.
+    The arrays are cut into at most ``pool.workers`` consecutive parts, and
+    each result (a tuple of arrays with that leading axis) is concatenated
+    in order.  With one part the call runs in this process.
     """
-    arrays = batch if isinstance(batch, tuple) else (batch,)
     n = len(arrays[0])
     cuts = [c for c in np.array_split(np.arange(n), max(1, min(pool.workers, n))) if len(c)]
-    one = not isinstance(batch, tuple)
-    items = [((arrays[0][c] if one else tuple(x[c] for x in arrays)), *extra) for c in cuts]
+    items = [(tuple(x[c] for x in arrays), *extra) for c in cuts]
     if len(items) == 1:
         return fn(pool.state, items[0])
     parts = pool.map(fn, items)
