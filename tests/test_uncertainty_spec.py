@@ -85,11 +85,12 @@ def test_file_refusals_are_one_line_exit_2(capsys, tmp_path, doc, words):
 
 
 def test_a_set_the_model_cannot_carry_is_refused_with_its_measured_reason(capsys, tmp_path):
-    # panda with its rated payload (0-3 kg, CoM within 0.1 m): measured before any bounds are taken
+    # panda with its rated payload (0-3 kg) whose CoM lies within 0.3 m: measured before any bounds are taken
     import yaml
 
     doc = yaml.safe_load(EXAMPLE.read_text(encoding="utf-8"))
     doc["payload"]["mass"] = [0.0, 3.0]
+    doc["payload"]["com_ball"]["radius"] = 0.3
     path = write(tmp_path, doc)
     for argv in (
         ("synth", "panda", "--robot-uncertainty", path),
@@ -101,7 +102,7 @@ def test_a_set_the_model_cannot_carry_is_refused_with_its_measured_reason(capsys
         assert "default task of" not in err and code == 2 and out == "", argv
         assert "not carried on panda's default task: the relative inertia error is too large" in line, argv
         # the set is echoed as a phrase
-        assert "per-link ±10 %" in line and "payload 0-3 kg, centre of mass within 0.1 m" in line, argv
+        assert "per-link ±10 %" in line and "payload 0-3 kg, centre of mass within 0.3 m" in line, argv
         assert "panda_link8" in line and "Coulomb <= 1.279 N m" in line, argv
 
 

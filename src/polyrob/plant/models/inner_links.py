@@ -409,8 +409,8 @@ def inner_links_plant(
     residual_norm = _state_residual_norm(rest[..., :n], on_payload, pay, spread[:, :n]) if residual == "block" else None
     # the acceleration columns: one norm-bounded block (in M_hat^{1/2} coordinates nearly symmetric)
     # two valid bounds of the same block: each sample's symmetric form times what the fixed weighting costs
-    # there (kappa), or the fixed weighting's own symmetric and skew parts (panda: 1.68 and 1.20 against the
-    # 1.32 the centre leaves); the one of smaller relative size is carried
+    # there (kappa), or the fixed weighting's own block, not symmetric away from the task's centre (its
+    # Hermitian dilation: inner_links_inertia.g_norm_bound); the one of smaller relative size is carried
     G_fixed = Phi[..., n:]
     bounds = [g_norm_bound(G_exact[~on_payload], G_exact[on_payload], pay, kappa),
               g_norm_bound(G_fixed[~on_payload], G_fixed[on_payload], pay, np.ones(len(q)))]  # fmt: skip
