@@ -9,9 +9,10 @@ default_task.DefaultTask`) and the engineer's set of ``--robot-uncertainty
 default`` (:func:`polyrob.uncertainty_set.default_set.default_set`), with
 the ``inner-links`` model's answer on the default task
 (:func:`polyrob.plant.models.inner_links.carried`, the check ``synth`` makes
-before its bounds): carried, or refused with the bound of the inertia block,
-the room its centre leaves and the range of the true robots' inertia
-against the model's.  Seconds per arm; no synthesis.
+before its bounds): carried or refused, with the bound of the inertia block
+and the room its centre leaves (:func:`~polyrob.plant.models.inner_links.light_model`'s
+``info``), and when refused the range of the true robots' inertia against
+the model's.  Seconds per arm; no synthesis.
 """
 
 from __future__ import annotations
@@ -37,10 +38,11 @@ def main() -> None:
     args = ap.parse_args()
 
     from polyrob.domains.default_task import DEFAULT_TASK, applies_to, default_task_domain
+    from polyrob.errors import NotApplicable
     from polyrob.fleet.batch import serial_arms
     from polyrob.model.inner import inner_loop_of_set
     from polyrob.model.robots import load_robot
-    from polyrob.plant.models.inner_links import carried
+    from polyrob.plant.models.inner_links import light_model
     from polyrob.uncertainty_set.default_set import default_set
 
     rows, out = [], []
@@ -56,7 +58,11 @@ def main() -> None:
         )
         spec = default_set(robot)
         loop = inner_loop_of_set(robot, "computed-torque", spec)
-        why = carried(loop, default_task_domain(loop, DEFAULT_TASK))
+        try:
+            info = light_model(loop, default_task_domain(loop, DEFAULT_TASK)).info
+            why = None
+        except NotApplicable as exc:
+            why = str(exc).removeprefix("inner-links: ")
         entry = {"robot": name, "joints": robot.m, "default_task_set": task_set, "set": spec.words(),
                  "source": spec.source, "carried": why is None, "why": why}  # fmt: skip
         found = REFUSAL.search(why or "")
@@ -66,8 +72,11 @@ def main() -> None:
                 f"refused: block bound {entry['g_bound']:.3g} against {entry['g_room']:.3g}; true inertia "
                 f"{entry['inertia_low']:.2g} to {entry['inertia_high']:.2g} times the model's"
             )
+        elif why is None:
+            entry.update(g_bound=info["residual_g_norm"], g_room=1.0 - float(info["K_offset"][-1, -1]))
+            verdict = f"carried: block bound {entry['g_bound']:.3g} against {entry['g_room']:.3g}"
         else:
-            verdict = "carried" if why is None else f"refused: {why}"
+            verdict = f"refused: {why}"
         instrument = "no instrument (rating unknown)" if spec.payload is None else (
             f"instrument 0-{spec.payload.mass_upper:g} kg within {spec.payload.com_radius:g} m")  # fmt: skip
         entry["seconds"] = time.perf_counter() - t0

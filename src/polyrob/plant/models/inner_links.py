@@ -83,6 +83,7 @@ __all__ = [
     "unit_factors",
     "factor_of",
     "inner_links_plant",
+    "light_model",
     "carried",
     "scalars_of_true",
     "set_witness",
@@ -298,19 +299,26 @@ def unit_factors(loop, scalars, q, qdot, a) -> np.ndarray:
     return np.array(out)
 
 
-def carried(loop, domain, *, samples: int = 64) -> str | None:
-    """Why the model cannot carry ``loop``'s set over ``domain`` (``None``: it can), measured on a light build.
+def light_model(loop, domain, *, samples: int = 64) -> UncertainPlant:
+    """The model of ``loop``'s set over ``domain`` on a light stand-in for a PLDI (raises :class:`NotApplicable`).
 
     The build reads of the PLDI only its domain, size and nominal, so a
-    stand-in answers in seconds what the bounds would take minutes to reach.
+    stand-in answers in seconds what the bounds would take minutes to reach;
+    its ``info`` holds the inertia block's bound (``residual_g_norm``) and
+    centre (``K_offset``).
     """
     from types import SimpleNamespace
 
     q, qdot, a = _domain_points(domain, 1, seed=0)
     A0, B0 = loop.jacobians_batch(q, qdot, loop.inverse_dynamics(q, qdot, a))
     stand_in = SimpleNamespace(m=loop.m, domain=domain, A0=A0[0], B0=B0[0], enclosure="sampled", robot_name=loop.name)
+    return inner_links_plant(stand_in, loop, samples=samples)
+
+
+def carried(loop, domain, *, samples: int = 64) -> str | None:
+    """Why the model cannot carry ``loop``'s set over ``domain`` (``None``: it can), measured on :func:`light_model`."""
     try:
-        inner_links_plant(stand_in, loop, samples=samples)
+        light_model(loop, domain, samples=samples)
     except NotApplicable as exc:
         return str(exc).removeprefix("inner-links: ")
     return None
