@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from polyrob.plant.models.inner_links_inertia import g_norm_bound
+from polyrob.plant.models.inner_links_inertia import g_norm_bound, residual_norm_bounds
 
 
 def _random_block(seed, J=6, S=5, m=4, P=25, k=3):
@@ -61,3 +61,22 @@ def test_one_symmetric_scalar_is_bounded_exactly():
     box = np.diag([0.3, -0.1])[None, None]
     g_norm, g0 = g_norm_bound(box, np.zeros((0, 1, 2, 2)), np.zeros((1, 0)), np.ones(1))
     assert g_norm == pytest.approx(0.3, abs=2e-3) and abs(g0) < 2e-3
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_residual_s_norm_bound_holds_for_every_member_and_is_at_most_the_triangle_inequality(seed):
+    rng = np.random.default_rng(seed)
+    box = rng.standard_normal((8, 4, 3, 6))  # the state residual: joints x states, 8 scalars, 4 samples
+    payload = rng.standard_normal((2, 4, 3, 6))
+    pay = rng.uniform(-1.0, 1.0, (30, 2))
+    bound = residual_norm_bounds(box, payload, pay, chunk=3)
+    triangle = np.linalg.norm(box, 2, axis=(-2, -1)).sum(0) + np.linalg.norm(
+        np.einsum("pi,isab->psab", pay, payload), 2, axis=(-2, -1)).max(0)  # fmt: skip
+    assert np.all(bound <= triangle * (1 + 1e-12)) and np.any(bound < 0.9 * triangle)
+    for s in range(4):
+        worst = max(
+            np.linalg.norm(np.tensordot(rng.choice([-1.0, 1.0], 8), box[:, s], axes=1)
+                           + np.tensordot(pay[p], payload[:, s], axes=1), 2)  # fmt: skip
+            for p in rng.integers(0, 30, 400)
+        )
+        assert 0.5 * bound[s] < worst <= bound[s] * (1 + 1e-12)

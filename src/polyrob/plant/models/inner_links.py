@@ -68,7 +68,13 @@ import pinocchio
 
 from polyrob.errors import NotApplicable
 from polyrob.plant.lftplant import UncertainPlant
-from polyrob.plant.models.inner_links_inertia import exactly_weighted, g_norm_bound, inertia_range, inertia_ratio
+from polyrob.plant.models.inner_links_inertia import (
+    exactly_weighted,
+    g_norm_bound,
+    inertia_range,
+    inertia_ratio,
+    residual_norm_bounds,
+)
 from polyrob.uncertainty_set.payload_body import SECOND_MOMENT_ENTRIES, payload_sampling_words, second_moment
 
 __all__ = [
@@ -468,18 +474,20 @@ def inner_links_plant(
     )
 
 
-def _state_residual_norm(rest, on_payload, pay, spread, chunk: int = 16) -> float | None:
+def _state_residual_norm(rest, on_payload, pay, spread) -> float | None:
     """The state columns' residual block's norm bound ``rho <= 1`` in the weights the entry radii ``spread`` give it.
 
     The entry box (:func:`~polyrob.plant.models.axes.residual_of_radii`: a
     Frobenius covering, ``rho = 1``) takes each entry's largest value over the
     samples, which no single sample reaches.  At each sample ``x`` the
-    residual ``E(u, x) = sum_j u_j R_j(x)`` has, for every ``u`` of the box,
-    ``||W_l^-1 E W_r^-1|| <= sum_j ||W_l^-1 R_j(x) W_r^-1||`` (the triangle
-    inequality; the payload's scalars at the points of its physical set):
-    sampled over the task like the entries, exact over the box scalars.  Its
-    largest value over the samples times :data:`SPREAD_MARGIN`, capped at 1.
-    ``rest``: ``(N, S, m, 2m)`` (weighted); ``spread``: ``(m, 2m)``.
+    residual ``E(u, x) = sum_j u_j R_j(x)`` in those weights is bounded for
+    every ``u`` of the box by the dilation bound of
+    :func:`~polyrob.plant.models.inner_links_inertia.residual_norm_bounds`
+    (the payload's scalars at the points of its physical set; at most the
+    triangle inequality's ``sum_j ||R_j(x)||``): sampled over the task like
+    the entries, exact over the box scalars.  Its largest value over the
+    samples times :data:`SPREAD_MARGIN`, capped at 1.  ``rest``:
+    ``(N, S, m, 2m)`` (weighted); ``spread``: ``(m, 2m)``.
     """
     from polyrob.plant.models.axes import residual_of_radii
 
@@ -488,12 +496,7 @@ def _state_residual_norm(rest, on_payload, pay, spread, chunk: int = 16) -> floa
     if not len(rows):
         return None
     scaled = rest[:, :, rows][:, :, :, cols] / gains["W_l"][:, None] / gains["W_r"][None, :]  # (N, S, r, c)
-    bound = np.linalg.norm(scaled[~on_payload], 2, axis=(-2, -1)).sum(axis=0)  # (S,)
-    if on_payload.any():
-        on = scaled[on_payload]
-        for start in range(0, on.shape[1], chunk):  # (points, chunk, r, c) at a time: the payload's set is large
-            sums = np.einsum("pi,isab->psab", pay, on[:, start : start + chunk])
-            bound[start : start + chunk] += np.linalg.norm(sums, 2, axis=(-2, -1)).max(axis=0)
+    bound = residual_norm_bounds(scaled[~on_payload], scaled[on_payload], pay)
     return float(min(1.0, SPREAD_MARGIN * bound.max()))
 
 

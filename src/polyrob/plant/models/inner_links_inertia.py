@@ -1,16 +1,39 @@
-"""The inertia block of the ``inner-links`` model: the relative inertia error ``G = I - M_hat^-1 M`` as one norm-bounded block.
+"""The norm-bounded blocks of the ``inner-links`` model: the relative inertia error ``G = I - M_hat^-1 M`` and the state residual.
 
 Split from :mod:`~polyrob.plant.models.inner_links` (its module text says
-how the block is used): the weighted forms of ``G`` over the task's
-samples, the bound of their spread over the set, and the inertia ratio the
-model reports.
+how the blocks are used): the weighted forms of ``G`` over the task's
+samples, the bounds of the blocks' norms over the set, and the inertia
+ratio the model reports.
+
+Both blocks are a matrix linear in the set's scalars, ``sum_j u_j R_j``
+(``|u_j| <= 1``), plus the payload's part at each point of its physical
+set.  Its norm is the largest eigenvalue of its Hermitian dilation
+``H(X) = [[0, X], [X^T, 0]]``, linear in ``X``; ``u H(R) <= |H(R)|`` in the
+Loewner order, so ``||sum_j u_j R_j + R_p|| <= lambda_max(H(R_p) + sum_j
+|H(R_j)|)`` for every ``u`` of the box: at most the triangle inequality's
+``sum_j ||R_j|| + ||R_p||``, and less where the ``R_j`` act on different
+directions.
+
+Examples
+--------
+>>> import numpy as np
+>>> R = np.array([np.diag([1.0, 0.0]), np.diag([0.0, 1.0])])[:, None]  # two scalars on different axes, one sample
+>>> float(residual_norm_bounds(R, np.zeros((0, 1, 2, 2)), np.zeros((1, 0)))[0])  # the triangle inequality says 2
+1.0
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["exactly_weighted", "spectrum_bounds", "g_norm_bound", "inertia_range", "inertia_ratio"]
+__all__ = [
+    "exactly_weighted",
+    "spectrum_bounds",
+    "g_norm_bound",
+    "residual_norm_bounds",
+    "inertia_range",
+    "inertia_ratio",
+]
 
 
 def exactly_weighted(robot, q, G, W) -> tuple[np.ndarray, np.ndarray]:
@@ -60,10 +83,10 @@ def spectrum_bounds(box_rest, payload_rest, pay) -> tuple[np.ndarray, np.ndarray
 
 def _dilation(X) -> np.ndarray:
     """The Hermitian dilation ``[[0, X], [X^T, 0]]`` of ``X`` (last two axes): linear in ``X``, its largest eigenvalue ``||X||_2``."""
-    m = X.shape[-1]
-    out = np.zeros(X.shape[:-2] + (2 * m, 2 * m))
-    out[..., :m, m:] = X
-    out[..., m:, :m] = np.swapaxes(X, -1, -2)
+    r, c = X.shape[-2:]
+    out = np.zeros(X.shape[:-2] + (r + c, r + c))
+    out[..., :r, r:] = X
+    out[..., r:, :r] = np.swapaxes(X, -1, -2)
     return out
 
 
@@ -92,9 +115,7 @@ def g_norm_bound(box_rest, payload_rest, pay, kappa) -> tuple[float, float]:
     from scipy.optimize import minimize_scalar
 
     m = box_rest.shape[-1]
-    H = _dilation(box_rest)
-    values, vectors = np.linalg.eigh(H)
-    A = np.einsum("...ab,...b,...cb->...ac", vectors, np.abs(values), vectors).sum(axis=0)  # (S, 2m, 2m)
+    A = _absolute_sum(box_rest)  # (S, 2m, 2m)
     R = np.einsum("pi,isab->psab", pay, payload_rest) if len(payload_rest) else np.zeros((1,) + box_rest.shape[1:])
     eye = np.eye(m)
 
@@ -121,6 +142,30 @@ def g_norm_bound(box_rest, payload_rest, pay, kappa) -> tuple[float, float]:
         at_g[p, s] = np.linalg.eigvalsh(_dilation(R[p, s] - g * eye) + A[s]).max(axis=-1)
     bounds = [(float((kappa * at_centre.max(axis=0)).max()), g_c), (float((kappa * at_g.max(axis=0)).max()), g)]
     return min((b for b in bounds if b[1] < 1.0), key=lambda b: b[0] / (1.0 - b[1]))
+
+
+def _absolute_sum(X) -> np.ndarray:
+    """``sum_j |H(X_j)|`` over the first axis of ``X`` ``(J, S, r, c)``: ``(S, r + c, r + c)``."""
+    values, vectors = np.linalg.eigh(_dilation(X))
+    return np.einsum("...ab,...b,...cb->...ac", vectors, np.abs(values), vectors).sum(axis=0)
+
+
+def residual_norm_bounds(box_rest, payload_rest, pay, chunk: int = 16) -> np.ndarray:
+    """``(S,)``: ``||sum_j u_j R_j + sum_i p_i P_i||_2`` bounded at each sample, over the box ``|u_j| <= 1`` and the points ``p`` of ``pay``.
+
+    ``box_rest`` ``(J, S, r, c)``, ``payload_rest`` ``(I, S, r, c)``, ``pay``
+    ``(points, I)``: the module text's dilation bound, the payload's points
+    ``chunk`` samples at a time (a payload's set has about 1300 points).
+    """
+    A = _absolute_sum(box_rest)
+    if not len(payload_rest):
+        return np.linalg.eigvalsh(A).max(axis=-1)
+    out = np.empty(box_rest.shape[1])
+    for start in range(0, len(out), chunk):
+        part = slice(start, start + chunk)
+        sums = np.einsum("pi,isab->psab", pay, payload_rest[:, part])
+        out[part] = np.linalg.eigvalsh(_dilation(sums) + A[part]).max(axis=-1).max(axis=0)
+    return out
 
 
 def inertia_range(G_exact_box, G_exact_payload, pay) -> tuple[float, float]:
