@@ -134,8 +134,9 @@ def test_the_coverage_falls_below_one_when_the_set_is_shrunk(name):
 
 def test_panda_s_default_set_is_carried_once_the_block_keeps_its_skew_part_s_signs():
     # with the task's corners sampled the fixed weighting's block is not symmetric; its symmetric part's spectrum
-    # plus the skew parts' norms bounded it by 1.35 against the 1.33 its centre left (refused), the Hermitian
-    # dilation by 1.2 (inner_links_inertia.g_norm_bound)
+    # plus the skew parts' norms bounded it by 1.35 against the 1.33 its centre left (refused: the record
+    # default_set-20261129T224539), the Hermitian dilation by 1.22 against 1.54 (inner_links_inertia.g_norm_bound;
+    # python benchmarks/default_set.py panda)
     panda = load_robot("panda")
     loop = inner_loop_of_set(panda, "computed-torque", spec_of("panda"), draws=0)
     assert links.carried(loop, default_task_domain(loop)) is None

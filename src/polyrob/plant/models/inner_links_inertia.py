@@ -99,9 +99,9 @@ def g_norm_bound(box_rest, payload_rest, pay, kappa) -> tuple[float, float]:
     scalars) and every point ``p`` of the payload's sampled physical set.  A
     block that is not symmetric (the fixed weighting away from the task's
     centre) keeps the signs its symmetric and skew parts share; adding the
-    skew parts' norms to the symmetric part's spectrum instead gave panda's
-    default set 1.29 against the 1.13 here.  ``kappa`` per sample is what a
-    fixed weighting costs there.
+    skew parts' norms to the symmetric part's spectrum instead refused
+    panda's default set and z1's (docs/uncertainty.md).  ``kappa`` per sample is
+    what a fixed weighting costs there.
 
     ``g0``, the block's centre (a heavy off-axis payload raises the inertia
     more than a light one lowers it), minimises ``g_norm / (1 - g0)``, the
@@ -119,8 +119,12 @@ def g_norm_bound(box_rest, payload_rest, pay, kappa) -> tuple[float, float]:
     R = np.einsum("pi,isab->psab", pay, payload_rest) if len(payload_rest) else np.zeros((1,) + box_rest.shape[1:])
     eye = np.eye(m)
 
-    def largest(g, rows):  # (rows, S): the dilation's largest eigenvalue at each payload point and sample
-        return np.linalg.eigvalsh(_dilation(R[rows] - g * eye) + A).max(axis=-1)
+    def largest(g, rows, chunk=32):  # (rows, S): the dilation's largest eigenvalue at each payload point and sample
+        out = np.empty((len(rows), A.shape[0]))
+        for start in range(0, A.shape[0], chunk):  # a payload's 1300 points times 512 samples: a gigabyte at once
+            part = slice(start, start + chunk)
+            out[:, part] = np.linalg.eigvalsh(_dilation(R[rows, part] - g * eye) + A[part]).max(axis=-1)
+        return out
 
     bottom, top, _ = spectrum_bounds(box_rest, payload_rest, pay[::16])  # a start: any centre gives a bound
     g_c = 0.5 * (float(top.max()) + float(bottom.min()))
@@ -137,8 +141,8 @@ def g_norm_bound(box_rest, payload_rest, pay, kappa) -> tuple[float, float]:
     at_g = at_centre + abs(g - g_c)  # every pair's eigenvalue at g, bounded
     at_g[active] = largest(g, active)
     unsettled = np.argwhere(kappa * at_g > (kappa * at_g[active]).max())
-    if len(unsettled):
-        p, s = unsettled.T
+    for start in range(0, len(unsettled), 16384):
+        p, s = unsettled[start : start + 16384].T
         at_g[p, s] = np.linalg.eigvalsh(_dilation(R[p, s] - g * eye) + A[s]).max(axis=-1)
     bounds = [(float((kappa * at_centre.max(axis=0)).max()), g_c), (float((kappa * at_g.max(axis=0)).max()), g)]
     return min((b for b in bounds if b[1] < 1.0), key=lambda b: b[0] / (1.0 - b[1]))
