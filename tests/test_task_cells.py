@@ -82,13 +82,16 @@ def test_the_task_s_moving_robot_is_certified_on_cells_and_says_so(certified):
 
 
 def test_the_proved_x_holds_at_random_points_and_exact_rates_of_the_task(tiny_task):
-    """Soundness: an X the cells prove, at random (q2, qdot, qddot) with dq2/dt = qdot2 and dqdot/dt = qddot."""
-    from polyrob.analysis.lpv.basis import default_basis
+    """Soundness: an X the cells prove, at random (q2, qdot, qddot) with dq2/dt = qdot2 and dqdot/dt = qddot.
+
+    The X is the certificate's: the search, then the re-check grid's failing points added to it (constraint
+    generation), as :func:`task_motion_certificate` runs them before the cells."""
+    from polyrob.analysis.lpv.basis import default_basis, finer_recheck
     from polyrob.analysis.lpv.cells import check_cells
     from polyrob.analysis.lpv.moving import conditioned_time_scale
     from polyrob.analysis.lpv.norm import lpvnorm
-    from polyrob.analysis.lpv.robot import closed_loop_system, conditioned
-    from polyrob.analysis.lpv.task import _search, task_rate_bounds
+    from polyrob.analysis.lpv.robot import cells_level, closed_loop_system, conditioned
+    from polyrob.analysis.lpv.task import RECHECK_ROUNDS, _add_failing_points, _search, recheck_points, task_rate_bounds
 
     model = task_scheduling(tiny_task.robot, tiny_task.domain, points=(3, 2))
     system = closed_loop_system(model, pd_controller(), tiny_task.P.W_S, None, None)
@@ -96,6 +99,10 @@ def test_the_proved_x_holds_at_random_points_and_exact_rates_of_the_task(tiny_ta
     rates = task_rate_bounds(model, tiny_task.domain)
     r, sysf, c = _search(model, system, rates, basis, lpvnorm, conditioned, conditioned_time_scale, kinematic_rates,
                          0.9)  # fmt: skip
+    recheck = recheck_points((3, 2))
+    finer = finer_recheck(sysf, model, r, rates, basis, points=recheck, c=c)
+    r, _, _ = _add_failing_points(model, sysf, c, r, finer, rates, basis, recheck, r.gamma + 0.75 * (cells_level(r.gamma, 0.9) - r.gamma),
+                                  RECHECK_ROUNDS, {"eps": 1e-4, "level": 0.9, "solver": "clarabel"})  # fmt: skip
     used = [(-np.inf, np.inf) if k == "qddot" else b for b, k in zip(rates, model.kinds)]
     chk = check_cells(model, system, r.X, basis, used, 0.9, similarity=getattr(sysf, "similarity", None), c=c,
                       workers=1)  # fmt: skip
@@ -115,8 +122,12 @@ def test_the_proved_x_holds_at_random_points_and_exact_rates_of_the_task(tiny_ta
 
 
 def test_without_cells_the_task_certificate_stays_grid_only(tiny_task):
+    """The same search and constraint generation as the cells' certificate (without them, the X at level 0.9 may
+    fail on the finer grid: NOT_CERTIFIED, as Clarabel 0.11's did), and no cells: grid only."""
+    from polyrob.analysis.lpv.task import RECHECK_ROUNDS
+
     plain = task_motion_certificate(tiny_task, pd_controller(), points=(3, 2), velocities="bounded", level=0.9,
-                                    lower_bound=False)  # fmt: skip
+                                    lower_bound=False, recheck_rounds=RECHECK_ROUNDS)  # fmt: skip
     assert plain.certificate.status.value == "GRID_ONLY" and not plain.cells
 
 

@@ -390,8 +390,9 @@ def task_motion_certificate(
         fifth of the memory, for a lower bound (the records in
         docs/certificates.md, ``benchmarks/moving_task.py --solver``); on the
         small tasks of the tests (two points per velocity) its ``X``, of the
-        same margin, failed between the points where Clarabel's held
-        (:data:`~polyrob.analysis.lpv.robot.SEARCH_SOLVER`).
+        same margin, failed between the points where Clarabel 0.10's held
+        (:data:`~polyrob.analysis.lpv.robot.SEARCH_SOLVER`; with ``cells``
+        the constraint generation below makes either hold).
     recheck_rounds : int, optional
         Rounds of constraint generation: the re-check grid's points where
         ``X`` is not proved at a level three quarters of the way from the
