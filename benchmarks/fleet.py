@@ -22,6 +22,11 @@ option not given here (the figures of "All serial arms" in docs/fleet.md)::
 
     python benchmarks/fleet.py --all-serial --max-bandwidth --speedup-robots ""
 
+and on the engineer's set of each arm (per-link ±10 %, an instrument of 0-1.5 kg
+within 0.1 m of the flange, friction: docs/uncertainty.md)::
+
+    python benchmarks/fleet.py --all-serial --max-bandwidth --speedup-robots "" --robot-uncertainty default
+
 A robot is ``NAME`` or ``NAME:DOMAIN`` (a named domain, e.g. ``paper_2r:paper``).
 The robots of ``--robots`` run in one batch with ``-j`` workers; the speed-up
 runs ``--speedup-robots`` once with 1 worker and once with 2.
@@ -96,6 +101,11 @@ def main(argv=None) -> int:
     p.add_argument("--max-bandwidth", action="store_true", help="search the largest bandwidth factor")
     p.add_argument("--alphas", default=None, help="factors of the bandwidth search (comma-separated)")
     p.add_argument("--uncertainty", default="auto")
+    p.add_argument(
+        "--robot-uncertainty",
+        default=None,
+        help="a robot-uncertainty set for every job: 'default' (the engineer's set of each arm) or a YAML/JSON file",
+    )
     p.add_argument("--no-validate", action="store_true")
     p.add_argument(
         "--no-analysis", action="store_true", help="skip the mu analysis sweeps (the row: the synthesis certificate)"
@@ -129,8 +139,16 @@ def main(argv=None) -> int:
     if args.mc is not None:
         options["mc"] = args.mc
 
+    extra = {}
+    if args.robot_uncertainty is not None:
+        extra["robot_uncertainty"] = args.robot_uncertainty
+        if args.robot_uncertainty != "default":
+            from polyrob.uncertainty_set.spec import RobotUncertainty
+
+            extra["robot_uncertainty"] = RobotUncertainty.from_file(args.robot_uncertainty).to_dict()
+
     def jobs(text):
-        return [dict(j, uncertainty=args.uncertainty) for j in _jobs(text)]
+        return [dict(j, uncertainty=args.uncertainty, **extra) for j in _jobs(text)]
 
     def show(r, done, total):
         print(
@@ -151,7 +169,8 @@ def main(argv=None) -> int:
             "cores": len(os.sched_getaffinity(0)),
             "load_average_at_start": os.getloadavg(),
         },
-        "settings": {**options, "uncertainty": args.uncertainty, "workers": args.workers},
+        "settings": {**options, "uncertainty": args.uncertainty, "robot_uncertainty": args.robot_uncertainty,
+                     "workers": args.workers},
     }
     res = run_batch(jobs(args.robots), workers=args.workers, progress=show, **options)
     doc["robots"] = [_row(r) for r in res.results]
@@ -178,20 +197,23 @@ def fleet_record(doc: dict) -> dict:
     """The batch's results-file record: the robots' table and the count certified, with the command and machine."""
     rows = doc["robots"]
     certified = sum(bool(r["certified"]) for r in rows)
-    columns = ["robot", "model (real scalars)", "status", "μ at every frequency", "factor α", "order", "validation"]
-    columns += ["bounds s", "robot s"]
+    columns = ["robot", "model (real scalars)", "status", "μ at every frequency", "μ on the grid", "factor α", "order"]
+    columns += ["validation", "bounds s", "robot s"]
+    why = any(r["reason"] for r in rows)
+    columns += ["what stands in the way"] if why else []
     table = [
         [
             r["robot"],
             f"{r['model']} ({r['parameters']})" if r["model"] else "–",
             r["status"] or f"FAILED: {r['error']}",
             "–" if r["mu_upper"] is None else f"{r['mu_upper']:.4f}",
+            "–" if r["mu_upper_grid"] is None else f"{r['mu_upper_grid']:.4g}",
             "–" if r["alpha"] is None else f"{r['alpha']:.4g}",
             "–" if r["order"] is None else str(r["order"]),
             r["validation"] or "–",
             "–" if r["bound_s"] is None else f"{r['bound_s']:.0f}",
             f"{r['total_s']:.0f}",
-        ]
+        ] + ([r["reason"] or "–"] if why else [])
         for r in rows
     ]
     figure = f"{certified} of {len(rows)} robots CERTIFIED; {doc['batch_seconds']:.0f} s"
