@@ -124,6 +124,13 @@ def test_a_set_is_carried_on_computed_torque_only_and_not_twice_and_by_the_batch
     assert type(robot).__name__ == "SetLoopRobot" and robot.inner == "computed-torque" and task is not None
     assert robot.uncertainty.link_error == 0.1 and "per-link ±10 %" in robot.words()
     assert type(domain).__name__ == "TaskDomain"
+    # a two-joint robot has no default task: its row says so (the set needs that task's computed-torque layer)
+    (job,) = with_robot_uncertainty(args, [{"robot": "planar_2r"}])
+    with pytest.raises(ArgumentError, match="planar_2r has 2 joints and no default task"):
+        job_robot_and_domain(as_job(job))
+    (job,) = with_robot_uncertainty(args, [{"robot": "ur5", "model_error": 0.1}])
+    with pytest.raises(ArgumentError, match="holds the link errors and the payload: drop model_error$"):
+        job_robot_and_domain(as_job(job))
 
 
 def test_link_error_option(capsys):

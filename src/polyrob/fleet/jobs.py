@@ -275,10 +275,20 @@ def job_robot_and_domain(job: Job):
         from polyrob.model.inner import inner_loop_of_set
         from polyrob.uncertainty_set.spec import RobotUncertainty
 
-        if inner != "computed-torque" or job.model_error is not None or job.payload_mass is not None:
+        if job.model_error is not None or job.payload_mass is not None:
             raise ArgumentError(
-                f"job {job.name}: a robot-uncertainty set is carried on a computed-torque inner layer only, "
-                "without model_error or payload_mass beside it"
+                f"job {job.name}: the robot-uncertainty set holds the link errors and the payload: drop "
+                + " and ".join(k for k in ("model_error", "payload_mass") if getattr(job, k) is not None)
+            )
+        if inner != "computed-torque":
+            why = (
+                f"{robot.name} has {robot.m} joints and no default task (an arm of 3+ joints has one, with that layer)"
+                if task is None and not (given or job.torque_box) and job.inner is None
+                else f"this job's inner layer is {inner!r}"
+            )
+            raise ArgumentError(
+                f"job {job.name}: a robot-uncertainty set is carried on a computed-torque inner layer only, and {why}: "
+                "give inner: computed-torque with a task (pose, q_radius, qddot_max), or drop robot_uncertainty"
             )
         from polyrob.uncertainty_set.default_set import DEFAULT_SET, default_set
 
