@@ -199,7 +199,7 @@ def fleet_record(doc: dict) -> dict:
     certified = sum(bool(r["certified"]) for r in rows)
     columns = ["robot", "model (real scalars)", "status", "μ at every frequency", "μ on the grid", "factor α", "order"]
     columns += ["validation", "bounds s", "robot s"]
-    why = any(r["reason"] for r in rows)
+    why = any(r.get("reason") for r in rows)
     columns += ["what stands in the way"] if why else []
     table = [
         [
@@ -213,7 +213,7 @@ def fleet_record(doc: dict) -> dict:
             r["validation"] or "–",
             "–" if r["bound_s"] is None else f"{r['bound_s']:.0f}",
             f"{r['total_s']:.0f}",
-        ] + ([r["reason"] or "–"] if why else [])
+        ] + ([r.get("reason") or "–"] if why else [])
         for r in rows
     ]
     figure = f"{certified} of {len(rows)} robots CERTIFIED; {doc['batch_seconds']:.0f} s"

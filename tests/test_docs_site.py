@@ -133,14 +133,18 @@ def test_the_benchmarks_turn_their_json_into_records(monkeypatch):
         robot="ur5", model="inner-gain", parameters=2, status="CERTIFIED", mu_upper=0.66521, alpha=32.0, order=12
     )
     row.update(validation="settled, inside", bound_s=108.2, total_s=183.4, certified=True, error=None)
+    row.update(mu_upper_grid=0.6601, reason=None)
     failed = dict(row, robot="TwoDofs", model=None, status=None, mu_upper=None, alpha=None, order=None, certified=False)
-    failed.update(validation=None, bound_s=None, total_s=5.0, error="PerformanceLimit: >= 1")
+    failed.update(validation=None, bound_s=None, total_s=5.0, error="PerformanceLimit: >= 1", mu_upper_grid=None)
+    failed.update(reason="performance limit 1.3 at the weights used")
     record = fleet.fleet_record({"robots": [row, failed], "batch_seconds": 1154.4})
     assert record["figure"] == "1 of 2 robots CERTIFIED; 1154 s" and record["id"].startswith("batch-")
+    assert record["table"]["columns"][4] == "μ on the grid" and record["table"]["columns"][-1] == "what stands in the way"
     assert record["table"]["rows"] == [
-        ["ur5", "inner-gain (2)", "CERTIFIED", "0.6652", "32", "12", "settled, inside", "108", "183"],
-        ["TwoDofs", "–", "FAILED: PerformanceLimit: >= 1", "–", "–", "–", "–", "–", "5"],
-    ]
+        ["ur5", "inner-gain (2)", "CERTIFIED", "0.6652", "0.6601", "32", "12", "settled, inside", "108", "183", "–"],
+        ["TwoDofs", "–", "FAILED: PerformanceLimit: >= 1", "–", "–", "–", "–", "–", "–", "5",
+         "performance limit 1.3 at the weights used"],
+    ]  # fmt: skip
     runs = [
         {
             "command": "run --json --quiet",
