@@ -364,3 +364,34 @@ def test_the_d_steps_see_the_crossover_of_a_double_integrator_loop():
     peak = mu_peak(np.concatenate([[0.0], np.logspace(-3, 5, 161)]))
     assert peak > 1.5 * mu_peak(omega)  # the plant's grid alone misses the peak by far
     assert hist[0].mu_peak == pytest.approx(peak, rel=0.05)
+
+
+def test_the_certificate_of_the_best_iteration_has_its_own_part_of_the_job_s_progress(monkeypatch):
+    """`synth ur5 --robot-uncertainty default` stood at "97 %, 5 s left" for the 120 s of its certificate: the
+    D-K iterations filled the whole stage.  Now they fill ITERATIONS_SHARE of it and the certificate the rest."""
+    import io
+
+    from clocks import FakeClock
+
+    import polyrob.synthesis.mu_synthesis as ms
+    from polyrob.progress import WITHIN_CAP, JobProgress
+
+    job = JobProgress(["synthesis"], stream=io.StringIO(), clock=FakeClock(now=0.0))
+    job.start()
+    job._stop.set()  # no real-time ticks: the shares are read directly
+    seen = []
+    certify = ms.certify_loop
+
+    def spy(*args, **kwargs):
+        seen.append(job.share)
+        return certify(*args, **kwargs)
+
+    monkeypatch.setattr(ms, "certify_loop", spy)
+    try:
+        job.begin(1, "synthesis (full)")
+        musyn(_mixed_toy(), [[-1, 0], [1, 1]], n_u=1, n_y=1, max_iter=4, progress=False)
+        after = job.share
+    finally:
+        job.stop()
+    assert seen and seen[0] == pytest.approx(ms.ITERATIONS_SHARE)  # the iterations' part, not the stage's end
+    assert after == pytest.approx(WITHIN_CAP)  # the certificate's span ended the stage (its cap)
