@@ -84,6 +84,20 @@ def test_the_check_reads_the_weighted_norm_of_each_frozen_loop():
     assert "lower bound of the set's worst case, not a certificate" in check.words()
 
 
+def test_the_worst_loop_s_figure_by_weight_says_which_weight_it_misses():
+    """Each weight alone on the worst loop: none above the stacked peak, and together they make it up (two
+    stacked blocks: at most sqrt(2) times the larger); said when the worst loop misses the weights."""
+    loop, task = loop_and_task(0.1)
+    check = tr.true_robot_check(loop, task, pid(2.0), WEIGHTS, n=8)
+    channels = check.worst_channels
+    assert set(channels) == {"W_S S", "W_T T"}  # the paper's weights have no W_KS
+    assert max(channels.values()) <= check.worst * (1 + 1e-9)
+    assert max(channels.values()) >= check.worst / np.sqrt(2) * (1 - 1e-9)
+    missing = tr.TrueRobotCheck(500, 0, 1.98, 1.69, 0, 250, {"W_S S": 1.16, "W_T T": 1.13, "W_KS K S": 1.71})
+    assert "; the worst loop by weight: W_S S 1.16, W_T T 1.13, W_KS K S 1.71 (" in missing.words()
+    assert "by weight" not in tr.TrueRobotCheck(500, 0, 0.9, 0.7, 0, 250, {"W_S S": 0.9}).words()
+
+
 def test_a_destabilising_controller_is_counted_unstable_and_has_no_finite_figure():
     loop, task = loop_and_task(0.1)
     check = tr.true_robot_check(loop, task, pid(2.0, sign=-1.0), WEIGHTS, n=5)

@@ -40,7 +40,7 @@ Examples
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -177,6 +177,10 @@ class TrueRobotCheck:
         (``[W_S S; W_T T; W_KS K S]``) on the grid: a lower bound of the
         set's worst case (``inf`` when a loop is unstable).
     seed : int
+    worst_channels : dict
+        The worst loop's peak for each weight alone (``W_S S``, ``W_T T``,
+        ``W_KS K S``: the ones the problem has), on the same grid: which
+        weight it misses (empty when a loop is unstable).
     """
 
     draws: int
@@ -185,14 +189,20 @@ class TrueRobotCheck:
     median: float
     seed: int
     extremes: int = 0
+    worst_channels: dict = field(default_factory=dict)
 
     def words(self) -> str:
         none = "none unstable" if self.unstable == 0 else f"{self.unstable} UNSTABLE"
         where = f" ({self.extremes} at its vertices and the task's corners)" if self.extremes else ""
+        channels = ""
+        if self.worst_channels and self.worst >= 1.0:
+            channels = "; the worst loop by weight: " + ", ".join(
+                f"{name} {value:.3g}" for name, value in self.worst_channels.items()
+            )
         return (
             f"true robots: worst weighted gain {self.worst:.3g} (median {self.median:.3g}) over {self.draws} "
-            f"frozen loops drawn from the set{where}, {none} (sampled on a frequency grid: a lower bound of the "
-            "set's worst case, not a certificate)"
+            f"frozen loops drawn from the set{where}, {none}{channels} (sampled on a frequency grid: a lower bound "
+            "of the set's worst case, not a certificate)"
         )
 
     def to_dict(self) -> dict:
@@ -203,6 +213,7 @@ class TrueRobotCheck:
             "median": self.median,
             "seed": self.seed,
             "extremes": self.extremes,
+            "worst_channels": dict(self.worst_channels),
             "words": self.words(),
         }
 
@@ -270,11 +281,27 @@ def true_robot_check(
 
     W = plant_weights(weights)
     plants = true_robot_plants(loop, domain, n, seed=seed, extremes=extremes)
-    abscissa, peaks = _loop_figures(plants, K, W["W_S"], W["W_T"], W["W_KS"], check_omega(weights))
+    omega = check_omega(weights)
+    abscissa, peaks = _loop_figures(plants, K, W["W_S"], W["W_T"], W["W_KS"], omega)
     stable = abscissa < 0
     worst = float(peaks[stable].max()) if stable.all() else float("inf")
     median = float(np.median(peaks[stable])) if stable.any() else float("inf")
-    return TrueRobotCheck(int(n), int((~stable).sum()), worst, median, int(seed), at_vertices(n, extremes))
+    channels = _channels(plants[int(np.argmax(peaks))], K, W, omega) if stable.all() else {}
+    return TrueRobotCheck(int(n), int((~stable).sum()), worst, median, int(seed), at_vertices(n, extremes), channels)
+
+
+def _channels(plant, K, W, omega) -> dict:
+    """One loop's peak for each weight alone: ``{"W_S S": ..., "W_T T": ..., "W_KS K S": ...}`` (those given)."""
+    from polyrob.analysis.time_varying.vertices import vertex_set
+    from polyrob.synthesis.fixed.vertex import vertex_peaks
+
+    vs = vertex_set([plant], max_vertices=1)
+    out = {}
+    for name, key in (("W_S S", "W_S"), ("W_T T", "W_T"), ("W_KS K S", "W_KS")):
+        if W.get(key) is not None:
+            alone = {k: (W[k] if k == key else None) for k in ("W_S", "W_T", "W_KS")}
+            out[name] = float(vertex_peaks(vs, K, alone["W_S"], alone["W_T"], alone["W_KS"], omega=omega)[0])
+    return out
 
 
 @dataclass(frozen=True, eq=False)
