@@ -155,6 +155,15 @@ def test_the_search_and_the_cells_move_the_whole_job_s_progress_line(tiny_task, 
     job._stop.set()  # no ticking thread: the test reads the shares itself
     shares, within = [], job.within
     monkeypatch.setattr(job, "within", lambda share: (shares.append(share), within(share))[1])
+    import polyrob.analysis.lpv.cells as cells_module
+
+    proved, reporter = [], cells_module.volume_reporter
+
+    def counted(lo0, hi0):  # each proved cell: one report of the volume proved so far
+        on_proved = reporter(lo0, hi0)
+        return lambda lo, hi: (proved.append(1), on_proved(lo, hi))[1]
+
+    monkeypatch.setattr(cells_module, "volume_reporter", counted)
     try:
         job.begin(1, "moving-robot certificate")
         mv = task_motion_certificate(tiny_task, pd_controller(), points=(3, 3), velocities="bounded", level=0.9,
@@ -164,7 +173,9 @@ def test_the_search_and_the_cells_move_the_whole_job_s_progress_line(tiny_task, 
     assert mv.certificate.status.value == "CERTIFIED", mv.cells
     search = [s for s in shares if 0.0 < s < 0.4]  # the solves' own reports, inside the search's part
     cells = [s for s in shares if 0.45 < s < 0.9]  # the volume proved, inside the cells' part
-    assert len(set(search)) >= 5 and len(set(cells)) >= 5, shares
+    # every proved cell but the last (which reaches the part's end) moves the line; how many cells the proof
+    # needs depends on the solver's X (a CI run under load saw a single share there, other runs five or more)
+    assert len(set(search)) >= 5 and proved and len(set(cells)) >= min(5, len(proved) - 1), (shares, len(proved))
     assert shares[-1] == 1.0 and job.share >= 0.9
 
 
