@@ -174,7 +174,7 @@ def test_the_search_and_the_cells_move_the_whole_job_s_progress_line(tiny_task, 
     search = [s for s in shares if 0.0 < s < 0.4]  # the solves' own reports, inside the search's part
     cells = [s for s in shares if 0.45 < s < 0.9]  # the volume proved, inside the cells' part
     # every proved cell but the last (which reaches the part's end) moves the line; how many cells the proof
-    # needs depends on the solver's X (a CI run under load saw a single share there, other runs five or more)
+    # needs depends on the solver's X (a CI run saw a single share there, other runs five or more)
     assert len(set(search)) >= 5 and proved and len(set(cells)) >= min(5, len(proved) - 1), (shares, len(proved))
     assert shares[-1] == 1.0 and job.share >= 0.9
 
