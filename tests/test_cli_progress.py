@@ -165,3 +165,41 @@ def test_an_arm_s_proof_moves_the_bounds_job_s_progress_line(capsys, monkeypatch
     assert seen and all(inside for _, _, inside in seen)  # reported while the command's job runs
     assert 0.0 < max(done for done, _, _ in seen) < 1.0
     assert current() is None  # the command's end stopped it
+
+
+def test_a_loop_in_another_thread_neither_moves_nor_narrows_the_job_s_line():
+    """The span was one global: a loop left running in another thread (an in-process worker, an abandoned call)
+    narrowed the job's span and moved its line (two .ci/run runs: a moving-robot certificate's cells all reported
+    0.5, musyn's ITERATIONS_SHARE).  Now each thread has its own span and only the job's own thread reports."""
+    import threading
+
+    from clocks import FakeClock
+
+    from polyrob.progress import report, span
+
+    job, _ = _job(["moving-robot certificate"], FakeClock(now=0.0))
+    job.start()
+    job._stop.set()
+    shares, within = [], job.within
+    job.within = lambda share: (shares.append(share), within(share))[1]
+    inside, leave = threading.Event(), threading.Event()
+
+    def stray():  # another thread enters a span and reports while the job's thread is inside its own
+        with span(0.5, 0.5):
+            report(1, 2)
+            inside.set()
+            leave.wait(5.0)
+
+    try:
+        job.begin(1, "moving-robot certificate")
+        other = threading.Thread(target=stray)
+        with span(0.2, 0.4):
+            other.start()
+            inside.wait(5.0)
+            report(1, 4)  # a quarter of this thread's part: 0.25
+            leave.set()
+            other.join(5.0)
+            report(2, 4)
+    finally:
+        job.stop()
+    assert shares == pytest.approx([0.25, 0.3, 0.4]), shares  # the stray thread's report and span end are not counted

@@ -173,10 +173,11 @@ def test_the_search_and_the_cells_move_the_whole_job_s_progress_line(tiny_task, 
     assert mv.certificate.status.value == "CERTIFIED", mv.cells
     search = [s for s in shares if 0.0 < s < 0.4]  # the solves' own reports, inside the search's part
     cells = [s for s in shares if 0.45 < s < 0.9]  # the volume proved, inside the cells' part
-    # the search's solves move the line inside its part, and the cells report inside theirs (143 cells here, one
-    # report each).  Run alone or with its file, the cells' reports spread over their part (143 distinct shares);
-    # in two .ci/run runs (pytest -n 2) the shares inside the cells' part were one value, 0.5: not explained yet
-    assert len(set(search)) >= 5 and proved and cells, (shares, len(proved))
+    # every proved cell but the last (which reaches the part's end) moves the line.  Two .ci/run runs saw one
+    # share there, 0.5, and a last share of 0.5, as if a loop in another thread of the worker (a Dask worker
+    # thread of test_fleet.py's in-process cluster, presumably) narrowed the one global span: polyrob.progress
+    # keeps a span per thread now, and counts the reports of the job's own thread only
+    assert len(set(search)) >= 5 and proved and len(set(cells)) >= min(5, len(proved) - 1), (shares, len(proved))
     assert shares[-1] == 1.0 and job.share >= 0.9
 
 

@@ -42,8 +42,14 @@ WITHIN_CAP = 0.95
 
 _current: JobProgress | None = None
 _lock = threading.Lock()
-#: The part of the current stage that :func:`report` counts in (:func:`span` narrows it for nested loops).
-_span = (0.0, 1.0)
+#: The part of the current stage that :func:`report` counts in (:func:`span` narrows it for nested loops), per
+#: thread: a loop left running in another thread (a batch's in-process worker, an abandoned call) neither moves
+#: nor narrows the job's line (two .ci/run runs failed a progress test when the span was one global).
+_local = threading.local()
+
+
+def _current_span() -> tuple[float, float]:
+    return getattr(_local, "span", (0.0, 1.0))
 
 
 def duration_words(seconds: float) -> str:
@@ -71,8 +77,8 @@ def report(done: float, total: float) -> None:
     Inside a :func:`span` the loop's count fills that span's part of the stage.
     """
     job = _current
-    if job is not None and total > 0:
-        lo, hi = _span
+    if job is not None and total > 0 and job.reported_from_here():
+        lo, hi = _current_span()
         job.within(lo + (hi - lo) * min(max(done / total, 0.0), 1.0))
 
 
@@ -99,16 +105,15 @@ def span(lo: float, hi: float) -> Iterator[None]:
     0.75
     >>> job.stop()
     """
-    global _span
-    outer = _span
+    outer = _current_span()
     a, b = outer
-    _span = (a + (b - a) * float(lo), a + (b - a) * float(hi))
+    _local.span = (a + (b - a) * float(lo), a + (b - a) * float(hi))
     try:
         yield
     finally:
-        _span = outer
+        _local.span = outer
         job = _current
-        if job is not None:
+        if job is not None and job.reported_from_here():
             job.within(a + (b - a) * float(hi))
 
 
@@ -189,6 +194,10 @@ class JobProgress:
             self.stage, self.share = k, 0.0
         self._show(force=True)
 
+    def reported_from_here(self) -> bool:
+        """Whether the calling thread is the one that started the job (the library's reports count from it only)."""
+        return getattr(self, "_owner", threading.get_ident()) == threading.get_ident()
+
     def within(self, share: float) -> None:
         """The current stage is ``share`` done (its own loops' count; capped at :data:`WITHIN_CAP`)."""
         with _lock:
@@ -242,6 +251,7 @@ class JobProgress:
         """Make this the current job and tick it every second from a daemon thread (until :meth:`stop`)."""
         global _current
         _current = self
+        self._owner = threading.get_ident()
 
         def beat():
             while not self._stop.wait(1.0):
