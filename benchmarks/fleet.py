@@ -139,13 +139,13 @@ def main(argv=None) -> int:
     if args.mc is not None:
         options["mc"] = args.mc
 
-    extra = {}
-    if args.robot_uncertainty is not None:
-        extra["robot_uncertainty"] = args.robot_uncertainty
-        if args.robot_uncertainty != "default":
-            from polyrob.uncertainty_set.spec import RobotUncertainty
+    extra = {}  # the job field: "default" as given, a file as its set's mapping
+    if args.robot_uncertainty == "default":
+        extra["robot_uncertainty"] = "default"
+    elif args.robot_uncertainty is not None:
+        from polyrob.uncertainty_set.spec import RobotUncertainty
 
-            extra["robot_uncertainty"] = RobotUncertainty.from_file(args.robot_uncertainty).to_dict()
+        extra["robot_uncertainty"] = RobotUncertainty.from_file(args.robot_uncertainty).to_dict()
 
     def jobs(text):
         return [dict(j, uncertainty=args.uncertainty, **extra) for j in _jobs(text)]

@@ -296,12 +296,9 @@ def _channels(plant, K, W, omega) -> dict:
     from polyrob.synthesis.fixed.vertex import vertex_peaks
 
     vs = vertex_set([plant], max_vertices=1)
-    out = {}
-    for name, key in (("W_S S", "W_S"), ("W_T T", "W_T"), ("W_KS K S", "W_KS")):
-        if W.get(key) is not None:
-            alone = {k: (W[k] if k == key else None) for k in ("W_S", "W_T", "W_KS")}
-            out[name] = float(vertex_peaks(vs, K, alone["W_S"], alone["W_T"], alone["W_KS"], omega=omega)[0])
-    return out
+    names = {"W_S": "W_S S", "W_T": "W_T T", "W_KS": "W_KS K S"}
+    return {name: float(vertex_peaks(vs, K, **{key: W[key]}, omega=omega)[0])
+            for key, name in names.items() if W.get(key) is not None}  # fmt: skip
 
 
 @dataclass(frozen=True, eq=False)
