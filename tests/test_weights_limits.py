@@ -17,6 +17,8 @@ from polyrob.fleet.autoweights import TASK_TORQUE_MARGIN, automatic_hyperparamet
 from polyrob.pipeline import default_hyperparameters
 from polyrob.plant.generalized import generalized_plant, lft, paper_controller
 from polyrob.plant.weights import (
+    CHANNEL_FLOOR,
+    channel_budgets,
     effort_level,
     encoder_lsb,
     encoder_noise_level,
@@ -40,15 +42,38 @@ def test_encoder_levels_are_the_lsb_and_half_of_it():
 def test_effort_level_is_the_budget_formula():
     # a_j = min(0.05 tau_max / 2, tau_max - tau_task): 3.75 N m on joint 0; 0.5 N m left by the task on joint 1
     assert effort_level([150.0, 28.0], [20.0, 27.5]).tolist() == pytest.approx([1 / 3.75, 1 / 0.5])
-    # through M_hat: W_u = max_j g_j / a_j on every v channel
-    w = effort_level([150.0, 28.0], [20.0, 5.0], torque_gain=[3.0, 0.1])
-    assert w.tolist() == pytest.approx([3.0 / 3.75] * 2)
+    # through M_hat, uncoupled: each channel its own row's a_j / N_jj
+    w = effort_level([150.0, 28.0], [20.0, 5.0], [[3.0, 0.0], [0.0, 0.1]])
+    assert w.tolist() == pytest.approx([3.0 / 3.75, 0.1 / 0.7], rel=1e-6)
     assert effort_level([150.0], [0.0], fraction=0.1).tolist() == pytest.approx([1 / 7.5])
     with pytest.raises(ArgumentError, match="no torque is left"):
         effort_level([150.0, 28.0], [20.0, 28.0])
     for bad in ([float("nan"), 1.0], [0.0, 1.0], [float("inf"), 1.0]):
         with pytest.raises(ArgumentError):
             effort_level(bad, [0.0, 0.0])
+
+
+def test_the_v_channels_share_the_rows_budgets_and_keep_every_joint_within_its_own():
+    # a shoulder, an elbow and a wrist: one weight for all three is set by the shoulder's row
+    N = np.array([[4.9, 0.15, 0.02], [0.15, 1.8, 0.03], [0.02, 0.03, 0.025]])
+    a = np.array([3.75, 3.75, 0.7])
+    uniform = 1 / np.min(a / np.linalg.norm(N, axis=1))
+    W_u = effort_level([150.0, 150.0, 28.0], [0.0, 0.0, 0.0], N)
+    c = 1 / W_u
+    assert np.all(W_u <= uniform / CHANNEL_FLOOR * (1 + 1e-6))  # no channel much tighter than the uniform weight
+    assert W_u[2] < uniform / 10  # the wrist's v hardly moves the shoulder: ten times the room
+    # every v with ||diag(1/c) v|| <= 1 keeps |N_j . |v|| within a_j (Cauchy-Schwarz, rows re-checked)
+    assert np.all(np.linalg.norm(N * c, axis=1) <= a * (1 + 1e-12))
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(2000, 3))
+    v = c * v / np.linalg.norm(v, axis=1, keepdims=True)
+    assert np.all(np.abs(v) @ N.T <= a * (1 + 1e-12))
+    # an extreme v: all the shoulder row's budget, each term at its largest
+    worst = np.linalg.norm(N[0] * c)
+    assert worst == pytest.approx(a[0], rel=1e-3)
+    with pytest.raises(ArgumentError, match="positive diagonal"):
+        effort_level([150.0, 28.0], [0.0, 0.0], [[1.0, 0.0], [0.0, 0.0]])
+    assert channel_budgets([1.0, 1.0], [[1.0, 0.0], [0.0, 0.5]]) == pytest.approx([1.0, 2.0], rel=1e-6)
 
 
 def test_limit_weight_folds_the_largest_noise_into_w_u():

@@ -109,12 +109,13 @@ class EffortBudget:
     task_torque : tuple of float
         The largest ``|tau|`` the task needs [N m], sampled over the domain
         and the true robots, times :data:`TASK_TORQUE_MARGIN` (not proved).
-    torque_gain : tuple of float or None
-        ``max_q ||M_hat(q)[j, :]||`` [N m s^2/rad] when ``u`` is the
-        computed-torque input ``v``; ``None`` when ``u`` is the torque.
+    inertia_bound : tuple of tuples or None
+        ``N_ji = max_q |M_hat(q)_ji|`` [N m s^2/rad] (sampled) when ``u`` is
+        the computed-torque input ``v``; ``None`` when ``u`` is the torque.
     encoder_bits : int
     effort : tuple of float
-        ``W_u`` [1/N m, or s^2/rad for ``v``].
+        ``W_u`` [1/N m, or s^2/rad for ``v``], per channel
+        (:func:`polyrob.plant.weights.effort_level`).
     noise : tuple of float
         ``W_n = LSB/2`` [rad].
     binds : tuple of str
@@ -125,7 +126,7 @@ class EffortBudget:
 
     effort_limit: tuple
     task_torque: tuple
-    torque_gain: tuple | None
+    inertia_bound: tuple | None
     encoder_bits: int
     effort: tuple
     noise: tuple
@@ -142,10 +143,12 @@ class EffortBudget:
 
         lim = ", ".join(f"{t:.3g}" for t in self.effort_limit)
         task = ", ".join(f"{t:.3g}" for t in self.task_torque)
+        effort = ", ".join(f"{v:.4g}" for v in self.effort) if len(set(self.effort)) > 1 else f"{self.effort[0]:.4g}"
+        through = "" if self.inertia_bound is None else ", shared through M_hat's rows (sampled) per channel"
         return (
-            f"limit weights: W_u = {self.effort[0]:.4g}{'' if len(set(self.effort)) == 1 else ' ...'} "
-            f"[1/({self.u_unit})] from effort limits ({lim}) N m minus the task's torque ({task}) N m "
-            f"(sampled), noise within {100 * CHATTER_FRACTION:g} % of the limit peak to peak; "
+            f"limit weights: W_u = {effort} [1/({self.u_unit})] from effort limits ({lim}) N m minus the "
+            f"task's torque ({task}) N m (sampled), noise within {100 * CHATTER_FRACTION:g} % of the limit "
+            f"peak to peak{through}; "
             f"W_n = {self.noise[0]:.4g} rad (half a count of a {self.encoder_bits}-bit encoder, "
             f"LSB {encoder_lsb(self.encoder_bits):.3g} rad)"
         )
@@ -173,9 +176,10 @@ def limit_hyperparameters(robot, domain, *, encoder_bits: int | None = None, sam
     points of the domain's ``(q, qdot, qddot)`` (``qddot = 0`` on a
     torque-box domain, which states no acceleration; each point also with its
     accelerations at the box's corner), raised by
-    :data:`TASK_TORQUE_MARGIN`.  On a computed-torque robot ``u`` is ``v``
-    and the torque gain is the largest row norm of the model's ``M_hat(q)``
-    at the same points.
+    :data:`TASK_TORQUE_MARGIN`.  On a computed-torque robot ``u`` is ``v``;
+    the bound of ``|M_hat(q)|`` is its entries' largest magnitudes at the
+    same points, and each ``v`` channel gets its own weight
+    (:func:`polyrob.plant.weights.effort_level`).
 
     Raises
     ------
@@ -199,12 +203,11 @@ def limit_hyperparameters(robot, domain, *, encoder_bits: int | None = None, sam
     truths = [getattr(v, "true_robot", v) for v in variants]
     need = np.max([np.abs(t.inverse_dynamics(q, qdot, qddot)).max(axis=0) for t in truths], axis=0)
     task = TASK_TORQUE_MARGIN * need
-    gain = None
+    bound = None
     if inner == "computed-torque":
         model = robot.model_robot
-        rows = np.array([np.linalg.norm(model.mass_matrix(qk), axis=1) for qk in q])
-        gain = rows.max(axis=0)
-    effort = effort_level(limit, task, gain)
+        bound = np.max([np.abs(np.asarray(model.mass_matrix(qk), float)) for qk in q], axis=0)
+    effort = effort_level(limit, task, bound)
     from polyrob.plant.weights import CHATTER_FRACTION
 
     binds = tuple(
@@ -213,12 +216,12 @@ def limit_hyperparameters(robot, domain, *, encoder_bits: int | None = None, sam
     return EffortBudget(
         effort_limit=tuple(float(v) for v in limit),
         task_torque=tuple(float(v) for v in task),
-        torque_gain=None if gain is None else tuple(float(v) for v in gain),
+        inertia_bound=None if bound is None else tuple(tuple(float(v) for v in row) for row in bound),
         encoder_bits=int(bits),
         effort=tuple(float(v) for v in effort),
         noise=(float(noise),) * robot.m,
         binds=binds,
-        u_unit="N m" if gain is None else "rad/s^2",
+        u_unit="N m" if bound is None else "rad/s^2",
     )
 
 

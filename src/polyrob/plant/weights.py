@@ -10,7 +10,8 @@
 * What limits a real loop (beside the paper's shape): :func:`encoder_noise_level`
   (the sensor-noise weight ``W_n`` from the encoder resolution),
   :func:`effort_level` (the control-effort weight ``W_u`` from the effort
-  limit and the torque the task needs) and :func:`limit_weight` (the
+  limit and the torque the task needs, per channel through the computed-torque
+  layer: :func:`channel_budgets`) and :func:`limit_weight` (the
   ``W_KS = W_u W_n`` they make on the ``u`` channel); :func:`plant_weights`
   gives every weight of a hyperparameter dict.
 
@@ -43,6 +44,8 @@ __all__ = [
     "encoder_lsb",
     "encoder_noise_level",
     "effort_level",
+    "channel_budgets",
+    "CHANNEL_FLOOR",
     "limit_weight",
     "plant_weights",
     "coulomb_weight",
@@ -312,7 +315,7 @@ def encoder_noise_level(bits: float) -> float:
     return 0.5 * encoder_lsb(bits)
 
 
-def effort_level(effort_limit, task_torque, torque_gain=None, *, fraction: float = CHATTER_FRACTION) -> np.ndarray:
+def effort_level(effort_limit, task_torque, inertia_bound=None, *, fraction: float = CHATTER_FRACTION) -> np.ndarray:
     """``W_u`` per joint: one over the torque amplitude the noise may drive, through ``u``.
 
     The noise-driven torque of joint ``j`` may swing by ``fraction`` of its
@@ -320,11 +323,20 @@ def effort_level(effort_limit, task_torque, torque_gain=None, *, fraction: float
 
         a_j = min(fraction * tau_max_j / 2,  tau_max_j - tau_task_j)    [N m, amplitude]
 
-    Without ``torque_gain`` ``u`` is the torque deviation and ``W_u = diag(1/a_j)``.
-    With it (the computed-torque layer: torque ``= M_hat(q) v``, ``torque_gain``
-    the largest ``|M_hat|`` row norms over the domain, ``g_j = max_q ||M_hat(q)[j, :]||``)
-    ``|tau_j| <= g_j |v|``, so ``|v| <= min_j a_j / g_j`` keeps every joint in
-    its budget and ``W_u = max_j(g_j / a_j)`` on every ``v`` channel.
+    Without ``inertia_bound`` ``u`` is the torque deviation and ``W_u = diag(1/a_j)``.
+
+    With it, ``u`` is the computed-torque layer's ``v`` (torque ``= M_hat(q) v``)
+    and ``N_ji >= |M_hat(q)_ji|`` over the domain.  ``W_u = diag(1/c_i)``
+    bounds ``||diag(1/c) v|| <= 1``, so by Cauchy-Schwarz
+    ``|tau_j| <= sum_i N_ji c_i |v_i / c_i| <= ||N_j o c|| <= a_j`` whenever
+    every row satisfies ``||N_j o c|| <= a_j`` (for signals too, row by row,
+    with ``M_hat`` moving with ``q``).  One ``c`` on every channel gives
+    ``c_u = min_j a_j / ||N_j||``: the heavy joints' rows then set the budget
+    of a wrist channel whose ``v`` hardly moves them.  So the channels share
+    the rows' budgets: ``c`` maximises ``sum_i log c_i`` (the volume of the
+    ``v`` box the noise may drive) with every ``c_i >= CHANNEL_FLOOR * c_u``
+    (no channel much tighter than the uniform budget), a convex program
+    (cvxpy), re-checked in floats and scaled down when a row is over.
 
     Parameters
     ----------
@@ -332,8 +344,8 @@ def effort_level(effort_limit, task_torque, torque_gain=None, *, fraction: float
         ``tau_max`` per joint [N m] (the URDF's effort limits).
     task_torque : sequence of float
         The largest ``|tau|`` the task needs per joint [N m].
-    torque_gain : sequence of float, optional
-        ``g_j`` [N m per rad/s^2] when ``u`` is the computed-torque input ``v``.
+    inertia_bound : (m, m) array_like, optional
+        ``N_ji >= |M_hat(q)_ji|`` [N m per rad/s^2] when ``u`` is the computed-torque input ``v``.
     fraction : float
         Peak-to-peak share of the effort limit (default :data:`CHATTER_FRACTION`).
 
@@ -347,14 +359,22 @@ def effort_level(effort_limit, task_torque, torque_gain=None, *, fraction: float
     ArgumentError
         A limit that is not positive and finite, or a task that needs the
         whole effort limit of a joint (no torque is left for feedback).
+    SolverError
+        The channels' convex program was not solved.
 
     Examples
     --------
     >>> from polyrob.plant.weights import effort_level
     >>> effort_level([150.0, 28.0], [20.0, 27.5]).round(4).tolist()   # 3.75 N m; 0.5 N m left on joint 2
     [0.2667, 2.0]
-    >>> effort_level([150.0, 28.0], [20.0, 5.0], torque_gain=[3.0, 0.1]).round(4).tolist()
-    [0.8, 0.8]
+
+    A shoulder and a wrist, ``N = [[3, 0.01], [0.01, 0.1]]``: one weight on
+    both channels would be the shoulder's ``3/3.75 = 0.8``; the wrist's ``v``
+    moves the shoulder by 0.01 N m per rad/s^2 only, so its channel gets its
+    own row's room, ``0.1/0.7``:
+
+    >>> effort_level([150.0, 28.0], [20.0, 5.0], [[3.0, 0.01], [0.01, 0.1]]).round(3).tolist()
+    [0.8, 0.143]
     """
     tau_max = np.asarray(effort_limit, float).ravel()
     tau_task = np.abs(np.asarray(task_torque, float).ravel())
@@ -373,12 +393,53 @@ def effort_level(effort_limit, task_torque, torque_gain=None, *, fraction: float
             "no torque is left for feedback; give a smaller task (--qddot-max, --qdot-max, --q-range)"
         )
     amplitude = np.minimum(0.5 * frac * tau_max, left)
-    if torque_gain is None:
+    if inertia_bound is None:
         return 1.0 / amplitude
-    g = np.asarray(torque_gain, float).ravel()
-    if g.shape != tau_max.shape or not np.all(np.isfinite(g) & (g > 0)):
-        raise ArgumentError(f"torque_gain needs one finite value > 0 per joint, got {g.tolist()}")
-    return np.full(tau_max.size, float(np.max(g / amplitude)))
+    N = np.abs(np.asarray(inertia_bound, float))
+    m = tau_max.size
+    if N.shape != (m, m) or not np.all(np.isfinite(N)) or np.any(np.diag(N) <= 0):
+        raise ArgumentError(
+            f"inertia_bound needs an ({m}, {m}) bound of |M_hat| with a positive diagonal, got shape {N.shape}"
+        )
+    return 1.0 / channel_budgets(amplitude, N)
+
+
+#: Each ``v`` channel's budget is at least this share of the uniform one (:func:`effort_level`).
+CHANNEL_FLOOR = 0.99
+
+
+def channel_budgets(amplitude, inertia_bound) -> np.ndarray:
+    """The ``v`` channels' amplitudes ``c`` with ``||N_j o c|| <= a_j`` on every row (see :func:`effort_level`).
+
+    Re-checked in floats: a row over its budget scales ``c`` down, so the
+    result satisfies every row whatever the solver returned.
+
+    Examples
+    --------
+    >>> from polyrob.plant.weights import channel_budgets
+    >>> channel_budgets([1.0, 1.0], [[1.0, 0.0], [0.0, 0.5]]).round(6).tolist()   # uncoupled: a_j / N_jj
+    [1.0, 2.0]
+    """
+    import cvxpy as cp
+
+    from polyrob.errors import SolverError
+
+    a = np.asarray(amplitude, float).ravel()
+    N = np.asarray(inertia_bound, float)
+    uniform = float(np.min(a / np.linalg.norm(N, axis=1)))
+    # cvxpy: maximise the product of the budgets, a small exponential-cone program; the rows' scale is 1
+    c = cp.Variable(a.size, pos=True)
+    rows = [cp.norm(cp.multiply(N[j] / a[j], c)) <= 1.0 for j in range(a.size)]
+    problem = cp.Problem(cp.Maximize(cp.sum(cp.log(c / uniform))), rows + [c >= CHANNEL_FLOOR * uniform])
+    try:
+        problem.solve(solver="CLARABEL")
+    except cp.error.SolverError as exc:
+        raise SolverError(f"the effort weights' channel budgets: {exc}") from exc
+    if c.value is None or problem.status not in ("optimal", "optimal_inaccurate"):
+        raise SolverError(f"the effort weights' channel budgets: the solver ended {problem.status}")
+    budget = np.maximum(np.asarray(c.value, float), CHANNEL_FLOOR * uniform)
+    over = float(np.max(np.linalg.norm(N * budget, axis=1) / a))
+    return budget / max(over, 1.0) if over > 1.0 else budget
 
 
 def limit_weight(hyperparameters: dict):
