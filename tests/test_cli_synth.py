@@ -11,6 +11,7 @@ import contextlib
 import fcntl
 import json
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -256,7 +257,11 @@ def test_run_json_announces_stages_when_they_start_and_matches_synth(files, tmp_
     assert margin["proved"] and margin["level"] >= doc["analysis"]["robust_performance"]["mu_upper_grid"]
     assert margin["fraction_of_ranges"] == pytest.approx(1 / margin["level"])
     assert instead.startswith("instead: robust performance at level ") and "in the way: mu peaks at " in instead
-    assert "\n" not in instead and len(instead) < 300
+    assert "\n" not in instead and len(instead) < 400
+    # and which of the box's parameters carries mu at the peak: mu without each, the largest drop first
+    said = instead.split("without one block mu there: ")[1].split(")")[0].split(", ")
+    assert len(said) == 3 and all(re.fullmatch(r"[ab]\d\d [0-9.]+", x) for x in said)  # the box's entries a_ij, b_ij
+    assert all(float(x.split()[1]) <= margin["level"] for x in said)  # a smaller problem: mu can only fall
     assert doc["output"] == str(out_file) and len(doc["bounds"]["entries"]) == 10
     assert doc["performance_limit"]["bound"] == pytest.approx(0.65, abs=0.01)
     saved = json.loads(out_file.read_text())

@@ -62,3 +62,44 @@ def test_the_dominant_weighted_signal_is_the_largest_block_of_the_nominal_loop()
         assert dominant_weight(P, N, w) == max(gains, key=gains.get)
         seen.add(dominant_weight(P, N, w))
     assert seen == {"W_S e", "W_T y"}  # both demands dominate somewhere (before: always the first label)
+
+
+# --------------------------------------------------------------------------- which block carries mu
+def test_leaving_a_block_out_gives_mu_of_the_rest():
+    from polyrob.analysis.margins import block_shares
+
+    # uncoupled real scalars: mu is the largest |m_ii|, without a block the largest of the others
+    M = np.diag([2.0, 0.5, 1.0]).astype(complex)
+    shares = block_shares(M, [[-1, 0], [-1, 0], [-1, 0]], ["a", "b", "c"], skip_last=False)
+    assert [s.block for s in shares] == ["a", "b", "c"]  # ties keep the model's order
+    assert [s.mu_without for s in shares] == pytest.approx([1.0, 2.0, 2.0], rel=1e-3)
+    # a loop through two complex scalars: mu = sqrt(|ab|) = 2; either one out breaks the loop, mu 0
+    M = np.array([[0.0, 4.0], [1.0, 0.0]], complex)
+    shares = block_shares(M, [[1, 0], [1, 0]], skip_last=False)
+    assert [s.mu_without for s in shares] == pytest.approx([0.0, 0.0], abs=1e-9)
+    # robust performance: the last block (performance) stays in; a full 1x2 block (Delta 1x2) has two rows of M
+    M = np.array([[0.3, 0.1], [0.0, 0.2], [0.4, 0.9]], complex)
+    (only,) = block_shares(M, [[-1, 0], [1, 2]])
+    assert only.block == "block 0" and only.mu_without == pytest.approx(np.linalg.norm(M[1:, 1:], 2), rel=1e-3)
+
+
+def test_blocks_are_named_in_the_model_s_words():
+    from types import SimpleNamespace
+
+    from polyrob.analysis.margins import block_words
+
+    # an inner-links-like model: two residual blocks (state columns 0..3, acceleration columns 4..5), one real t0 x2
+    unc = SimpleNamespace(
+        channel_names=("res#0", "res#1", "res#2", "res#3", "res#4", "res#5", "t0#0", "t0#1"),
+        channel_parameter=np.array([-1, -1, -1, -1, -1, -1, 0, 0]),
+        parameter_names=("t0",),
+        n_x=4,
+        info={"residual_blocks": [{"cols": np.arange(4)}, {"cols": np.array([4, 5])}]},
+    )
+    words = block_words(unc, [[4, 4], [2, 2], [-2, 0], [2, 6]])
+    assert words == (
+        "the state columns' residual (4x4)",
+        "the acceleration columns' residual, the inertia (2x2)",
+        "t0",
+        "performance",
+    )

@@ -46,15 +46,35 @@ def instead_line(problem, analysis, limit: dict | None = None) -> str:
     w = float(cert.mu.peak_upper_frequency) if cert.mu is not None else np.nan
     stable = cert.closed_loop is not None and cert.stable_at_delta0 is not None and cert.stable_at_delta0.stable
     label = dominant_weight(problem.P, cert.closed_loop, w) if stable and np.isfinite(w) else None
-    way = (
-        "mu peaks " + ("as omega -> 0" if w == 0 else f"at {w:.3g} rad/s") + (f" ({label} dominates)" if label else "")
-    )
+    shares = _shares_at_peak(problem, cert.closed_loop, w) if stable and np.isfinite(w) else ()
+    said = [f"{label} dominates"] if label else []
+    if shares:
+        said.append("without one block mu there: " + ", ".join(b.phrase() for b in shares[:SHARES_SAID]))
+    way = "mu peaks " + ("as omega -> 0" if w == 0 else f"at {w:.3g} rad/s") + (f" ({'; '.join(said)})" if said else "")
     if limit and limit.get("excludes_mu_below_one"):
         way += f"; the unstable poles keep mu >= {limit['bound']:.3g} at these weights"
     return (
         f"instead: {instead}; in the way: {way}; try --max-bandwidth (the largest bandwidth factor that "
         "certifies) or a smaller domain"
     )
+
+
+#: Uncertainty blocks beyond which the leave-one-out figures are not computed (one μ bound each).
+SHARES_MAX_BLOCKS = 12
+#: How many of them the line says (the blocks whose removal lowers μ most).
+SHARES_SAID = 3
+
+
+def _shares_at_peak(problem, N, w: float) -> tuple:
+    """:func:`~polyrob.analysis.margins.block_shares` of the loop ``N`` at the μ peak ``w`` (empty for one block)."""
+    from polyrob.analysis.margins import block_shares, block_words
+    from polyrob.analysis.mu.frequency import freqresp
+
+    blk = np.asarray(problem.P.block_structure_rp)
+    if not 2 <= len(blk) - 1 <= SHARES_MAX_BLOCKS:
+        return ()
+    M = np.asarray(freqresp(N, np.array([max(float(w), 0.0)])))[0]
+    return block_shares(M, blk, block_words(problem.P.uncertain, blk))
 
 
 def reusable_certificate(cert, P, K, scope):
