@@ -370,6 +370,15 @@ def test_the_reason_why_not_names_the_performance_limit_when_it_excludes_mu_belo
     # at the paper's bandwidths the floor (0.65) excludes nothing and the tight model keeps M^-1 definite
     paper = build_problem(robot, domain, progress=False, bound_options={"samples": 256, "coverage": 0})
     assert why_not_certified(paper, {}).startswith("mu >= 1 is the synthesis' best")
+    # mu < 1 on the grid but no certificate (kinova's inner-gain model covered 0.16 of its fresh Jacobians):
+    # the certificate's own reason, not "mu >= 1" (the row said that of mu 0.75)
+    from types import SimpleNamespace
+
+    gap = SimpleNamespace(
+        mu_upper_grid=0.74, reasons=("the 'inner-gain' model contains only 0.1585 of 2000 fresh Jacobians",)
+    )
+    assert why_not_certified(paper, {}, gap) == gap.reasons[0]
+    assert why_not_certified(paper, {}, SimpleNamespace(mu_upper_grid=1.2, reasons=("x",))).startswith("mu >= 1")
 
 
 def test_the_bandwidth_search_is_skipped_when_the_model_reverses_inputs(pendulums, monkeypatch):

@@ -38,10 +38,18 @@ def search_skipped(problem, details: dict) -> str | None:
     )
 
 
-def why_not_certified(problem, details: dict) -> str:
-    """What stands between this robot and μ < 1, in one line; the evidence goes into ``details``."""
+def why_not_certified(problem, details: dict, certificate=None) -> str:
+    """What stands between this robot and a certificate, in one line; the evidence goes into ``details``.
+
+    With ``certificate`` (the row's frozen-robot one) below 1 on the grid,
+    μ is not what stands in the way: its own reasons are (a model that
+    does not cover the robot's fresh Jacobians, a check between the grid
+    points that failed).  Otherwise what keeps μ from falling below 1.
+    """
     from polyrob.plant.coverage import input_definiteness
 
+    if certificate is not None and certificate.mu_upper_grid < 1.0 and certificate.reasons:
+        return "; ".join(certificate.reasons)
     parts = []
     limit = problem.performance_limit(samples=1024, starts=2)
     details["performance_limit"] = limit.to_dict()

@@ -455,7 +455,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
     friction = friction_statement(problem, design.controller)  # the set's Coulomb levels, as synth and run state them
     if friction is not None:
         details["friction"] = friction
-    reason = None if cert.certified else why_not_certified(problem, details)
+    reason = None if cert.certified else why_not_certified(problem, details, cert)
     if reason and skipped:
         reason = f"{reason} (bandwidth search skipped)"
     K = controller_data(design.controller)
