@@ -198,3 +198,19 @@ def test_coverage_draws_fresh_true_robots_half_at_vertices(with_payload_problem,
     monkeypatch.setattr(InnerLoopRobot, "drawn", spy)
     assert coverage_fraction(unc, arm, dom, 400) == 1.0
     assert calls == [False] * 10 + [True] * 10
+
+
+def test_a_member_the_pinned_segment_misses_is_found_by_the_box_search(with_payload_problem, monkeypatch):
+    """The pinned segment is a shortcut: when it misses (kinova's inner-gain model refused 84 % of fresh
+    points, 1.0 without it), the box search still finds the member's factors, and a wider set stays out."""
+    import polyrob.plant.models.inner_factors as inner_factors
+
+    _, _, unc = with_payload_problem
+    rng = np.random.default_rng(3)
+    members = [unc.matrices_at(rng.uniform(-1, 1, 2), residual=unc.residual_samples(1, seed=i)[0]) for i in range(4)]
+    A, B = np.array([a for a, _ in members]), np.array([b for _, b in members])
+    monkeypatch.setattr(inner_factors, "_pinned_line", lambda *args: "outside")
+    assert model_contains(unc, A, B).all()
+    # and it accepts a point only where its own residual norm is at most 1: a wider set is still refused
+    wider = inner_loop(load_robot("planar_2r", armature=ARMATURE), "computed-torque", model_error=0.3)
+    assert coverage_fraction(unc, wider, _task(wider), 100) < 0.9
