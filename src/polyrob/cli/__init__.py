@@ -97,5 +97,32 @@ def main(argv=None) -> int:
     return EXIT_INTERRUPTED
 
 
+def console() -> int:
+    """The ``polyrob`` console script: :func:`main`, and after an interrupt an exit without finalization.
+
+    A SIGINT can land inside a C extension's import (pinocchio, BLAS
+    threads): the interrupted line is printed and the files are cleaned up,
+    but finalizing the half-imported interpreter can then abort ("Fatal
+    Python error: PyThreadState_Get", status -6 instead of 130, one
+    ``.ci/run`` in four on a loaded machine).  So the process ends at once,
+    its streams flushed and its children stopped; in-process callers of
+    :func:`main` get the status back.
+    """
+    code = main()
+    if code == 130:  # EXIT_INTERRUPTED
+        import os
+
+        from polyrob.cli.interrupt import stop_children
+
+        stop_children()
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(code)
+    return code
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    sys.exit(console())

@@ -2,6 +2,6 @@
 
 import sys
 
-from polyrob.cli import main
+from polyrob.cli import console
 
-sys.exit(main())
+sys.exit(console())
