@@ -108,11 +108,11 @@ def console() -> int:
     its streams flushed and its children stopped; in-process callers of
     :func:`main` get the status back.
     """
-    code = main()
-    if code == 130:  # EXIT_INTERRUPTED
-        import os
+    from polyrob.cli.interrupt import EXIT_INTERRUPTED, stop_children
 
-        from polyrob.cli.interrupt import stop_children
+    code = main()
+    if code == EXIT_INTERRUPTED:
+        import os
 
         stop_children()
         for stream in (sys.stdout, sys.stderr):
