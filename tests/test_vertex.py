@@ -58,3 +58,35 @@ def test_the_one_vertex_enumeration_box_corners_and_halfspaces_agree():
     v = halfspace_vertices(np.r_[G, np.zeros((1, 3))], np.r_[g, -1e-17])
     assert sorted(np.round(v, 12).tolist()) == sorted(corners.tolist())
     assert halfspace_vertices(G, np.r_[hi, -hi - 1.0]) is None  # empty
+
+
+def test_its_rounds_move_the_jobs_progress_line(monkeypatch):
+    """``--init true-robots`` tunes for minutes on a six-joint arm: each round moves the line, within its span."""
+    import io
+
+    from clocks import FakeClock
+
+    import polyrob.synthesis.fixed.vertex as vertex
+    from polyrob.progress import JobProgress, span
+
+    job = JobProgress(["synthesis"], stream=io.StringIO(), clock=FakeClock(now=0.0))
+    job.start()
+    job._stop.set()  # no real-time ticks: the shares are read directly
+    seen, real_report = [], vertex.report
+
+    def spy(done, total):
+        real_report(done, total)
+        seen.append(job.share)
+
+    monkeypatch.setattr(vertex, "report", spy)
+    try:
+        job.begin(1, "synthesis (full)")
+        with span(0.0, 0.5):
+            vertex_synthesis(
+                _vertices(), W_S, W_T, structure="tf1", initial=control.tf([2.0, 1.0], [0.05, 1.0]),
+                max_iter=40, certify=False,
+            )  # fmt: skip
+        after = job.share
+    finally:
+        job.stop()
+    assert seen and 0 < seen[0] <= 0.5 and after == 0.5

@@ -91,6 +91,11 @@ TRUE_ROBOTS_NOT_IN_SEARCH = (
 )
 
 
+#: The share of the synthesis stage the tuning on true robots takes when it is the answer (``max_iter=1``:
+#: the certificate's sweep takes the rest); a quarter of that before a D-K iteration.
+TRUE_ROBOTS_SHARE = 0.7
+
+
 def true_robot_start(problem, options: dict) -> tuple[dict, object]:
     """``options`` with the start ``init="true-robots"`` resolved, and the synthesis when the start is the answer.
 
@@ -108,6 +113,7 @@ def true_robot_start(problem, options: dict) -> tuple[dict, object]:
     import time
 
     from polyrob.analysis.certificate import certify_loop
+    from polyrob.progress import span
     from polyrob.synthesis.pid_tuning import tuned_pid
     from polyrob.synthesis.result import MusynResult
     from polyrob.synthesis.true_robots import tune_on_true_robots
@@ -118,12 +124,17 @@ def true_robot_start(problem, options: dict) -> tuple[dict, object]:
     # the PID first, then the structure from it: started from the model's PID, ss:12 on ur5 stalled at 1.94 on its
     # draws with 6 of 500 others unstable; from the PID tuned on true robots it reached 0.926 on the others
     # (docs/uncertainty.md)
-    tuning = tune_on_true_robots(problem.robot, problem.domain, problem.hyperparameters, start.controller)
+    # the tunings' rounds move the job's line (minutes on a six-joint arm); the certificate's sweep comes after
+    share = TRUE_ROBOTS_SHARE if options.get("max_iter") == 1 else TRUE_ROBOTS_SHARE / 4
+    half = share if structure == "pid" else share / 2
+    with span(0.0, half):
+        tuning = tune_on_true_robots(problem.robot, problem.domain, problem.hyperparameters, start.controller)
     words = f"{start.words()}, then {tuning.words()}"
     if structure != "pid":
-        tuning = tune_on_true_robots(
-            problem.robot, problem.domain, problem.hyperparameters, tuning.controller, structure=structure
-        )
+        with span(half, share):
+            tuning = tune_on_true_robots(
+                problem.robot, problem.domain, problem.hyperparameters, tuning.controller, structure=structure
+            )
         words += f", then {tuning.words()}"
     logging.getLogger("polyrob").info(f"musyn: start from a {words}")
     options = {**options, "initial_controller": tuning.controller}
@@ -140,7 +151,11 @@ def true_robot_start(problem, options: dict) -> tuple[dict, object]:
             "method": f"{structure} tuned on true robots drawn from the set from the tuned PID (no D-K step)",
             "start": words,
             "stopped_by": "max_iter=1: the start only",
-            "true_robots": {**tuning.check.to_dict(), "fitted_draws": tuning.draws, "fitted_worst": tuning.fitted_worst},
+            "true_robots": {
+                **tuning.check.to_dict(),
+                "fitted_draws": tuning.draws,
+                "fitted_worst": tuning.fitted_worst,
+            },
         },
     )
     return options, result

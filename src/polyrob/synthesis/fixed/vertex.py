@@ -39,6 +39,7 @@ from polyrob.analysis.time_varying.vertices import (
     vertex_set,
 )
 from polyrob.errors import SynthesisError
+from polyrob.progress import report
 
 __all__ = ["VertexSynthesisResult", "vertex_synthesis", "vertex_peak", "vertex_peaks"]
 
@@ -299,6 +300,7 @@ def vertex_synthesis(
         cand = th_start + scale * res.x
         peak_c, vpk_c = full_check(cand)
         say(f"round {rnd + 1}: {idx.size} active vertices, worst vertex grid peak {peak_c:.4g}")
+        report(rnd + 1, rounds)
         if not peak_c < best["f"] * (1 - 1e-4):
             break
         best.update(f=peak_c, theta=cand)
