@@ -214,3 +214,25 @@ def test_a_member_the_pinned_segment_misses_is_found_by_the_box_search(with_payl
     # and it accepts a point only where its own residual norm is at most 1: a wider set is still refused
     wider = inner_loop(load_robot("planar_2r", armature=ARMATURE), "computed-torque", model_error=0.3)
     assert coverage_fraction(unc, wider, _task(wider), 100) < 0.9
+
+
+def test_membership_of_two_factors_finds_a_narrow_oblique_valley(monkeypatch):
+    """kinova's default task: a common link factor and a payload mass move the inertia nearly alike, so a member's
+    residual norm stays below 1 only in a narrow oblique valley; the grid and its zoom missed one (1.36, against
+    a minimum of 0.29), and the nested scalar searches find it."""
+    import polyrob.plant.models.inner_factors as factors
+
+    box = np.array([0.1, 0.02185])  # kinova's ranges: the link factor and the payload mass
+    rng = np.random.default_rng(19)
+    X, Y, Z = rng.normal(size=(3, 3, 3))
+    E1, E2 = 1000 * X + 30 * Y, -4370 * X + 30 * Z  # nearly the same direction, as the two inertia effects
+    centre = np.array([0.09083495, -0.0057519])
+    E0 = 0.5 * np.eye(3) - centre[0] * E1 - centre[1] * E2
+
+    def residual_norm(t):  # convex, minimum 0.5 at `centre`, near the box's edge
+        return np.linalg.norm(E0 + t[0] * E1 + t[1] * E2, 2)
+
+    start = np.zeros(2)
+    assert factors.convex_box_minimum(residual_norm, start, box) == pytest.approx(0.5, abs=1e-5)
+    monkeypatch.setattr(factors, "_nested_minimum", lambda f, r: np.inf)  # the grid, Nelder-Mead and the zoom alone
+    assert factors.convex_box_minimum(residual_norm, start, box) > 1.0
