@@ -13,7 +13,8 @@ from polyrob import bound_pldi, load_robot
 from polyrob.domains.task import TaskDomain
 from polyrob.model.inner import inner_loop
 from polyrob.plant.coverage import coverage_fraction, model_contains
-from polyrob.plant.models.inner_factors import factor_parameters, scaled_residuals
+from polyrob.plant.models.factor_membership import scaled_residuals
+from polyrob.plant.models.inner_factors import factor_parameters
 from polyrob.plant.uncertainty import uncertain_plant
 
 ARMATURE = [0.4, 0.3]  # kg m^2: comparable to the links' own inertia, so G = M_hat^-1 L is far from I
@@ -149,7 +150,7 @@ def test_membership_minimises_over_the_factors_past_a_kink_where_nelder_mead_sta
     payload (its model then held 0.953 of its own true robots' Jacobians; 1.0 with the grid first)."""
     from scipy.optimize import minimize
 
-    from polyrob.plant.models.inner_factors import convex_box_minimum
+    from polyrob.plant.models.factor_membership import convex_box_minimum
 
     def ridge(t):  # minimum 0 at (0.25, 0.25), along a narrow valley
         return max(100 * abs(t[0] - t[1]), abs(t[0] + t[1] - 0.5))
@@ -164,7 +165,7 @@ def test_members_whose_exact_entries_pin_the_factors_are_held_at_interior_factor
     factors, so a member's factors lie on a line; the box search never landed on it (half of these members,
     15 % of fresh true robots, were refused) and membership now solves for it."""
     from polyrob.domains.default_task import default_task_domain, default_task_robot
-    from polyrob.plant.models.inner_factors import reached_entries
+    from polyrob.plant.models.factor_membership import reached_entries
 
     arm = default_task_robot(load_robot("ur5"))
     dom = default_task_domain(arm)
@@ -203,7 +204,7 @@ def test_coverage_draws_fresh_true_robots_half_at_vertices(with_payload_problem,
 def test_a_member_the_pinned_segment_misses_is_found_by_the_box_search(with_payload_problem, monkeypatch):
     """The pinned segment is a shortcut: when it misses (kinova's inner-gain model refused 84 % of fresh
     points, 1.0 without it), the box search still finds the member's factors, and a wider set stays out."""
-    import polyrob.plant.models.inner_factors as inner_factors
+    import polyrob.plant.models.factor_membership as inner_factors
 
     _, _, unc = with_payload_problem
     rng = np.random.default_rng(3)
@@ -220,7 +221,7 @@ def test_membership_of_two_factors_finds_a_narrow_oblique_valley(monkeypatch):
     """kinova's default task: a common link factor and a payload mass move the inertia nearly alike, so a member's
     residual norm stays below 1 only in a narrow oblique valley; the grid and its zoom missed one (1.36, against
     a minimum of 0.29), and the nested scalar searches find it."""
-    import polyrob.plant.models.inner_factors as factors
+    import polyrob.plant.models.factor_membership as factors
 
     box = np.array([0.1, 0.02185])  # kinova's ranges: the link factor and the payload mass
     rng = np.random.default_rng(19)

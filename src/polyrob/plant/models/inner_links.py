@@ -574,7 +574,7 @@ def set_witness(unc: UncertainPlant, robot, true, q, qdot, a) -> float:
     samples bound (and :data:`RANGE_MARGIN` widens); the larger of the two
     ratios is returned.
     """
-    from polyrob.plant.models.inner_factors import reached_entries, scaled_residual_norm
+    from polyrob.plant.models.factor_membership import reached_entries, scaled_residual_norm
 
     W = unc.info["residual_weighting"]
     m = W.shape[0]

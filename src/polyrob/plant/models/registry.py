@@ -283,7 +283,7 @@ class InnerGainModel(UncertaintyModel):
 
     def contains(self, unc, A, B):
         if "theta_range" in unc.info:
-            from polyrob.plant.models.inner_factors import inner_factors_contains
+            from polyrob.plant.models.factor_membership import inner_factors_contains
 
             return inner_factors_contains(unc, A, B)
         from polyrob.plant.models.axes import axes_contains
@@ -333,7 +333,7 @@ class InnerLinksModel(UncertaintyModel):
             raise ArgumentError(f"robot uncertainty ({robot.uncertainty.words()}): not carried: {exc}") from None
 
     def contains(self, unc, A, B):
-        from polyrob.plant.models.inner_factors import inner_factors_contains
+        from polyrob.plant.models.factor_membership import inner_factors_contains
 
         return inner_factors_contains(unc, A, B)
 
