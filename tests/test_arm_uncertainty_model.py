@@ -160,7 +160,10 @@ def test_true_robots_at_the_set_s_vertices_frozen_at_the_task_s_corners_are_memb
 
 def test_panda_with_its_rated_payload_far_off_the_flange_is_refused_with_the_measured_reason():
     panda = load_robot("panda")
-    rated = dict(DEFAULT_SET, payload=dict(DEFAULT_SET["payload"], mass=[0.0, 3.0], com_ball={"centre": [0, 0, 0], "radius": 0.3}))
+    rated = dict(
+        DEFAULT_SET,
+        payload=dict(DEFAULT_SET["payload"], mass=[0.0, 3.0], com_ball={"centre": [0, 0, 0], "radius": 0.3}),
+    )
     loop = inner_loop_of_set(panda, "computed-torque", spec_of("panda", rated), draws=0)
     why = links.carried(loop, default_task_domain(loop))
     assert why is not None and why.startswith("the relative inertia error is too large")
@@ -177,11 +180,20 @@ def test_channels_and_the_sizes_mu_sees():
     assert repeated == [[-6, 0]] * links.DEFAULT_DIRECTIONS  # each direction one real scalar on the 6 joints
     assert len(full) == 2 and full[-1] == [6, 6]  # the state columns' residual, then the inertia's norm block
     assert full[0][0] <= 2 * 6  # square: the larger of its rows (joints) and columns (states)
-    assert 0.0 < unc.info["residual_g_norm"] < 1.0 - unc.info["K_offset"][-1, -1]  # well posed: I - G never singular
+    # the inertia block is shaped like the set and well posed: I - G0 - g H Delta H never singular (small gain)
+    assert unc.info["inertia_block"] == "shaped"
+    W = unc.info["residual_weighting"]
+    G0 = W @ unc.info["K_offset"][:, 12:] @ np.linalg.inv(W)  # the block's centre in its weighted coordinates
+    values, vectors = np.linalg.eigh(unc.info["residual_g_shape"])
+    H_inv = (vectors / np.sqrt(values)) @ vectors.T
+    room = np.linalg.svd(H_inv @ (np.eye(6) - G0) @ H_inv, compute_uv=False)[-1]
+    assert 0.0 < unc.info["residual_g_norm"] < room
+    assert values.max() == pytest.approx(1.0) and values.min() < 0.5  # thin where the set is
     assert unc.B_d.shape[1] == 6 * links.DEFAULT_DIRECTIONS + sum(b[0] for b in full)
     assert len(unc.info["scalars"]) < 34  # scalars that move nothing (a first moment on a joint's axis) dropped
     text = MODELS["inner-links"].describe(unc)
     assert "per-link ±10 %" in text and "payload 0-1.5 kg" in text and "sampled enclosure" in text
+    assert "S shaped like the set's inertia errors" in text
     # the payload's CoM ball is sampled, not proved: the description and the certificate's scope note say how
     sampled = "sampled at its 2 end masses x 641 centres of mass (the ball's centre and 4 spheres of 160 points)"
     assert sampled in text
@@ -250,13 +262,38 @@ def test_the_state_residual_block_carries_its_sampled_norm_not_the_entry_box(mon
 
     loop, domain, unc = carried_model("ur5")
     rho = unc.info["state_residual_norm"]
-    assert 0.35 < rho < 0.5  # ur5's default set: 0.42 with the sampling margin of 1.25 (0.67 by the triangle inequality)
-    assert np.allclose(unc.info["residual_blocks"][0]["W_l"] / rho, carried_frobenius_model()[2].info["residual_blocks"][0]["W_l"])
+    assert (
+        0.35 < rho < 0.5
+    )  # ur5's default set: 0.42 with the sampling margin of 1.25 (0.67 by the triangle inequality)
+    assert np.allclose(
+        unc.info["residual_blocks"][0]["W_l"] / rho, carried_frobenius_model()[2].info["residual_blocks"][0]["W_l"]
+    )
     K = pid_controller(pid_gains(np.full(6, 9.39), 16.0, 20.0, np.ones(6)))
     omega = np.array([2.0])
     normed = robstab(generalized_plant(unc, W_T=1.0), K, omega, refine_peak=False)
     boxed = robstab(generalized_plant(carried_frobenius_model()[2], W_T=1.0), K, omega, refine_peak=False)
     assert normed.mu_upper_grid < 0.95 * boxed.mu_lower  # proved below what members of the entry box reach (1.22, 1.37)
+
+
+def test_the_shaped_inertia_block_of_per_link_errors_is_thin_where_the_links_are_and_holds_the_true_robots():
+    """ur5 with ±10 % per link alone: the links' inertia errors are large in one direction (the upper arm's
+    parallel-axis term) and small in the others, so the shaped block is under half the ball's radius in at
+    least four of six directions (the ball: one radius for all), and every drawn true robot, half of them at
+    the set's vertices, is still a member."""
+    import polyrob.plant.models.inner_links_inertia as inertia
+
+    robot = load_robot("ur5")
+    spec = RobotUncertainty.from_dict({"links": {"error_percent": 10}})
+    loop, domain, unc = model_of(robot, spec)
+    assert unc.info["inertia_block"] == "shaped"
+    widths = unc.info["residual_g_norm"] * np.linalg.eigvalsh(unc.info["residual_g_shape"])
+    ball = unc.info["inertia_ball"]  # relative to its room, with the centre at I: the ball's radius here
+    assert np.sum(widths < 0.5 * ball) >= 4 and widths.max() < 1.1 * ball
+    trues = draw_true_robots(robot, spec, 40, seed=11, extremes=0.5)
+    assert np.all(witnesses(unc, loop, domain, trues, points=2) <= 1.0 + 1e-9)
+    with pytest.MonkeyPatch.context() as mp:  # without a shape the same set takes the ball
+        mp.setattr(inertia, "shape_of", lambda *args, **kwargs: None)
+        assert model_of(robot, spec)[2].info["inertia_block"] == "ball"
 
 
 def test_the_cli_offers_every_named_model():

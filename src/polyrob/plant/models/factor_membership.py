@@ -60,7 +60,11 @@ def scaled_residuals(unc: UncertainPlant, E: np.ndarray) -> list[np.ndarray]:
     out = []
     for b, size in zip(unc.info["residual_blocks"], unc.full_blocks):
         S = np.zeros((size, size))
-        S[: len(b["rows"]), : len(b["cols"])] = E[np.ix_(b["rows"], b["cols"])] / b["W_l"][:, None] / b["W_r"][None, :]
+        part, W_l, W_r = E[np.ix_(b["rows"], b["cols"])], np.asarray(b["W_l"]), np.asarray(b["W_r"])
+        # diagonal weights (entry radii), or the matrices of a shaped block (W_l^-1 E W_r^-1)
+        part = np.linalg.solve(W_l, part) if W_l.ndim == 2 else part / W_l[:, None]
+        part = np.linalg.solve(W_r.T, part.T).T if W_r.ndim == 2 else part / W_r[None, :]
+        S[: len(b["rows"]), : len(b["cols"])] = part
         out.append(S)
     return out
 

@@ -236,9 +236,10 @@ def factor_lft_plant(
     info: dict | None = None,
     weighting=None,
     g_norm: float | None = None,
-    g_offset: float = 0.0,
+    g_offset=0.0,
     residual: str = "block",
     state_residual_norm: float | None = None,
+    g_shape=None,
 ):
     """The LFT ``a = v + sum_k theta_k K_k,c [x; a] + E [x; a]`` (module text) as an :class:`UncertainPlant`.
 
@@ -254,7 +255,12 @@ def factor_lft_plant(
     of norm at most ``g_norm`` instead of entry bounds.  ``g_offset`` ``g0``:
     the LFT is centred at ``K_0 = [0, g0 I]`` (``a = (v + w) / (1 - g0)`` at
     ``Δ = 0``, and the model's nominal there): the set of ``I - G =
-    M_hat^-1 M`` of a heavy payload is not centred at the identity.
+    M_hat^-1 M`` of a heavy payload is not centred at the identity; an
+    ``m x m`` matrix ``G0`` (weighted like ``g_norm``) centres it at ``K_0 =
+    [0, W^-1 G0 W]``.  ``g_shape`` ``S`` (``m x m``, symmetric positive
+    definite, largest eigenvalue 1): the block is ``g_norm S^1/2 Delta
+    S^1/2`` (weighted), thin where the set is
+    (:func:`~polyrob.plant.models.inner_links_inertia.shape_of`).
     ``residual``: ``"block"`` carries the state columns' residual in a full
     complex block (:func:`residual_blocks`); ``"real"`` gives each of its
     entries a real scalar of its own (``|E_ij| <= spread_ij``, weighted as
@@ -293,11 +299,19 @@ def factor_lft_plant(
     if g_norm is not None and g_norm > 0:
         root = np.sqrt(g_norm)
         C = np.zeros((m, 3 * m))
-        C[:, n:] = root * np.eye(m)
-        blocks.append({"B": root * np.eye(m), "C": C, "rows": np.arange(m), "cols": np.arange(n, 3 * m),
-                       "W_l": np.full(m, root), "W_r": np.full(m, root)})  # fmt: skip
+        if g_shape is None:
+            C[:, n:] = root * np.eye(m)
+            blocks.append({"B": root * np.eye(m), "C": C, "rows": np.arange(m), "cols": np.arange(n, 3 * m),
+                           "W_l": np.full(m, root), "W_r": np.full(m, root)})  # fmt: skip
+        else:  # the residual's block is root H Delta root H, H = S^1/2: its scaled form H^-1 E H^-1 / g_norm
+            values, vectors = np.linalg.eigh(np.asarray(g_shape, float))
+            H = root * (vectors * np.sqrt(values)) @ vectors.T
+            C[:, n:] = H
+            blocks.append({"B": H, "C": C, "rows": np.arange(m), "cols": np.arange(n, 3 * m), "W_l": H, "W_r": H})
+    G0 = np.asarray(g_offset, float) * np.eye(m) if np.ndim(g_offset) == 0 else np.asarray(g_offset, float)
     if weighting is not None:
         W = np.asarray(weighting, float)
+        G0 = np.linalg.solve(W, G0 @ W)  # into K's own coordinates
         back = np.eye(3 * m)
         back[n:, n:] = W
         for b in blocks:
@@ -315,10 +329,10 @@ def factor_lft_plant(
     C_e[np.arange(n_e), entries[:, 1]] = entry_radii
     # channels: the residual block, then each theta repeated m times, then the entry scalars; every channel
     # enters the accelerations: a = u + sum_j d_j + B_f d_f, and every output reads [x; a]
-    gain = 1.0 / (1.0 - g_offset)  # a = gain (u + to_a d) around K_0 = [0, g0 I]
-    to_a = gain * np.hstack([Bf if k else np.zeros((m, 0)), np.tile(np.eye(m), P), B_e])  # a = gain u + to_a d
+    gain = np.linalg.inv(np.eye(m) - G0)  # a = gain (u + to_a d) around K_0 = [0, G0]
+    to_a = gain @ np.hstack([Bf if k else np.zeros((m, 0)), np.tile(np.eye(m), P), B_e])  # a = gain u + to_a d
     reads = np.vstack(([Cf] if k else []) + [r * K for r, K in zip(ranges, centres)] + [C_e])
-    C_v, D_vu, D_vd = reads[:, :n], gain * reads[:, n:], reads[:, n:] @ to_a
+    C_v, D_vu, D_vd = reads[:, :n], reads[:, n:] @ gain, reads[:, n:] @ to_a
     entry_names = [f"residual[{i},{j}]" for i, j in entries]
     channels = Channels(
         into_accelerations(m) @ to_a,
@@ -329,15 +343,16 @@ def factor_lft_plant(
         [-1] * k + [j for j in range(P) for _ in range(m)] + list(range(P, P + n_e)),
         D_vd,
     )
-    centre = (arm_state_matrix(np.zeros((m, n))), gain * into_accelerations(m))
+    centre = (arm_state_matrix(np.zeros((m, n))), into_accelerations(m) @ gain)
+    centred = bool(np.any(G0 != 0.0))
     return model_plant(
         pldi,
         model,
         centre,
         channels,
         (tuple(names) + tuple(entry_names), -np.r_[ranges, entry_radii], np.r_[ranges, entry_radii]),
-        A_nom=np.asarray(pldi.A0, float) if not g_offset else centre[0],
-        B_nom=np.asarray(pldi.B0, float) if not g_offset else centre[1],
+        A_nom=np.asarray(pldi.A0, float) if not centred else centre[0],
+        B_nom=np.asarray(pldi.B0, float) if not centred else centre[1],
         info={
             **enclosure_info(inputs),  # "certified" only on proved factor ranges
             "factors": tuple(names),
@@ -353,7 +368,8 @@ def factor_lft_plant(
             "residual_entry_radii": entry_radii,
             **({} if weighting is None else {"residual_weighting": np.asarray(weighting, float)}),
             **({} if g_norm is None else {"residual_g_norm": float(g_norm)}),
-            "K_offset": np.hstack([np.zeros((m, n)), g_offset * np.eye(m)]),
+            "K_offset": np.hstack([np.zeros((m, n)), G0]),
+            **({} if g_shape is None else {"residual_g_shape": np.asarray(g_shape, float)}),
             **(info or {}),
         },
     )

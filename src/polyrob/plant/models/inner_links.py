@@ -70,7 +70,7 @@ from polyrob.errors import NotApplicable
 from polyrob.plant.lftplant import UncertainPlant
 from polyrob.plant.models.inner_links_inertia import (
     exactly_weighted,
-    g_norm_bound,
+    inertia_block,
     inertia_range,
     inertia_ratio,
     residual_norm_bounds,
@@ -421,16 +421,9 @@ def inner_links_plant(
         worst = worst + payload_rest.reshape(shape)
     spread = SPREAD_MARGIN * worst.max(axis=0)
     residual_norm = _state_residual_norm(rest[..., :n], on_payload, pay, spread[:, :n]) if residual == "block" else None
-    # the acceleration columns: one norm-bounded block (in M_hat^{1/2} coordinates nearly symmetric)
-    # two valid bounds of the same block: each sample's symmetric form times what the fixed weighting costs
-    # there (kappa), or the fixed weighting's own block, not symmetric away from the task's centre (its
-    # Hermitian dilation: inner_links_inertia.g_norm_bound); the one of smaller relative size is carried
-    G_fixed = Phi[..., n:]
-    bounds = [g_norm_bound(G_exact[~on_payload], G_exact[on_payload], pay, kappa),
-              g_norm_bound(G_fixed[~on_payload], G_fixed[on_payload], pay, np.ones(len(q)))]  # fmt: skip
-    g_norm, g0 = min(bounds, key=lambda b: b[0] / (1.0 - b[1]))
-    g_norm *= G_MARGIN
-    margin = _well_posed_margin(ranges, centres, g_norm, n, g0)
+    # the acceleration columns: one norm-bounded block, shaped like the set where that is well posed
+    block = inertia_block(G_exact, Phi[..., n:], on_payload, pay, kappa, ranges, centres, G_MARGIN)
+    g_norm, margin = block.g_norm, block.margin
     if margin <= 0.0:
         lo, hi = inertia_range(G_exact[~on_payload], G_exact[on_payload], pay)
         raise NotApplicable(
@@ -440,11 +433,6 @@ def inner_links_plant(
             "(eigenvalues of M_hat^-1 M, sampled), so the outer loop's gain varies that much"
         )
     centres = _weighted(centres, np.linalg.inv(W), W)  # back to K's own coordinates; the residual stays weighted
-    if margin <= 0.0:
-        raise NotApplicable(
-            f"inner-links: I - sum t_k G_k - E_G may be singular inside the ranges (sigma_min less the residual's "
-            f"gain {margin:.3g} on a grid of the directions)"
-        )
     inertia = inertia_ratio(robot, scalars, q, _moved)
     names = tuple(f"t{k}" for k in range(P))
     return factor_lft_plant(
@@ -457,7 +445,8 @@ def inner_links_plant(
         {"PLDI": pldi.enclosure, "factors": "sampled"},
         weighting=W,
         g_norm=g_norm,
-        g_offset=g0,
+        g_offset=block.offset,
+        g_shape=block.shape,
         residual=residual,
         state_residual_norm=residual_norm,
         info={
@@ -468,6 +457,8 @@ def inner_links_plant(
             "direction_scale": scale,
             "samples": int(samples),  # uniform points, and as many corners of the task
             "spread_margin": SPREAD_MARGIN,
+            "inertia_block": block.kind,
+            "inertia_ball": block.ball,
             "inertia_ratio": inertia,
             **({"payload_sampling": payload_sampling_words(body)} if on_payload.any() else {}),
         },
@@ -514,21 +505,6 @@ def _weighted(K, W, W_inv) -> np.ndarray:
     out = np.einsum("ab,...bc->...ac", W, K)
     out[..., 2 * m :] = np.einsum("...ab,bc->...ac", out[..., 2 * m :], W_inv)
     return out
-
-
-def _well_posed_margin(ranges, centres, g_norm: float, n: int, g0: float = 0.0, points: int = 9) -> float:
-    """``min sigma_min((1 - g0) I - sum t_k G_k,c) - g_norm`` over a grid of the directions' box (``> 0``: well posed there).
-
-    In the weighted coordinates of the residual; the grid has ``points``
-    values per direction (at most 4 directions on the grid, the rest at their ends).
-    """
-    G = np.array([K[:, n:] for K in centres])
-    axes = [np.linspace(-r, r, points if k < 4 else 2) for k, r in enumerate(ranges)]
-    grid = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(ranges), -1).T
-    m = G.shape[1]
-    eye = (1.0 - g0) * np.eye(m)
-    worst = min(float(np.linalg.svd(eye - np.tensordot(t, G, axes=1), compute_uv=False)[-1]) for t in grid)
-    return worst - g_norm
 
 
 def scalars_of_true(robot, true) -> np.ndarray:

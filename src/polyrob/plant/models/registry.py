@@ -353,12 +353,27 @@ class InnerLinksModel(UncertaintyModel):
             f"{self.name}: the computed-torque factor [B_low^-1 A_low, I - B_low^-1], exactly linear in the "
             f"{len(unc.info['scalars'])} scalars of the set's parameter box, as {len(unc.info['factors'])} principal "
             f"directions (one repeated real each: {ranges}) and the rest in {rest} "
-            f"(the inertia's M_hat^1/2-weighted block of norm <= {unc.info.get('residual_g_norm', 0.0):.3g} around "
-            f"I - G = {1.0 - float(unc.info['K_offset'][-1, -1]):.3g} I); "
+            f"({_inertia_words(unc)}); "
             f"set: {unc.info['set']} ({self.enclosure(unc)} enclosure over the task domain"
             + (f"; {unc.info['payload_sampling']}" if unc.info.get("payload_sampling") else "")
             + ")."
         )
+
+
+def _inertia_words(unc) -> str:
+    """How the ``inner-links`` model carries the relative inertia error ``G`` (its acceleration columns)."""
+    g = unc.info.get("residual_g_norm", 0.0)
+    if unc.info.get("inertia_block") == "shaped":
+        values = np.linalg.eigvalsh(unc.info["residual_g_shape"])
+        return (
+            f"the inertia's M_hat^1/2-weighted block g S^1/2 Delta S^1/2 around a centre fitted to the set, g = {g:.3g}, "
+            f"S shaped like the set's inertia errors (eigenvalues {values.min():.2g} to 1; a ball would need "
+            f"{unc.info['inertia_ball']:.3g} relative to its room)"
+        )
+    return (
+        f"the inertia's M_hat^1/2-weighted block of norm <= {g:.3g} around "
+        f"I - G = {1.0 - float(unc.info['K_offset'][-1, -1]):.3g} I"
+    )
 
 
 #: The uncertainty models by name (``unc.model``).
