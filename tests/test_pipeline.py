@@ -96,6 +96,12 @@ def test_controller_problem_differences_name_the_options(problem):
     other = dict(info, weights=dict(info["weights"], omega_b=[1.0, 0.2]))
     (diff,) = controller_differences(other, problem)
     assert "omega_b" in diff and "--wb 1,0.2" in diff
+    # a computed weight (the effort weight from the task's torques) is named to every digit it has, so the
+    # option the message gives reproduces it (six digits did not: "effort = 1.3341 (given 1.3341)")
+    effort = [1.3341049827418956, 0.055602604851169295]
+    (diff,) = controller_differences(dict(info, weights={"effort": effort}), {"weights": {"effort": [1.3341, 0.0556]}})
+    option = diff.split("--effort-weight ")[1].rstrip(")")
+    assert [float(v) for v in option.split(",")] == effort
     other = dict(info, uncertainty={"model": "lft", "merge_symmetric": False})
     assert "--uncertainty lft" in controller_differences(other, problem)[0]
     dom = dict(info["domain"], u={"joint1": [-5.0, 5.0], "joint2": info["domain"]["u"]["joint2"]})

@@ -35,7 +35,13 @@ _GROUP_OPTIONS = {"q": "--q-range", "qdot": "--qdot-max", "u": "--u-max", "qddot
 
 
 def _values(x) -> str:
-    return ",".join(f"{float(v):.6g}" for v in x)
+    """Each value's shortest round-trip form: the option it is pasted into must reproduce the file's value
+    (six digits made a weight computed from the task's torques differ from itself in the 7th)."""
+    out = []
+    for v in x:
+        text = repr(float(v))
+        out.append(text[:-2] if text.endswith(".0") else text)
+    return ",".join(out)
 
 
 def _domain_differences(saved: dict, given: dict) -> list[str]:
