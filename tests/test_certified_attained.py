@@ -70,16 +70,27 @@ def test_the_proof_closes_with_the_ascent_where_the_pilot_alone_cannot(finger):
     assert np.all(enclosure.lower <= lo) and np.all(enclosure.upper >= hi)  # the proof holds what is attained
 
 
-def test_the_inner_gain_model_rests_on_the_proved_factor_ranges_alone(finger):
+def test_the_inner_gain_model_rests_on_the_proved_factor_ranges_alone(finger, monkeypatch):
+    """finger_edu's computed-torque task (a tenth of the default box), its factor ranges proved: the inner-gain
+    model's centres are the proof's, it covers 300 fresh true-robot points, and a problem built on it says its
+    enclosure is certified though the PLDI's A, B intervals are sampled; without the proof it is sampled.
+
+    The PLDIs' sampled supports are the model's to ignore: they are sampled with the search's cheap effort (64
+    positions, no local refinement, screening or verification rounds), and build_problem's uncertain plant checks
+    its coverage on 300 points as the one above does (its default 2000 were most of the test's time; no assertion
+    reads them)."""
     from polyrob import bound_pldi
     from polyrob.pipeline.problem import build_problem
+    from polyrob.plant import uncertainty as uncertainty_module
     from polyrob.plant.models.registry import enclosure_inputs, model_of
     from polyrob.plant.uncertainty import uncertain_plant
 
     _, problem, domain = finger
     small = domain.scaled(0.1)
     robot = default_task_robot(load_robot("finger_edu"))
-    pldi = bound_pldi(robot, small, certify=True, samples=256, coverage=0, workers=1, progress=False)
+    cheap = {"samples": 64, "refine": False, "screen": 0, "verify_rounds": 0, "coverage": 0, "workers": 1,
+             "progress": False}  # fmt: skip
+    pldi = bound_pldi(robot, small, certify=True, **cheap)
     assert pldi.enclosure == "sampled"  # the A, B intervals: the model does not read them
     unc = uncertain_plant(pldi, model="inner-gain", coverage=300, volume_samples=0)
     assert model_of(unc).enclosure(unc) == "certified" and enclosure_inputs(unc) == {"factors": "certified"}
@@ -90,15 +101,20 @@ def test_the_inner_gain_model_rests_on_the_proved_factor_ranges_alone(finger):
         assert np.allclose(unc.info["K_centres"][k], 0.5 * (lo + hi), rtol=0, atol=1e-12 * np.abs(hi).max())
     assert unc.coverage == 1.0 and unc.coverage_points == 300  # true robots at fresh task points are members
     # what a certificate on it covers: proved, though the PLDI's own A, B intervals are sampled
+    monkeypatch.setattr(
+        uncertainty_module,
+        "uncertain_plant",
+        lambda pldi, **kw: uncertain_plant(pldi, **{"coverage": 300, "volume_samples": 0, **kw}),
+    )
     problem = build_problem(robot, pldi=pldi, progress=False)
     assert problem.model == "inner-gain"  # auto's choice for a computed-torque task
+    assert problem.unc.coverage == 1.0 and problem.unc.coverage_points == 300
     scope = problem.scope()
     assert scope.enclosure == "certified" and "proved (interval arithmetic)" in scope.sentence()
     # the PLDI's sampled intervals are named as what they are: not what the certificate rests on
     assert "are not what the model rests on" in scope.sentence() and "; bounds sampled at" not in scope.sentence()
     # without the proof the same model is sampled, and says it rests on the PLDI too
-    sampled = uncertain_plant(bound_pldi(robot, small, samples=256, coverage=0, workers=1, progress=False),
-                              model="inner-gain", coverage=0, volume_samples=0)  # fmt: skip
+    sampled = uncertain_plant(bound_pldi(robot, small, **cheap), model="inner-gain", coverage=0, volume_samples=0)
     assert model_of(sampled).enclosure(sampled) == "sampled" and "PLDI" in enclosure_inputs(sampled)
 
 
@@ -120,4 +136,6 @@ def test_synth_certify_is_refused_in_one_line_where_it_cannot_run(tmp_path, caps
     # a torque box's proof names the options of `polyrob bounds`, which this command does not have: it says so
     assert main(["synth", "planar_2r", "--certify", "--max-boxes", "1", "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert "--rel-tol and --time-limit are options of `polyrob bounds --certify -o STEM`" in err and err.count("\n") == 1
+    assert (
+        "--rel-tol and --time-limit are options of `polyrob bounds --certify -o STEM`" in err and err.count("\n") == 1
+    )

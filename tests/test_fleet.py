@@ -522,12 +522,17 @@ def test_the_summary_table_has_the_validation_at_the_rate():
 
 
 def test_the_moving_robot_certificate_is_a_column_and_decides_the_row(pendulums, monkeypatch):
-    """`batch --moving`: each row carries the moving-robot certificate; once computed it decides `certified`."""
+    """`batch --moving`: each row carries the moving-robot certificate; once computed it decides `certified`.
+
+    Four runs of one job: the frozen stages at their cheapest (bounds sampled without local refinement, no
+    analysis: the design's certificate is the row's frozen status), the moving-robot stage computed in the first."""
     import polyrob.fleet.jobs as jobs
     from polyrob.fleet.outputs import markdown_table
 
+    bounds = {"samples": 16, "refine": False, "screen": 0, "verify_rounds": 0}
+    fast = dict(FAST, bound_options=bounds, validate=False, analyze=False)
     job = Job(robot=pendulums[0], q_radius=0.2, qdot_max=0.5, qddot_max=1.0, inner="computed-torque", model_error=0.1)
-    r = run_job(job, Settings(**dict(FAST, validate=False), moving=True))
+    r = run_job(job, Settings(**fast, moving=True))
     assert r.ok, r.message
     row = r.row()
     assert r.model == "inner-gain" and row["moving"]["computed"]  # the masses constant, the state at any rate
@@ -537,7 +542,7 @@ def test_the_moving_robot_certificate_is_a_column_and_decides_the_row(pendulums,
     # a frozen certificate with a moving one that does not hold: the row is not certified
     refused = {"computed": True, "certified": False, "status": "NOT_CERTIFIED", "gamma": 1.3, "verdict": "stub"}
     monkeypatch.setattr(jobs, "moving_stage", lambda problem, K: dict(refused))
-    r2 = run_job(job, Settings(**dict(FAST, validate=False), moving=True))
+    r2 = run_job(job, Settings(**fast, moving=True))
     assert r2.status == "CERTIFIED" and not r2.certified and r2.row()["certified"] is False
     assert "NOT_CERTIFIED (<= 1.3)" in markdown_table([r2.row()])
     # a moving-robot test that cannot run is said in the row, which keeps its frozen certificate
@@ -547,10 +552,10 @@ def test_the_moving_robot_certificate_is_a_column_and_decides_the_row(pendulums,
         raise SolverError("the LMI solver gave up (a stand-in)")
 
     monkeypatch.setattr(jobs, "moving_stage", broken)
-    r4 = run_job(job, Settings(**dict(FAST, validate=False), moving=True))
+    r4 = run_job(job, Settings(**fast, moving=True))
     assert r4.ok and r4.moving["computed"] is False and r4.certified == (r4.status == "CERTIFIED")
     assert r4.moving["verdict"] == "moving robot: not computed: SolverError: the LMI solver gave up (a stand-in)"
     assert "not computed" in markdown_table([r4.row()])
     # not asked: no column value, and the row is the frozen certificate's
-    r3 = run_job(job, Settings(**dict(FAST, validate=False)))
+    r3 = run_job(job, Settings(**fast))
     assert r3.moving is None and r3.certified == (r3.status == "CERTIFIED")

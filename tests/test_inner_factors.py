@@ -163,14 +163,26 @@ def test_membership_minimises_over_the_factors_past_a_kink_where_nelder_mead_sta
 def test_members_whose_exact_entries_pin_the_factors_are_held_at_interior_factors():
     """ur5's default task: an entry no residual block reaches (the wrist's own ``G[5, 5]``) is moved by both
     factors, so a member's factors lie on a line; the box search never landed on it (half of these members,
-    15 % of fresh true robots, were refused) and membership now solves for it."""
+    15 % of fresh true robots, were refused) and membership now solves for it.
+
+    The model's factor ranges come from its own searches (one per factor, over the PLDI's domain); the PLDI's A, B
+    intervals do not enter it, so they are sampled without local refinement (``refine=False``)."""
     from polyrob.domains.default_task import default_task_domain, default_task_robot
     from polyrob.plant.models.factor_membership import reached_entries
 
     arm = default_task_robot(load_robot("ur5"))
     dom = default_task_domain(arm)
     pldi = bound_pldi(
-        arm, dom, samples=32, screen=0, verify_rounds=0, coverage=0, progress=False, workers=1, describe_polytope=False
+        arm,
+        dom,
+        samples=32,
+        refine=False,
+        screen=0,
+        verify_rounds=0,
+        coverage=0,
+        progress=False,
+        workers=1,
+        describe_polytope=False,
     )
     unc = uncertain_plant(pldi, model="inner-gain", coverage=0, volume_samples=0)
     unreached = unc.info["K_centres"].reshape(2, -1).T[~reached_entries(unc).ravel()]

@@ -58,10 +58,23 @@ def test_reconditioning_keeps_the_loop_and_makes_the_lyapunov_matrix_the_identit
 
 
 def test_the_search_again_in_its_own_coordinates_reaches_the_frozen_peak(stiff, monkeypatch):
+    """The stiff loop's search in the Gramian's coordinates alone stays above its frozen peak (0.878 against
+    0.7607); one pass of refine, the search again where its own X is the identity at the centre, reaches it (0.7618).
+
+    One pass (REFINE_PASSES = 1; the default 3 runs a second, which gains under REFINE_GAIN: 0.7607) and the
+    Gramian's search recorded as the first solve of the same run (what REFINE_PASSES = 0 returns), not run again:
+    two solves instead of four."""
     model, system, basis, rates = stiff
-    args = (model, system, rates, basis, lpvnorm, conditioned, conditioned_time_scale, kinematic_rates)
+    solves = []
+
+    def recorded(*args, **kwargs):
+        solves.append(lpvnorm(*args, **kwargs))
+        return solves[-1]
+
+    monkeypatch.setattr(robot_module, "REFINE_PASSES", 1)
+    args = (model, system, rates, basis, recorded, conditioned, conditioned_time_scale, kinematic_rates)
     refined, _, _ = task_module._search(*args)
-    assert refined.proved and refined.gamma <= 1.01 * refined.frozen_gamma  # 0.7607 against the frozen 0.7607
-    monkeypatch.setattr(robot_module, "REFINE_PASSES", 0)
-    first, _, _ = task_module._search(*args)
-    assert first.proved and first.gamma > 1.05 * first.frozen_gamma  # the Gramian's coordinates alone: 0.830
+    assert len(solves) == 2 and refined is solves[1]  # the Gramian's search, then refine's, which is kept
+    assert refined.proved and refined.gamma <= 1.01 * refined.frozen_gamma  # 0.7618 against the frozen 0.7607
+    first = solves[0]  # proved: _search tried nothing else before refining it
+    assert first.proved and first.gamma > 1.05 * first.frozen_gamma  # the Gramian's coordinates alone: 0.878

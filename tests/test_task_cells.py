@@ -65,10 +65,36 @@ def tiny_task(robot):
     return SimpleNamespace(robot=robot, domain=task, P=SimpleNamespace(W_S=0.4 * np.eye(2), W_T=None, W_KS=None))
 
 
+#: The re-check grid of these tests' certificates: every search point of ``points=(3, 2)`` and one midway between
+#: each two neighbours, along the positions and the velocities (what recheck_points gives before its floor,
+#: DEFAULT_RECHECK (9, 5)): the midpoints where an X fitted at the grid's points fails, in 405 points instead of
+#: 5625 (the re-check and its constraint generation were most of these tests' time).
+RECHECK = (5, 3)
+
+
 @pytest.fixture(scope="module")
-def certified(tiny_task):
-    return task_motion_certificate(tiny_task, pd_controller(), points=(3, 2), velocities="bounded", level=0.9,
-                                   cells=True, cell_workers=1, lower_bound=False)  # fmt: skip
+def certified_run(tiny_task):
+    """The certificate on cells, and the system and time scale its search returned (the coordinates of its X)."""
+    from polyrob.analysis.lpv import task as task_module
+
+    searched, search = [], task_module._search
+
+    def recorded(*args):
+        searched.append(search(*args))
+        return searched[-1]
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(task_module, "_search", recorded)
+        mv = task_motion_certificate(tiny_task, pd_controller(), points=(3, 2), velocities="bounded", level=0.9,
+                                     cells=True, cell_workers=1, lower_bound=False, recheck=RECHECK)  # fmt: skip
+    assert len(searched) == 1
+    _, sysf, c = searched[0]
+    return mv, sysf, c
+
+
+@pytest.fixture(scope="module")
+def certified(certified_run):
+    return certified_run[0]
 
 
 def test_the_task_s_moving_robot_is_certified_on_cells_and_says_so(certified):
@@ -81,32 +107,22 @@ def test_the_task_s_moving_robot_is_certified_on_cells_and_says_so(certified):
     assert "cells covering the whole box" in " ".join(cert.scope.notes)
 
 
-def test_the_proved_x_holds_at_random_points_and_exact_rates_of_the_task(tiny_task):
+def test_the_proved_x_holds_at_random_points_and_exact_rates_of_the_task(tiny_task, certified_run):
     """Soundness: an X the cells prove, at random (q2, qdot, qddot) with dq2/dt = qdot2 and dqdot/dt = qddot.
 
-    The X is the certificate's: the search, then the re-check grid's failing points added to it (constraint
-    generation), as :func:`task_motion_certificate` runs them before the cells."""
-    from polyrob.analysis.lpv.basis import default_basis, finer_recheck
-    from polyrob.analysis.lpv.cells import check_cells
-    from polyrob.analysis.lpv.moving import conditioned_time_scale
-    from polyrob.analysis.lpv.norm import lpvnorm
-    from polyrob.analysis.lpv.robot import cells_level, closed_loop_system, conditioned
-    from polyrob.analysis.lpv.task import RECHECK_ROUNDS, _add_failing_points, _search, recheck_points, task_rate_bounds
+    The X is the certificate's (the ``certified`` fixture's, whose cells prove it at level 0.9): the search, then the
+    re-check grid's failing points added to it (constraint generation), as :func:`task_motion_certificate` runs them
+    before the cells; checked here in the coordinates and time scale its search returned."""
+    from polyrob.analysis.lpv.basis import default_basis
+    from polyrob.analysis.lpv.task import task_rate_bounds
 
+    mv, sysf, c = certified_run
+    assert mv.cells["holds"] and mv.cells["gamma"] == 0.9, mv.cells  # the cells proved this X at 0.9
+    r = mv.result
     model = task_scheduling(tiny_task.robot, tiny_task.domain, points=(3, 2))
-    system = closed_loop_system(model, pd_controller(), tiny_task.P.W_S, None, None)
     basis = default_basis(model, tensor=True)
     rates = task_rate_bounds(model, tiny_task.domain)
-    r, sysf, c = _search(model, system, rates, basis, lpvnorm, conditioned, conditioned_time_scale, kinematic_rates,
-                         0.9)  # fmt: skip
-    recheck = recheck_points((3, 2))
-    finer = finer_recheck(sysf, model, r, rates, basis, points=recheck, c=c)
-    r, _, _ = _add_failing_points(model, sysf, c, r, finer, rates, basis, recheck, r.gamma + 0.75 * (cells_level(r.gamma, 0.9) - r.gamma),
-                                  RECHECK_ROUNDS, {"eps": 1e-4, "level": 0.9, "solver": "clarabel"})  # fmt: skip
     used = [(-np.inf, np.inf) if k == "qddot" else b for b, k in zip(rates, model.kinds)]
-    chk = check_cells(model, system, r.X, basis, used, 0.9, similarity=getattr(sysf, "similarity", None), c=c,
-                      workers=1)  # fmt: skip
-    assert chk.holds, chk.reason
     rates_at = kinematic_rates(model, used, c)
     lo, hi = np.array([a[0] for a in model.axes]), np.array([a[-1] for a in model.axes])
     rng = np.random.default_rng(2)
@@ -136,7 +152,8 @@ def test_a_urdf_robot_s_task_is_proved_through_its_exact_polynomials():
     task = TaskDomain.from_robot(robot, pose=[0.0, 1.5708], q_radius=0.05, qdot_max=0.05, qddot_max=0.1)
     problem = SimpleNamespace(robot=robot, domain=task, P=SimpleNamespace(W_S=0.4 * np.eye(2), W_T=None, W_KS=None))
     runs = [task_motion_certificate(problem, pd_controller(), points=(3, 2), velocities="bounded", level=0.9,
-                                    cells=True, cell_workers=w, lower_bound=False) for w in (1, 2)]  # fmt: skip
+                                    cells=True, cell_workers=w, lower_bound=False, recheck=RECHECK)
+            for w in (1, 2)]  # fmt: skip
     for c, workers in zip(runs, (1, 2)):
         assert c.cells["holds"], c.cells
         assert c.cells["workers"] == workers and c.certificate.status.value == "CERTIFIED"
@@ -166,8 +183,11 @@ def test_the_search_and_the_cells_move_the_whole_job_s_progress_line(tiny_task, 
     monkeypatch.setattr(cells_module, "volume_reporter", counted)
     try:
         job.begin(1, "moving-robot certificate")
+        # re-checked on RECHECK (along the velocities, the search's own three points): this test reads the search's
+        # and the cells' shares, and the cells prove the X on the whole box
         mv = task_motion_certificate(tiny_task, pd_controller(), points=(3, 3), velocities="bounded", level=0.9,
-                                     cells=True, cell_workers=1, lower_bound=False, solver="structured")  # fmt: skip
+                                     cells=True, cell_workers=1, lower_bound=False, solver="structured",
+                                     recheck=RECHECK)  # fmt: skip
     finally:
         job.stop()
     assert mv.certificate.status.value == "CERTIFIED", mv.cells
@@ -239,6 +259,7 @@ def test_constraint_generation_makes_the_structured_search_s_x_hold_between_its_
     points (robot.SEARCH_SOLVER); the re-check grid's failing points added to the search make it hold there, and
     the cells then prove it on the whole box."""
     mv = task_motion_certificate(tiny_task, pd_controller(), points=(3, 2), velocities="bounded", level=0.9,
-                                 cells=True, cell_workers=1, lower_bound=False, solver="structured")  # fmt: skip
+                                 cells=True, cell_workers=1, lower_bound=False, solver="structured",
+                                 recheck=RECHECK)  # fmt: skip
     assert mv.certificate.status.value == "CERTIFIED", (mv.finer, mv.cells)
     assert np.isfinite(mv.finer["gamma"]) and "constraint generation" in " ".join(mv.certificate.scope.notes)
