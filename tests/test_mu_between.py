@@ -210,3 +210,22 @@ def test_panda_pid_start_has_the_same_certificate_under_a_clock_1000x_faster(mon
     assert found == pytest.approx(PANDA_NORMAL_CLOCK, rel=1e-9)
     assert loaded.bound == pytest.approx(0.9699, abs=5e-5)
     assert between.seconds > 120.0  # as the loaded clock reads it: past the old limit of 120 s
+
+
+def test_a_peak_just_below_one_is_checked_at_a_level_below_one():
+    """A grid peak of 0.995 with the default 1 % margin would be checked at 1.005: μ <= 1.005 everywhere
+    decides nothing.  The level between the peak and 1 is checked instead, and it holds (the true peak, at
+    ω = 0, is 0.995), so the check's level certifies μ < 1 at every frequency; a true peak above 1 between the
+    points still lifts the level over 1."""
+    from polyrob.analysis.mu.between import LEVEL_MARGIN
+
+    G = control.tf([0.995], [1, 1])
+    sweep = mu_bounds(G, [[1, 1]], np.logspace(-3, 3, 30), refine_peak=False, progress=False)
+    assert sweep.peak_upper < 1.0 <= sweep.peak_upper * (1.0 + LEVEL_MARGIN)
+    r = verify_between(G, sweep)
+    assert r.holds and sweep.peak_upper < r.level < 1.0
+    resonant = 37.3125 * control.tf([0.02], [1, 0.02, 1])  # peak 37.3 at ω ≈ 1; the coarse grid sees 0.995 at 0.5
+    coarse = mu_bounds(resonant, [[1, 1]], [0.1, 0.5, 2.0, 10.0], refine_peak=False, progress=False)
+    assert coarse.peak_upper < 1.0 <= coarse.peak_upper * (1.0 + LEVEL_MARGIN)
+    lifted = verify_between(resonant, coarse)
+    assert lifted.holds and lifted.level > 30.0

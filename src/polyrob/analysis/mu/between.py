@@ -206,7 +206,9 @@ def verify_between(
         (``holds=False``).  Default: the sweep's peak upper bound times
         ``1 + LEVEL_MARGIN``, raised to ``1 + LEVEL_MARGIN`` times any larger
         bound found between the grid points (the result's ``level`` is then a
-        bound of μ over every frequency).
+        bound of μ over every frequency).  A peak below 1 that the margin
+        would lift to 1 or above is checked at the middle between it and 1
+        instead: the level that decides whether μ < 1 at every frequency.
     method : str, optional
         Upper-bound method of the added points (default: the sweep's).
     max_points : int
@@ -246,6 +248,9 @@ def verify_between(
         return BetweenGridResult(np.nan, False, float(mu.peak_upper), 0, 0, None, "M is not stable", 0.0)
     adaptive = level is None
     beta = float(mu.peak_upper) * (1.0 + LEVEL_MARGIN) if adaptive else float(level)
+    if adaptive and float(mu.peak_upper) < 1.0 <= beta:
+        # the margin would lift a peak just below 1 over it: the level that decides the verdict lies between
+        beta = 0.5 * (float(mu.peak_upper) + 1.0)
     how = method or (mu.method if mu.method in ("ab13md", "lmi", "gradient") else "auto")
     second = how == "gradient" and relaxed_is_cheap(st)
     w = np.asarray(mu.omega, float)
