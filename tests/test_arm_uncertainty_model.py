@@ -296,6 +296,36 @@ def test_the_shaped_inertia_block_of_per_link_errors_is_thin_where_the_links_are
         assert model_of(robot, spec)[2].info["inertia_block"] == "ball"
 
 
+def test_the_shaped_block_s_lft_and_its_membership_read_one_residual_alike():
+    """The LFT (``factor_lft_plant`` with a matrix centre and ``g_shape``) and the membership test
+    (``scaled_residuals``) agree: the member the LFT gives at an inertia residual of 0.8 times the shaped block's
+    size has the factor ``K_offset + E`` and is held; at 1.3 times (scaled norm 1.04) it is refused."""
+    from polyrob.plant.models.factor_membership import scaled_residuals
+
+    _, _, unc = carried_model("ur5")
+    m = 6
+    W, g = unc.info["residual_weighting"], unc.info["residual_g_norm"]
+    values, vectors = np.linalg.eigh(unc.info["residual_g_shape"])
+    H = (vectors * np.sqrt(values)) @ vectors.T
+    Delta = np.linalg.qr(np.random.default_rng(3).standard_normal((m, m)))[0]  # orthogonal: norm 1
+    E = np.zeros((m, 3 * m))
+    E[:, 2 * m :] = np.linalg.solve(W, 0.8 * g * H @ Delta @ H @ W)  # the weighted block's member, in K's coordinates
+
+    def member(E):
+        blocks = scaled_residuals(unc, E)
+        A, B = unc.matrices_at(np.zeros(unc.n_params), residual=blocks)
+        return blocks, A, B
+
+    blocks, A, B = member(E)
+    assert np.linalg.norm(blocks[-1], 2) == pytest.approx(0.8)
+    inverse = np.linalg.inv(B[m:])
+    K_raw = np.hstack([inverse @ A[m:], np.eye(m) - inverse])
+    assert np.allclose(K_raw, unc.info["K_offset"] + E, rtol=0, atol=1e-9 * np.abs(K_raw).max())
+    assert MODELS["inner-links"].contains(unc, A, B).all()
+    _, A, B = member(1.3 * E)
+    assert not MODELS["inner-links"].contains(unc, A, B).any()
+
+
 def test_the_cli_offers_every_named_model():
     from polyrob.cli.options import MODEL_CHOICES
     from polyrob.pipeline.problem import UNCERTAINTY_MODELS

@@ -125,9 +125,10 @@ def test_the_shaped_block_holds_every_member_and_is_thinner_than_the_ball(seed):
 
 
 def test_a_shaped_block_s_member_is_in_the_lft_and_a_larger_one_is_not():
-    """The LFT carries the shaped block as ``g H Delta H`` (``factor_lft_plant(g_shape=)``) and the membership
-    test reads it back (``scaled_residuals``: ``H^-1 E H^-1 / g``): a residual at the shape's edge is a member,
-    the same residual 10 % larger is not, and a ball of the same g would accept an error the shape refuses."""
+    """The membership test reads a shaped block's matrix weights (``scaled_residuals``: ``H^-1 E H^-1``, ``H = root
+    g S^1/2``): a residual at the shape's edge has scaled norm 1, the same residual 10 % larger 1.1, and an error
+    a ball of the same g would hold is 16 times the shape's edge along its thin axis (the LFT side:
+    ``tests/test_arm_uncertainty_model.py``)."""
     from types import SimpleNamespace
 
     from polyrob.plant.models.factor_membership import scaled_residuals
