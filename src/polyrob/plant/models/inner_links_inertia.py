@@ -223,11 +223,8 @@ def g_norm_bound(box_rest, payload_rest, pay, kappa, shape=None, centre=None) ->
 
     m = box_rest.shape[-1]
     eye = np.eye(m)
-
-    def room(t):
-        return 1.0 / (1.0 - t) if t < 1.0 else np.inf
-
-    if shape is not None or centre is not None:
+    shaped = shape is not None or centre is not None
+    if shaped:
         S = eye if shape is None else np.asarray(shape, float)
         C = np.zeros((m, m)) if centre is None else np.asarray(centre, float)
         values, vectors = np.linalg.eigh(S)
@@ -238,11 +235,13 @@ def g_norm_bound(box_rest, payload_rest, pay, kappa, shape=None, centre=None) ->
         payload_rest = np.concatenate([T @ payload_rest @ T, constant]) if len(payload_rest) else constant
         pay = np.hstack([pay, np.ones((len(pay), 1))])
 
-        def room(t):  # noqa: F811 - the shaped block's small-gain figure
-            M = eye - C - t * S
-            if np.linalg.cond(M) > 1e12:
-                return np.inf
-            return float(np.linalg.norm(root @ np.linalg.solve(M, root), 2))
+    def room(t):  # the small-gain figure of the loop (I - G)^-1 around the centre t
+        if not shaped:
+            return 1.0 / (1.0 - t) if t < 1.0 else np.inf
+        M = eye - C - t * S
+        if np.linalg.cond(M) > 1e12:
+            return np.inf
+        return float(np.linalg.norm(root @ np.linalg.solve(M, root), 2))
 
     A = _absolute_sum(box_rest)  # (S, 2m, 2m)
     R = np.einsum("pi,isab->psab", pay, payload_rest) if len(payload_rest) else np.zeros((1,) + box_rest.shape[1:])
@@ -259,7 +258,7 @@ def g_norm_bound(box_rest, payload_rest, pay, kappa, shape=None, centre=None) ->
     span = max(float(top.max() - bottom.min()), 1e-6)
     at_centre = largest(g_c, np.arange(len(R)))  # (P, S)
     active = np.unique(np.argmax(at_centre, axis=0))
-    upper = g_c + 0.5 * span if shape is not None or centre is not None else min(g_c + 0.5 * span, 1.0 - 1e-3)
+    upper = g_c + 0.5 * span if shaped else min(g_c + 0.5 * span, 1.0 - 1e-3)
     found = minimize_scalar(
         lambda t: float((kappa * largest(t, active).max(axis=0)).max()) * room(t),
         bounds=(g_c - 0.5 * span, upper),
