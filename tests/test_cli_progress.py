@@ -203,3 +203,36 @@ def test_a_loop_in_another_thread_neither_moves_nor_narrows_the_job_s_line():
     finally:
         job.stop()
     assert shares == pytest.approx([0.25, 0.3, 0.4]), shares  # the stray thread's report and span end are not counted
+
+
+def test_analyze_shows_the_job_progress_and_the_mu_sweep_moves_it(capsys, monkeypatch, tmp_path):
+    """`analyze ur5 ...` ran 5-20 min with no line off a terminal (its stages had no job).  Now the job's line
+    starts with the first stage, and the μ sweep's points and the intervals between them report into it."""
+    import polyrob.analysis.mu.between as between
+    import polyrob.analysis.mu.sweep as sweep
+    from polyrob.progress import current
+
+    seen = []
+
+    def spy(module):
+        real = module.report
+
+        def reported(done, total):
+            job = current()
+            seen.append((module.__name__, done, total, job is not None and job.stage == 2))
+            real(done, total)
+
+        monkeypatch.setattr(module, "report", reported)
+
+    spy(sweep), spy(between)
+    paper_pldi().save(tmp_path / "paper.json")
+    argv = ["analyze", "paper_2r", "--pldi", tmp_path / "paper.npz", "--controller", "paper", "--uncertainty", "box"]
+    code, _, err = _run(capsys, *argv, "--mc", "20", "--omega", "0.1:100:8", "--no-time-varying", "--no-moving")
+    assert code in (0, 1)
+    assert "progress: stage 1 of 2 (reading the PLDI" in err  # the stage before the analysis: the PLDI given
+    assert "progress: stage 2 of 2 (analysis" in err
+    points = [(done, total) for name, done, total, _ in seen if name.endswith(".sweep")]
+    assert points and max(done / total for done, total in points) == 1.0  # every grid point reported
+    assert any(name.endswith(".between") for name, *_ in seen)  # the check between the points reports too
+    assert all(inside for *_, inside in seen)  # inside the analysis stage of the command's job
+    assert current() is None

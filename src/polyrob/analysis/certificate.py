@@ -90,6 +90,10 @@ class Status(str, enum.Enum):
         return self is Status.CERTIFIED
 
 
+#: The share of a certificate's progress its grid sweep fills; the check between the points fills the rest (its
+#: intervals are known only as it splits them, so its share is a guess, and the job's line never goes back).
+SWEEP_SHARE = 0.75
+
 #: How the words of a verdict read for each status (GRID_ONLY says exactly what holds).
 _WORDS = {
     Status.CERTIFIED: "CERTIFIED",
@@ -406,6 +410,7 @@ def certify_loop(
     from polyrob.analysis.loop_sweep import sweep_loop
     from polyrob.analysis.stability import stability_verdict
     from polyrob.plant.loops import lft
+    from polyrob.progress import span
 
     N = lft(P, K, n_u=n_u, n_y=n_y)
     M = N
@@ -418,16 +423,18 @@ def certify_loop(
     if stability.unstable and not sweep_unstable:
         status, reasons = decide_mu(stability, np.inf, np.nan, None)
         return Certificate(status, np.inf, np.inf, np.nan, stability, base, reasons, None, N)
-    mu, response_bits = sweep_loop(M, blk, omega, **mu_options)
-    cert = certificate_of_sweep(
-        N,
-        mu,
-        M=M,
-        stability=stability,
-        scope=base,
-        response_bits=response_bits,
-        lower_bound_disproves=lower_bound_disproves,
-    )
+    with span(0.0, SWEEP_SHARE):  # the grid's points, then the intervals between them (the job's line)
+        mu, response_bits = sweep_loop(M, blk, omega, **mu_options)
+    with span(SWEEP_SHARE, 1.0):
+        cert = certificate_of_sweep(
+            N,
+            mu,
+            M=M,
+            stability=stability,
+            scope=base,
+            response_bits=response_bits,
+            lower_bound_disproves=lower_bound_disproves,
+        )
     return replace(cert, default_grid=omega is None)
 
 

@@ -103,7 +103,7 @@ def cmd_analyze(args) -> int:
 
     omega_spec = parse_frequencies(args.omega)
     sampling = sampling_from_args(args)
-    out = Output(args, stages=2)
+    out = Output(args, stages=2, job=["bounds", "analysis"])  # minutes on an arm: one line for the whole job
     K, info, source = load_controller_args(args.controller)
     robot = robot_from_args(args)
     from polyrob.pipeline.matching import check_controller_size
@@ -272,7 +272,9 @@ def moving_options(args) -> dict | None:
         if getattr(args, flag, None) is not None and not getattr(args, "moving_cells", False):
             from polyrob.errors import ArgumentError
 
-            raise ArgumentError(f"--{flag.replace('_', '-')} sets a level of --moving-cells: add --moving-cells, or drop it")
+            raise ArgumentError(
+                f"--{flag.replace('_', '-')} sets a level of --moving-cells: add --moving-cells, or drop it"
+            )
     out = {} if n is None else {"velocities": "bounded", "harmonics": int(n), "points": (9, 3)}
     if getattr(args, "qdddot_max", None) is not None:
         out["jerk"] = args.qdddot_max  # a task domain's (polyrob.analysis.lpv.task); refused on another domain

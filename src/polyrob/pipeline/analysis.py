@@ -281,22 +281,29 @@ def analyze_controller(
     options = {"progress": progress, "scope": problem.scope()}
     if stability not in ("sweep", "implied"):
         raise ArgumentError(f"stability must be 'sweep' or 'implied', got {stability!r}")
+    from polyrob.progress import span
+
     own = reusable_certificate(certificate, problem.P, K, problem.scope()) if omega is None else None
-    rp = robperf(problem.P, K, omega, certificate=own, **options)
+    # the job's line: the two μ sweeps are most of the stage unless the moving robot's search follows (minutes)
+    ends = (0.2, 0.27, 0.3) if moving is not False else (0.6, 0.85, 1.0)
+    with span(0.0, ends[0]):
+        rp = robperf(problem.P, K, omega, certificate=own, **options)
     rs = robstab_implied(rp) if stability == "implied" else None
     if rs is None:
-        rs = robstab(problem.P, K, omega, **options)
-    npf = nominal_performance(problem.P, K)
-    sampling = sample_stability(problem.unc, K, n=int(mc), seed=seed)
-    covers = rp.certificate.scope.sentence()
+        with span(ends[0], ends[1]):
+            rs = robstab(problem.P, K, omega, **options)
     from polyrob.synthesis.true_robots import check_of_problem
 
-    true_robots = check_of_problem(problem, K)  # None without true robots to draw
-    tv = None
-    if time_varying:
-        from polyrob.analysis.time_varying.certificate import time_varying_certificate
+    with span(ends[1], ends[2]):
+        npf = nominal_performance(problem.P, K)
+        sampling = sample_stability(problem.unc, K, n=int(mc), seed=seed)
+        true_robots = check_of_problem(problem, K)  # None without true robots to draw
+        tv = None
+        if time_varying:
+            from polyrob.analysis.time_varying.certificate import time_varying_certificate
 
-        tv = time_varying_certificate(problem, K)
+            tv = time_varying_certificate(problem, K)
+    covers = rp.certificate.scope.sentence()
     from polyrob.analysis.lpv.constant import check_jerk, robot_in_motion_certificate
     from polyrob.analysis.lpv.moving import MovingRobotCertificate
 
@@ -304,8 +311,6 @@ def analyze_controller(
     if moving is False:
         mv = MovingRobotCertificate.not_computed("not asked for (--no-moving)")
     else:  # a task domain's goes to polyrob.analysis.lpv.task (its Jacobians depend on the accelerations too)
-        from polyrob.progress import span
-
         with span(0.3, 0.95):  # asked for, the search is most of the stage (minutes); its solves report inside
             mv = robot_in_motion_certificate(problem, K, auto=moving is None, time_varying=tv,
                                              **dict(moving_options or {}))  # fmt: skip

@@ -42,6 +42,7 @@ from polyrob.analysis.mu.blocks import as_block_structure
 from polyrob.analysis.mu.frequency import matrix_response
 from polyrob.analysis.mu.radius import covering_radius
 from polyrob.errors import ArgumentError
+from polyrob.progress import report
 
 __all__ = ["BetweenGridResult", "verify_between", "with_between", "crossing_frequencies"]
 
@@ -351,6 +352,7 @@ def verify_between(
             return result(False, None, why, done)
         if covered:
             done += 1
+            report(done, done + len(stack))  # intervals split as they go: a share of the ones known so far
             continue
         if added >= max_points:
             spent = f"{_points(added)} added (the check's limit of {_points(max_points)})"

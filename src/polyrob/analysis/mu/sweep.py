@@ -16,6 +16,7 @@ from polyrob.analysis.mu.lower import lower_bound
 from polyrob.analysis.mu.results import MuBoundsResult
 from polyrob.analysis.mu.upper import LmiUpper
 from polyrob.analysis.timelimit import TimeLimitedCall
+from polyrob.progress import report
 
 __all__ = [
     "run_sweep",
@@ -171,6 +172,7 @@ def run_sweep(
             l2, d2 = lower_at(H[i], D=Ds[i])
             if l2 >= lo[i]:
                 lo[i], deltas[i] = l2, d2
+            report(i + 1, omega.size)  # the grid is the sweep's work: its points move the job's line
         cold_from_the_top()  # before the peak is refined: a false peak would draw the refinement
         extra = []
         can_eval = not is_frd or getattr(sys, "ifunc", None) is not None
