@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+import dataclasses
+import fcntl
 import functools
+import hashlib
+import io
+import os
+import pickle
 import signal
+from pathlib import Path
 
 import pytest
 
 from polyrob import load_robot
+from polyrob.plant.models import inner_links
 
 
 @functools.cache
@@ -45,6 +53,92 @@ class _DoctestNamespace:
 
 def pytest_configure(config):
     config.pluginmanager.register(_DoctestNamespace(), "polyrob-doctest-namespace")
+
+
+# --------------------------------------------------------------------------- computed once per session
+
+_SESSION_FOLDER: list[Path] = []
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _session_folder(tmp_path_factory):
+    """The session's temporary folder, above every xdist worker's own (where :func:`once` keeps its results)."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent
+    _SESSION_FOLDER[:] = [root]
+
+
+class _Digest(pickle.Pickler):
+    """Pickles what decides a computation: a loop's drawn true robots and a domain's torque cache left out.
+
+    ``_scenarios`` (the true robots an inner loop's *bounds* are sampled at)
+    and ``_torques`` (a cache of the domain's torque range) are read by no
+    model build; two loops equal but for them build the same model.
+    """
+
+    SKIP = ("_scenarios", "_torques")
+
+    def reducer_override(self, obj):
+        if dataclasses.is_dataclass(obj) and not isinstance(obj, type) and any(hasattr(obj, k) for k in self.SKIP):
+            state = {k: v for k, v in vars(obj).items() if k not in self.SKIP}
+            return tuple, ((type(obj).__module__, type(obj).__qualname__, state),)
+        return NotImplemented
+
+
+def digest(*objects) -> str:
+    buffer = io.BytesIO()
+    _Digest(buffer, protocol=pickle.HIGHEST_PROTOCOL).dump(objects)
+    return hashlib.sha256(buffer.getvalue()).hexdigest()[:32]
+
+
+def once(tag: str, make, *inputs):
+    """``make()``, computed once per test session (also across xdist workers) for equal ``inputs``.
+
+    The result (or the exception ``make`` raised) is pickled in the session's
+    folder under ``tag`` and the digest of ``inputs`` (:func:`digest`: they
+    must hold everything ``make`` reads); a worker that needs a result another
+    is computing waits for it (a lock file), as tests/test_cli_synth.py's
+    ``shared`` does for its CLI runs.  Deterministic computations only.
+    """
+    folder = _SESSION_FOLDER[0] / "once"
+    folder.mkdir(exist_ok=True)
+    path = folder / f"{tag}-{digest(*inputs)}.pickle"
+    with open(path.with_suffix(".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if not path.exists():
+            try:
+                outcome = ("value", make())
+            except Exception as exc:
+                outcome = ("raised", exc)
+            path.write_bytes(pickle.dumps(outcome))
+        else:
+            outcome = pickle.loads(path.read_bytes())
+    if outcome[0] == "raised":
+        raise outcome[1]
+    return outcome[1]
+
+
+def light_model_once(loop, domain, *, samples: int = 64):
+    """:func:`polyrob.plant.models.inner_links.light_model` (what ``carried`` measures on), once per session.
+
+    For the unpatched model only: called while a test has patched the model's
+    functions, it would keep (or give) a result of other code.
+    """
+    return once("light_model", lambda: _LIGHT_MODEL(loop, domain, samples=samples), loop, domain, samples)
+
+
+_LIGHT_MODEL = inner_links.light_model  # the module's own, whatever a test patches
+
+
+@pytest.fixture
+def light_models_once(monkeypatch):
+    """``inner_links.light_model`` as :func:`light_model_once` for this test: a set measured by another test
+    (or by an earlier command of this one) on an equal loop and domain is not measured again.
+
+    ``carried`` and the CLI's refusals look it up in the module at each call, so they go through it.
+    """
+    monkeypatch.setattr(inner_links, "light_model", light_model_once)
 
 
 @pytest.fixture(scope="session")

@@ -10,6 +10,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import light_model_once
 
 from polyrob import load_robot
 from polyrob.domains.default_task import default_task_domain
@@ -62,8 +63,14 @@ def model_of(robot, spec, *, samples=64):
 
 @functools.cache
 def carried_model(name: str):
-    """The model of :func:`carried_set` (built once per robot for the tests that read it)."""
-    return model_of(load_robot(name), carried_set(name))
+    """The model of :func:`carried_set`, built once per robot and session for the tests that read it.
+
+    ``links.light_model`` builds what :func:`model_of` does (the same stand-in), through
+    :func:`conftest.light_model_once`: also what ``links.carried`` measures panda's set on.
+    """
+    loop = inner_loop_of_set(load_robot(name), "computed-torque", carried_set(name), draws=2)
+    domain = default_task_domain(loop)
+    return loop, domain, light_model_once(loop, domain, samples=64)
 
 
 @functools.cache
@@ -132,11 +139,11 @@ def test_the_coverage_falls_below_one_when_the_set_is_shrunk(name):
     assert np.mean(inside) < 0.9
 
 
-def test_panda_s_default_set_is_carried_once_the_block_keeps_its_skew_part_s_signs():
+def test_panda_s_default_set_is_carried_once_the_block_keeps_its_skew_part_s_signs(light_models_once):
     # with the task's corners sampled the fixed weighting's block is not symmetric; its symmetric part's spectrum
     # plus the skew parts' norms bounded it by 1.35 against the 1.33 its centre left (refused: the record
     # default_set-20261129T224539), the Hermitian dilation by 1.22 against 1.54 (inner_links_inertia.g_norm_bound;
-    # python benchmarks/default_set.py panda)
+    # python benchmarks/default_set.py panda); measured once a session: carried_model("panda") builds the same
     panda = load_robot("panda")
     loop = inner_loop_of_set(panda, "computed-torque", spec_of("panda"), draws=0)
     assert links.carried(loop, default_task_domain(loop)) is None

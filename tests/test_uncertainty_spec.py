@@ -84,8 +84,9 @@ def test_file_refusals_are_one_line_exit_2(capsys, tmp_path, doc, words):
     assert "not yet certified" not in line  # refused for the file's content, before the set's status
 
 
-def test_a_set_the_model_cannot_carry_is_refused_with_its_measured_reason(capsys, tmp_path):
+def test_a_set_the_model_cannot_carry_is_refused_with_its_measured_reason(capsys, tmp_path, light_models_once):
     # panda with its rated payload (0-3 kg) whose CoM lies within 0.3 m: measured before any bounds are taken
+    # (measured once: analyze poses the same loop and default task as synth, light_models_once keeps synth's)
     import yaml
 
     doc = yaml.safe_load(EXAMPLE.read_text(encoding="utf-8"))
