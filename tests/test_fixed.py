@@ -259,3 +259,30 @@ def test_failed_h2_start_is_recorded(monkeypatch):
     r = fixed_structure_musyn(P, blk, "tf1", n_u=1, n_y=1, starts=1, max_iter=1, omega=w, certify_omega=w)
     assert r.info["start"] == "random"
     assert any("H2 start failed" in f and "random start" in f for f in r.info["fallbacks"])
+
+
+def test_the_job_s_line_moves_through_the_first_scalings_the_iterations_and_the_certificate():
+    """`synth ur5 --structure pid` sat at "31 % of the job" for 17 min: the first scalings (a cold μ bound per
+    frequency), the iterations and the certificate reported nothing into the job's line.  Now each has its part."""
+    import io
+
+    from polyrob.progress import JobProgress
+
+    P, blk = _tiny_plant()
+    w = np.logspace(-2, 2, 21)
+    job = JobProgress(["synthesis"], stream=io.StringIO(), clock=lambda: 0.0).start()
+    job._stop.set()  # no ticking thread: the shares are read from the job's own record
+    shares, within = [], job.within
+    job.within = lambda share: (shares.append(share), within(share))[1]
+    try:
+        job.begin(1, "synthesis")
+        fixed_structure_musyn(P, blk, "tf1", n_u=1, n_y=1, init=-4.0, starts=2, max_iter=3, omega=w, certify_omega=w)
+    finally:
+        job.stop()
+    from polyrob.synthesis.fixed.synthesis import FIRST_SCALINGS_SHARE, STARTS_SHARE
+
+    first = STARTS_SHARE / 2 * FIRST_SCALINGS_SHARE  # the first start's first scalings end here
+    assert len([s for s in shares if 0 < s < first]) >= 10  # its frequencies move the line one by one
+    assert any(first < s < STARTS_SHARE / 2 for s in shares)  # the first start's iterations
+    assert any(STARTS_SHARE / 2 < s < STARTS_SHARE for s in shares)  # the second start's
+    assert any(STARTS_SHARE < s < 1.0 for s in shares)  # the certificate's sweep

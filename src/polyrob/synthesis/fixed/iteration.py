@@ -18,6 +18,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from polyrob.errors import ArgumentError
+from polyrob.progress import span
 from polyrob.synthesis.fixed.kstep import kstep
 from polyrob.synthesis.fixed.loop import FixedLoop
 from polyrob.synthesis.fixed.options import FixedStructureOptions
@@ -215,55 +216,56 @@ def optimise_start(
 ):
     radius = opts.trust_region
     stall = 0
-    for _ in range(max_iter):
-        if target is not None and run.peak <= target:
-            break
-        # a start that began makes at least one iteration (a start is not begun after the limit):
-        # on a loaded machine its set-up alone can outlast a short limit
-        if deadline is not None and run.iterations > 0 and deadline.passed():
-            run.notes.append(f"stopped by {deadline.words} after {run.iterations} iteration(s)")
-            break
-        t0 = time.perf_counter()
-        old = run.peak
-        theta_new, _, msg = kstep(loop, run.theta, run.sc, opts, radius)
-        theta_new, sc = accept_step(loop, run.theta, theta_new, run.sc, run.peak, blk, opts, screen)
-        run.iterations += 1
-        if theta_new is None:
-            # no decrease within the trust region: shrink it and refresh the
-            # scalings with AB13MD in case the warm-started ones are what stalls
-            radius *= 0.3
-            run.notes.append(f"iteration {run.iterations}: step rejected ({msg}); trust radius {radius:.3g}")
-            sc = grid_bound(loop, run.theta, run.sc, blk, opts, exact=True)
-            stall += 1
-        else:
-            run.theta = theta_new
-            grown = float(np.max(sc.mu)) < 0.97 * old
-            radius = min(2.0 * radius, 4.0 * opts.trust_region) if grown else radius
-        ref = refine_points(sc)
-        ref = ref[~np.isin(ref, sc.omega)]
-        if ref.size:
-            sc = sc.merged(dstep(loop, run.theta, ref, blk))
-        run.sc = sc
-        run.peak = float(np.max(sc.mu))
-        added = screen_grid(loop, run, screen, blk, opts)
-        run.history.append(run.peak)
-        run.gammas.append(run.peak)
-        report(
-            {
-                "start": label,
-                "iteration": run.iterations,
-                "peak_mu": run.peak,
-                "kstep": msg,
-                "grid": int(run.sc.omega.size),
-                "screen_added": added,
-                "radius": radius,
-                "seconds": time.perf_counter() - t0,
-            }
-        )
-        if theta_new is not None:
-            stall = stall + 1 if run.peak > old * (1 - opts.tol) else 0
-        if stall >= opts.patience or radius < 1e-4:
-            break
+    for i in range(max_iter):
+        with span(i / max_iter, (i + 1) / max_iter):  # the job's line: each iteration its part
+            if target is not None and run.peak <= target:
+                break
+            # a start that began makes at least one iteration (a start is not begun after the limit):
+            # on a loaded machine its set-up alone can outlast a short limit
+            if deadline is not None and run.iterations > 0 and deadline.passed():
+                run.notes.append(f"stopped by {deadline.words} after {run.iterations} iteration(s)")
+                break
+            t0 = time.perf_counter()
+            old = run.peak
+            theta_new, _, msg = kstep(loop, run.theta, run.sc, opts, radius)
+            theta_new, sc = accept_step(loop, run.theta, theta_new, run.sc, run.peak, blk, opts, screen)
+            run.iterations += 1
+            if theta_new is None:
+                # no decrease within the trust region: shrink it and refresh the
+                # scalings with AB13MD in case the warm-started ones are what stalls
+                radius *= 0.3
+                run.notes.append(f"iteration {run.iterations}: step rejected ({msg}); trust radius {radius:.3g}")
+                sc = grid_bound(loop, run.theta, run.sc, blk, opts, exact=True)
+                stall += 1
+            else:
+                run.theta = theta_new
+                grown = float(np.max(sc.mu)) < 0.97 * old
+                radius = min(2.0 * radius, 4.0 * opts.trust_region) if grown else radius
+            ref = refine_points(sc)
+            ref = ref[~np.isin(ref, sc.omega)]
+            if ref.size:
+                sc = sc.merged(dstep(loop, run.theta, ref, blk))
+            run.sc = sc
+            run.peak = float(np.max(sc.mu))
+            added = screen_grid(loop, run, screen, blk, opts)
+            run.history.append(run.peak)
+            run.gammas.append(run.peak)
+            report(
+                {
+                    "start": label,
+                    "iteration": run.iterations,
+                    "peak_mu": run.peak,
+                    "kstep": msg,
+                    "grid": int(run.sc.omega.size),
+                    "screen_added": added,
+                    "radius": radius,
+                    "seconds": time.perf_counter() - t0,
+                }
+            )
+            if theta_new is not None:
+                stall = stall + 1 if run.peak > old * (1 - opts.tol) else 0
+            if stall >= opts.patience or radius < 1e-4:
+                break
     return run
 
 

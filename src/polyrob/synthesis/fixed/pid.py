@@ -36,7 +36,9 @@ class PIDStructure(ControllerStructure):
 
     def __post_init__(self):
         if self.n_u != self.n_y:
-            raise ArgumentError(f"a decentralised PID needs as many controls as measurements, got {self.n_u}x{self.n_y}")
+            raise ArgumentError(
+                f"a decentralised PID needs as many controls as measurements, got {self.n_u}x{self.n_y}"
+            )
 
     @property
     def name(self) -> str:

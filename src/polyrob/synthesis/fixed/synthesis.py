@@ -81,6 +81,7 @@ from polyrob.analysis.certificate import certify_loop
 from polyrob.analysis.mu.blocks import as_block_structure
 from polyrob.errors import ArgumentError, PolyrobError, SynthesisError
 from polyrob.plant.generalized import paper_controller
+from polyrob.progress import span
 from polyrob.synthesis.fixed.iteration import (
     StartRun,
     check_grid,
@@ -99,6 +100,11 @@ from polyrob.synthesis.options import FixedStructure, MusynOptions
 from polyrob.synthesis.result import MusynResult
 
 __all__ = ["fixed_structure_musyn", "FixedStructureOptions", "closed_loop_response"]
+
+#: Shares of the job's line (guesses: the line never goes back): the starts' iterations, then the certificate;
+#: within a start, its first scalings (a cold μ bound per frequency of the working grid), then its iterations.
+STARTS_SHARE = 0.8
+FIRST_SCALINGS_SHARE = 0.2
 
 
 def fixed_structure_musyn(
@@ -197,14 +203,16 @@ def fixed_structure_musyn(
 
     with single_blas_thread():
         candidates = _starts(search.loop, sysP, init, method, tuning, fallbacks)
-        runs, failures, screen = search.run_starts(candidates, omega, certify_omega, deadline, fallbacks)
+        with span(0.0, STARTS_SHARE):
+            runs, failures, screen = search.run_starts(candidates, omega, certify_omega, deadline, fallbacks)
         if not runs:
             raise SynthesisError(
                 f"no start stabilises the closed loop with a {strc.name} controller "
                 f"({'; '.join(failures)}); try another structure, a higher order or an init controller"
             )
         best = min(runs, key=lambda r: r.peak)
-        K, sweep, cert = search.certify(P, best, certify_omega, screen)
+        with span(STARTS_SHARE, 1.0):
+            K, sweep, cert = search.certify(P, best, certify_omega, screen)
 
     N = cert.closed_loop
     poles = np.linalg.eigvals(np.asarray(N.A)) if N.nstates else np.zeros(0)
@@ -295,7 +303,7 @@ class _Search:
         """Optimise every start that can be stabilised: ``(runs, failures, screening grid)``."""
         loop, tuning = self.loop, self.tuning
         runs, failures = [], []
-        span = screen = work = None
+        extent = screen = work = None
         for label, th in candidates:
             if runs and deadline is not None and deadline.passed():
                 fallbacks.append(f"starts after {len(runs)} not run: {deadline.words}")
@@ -311,18 +319,24 @@ class _Search:
                     f"({np.round(loop.fixed_modes[loop.fixed_modes.real >= 0], 4).tolist()})"
                 )
                 continue
-            if span is None:
-                span = grid_span(loop, th, omega)
-                work = omega if omega is not None else log_grid(*span, tuning.grid_density)
-                screen = log_grid(*span, tuning.screen_density)
+            if extent is None:
+                extent = grid_span(loop, th, omega)
+                work = omega if omega is not None else log_grid(*extent, tuning.grid_density)
+                screen = log_grid(*extent, tuning.screen_density)
                 if certify_omega is not None:
                     screen = np.union1d(screen, certify_omega[certify_omega > 0])
-            sc = dstep(loop, th, work, self.st)
-            run = StartRun(theta=th, sc=sc, peak=float(np.max(sc.mu)))
-            run.history.append(run.peak)
-            screen_grid(loop, run, screen, self.st, tuning)
-            run.history[-1] = run.peak
-            optimise_start(loop, run, self.st, tuning, self.max_iter, screen, self.report, label, self.target, deadline)
+            k, n = len(runs) + len(failures), len(candidates)
+            with span(k / n, (k + 1) / n):  # the job's line: each start its part, its first scalings a fifth of it
+                with span(0.0, FIRST_SCALINGS_SHARE):
+                    sc = dstep(loop, th, work, self.st)
+                run = StartRun(theta=th, sc=sc, peak=float(np.max(sc.mu)))
+                run.history.append(run.peak)
+                screen_grid(loop, run, screen, self.st, tuning)
+                run.history[-1] = run.peak
+                with span(FIRST_SCALINGS_SHARE, 1.0):
+                    optimise_start(
+                        loop, run, self.st, tuning, self.max_iter, screen, self.report, label, self.target, deadline
+                    )
             run.notes.insert(0, label)
             runs.append(run)
         return runs, failures, screen
