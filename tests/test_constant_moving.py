@@ -137,6 +137,23 @@ def test_a_model_whose_parameters_move_goes_to_the_rate_bounded_route():
         robot_in_motion_certificate(lft_problem, control.ss([], [], [], np.eye(2)))
 
 
+def test_an_inner_loop_on_a_model_whose_parameters_move_names_the_time_varying_verdict(problem):
+    """ur5's per-link set (inner-links) printed "not computed (an inner loop: its moving-robot verdict is the any-rate
+    one (inner-gain model))": no such verdict was computed.  Its direction scalars move with the state, so only the
+    time-varying verdict covers the moving robot, and the line says so; a jerk bound is refused with an inner layer."""
+    from types import SimpleNamespace
+
+    from polyrob.errors import ArgumentError
+
+    links = SimpleNamespace(P=SimpleNamespace(uncertain=SimpleNamespace(model="inner-links")), robot=problem.robot,
+                            domain=problem.domain)  # fmt: skip
+    out = robot_in_motion_certificate(links, control.ss([], [], [], np.eye(2)))
+    assert not out.computed and "'inner-links' model's parameters move" in out.notes[-1]
+    assert "only the time-varying verdict" in out.notes[-1] and "inner-gain model)" not in out.notes[-1]
+    with pytest.raises(ArgumentError, match="without an inner layer"):
+        robot_in_motion_certificate(links, control.ss([], [], [], np.eye(2)), jerk=5.0)
+
+
 def test_a_failed_test_is_not_certified_never_a_violation(problem):
     """Half the PID's gain: mu of the scaled structure >= 1 says the test fails, not that a robot violates it."""
     from polyrob.analysis.certificate import Status

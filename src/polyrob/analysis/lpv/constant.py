@@ -50,8 +50,15 @@ import numpy as np
 
 from polyrob.errors import ArgumentError, PolyrobError
 
-__all__ = ["applies", "residual_scalings", "scaled_plant", "constant_parameter_certificate", "robot_in_motion_certificate",
-           "check_jerk", "TASK_OPTIONS"]
+__all__ = [
+    "applies",
+    "residual_scalings",
+    "scaled_plant",
+    "constant_parameter_certificate",
+    "robot_in_motion_certificate",
+    "check_jerk",
+    "TASK_OPTIONS",
+]
 
 #: Largest closed loop (states) analysed.
 MAX_STATES = 60
@@ -220,12 +227,22 @@ def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0
 
 
 #: The options :func:`~polyrob.analysis.lpv.task.task_motion_certificate` takes from the moving search's options.
-TASK_OPTIONS = ("points", "velocities", "harmonics", "level", "cells", "cell_level", "cell_time_limit", "cell_workers",
-                "progress", "solver")
+TASK_OPTIONS = (
+    "points",
+    "velocities",
+    "harmonics",
+    "level",
+    "cells",
+    "cell_level",
+    "cell_time_limit",
+    "cell_workers",
+    "progress",
+    "solver",
+)
 
 
 def check_jerk(problem, jerk) -> None:
-    """Refuse a jerk bound (``--qdddot-max``) where no certificate reads it: off a task, or on an inner-gain model.
+    """Refuse a jerk bound (``--qdddot-max``) where no certificate reads it: off a task, or with an inner layer.
 
     Raises
     ------
@@ -233,7 +250,10 @@ def check_jerk(problem, jerk) -> None:
     """
     if jerk is None:
         return
-    if getattr(getattr(problem, "domain", None), "kind", "") != "task" or applies(problem) is None:
+    from polyrob.model.inner import InnerLoopRobot
+
+    inner = isinstance(getattr(problem, "robot", None), InnerLoopRobot)
+    if getattr(getattr(problem, "domain", None), "kind", "") != "task" or applies(problem) is None or inner:
         raise ArgumentError(
             "--qdddot-max bounds the jerk of a task domain's moving robot: give a task (--pose, --q-radius, "
             "--qdot-max, --qddot-max) without an inner layer, or drop it"
@@ -264,8 +284,19 @@ def robot_in_motion_certificate(problem, K, *, auto: bool = False, time_varying=
     from polyrob.analysis.lpv.moving import moving_robot_certificate
 
     check_jerk(problem, jerk)
-    if applies(problem) is None:
+    why = applies(problem)
+    if why is None:
         return constant_parameter_certificate(problem, K, auto=auto)
+    from polyrob.model.inner import InnerLoopRobot
+
+    if isinstance(getattr(problem, "robot", None), InnerLoopRobot):
+        # an inner loop on another model (inner-links: its direction scalars are the set's constants times
+        # coefficients of the state): no constant parameter to hold, and the task's grid is for a bare robot
+        from polyrob.analysis.lpv.moving import MovingRobotCertificate
+
+        return MovingRobotCertificate.not_computed(
+            f"{why}; only the time-varying verdict (every parameter at any rate) covers the moving robot"
+        )
     if getattr(getattr(problem, "domain", None), "kind", "") != "task":
         return moving_robot_certificate(problem, K, auto=auto, **options)
     from polyrob.analysis.lpv.task import task_motion_certificate
