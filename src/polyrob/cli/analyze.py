@@ -103,6 +103,7 @@ def cmd_analyze(args) -> int:
 
     omega_spec = parse_frequencies(args.omega)
     sampling = sampling_from_args(args)
+    moving_opts = moving_options(args)  # its refusals before any work (and before the job's progress line)
     out = Output(args, stages=2, job=["bounds", "analysis"])  # minutes on an arm: one line for the whole job
     K, info, source = load_controller_args(args.controller)
     robot = robot_from_args(args)
@@ -141,7 +142,7 @@ def cmd_analyze(args) -> int:
         progress=out.progress,
         time_varying=args.time_varying,
         moving=moving_asked(args),
-        moving_options=moving_options(args),
+        moving_options=moving_opts,
         sampled_loop=sampling,
     )
     report = {

@@ -113,6 +113,7 @@ def cmd_run(args) -> int:
     run_dir = _run_dir(args)
     at_rate = rate_conditions_from_args(args) if run_dir is not None else None  # its refusals before any work
     coulomb = coulomb_from_args(args)
+    moving_opts = moving_options(args)  # its refusals before any work
     stages = ["bounds", "largest bandwidth" if args.max_bandwidth else "synthesis", "analysis"]
     out = Output(args, stages=len(stages) + (run_dir is not None), job=stages + ["validation"] * (run_dir is not None))
     main_job_defaults(args, out)
@@ -167,7 +168,7 @@ def cmd_run(args) -> int:
         time_varying=args.time_varying,
         stability="sweep" if args.stability_sweep else "implied",
         moving=moving_asked(args),
-        moving_options=moving_options(args),
+        moving_options=moving_opts,
         limit=None if args.max_bandwidth else limit,  # the limit printed above is factor 1's
         certificate=design.certificate,  # decided again, not swept again, when it is of the same loop and grid
         sampled_loop=sampling,  # --rate HZ: the sampled loop's certificate is the verdict

@@ -204,6 +204,7 @@ def cmd_synth(args) -> int:
         scale_names(args.scale_only), alphas_from_args(args.alphas)
     at_rate = rate_conditions_from_args(args)
     coulomb = coulomb_from_args(args)
+    moving_opts = moving_options(args) if args.moving else None  # its refusals before any work
     stages = ["bounds", "largest bandwidth" if args.max_bandwidth else "synthesis"] + ["moving-robot"] * args.moving
     stages += ["validation"] * (at_rate is not None)
     out = Output(args, stages=len(stages), job=stages)
@@ -252,7 +253,7 @@ def cmd_synth(args) -> int:
         design, doc["sampled"] = sampled_check(problem, design, sampling, out)
         # export reads the rate, delay and hold the certificate covers (cli/files.py certified_sampling)
         sampled_record = {k: doc["sampled"][k] for k in ("rate_hz", "delay_samples", "hold", "words")}
-    moving = moving_check(problem, design.controller, out, moving_options(args)) if args.moving else None
+    moving = moving_check(problem, design.controller, out, moving_opts) if args.moving else None
     if moving is not None:
         doc["moving"] = moving
     if args.output:
