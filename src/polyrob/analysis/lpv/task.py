@@ -235,10 +235,7 @@ def task_scheduling(robot, domain, *, points=DEFAULT_POINTS, jerk=None, max_join
     if getattr(domain, "kind", "") != "task" or not hasattr(domain, "qddot_upper"):
         raise NotApplicable("not a task domain (q, qdot, qddot bounded, torques by inverse dynamics)")
     if getattr(robot, "inner", None) is not None or type(robot).__name__.startswith("Inner"):
-        raise NotApplicable(
-            "an inner loop: the task's scheduled grid is for a robot without one (an inner-gain model's moving-robot "
-            "verdict is its constant-parameter one, any other model's the time-varying one)"
-        )
+        raise NotApplicable("an inner loop: the task's scheduled grid is for a robot without one")
     m = robot.m
     if m > max_joints:
         raise NotApplicable(f"{m} joints: the task's scheduled grid is built for at most {max_joints}")
@@ -563,9 +560,8 @@ def _found(model, system, domain, lower_bound) -> dict:
         return {}
 
 
-def _search(
-    model, system, rates, basis, lpvnorm, conditioned, time_scale, kinematic_rates, level=None, solver="clarabel"
-):
+def _search(model, system, rates, basis, lpvnorm, conditioned, time_scale, kinematic_rates, level=None,
+            solver="clarabel"):  # fmt: skip
     """``(result, the system it ran on, its time scale)``: the conditioned copy first, then the time-scaled loop; a
     proved result is searched again in the coordinates of its own ``X`` (:func:`~polyrob.analysis.lpv.robot.refine`)."""
     from polyrob.analysis.lpv.result import LpvNormResult
