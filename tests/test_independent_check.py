@@ -97,20 +97,71 @@ def test_on_the_certified_set_every_loop_is_below_the_bound_and_the_per_link_set
     assert vertices["weighted_norm_worst"] > inside["weighted_norm_worst"]
 
 
-def test_a_file_with_limit_weights_is_checked_on_its_paper_block_as_a_lower_bound(tmp_path):
+def _with_limit_weights(tmp_path, effort=(1.3, 0.9), noise=(1.2e-5, 1.2e-5)):
+    import json
+
+    doc = json.loads(FIXTURE.read_text(encoding="utf-8"))
+    doc["info"]["weights"].update({"effort": list(effort), "noise": list(noise)})
+    path = tmp_path / "K.json"
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    return path, doc["info"]["weights"]
+
+
+def test_a_file_with_limit_weights_is_checked_with_its_effort_weight_as_polyrob_states_it(tmp_path):
+    """The limit weights are rebuilt from their formula: the check's frozen loop is polyrob's generalized plant
+    with ``W_KS = W_u max(W_n)`` on the outer input closed with the controller (its nominal norm to AB13DD's
+    tolerance), and at every frequency its gain is that of ``[W_S S; W_T T; W_KS K S]`` computed from the
+    transfer matrices; ``paper_block`` leaves the effort rows out (a lower bound, said)."""
+    from polyrob.analysis.robust import nominal_performance
+    from polyrob.pipeline import build_problem
+    from polyrob.plant.generalized import generalized_plant
+    from polyrob.plant.weights import plant_weights
+
+    path, weights = _with_limit_weights(tmp_path, effort=(600.0, 400.0))  # W_KS 7e-3, 5e-3: the norm doubles
+    full = frozen_check(path, RobotUncertainty(link_error=0.0), nominal_only=True, at_pose=True)
+    plain = frozen_check(FIXTURE, RobotUncertainty(link_error=0.0), nominal_only=True, at_pose=True)
+    block = frozen_check(path, RobotUncertainty(link_error=0.0), nominal_only=True, at_pose=True, paper_block=True)
+    assert block.weighted_norm[0] == pytest.approx(plain.weighted_norm[0], rel=1e-12)  # the same W_S/W_T loop
+    assert full.weighted_norm[0] > plain.weighted_norm[0] * 1.01  # the effort rows add to the norm
+    assert "W_KS u" in full.summary()["weights_rebuilt"] and "weighted_norm_of" not in full.summary()
+
+    arm = inner_loop(load_robot("planar_2r"), "computed-torque", model_error=0.1)
+    dom = TaskDomain.from_robot(arm, pose=[0.4, 0.3], q_radius=0.3, qdot_max=0.5, qddot_max=2.0)
+    cheap = {"samples": 32, "coverage": 0, "refine": 0, "verify_rounds": 0, "screen": 0, "workers": 1}
+    problem = build_problem(arm, dom, progress=False, bound_options={**cheap, "describe_polytope": False})
+    hp = {k: tuple(v) for k, v in weights.items()}
+    P = generalized_plant(problem.unc, **plant_weights(hp))
+    assert full.weighted_norm[0] == pytest.approx(nominal_performance(P, load_controller(path)), rel=1e-6)
+
+    # by hand: the nominal loop at the pose is the double integrator behind computed torque
+    K = control.ss(load_controller(path))
+    WS, WT = paper_weights(hp)
+    W_KS = np.diag(np.asarray(weights["effort"]) * max(weights["noise"]))
+    for w in (0.05, 1.0, 20.0):
+        s = 1j * w
+        G = np.eye(2) / s**2
+        Ks = K(s)
+        S = np.linalg.inv(np.eye(2) + G @ Ks)
+        stacked = np.vstack([WS(s) @ S, WT(s) @ G @ Ks @ S, W_KS @ Ks @ S])
+        top = np.linalg.svd(stacked, compute_uv=False)[0]
+        assert top <= full.weighted_norm[0] * (1 + 1e-6)
+        assert np.linalg.svd(stacked[:4], compute_uv=False)[0] <= top
+
+
+def test_a_file_whose_weights_the_check_cannot_rebuild_is_refused(tmp_path):
     import json
 
     from polyrob.errors import ArgumentError
 
     doc = json.loads(FIXTURE.read_text(encoding="utf-8"))
-    doc["info"]["weights"].update({"effort": [1.3, 1.3], "noise": [1.2e-5, 1.2e-5]})
+    doc["info"]["weights"]["friction"] = [0.1, 0.1]
     path = tmp_path / "K.json"
     path.write_text(json.dumps(doc), encoding="utf-8")
-    with pytest.raises(ArgumentError, match="rebuilds the paper's"):
+    with pytest.raises(ArgumentError, match="check that controller another way"):
         frozen_check(path, RobotUncertainty(link_error=0.0), nominal_only=True, at_pose=True)
-    plain = frozen_check(FIXTURE, RobotUncertainty(link_error=0.0), nominal_only=True, at_pose=True)
-    block = frozen_check(path, RobotUncertainty(link_error=0.0), nominal_only=True, at_pose=True, paper_block=True)
-    assert block.weighted_norm[0] == pytest.approx(plain.weighted_norm[0], rel=1e-12)  # the same W_S/W_T loop
-    out = block.summary()
-    assert "a lower bound" in out["weighted_norm_of"] and "effort, noise" in out["weighted_norm_of"]
-    assert out["every_loop_stable_and_below_bound"] is False  # a sub-block's norm proves nothing below the bound
+    only_effort, _ = _with_limit_weights(tmp_path)
+    doc = json.loads(only_effort.read_text(encoding="utf-8"))
+    del doc["info"]["weights"]["noise"]
+    only_effort.write_text(json.dumps(doc), encoding="utf-8")
+    with pytest.raises(ArgumentError, match="need both"):
+        frozen_check(only_effort, RobotUncertainty(link_error=0.0), nominal_only=True, at_pose=True)

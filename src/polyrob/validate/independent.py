@@ -19,9 +19,12 @@ random points of the file's task domain:
 
    with ``v`` the input that gives the point's ``qddot`` on this true robot;
 2. the closed loop with the controller ``u = K (r - q)``: its largest pole real part;
-3. the weighted closed loop ``w = r -> z = [W_S e; W_T y]`` with the paper's
-   weights rebuilt here from the file's hyperparameters, and its H-infinity
-   norm by SLICOT's ``AB13DD`` (called directly).
+3. the weighted closed loop ``w = r -> z = [W_S e; W_T y; W_KS u]`` with the
+   weights rebuilt here from the file's hyperparameters (the paper's ``W_S``
+   and ``W_T``; where the file has limit weights, the effort weight on the
+   outer input, ``W_KS = w_n W_u``: the encoder noise ``W_n n`` enters ``e``
+   where ``r`` does, so the noise-driven effort is this channel's), and its
+   H-infinity norm by SLICOT's ``AB13DD`` (called directly).
 
 A frozen certificate ``mu <= b`` of robust performance implies, for every
 robot of its set and every frozen point, a stable loop with ``||N_zw||inf <= b``:
@@ -41,10 +44,19 @@ import pinocchio
 from polyrob.errors import ArgumentError
 from polyrob.uncertainty_set.draw import EXTREME_SHARE, at_vertices
 
-__all__ = ["FrozenCheck", "weights_from_hyperparameters", "frozen_jacobians", "weighted_loop", "frozen_check"]
+__all__ = [
+    "FrozenCheck",
+    "weights_from_hyperparameters",
+    "effort_weight_from_hyperparameters",
+    "frozen_jacobians",
+    "weighted_loop",
+    "frozen_check",
+]
 
 #: The weight hyperparameters this check rebuilds (the paper's W_S and W_T).
 PAPER_KEYS = ("omega_b", "M_s", "A_s", "omega_bt", "M_t", "A_t")
+#: The limit hyperparameters it rebuilds too: the effort weight ``W_u`` per outer input, the noise ``W_n`` per joint.
+LIMIT_KEYS = ("effort", "noise")
 
 
 def weights_from_hyperparameters(hp: dict, m: int):
@@ -53,11 +65,12 @@ def weights_from_hyperparameters(hp: dict, m: int):
     ``W_S,i = (s / M_s + w_b) / (s + w_b A_s)``, ``W_T,i = (s + w_bt) / (A_t s + w_bt M_t)``.
     Each is ``(A, B, C, D)`` with ``m`` states.
     """
-    unknown = sorted(set(hp) - set(PAPER_KEYS))
+    unknown = sorted(set(hp) - set(PAPER_KEYS) - set(LIMIT_KEYS))
     if unknown or set(PAPER_KEYS) - set(hp):
         raise ArgumentError(
             f"the controller file's weights hold {sorted(hp)}; this check rebuilds the paper's "
-            f"{', '.join(PAPER_KEYS)} only: check that controller another way"
+            f"{', '.join(PAPER_KEYS)} and the limit weights' {', '.join(LIMIT_KEYS)} only: check that controller "
+            "another way"
         )
     get = {k: np.broadcast_to(np.asarray(hp[k], float), (m,)) for k in PAPER_KEYS}
     wb, ms, As = get["omega_b"], get["M_s"], get["A_s"]
@@ -68,6 +81,23 @@ def weights_from_hyperparameters(hp: dict, m: int):
     p = wbt * mt / At
     WT = (np.diag(-p), np.eye(m), np.diag((wbt - p) / At), np.diag(1.0 / At))
     return WS, WT
+
+
+def effort_weight_from_hyperparameters(hp: dict, m: int):
+    """``W_KS`` on the outer input ``u``: ``diag(W_u) * max(W_n)``, or ``None`` when ``hp`` has no limit keys.
+
+    The noise ``n`` enters the measurement as ``e = r - q - W_n n``, where
+    the reference does, so ``n -> u`` is ``-K S W_n``; with the largest noise
+    level on every joint (only larger) ``||W_u K S W_n|| <= ||(w_n W_u) K
+    S||``, the ``r -> u`` channel this weight puts in the stacked norm.
+    """
+    if not set(LIMIT_KEYS) & set(hp):
+        return None
+    if set(LIMIT_KEYS) - set(hp):
+        raise ArgumentError(f"the controller file's limit weights need both {list(LIMIT_KEYS)}, it has {sorted(hp)}")
+    effort = np.broadcast_to(np.asarray(hp["effort"], float), (m,))
+    noise = float(np.max(np.asarray(hp["noise"], float)))
+    return np.diag(effort * noise)
 
 
 def _config(model, q):
@@ -113,8 +143,11 @@ def frozen_jacobians(true_model, true_damping, model_hat, damping_hat, inner: st
     return A, B, v
 
 
-def weighted_loop(A, B, K, WS, WT):
-    """``(closed loop A, weighted loop (A, B, C, D))`` of ``G = (A, B, [I 0], 0)`` under ``u = K (r - y)``."""
+def weighted_loop(A, B, K, WS, WT, W_KS=None):
+    """``(closed loop A, weighted loop (A, B, C, D))`` of ``G = (A, B, [I 0], 0)`` under ``u = K (r - y)``.
+
+    ``z = [W_S e; W_T y]``, and ``W_KS u`` below them when the constant ``W_KS`` is given.
+    """
     m = B.shape[1]
     n = A.shape[0]
     Ak, Bk, Ck, Dk = K
@@ -141,6 +174,10 @@ def weighted_loop(A, B, K, WS, WT):
         ]
     )
     Dw = np.vstack([Ds, np.zeros((m, m))])
+    if W_KS is not None:  # u = Ck xk + Dk e = [-Dk C, Ck] xcl + Dk r
+        W_KS = np.asarray(W_KS, float)
+        Cu = np.hstack([-Dk @ C, Ck, np.zeros((Dk.shape[0], ns + nt))])
+        Cw, Dw = np.vstack([Cw, W_KS @ Cu]), np.vstack([Dw, W_KS @ Dk])
     return Acl, (Aw, Bw, Cw, Dw)
 
 
@@ -263,9 +300,11 @@ def frozen_check(
         Called with ``(done, total)`` loops (progress).
     paper_block : bool
         A file whose weights hold limit weights (effort, noise) too: rebuild
-        only ``W_S`` and ``W_T``.  The norm is then that of a sub-block of the
-        certified loop, a lower bound of its norm: a value above the bound
-        disproves it, none below proves it (the summary says so).
+        only ``W_S`` and ``W_T`` (by default the effort weight is rebuilt
+        too: :func:`effort_weight_from_hyperparameters`).  The norm is then
+        that of a sub-block of the certified loop, a lower bound of its norm:
+        a value above the bound disproves it, none below proves it (the
+        summary says so).
     extremes : float
         The share of the ``n`` robots drawn at vertices of the set (every link factor
         at an end, the payload's mass at an end and its centre of mass on the
@@ -294,6 +333,7 @@ def frozen_check(
     if paper_block:
         weights = {k: v for k, v in weights.items() if k in PAPER_KEYS}
     WS, WT = weights_from_hyperparameters(weights, m)
+    W_KS = effort_weight_from_hyperparameters(weights, m)
     box = _task_box(info, robot.joint_names)
     bound = (cert.get("certificate") or {}).get("bound")
     spec = default_uncertainty(robot) if uncertainty is None else uncertainty
@@ -344,7 +384,7 @@ def frozen_check(
             A, B, _ = frozen_jacobians(
                 true_model, damping, model_hat.model, np.asarray(model_hat.damping, float), inner, q, qdot, qddot
             )
-            Acl, Wl = weighted_loop(A, B, Kmats, WS, WT)
+            Acl, Wl = weighted_loop(A, B, Kmats, WS, WT, W_KS)
             poles[k] = float(np.linalg.eigvals(Acl).real.max())
             norms[k] = hinf(*Wl) if poles[k] < 0 else float("inf")
             k += 1
@@ -362,6 +402,7 @@ def frozen_check(
         info={
             "seed": int(seed),
             "certificate": (cert.get("certificate") or {}).get("verdict"),
+            "weights_rebuilt": "W_S e, W_T y" + ("" if W_KS is None else ", W_KS u (effort x noise)"),
             **(
                 {"weighted_norm_of": f"the W_S/W_T sub-block only ({', '.join(limit_keys)} left out): a lower bound"}
                 if paper_block and limit_keys
