@@ -65,3 +65,54 @@ def test_check_without_hamiltonian_still_covers_smooth_loops_and_finds_resonance
     coarse = mu_bounds(sharp, [[1, 1]], [0.1, 0.5, 2.0, 10.0], refine_peak=False, progress=False)
     miss = between.verify_between(sharp, coarse, level=1.4)
     assert not miss.holds
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_series_radius_reaches_farther_on_a_slow_loop_with_spread_scalings_and_stays_sound(seed):
+    """Scalings over four decades make the first-order bound's norm product large while the scaled ``M``
+    moves little: the series kept to order 4 reaches farther from ω = 0, and the scaled test holds at every
+    sampled frequency inside it (the module text's ur5 case, in small)."""
+    rng = np.random.default_rng(seed)
+    n, k = 6, 3
+    A = rng.standard_normal((n, n))
+    A -= (np.max(np.linalg.eigvals(A).real) + 0.05) * np.eye(n)  # a slow pole: ||R|| about 20
+    B, C, D = rng.standard_normal((n, k)), rng.standard_normal((k, n)), 0.1 * rng.standard_normal((k, k))
+    Dh = np.diag(10.0 ** np.array([-4.0, -2.0, 0.0]))
+    Di = np.linalg.inv(Dh)
+    loop = (A, B @ Di, Dh @ C, Dh @ D @ Di)
+    level = 1.05 * max(_sigma(*loop, w) for w in np.linspace(0.0, 0.2, 400))
+    first = covering_radius(*loop, np.zeros((k, k)), level, 0.0, order=0)
+    series = covering_radius(*loop, np.zeros((k, k)), level, 0.0)
+    assert series >= first > 0
+    for w in np.linspace(0.0, series, 101):
+        assert _sigma(*loop, w) < level
+    assert series > 1.5 * first
+
+
+def test_a_power_of_the_scalings_keeps_their_structure_and_is_what_the_test_reads():
+    """``D^t`` and ``t G~`` (between.TEMPERED): block diagonal like ``D``, ``G`` zero on the complex block, and
+    the normalised loop's ``Φ`` is the D-G test of those scalings, ``D^-t Φ D^-t``."""
+    from polyrob.analysis.mu.blocks import as_block_structure
+
+    st = as_block_structure([[-2, 0], [1, 1]])  # a repeated real of 2 and a complex scalar
+    rng = np.random.default_rng(3)
+    X = rng.standard_normal((2, 2)) + 1j * rng.standard_normal((2, 2))
+    Dh = np.zeros((3, 3), complex)
+    Dh[:2, :2] = X @ X.conj().T + 0.1 * np.eye(2)
+    Dh[2, 2] = 40.0
+    G = np.zeros((3, 3), complex)
+    G[:2, :2] = [[0.3, 0.1 - 0.2j], [0.1 + 0.2j, -0.4]]
+    A, B, C, D = -np.eye(3), rng.standard_normal((3, 3)), rng.standard_normal((3, 3)), rng.standard_normal((3, 3))
+    An, Bn, Cn, Dn, P, Gt = between.normalised_loop(A, B, C, D, (Dh, G), 0.5)
+    assert np.allclose(P, np.eye(3)) and np.allclose(Gt[2], 0) and np.allclose(Gt[:, 2], 0)
+    half = Cn @ np.linalg.inv(C)  # D^t
+    assert np.allclose(half[:2, 2], 0) and np.allclose(half[2, 2], np.sqrt(40.0))
+    assert np.allclose(half @ half, Dh, atol=1e-9)
+    w, level = 0.7, 3.0
+    M = C @ np.linalg.solve(1j * w * np.eye(3) - A, B) + D
+    Pt, Gs = half @ half, half @ Gt @ half
+    Phi = M.conj().T @ Pt @ M + 1j * (Gs @ M - M.conj().T @ Gs) - level**2 * Pt
+    Hi = np.linalg.inv(half)
+    lam = np.linalg.eigvalsh(Hi @ Phi @ Hi)[-1]
+    assert lam == pytest.approx(between._largest_eigenvalue(An, Bn, Cn, Dn, P, Gt, level, w), rel=1e-9, abs=1e-9)
+    assert st.padded_size == 3
