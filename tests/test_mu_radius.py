@@ -116,3 +116,24 @@ def test_a_power_of_the_scalings_keeps_their_structure_and_is_what_the_test_read
     lam = np.linalg.eigvalsh(Hi @ Phi @ Hi)[-1]
     assert lam == pytest.approx(between._largest_eigenvalue(An, Bn, Cn, Dn, P, Gt, level, w), rel=1e-9, abs=1e-9)
     assert st.padded_size == 3
+
+
+def test_where_an_ends_own_scalings_cannot_be_tested_their_powers_cover_the_interval(monkeypatch):
+    """The Hamiltonian test made inapplicable (``None``) for the ends' own scalings and the radii switched off:
+    the check still holds through the powers of the scalings (between.TEMPERED), and without them it gives up."""
+    original_loop, original_crossings, last = between.normalised_loop, between.crossing_frequencies, []
+
+    def loop(*args):
+        last.append(args[-1] if len(args) > 5 else 1.0)
+        return original_loop(*args)
+
+    monkeypatch.setattr(between, "normalised_loop", loop)
+    monkeypatch.setattr(between, "crossing_frequencies", lambda *a: None if last[-1] == 1.0 else original_crossings(*a))
+    monkeypatch.setattr(between, "covering_radius", lambda *a: 0.0)
+    smooth = control.tf([1], [1, 1])
+    mu = mu_bounds(smooth, [[1, 1]], progress=False)
+    ok = between.verify_between(smooth, mu, max_points=20)
+    assert ok.holds and ok.by_radius == 0 and 0.5 in last
+    monkeypatch.setattr(between, "TEMPERED", ())
+    stuck = between.verify_between(smooth, mu, max_points=20)
+    assert not stuck.holds and stuck.intervals == 0  # nothing covered

@@ -322,14 +322,20 @@ def verify_between(
 
     def covers(scaling, at, lo, hi) -> bool:
         """The scalings found at ``at`` (or a power of them, :data:`TEMPERED`) keep ``Φ`` negative definite on ``[lo, hi]``."""
-        if covers_with(scaling, at, lo, hi, 1.0):
-            return True
+        refuted = None
+        try:
+            if covers_with(scaling, at, lo, hi, 1.0):
+                return True
+        except _Unreliable as own:  # the powers may still cover it; if none does, the check stops as before
+            refuted = own
         for power in TEMPERED:
             try:
                 if covers_with(scaling, at, lo, hi, power):
                     return True
-            except _Unreliable:  # a second try that the spot checks refute only fails to cover
+            except _Unreliable:  # a power's test that the inner points refute only fails to cover
                 continue
+        if refuted is not None:
+            raise refuted
         return False
 
     def covers_with(scaling, at, lo, hi, power) -> bool:
