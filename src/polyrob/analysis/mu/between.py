@@ -25,8 +25,11 @@ because neither SLICOT nor python-control offers it.
 frequency ``ω ≥ 0``, up to the eigenvalue solver's accuracy: near-imaginary
 eigenvalues are all candidate crossings, a candidate is dropped only where
 ``Φ`` is clearly negative definite, and ``Φ`` is also evaluated inside every
-interval the test passes; a failure there refuses the whole check (the
-Hamiltonian is then not reliable on that realisation).
+interval the test passes; a failure there means the test missed a crossing
+in that interval, so the interval and its parts are left to the
+perturbation radii (:mod:`~polyrob.analysis.mu.radius`, norm bounds), and
+the result counts them (on the interval up to infinity, which no radius
+reaches, the check stops).
 """
 
 from __future__ import annotations
@@ -96,6 +99,10 @@ class BetweenGridResult:
     by_radius : int
         Of the intervals covered, those covered by the ends' perturbation
         radii (:mod:`~polyrob.analysis.mu.radius`); the others by Hamiltonian tests.
+    refuted : int
+        Intervals whose Hamiltonian test passed while ``Φ`` failed at one of
+        their inner points: not trusted, they and their parts are left to
+        the perturbation radii.
     """
 
     level: float
@@ -107,6 +114,7 @@ class BetweenGridResult:
     reason: str
     seconds: float
     by_radius: int = 0
+    refuted: int = 0
 
     def sentence(self) -> str:
         """One clause for a verdict."""
@@ -116,9 +124,15 @@ class BetweenGridResult:
             return (
                 f"mu <= {self.level:.4g} at every frequency (the grid's D-G scalings verified between its points by "
                 f"{' and '.join(tests) or 'Hamiltonian tests'}, "
-                f"{self.points_added} point{'' if self.points_added == 1 else 's'} added)"
+                f"{self.points_added} point{'' if self.points_added == 1 else 's'} added{self._refuted_words()})"
             )
-        return f"not verified between the grid points: {self.reason}"
+        return f"not verified between the grid points: {self.reason}{self._refuted_words()}"
+
+    def _refuted_words(self) -> str:
+        if not self.refuted:
+            return ""
+        n = self.refuted
+        return f"; {n} interval{'' if n == 1 else 's'} whose Hamiltonian test an inner point refuted left to the radii"
 
     def summary(self) -> dict:
         return dict(self.__dict__)
@@ -283,10 +297,20 @@ def verify_between(
     scalings = [(mu.D[i], mu.G[i]) for i in range(len(w))]
     peak, added = float(np.max(mu.upper)), 0
     by_radius = 0  # intervals the perturbation radii covered
+    refuted = set()  # intervals whose Hamiltonian test the inner points refuted: their parts by radii alone
 
     def result(holds, failed_at=None, reason="", intervals=0):
         return BetweenGridResult(
-            beta, holds, peak, intervals, added, failed_at, reason, round(time.perf_counter() - t0, 3), by_radius
+            beta,
+            holds,
+            peak,
+            intervals,
+            added,
+            failed_at,
+            reason,
+            round(time.perf_counter() - t0, 3),
+            by_radius,
+            len(refuted),
         )
 
     memo = {}  # per end (each serves two intervals): its normalised loop, crossings and radius at the level
@@ -378,16 +402,20 @@ def verify_between(
     done = 0
     while stack:
         lo, hi, ends = stack.pop()
-        try:
-            near = near_enough(ends, lo, hi)
-            by_radius += near
-            covered = near or any(covers(pg, at, lo, hi) for at, pg in ends)
-        except _Unreliable:
-            why = (
-                f"the Hamiltonian test is not reliable on this loop's realisation (it passed [{lo:.4g}, {hi:.4g}] "
-                "rad/s, where the scalings fail at an inner point)"
-            )
-            return result(False, None, why, done)
+        near = near_enough(ends, lo, hi)
+        by_radius += near
+        covered = near
+        if not near and not any(a <= lo and hi <= b for a, b in refuted):
+            try:
+                covered = any(covers(pg, at, lo, hi) for at, pg in ends)
+            except _Unreliable:
+                if not np.isfinite(hi):  # no radius reaches infinity: nothing else can cover it
+                    why = (
+                        f"the Hamiltonian test is not reliable on this loop's realisation (it passed [{lo:.4g}, "
+                        f"{hi:.4g}] rad/s, where the scalings fail at an inner point)"
+                    )
+                    return result(False, None, why, done)
+                refuted.add((lo, hi))
         if covered:
             done += 1
             report(done, done + len(stack))  # intervals split as they go: a share of the ones known so far
