@@ -149,6 +149,9 @@ def test_true_robots_start_is_refused_in_the_bandwidth_search():
     problem = SimpleNamespace(robot=SimpleNamespace(inner="computed-torque"))
     with pytest.raises(ArgumentError, match="--max-bandwidth"):
         design_max_bandwidth(problem, **synthesis_options(init="true-robots"))
+    assert synthesis_options(init="true-robots+corners")["initial_controller"] == "true-robots+corners"
+    with pytest.raises(ArgumentError, match="--max-bandwidth"):
+        design_max_bandwidth(problem, **synthesis_options(init="true-robots+corners"))
 
 
 def test_synth_and_analyze_say_the_true_robots_figure_on_a_set_and_nothing_without_one():
@@ -249,3 +252,42 @@ def test_vertices_of_ur5s_per_link_set_find_a_worse_frozen_loop_than_uniform_dra
     vertices = tr.true_robot_check(loop, task, K, weights, n=100, extremes=1.0)
     assert inside.worst < 1.2 < 1.5 < vertices.worst
     assert vertices.extremes == 100 and "100 at its vertices and the task's corners" in vertices.words()
+
+
+class _StiffnessCorners:
+    """A stand-in uncertainty model: two real parameters, each a joint stiffness of ±0.15 (1/s^2) no true robot has."""
+
+    n_params = 2
+
+    def delta_samples(self, n=None, *, kind="uniform", seed=None):
+        assert kind == "corners" and n is None  # 2^2 corners: all of them
+        return np.array([[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0]])
+
+    def matrices_at(self, delta):
+        A = np.zeros((4, 4))
+        A[:2, 2:] = np.eye(2)
+        A[2:, :2] = np.diag(0.15 * np.asarray(delta))
+        return A, np.vstack([np.zeros((2, 2)), np.eye(2)])
+
+
+def test_tuning_on_the_models_corners_too_makes_the_controller_robust_to_them():
+    """``model=``: the model's corner plants join the true robots' (``--init true-robots+corners``); the tuned
+    controller's worst over those corners is below the one tuned on true robots alone, and the words say so."""
+    from polyrob.plant.weights import plant_weights
+    from polyrob.synthesis.fixed.vertex import vertex_peak
+
+    loop, task = loop_and_task(0.1)
+    start, model = pid(0.5), _StiffnessCorners()
+    alone = tr.tune_on_true_robots(loop, task, WEIGHTS, start, n=12, check_draws=30, max_iter=60)
+    both = tr.tune_on_true_robots(loop, task, WEIGHTS, start, n=12, check_draws=30, max_iter=60, model=model)
+    W = plant_weights(WEIGHTS)
+    corners = [model.matrices_at(d) for d in model.delta_samples(kind="corners")]
+
+    def on_corners(K):
+        return vertex_peak(corners, K, W["W_S"], W["W_T"], W["W_KS"], omega=tr.check_omega(WEIGHTS))
+
+    assert both.corners == 4 and alone.corners == 0
+    assert on_corners(both.controller) < on_corners(alone.controller)
+    assert both.fitted_worst >= on_corners(both.controller) * (1 - 1e-9)  # its figure includes the corners
+    assert "and 4 corners of the uncertainty model" in both.words() and "corners" not in alone.words()
+    assert both.check.unstable == 0

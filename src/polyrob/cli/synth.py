@@ -209,17 +209,17 @@ def cmd_synth(args) -> int:
     stages += ["validation"] * (at_rate is not None)
     out = Output(args, stages=len(stages), job=stages)
     options = options_from_args(args, out)
-    if args.init == "true-robots" and args.max_bandwidth:
-        from polyrob.pipeline.design import TRUE_ROBOTS_NOT_IN_SEARCH
+    from polyrob.pipeline.design import TRUE_ROBOT_STARTS, TRUE_ROBOTS_NOT_IN_SEARCH
 
+    if args.init in TRUE_ROBOT_STARTS and args.max_bandwidth:
         raise ArgumentError(TRUE_ROBOTS_NOT_IN_SEARCH)
-    if args.init == "true-robots" and getattr(args, "robot_uncertainty", None) is None and args.link_error is None:
+    if args.init in TRUE_ROBOT_STARTS and getattr(args, "robot_uncertainty", None) is None and args.link_error is None:
         raise ArgumentError(
             "--init true-robots draws true robots from a robot-uncertainty set: give --robot-uncertainty FILE or "
             "--link-error P"
         )
     robot = robot_from_args(args)
-    if args.init == "true-robots":
+    if args.init in TRUE_ROBOT_STARTS:
         true_robots_structure_holds_pid(args.structure, robot.m)
     if coulomb is not None:  # one level or one per joint: refused before any work
         from polyrob.synthesis.integral import coulomb_levels
@@ -377,11 +377,12 @@ def add_synthesis_arguments(p) -> None:
     g.add_argument(
         "--init",
         default=None,
-        metavar="paper|pid|true-robots|FILE",
+        metavar="paper|pid|true-robots|true-robots+corners|FILE",
         help="start from the paper's K* ('paper', fixed structures), from a per-joint PID tuned to the weights "
         "('pid'; the default on an arm's default task), from that PID tuned further on the frozen loops of "
         "true robots drawn from a robot-uncertainty set ('true-robots', multi-model H-inf, in the --structure "
-        "asked for, a PID for full; with --max-iter 1 it is the answer, certified on the model) or from a "
+        "asked for, a PID for full; with --max-iter 1 it is the answer, certified on the model; "
+        "'true-robots+corners': on the uncertainty model's corners too, what its certificate checks) or from a "
         "controller file (K.json, K.mat), "
         "e.g. one designed at a nearby bandwidth",
     )

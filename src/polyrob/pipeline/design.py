@@ -23,6 +23,8 @@ __all__ = [
     "starts_from_tuned_pid",
     "true_robot_start",
     "TRUE_ROBOTS",
+    "TRUE_ROBOTS_AND_CORNERS",
+    "TRUE_ROBOT_STARTS",
 ]
 
 
@@ -72,8 +74,8 @@ def synthesis_options(
         options["init"] = "paper"
     elif init == "pid":  # the per-joint PID tuned to the weights (polyrob.synthesis.pid_tuning)
         options["initial_controller"] = "pid"
-    elif init == "true-robots":  # tuned on true robots of the set (resolved by design_controller)
-        options["initial_controller"] = TRUE_ROBOTS
+    elif init in TRUE_ROBOT_STARTS:  # tuned on true robots of the set (resolved by design_controller)
+        options["initial_controller"] = init
     elif init:
         # a controller file: a warm start (continuation from a nearby problem, MATLAB's musyn(P, K0))
         from polyrob.io.controller import controller_from_mapping, read_controller_file
@@ -84,6 +86,10 @@ def synthesis_options(
 
 #: ``initial_controller`` of :func:`synthesis_options`'s ``init="true-robots"``.
 TRUE_ROBOTS = "true-robots"
+#: The same tuned on the uncertainty model's corners too (:func:`~polyrob.synthesis.true_robots.tune_on_true_robots`'s ``model``).
+TRUE_ROBOTS_AND_CORNERS = "true-robots+corners"
+#: The starts tuned on true robots.
+TRUE_ROBOT_STARTS = (TRUE_ROBOTS, TRUE_ROBOTS_AND_CORNERS)
 #: Why the bandwidth search refuses that start (``synth`` says it before any bounds).
 TRUE_ROBOTS_NOT_IN_SEARCH = (
     "--init true-robots tunes one PID on true robots at the given weights; the bandwidth search does not "
@@ -127,13 +133,21 @@ def true_robot_start(problem, options: dict) -> tuple[dict, object]:
     # the tunings' rounds move the job's line (minutes on a six-joint arm); the certificate's sweep comes after
     share = TRUE_ROBOTS_SHARE if options.get("max_iter") == 1 else TRUE_ROBOTS_SHARE / 4
     half = share if structure == "pid" else share / 2
+    model = problem.unc if options["initial_controller"] == TRUE_ROBOTS_AND_CORNERS else None
     with span(0.0, half):
-        tuning = tune_on_true_robots(problem.robot, problem.domain, problem.hyperparameters, start.controller)
+        tuning = tune_on_true_robots(
+            problem.robot, problem.domain, problem.hyperparameters, start.controller, model=model
+        )
     words = f"{start.words()}, then {tuning.words()}"
     if structure != "pid":
         with span(half, share):
             tuning = tune_on_true_robots(
-                problem.robot, problem.domain, problem.hyperparameters, tuning.controller, structure=structure
+                problem.robot,
+                problem.domain,
+                problem.hyperparameters,
+                tuning.controller,
+                structure=structure,
+                model=model,
             )
         words += f", then {tuning.words()}"
     logging.getLogger("polyrob").info(f"musyn: start from a {words}")
@@ -148,7 +162,9 @@ def true_robot_start(problem, options: dict) -> tuple[dict, object]:
         mu_history=[cert.mu_upper_grid],
         seconds=time.perf_counter() - t0,
         info={
-            "method": f"{structure} tuned on true robots drawn from the set from the tuned PID (no D-K step)",
+            "method": f"{structure} tuned on true robots drawn from the set"
+            + (" and the model's corners" if model is not None else "")
+            + " from the tuned PID (no D-K step)",
             "start": words,
             "stopped_by": "max_iter=1: the start only",
             "true_robots": {
@@ -284,7 +300,7 @@ def design_controller(
         raise ArgumentError(f"reduce_max_order must be >= 1, got {reduce_max_order}")
     options = with_default_start(problem, options)
     result = None
-    if options.get("initial_controller") == TRUE_ROBOTS:
+    if options.get("initial_controller") in TRUE_ROBOT_STARTS:
         options, result = true_robot_start(problem, options)
     if result is None:
         result = musyn(problem.P, **options)
@@ -353,7 +369,7 @@ def design_max_bandwidth(
     from polyrob.synthesis import max_bandwidth_scaling
 
     options = with_default_start(problem, dict(options))
-    if options.get("initial_controller") == TRUE_ROBOTS:
+    if options.get("initial_controller") in TRUE_ROBOT_STARTS:
         raise ArgumentError(TRUE_ROBOTS_NOT_IN_SEARCH)
     per_factor = "musyn"
     if options.get("initial_controller") == "pid" and options.get("max_iter") is None:

@@ -50,6 +50,7 @@ from polyrob.uncertainty_set.draw import EXTREME_SHARE, at_vertices  # the share
 __all__ = [
     "CHECK_DRAWS",
     "TUNING_DRAWS",
+    "MODEL_CORNERS",
     "EXTREME_SHARE",
     "TrueRobotCheck",
     "TrueRobotTuning",
@@ -67,6 +68,9 @@ CHECK_DRAWS = 500
 #: True robots the multi-model tuning is fitted to (ur5's per-link set: a PID fitted to 150 reached 0.825 on
 #: them and 1.02 on 500 others, docs/uncertainty.md: the held-out check is what to read).
 TUNING_DRAWS = 150
+#: Corners of the uncertainty model tuned on with ``model=`` (all of them up to this many, as many random ones
+#: beyond): ur5's ``inner-links`` model has six real direction scalars, 64 corners.
+MODEL_CORNERS = 64
 #: Seeds of the tuning's and the check's draws: the check never sees a plant the tuning fitted.
 TUNING_SEED, CHECK_SEED = 0, 99
 
@@ -316,6 +320,8 @@ class TrueRobotTuning:
     check : TrueRobotCheck
         The result on an independent draw.
     seconds : float
+    corners : int
+        Corners of the uncertainty model tuned on too (``model``; their figures are in the worst ones).
     """
 
     controller: object
@@ -325,11 +331,13 @@ class TrueRobotTuning:
     fitted_worst: float
     check: TrueRobotCheck
     seconds: float
+    corners: int = 0
 
     def words(self) -> str:
+        model = f" and {self.corners} corners of the uncertainty model" if self.corners else ""
         return (
-            f"{self.structure} tuned on {self.draws} true robots drawn from the set (multi-model H-inf on a grid): "
-            f"worst {self.start_worst:.3g} -> {self.fitted_worst:.3g} on them; on {self.check.draws} others: "
+            f"{self.structure} tuned on {self.draws} true robots drawn from the set{model} (multi-model H-inf on a "
+            f"grid): worst {self.start_worst:.3g} -> {self.fitted_worst:.3g} on them; on {self.check.draws} others: "
             f"worst {self.check.worst:.3g}, {self.check.unstable} unstable"
         )
 
@@ -345,8 +353,17 @@ def tune_on_true_robots(
     check_draws: int = CHECK_DRAWS,
     max_iter: int = 300,
     progress=None,
+    model=None,
 ) -> TrueRobotTuning:
     """A ``structure`` controller tuned from ``start`` on ``n`` frozen loops of true robots (see the module text).
+
+    ``model`` (an :class:`~polyrob.plant.lftplant.UncertainPlant`): the
+    plants at corners of its real parameters (the norm-bounded blocks at 0;
+    all corners up to :data:`MODEL_CORNERS`, as many random ones beyond) are
+    tuned on too.  μ certifies the model, which holds members no true robot
+    is (a stiffness box wider than any link's): tuned on those as well, the
+    controller is robust to what its certificate checks, as MATLAB's
+    ``systune`` tunes an uncertain model on its scenarios.
 
     Raises
     ------
@@ -362,6 +379,13 @@ def tune_on_true_robots(
     W = plant_weights(weights)
     omega = check_omega(weights)
     plants = true_robot_plants(loop, domain, n, seed=TUNING_SEED)
+    corners = 0
+    if model is not None:
+        k = model.n_params
+        deltas = (model.delta_samples(kind="corners") if 2**k <= MODEL_CORNERS
+                  else model.delta_samples(MODEL_CORNERS, kind="corners", seed=TUNING_SEED))  # fmt: skip
+        plants = plants + [model.matrices_at(d) for d in deltas]
+        corners = len(deltas)
     start_worst = vertex_peak(plants, start, W["W_S"], W["W_T"], W["W_KS"], omega=omega)
     result = vertex_synthesis(
         plants, W["W_S"], W["W_T"], W["W_KS"], structure=structure, initial=start, omega=omega,
@@ -374,4 +398,4 @@ def tune_on_true_robots(
         controller = result.controller
     check = true_robot_check(loop, domain, controller, weights, n=check_draws)
     return TrueRobotTuning(controller, structure, int(n), float(start_worst), float(fitted), check,
-                           time.perf_counter() - t0)  # fmt: skip
+                           time.perf_counter() - t0, corners)  # fmt: skip
