@@ -395,3 +395,32 @@ def test_relaxed_repeated_scalars_bound_mu_from_above():
     n_big = DESCENT_ABOVE // 3 + 1
     big = mussv(rng.normal(size=(3 * n_big, 3 * n_big)), [[-3, 0]] * n_big, lower=False)
     assert big.method == "gradient" and not big.notes
+
+
+def test_a_lower_bound_whose_svd_does_not_converge_falls_back_and_stays_a_lower_bound(monkeypatch):
+    """LAPACK's SVD can give up on a matrix scaled over hundreds of decades (panda's per-link loop): the search
+    then starts from the unscaled matrix, and where that fails too the lower bound is 0, never a crash."""
+    import polyrob.analysis.mu.lower as lower
+
+    rng = np.random.default_rng(4)
+    M = rng.standard_normal((4, 4)) + 1j * rng.standard_normal((4, 4))
+    st = as_block_structure([[1, 1], [1, 1], [2, 2]])
+    plain = lower.lower_bound(M, st, D=np.eye(4))[0]
+    real_svd, calls = np.linalg.svd, []
+
+    def failing(limit):
+        def svd(*args, **kwargs):
+            calls.append(1)
+            if len(calls) <= limit:
+                raise np.linalg.LinAlgError("SVD did not converge")
+            return real_svd(*args, **kwargs)
+
+        return svd
+
+    monkeypatch.setattr(lower.np.linalg, "svd", failing(1))
+    once = lower.lower_bound(M, st, D=np.diag([1e150, 1.0, 1.0, 1.0]))[0]
+    assert once == pytest.approx(plain, rel=1e-6) and once <= mussv(M, st).upper * (1 + 1e-9)
+    calls.clear()
+    monkeypatch.setattr(lower.np.linalg, "svd", failing(2))
+    lo, delta, _ = lower.lower_bound(M, st)
+    assert lo == 0.0 and not np.any(delta)

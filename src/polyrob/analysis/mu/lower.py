@@ -294,7 +294,14 @@ def lower_bound(Ms, st, *, starts=4, refine=True, seed=0, init=None, real_starts
         Mp = Ms
     if not np.all(np.isfinite(Mp)):
         Mp = Ms
-    U, _, Vh = np.linalg.svd(Mp)
+    try:
+        U, _, Vh = np.linalg.svd(Mp)
+    except np.linalg.LinAlgError:  # scalings over hundreds of decades (panda's per-link loop): LAPACK gives up
+        Mp = Ms
+        try:
+            U, _, Vh = np.linalg.svd(Mp)
+        except np.linalg.LinAlgError:  # no start for the search: 0, the bound that always holds
+            return 0.0, np.zeros((n, n), complex), None
     inits = [init] if init is not None else []
     inits.append((Vh[0].conj(), U[:, 0]))
     for _ in range(starts - 1):
