@@ -1,0 +1,171 @@
+"""What the ``inner-links`` model's inertia block costs μ at one frequency, against the drawn robots' own inertia errors, as JSON.
+
+    python benchmarks/inertia_block.py CONTROLLER.json [--omega W] [-n 60] [--seed 5] [--extremes 0.5]
+        [--com-box] [--ball 0] [--robot-uncertainty FILE | --link-error 10 --payload-max 1.5 --com-radius 0.1]
+
+The model (:mod:`polyrob.plant.models.inner_links`) carries the relative
+inertia error of the computed-torque loop (the acceleration columns of the
+factor, ``I - M_hat^-1 M`` in ``M_hat^1/2`` coordinates) as one full complex
+block of norm at most one in its shaped coordinates, independent of the
+other blocks.  At the frequency ``W`` (default: the peak of the controller
+file's certificate) this prints μ of the robust-performance loop with every
+block, μ with the inertia block left out, and μ's upper bound of the rest of
+the structure with the inertia block *closed* at each of ``n`` true robots'
+own inertia error at the task's centre (a real, nearly symmetric matrix,
+drawn from the stated set: half at its vertices).  The last is what a model
+exact in the inertia could reach at best with the other blocks as they are
+(an estimate from the draws, not a bound); the first is what the certificate
+pays.  ``--com-box`` draws the payload's centre of mass in the box that holds
+the ball (a box-shaped parametrisation's set); ``--ball K`` also searches
+``K`` random real symmetric matrices of the block's unit ball (its extreme
+points ``Q diag(+-1) Q^T``) and ``K`` rotations of the worst: what a real
+symmetric block of the same size would still allow.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+from _results import add_results_option, save_run
+
+
+def _spec(args, name):
+    from polyrob.model.robots import load_robot
+    from polyrob.uncertainty_set.spec import RATED_PAYLOAD, PayloadBody, RobotUncertainty
+
+    if args.robot_uncertainty:
+        return RobotUncertainty.from_file(args.robot_uncertainty)
+    rated = RATED_PAYLOAD.get(load_robot(name).name)
+    top = min(args.payload_max, rated.kg) if rated is not None and rated.kg else args.payload_max
+    payload = PayloadBody(0.0, top, com_radius=args.com_radius) if top > 0 else None
+    return RobotUncertainty(link_error=args.link_error / 100.0, payload=payload, source="benchmark options")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("controller", help="a controller file as `polyrob synth -o` writes it (an inner-links problem)")
+    ap.add_argument("--omega", type=float, default=None, help="rad/s (default: the certificate's peak frequency)")
+    ap.add_argument("-n", type=int, default=60, help="true robots drawn (default 60)")
+    ap.add_argument("--seed", type=int, default=5)
+    ap.add_argument("--extremes", type=float, default=0.5, help="share drawn at vertices of the set (default 0.5)")
+    ap.add_argument("--com-box", action="store_true", help="draw the centre of mass in the box holding the ball")
+    ap.add_argument("--ball", type=int, default=0, help="also search this many symmetric matrices of the unit ball")
+    ap.add_argument("--robot-uncertainty", default=None, help="a robot-uncertainty file (YAML/JSON)")
+    ap.add_argument("--link-error", type=float, default=10.0, help="per-link error in percent (default 10)")
+    ap.add_argument("--payload-max", type=float, default=1.5, help="payload up to this many kg (capped at the rated)")
+    ap.add_argument("--com-radius", type=float, default=0.1, help="payload centre of mass within this radius (m)")
+    add_results_option(ap)
+    args = ap.parse_args()
+
+    import dataclasses
+
+    import numpy as np
+
+    from polyrob.analysis.margins import block_words
+    from polyrob.analysis.mu.blocks import as_block_structure
+    from polyrob.analysis.mu.bounds import mussv
+    from polyrob.domains.task import TaskDomain
+    from polyrob.io.controller import load_controller, read_controller_file
+    from polyrob.model.inner import inner_loop_of_set
+    from polyrob.model.robots import load_robot
+    from polyrob.plant.generalized import generalized_plant, lft
+    from polyrob.plant.models import inner_links as links
+    from polyrob.plant.weights import plant_weights
+    from polyrob.uncertainty_set.draw import draw_true_robots
+
+    t0 = time.perf_counter()
+    doc = read_controller_file(args.controller)
+    info, cert = doc.get("info") or {}, doc.get("certificate") or {}
+    omega = float(args.omega if args.omega is not None else cert.get("peak_frequency"))
+    robot = load_robot(info["robot"])
+    spec = _spec(args, info["robot"])
+    loop = inner_loop_of_set(robot, "computed-torque", spec, draws=2)
+    domain = TaskDomain.from_dict(info["domain"], robot=loop)
+    unc = links.light_model(loop, domain, samples=256)
+    weights = {k: tuple(v) for k, v in info["weights"].items()}
+    P = generalized_plant(unc, **plant_weights(weights))
+    M = np.asarray(lft(P, load_controller(args.controller))(1j * omega), complex)
+    blocks = list(as_block_structure(P.block_structure_rp).blocks)
+    words = block_words(unc, P.block_structure_rp)
+    i = next(k for k, w in enumerate(words) if "inertia" in w)
+    row0 = np.cumsum([0] + [b.cols for b in blocks])
+    col0 = np.cumsum([0] + [b.rows for b in blocks])
+    ri, ci = np.arange(row0[i], row0[i + 1]), np.arange(col0[i], col0[i + 1])
+    ro, co = np.r_[0 : row0[i], row0[i + 1] : row0[-1]], np.r_[0 : col0[i], col0[i + 1] : col0[-1]]
+    rest = [b.matlab for k, b in enumerate(blocks) if k != i]
+
+    def mu_closed(D):  # mu's upper bound of the rest with the inertia block closed at D
+        X = M[np.ix_(ro, co)] + M[np.ix_(ro, ci)] @ D @ np.linalg.solve(
+            np.eye(len(ci)) - M[np.ix_(ri, ci)] @ D, M[np.ix_(ri, co)]
+        )
+        return float(mussv(X, rest, lower=False).upper)
+
+    full = mussv(M, P.block_structure_rp)
+    # each drawn robot's block value: its acceleration columns less the centre, in the block's shaped coordinates
+    W, g = unc.info["residual_weighting"], unc.info["residual_g_norm"]
+    values, vectors = np.linalg.eigh(unc.info.get("residual_g_shape", np.eye(robot.m)))
+    H_inv = (vectors / np.sqrt(values)) @ vectors.T
+    n = 2 * robot.m
+    draw_spec = spec
+    if args.com_box and spec.payload is not None and spec.payload.com_radius is not None:
+        box = spec.payload.com_box()
+        body = dataclasses.replace(
+            spec.payload, com_radius=None, com_lower=tuple(b[0] for b in box), com_upper=tuple(b[1] for b in box)
+        )
+        draw_spec = dataclasses.replace(spec, payload=body)
+    centre = 0.5 * (np.asarray(domain.lower, float) + np.asarray(domain.upper, float))
+    q, qdot, a = domain.split(centre[None])
+    trues = draw_true_robots(loop.uncertainty_robot, draw_spec, args.n, seed=args.seed, extremes=args.extremes)
+    offset = unc.info["K_offset"][:, n:]
+    deltas = [
+        H_inv @ W @ (links.factor_of(loop, t.robot, q, qdot, a)[0][:, n:] - offset) @ np.linalg.inv(W) @ H_inv / g
+        for t in trues
+    ]
+    closed = np.array([mu_closed(D) for D in deltas])
+    norms = np.array([np.linalg.norm(D, 2) for D in deltas])
+    out = {
+        "what": "mu at one frequency: the inertia block as the model carries it, left out, and closed at drawn robots' own errors",
+        "controller": str(args.controller),
+        "robot": robot.name,
+        "set": spec.words(),
+        "omega": omega,
+        "mu": [round(float(full.lower), 4), round(float(full.upper), 4)],
+        "mu_without_inertia_block": round(mu_closed(np.zeros((len(ci), len(ri)))), 4),
+        "robots": len(trues),
+        "com_box": bool(args.com_box),
+        "block_norm_of_drawn": {"median": round(float(np.median(norms)), 3), "worst": round(float(norms.max()), 3)},
+        "mu_closed_at_drawn": {"median": round(float(np.median(closed)), 4), "worst": round(float(closed.max()), 4)},
+    }
+    if args.ball:
+        rng = np.random.default_rng(args.seed)
+        k = len(ci)
+        best, best_D = -1.0, None
+        for _ in range(args.ball):
+            Q = np.linalg.qr(rng.normal(size=(k, k)))[0]
+            D = (Q * rng.choice([-1.0, 1.0], size=k)) @ Q.T
+            value = mu_closed(D)
+            best, best_D = (value, D) if value > best else (best, best_D)
+        for _ in range(args.ball):
+            from scipy.linalg import expm
+
+            A = 0.1 * rng.normal(size=(k, k))
+            Q = expm(A - A.T)
+            value = mu_closed(Q @ best_D @ Q.T)
+            best, best_D = (value, Q @ best_D @ Q.T) if value > best else (best, best_D)
+        out["mu_closed_at_unit_ball_symmetric_worst_found"] = round(best, 4)
+    out["seconds"] = round(time.perf_counter() - t0, 1)
+    figure = (
+        f"{robot.name} at {omega:.4g} rad/s: mu {out['mu']} with the inertia block, "
+        f"{out['mu_without_inertia_block']} without it, worst {out['mu_closed_at_drawn']['worst']} "
+        f"with it closed at {len(trues)} drawn robots' own errors"
+    )
+    save_run(args.results, "inertia_block", "The inertia block's cost against drawn robots' errors", figure, out)
+    print(json.dumps(out, indent=1))
+    print(figure, file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
