@@ -107,6 +107,27 @@ def test_the_loop_factor_is_exactly_linear_in_the_parameters():
         assert np.abs(K - np.tensordot(u, unit, axes=1)).max() < 1e-9 * np.abs(K).max()  # ... and exactly linearly
 
 
+def test_a_links_parallel_axis_term_moves_with_its_mass_and_moment():
+    # b^2/a = 1 + 2 (b - 1) - (a - 1) + (b - a)^2 / a: the curvature alone is a scalar of its own, 4 p^2 / (1 - p)
+    ur5 = load_robot("ur5")
+    spec = RobotUncertainty.from_dict({"links": {"error_percent": 10}})
+    loop = inner_loop_of_set(ur5, "computed-torque", spec, draws=0)
+    domain = default_task_domain(loop)
+    q, qdot, a = domain.split(domain.sample_box(2, method="uniform", seed=1))
+    scalars = links.set_scalars(loop)
+    parallel = [k for k, s in enumerate(scalars) if s.name.endswith(".parallel")]
+    assert len(parallel) == 6 and all(scalars[k].half_range == pytest.approx(0.04 / 0.9) for k in parallel)
+    unit = links.unit_factors(loop, scalars, q, qdot, a)
+    vertices = draw_true_robots(ur5, spec, 40, seed=2, extremes=1.0)
+    us = np.array([links.scalars_of_true(loop, true) for true in vertices])
+    assert np.abs(us).max() <= 1.0 + 1e-12  # every vertex of the set is inside the box ...
+    assert np.abs(us[:, parallel]).max() == pytest.approx(1.0)  # ... the curvature's range reached at a = 0.9, b = 1.1
+    assert us[:, parallel].min() >= -1e-12  # and never below 0
+    for true, u in zip(vertices[:3], us):
+        K = links.factor_of(loop, true.robot, q, qdot, a)
+        assert np.abs(K - np.tensordot(u, unit, axes=1)).max() < 1e-9 * np.abs(K).max()
+
+
 @pytest.mark.parametrize("name", ["ur5", "panda"])
 def test_every_true_robot_drawn_inside_the_carried_set_is_a_member(name):
     robot = load_robot(name)

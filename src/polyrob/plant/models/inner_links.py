@@ -19,10 +19,15 @@ The set's ``dpi`` lies in a box of a few scalars per source, each with its
 exact per-unit direction in parameter space:
 
 * a link given as ``±p`` (mass ``a m``, first moment ``b h``, inertia about
-  the CoM ``d I_c``): four scalars ``a - 1``, ``b - 1``, ``d - 1`` within
-  ``±p`` and ``b^2/a - 1`` (the parallel-axis term ``m S(c)^T S(c)``, since
-  the CoM moves to ``(b/a) c``) within ``±((1 + p)^2/(1 - p) - 1)``: a box
-  that holds every ``(a, b, d)``;
+  the CoM ``d I_c``): its parallel-axis term ``m S(c)^T S(c)`` scales by
+  ``b^2/a`` (the CoM moves to ``(b/a) c``), which is ``1 + 2 (b - 1) - (a -
+  1) + (b - a)^2/a``, so the four scalars are ``a - 1`` (the mass, less the
+  parallel-axis term), ``b - 1`` (the first moment, plus twice that term),
+  ``d - 1`` within ``±p`` and the curvature ``(b - a)^2/a`` within ``[0,
+  4 p^2/(1 - p)]`` (widened to ``±``, 0.044 at 10 %): a box that holds every
+  ``(a, b, d)``, with the parallel-axis term moving with the mass and the
+  moment as it does (an independent scalar ``b^2/a - 1`` within ``±0.34``
+  let it move against them);
 * a link given as ten-parameter intervals: one scalar per parameter about
   the box's centre (the model's value);
 * the payload in the flange frame: its mass (with its solid body's
@@ -147,8 +152,8 @@ def _six(M) -> np.ndarray:
 
 
 def _parallel_axis_range(p: float) -> float:
-    """``max |b^2/a - 1|`` for ``a, b`` in ``[1 - p, 1 + p]``."""
-    return max((1 + p) ** 2 / (1 - p) - 1, 1 - (1 - p) ** 2 / (1 + p))
+    """``max (b - a)^2 / a`` for ``a, b`` in ``[1 - p, 1 + p]``: the parallel-axis term's curvature, ``4 p^2 / (1 - p)``."""
+    return 4.0 * p * p / (1.0 - p)
 
 
 def _flange_map(robot) -> np.ndarray:
@@ -243,12 +248,13 @@ def set_scalars(loop) -> list[Scalar]:
             continue
         theta = np.asarray(robot.model.inertias[j].toDynamicParameters(), float)
         ic = _about_com(theta)
-        zero3, zero6 = np.zeros(3), np.zeros(6)
+        zero3 = np.zeros(3)
+        parallel = theta[4:] - ic  # m S(c)^T S(c): scaled by b^2/a = 1 + 2 (b - 1) - (a - 1) + (b - a)^2 / a
         out += [
-            Scalar(f"{name}.mass", p, j, np.concatenate([[theta[0]], zero3, zero6])),
-            Scalar(f"{name}.moment", p, j, np.concatenate([[0.0], theta[1:4], zero6])),
+            Scalar(f"{name}.mass", p, j, np.concatenate([[theta[0]], zero3, -parallel])),
+            Scalar(f"{name}.moment", p, j, np.concatenate([[0.0], theta[1:4], 2.0 * parallel])),
             Scalar(f"{name}.inertia", p, j, np.concatenate([[0.0], zero3, ic])),
-            Scalar(f"{name}.parallel", _parallel_axis_range(p), j, np.concatenate([[0.0], zero3, theta[4:] - ic])),
+            Scalar(f"{name}.parallel", _parallel_axis_range(p), j, np.concatenate([[0.0], zero3, parallel])),
         ]
     if spec.payload is not None and spec.payload.mass_upper > 0:
         out += _payload_scalars(robot, spec.payload)
@@ -532,7 +538,7 @@ def scalars_of_true(robot, true) -> np.ndarray:
         k6 = int(np.argmax(np.abs(ic)))
         d = ic_drawn[k6] / ic[k6]
         values.update({f"{name}.mass": a - 1, f"{name}.moment": b - 1, f"{name}.inertia": d - 1,
-                       f"{name}.parallel": b * b / a - 1})  # fmt: skip
+                       f"{name}.parallel": (b - a) ** 2 / a})  # fmt: skip
     if spec.payload is not None:
         values.update(payload_coordinates(spec.payload, true.payload_mass, true.payload_com))
     model_damping = np.asarray(robot.model_robot.damping, float)
