@@ -140,6 +140,8 @@ def main() -> None:
         "mu_closed_at_drawn": {"median": round(float(np.median(closed)), 4), "worst": round(float(closed.max()), 4)},
     }
     if args.ball:
+        from scipy.linalg import expm
+
         rng = np.random.default_rng(args.seed)
         k = len(ci)
         best, best_D = -1.0, None
@@ -149,8 +151,6 @@ def main() -> None:
             value = mu_closed(D)
             best, best_D = (value, D) if value > best else (best, best_D)
         for _ in range(args.ball):
-            from scipy.linalg import expm
-
             A = 0.1 * rng.normal(size=(k, k))
             Q = expm(A - A.T)
             value = mu_closed(Q @ best_D @ Q.T)
