@@ -20,6 +20,22 @@ the ball (a box-shaped parametrisation's set); ``--ball K`` also searches
 ``K`` random real symmetric matrices of the block's unit ball (its extreme
 points ``Q diag(+-1) Q^T``) and ``K`` rotations of the worst: what a real
 symmetric block of the same size would still allow.
+
+``--hermitian`` prints μ's upper bound with the block's members taken as
+what they are, real matrices: at the task's centre they are symmetric (the
+weighting is ``M_hat^1/2`` there), away from it the fixed weighting leaves a
+skew-symmetric part, bounded here over the model's own samples of the task
+and the set (the dilation bound of
+:func:`~polyrob.plant.models.inner_links_inertia.residual_norm_bounds`,
+times the model's margin).  The block is then a Hermitian block of norm 1
+plus ``-j`` times a Hermitian block of that size, each with the scalar
+G-scaling a Hermitian block admits
+(:class:`~polyrob.analysis.mu.gradient.GradientUpper`'s ``hermitian``):
+what a model that carried the block so would certify at this frequency (the
+model does not yet).  ``--fixed-positions`` rebuilds the model with the
+task's positions held at its centre (velocities and accelerations as they
+are) and prints its μ: what the inertia's and the stiffness's change over
+the positions costs.
 """
 
 from __future__ import annotations
@@ -53,6 +69,8 @@ def main() -> None:
     ap.add_argument("--extremes", type=float, default=0.5, help="share drawn at vertices of the set (default 0.5)")
     ap.add_argument("--com-box", action="store_true", help="draw the centre of mass in the box holding the ball")
     ap.add_argument("--ball", type=int, default=0, help="also search this many symmetric matrices of the unit ball")
+    ap.add_argument("--hermitian", action="store_true", help="also mu with the block's real members (symmetric + skew)")
+    ap.add_argument("--fixed-positions", action="store_true", help="also mu with the task's positions at its centre")
     ap.add_argument("--robot-uncertainty", default=None, help="a robot-uncertainty file (YAML/JSON)")
     ap.add_argument("--link-error", type=float, default=10.0, help="per-link error in percent (default 10)")
     ap.add_argument("--payload-max", type=float, default=1.5, help="payload up to this many kg (capped at the rated)")
@@ -156,6 +174,17 @@ def main() -> None:
             value = mu_closed(Q @ best_D @ Q.T)
             best, best_D = (value, Q @ best_D @ Q.T) if value > best else (best, best_D)
         out["mu_closed_at_unit_ball_symmetric_worst_found"] = round(best, 4)
+    if args.hermitian:
+        out.update(_hermitian_split(loop, domain, unc, P, M, i, blocks))
+    if args.fixed_positions:
+        fixed = TaskDomain.from_dict(_positions_at_centre(info["domain"]), robot=loop)
+        unc_fixed = links.light_model(loop, fixed, samples=256)
+        P_fixed = generalized_plant(unc_fixed, **plant_weights(weights))
+        at = mussv(
+            np.asarray(lft(P_fixed, load_controller(args.controller))(1j * omega), complex), P_fixed.block_structure_rp
+        )
+        out["mu_positions_at_centre"] = [round(float(at.lower), 4), round(float(at.upper), 4)]
+        out["inertia_block_norm_positions_at_centre"] = round(float(unc_fixed.info["residual_g_norm"]), 4)
     out["seconds"] = round(time.perf_counter() - t0, 1)
     figure = (
         f"{robot.name} at {omega:.4g} rad/s: mu {out['mu']} with the inertia block, "
@@ -165,6 +194,63 @@ def main() -> None:
     save_run(args.results, "inertia_block", "The inertia block's cost against drawn robots' errors", figure, out)
     print(json.dumps(out, indent=1))
     print(figure, file=sys.stderr)
+
+
+def _positions_at_centre(domain: dict) -> dict:
+    """A task domain's dictionary with every joint's position range collapsed to its centre."""
+    out = dict(domain, q={j: [0.5 * (lo + hi)] * 2 for j, (lo, hi) in domain["q"].items()})
+    out["q_radius"] = 0.0
+    return out
+
+
+def _hermitian_split(loop, domain, unc, P, M, i, blocks) -> dict:
+    """μ's upper bound with the inertia block ``i`` as a Hermitian block plus ``-j`` times a Hermitian one (its skew part).
+
+    The block's member is ``S^-1/2 (X - C - g0 S) S^-1/2 / g`` with ``X = W G W^-1``
+    (the fixed weighting ``W``); ``C`` and ``S`` are symmetric, so its skew part
+    is ``skew(S^-1/2 X S^-1/2) / g``, linear in the set's scalars: bounded at
+    each of the model's samples by the dilation bound, over the box and the
+    payload's points, times the model's margin.  The model's samples are its
+    own (``inner_links._task_samples``, the seed the model uses): the bound
+    is of the set the model holds, sampled over the task as the model is.
+    """
+    import numpy as np
+
+    from polyrob.analysis.mu.blocks import as_block_structure
+    from polyrob.analysis.mu.gradient import GradientUpper
+    from polyrob.plant.models import inner_links as links
+    from polyrob.plant.models.inner_links_inertia import residual_norm_bounds
+
+    m = loop.m
+    q, qdot, a = links._task_samples(domain, int(unc.info["samples"]), seed=[7, 38])
+    named = dict(zip((s.name for s in links.set_scalars(loop)), links.set_scalars(loop)))
+    scalars = [named[name] for name in unc.info["scalars"]]
+    G = links.unit_factors(loop, scalars, q, qdot, a)[..., 2 * m :]  # (N, S, m, m): acceleration columns
+    W, g = unc.info["residual_weighting"], unc.info["residual_g_norm"]
+    values, vectors = np.linalg.eigh(unc.info.get("residual_g_shape", np.eye(m)))
+    T = (vectors / np.sqrt(values)) @ vectors.T @ W  # S^-1/2 W
+    X = T @ G @ np.linalg.inv(W) @ (vectors / np.sqrt(values)) @ vectors.T
+    skew = 0.5 * (X - np.swapaxes(X, -1, -2))
+    on_payload = np.array([s.name.startswith("payload.") for s in scalars])
+    body = loop.uncertainty.payload
+    pay = np.zeros((1, 0))
+    if on_payload.any():
+        pay = np.array([[c[s.name] / s.half_range for s in scalars if s.name.startswith("payload.")]
+                        for c in (links.payload_coordinates(body, mm, cc) for mm, cc in links.payload_points(body))])  # fmt: skip
+    size = links.G_MARGIN * float(residual_norm_bounds(skew[~on_payload], skew[on_payload], pay).max()) / g
+    # the block's output is Delta_sym z + s (-j) H z: its input rows twice, its output columns twice (the second times -j s)
+    rows = np.cumsum([0] + [b.cols for b in blocks])
+    cols = np.cumsum([0] + [b.rows for b in blocks])
+    r, c = np.arange(rows[i], rows[i + 1]), np.arange(cols[i], cols[i + 1])
+    split = np.block([[M, -1j * size * M[:, c]], [M[r, :], -1j * size * M[np.ix_(r, c)]]])
+    k = len(r)
+    st = as_block_structure([b.matlab for b in blocks] + [(k, k)])
+    padded = st.pad(split)
+    bound = GradientUpper(st, hermitian=[i, len(blocks)])(padded)[0]
+    return {
+        "inertia_skew_part_norm": round(size, 4),
+        "mu_upper_inertia_block_real": round(float(bound), 4),
+    }
 
 
 if __name__ == "__main__":

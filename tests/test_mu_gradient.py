@@ -69,3 +69,61 @@ def test_a_large_sweep_uses_descent_warm_started_and_stays_above_the_lower_bound
     H = st.pad(freqresp(sys, res.omega))
     for k in range(res.omega.size):
         assert certified_beta(H[k], res.D[k] @ res.D[k], res.G[k])[0] <= res.upper[k] * (1 + 1e-6)
+
+
+def _hermitian_destabiliser(M, rng, tries=300):
+    """The smallest Hermitian ``Delta`` found with ``I - M Delta`` singular: ``Delta M w = w`` with ``(M w)^* w`` real.
+
+    A Hermitian ``Delta`` maps ``a = M w`` to ``b = w`` only if ``a^* b`` is real; then
+    ``Delta = (b a^* + a b^*)/|a|^2 - (a^* b) a a^*/|a|^4`` does, and ``M Delta a = a``.
+    """
+    K = (M - M.conj().T) / 2j  # w^* M^* w is real exactly when w^* K w = 0
+    best = np.inf
+    for _ in range(tries):
+        u, v = (rng.standard_normal(len(M)) + 1j * rng.standard_normal(len(M)) for _ in range(2))
+        ku, kv, kuv = (u.conj() @ K @ u).real, (v.conj() @ K @ v).real, (u.conj() @ K @ v).real
+        if ku * kv >= 0:
+            continue
+        s = (-kuv + np.sqrt(kuv**2 - ku * kv)) / kv  # (u + s v)^* K (u + s v) = 0, s real
+        w = u + s * v
+        a, b = M @ w, w
+        r = (a.conj() @ b).real
+        D = (np.outer(b, a.conj()) + np.outer(a, b.conj())) / (a.conj() @ a).real - r * np.outer(a, a.conj()) / (
+            a.conj() @ a
+        ).real ** 2
+        assert abs(np.linalg.det(np.eye(len(M)) - M @ D)) < 1e-8 * max(1.0, np.linalg.norm(M @ D, 2)) ** len(M)
+        best = min(best, np.linalg.norm(D, 2))
+    return best
+
+
+def test_a_hermitian_block_s_bound_lies_between_its_hermitian_destabilisers_and_the_complex_bound():
+    """A full block whose members are Hermitian takes a G-scaling too: a smaller bound, still above every Hermitian Delta."""
+    rng = np.random.default_rng(3)
+    one = as_block_structure([[3, 3]])
+    for _ in range(3):
+        M = rng.standard_normal((3, 3)) + 1j * rng.standard_normal((3, 3))
+        complex_bound = GradientUpper(one)(M)[0]
+        hermitian_bound, D, G, _ = GradientUpper(one, hermitian=[0])(M)
+        lower = 1.0 / _hermitian_destabiliser(M, rng)
+        assert lower <= hermitian_bound * (1 + 1e-9)
+        assert hermitian_bound < complex_bound
+        assert certified_beta(M, D @ D, G)[0] == pytest.approx(hermitian_bound, rel=1e-6)
+    # with other blocks beside it the bound still holds its own scalings, and never exceeds the complex block's
+    st = as_block_structure([[3, 3], [-1, 0], [1, 2]])
+    M = st.pad(_random(st, rng))
+    hermitian_bound, D, G, _ = GradientUpper(st, hermitian=[0])(M)
+    assert hermitian_bound <= GradientUpper(st)(M)[0] * (1 + 1e-6)
+    assert certified_beta(M, D @ D, G)[0] == pytest.approx(hermitian_bound, rel=1e-6)
+    # a Hermitian M: its spectral radius is reached by a Hermitian Delta, so the G-scaling cannot go below it
+    H = rng.standard_normal((3, 3))
+    H = H + H.T
+    assert GradientUpper(one, hermitian=[0])(H.astype(complex))[0] == pytest.approx(
+        np.abs(np.linalg.eigvalsh(H)).max(), rel=1e-3
+    )
+
+
+def test_only_square_full_blocks_can_be_hermitian():
+    from polyrob.errors import ArgumentError
+
+    with pytest.raises(ArgumentError, match="not a square full block"):
+        GradientUpper(as_block_structure([[-2, 0], [1, 2]]), hermitian=[1])

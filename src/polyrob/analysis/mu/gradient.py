@@ -31,6 +31,7 @@ from scipy import optimize
 
 from polyrob.analysis.mu.blocks import BlockStructure, perron_upper
 from polyrob.analysis.mu.upper import certified_beta
+from polyrob.errors import ArgumentError
 
 __all__ = ["GradientUpper"]
 
@@ -51,6 +52,13 @@ class GradientUpper:
         Smoothing of the largest eigenvalue, relative to the current bound,
         one L-BFGS run each (a D-K iteration's D-step needs less than a
         certificate: fewer and coarser steps there).
+    hermitian : sequence of int
+        Indices of square full blocks whose members are Hermitian (a real
+        symmetric matrix error, e.g. an inertia's): they take a scalar
+        ``G = g I`` too, which is admissible because ``j w^* (Delta^* G - G
+        Delta) w = 0`` for ``Delta = Delta^*``.  The bound is then one for
+        that smaller set, not for a complex block (MATLAB's ``blk`` has no
+        such block; ``mussv`` below does not pass it).
 
     Examples
     --------
@@ -64,19 +72,32 @@ class GradientUpper:
     >>> beta, D, G, x = GradientUpper(as_block_structure([[-2, 0]]))(M.astype(complex))
     >>> print(f"{beta:.3f}")
     1.500
+
+    ``M = 2j I`` is made singular by no Hermitian ``I - M Delta`` (its
+    eigenvalues ``1 - 2j lambda``), while a complex block of norm 1/2 does:
+
+    >>> full = as_block_structure([[2, 2]])
+    >>> M = 2j * np.eye(2)
+    >>> print(f"{GradientUpper(full)(M)[0]:.3f} {GradientUpper(full, hermitian=[0])(M)[0] < 1e-3}")
+    2.000 True
     """
 
-    def __init__(self, st: BlockStructure, maxiter: int = 150, temperatures=_TEMPERATURES):
+    def __init__(self, st: BlockStructure, maxiter: int = 150, temperatures=_TEMPERATURES, hermitian=()):
         self.st, self.maxiter, self.temperatures = st, maxiter, tuple(temperatures)
+        self.hermitian = frozenset(int(i) for i in hermitian)
+        for i in self.hermitian:
+            b = st.blocks[i]
+            if b.kind == "real" or b.repeated or b.rows != b.cols:
+                raise ArgumentError(f"hermitian: block {i} is not a square full block ({b.matlab})")
         #: eigenpairs computed per step (doubled while they all weigh in the smoothed maximum)
         self.top = 16
         self._layout = []
         k = 0
-        for b, sl in zip(st.blocks, st.padded_slices):
+        for i, (b, sl) in enumerate(zip(st.blocks, st.padded_slices)):
             n = sl.stop - sl.start
             full_t = b.repeated  # full T (D) on repeated scalars, t*I elsewhere
             nt = 2 * n * n if full_t else 1
-            ng = (n * n if full_t else 1) if b.kind == "real" else 0
+            ng = (n * n if full_t else 1) if b.kind == "real" or i in self.hermitian else 0
             self._layout.append((sl, n, full_t, slice(k, k + nt), slice(k + nt, k + nt + ng)))
             k += nt + ng
         self.size = k
