@@ -175,7 +175,7 @@ def main() -> None:
             best, best_D = (value, Q @ best_D @ Q.T) if value > best else (best, best_D)
         out["mu_closed_at_unit_ball_symmetric_worst_found"] = round(best, 4)
     if args.hermitian:
-        out.update(_hermitian_split(loop, domain, unc, P, M, i, blocks))
+        out.update(_hermitian_split(loop, domain, unc, M, i, blocks))
     if args.fixed_positions:
         fixed = TaskDomain.from_dict(_positions_at_centre(info["domain"]), robot=loop)
         unc_fixed = links.light_model(loop, fixed, samples=256)
@@ -203,7 +203,7 @@ def _positions_at_centre(domain: dict) -> dict:
     return out
 
 
-def _hermitian_split(loop, domain, unc, P, M, i, blocks) -> dict:
+def _hermitian_split(loop, domain, unc, M, i, blocks) -> dict:
     """μ's upper bound with the inertia block ``i`` as a Hermitian block plus ``-j`` times a Hermitian one (its skew part).
 
     The block's member is ``S^-1/2 (X - C - g0 S) S^-1/2 / g`` with ``X = W G W^-1``
@@ -211,7 +211,7 @@ def _hermitian_split(loop, domain, unc, P, M, i, blocks) -> dict:
     is ``skew(S^-1/2 X S^-1/2) / g``, linear in the set's scalars: bounded at
     each of the model's samples by the dilation bound, over the box and the
     payload's points, times the model's margin.  The model's samples are its
-    own (``inner_links._task_samples``, the seed the model uses): the bound
+    own (``inner_links.model_samples``): the bound
     is of the set the model holds, sampled over the task as the model is.
     """
     import numpy as np
@@ -222,8 +222,8 @@ def _hermitian_split(loop, domain, unc, P, M, i, blocks) -> dict:
     from polyrob.plant.models.inner_links_inertia import residual_norm_bounds
 
     m = loop.m
-    q, qdot, a = links._task_samples(domain, int(unc.info["samples"]), seed=[7, 38])
-    named = dict(zip((s.name for s in links.set_scalars(loop)), links.set_scalars(loop)))
+    q, qdot, a = links.model_samples(domain, int(unc.info["samples"]))
+    named = {s.name: s for s in links.set_scalars(loop)}
     scalars = [named[name] for name in unc.info["scalars"]]
     G = links.unit_factors(loop, scalars, q, qdot, a)[..., 2 * m :]  # (N, S, m, m): acceleration columns
     W, g = unc.info["residual_weighting"], unc.info["residual_g_norm"]
@@ -232,11 +232,7 @@ def _hermitian_split(loop, domain, unc, P, M, i, blocks) -> dict:
     X = T @ G @ np.linalg.inv(W) @ (vectors / np.sqrt(values)) @ vectors.T
     skew = 0.5 * (X - np.swapaxes(X, -1, -2))
     on_payload = np.array([s.name.startswith("payload.") for s in scalars])
-    body = loop.uncertainty.payload
-    pay = np.zeros((1, 0))
-    if on_payload.any():
-        pay = np.array([[c[s.name] / s.half_range for s in scalars if s.name.startswith("payload.")]
-                        for c in (links.payload_coordinates(body, mm, cc) for mm, cc in links.payload_points(body))])  # fmt: skip
+    pay = links.payload_set_points(loop.uncertainty.payload, scalars) if on_payload.any() else np.zeros((1, 0))
     size = links.G_MARGIN * float(residual_norm_bounds(skew[~on_payload], skew[on_payload], pay).max()) / g
     # the block's output is Delta_sym z + s (-j) H z: its input rows twice, its output columns twice (the second times -j s)
     rows = np.cumsum([0] + [b.cols for b in blocks])

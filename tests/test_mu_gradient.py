@@ -93,6 +93,7 @@ def _hermitian_destabiliser(M, rng, tries=300):
         ).real ** 2
         assert abs(np.linalg.det(np.eye(len(M)) - M @ D)) < 1e-8 * max(1.0, np.linalg.norm(M @ D, 2)) ** len(M)
         best = min(best, np.linalg.norm(D, 2))
+    assert np.isfinite(best), "no direction w with a real (M w)^* w was found"
     return best
 
 

@@ -90,6 +90,9 @@ __all__ = [
     "set_scalars",
     "payload_points",
     "payload_coordinates",
+    "payload_set_points",
+    "model_samples",
+    "SAMPLE_SEED",
     "payload_sampling_words",
     "unit_factors",
     "factor_of",
@@ -341,6 +344,22 @@ def _domain_points(domain, n: int, seed):
     return q, qdot, a
 
 
+#: The seed of the model's own samples of the task (:func:`model_samples`).
+SAMPLE_SEED = (7, 38)
+
+
+def model_samples(domain, samples: int):
+    """The points of ``domain`` the model is built on: :func:`_task_samples` with :data:`SAMPLE_SEED`."""
+    return _task_samples(domain, samples, seed=list(SAMPLE_SEED))
+
+
+def payload_set_points(body, scalars) -> np.ndarray:
+    """``(points, I)``: the payload's scalars among ``scalars`` (per unit of their half range) at the points of its physical set."""
+    on = [s for s in scalars if s.name.startswith("payload.")]
+    points = (payload_coordinates(body, mass, com) for mass, com in payload_points(body))
+    return np.array([[c[s.name] / s.half_range for s in on] for c in points])
+
+
 def _task_samples(domain, n: int, seed):
     """``n`` uniform points of the task domain and ``n`` random corners of it, ``(q, qdot, a)``.
 
@@ -383,7 +402,7 @@ def inner_links_plant(
     scalars = set_scalars(robot)
     if not scalars:
         raise NotApplicable("inner-links: the set has no uncertain parameter")
-    q, qdot, a = _task_samples(pldi.domain, samples, seed=[7, 38])
+    q, qdot, a = model_samples(pldi.domain, samples)
     Phi = unit_factors(robot, scalars, q, qdot, a)  # (N, S, m, 3m)
     moves = np.abs(Phi).reshape(len(scalars), -1).max(axis=1)
     keep = moves > NEGLIGIBLE * moves.max()  # a first moment at a joint's axis, a mass on a vertical first joint
@@ -395,8 +414,7 @@ def inner_links_plant(
     on_payload = np.array([s.name.startswith("payload.") for s in scalars])
     body = robot.uncertainty.payload
     if on_payload.any():
-        pay = np.array([[c[s.name] / s.half_range for s in scalars if s.name.startswith("payload.")]
-                        for c in (payload_coordinates(body, mm, cc) for mm, cc in payload_points(body))])  # fmt: skip
+        pay = payload_set_points(body, scalars)
     else:
         pay = np.zeros((1, 0))
     # in M_hat^{1/2} coordinates at the task's centre: K -> W K diag(I, W^-1)
