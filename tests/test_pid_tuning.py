@@ -49,7 +49,7 @@ def test_tuned_pid_takes_the_best_candidate_and_its_figure_is_an_upper_bound(P, 
     from polyrob.plant.loops import lower_lft
 
     omega = np.logspace(-2, 2, 9)
-    r = tuned_pid(P, omega=omega)
+    r = tuned_pid(P, omega=omega, decouple=False)
     # crossovers placed by the smallest W_T bandwidth of the paper's weights (10 rad/s)
     assert sorted({t[0] for t in r.tried}) == pytest.approx([f * 10.0 for f in CROSSOVER_FRACTIONS])
     finite = [t for t in r.tried if np.isfinite(t[3])]
@@ -67,6 +67,20 @@ def test_tuned_pid_takes_the_best_candidate_and_its_figure_is_an_upper_bound(P, 
     lower = max(mussv(H[k], P.block_structure_rp, lower=True).lower for k in range(omega.size))
     assert lower <= r.grid_mu * (1 + 1e-6)
     assert "per-joint PID critically damped" in r.words()
+
+
+def test_a_coupled_input_matrix_gets_the_pid_through_its_inverse(P, unc):
+    # the paper's 2R has no inner layer: B_v = M^-1 at the box's centre couples the joints
+    B_v = np.asarray(unc.B_nom)[2:]
+    assert abs(B_v[0, 1]) > 0.1 * abs(B_v).max()
+    r = tuned_pid(P, omega=np.logspace(-2, 2, 9), refine_window=None)
+    assert r.decoupling == pytest.approx(np.linalg.inv(B_v))
+    assert r.input_gains == pytest.approx([1.0, 1.0])
+    assert "through the nominal inertia" in r.words()
+    # the controller is T diag(K_j): the nominal loop B_v T K = K, each joint a unit double integrator's PID
+    K = pid_controller(r.gains())
+    for w in (0.3, 3.0):
+        assert B_v @ r.controller(1j * w) == pytest.approx(K(1j * w), rel=1e-9, abs=1e-12)
 
 
 def test_per_joint_crossovers_only_lower_the_figure_and_the_figure_is_the_controllers(P):
@@ -148,7 +162,7 @@ def test_the_pid_start_answers_only_when_its_certificate_meets_the_target(P, mon
     from polyrob.synthesis.pid_tuning import pid_start
 
     real = tuning.tuned_pid(P, omega=np.logspace(-2, 2, 5))
-    monkeypatch.setattr(tuning, "tuned_pid", lambda P: dataclasses.replace(real, grid_mu=0.9 * bound))
+    monkeypatch.setattr(tuning, "tuned_pid", lambda P, **k: dataclasses.replace(real, grid_mu=0.9 * bound))
     monkeypatch.setattr(certificate, "certify_loop", lambda *a, **k: _certificate(bound))
     K, words, done = pid_start(P, target=target)
     assert K.nstates == 2 * P.n_u and words.startswith("per-joint PID")

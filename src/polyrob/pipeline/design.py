@@ -125,7 +125,8 @@ def true_robot_start(problem, options: dict) -> tuple[dict, object]:
     from polyrob.synthesis.true_robots import tune_on_true_robots
 
     t0 = time.perf_counter()
-    start = tuned_pid(problem.P)
+    # the true robots' tuning fits a per-joint structure to the start: no decoupling to fit
+    start = tuned_pid(problem.P, decouple=False)
     structure = "pid" if options.get("structure", "full") == "full" else options["structure"]
     # the PID first, then the structure from it: started from the model's PID, ss:12 on ur5 stalled at 1.94 on its
     # draws with 6 of 500 others unstable; from the PID tuned on true robots it reached 0.926 on the others

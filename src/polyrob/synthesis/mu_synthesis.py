@@ -210,7 +210,9 @@ def _pid_start(P, opts: MusynOptions):
     stop = {}
     if opts.structure in ("full", "pid"):
         stop = {"target": opts.target, "only": opts.max_iter == 1 and opts.structure == "full"}
-    controller, words, done = pid_start(P, certify_omega=opts.certify_omega, **stop)
+    # a fixed structure fits its own parameters to the start: only the full order keeps a decoupling
+    decouple = opts.structure == "full"
+    controller, words, done = pid_start(P, certify_omega=opts.certify_omega, decouple=decouple, **stop)
     return replace(opts, initial_controller=controller), words, done
 
 

@@ -69,6 +69,8 @@ JOINT_SWEEPS = 2
 #: A candidate replaces the best only when its figure is lower by this fraction: the ranking is
 #: coarse anyway, and each new best costs a μ bound at every frequency of the grid.
 MIN_GAIN = 0.01
+#: Off-diagonal input gains up to this fraction of the largest diagonal one are none: no decoupling.
+DECOUPLE_TOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -94,6 +96,10 @@ class TunedPID:
     joint_scales : tuple of float
         Each joint's crossover is ``crossover`` times its scale (all 1 unless
         the per-joint search improved the figure).
+    decoupling : ndarray or None
+        ``T``: the controller is ``T diag(K_j)`` (the nominal input matrix's
+        inverse when it couples the joints, :func:`tuned_pid`); ``None``: the
+        PID alone.
     """
 
     controller: control.StateSpace = field(repr=False)
@@ -104,6 +110,7 @@ class TunedPID:
     grid_mu: float
     tried: tuple = field(default=(), repr=False)
     joint_scales: tuple = ()
+    decoupling: np.ndarray | None = field(default=None, repr=False)
 
     def crossovers(self) -> np.ndarray:
         """Each joint's crossover ``ω_c`` (rad/s)."""
@@ -118,8 +125,9 @@ class TunedPID:
         per_joint = ""
         if self.joint_scales and any(s != 1.0 for s in self.joint_scales):
             per_joint = f" times ({', '.join(f'{s:.3g}' for s in self.joint_scales)}) per joint"
+        through = " through the nominal inertia (decoupled at the task's pose)" if self.decoupling is not None else ""
         return (
-            f"per-joint PID critically damped at {self.crossover:.3g} rad/s{per_joint} "
+            f"per-joint PID critically damped at {self.crossover:.3g} rad/s{per_joint}{through} "
             f"(integral omega_c^3/{self.integral_ratio:g}, derivative filter at {self.filter_ratio:g} omega_c)"
         )
 
@@ -161,16 +169,36 @@ def pid_controller(gains: np.ndarray) -> control.StateSpace:
     return control.ss(*PIDStructure(m, m).realization(theta.ravel()))
 
 
-def _input_gains(P) -> np.ndarray:
-    """``b_j``: the nominal input matrix's diagonal on the velocity rows (1 behind computed torque)."""
+def _input_gains(P, decouple: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(b, T)``: each joint's input gain ``b_j`` and the static decoupling ``T`` (``None`` if not needed).
+
+    ``B_v``, the nominal input matrix's velocity rows, is the identity behind
+    computed torque (``b_j = 1``).  Without that layer (``--inner gravity``,
+    ``none``) it is ``M(q_0)^-1``, whose couplings a per-joint PID on its
+    diagonal ignores (ur5's shoulder and elbow); with ``decouple`` the PID
+    then acts through ``T = B_v^-1`` (the nominal inertia: a PD with inertia
+    decoupling at the task's pose, what computed torque does at one pose)
+    with every ``b_j = 1``.
+    """
     B = getattr(getattr(P, "uncertain", None), "B_nom", None)
     m = int(P.n_u)
     if B is None or np.shape(B) != (2 * m, m):
-        return np.ones(m)
-    b = np.diag(np.asarray(B, float)[m:])
-    if np.any(~np.isfinite(b)) or np.any(b <= 0):
+        return np.ones(m), None
+    B_v = np.asarray(B, float)[m:]
+    b = np.diag(B_v)
+    if np.any(~np.isfinite(B_v)) or np.any(b <= 0):
         raise SynthesisError("a PID start needs a positive nominal input gain on every joint")
-    return b
+    off = B_v - np.diag(b)
+    if not decouple or np.abs(off).max(initial=0.0) <= DECOUPLE_TOL * np.abs(b).max():
+        return b, None
+    return np.ones(m), np.linalg.inv(B_v)
+
+
+def _decoupled(K: control.StateSpace, T) -> control.StateSpace:
+    """``T K``: the PID's outputs through the decoupling (``K`` itself for ``T = None``)."""
+    if T is None:
+        return K
+    return control.ss(K.A, K.B, T @ np.asarray(K.C), T @ np.asarray(K.D))
 
 
 def tuned_pid(
@@ -181,6 +209,7 @@ def tuned_pid(
     integral_ratios=INTEGRAL_RATIOS,
     filter_ratios=FILTER_RATIOS,
     refine_window: tuple | None = (1.0, 1.5),
+    decouple: bool = True,
 ) -> TunedPID:
     """The per-joint PID of the module text with the smallest coarse-grid μ on ``P``.
 
@@ -201,6 +230,10 @@ def tuned_pid(
         lowers the figure, for up to :data:`JOINT_SWEEPS` sweeps while a
         sweep gains 2 % (``None``: never; each candidate costs up to a
         figure on the coarse grid).
+    decouple : bool
+        When the nominal input matrix couples the joints (no computed-torque
+        layer), act through its inverse (:func:`_input_gains`); ``False``:
+        divide by its diagonal only, each joint on its own.
 
     Raises
     ------
@@ -214,7 +247,7 @@ def tuned_pid(
     from polyrob.plant.loops import lower_lft_matrices
 
     m = int(P.n_u)
-    b = _input_gains(P)
+    b, T = _input_gains(P, decouple)
     if crossovers is None:
         wbt = _smallest_bandwidth(P)
         crossovers = [f * wbt for f in CROSSOVER_FRACTIONS]
@@ -242,7 +275,7 @@ def tuned_pid(
     def rank(wc, ki, nf, scales=(1.0,) * m) -> None:
         """Append the candidate's row to ``tried``; make it the best when it ran to the end."""
         figure, complete = np.inf, False
-        K = pid_controller(pid_gains(wc * np.asarray(scales, float), ki, nf, b))
+        K = _decoupled(pid_controller(pid_gains(wc * np.asarray(scales, float), ki, nf, b)), T)
         Ak, Bk, Ck, Dk = (np.asarray(X, float) for X in (K.A, K.B, K.C, K.D))
         try:
             Acl, Bcl, Ccl, Dcl = lower_lft_matrices(A, B, C, D, Ak, Bk, Ck, Dk, m, m)
@@ -291,7 +324,7 @@ def tuned_pid(
         )
     wc, ki, nf, mu, scales = bests[-1]
     return TunedPID(
-        controller=pid_controller(pid_gains(wc * np.asarray(scales), ki, nf, b)),
+        controller=_decoupled(pid_controller(pid_gains(wc * np.asarray(scales), ki, nf, b)), T),
         crossover=wc,
         integral_ratio=ki,
         filter_ratio=nf,
@@ -299,6 +332,7 @@ def tuned_pid(
         grid_mu=float(mu),
         tried=tuple(tried),
         joint_scales=tuple(scales),
+        decoupling=T,
     )
 
 
@@ -320,6 +354,7 @@ def pid_start(
     only: bool = False,
     screen: float | None = None,
     certify_omega=None,
+    decouple: bool = True,
 ):
     """``musyn``'s ``initial_controller="pid"``: ``(controller, words, result)``.
 
@@ -332,14 +367,15 @@ def pid_start(
     certificate and ``info["stopped_by"]`` says why no D-K step ran.
     ``screen`` (a search over weights): a :class:`SynthesisError` instead
     when the ranking's coarse-grid μ is already at least ``screen``.
+    ``decouple``: :func:`tuned_pid`'s (``False`` for a fixed structure
+    that holds no decoupling, such as ``"pid"``).
     """
     import time
-
 
     if isinstance(P, control.StateSpace):
         raise ArgumentError("initial_controller='pid' needs a GeneralizedPlant (its weights place the crossover)")
     t0 = time.perf_counter()
-    tuned = tuned_pid(P)
+    tuned = tuned_pid(P, decouple=decouple)
     log.info(f"musyn: start from a {tuned.words()}, coarse-grid mu {tuned.grid_mu:.4f}")
     if screen is not None and tuned.grid_mu >= screen:
         # a search's screen (a heuristic: the factor counts as not reached, never as refuted)
@@ -377,6 +413,7 @@ def start_result(tuned: TunedPID, certificate, seconds: float, stopped_by: str):
             "start": tuned.words(),
             "stopped_by": stopped_by,
             "pid_gains": tuned.gains().tolist(),
+            **({"decoupling": tuned.decoupling.tolist()} if tuned.decoupling is not None else {}),
             "ranking": [list(t) for t in tuned.tried],
         },
     )
