@@ -46,8 +46,22 @@ over the sampled one is reported relative to that scale (``excess_max``).
   factors in ``q`` sampled at 16 points of the box (step 1e-4): how much of
   the over-estimation is the ball arithmetic's, not the function's.
 
+- ``corners`` (``--corner-scales``, ``--corners`` random corners of the
+  task): what the branch and bound must reach where the entries' extremes
+  lie.  A sub-box at a corner of the task, each coordinate's range shrunk
+  to the fraction ``s`` of it at that end, is enclosed with the Taylor
+  form; a side of an entry is still open there when its bound exceeds the
+  whole task's attained value (``--samples`` points and the vertex
+  ascent) by more than the proof's tolerance (``REL_TOL`` of the entry's
+  width, floored at ``--floor`` of its factor's scale, as
+  :func:`~polyrob.bounds.certified.factors.prove_factor_ranges` closes
+  it).  Per scale: the open sides (the most over the corners), the worst
+  excess in tolerances, and that entry (factor, row, column) with whether
+  it is thin (below the floor).
+
 Usage: ``python benchmarks/certified_arms.py [--robots ur5,panda] [--max-boxes N] [--workers N] [--samples N] [--floor F]
-[--scales 1,0.25,0.05,0.01] [--proof-scales 1,0.05]`` (an empty list skips that part).
+[--scales 1,0.25,0.05,0.01] [--proof-scales 1,0.05] [--corner-scales 0.25,0.1,0.05,0.02] [--corners 3]``
+(an empty list skips that part).
 """
 
 from __future__ import annotations
@@ -64,6 +78,7 @@ from _results import add_results_option, save_run
 from polyrob import load_robot
 from polyrob.bounds.certified.factors import (
     MAX_BOXES,
+    REL_TOL,
     FactorProblem,
     attained_range,
     prove_factor_ranges,
@@ -125,6 +140,40 @@ def hessian_widths(problem, box, rng, points: int = 6, step: float = 1e-4) -> di
     return out
 
 
+def corner_boxes(problem, domain, rng, scales, corners, samples, floor) -> list:
+    """Open sides at sub-boxes of ``domain``'s corners against the whole task's attained values (module text)."""
+    m = problem.m
+    a_lo, a_hi = domain.qddot_lower, domain.qddot_upper
+    x_lo, x_hi = np.r_[domain.q_lower, domain.qdot_lower], np.r_[domain.q_upper, domain.qdot_upper]
+    p_lo, p_hi = attained_range(problem, domain.q_lower, domain.q_upper, domain.qdot_lower, domain.qdot_upper,
+                                a_lo, a_hi, samples, rng)  # fmt: skip
+    v_lo, v_hi = vertex_ascent(problem, x_lo, x_hi, a_lo, a_hi)
+    p_lo, p_hi = np.minimum(p_lo, v_lo), np.maximum(p_hi, v_hi)
+    width = p_hi - p_lo
+    factor_scale = np.maximum(np.abs(p_lo), np.abs(p_hi)).max(axis=(1, 2), keepdims=True)
+    tol = REL_TOL * np.maximum(width, floor * factor_scale) + 1e-8 * factor_scale
+    thin = width < floor * factor_scale
+    picks = [rng.integers(0, 2, 2 * m).astype(bool) for _ in range(corners)]
+    out = []
+    for s in scales:
+        row = {"scale": s, "open_sides_max": 0, "worst_excess": 0.0}
+        for at_upper in picks:
+            lo_b = np.where(at_upper, x_hi - s * (x_hi - x_lo), x_lo)
+            hi_b = np.where(at_upper, x_hi, x_lo + s * (x_hi - x_lo))
+            lo, hi, _ = problem.enclose(lo_b[None, :m], hi_b[None, :m], lo_b[None, m:], hi_b[None, m:], a_lo, a_hi,
+                                        taylor=True)  # fmt: skip
+            excess = np.maximum((hi[0] - p_hi) / tol, (p_lo - lo[0]) / tol)
+            row["open_sides_max"] = max(
+                row["open_sides_max"], int((hi[0] - p_hi > tol).sum() + (p_lo - lo[0] > tol).sum())
+            )
+            if excess.max() > row["worst_excess"]:
+                worst = np.unravel_index(np.argmax(excess), excess.shape)
+                row.update(worst_excess=round(float(excess.max()), 3), worst_entry=[int(k) for k in worst],
+                           worst_entry_thin=bool(thin[worst]))  # fmt: skip
+        out.append(row)
+    return out
+
+
 #: Entries of ``M_hat^-1`` whose sampled width is below this fraction of its largest entry are judged by their excess.
 INVERSE_FLOOR = 1e-6
 
@@ -157,6 +206,8 @@ def main() -> None:
     parser.add_argument("--floor", type=float, default=FLOOR)
     parser.add_argument("--wrapping-scale", type=float, default=0.01)
     parser.add_argument("--proof-scales", default="1", help="task scales the branch and bound is run on (1: the task)")
+    parser.add_argument("--corner-scales", default="", help="sub-box sizes at the task's corners (fractions of it)")
+    parser.add_argument("--corners", type=int, default=3, help="random corners of the task for --corner-scales")
     parser.add_argument("--workers", type=int, default=None, help="processes the proof's boxes are shared among "
                         "(default: the cores, as `polyrob bounds --certify`)")  # fmt: skip
     add_results_option(parser)
@@ -193,6 +244,10 @@ def main() -> None:
                         "M_hat not provably invertible on the whole box: no enclosure without splitting"
                     )
             row["one_box"].append(entry)
+        corner_scales = [float(x) for x in args.corner_scales.split(",") if x]
+        if corner_scales:
+            row["corners"] = corner_boxes(problem, domain, np.random.default_rng(4), corner_scales, args.corners,
+                                          args.samples, args.floor)  # fmt: skip
         row["proof"] = []
         for s in [float(x) for x in args.proof_scales.split(",") if x]:
             box = domain.scaled(s)
