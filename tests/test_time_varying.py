@@ -184,3 +184,20 @@ def test_an_exact_model_has_its_loop_s_own_h_infinity_norm_as_the_time_varying_t
     assert tv.gamma == pytest.approx(norm, rel=2e-3) and tv.gamma >= norm * (1 - 1e-9)
     assert tv.performance_holds == (norm < 1)
     assert "no uncertainty channel" in " ".join(tv.notes)
+
+
+def test_a_skew_multiplier_proves_what_no_constant_scaling_can():
+    """``x' = -x + 2 delta(t) J x`` (``J`` a rotation): ``d|x|^2/dt = -2 |x|^2`` for every ``delta(t)``, so it is
+    stable at any rate.  The loop ``N = 2 J / (s + 1)`` has ``||S N S^-1|| >= 2`` for every scaling ``S``; the
+    skew multiplier of a real repeated scalar proves it, and a complex one (which may turn ``J`` into a negative
+    gain) is rightly not helped by it."""
+    from polyrob.analysis.time_varying.smallgain import scaled_small_gain
+
+    J = np.array([[0.0, 1.0], [-1.0, 0.0]])
+    N = control.ss(-np.eye(2), 2 * J, np.eye(2), np.zeros((2, 2)))
+    real = scaled_small_gain(N, [[-2, 0]])
+    assert real.holds and real.gamma < 0.5 and real.info["skew_multipliers"] == 1
+    complex_ = scaled_small_gain(N, [[2, 0]])
+    assert not complex_.holds and complex_.gamma == pytest.approx(2.0, rel=2e-3)
+    # the complex scalar delta = j/2 makes I - N(0) delta = I - j J singular: gamma 2 is attained
+    assert abs(np.linalg.det(np.eye(2) - 2 * J * (0.5j))) < 1e-12

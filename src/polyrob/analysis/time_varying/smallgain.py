@@ -14,13 +14,19 @@ constant it commutes with every *time-varying* ``Δ(t)`` of the structure:
 * repeated scalar ``δ(t) I_r``       -> a full ``r x r`` matrix ``X_i > 0``;
 * full block (norm-bounded LTV)      -> a scalar ``x_i I``,
 
+and, for a real repeated scalar, a constant skew-symmetric ``Z_i`` that
+pairs its input and output (the multiplier ``[[X, Z], [Z^T, -X]]`` of a
+time-varying real scalar, Megretski and Rantzer, IEEE TAC 1997: for ``w =
+δ(t) v``, ``v^T X v - δ² v^T X v + δ v^T (Z + Z^T) v = (1 - δ²) v^T X v
+>= 0``; the constant-G scaling that survives arbitrarily fast variation),
+
 so the bound certifies stability (and, with the performance block in the
 structure, L2 performance) for arbitrarily fast parameter variation and any
 norm-bounded linear time-varying block.  Found by the KYP lemma, an LMI in
 ``Y = Y^T`` and ``X = D^T D`` at a fixed level ``γ`` (bisection on ``γ``)::
 
     [A^T Y + Y A   Y B      ]   [C^T]                  [0   0        ]
-    [B^T Y         0        ] + [D^T] X_c [C  D]   -   [0   γ² X_r   ]  < 0
+    [B^T Y         0        ] + [D^T] X_c [C  D]   -   [0   γ² X_r   ]  + He([C D]^T Z [0 I])  < 0
 
 and verified a posteriori like the vertex LMIs (eigenvalues with a
 rounding allowance, and ``A`` Hurwitz); the scaled norm is also computed
@@ -78,23 +84,29 @@ class ScaledSmallGainResult:
     info: dict = field(default_factory=dict)
 
 
-def _kyp(A, B, C, D, Y, Xr, Xc, g2):
+def _kyp(A, B, C, D, Y, Xr, Xc, g2, Z=None):
     n = A.shape[0]
     top = np.block([[A.T @ Y + Y @ A, Y @ B], [B.T @ Y, np.zeros((B.shape[1], B.shape[1]))]])
     CD = np.hstack([C, D])
     L = top + CD.T @ Xc @ CD
     L[n:, n:] -= g2 * Xr
+    if Z is not None:
+        cross = CD.T @ Z  # (n + nr, nr): [C D]^T Z [0 I]
+        L[:, n:] += cross
+        L[n:, :] += cross.T
     return L
 
 
-def _kyp_ok(A, B, C, D, Y, Xr, Xc, g2) -> bool:
-    L = _kyp(A, B, C, D, Y, Xr, Xc, g2)
+def _kyp_ok(A, B, C, D, Y, Xr, Xc, g2, Z=None) -> bool:
+    L = _kyp(A, B, C, D, Y, Xr, Xc, g2, Z)
     N = L.shape[0]
+    CD = np.abs(np.hstack([C, D]))
     scale = (
         2 * np.linalg.norm(np.abs(A), 2) * np.linalg.norm(np.abs(Y), 2)
-        + np.linalg.norm(np.abs(np.hstack([C, D])), 2) ** 2 * np.linalg.norm(np.abs(Xc), 2)
+        + np.linalg.norm(CD, 2) ** 2 * np.linalg.norm(np.abs(Xc), 2)
         + g2 * np.linalg.norm(Xr, 2)
         + np.linalg.norm(L, 2)
+        + (2 * np.linalg.norm(CD, 2) * np.linalg.norm(np.abs(Z), 2) if Z is not None else 0.0)
     )
     return bool(np.linalg.eigvalsh(L)[-1] + 8.0 * (N + 2) * _U * scale < 0)
 
@@ -159,7 +171,7 @@ def scaled_small_gain(N, blk, *, rtol: float = 1e-3, max_steps: int = 30) -> Sca
     # bisection step only re-solves (DPP), instead of compiling ~15 times.
     g2p = cp.Parameter(nonneg=True)
     Y = cp.Variable((n, n), symmetric=True)
-    Xr, Xc, cons = 0, 0, []
+    Xr, Xc, Z, skews, cons = 0, 0, 0, 0, []
     for b, rs, cs in zip(st.blocks, st.row_slices, st.col_slices):
         Er, Ec = np.eye(nr)[rs], np.eye(nc)[cs]
         if b.kind == "full" or b.rows == 1:
@@ -170,9 +182,15 @@ def scaled_small_gain(N, blk, *, rtol: float = 1e-3, max_steps: int = 30) -> Sca
             S = cp.Variable((b.rows, b.rows), symmetric=True)
             Xr, Xc = Xr + Er.T @ S @ Er, Xc + Ec.T @ S @ Ec
             cons.append(S >> 1e-6 * np.eye(b.rows))
+            if b.kind == "real":  # a skew-symmetric Z_i pairing its output v_i with its input w_i
+                U = cp.Variable((b.rows, b.rows))
+                Z, skews = Z + Ec.T @ (U - U.T) @ Er, skews + 1
     CD = np.hstack([C, D])
     L = cp.bmat([[A.T @ Y + Y @ A, Y @ B], [B.T @ Y, np.zeros((nr, nr))]]) + CD.T @ Xc @ CD
     L = L - cp.bmat([[np.zeros((n, n)), np.zeros((n, nr))], [np.zeros((nr, n)), g2p * Xr]])
+    if skews:
+        cross = CD.T @ Z
+        L = L + cp.bmat([[np.zeros((n, n)), cross[:n]], [cross[:n].T, cross[n:] + cross[n:].T]])
     cons += [0.5 * (L + L.T) << -1e-9 * np.eye(n + nr), Xr >> np.eye(nr)]
     prob = cp.Problem(cp.Minimize(0), cons)
 
@@ -184,8 +202,11 @@ def scaled_small_gain(N, blk, *, rtol: float = 1e-3, max_steps: int = 30) -> Sca
             return None
         if prob.status not in ("optimal", "optimal_inaccurate") or Y.value is None:
             return None
-        sol = (0.5 * (Y.value + Y.value.T), np.asarray(Xr.value), np.asarray(Xc.value))
-        return sol if _kyp_ok(A, B, C, D, *sol, g2) and np.linalg.eigvalsh(sol[1])[0] > 0 else None
+        Zv = np.asarray(Z.value, float) if skews else None
+        if Zv is not None:
+            Zv = _skew_part(Zv, st, nr, nc)  # exactly skew per block before the check (the solver's rounding)
+        sol = (0.5 * (Y.value + Y.value.T), np.asarray(Xr.value), np.asarray(Xc.value), Zv)
+        return sol if _kyp_ok(A, B, C, D, *sol[:3], g2, sol[3]) and np.linalg.eigvalsh(sol[1])[0] > 0 else None
 
     lo, hi = 0.0, unscaled * (1 + 1e-6)
     best = solve(hi**2)
@@ -197,7 +218,7 @@ def scaled_small_gain(N, blk, *, rtol: float = 1e-3, max_steps: int = 30) -> Sca
         steps += 1
     lmi = None
     if best is not None:
-        Y, Xr, Xc = best
+        Y, Xr, Xc, Zv = best
         Dr, Dc = _sqrtm(Xr), _sqrtm(Xc)
         scaled = control.ss(A, B @ np.linalg.inv(Dr), Dc @ C, Dc @ D @ np.linalg.inv(Dr))
         lmi = ScaledSmallGainResult(
@@ -214,6 +235,9 @@ def scaled_small_gain(N, blk, *, rtol: float = 1e-3, max_steps: int = 30) -> Sca
                 "bisection_steps": steps,
                 "lower": lo,
                 "lyapunov_min_eig": float(np.linalg.eigvalsh(Y)[0]),
+                # with skew multipliers the verified level is the LMI's, below the D-only scaled norm
+                "skew_multipliers": skews,
+                "skew_norm": float(np.linalg.norm(Zv, 2)) if Zv is not None else 0.0,
             },
         )
         if lmi.holds:
@@ -238,6 +262,16 @@ def scaled_small_gain(N, blk, *, rtol: float = 1e-3, max_steps: int = 30) -> Sca
         _covers(st),
         {"reason": "no verified scaling"},
     )
+
+
+def _skew_part(Z, st, nr, nc) -> np.ndarray:
+    """``Z`` with each real repeated block's part made exactly skew-symmetric and every other entry zero."""
+    out = np.zeros((nc, nr))
+    for b, rs, cs in zip(st.blocks, st.row_slices, st.col_slices):
+        if b.kind == "real" and b.rows > 1:
+            part = Z[cs, rs]
+            out[cs, rs] = 0.5 * (part - part.T)
+    return out
 
 
 def _frequency_route(A, B, C, D, st, unscaled: float, t0: float) -> ScaledSmallGainResult | None:
