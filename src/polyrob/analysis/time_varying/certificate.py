@@ -63,7 +63,8 @@ def covers_nonlinear(method: str, constants: bool = False) -> str:
         )
     if method == "scaled small gain":
         return (
-            "Only the time-varying certificate (constant-D scaled small gain on the LFT model) covers the moving "
+            "Only the time-varying certificate (constant-D scaled small gain, with a skew multiplier on each real "
+            "repeated scalar, on the LFT model) covers the moving "
             "nonlinear robot, as far as the model covers its Jacobians and only while its state and its torques (accelerations, for a task domain) stay "
             "inside the domain the PLDI was bounded on; mu with constant parameters certifies each frozen robot "
             "of the set, not the robot in motion."
