@@ -1,8 +1,9 @@
 """A per-joint PID tuned to the weights: the start an arm engineer would write down first.
 
 Behind a computed-torque inner layer the outer controller sees, per joint, a
-double integrator ``qddot_j = b_j v_j`` up to the model error (and, without an
-inner layer, ``b_j`` is the nominal ``M^-1`` diagonal).  The textbook
+double integrator ``qddot_j = b_j v_j`` up to the model error (``b_j = 1``);
+without that layer the nominal input matrix ``M(q_0)^-1`` couples the joints,
+and the PID acts through its inverse, the nominal inertia (:func:`_input_gains`).  The textbook
 controller for it is a PID with a filtered derivative, critically damped at a
 crossover ``ω_c``::
 
