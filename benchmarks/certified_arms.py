@@ -85,7 +85,7 @@ from polyrob.bounds.certified.factors import (
     vertex_ascent,
 )
 from polyrob.bounds.certified.factors.hessian import hessian_enclosure
-from polyrob.bounds.certified.factors.width_ratio import FLOOR, width_ratios
+from polyrob.bounds.certified.factors.width_ratio import FLOOR, closing_tolerance, width_ratios
 from polyrob.bounds.parallel import available_cores
 from polyrob.domains.default_task import default_task_domain, default_task_robot
 from polyrob.errors import CertificationError
@@ -149,10 +149,9 @@ def corner_boxes(problem, domain, rng, scales, corners, samples, floor) -> list:
                                 a_lo, a_hi, samples, rng)  # fmt: skip
     v_lo, v_hi = vertex_ascent(problem, x_lo, x_hi, a_lo, a_hi)
     p_lo, p_hi = np.minimum(p_lo, v_lo), np.maximum(p_hi, v_hi)
-    width = p_hi - p_lo
+    tol = closing_tolerance(p_lo, p_hi, REL_TOL, floor)
     factor_scale = np.maximum(np.abs(p_lo), np.abs(p_hi)).max(axis=(1, 2), keepdims=True)
-    tol = REL_TOL * np.maximum(width, floor * factor_scale) + 1e-8 * factor_scale
-    thin = width < floor * factor_scale
+    thin = p_hi - p_lo < floor * factor_scale
     picks = [rng.integers(0, 2, 2 * m).astype(bool) for _ in range(corners)]
     out = []
     for s in scales:

@@ -30,7 +30,10 @@ variation allowed:
 
 The grid figures are the largest values on ``--points`` log-spaced
 frequencies (and the poles' magnitudes), not bounds between them: a
-measurement of what motion costs, not a certificate.
+measurement of what motion costs, not a certificate.  Only the ``inner-gain``
+model's real scalars are the robot's constant parameters (``inner-links``'
+directions and the ``axes`` model's move with the state): other models are
+refused.
 """
 
 from __future__ import annotations
@@ -71,6 +74,11 @@ def main() -> None:
     t0 = time.perf_counter()
     cli = build_parser().parse_args(["analyze", *rest, "--no-moving"])
     problem = problem_from_args(robot_from_args(cli), cli, Quiet())
+    if problem.model != "inner-gain":  # only there are the real scalars the robot's constant parameters
+        sys.exit(
+            f"mixed_ltv.py: the model is {problem.model!r}; its real scalars move with the state, so holding them "
+            "constant would not describe the moving robot: give an arm's default task ('inner-gain')"
+        )
     K = load_controller_args(cli.controller)[0]
     P = problem.P
     N = lft(P, Controller.of(K))

@@ -196,10 +196,8 @@ def _input_gains(P, decouple: bool = True) -> tuple[np.ndarray, np.ndarray | Non
 
 
 def _decoupled(K: control.StateSpace, T) -> control.StateSpace:
-    """``T K``: the PID's outputs through the decoupling (``K`` itself for ``T = None``)."""
-    if T is None:
-        return K
-    return control.ss(K.A, K.B, T @ np.asarray(K.C), T @ np.asarray(K.D))
+    """``T K``: the PID's outputs through the decoupling (``K`` itself for ``T = None``; python-control's product)."""
+    return K if T is None else T * K
 
 
 def tuned_pid(

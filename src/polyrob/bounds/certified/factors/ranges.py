@@ -60,7 +60,7 @@ from polyrob.bounds.certified.factors.hessian import box_models, factor_hessians
 from polyrob.bounds.certified.factors.inverse import fixed_point_inverse, jet_parts, taylor_neumann_inverse
 from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread, vertex_gradients
 from polyrob.bounds.certified.factors.taylor2 import at_vertices, taylor2_bounds
-from polyrob.bounds.certified.factors.width_ratio import FLOOR
+from polyrob.bounds.certified.factors.width_ratio import FLOOR, closing_tolerance
 from polyrob.bounds.certified.jet_rnea import PARAMETER_RTOL, Chain, rnea
 from polyrob.bounds.parallel import WorkerPool
 from polyrob.errors import CertificationError
@@ -521,12 +521,7 @@ def prove_factor_ranges(
         p_lo, p_hi = np.minimum(p_lo, at_lo), np.maximum(p_hi, at_hi)
     if inner is not None:
         p_lo, p_hi = np.minimum(p_lo, inner[0]), np.maximum(p_hi, inner[1])
-    width = p_hi - p_lo
-    scale = np.maximum(np.abs(p_lo), np.abs(p_hi))
-    # an entry thinner than FLOOR of its factor's scale is judged by its excess against that scale (width_ratio.py);
-    # the last floor is far above the propagated rounding margins (about 1e-10 of a factor's largest entry)
-    factor_scale = np.maximum(scale.max(axis=(1, 2), keepdims=True), 1e-300)
-    tol = rel_tol * np.maximum(width, FLOOR * factor_scale) + 1e-8 * factor_scale
+    tol = closing_tolerance(p_lo, p_hi, rel_tol, FLOOR)
     F = len(problem.names)
     out_lo, out_hi = np.full((F, m, 3 * m), np.inf), np.full((F, m, 3 * m), -np.inf)
     root_q, root_v = np.where(q_hi > q_lo, q_hi - q_lo, 1.0), np.where(v_hi > v_lo, v_hi - v_lo, 1.0)

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["width_ratios", "FLOOR"]
+__all__ = ["width_ratios", "closing_tolerance", "FLOOR"]
 
 #: An entry whose sampled width is below this fraction of its factor's scale is reported by its excess, not its ratio.
 FLOOR = 1e-3
@@ -62,3 +62,26 @@ def width_ratios(lower, upper, sampled_lower, sampled_upper, floor: float = FLOO
         "excess_max": round(float(excess.max()), 12) if excess.size else 0.0,
         "thin_entries": int((~significant).sum()),
     }
+
+
+def closing_tolerance(attained_lower, attained_upper, rel_tol: float, floor: float = FLOOR) -> np.ndarray:
+    """How far past the attained values a proved side may stay and count as closed, per entry ``(F, ...)``.
+
+    ``rel_tol`` of the entry's attained width, or of ``floor`` times its
+    factor's scale for a thinner entry (judged by its excess against that
+    scale, as :func:`width_ratios` reports it); ``1e-8`` of the scale on top,
+    far above the propagated rounding margins (about 1e-10 of a factor's
+    largest entry).  The branch and bound of
+    :func:`~polyrob.bounds.certified.factors.prove_factor_ranges` closes its
+    sides with it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> closing_tolerance(np.array([[0.0, -1e-6]]), np.array([[2.0, 1e-6]]), 0.04).round(10).tolist()
+    [[0.08000002, 8.002e-05]]
+    """
+    lo, hi = np.asarray(attained_lower, float), np.asarray(attained_upper, float)
+    axes = tuple(range(1, lo.ndim))
+    scale = np.maximum(np.maximum(np.abs(lo), np.abs(hi)).max(axis=axes, keepdims=True), 1e-300)
+    return rel_tol * np.maximum(hi - lo, floor * scale) + 1e-8 * scale
