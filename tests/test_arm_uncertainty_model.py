@@ -77,7 +77,7 @@ def carried_model(name: str):
 def carried_frobenius_model():
     """ur5's model of :func:`carried_set` with the state residual's block covering its entry box (``rho = 1``)."""
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(links, "_state_residual_norm", lambda *args, **kwargs: None)
+        mp.setattr(links, "state_residual_norm_bound", lambda *args, **kwargs: None)
         return model_of(load_robot("ur5"), carried_set("ur5"))
 
 

@@ -138,17 +138,19 @@ def test_a_model_whose_parameters_move_goes_to_the_rate_bounded_route():
 
 
 def test_an_inner_loop_on_a_model_whose_parameters_move_names_the_time_varying_verdict(problem):
-    """ur5's per-link set (inner-links) printed "not computed (an inner loop: its moving-robot verdict is the any-rate
-    one (inner-gain model))": no such verdict was computed.  Its direction scalars move with the state, so only the
-    time-varying verdict covers the moving robot, and the line says so; a jerk bound is refused with an inner layer."""
+    """ur5's per-link set printed "not computed (an inner loop: its moving-robot verdict is the any-rate one
+    (inner-gain model))": no such verdict was computed.  On a model whose direction scalars move with the state and
+    that has no model of constants (inner-links-real; inner-links has inner-links-moving, tests/test_moving_links.py)
+    only the time-varying verdict covers the moving robot, and the line says so; a jerk bound is refused with an
+    inner layer."""
     from types import SimpleNamespace
 
     from polyrob.errors import ArgumentError
 
-    links = SimpleNamespace(P=SimpleNamespace(uncertain=SimpleNamespace(model="inner-links")), robot=problem.robot,
+    links = SimpleNamespace(P=SimpleNamespace(uncertain=SimpleNamespace(model="inner-links-real")), robot=problem.robot,
                             domain=problem.domain)  # fmt: skip
     out = robot_in_motion_certificate(links, control.ss([], [], [], np.eye(2)))
-    assert not out.computed and "'inner-links' model's parameters move" in out.notes[-1]
+    assert not out.computed and "'inner-links-real' model's parameters move" in out.notes[-1]
     assert "only the time-varying verdict" in out.notes[-1] and "inner-gain model)" not in out.notes[-1]
     with pytest.raises(ArgumentError, match="without an inner layer"):
         robot_in_motion_certificate(links, control.ss([], [], [], np.eye(2)), jerk=5.0)

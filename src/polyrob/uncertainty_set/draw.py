@@ -35,7 +35,7 @@ import numpy as np
 import pinocchio
 
 from polyrob.errors import ArgumentError
-from polyrob.uncertainty_set.payload_body import SECOND_MOMENT_ENTRIES, second_moment
+from polyrob.uncertainty_set.payload_body import SECOND_MOMENT_ENTRIES, payload_middle, second_moment
 from polyrob.uncertainty_set.spec import (
     RobotUncertainty,
     link_names,
@@ -296,26 +296,6 @@ def model_of_set(robot, spec: RobotUncertainty):
         viscous[robot.joint_names.index(f.joint)] = 0.5 * (f.viscous[0] + f.viscous[1])
     model.damping[:] = viscous
     return replace(robot, model=model, damping=viscous)
-
-
-def payload_middle(body) -> tuple[float, np.ndarray, np.ndarray]:
-    """``(mass, com, second)``: the payload the inner layer computes with.
-
-    The middle of its mass range at the centre of its centre-of-mass ball or
-    box, and ``second`` the middle of the range of the parallel-axis part
-    ``m S(c)^T S(c)`` of its inertia about the flange (six entries,
-    :func:`~polyrob.uncertainty_set.payload_body.second_moment`): the
-    middle of the set in the ten parameters, so that a payload whose centre
-    of mass ranges off the last joint's axis is not modelled at the
-    lightest end of its inertia about that axis.
-    """
-    mass = 0.5 * (body.mass_lower + body.mass_upper)
-    if body.com_radius is not None:
-        com = np.array(body.com_centre, float)
-    else:
-        com = 0.5 * (np.array(body.com_lower, float) + np.array(body.com_upper, float))
-    lo, hi = body.second_moment_range()
-    return mass, com, 0.5 * (lo + hi)
 
 
 def _matrix(six) -> np.ndarray:

@@ -29,6 +29,9 @@ __all__ = [
     "SECOND_MOMENT_ENTRIES",
     "second_moment",
     "payload_sampling_words",
+    "payload_points",
+    "payload_coordinates",
+    "payload_middle",
 ]
 
 #: The six entries ``(i, j)`` of a symmetric 3 x 3 matrix, in ``toDynamicParameters()``'s inertia order.
@@ -254,10 +257,63 @@ def _square_range(lo: float, hi: float) -> tuple[float, float]:
 
 
 def payload_sampling_words(body, shells: int = 4, per_shell: int = 160) -> str:
-    """What :func:`polyrob.plant.models.inner_links.payload_points` samples of the payload's set, in words (the covers line names it)."""
+    """What :func:`payload_points` samples of the payload's set, in words (the covers line names it)."""
     if body.com_radius is not None:
         return (f"the payload's extremes sampled at its 2 end masses x {1 + shells * per_shell} centres of mass "
                 f"(the ball's centre and {shells} spheres of {per_shell} points)")  # fmt: skip
     return (
         "the payload's extremes sampled at its 2 end masses x 343 centres of mass (a 7-point grid per axis of the box)"
     )
+
+
+def payload_points(body, shells: int = 4, per_shell: int = 160) -> list[tuple[float, np.ndarray]]:
+    """``(mass, com)`` points of the payload's set over which its scalars' extremes are taken (sampled).
+
+    Each scalar's effect is linear in the mass at a fixed centre of mass, so
+    the masses are the range's two ends; the centres of mass fill the ball
+    (its centre and ``shells`` spheres of ``per_shell`` Fibonacci points) or
+    the box (a 7-point grid per axis).
+    """
+    if body.com_radius is not None:
+        k = np.arange(per_shell) + 0.5
+        polar, azimuth = np.arccos(1 - 2 * k / per_shell), np.pi * (1 + 5**0.5) * k
+        sphere = np.column_stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)])
+        radii = body.com_radius * np.arange(1, shells + 1) / shells
+        coms = np.vstack([np.zeros((1, 3))] + [r * sphere for r in radii]) + np.array(body.com_centre)
+    else:
+        axes = [np.linspace(lo, hi, 7) for lo, hi in zip(body.com_lower, body.com_upper)]
+        coms = np.array(np.meshgrid(*axes, indexing="ij")).reshape(3, -1).T
+    return [(mass, c) for mass in (body.mass_lower, body.mass_upper) for c in coms]
+
+
+def payload_coordinates(body, mass: float, com) -> dict[str, float]:
+    """The payload scalars' values (physical units, about the model's payload) of a payload ``(mass, com)``."""
+    m0, c0, second0 = payload_middle(body)
+    c = np.asarray(com, float)
+    out = {"payload.mass": mass - m0}
+    for i, axis in enumerate("xyz"):
+        out[f"payload.m{axis}"] = mass * c[i] - m0 * c0[i]
+    second = second_moment(mass, c) - second0
+    for k, (i, j) in enumerate(SECOND_MOMENT_ENTRIES):
+        out[f"payload.second{i}{j}"] = second[k]
+    return out
+
+
+def payload_middle(body) -> tuple[float, np.ndarray, np.ndarray]:
+    """``(mass, com, second)``: the payload the inner layer computes with.
+
+    The middle of its mass range at the centre of its centre-of-mass ball or
+    box, and ``second`` the middle of the range of the parallel-axis part
+    ``m S(c)^T S(c)`` of its inertia about the flange (six entries,
+    :func:`~polyrob.uncertainty_set.payload_body.second_moment`): the
+    middle of the set in the ten parameters, so that a payload whose centre
+    of mass ranges off the last joint's axis is not modelled at the
+    lightest end of its inertia about that axis.
+    """
+    mass = 0.5 * (body.mass_lower + body.mass_upper)
+    if body.com_radius is not None:
+        com = np.array(body.com_centre, float)
+    else:
+        com = 0.5 * (np.array(body.com_lower, float) + np.array(body.com_upper, float))
+    lo, hi = body.second_moment_range()
+    return mass, com, 0.5 * (lo + hi)

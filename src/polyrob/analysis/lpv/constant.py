@@ -28,6 +28,14 @@ parameters are not:
   the parameters and every motion of the state inside the domain, at any
   rate.
 
+A per-link set (the ``inner-links`` model, whose direction scalars move
+with the state) is analysed on its ``inner-links-moving`` model
+(:func:`moving_problem`, :mod:`polyrob.plant.moving_links`): each true
+robot's factor split at the task's centre into constants (the directions'
+values and the rest of the factor there: real blocks and constant full
+blocks, frequency-dependent scalings) and the motion (full blocks marked
+``moving``), and only the motion is merged with the performance channels.
+
 This sits between the frozen robot (μ: constant parameters, constant
 state) and the time-varying certificate (every parameter arbitrarily fast,
 the masses too), and covers the robot in motion as the time-varying test
@@ -52,6 +60,7 @@ from polyrob.errors import ArgumentError, PolyrobError
 
 __all__ = [
     "applies",
+    "moving_problem",
     "residual_scalings",
     "scaled_plant",
     "constant_parameter_certificate",
@@ -65,12 +74,14 @@ MAX_STATES = 60
 #: Largest LFT loop computed by default (``analyze`` and ``run`` without ``--moving``).
 AUTO_STATES = 48
 #: Models whose real parameters are physical constants of the robot.
-CONSTANT_MODELS = ("inner-gain",)
+CONSTANT_MODELS = ("inner-gain", "inner-links-moving")
+#: Frozen models whose moving robot is analysed on another model of the same set, whose scalars are constants.
+MOVING_MODEL = {"inner-links": "inner-links-moving"}
 
 
 def applies(problem) -> str | None:
     """Why the constant-parameter route does not apply to ``problem`` (``None`` when it does)."""
-    model = getattr(getattr(getattr(problem, "P", None), "uncertain", None), "model", "")
+    model = _model(problem)
     if model not in CONSTANT_MODELS:
         return (
             f"the {model!r} model's parameters move with the robot's state "
@@ -79,16 +90,65 @@ def applies(problem) -> str | None:
     return None
 
 
-def _channels(blk):
-    """``(real, full)``: per block, its ``d`` (input) and ``v`` (output) channel indices."""
+def _model(problem) -> str:
+    return getattr(getattr(getattr(problem, "P", None), "uncertain", None), "model", "")
+
+
+def moving_problem(problem):
+    """``problem`` on the model whose real scalars are the robot's constants (itself when it is one).
+
+    An ``inner-links`` problem's direction scalars ``t_k(u, x)`` and blocks
+    move with the state; the ``inner-links-moving`` model of the same set
+    and PLDI (:mod:`polyrob.plant.moving_links`) splits each true robot's
+    factor at the task's centre into constants (the scalars and blocks
+    there) and the motion (blocks marked ``moving``).  It is built here, its
+    coverage measured on fresh true robots with their factors at the centre
+    (:func:`~polyrob.plant.moving_links.motion_coverage`), the problem's
+    weights kept.  ``None`` when no such model exists.
+    """
+    model = _model(problem)
+    if model in CONSTANT_MODELS:
+        return problem
+    if model not in MOVING_MODEL or not hasattr(problem, "pldi"):
+        return None
+    from polyrob.plant.generalized import generalized_plant
+    from polyrob.plant.moving_links import motion_coverage
+    from polyrob.plant.uncertainty import uncertain_plant
+    from polyrob.plant.weights import plant_weights
+
+    unc = uncertain_plant(problem.pldi, model=MOVING_MODEL[model], coverage=0, volume_samples=0)
+    points = int(getattr(problem.unc, "coverage_points", 0) or 2000)
+    unc = unc.with_figures(
+        coverage=motion_coverage(unc, problem.robot, problem.pldi.domain, points), coverage_points=points
+    )
+    P = generalized_plant(unc, **plant_weights(problem.hyperparameters))
+    return replace(problem, unc=unc, P=P, model=unc.model)
+
+
+def _channels(blk, moving=None):
+    """``(real, full)``: per block, its ``d`` (input) and ``v`` (output) channel indices.
+
+    ``moving`` (one flag per full block, in order): ``full`` holds only the
+    flagged ones and ``real`` the rest too (the blocks that stay constant).
+    """
     from polyrob.analysis.mu.blocks import as_block_structure
 
-    real, full, a, b = [], [], 0, 0
+    real, full, a, b, k = [], [], 0, 0, 0
     for block in as_block_structure(blk).blocks:
         ins, outs = np.arange(a, a + block.rows), np.arange(b, b + block.cols)
-        (real if block.kind == "real" else full).append((ins, outs))
+        if block.kind == "real":
+            real.append((ins, outs, block))
+        else:
+            (full if moving is None or moving[k] else real).append((ins, outs, block))
+            k += 1
         a, b = a + block.rows, b + block.cols
     return real, full
+
+
+def _moving_flags(P) -> list[bool] | None:
+    """Which full blocks move with the state (``None``: all of them, as on ``inner-gain``)."""
+    blocks = (getattr(getattr(P, "uncertain", None), "info", None) or {}).get("residual_blocks") or []
+    return [bool(b["moving"]) for b in blocks] if blocks and "moving" in blocks[0] else None
 
 
 def residual_scalings(P, K):
@@ -96,19 +156,19 @@ def residual_scalings(P, K):
     from polyrob.analysis.time_varying.smallgain import scaled_small_gain
     from polyrob.plant.generalized import lft
 
-    _real, full = _channels(P.block_structure_rs)
+    _real, full = _channels(P.block_structure_rs, _moving_flags(P))
     if not full:
         return np.ones(0), "no residual block"
     N = lft(P, K)
     n_d = P.n_delta
-    ins = np.concatenate([i for i, _ in full] + [np.arange(n_d, n_d + P.n_w)])
-    outs = np.concatenate([o for _, o in full] + [np.arange(n_d, n_d + P.n_z)])
-    blk = [[len(i), len(o)] for i, o in full] + [[P.n_w, P.n_z]]
+    ins = np.concatenate([i for i, _, _ in full] + [np.arange(n_d, n_d + P.n_w)])
+    outs = np.concatenate([o for _, o, _ in full] + [np.arange(n_d, n_d + P.n_z)])
+    blk = [[len(i), len(o)] for i, o, _ in full] + [[P.n_w, P.n_z]]
     res = scaled_small_gain(N[outs.tolist(), ins.tolist()], blk)
     if res.X_r is None:
         return np.ones(len(full)), "the constant-D small gain at delta = 0 found no scaling: d = 1"
     x, start, per = np.diag(res.X_r), 0, []
-    for i, _o in full + [(np.arange(P.n_w), None)]:
+    for i, *_ in full + [(np.arange(P.n_w), None)]:
         per.append(float(np.mean(x[start : start + len(i)])))
         start += len(i)
     d = np.sqrt(np.maximum(np.array(per[:-1]), 1e-300) / max(per[-1], 1e-300))
@@ -122,27 +182,30 @@ def scaled_plant(P, d):
     ``blk``: the real blocks as they are, then one full block for the scaled
     residual channels and the performance channels together -- one block, so
     that no frequency-dependent scaling between them is searched (the
-    residual varies in time: only the constant ``d`` is valid for it).
+    residual varies in time: only the constant ``d`` is valid for it).  On a
+    model whose full blocks say whether they move (``inner-links-moving``),
+    only the moving ones are merged; the constant ones stay blocks of their
+    own beside the real ones.
     """
     import control
 
-    real, full = _channels(P.block_structure_rs)
+    real, full = _channels(P.block_structure_rs, _moving_flags(P))
     sl_in, sl_out = P.input_slices, P.output_slices
     rng = lambda sl: np.arange(sl.start, sl.stop)  # noqa: E731
-    ins = np.concatenate([i for i, _ in real] + [i for i, _ in full] + [rng(sl_in["w"]), rng(sl_in["u"])])
-    outs = np.concatenate([o for _, o in real] + [o for _, o in full] + [rng(sl_out["z"]), rng(sl_out["y"])])
-    n_ri, n_ro = sum(len(i) for i, _ in real), sum(len(o) for _, o in real)
+    ins = np.concatenate([i for i, _, _ in real] + [i for i, _, _ in full] + [rng(sl_in["w"]), rng(sl_in["u"])])
+    outs = np.concatenate([o for _, o, _ in real] + [o for _, o, _ in full] + [rng(sl_out["z"]), rng(sl_out["y"])])
+    n_ri, n_ro = sum(len(i) for i, _, _ in real), sum(len(o) for _, o, _ in real)
     s_in, s_out = np.ones(ins.size), np.ones(outs.size)
     a, b = n_ri, n_ro
-    for (i, o), di in zip(full, np.asarray(d, float)):
+    for (i, o, _), di in zip(full, np.asarray(d, float)):
         s_in[a : a + len(i)], s_out[b : b + len(o)] = 1.0 / di, di
         a, b = a + len(i), b + len(o)
     sys = P.system
     B = np.asarray(sys.B, float)[:, ins] * s_in[None, :]
     C = np.asarray(sys.C, float)[outs] * s_out[:, None]
     D = np.asarray(sys.D, float)[np.ix_(outs, ins)] * s_out[:, None] * s_in[None, :]
-    blk = [[-len(i), 0] for i, _ in real]
-    blk.append([sum(len(i) for i, _ in full) + P.n_w, sum(len(o) for _, o in full) + P.n_z])
+    blk = [list(block.matlab) for _, _, block in real]
+    blk.append([sum(len(i) for i, _, _ in full) + P.n_w, sum(len(o) for _, o, _ in full) + P.n_z])
     return control.ss(np.asarray(sys.A, float), B, C, D), np.array(blk)
 
 
@@ -152,7 +215,8 @@ def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0
     Parameters
     ----------
     problem : Problem
-        Its generalized plant's uncertainty model must be an inner-gain one (:func:`applies`).
+        Its generalized plant's uncertainty model must be an inner-gain one (:func:`applies`), or
+        ``inner-links``, analysed on its ``inner-links-moving`` model (:func:`moving_problem`).
     K : LTI
     auto : bool
         Compute it only for a loop of at most :data:`AUTO_STATES` states.
@@ -173,19 +237,30 @@ def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0
 
     t0 = time.perf_counter()
     why = applies(problem)
-    if why:
+    if why and _model(problem) not in MOVING_MODEL:
         return MovingRobotCertificate.not_computed(why)
-    P, m = problem.P, problem.P.n_u
-    real, full = _channels(P.block_structure_rs)
-    n = P.n_x + int(control.ss(K).nstates)
-    if not real:
-        return MovingRobotCertificate.not_computed("the model has no constant real parameter")
+    n = problem.P.n_x + int(control.ss(K).nstates)  # the same plant on the model of constants
     if n > MAX_STATES or (auto and n > AUTO_STATES):
         return MovingRobotCertificate.not_computed(
             f"the loop has {n} states (computed up to {AUTO_STATES if auto else MAX_STATES})"
         )
+    try:
+        problem = moving_problem(problem)
+    except PolyrobError as exc:
+        return MovingRobotCertificate.not_computed(f"the model of constants ({MOVING_MODEL[_model(problem)]}): {exc}")
+    P, m = problem.P, problem.P.n_u
+    constant, full = _channels(P.block_structure_rs, _moving_flags(P))
+    real = [r for r in constant if r[2].kind == "real"]
+    if not real:
+        return MovingRobotCertificate.not_computed("the model has no constant real parameter")
     base = problem.scope() if hasattr(problem, "scope") else Scope()
     names = ", ".join(P.uncertain.parameter_names[: len(real)])
+    held = len(constant) - len(real)  # full blocks that stay constant (inner-links-moving: the rest at the centre)
+    if held:
+        names = (
+            f"the set's parameters (the directions' values {names} and {held} full block{'s' * (held > 1)} at the "
+            "task's centre)"
+        )
     words = f"{names} constant (rate 0), the state (q, qdot, qddot) moving at any rate"
     try:
         d0, source = residual_scalings(P, K)
@@ -203,10 +278,10 @@ def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0
         return MovingRobotCertificate.not_computed(str(exc))
     cert, factor = best
     notes = (
-        f"the residual blocks scaled by the constants d = {', '.join(f'{v:.4g}' for v in d0 * factor)} "
+        f"the moving residual blocks scaled by the constants d = {', '.join(f'{v:.4g}' for v in d0 * factor)} "
         f"({source}, times {factor:.3g}), one full block with the performance "
         "channels: a constant scaling commutes with a time-varying residual",
-        f"the constants {names} as real parameters of mu (constant in time: frequency-dependent D-G scalings)",
+        f"the constants {names} as blocks of mu of their own (constant in time: frequency-dependent D-G scalings)",
     )
     scope = replace(
         cert.scope,
@@ -219,7 +294,8 @@ def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0
         gamma=float(cert.bound),
         rates=tuple((0.0, 0.0) for _ in real),
         rate_words=words,
-        grid_words=f"mu with {len(real)} constant real block(s) and one full block",
+        grid_words=f"mu with {len(real)} constant real block(s), {held} constant full block(s) and one full block "
+        "that moves",
         scope=scope,
         decided=cert,
         seconds=time.perf_counter() - t0,
@@ -285,7 +361,7 @@ def robot_in_motion_certificate(problem, K, *, auto: bool = False, time_varying=
 
     check_jerk(problem, jerk)
     why = applies(problem)
-    if why is None:
+    if why is None or _model(problem) in MOVING_MODEL:
         return constant_parameter_certificate(problem, K, auto=auto)
     from polyrob.model.inner import InnerLoopRobot
 

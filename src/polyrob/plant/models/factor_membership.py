@@ -49,16 +49,20 @@ def _weighted_residual(unc: UncertainPlant, E: np.ndarray) -> np.ndarray:
     return E
 
 
-def scaled_residuals(unc: UncertainPlant, E: np.ndarray) -> list[np.ndarray]:
+def scaled_residuals(unc: UncertainPlant, E: np.ndarray, moving: bool | None = None) -> list[np.ndarray]:
     """``E`` (``m x 3m``, a residual of the factor) as the square blocks of ``unc.full_blocks``, scaled by their weights.
 
     ``unc.matrices_at(delta, residual=scaled_residuals(unc, E))`` is the
     member with residual ``E``; it is in the set when each block's norm is
-    at most one.
+    at most one.  ``moving`` (a model with motion blocks,
+    :mod:`polyrob.plant.moving_links`): only the blocks whose ``moving`` flag
+    is that, the part of the residual they carry.
     """
     E = _weighted_residual(unc, E)
     out = []
     for b, size in zip(unc.info["residual_blocks"], unc.full_blocks):
+        if moving is not None and bool(b.get("moving", False)) is not moving:
+            continue
         S = np.zeros((size, size))
         part, W_l, W_r = E[np.ix_(b["rows"], b["cols"])], np.asarray(b["W_l"]), np.asarray(b["W_r"])
         # diagonal weights (entry radii), or the matrices of a shaped block (W_l^-1 E W_r^-1)

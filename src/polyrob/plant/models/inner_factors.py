@@ -240,6 +240,7 @@ def factor_lft_plant(
     residual: str = "block",
     state_residual_norm: float | None = None,
     g_shape=None,
+    motion_spread=None,
 ):
     """The LFT ``a = v + sum_k theta_k K_k,c [x; a] + E [x; a]`` (module text) as an :class:`UncertainPlant`.
 
@@ -272,6 +273,10 @@ def factor_lft_plant(
     ``W_l``, ``W_r`` the weights :func:`residual_blocks` gives ``spread``
     (whose entry box needs ``rho = 1``: a Frobenius covering); for a caller
     that bounds that norm itself (:func:`~polyrob.plant.models.inner_links.inner_links_plant`).
+    ``motion_spread`` (``m x 3m``, weighted like ``spread``): more full blocks
+    (:func:`residual_blocks`) for the part of the factor that moves with the
+    state, marked ``moving`` in ``info["residual_blocks"]`` (the others
+    ``moving: False``): :mod:`polyrob.plant.moving_links`.
     """
     m, n = pldi.m, 2 * pldi.m
     ranges = np.asarray(ranges, float)
@@ -308,6 +313,8 @@ def factor_lft_plant(
             H = root * (vectors * np.sqrt(values)) @ vectors.T
             C[:, n:] = H
             blocks.append({"B": H, "C": C, "rows": np.arange(m), "cols": np.arange(n, 3 * m), "W_l": H, "W_r": H})
+    if motion_spread is not None:  # the part that moves with the state: the blocks the moving robot varies in time
+        blocks += [{**b, "moving": True} for b in residual_blocks(np.asarray(motion_spread, float), n)]
     G0 = np.asarray(g_offset, float) * np.eye(m) if np.ndim(g_offset) == 0 else np.asarray(g_offset, float)
     if weighting is not None:
         W = np.asarray(weighting, float)
@@ -360,7 +367,11 @@ def factor_lft_plant(
             "K_centres": np.array(centres),
             "residual_gain": float(np.linalg.norm(carried_spread)),
             "n_directions": P,
-            "residual_blocks": [{key: b[key] for key in ("rows", "cols", "W_l", "W_r")} for b in blocks],
+            "residual_blocks": [
+                {key: b[key] for key in ("rows", "cols", "W_l", "W_r")}
+                | ({} if motion_spread is None else {"moving": bool(b.get("moving", False))})
+                for b in blocks
+            ],
             **({} if state_residual_norm is None else {"state_residual_norm": float(state_residual_norm)}),
             "residual_spread": carried_spread,
             "residual": residual,

@@ -80,7 +80,12 @@ from polyrob.plant.models.inner_links_inertia import (
     inertia_ratio,
     residual_norm_bounds,
 )
-from polyrob.uncertainty_set.payload_body import SECOND_MOMENT_ENTRIES, payload_sampling_words, second_moment
+from polyrob.uncertainty_set.payload_body import (
+    SECOND_MOMENT_ENTRIES,
+    payload_coordinates,
+    payload_points,
+    payload_sampling_words,
+)
 
 __all__ = [
     "SPREAD_MARGIN",
@@ -88,8 +93,6 @@ __all__ = [
     "Scalar",
     "applies",
     "set_scalars",
-    "payload_points",
-    "payload_coordinates",
     "payload_set_points",
     "model_samples",
     "SAMPLE_SEED",
@@ -195,41 +198,6 @@ def _payload_scalars(robot, body) -> list[Scalar]:
     s_lo, s_hi = body.second_moment_range()
     for k, (i, j) in enumerate(SECOND_MOMENT_ENTRIES):
         add(f"second{i}{j}", s_lo[k] - second0[k], s_hi[k] - second0[k], np.eye(10)[4 + k])
-    return out
-
-
-def payload_points(body, shells: int = 4, per_shell: int = 160) -> list[tuple[float, np.ndarray]]:
-    """``(mass, com)`` points of the payload's set over which its scalars' extremes are taken (sampled).
-
-    Each scalar's effect is linear in the mass at a fixed centre of mass, so
-    the masses are the range's two ends; the centres of mass fill the ball
-    (its centre and ``shells`` spheres of ``per_shell`` Fibonacci points) or
-    the box (a 7-point grid per axis).
-    """
-    if body.com_radius is not None:
-        k = np.arange(per_shell) + 0.5
-        polar, azimuth = np.arccos(1 - 2 * k / per_shell), np.pi * (1 + 5**0.5) * k
-        sphere = np.column_stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)])
-        radii = body.com_radius * np.arange(1, shells + 1) / shells
-        coms = np.vstack([np.zeros((1, 3))] + [r * sphere for r in radii]) + np.array(body.com_centre)
-    else:
-        axes = [np.linspace(lo, hi, 7) for lo, hi in zip(body.com_lower, body.com_upper)]
-        coms = np.array(np.meshgrid(*axes, indexing="ij")).reshape(3, -1).T
-    return [(mass, c) for mass in (body.mass_lower, body.mass_upper) for c in coms]
-
-
-def payload_coordinates(body, mass: float, com) -> dict[str, float]:
-    """The payload scalars' values (physical units, about the model's payload) of a payload ``(mass, com)``."""
-    from polyrob.uncertainty_set.draw import payload_middle
-
-    m0, c0, second0 = payload_middle(body)
-    c = np.asarray(com, float)
-    out = {"payload.mass": mass - m0}
-    for i, axis in enumerate("xyz"):
-        out[f"payload.m{axis}"] = mass * c[i] - m0 * c0[i]
-    second = second_moment(mass, c) - second0
-    for k, (i, j) in enumerate(SECOND_MOMENT_ENTRIES):
-        out[f"payload.second{i}{j}"] = second[k]
     return out
 
 
@@ -389,8 +357,91 @@ def inner_links_plant(
         No robot-uncertainty set, not computed torque (:func:`applies`), not
         a task domain, or ``I - sum t_k G_k`` may be singular.
     """
-    from polyrob.domains.task import TaskDomain
     from polyrob.plant.models.inner_factors import factor_lft_plant
+
+    f = set_factors(pldi, robot, n_directions=n_directions, samples=samples)
+    scalars, q, on_payload, pay, Phi, centres = f.scalars, f.q, f.on_payload, f.pay, f.Phi, f.centres
+    n = 2 * pldi.m
+    ranges = RANGE_MARGIN * reach_of(f.coeff, on_payload, pay).max(axis=0)
+    rest = Phi - np.einsum("jsk,kab->jsab", f.coeff, centres)  # R_j(x) = K_j(x) - sum_k coeff_jk(x) D_k
+    spread = SPREAD_MARGIN * entry_bound(rest, on_payload, pay)
+    block_residual = residual == "block"
+    residual_norm = state_residual_norm_bound(rest[..., :n], on_payload, pay, spread[:, :n]) if block_residual else None
+    # the acceleration columns: one norm-bounded block, shaped like the set where that is well posed
+    block = inertia_block(f.G_exact, Phi[..., n:], on_payload, pay, f.kappa, ranges, centres, G_MARGIN)
+    g_norm, margin = block.g_norm, block.margin
+    if margin <= 0.0:
+        lo, hi = inertia_range(f.G_exact[~on_payload], f.G_exact[on_payload], pay)
+        raise NotApplicable(
+            f"inner-links: the relative inertia error is too large for one LFT around the model: its bound "
+            f"{g_norm:.3g} (M_hat^1/2 coordinates, over the task's positions) is not below the {margin + g_norm:.3g} "
+            f"the centre leaves; the true robots' inertia ranges from {lo:.2g} to {hi:.2g} times the model's "
+            "(eigenvalues of M_hat^-1 M, sampled), so the outer loop's gain varies that much"
+        )
+    # back to K's own coordinates; the residual stays weighted
+    centres = weighted_factor(centres, np.linalg.inv(f.W), f.W)
+    inertia = inertia_ratio(robot, scalars, q, _moved)
+    names = tuple(f"t{k}" for k in range(len(ranges)))
+    return factor_lft_plant(
+        pldi,
+        "inner-links" if residual == "block" else "inner-links-real",
+        names,
+        ranges,
+        list(centres),
+        spread,
+        {"PLDI": pldi.enclosure, "factors": "sampled"},
+        weighting=f.W,
+        g_norm=g_norm,
+        g_offset=block.offset,
+        g_shape=block.shape,
+        residual=residual,
+        state_residual_norm=residual_norm,
+        info={
+            "set": robot.uncertainty.words(),
+            "scalars": tuple(s.name for s in scalars),
+            "scalar_half_ranges": np.array([s.half_range for s in scalars]),
+            "state_directions": f.D,
+            "direction_scale": f.scale,
+            "samples": int(samples),  # uniform points, and as many corners of the task
+            "spread_margin": SPREAD_MARGIN,
+            "inertia_block": block.kind,
+            "inertia_ball": block.ball,
+            "inertia_ratio": inertia,
+            **({"payload_sampling": payload_sampling_words(robot.uncertainty.payload)} if on_payload.any() else {}),
+        },
+    )
+
+
+@dataclass(frozen=True)
+class SetFactors:
+    """The set's unit factors ``Phi`` ``(N, S, m, 3m)`` at the samples ``q`` (weighted by ``W``; ``G_exact``,
+    ``kappa``: :func:`~polyrob.plant.models.inner_links_inertia.exactly_weighted`), the state columns' principal
+    directions ``D`` (as factors: ``centres``) and each scalar's coordinates ``coeff`` ``(N, S, P)`` on them."""
+
+    scalars: list
+    q: np.ndarray
+    Phi: np.ndarray
+    W: np.ndarray
+    G_exact: np.ndarray
+    kappa: np.ndarray
+    on_payload: np.ndarray
+    pay: np.ndarray
+    D: np.ndarray
+    scale: float
+    coeff: np.ndarray
+    centres: np.ndarray
+
+
+def set_factors(pldi, robot, *, n_directions: int | None = None, samples: int = 256) -> SetFactors:
+    """The set's unit factors at the model's samples and their principal directions (:class:`SetFactors`).
+
+    Raises
+    ------
+    NotApplicable
+        No robot-uncertainty set, not computed torque (:func:`applies`), not
+        a task domain, or no uncertain parameter.
+    """
+    from polyrob.domains.task import TaskDomain
 
     why = applies(robot)
     if why:
@@ -412,15 +463,11 @@ def inner_links_plant(
     # the payload's scalars range over its physical set (mass x the CoM ball/box), not their box: the box's
     # corners (no mass but a full second moment) are no rigid body and make the inertia indefinite
     on_payload = np.array([s.name.startswith("payload.") for s in scalars])
-    body = robot.uncertainty.payload
-    if on_payload.any():
-        pay = payload_set_points(body, scalars)
-    else:
-        pay = np.zeros((1, 0))
+    pay = payload_set_points(robot.uncertainty.payload, scalars) if on_payload.any() else np.zeros((1, 0))
     # in M_hat^{1/2} coordinates at the task's centre: K -> W K diag(I, W^-1)
     W = _weighting(robot, pldi.domain)
     G_exact, kappa = exactly_weighted(robot, q, Phi[..., n:], W)
-    Phi = _weighted(Phi, W, np.linalg.inv(W))
+    Phi = weighted_factor(Phi, W, np.linalg.inv(W))
     # principal directions D_k of the state columns J_j(x) in matrix space, over the scalars and the samples
     # (an off-axis payload's stiffness turns with the wrist: one direction per parameter leaves that turn in
     # the residual); t_k(u, x) = sum_j u_j <J_j(x), D_k>; the acceleration columns G are one norm block (below)
@@ -430,66 +477,30 @@ def inner_links_plant(
     flat = Phi[..., :n].reshape(N, S, m * n) / scale
     D = np.linalg.svd(flat.reshape(N * S, m * n), full_matrices=False)[2][:P]  # (P, m n), orthonormal
     coeff = flat @ D.T  # (N, S, P): t_k = sum_j u_j coeff_jk(x)
-    reach = np.abs(coeff[~on_payload]).sum(axis=0)  # (S, P)
-    if on_payload.any():
-        reach = reach + np.abs(np.einsum("pi,isk->psk", pay, coeff[on_payload])).max(axis=0)
-    ranges = RANGE_MARGIN * reach.max(axis=0)
     centres = np.zeros((P, m, 3 * m))
     centres[..., :n] = (scale * D).reshape(P, m, n)
-    rest = Phi - np.einsum("jsk,kab->jsab", coeff, centres)  # R_j(x) = K_j(x) - sum_k coeff_jk(x) D_k
-    # |E| <= sum over the box scalars of |R_j| + the largest |sum_i u_i R_i| over the payload's physical set
+    return SetFactors(scalars, q, Phi, W, G_exact, kappa, on_payload, pay, D, scale, coeff, centres)
+
+
+def reach_of(coeff, on_payload, pay) -> np.ndarray:
+    """``(S, P)``: the largest ``|t_k|`` at each sample over the set, ``coeff`` ``(N, S, P)`` (the payload on its physical set)."""
+    reach = np.abs(coeff[~on_payload]).sum(axis=0)
+    if on_payload.any():
+        reach = reach + np.abs(np.einsum("pi,isk->psk", pay, coeff[on_payload])).max(axis=0)
+    return reach
+
+
+def entry_bound(rest, on_payload, pay) -> np.ndarray:
+    """``|E| <= sum_j |R_j|`` over the box scalars plus the largest ``|sum_i u_i R_i|`` over the payload's physical
+    set, entrywise, its largest value over the samples; ``rest`` ``(N, S, m, 3m)``."""
     worst = np.abs(rest[~on_payload]).sum(axis=0)
     if on_payload.any():
-        shape = rest.shape[1:]
         payload_rest = np.abs(pay @ rest[on_payload].reshape(int(on_payload.sum()), -1)).max(axis=0)
-        worst = worst + payload_rest.reshape(shape)
-    spread = SPREAD_MARGIN * worst.max(axis=0)
-    residual_norm = _state_residual_norm(rest[..., :n], on_payload, pay, spread[:, :n]) if residual == "block" else None
-    # the acceleration columns: one norm-bounded block, shaped like the set where that is well posed
-    block = inertia_block(G_exact, Phi[..., n:], on_payload, pay, kappa, ranges, centres, G_MARGIN)
-    g_norm, margin = block.g_norm, block.margin
-    if margin <= 0.0:
-        lo, hi = inertia_range(G_exact[~on_payload], G_exact[on_payload], pay)
-        raise NotApplicable(
-            f"inner-links: the relative inertia error is too large for one LFT around the model: its bound "
-            f"{g_norm:.3g} (M_hat^1/2 coordinates, over the task's positions) is not below the {margin + g_norm:.3g} "
-            f"the centre leaves; the true robots' inertia ranges from {lo:.2g} to {hi:.2g} times the model's "
-            "(eigenvalues of M_hat^-1 M, sampled), so the outer loop's gain varies that much"
-        )
-    centres = _weighted(centres, np.linalg.inv(W), W)  # back to K's own coordinates; the residual stays weighted
-    inertia = inertia_ratio(robot, scalars, q, _moved)
-    names = tuple(f"t{k}" for k in range(P))
-    return factor_lft_plant(
-        pldi,
-        "inner-links" if residual == "block" else "inner-links-real",
-        names,
-        ranges,
-        list(centres),
-        spread,
-        {"PLDI": pldi.enclosure, "factors": "sampled"},
-        weighting=W,
-        g_norm=g_norm,
-        g_offset=block.offset,
-        g_shape=block.shape,
-        residual=residual,
-        state_residual_norm=residual_norm,
-        info={
-            "set": robot.uncertainty.words(),
-            "scalars": tuple(s.name for s in scalars),
-            "scalar_half_ranges": np.array([s.half_range for s in scalars]),
-            "state_directions": D,
-            "direction_scale": scale,
-            "samples": int(samples),  # uniform points, and as many corners of the task
-            "spread_margin": SPREAD_MARGIN,
-            "inertia_block": block.kind,
-            "inertia_ball": block.ball,
-            "inertia_ratio": inertia,
-            **({"payload_sampling": payload_sampling_words(body)} if on_payload.any() else {}),
-        },
-    )
+        worst = worst + payload_rest.reshape(rest.shape[1:])
+    return worst.max(axis=0)
 
 
-def _state_residual_norm(rest, on_payload, pay, spread) -> float | None:
+def state_residual_norm_bound(rest, on_payload, pay, spread) -> float | None:
     """The state columns' residual block's norm bound ``rho <= 1`` in the weights the entry radii ``spread`` give it.
 
     The entry box (:func:`~polyrob.plant.models.axes.residual_of_radii`: a
@@ -523,7 +534,7 @@ def _weighting(robot, domain) -> np.ndarray:
     return (vectors * np.sqrt(values)) @ vectors.T
 
 
-def _weighted(K, W, W_inv) -> np.ndarray:
+def weighted_factor(K, W, W_inv) -> np.ndarray:
     """``W K diag(I, W_inv)`` on the last two axes of ``K`` (``... x m x 3m``)."""
     m = W.shape[0]
     out = np.einsum("ab,...bc->...ac", W, K)
@@ -579,7 +590,7 @@ def set_witness(unc: UncertainPlant, robot, true, q, qdot, a) -> float:
     W = unc.info["residual_weighting"]
     m = W.shape[0]
     K_all = factor_of(robot, true.robot, q, qdot, a)
-    J = _weighted(K_all, W, np.linalg.inv(W))[..., : 2 * m].reshape(len(q), -1) / unc.info["direction_scale"]
+    J = weighted_factor(K_all, W, np.linalg.inv(W))[..., : 2 * m].reshape(len(q), -1) / unc.info["direction_scale"]
     t_all = J @ unc.info["state_directions"].T  # (points, P)
     worst = float(np.max(np.abs(t_all) / unc.info["theta_range"]))
     reached = reached_entries(unc)

@@ -29,7 +29,7 @@ Examples
 >>> import polyrob
 >>> from polyrob.plant.models import MODELS, model_of
 >>> list(MODELS)
-['box', 'axes', 'lft', 'lft-torque', 'inertia', 'inner-gain', 'inner-links', 'inner-links-real']
+['box', 'axes', 'lft', 'lft-torque', 'inertia', 'inner-gain', 'inner-links', 'inner-links-real', 'inner-links-moving']
 >>> pldi = polyrob.bound_pldi(polyrob.load_robot("paper_2r"), samples=256, coverage=0, progress=False)
 >>> unc = MODELS["axes"].build(pldi)
 >>> model_of(unc).name, model_of(unc).enclosure(unc), unc.info["enclosure_inputs"]
@@ -360,6 +360,44 @@ class InnerLinksModel(UncertaintyModel):
         )
 
 
+class MovingLinksModel(InnerLinksModel):
+    """A per-link set's computed-torque loop split at the task's centre into what stays and what moves
+    (:mod:`polyrob.plant.moving_links`): the moving robot's model, built by its certificate."""
+
+    applies = "the moving robot of a per-link set: its parameters constant, its state moving"
+
+    def __init__(self):
+        super().__init__("inner-links-moving")
+
+    def build(self, pldi, *, n_directions: int | None = None, **options):
+        from polyrob.plant.moving_links import moving_links_plant
+
+        robot = pldi.source_robot if pldi.source_robot is not None else getattr(pldi.domain, "robot", None)
+        if robot is None or getattr(robot, "uncertainty", None) is None:
+            raise ArgumentError("inner-links-moving: no robot-uncertainty set recorded with the PLDI")
+        return moving_links_plant(pldi, robot, n_directions=n_directions)
+
+    def contains(self, unc, A, B):
+        # its blocks overlap (the centre's and the motion's on the same entries): membership needs the true
+        # robot at the task's centre too, polyrob.plant.moving_links.motion_witness
+        raise ArgumentError(
+            "inner-links-moving: membership needs the true robot (its factor at the task's centre), not a "
+            "Jacobian alone: use polyrob.plant.moving_links.motion_coverage"
+        )
+
+    def describe(self, unc):
+        ranges = ", ".join(f"{n} ±{r:.3g}" for n, r in zip(unc.info["factors"], unc.info["theta_range"]))
+        norm = unc.info.get("state_residual_norm")
+        state = "none for the state columns" if norm is None else f"the state columns' of norm <= {norm:.3g} in its weights"
+        return (
+            f"inner-links-moving: the computed-torque factor split at the task's centre: {len(unc.info['factors'])} "
+            f"directions' values there (one repeated real each, constant: {ranges}), the rest there in constant full "
+            f"blocks ({state}; {_inertia_words(unc)}), and the motion K(u, x) - K(u, x_c) in full blocks that vary in time "
+            f"(entry bounds of Frobenius norm {unc.info['motion_norm']:.3g}); set: {unc.info['set']} "
+            f"({self.enclosure(unc)} enclosure over the task domain)."
+        )
+
+
 def _inertia_words(unc) -> str:
     """How the ``inner-links`` model carries the relative inertia error ``G`` (its acceleration columns)."""
     g = unc.info.get("residual_g_norm", 0.0)
@@ -388,6 +426,7 @@ MODELS: dict[str, UncertaintyModel] = {
         InnerGainModel(),
         InnerLinksModel(),
         InnerLinksModel("inner-links-real", "real"),
+        MovingLinksModel(),
     )
 }
 

@@ -1,0 +1,176 @@
+"""``inner-links-moving``: a per-link set's computed-torque loop split into what stays and what moves.
+
+The ``inner-links`` model (:mod:`polyrob.plant.models.inner_links`) holds
+every *frozen* robot of the set: at each state ``x`` a true robot is a
+member with its own direction scalars ``t_k(u, x)`` and residuals.  A moving
+arm keeps its parameters ``u`` (its links, its instrument) while its state
+moves, and a certificate that lets every block vary at any rate pays for
+variation that the parameters never have.  This model splits each true
+robot's factor at the task's centre ``x_c``::
+
+    K(u, x) = K_0 + sum_k t_k(u) K_k,c + E_c(u) + E_m(u, x)
+
+* ``t_k(u) = <J(u, x_c), D_k>``: the directions' values at the centre, real
+  scalars within their reach there (exact in ``u``; the payload at the
+  points of its physical set), **constant** while the robot moves;
+* ``E_c(u)``: the rest of the factor at the centre, the state columns'
+  full block (its norm bound at ``x_c``) and the inertia block at ``q_c``
+  (shaped like the set): **constant** too, so μ's frequency-dependent
+  scalings are valid for them;
+* ``E_m(u, x) = K(u, x) - K(u, x_c)``: the motion, bounded entrywise over
+  the task's samples (``SPREAD_MARGIN`` wider) and carried by two full
+  blocks (state and acceleration columns), marked ``moving``: the only
+  blocks that vary in time.
+
+:func:`polyrob.analysis.lpv.constant.constant_parameter_certificate` merges
+only the ``moving`` blocks with the performance channels (a constant
+scaling), so the certificate covers every motion of the state at any rate
+with the parameters constant, paying for time variation only on what the
+motion moves.  The blocks overlap (``E_c`` and ``E_m`` on the same
+entries), so membership is no test on a Jacobian alone: it needs the true
+robot, whose ``t`` and ``E_c`` come from its factor at the centre and
+``E_m`` from its factor at each state (:func:`motion_witness`), and the
+coverage is measured that way on fresh true robots of the set at fresh
+points of the task (:func:`motion_coverage`).  Over the task the enclosure
+is sampled (the samples of ``inner-links``), over the parameters exact.
+
+Why here and not in :mod:`polyrob.plant.models`: it is that package's
+``inner-links`` model re-cut for the moving robot, built from the same
+factors (:func:`~polyrob.plant.models.inner_links.set_factors`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from polyrob.plant.lftplant import UncertainPlant
+
+__all__ = ["moving_links_plant", "motion_witness", "motion_coverage", "task_centre"]
+
+
+def task_centre(domain):
+    """``(q, qdot, a)`` of the task box's centre, one point each ``(1, m)``."""
+    lower, upper = np.asarray(domain.lower, float), np.asarray(domain.upper, float)
+    return domain.split(((lower + upper) / 2)[None, :])
+
+
+def moving_links_plant(pldi, robot, *, n_directions: int | None = None, samples: int = 256) -> UncertainPlant:
+    """The ``inner-links-moving`` LFT of the module text for ``robot`` (a :class:`~polyrob.model.inner.SetLoopRobot`).
+
+    The inertia block at the centre is shaped like the set there; whether
+    ``I - G`` stays invertible with the motion's acceleration block on top
+    is left to μ, whose bound at every frequency (``ω = ∞`` included)
+    proves the loop well posed for every member.
+
+    Raises
+    ------
+    NotApplicable
+        What :func:`~polyrob.plant.models.inner_links.set_factors` refuses.
+    """
+    from polyrob.plant.models import inner_links as links
+    from polyrob.plant.models.inner_factors import factor_lft_plant
+    from polyrob.plant.models.inner_links_inertia import exactly_weighted, inertia_block
+
+    f = links.set_factors(pldi, robot, n_directions=n_directions, samples=samples)
+    m, n, N = pldi.m, 2 * pldi.m, len(f.scalars)
+    centre = task_centre(pldi.domain)
+    raw = links.unit_factors(robot, f.scalars, *centre)  # (N, 1, m, 3m)
+    G_exact, kappa = exactly_weighted(robot, centre[0], raw[..., n:], f.W)
+    at_centre = links.weighted_factor(raw, f.W, np.linalg.inv(f.W))
+    coeff = at_centre[..., :n].reshape(N, 1, m * n) / f.scale @ f.D.T  # (N, 1, P): t_k(u) = sum_j u_j coeff_jk
+    ranges = links.RANGE_MARGIN * links.reach_of(coeff, f.on_payload, f.pay)[0]
+    rest = at_centre - np.einsum("jsk,kab->jsab", coeff, f.centres)
+    spread = links.SPREAD_MARGIN * links.entry_bound(rest, f.on_payload, f.pay)
+    norm = links.state_residual_norm_bound(rest[..., :n], f.on_payload, f.pay, spread[:, :n])
+    block = inertia_block(G_exact, at_centre[..., n:], f.on_payload, f.pay, kappa, ranges, f.centres, links.G_MARGIN)
+    motion = links.SPREAD_MARGIN * links.entry_bound(f.Phi - at_centre, f.on_payload, f.pay)
+    return factor_lft_plant(
+        pldi,
+        "inner-links-moving",
+        tuple(f"t{k}" for k in range(len(ranges))),
+        ranges,
+        list(links.weighted_factor(f.centres, np.linalg.inv(f.W), f.W)),
+        spread,
+        {"PLDI": pldi.enclosure, "factors": "sampled"},
+        weighting=f.W,
+        g_norm=block.g_norm,
+        g_offset=block.offset,
+        g_shape=block.shape,
+        state_residual_norm=norm,
+        motion_spread=motion,
+        info={
+            "set": robot.uncertainty.words(),
+            "scalars": tuple(s.name for s in f.scalars),
+            "state_directions": f.D,
+            "direction_scale": f.scale,
+            "samples": int(samples),
+            "spread_margin": links.SPREAD_MARGIN,
+            "inertia_block": block.kind,
+            "inertia_ball": block.ball,
+            "motion_norm": float(np.linalg.norm(motion)),
+            "centre": tuple(np.asarray(x, float)[0] for x in centre),
+        },
+    )
+
+
+def motion_witness(unc: UncertainPlant, robot, true_robot, q, qdot, a) -> np.ndarray:
+    """Per point ``(q, qdot, a)``, the largest scaled part of ``true_robot`` in the model: ``<= 1`` is membership.
+
+    ``robot`` is the set's loop, ``true_robot`` one robot of the set (a
+    :class:`~polyrob.uncertainty_set.draw.TrueRobot`'s ``robot``); its ``t`` and ``E_c`` come from its factor at the task's centre
+    (``unc.info["centre"]``), the same at every point; ``E_m`` is its factor
+    at the point less that at the centre.  Each must lie in its blocks'
+    balls (``t`` within the ranges); an entry no block of its kind reaches
+    must match to ``1e-9`` of the factor's size.
+    """
+    from polyrob.plant.models.factor_membership import scaled_residuals
+    from polyrob.plant.models.inner_links import factor_of, weighted_factor
+
+    m, info = len(unc.info["centre"][0]), unc.info
+    W = info["residual_weighting"]
+    K_c = factor_of(robot, true_robot, *(x[None, :] for x in info["centre"]))[0]
+    J = weighted_factor(K_c[None], W, np.linalg.inv(W))[0, :, : 2 * m].ravel() / info["direction_scale"]
+    t = info["state_directions"] @ J
+    E_c = K_c - info["K_offset"] - np.tensordot(t, info["K_centres"], axes=1)
+    ranges = np.asarray(info["theta_range"], float)
+    over = np.divide(np.abs(t), ranges, out=np.where(np.abs(t) > 0, np.inf, 0.0), where=ranges > 0)
+    fixed = max([float(over.max(initial=0.0))] + _norms(unc, E_c, False, scaled_residuals))
+    out = []
+    for K in factor_of(robot, true_robot, q, qdot, a):
+        out.append(max([fixed] + _norms(unc, K - K_c, True, scaled_residuals)))
+    return np.array(out)
+
+
+def _norms(unc, E, moving: bool, scaled_residuals) -> list[float]:
+    """The scaled norms of ``E`` in the blocks whose ``moving`` flag is ``moving``, and its mismatch off them."""
+    reached = np.zeros(E.shape, bool)
+    for b in unc.info["residual_blocks"]:
+        if bool(b.get("moving", False)) is moving:
+            reached[np.ix_(b["rows"], b["cols"])] = True
+    mismatch = np.abs(E[~reached]).max(initial=0.0) / (1e-9 * (1.0 + np.abs(E).max()))
+    return [mismatch] + [float(np.linalg.norm(S, 2)) for S in scaled_residuals(unc, E, moving)]
+
+
+def motion_coverage(unc: UncertainPlant, robot, domain, n: int = 2000, *, points: int = 10, seed: int = 12345) -> float:
+    """The fraction of ``n`` (true robot, point) pairs that :func:`motion_witness` finds members.
+
+    ``n // points`` true robots drawn anew from ``robot``'s set, half inside
+    it at uniform points of ``domain``, half at its vertices at random
+    corners of the task (:data:`~polyrob.uncertainty_set.draw.EXTREME_SHARE`,
+    as :func:`polyrob.plant.coverage.coverage_fraction` draws them).
+    """
+    from polyrob.uncertainty_set.draw import EXTREME_SHARE, at_vertices
+
+    rng = np.random.default_rng([seed, 38])
+    robots = max(1, int(n) // points)
+    inside = robots - at_vertices(robots, EXTREME_SHARE)
+    lower, upper = np.asarray(domain.lower, float), np.asarray(domain.upper, float)
+    found = []
+    for k in range(robots):
+        true = robot.drawn(rng, extreme=k >= inside)
+        if k < inside:
+            x = domain.sample_box(points, method="uniform", seed=int(rng.integers(2**31)))
+        else:
+            x = np.where(rng.integers(0, 2, size=(points, len(lower))) == 1, upper, lower)
+        found.append(motion_witness(unc, robot, true.true_robot, *domain.split(x)) <= 1.0)
+    return float(np.concatenate(found).mean())
