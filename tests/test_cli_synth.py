@@ -382,3 +382,15 @@ def test_synth_moving_decides_the_exit_status_when_it_was_computed(tmp_path, cap
     assert ("exit status 1: the moving-robot certificate asked for with --moving is not CERTIFIED" in out) == (
         moving == "not certified"
     )
+
+
+def test_tune_moving_takes_a_number_of_rounds_and_a_model_of_constants(tmp_path_factory, tmp_path, capsys):
+    """`synth --tune-moving N`: a negative count is refused before any work; the paper's lft model, whose
+    parameters move with the state, has no structure to tune on: one line, exit 2, no controller file."""
+    out = tmp_path / "K.json"
+    code, _, err = run(capsys, "synth", "paper_2r", "--tune-moving", "-1", "-o", out)
+    assert code == 2 and err.count("\n") == 1 and "--tune-moving" in err
+    pldi = paper_file(tmp_path_factory)
+    code, _, err = run(capsys, "synth", "paper_2r", "--pldi", pldi, "--tune-moving", "1", "--quiet", "-o", out)
+    assert code == 2 and err.count("\n") == 1 and "model of constants" in err, err
+    assert not out.exists()

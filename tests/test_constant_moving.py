@@ -179,3 +179,49 @@ def test_the_bandwidth_search_on_the_moving_criterion_ranks_by_it(problem):
     lft_problem = SimpleNamespace(P=SimpleNamespace(uncertain=SimpleNamespace(model="lft")))
     with pytest.raises(ArgumentError, match="needs an inner-gain model"):
         moving_judge(lft_problem)
+
+
+def test_searched_scalings_lower_the_merged_peak_and_are_those_of_the_scaled_plant(problem):
+    """Any constant ``d`` gives a valid bound; the search keeps the best it saw, measured on the scaled plant itself."""
+    from polyrob.analysis.lpv.constant import SEARCH_GRID, search_scalings
+    from polyrob.analysis.mu.bounds import mussv
+    from polyrob.analysis.mu.frequency import matrix_response
+
+    K = load_controller(FIXTURE)
+    d0, _ = residual_scalings(problem.P, K)
+    omega = np.logspace(np.log10(SEARCH_GRID[0]), np.log10(SEARCH_GRID[1]), SEARCH_GRID[2])
+
+    def peak(d):
+        plant, blk = scaled_plant(problem.P, d)
+        N = lft(plant, K, n_u=2, n_y=2)
+        H = matrix_response(*(np.asarray(X, float) for X in (N.A, N.B, N.C, N.D)))(omega)
+        return max(mussv(H[k], blk, lower=False).upper for k in range(len(omega)))
+
+    found = search_scalings(problem.P, K, 3.0 * d0)  # a poor start: the search must come back down
+    assert peak(found) < 0.95 * peak(3.0 * d0)
+
+
+def test_tuning_for_the_moving_robot_wins_the_certificate_the_frozen_design_lost(problem, result):
+    """The fixture's PID at half gain: frozen certified, the moving robot not; tuned on the merged structure, the moving
+    robot's certificate (from the tuning's scalings) falls below the start's and the frozen robot stays certified."""
+    from polyrob.analysis.certificate import certify_loop
+    from polyrob.synthesis.moving import tune_for_moving
+
+    start = load_controller(FIXTURE) * 0.5
+    before = constant_parameter_certificate(problem, start, tries=(1.0,))
+    tuning = tune_for_moving(problem, start, rounds=1, max_iter=2)
+    after = constant_parameter_certificate(problem, tuning.controller, scalings=tuning.scalings, tries=(1.0,))
+    assert not before.certificate.certified and after.certificate.certified  # 1.023 -> 0.817 (2026-12-01)
+    assert after.gamma < before.gamma and tuning.history[0] < before.gamma
+    assert certify_loop(problem.P, start).certified and certify_loop(problem.P, tuning.controller).certified
+
+
+def test_tuning_for_the_moving_robot_needs_a_model_of_constants():
+    from types import SimpleNamespace
+
+    from polyrob.errors import ArgumentError
+    from polyrob.synthesis.moving import tune_for_moving
+
+    lft_problem = SimpleNamespace(P=SimpleNamespace(uncertain=SimpleNamespace(model="lft")))
+    with pytest.raises(ArgumentError, match="needs a model of constants"):
+        tune_for_moving(lft_problem, control.ss([], [], [], np.eye(2)))

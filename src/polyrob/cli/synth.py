@@ -199,13 +199,16 @@ def cmd_synth(args) -> int:
 
     check_output(args)
     sampling = sampling_from_args(args)
-    args.moving = bool(moving_asked(args))
+    args.moving = bool(moving_asked(args)) or args.tune_moving > 0
+    if args.tune_moving < 0:
+        raise ArgumentError(f"--tune-moving takes a number of rounds >= 1, got {args.tune_moving}")
     if args.max_bandwidth:  # option errors before any work
         scale_names(args.scale_only), alphas_from_args(args.alphas)
     at_rate = rate_conditions_from_args(args)
     coulomb = coulomb_from_args(args)
     moving_opts = moving_options(args) if args.moving else None  # its refusals before any work
-    stages = ["bounds", "largest bandwidth" if args.max_bandwidth else "synthesis"] + ["moving-robot"] * args.moving
+    stages = ["bounds", "largest bandwidth" if args.max_bandwidth else "synthesis"]
+    stages += ["moving-robot tuning"] * (args.tune_moving > 0) + ["moving-robot"] * args.moving
     stages += ["validation"] * (at_rate is not None)
     out = Output(args, stages=len(stages), job=stages)
     options = options_from_args(args, out)
@@ -229,6 +232,11 @@ def cmd_synth(args) -> int:
         raise ArgumentError("--qdddot-max bounds the jerk in the moving-robot certificate: add --moving, or drop it")
     problem = problem_from_args(robot, args, out)
     check_jerk_applies(args, problem)  # a task without an inner layer, before the synthesis
+    if args.tune_moving:  # a model of constants to tune on, before the synthesis
+        from polyrob.analysis.lpv.constant import MOVING_MODEL, applies
+
+        if applies(problem) and problem.model not in MOVING_MODEL:
+            raise ArgumentError(f"--tune-moving needs a model of constants: {applies(problem)}")
     out.line(
         f"robot {robot.name}: {problem.unc.n_params} real parameters ({problem.pldi.enclosure} PLDI, "
         f"{problem.model} model), structure {args.structure}"
@@ -247,13 +255,16 @@ def cmd_synth(args) -> int:
         design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
         print_design(design, out)
         extra = None
+    scalings = None
+    if args.tune_moving:  # before the loop at the rate is checked: that check is of the tuned controller
+        design, scalings = moving_tuning_stage(problem, design, args.tune_moving, out)
     doc["synthesis"] = design.summary()
     sampled_record = None
     if sampling is not None:  # the loop as it runs: its certificate is the design's verdict
         design, doc["sampled"] = sampled_check(problem, design, sampling, out)
         # export reads the rate, delay and hold the certificate covers (cli/files.py certified_sampling)
         sampled_record = {k: doc["sampled"][k] for k in ("rate_hz", "delay_samples", "hold", "words")}
-    moving = moving_check(problem, design.controller, out, moving_opts) if args.moving else None
+    moving = moving_check(problem, design.controller, out, moving_opts, scalings) if args.moving else None
     if moving is not None:
         doc["moving"] = moving
     if args.output:
@@ -434,12 +445,26 @@ def add_bandwidth_arguments(p) -> None:
     )
 
 
-def moving_check(problem, K, out, options=None) -> dict:
+def moving_tuning_stage(problem, design, rounds: int, out):
+    """``synth --tune-moving N``: the design's PID tuned on the moving-robot structure; ``(design, scalings)``."""
+    from polyrob.pipeline.design import tuned_for_moving
+
+    out.stage(f"tuning for the moving robot (up to {rounds} rounds: scalings, then the PID on mu)")
+    design = tuned_for_moving(problem, design, rounds=rounds)
+    tuning = design.record["moving_tuning"]
+    out.line(
+        f"tuned for the moving robot: merged-structure mu {', '.join(f'{h:.4g}' for h in tuning['history'])} "
+        f"({tuning['seconds']:.0f} s); the frozen robot's mu is now {design.certificate.bound:.4g}"
+    )
+    return design, tuning["scalings"]
+
+
+def moving_check(problem, K, out, options=None, scalings=None) -> dict:
     """``synth --moving``: the moving-robot certificate of the synthesised ``K``, printed; its summary."""
     from polyrob.analysis.lpv.constant import robot_in_motion_certificate
 
     out.stage("moving-robot certificate of the controller (rate-bounded LPV analysis, docs/certificates.md)")
-    mv = robot_in_motion_certificate(problem, K, **(options or {}))
+    mv = robot_in_motion_certificate(problem, K, scalings=scalings, **(options or {}))
     out.line(mv.verdict)
     if mv.computed:
         out.line(mv.details())
@@ -482,6 +507,15 @@ def register(sub) -> None:
         "the moving-robot certificate are both CERTIFIED. "
         "With --max-bandwidth on an inner-gain model (the arms' default task) a factor counts only when its "
         "controller has the moving-robot certificate too",
+    )
+    p.add_argument(
+        "--tune-moving",
+        type=int,
+        default=0,
+        metavar="ROUNDS",
+        help="then tune the per-joint PID on the moving-robot certificate's own structure for up to ROUNDS rounds "
+        "(its scalings searched, then mu synthesis of the PID on it; an inner-gain or per-link set's model; minutes a "
+        "round on an arm, docs/certificates.md); implies --moving",
     )
     add_moving_harmonics_argument(p)
     add_jerk_argument(p)

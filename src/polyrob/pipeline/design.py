@@ -253,6 +253,30 @@ def certify_design(problem, design: Design) -> Design:
     return design.certified_by(cert if cert is not None else certify_loop(P, K, scope=problem.scope()))
 
 
+def tuned_for_moving(problem, design: Design, *, rounds: int = 3, structure: str = "pid") -> Design:
+    """``design`` with its controller tuned on the moving-robot structure (:mod:`polyrob.synthesis.moving`), certified anew.
+
+    The tuning's scalings and history go to ``record["moving_tuning"]`` (the
+    moving-robot certificate starts from those scalings); the frozen
+    certificate is the new controller's own.
+    """
+    from polyrob.analysis.certificate import certify_loop
+    from polyrob.synthesis.moving import tune_for_moving
+
+    tuning = tune_for_moving(problem, design.controller, structure=structure, rounds=rounds)
+    cert = certify_loop(problem.P, tuning.controller, scope=problem.scope())
+    history = ", ".join(f"{h:.4g}" for h in tuning.history)
+    record = {
+        **design.record,
+        "moving_tuning": tuning.summary(),
+        "peak_mu_upper": float(cert.mu_upper_grid),
+        "peak_mu_lower": float(cert.mu_lower),
+    }
+    notes = design.notes + (f"tuned for the moving robot ({structure}): merged-structure mu {history}",)
+    moved = Design(controller=tuning.controller, result=design.result, reduced=None, record=record, notes=notes)
+    return moved.certified_by(cert)
+
+
 def starts_from_tuned_pid(robot) -> bool:
     """Whether ``robot``'s synthesis starts from the per-joint PID tuned to the weights (:func:`with_default_start`)."""
     return getattr(robot, "inner", None) == "computed-torque"

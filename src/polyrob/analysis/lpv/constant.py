@@ -209,7 +209,71 @@ def scaled_plant(P, d):
     return control.ss(np.asarray(sys.A, float), B, C, D), np.array(blk)
 
 
-def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0, 1.05, 0.95), **mu_options):
+#: Log-spaced frequencies (rad/s) on which :func:`search_scalings` compares scalings, and its evaluations.
+SEARCH_GRID = (1e-3, 1e4, 36)
+SEARCH_EVALUATIONS = 40
+SEARCH_ROUNDS = 3
+
+
+def search_scalings(P, K, d0) -> np.ndarray:
+    """Constant scalings ``d`` of the moving blocks that lower the merged structure's μ peak, from ``d0``.
+
+    Any ``d > 0`` gives a valid certificate (:func:`scaled_plant`), so ``d``
+    is searched (Nelder-Mead on ``log d``, :data:`SEARCH_EVALUATIONS`
+    evaluations) on the μ upper bound at the frequencies of
+    :data:`SEARCH_GRID` where ``d0``'s is within 30 % of its peak, and
+    again with those where the found one's is when its peak moved (up to
+    :data:`SEARCH_ROUNDS` rounds); the scalings with the lowest peak on the
+    whole grid are returned (``d0`` when none is lower), and the
+    certificate then proves them at every frequency.  The loop's
+    response is computed once: the scalings act on its outside channels.
+    """
+    from scipy.optimize import minimize
+
+    from polyrob.analysis.mu.bounds import mussv
+    from polyrob.analysis.mu.frequency import matrix_response
+    from polyrob.plant.loops import lft
+
+    d0 = np.asarray(d0, float)
+    if d0.size == 0:
+        return d0
+    plant, blk = scaled_plant(P, np.ones_like(d0))
+    m = P.n_u
+    N = lft(plant, K, n_u=m, n_y=m)
+    H = matrix_response(*(np.asarray(X, float) for X in (N.A, N.B, N.C, N.D)))(
+        np.logspace(*map(np.log10, SEARCH_GRID[:2]), SEARCH_GRID[2])
+    )
+    constant, full = _channels(P.block_structure_rs, _moving_flags(P))
+    n_c, m_c = sum(len(i) for i, _, _ in constant), sum(len(o) for _, o, _ in constant)
+
+    def scaled(log_d, at):
+        s_out, s_in = np.ones(H.shape[1]), np.ones(H.shape[2])
+        a, b = n_c, m_c
+        for (i, o, _), dk in zip(full, np.exp(log_d)):
+            s_in[a : a + len(i)], s_out[b : b + len(o)] = 1.0 / dk, dk
+            a, b = a + len(i), b + len(o)
+        return np.array([mussv(s_out[:, None] * H[f] * s_in[None, :], blk, lower=False).upper for f in at])
+
+    # the search sees the frequencies near the peak; where the peak moves elsewhere, those join it (a few rounds)
+    best_x, best = np.log(d0), scaled(np.log(d0), range(len(H)))
+    near = set(np.flatnonzero(best >= 0.7 * best.max()).tolist())
+    for _ in range(SEARCH_ROUNDS):
+        at = sorted(near)
+        found = minimize(lambda x: scaled(x, at).max(), best_x, method="Nelder-Mead",
+                         options={"maxfev": SEARCH_EVALUATIONS})  # fmt: skip
+        whole = scaled(found.x, range(len(H)))
+        if whole.max() < best.max():
+            best_x, best = found.x, whole
+        moved = set(np.flatnonzero(whole >= 0.7 * whole.max()).tolist())
+        if moved <= near:
+            break
+        near |= moved
+    return np.exp(best_x)
+
+
+def constant_parameter_certificate(
+    problem, K, *, auto: bool = False, tries=(1.0, 1.05, 0.95), scalings=None, search: bool = False, **mu_options
+):
     """The moving-robot certificate of ``K`` on an ``inner-gain`` problem: constants fixed, the state at any rate.
 
     Parameters
@@ -222,6 +286,11 @@ def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0
         Compute it only for a loop of at most :data:`AUTO_STATES` states.
     tries : sequence of float
         Multiples of the small-gain scaling ``d`` tried in turn until one certifies.
+    scalings : array_like, optional
+        The moving blocks' ``d`` to start from instead of the small gain's
+        (a synthesis' own, :mod:`polyrob.synthesis.moving`).
+    search : bool
+        Search ``d`` first (:func:`search_scalings`), then certify that one.
     **mu_options
         Passed to :func:`polyrob.analysis.certificate.certify_loop`.
 
@@ -264,6 +333,10 @@ def constant_parameter_certificate(problem, K, *, auto: bool = False, tries=(1.0
     words = f"{names} constant (rate 0), the state (q, qdot, qddot) moving at any rate"
     try:
         d0, source = residual_scalings(P, K)
+        if scalings is not None and len(scalings) == len(d0):
+            d0, source = np.asarray(scalings, float), "given"
+        if search:
+            d0, source, tries = search_scalings(P, K, d0), f"searched from {source}", (1.0,)
         best = None
         for factor in tries:
             plant, blk = scaled_plant(P, d0 * factor)
@@ -336,11 +409,14 @@ def check_jerk(problem, jerk) -> None:
         )
 
 
-def robot_in_motion_certificate(problem, K, *, auto: bool = False, time_varying=None, jerk=None, **options):
+def robot_in_motion_certificate(
+    problem, K, *, auto: bool = False, time_varying=None, jerk=None, scalings=None, **options
+):
     """The moving-robot certificate that fits ``problem``'s model and domain.
 
     An inner-gain model (physical constants and state-dependent residual
-    blocks): :func:`constant_parameter_certificate`.  A task domain (the
+    blocks): :func:`constant_parameter_certificate`, its scalings searched
+    unless ``auto`` (``scalings``: a synthesis' own to start from).  A task domain (the
     torques by inverse dynamics): the robot scheduled on its positions,
     velocities and accelerations,
     :func:`polyrob.analysis.lpv.task.task_motion_certificate` (with the
@@ -362,7 +438,8 @@ def robot_in_motion_certificate(problem, K, *, auto: bool = False, time_varying=
     check_jerk(problem, jerk)
     why = applies(problem)
     if why is None or _model(problem) in MOVING_MODEL:
-        return constant_parameter_certificate(problem, K, auto=auto)
+        # asked for (not auto): the moving blocks' scalings searched, worth its minutes on an arm
+        return constant_parameter_certificate(problem, K, auto=auto, scalings=scalings, search=not auto)
     from polyrob.model.inner import InnerLoopRobot
 
     if isinstance(getattr(problem, "robot", None), InnerLoopRobot):
