@@ -81,6 +81,7 @@ def tune_for_moving(problem, K, *, structure: str = "pid", rounds: int = 3, max_
         ``inner-links``), or ``rounds < 1``.
     """
     from polyrob.analysis.lpv.constant import applies, moving_problem, residual_scalings, scaled_plant, search_scalings
+    from polyrob.progress import span
     from polyrob.synthesis import musyn
     from polyrob.synthesis.options import MusynOptions
 
@@ -93,11 +94,13 @@ def tune_for_moving(problem, K, *, structure: str = "pid", rounds: int = 3, max_
     P, m = held.P, held.P.n_u
     d, _ = residual_scalings(P, K)
     history, best = [], (np.inf, K, d)
-    for _ in range(int(rounds)):
-        d = search_scalings(P, best[1], best[2])
+    for k in range(int(rounds)):  # each round its part of the job's line: the scalings a fifth, mu synthesis the rest
+        with span(k / rounds, (k + 0.2) / rounds):
+            d = search_scalings(P, best[1], best[2])
         plant, blk = scaled_plant(P, d)
         options = MusynOptions.build(structure=structure, initial_controller=best[1], max_iter=max_iter, starts=1)
-        res = musyn(plant, blk, n_u=m, n_y=m, options=options)
+        with span((k + 0.2) / rounds, (k + 1) / rounds):
+            res = musyn(plant, blk, n_u=m, n_y=m, options=options)
         history.append(float(res.peak_mu))
         if not res.peak_mu < best[0]:
             break

@@ -219,8 +219,8 @@ def search_scalings(P, K, d0) -> np.ndarray:
     """Constant scalings ``d`` of the moving blocks that lower the merged structure's μ peak, from ``d0``.
 
     Any ``d > 0`` gives a valid certificate (:func:`scaled_plant`), so ``d``
-    is searched (Nelder-Mead on ``log d``, :data:`SEARCH_EVALUATIONS`
-    evaluations) on the μ upper bound at the frequencies of
+    is searched (a grid of starts around ``d0``, then Nelder-Mead on
+    ``log d``, :data:`SEARCH_EVALUATIONS` evaluations) on the μ upper bound at the frequencies of
     :data:`SEARCH_GRID` where ``d0``'s is within 30 % of its peak, and
     again with those where the found one's is when its peak moved (up to
     :data:`SEARCH_ROUNDS` rounds); the scalings with the lowest peak on the
@@ -233,6 +233,7 @@ def search_scalings(P, K, d0) -> np.ndarray:
     from polyrob.analysis.mu.bounds import mussv
     from polyrob.analysis.mu.frequency import matrix_response
     from polyrob.plant.loops import lft
+    from polyrob.progress import report
 
     d0 = np.asarray(d0, float)
     if d0.size == 0:
@@ -246,7 +247,11 @@ def search_scalings(P, K, d0) -> np.ndarray:
     constant, full = _channels(P.block_structure_rs, _moving_flags(P))
     n_c, m_c = sum(len(i) for i, _, _ in constant), sum(len(o) for _, o, _ in constant)
 
+    calls = [0]
+
     def scaled(log_d, at):
+        calls[0] += 1  # the job's line: at most this many evaluations in all
+        report(calls[0], SEARCH_ROUNDS * (SEARCH_EVALUATIONS + 26))
         s_out, s_in = np.ones(H.shape[1]), np.ones(H.shape[2])
         a, b = n_c, m_c
         for (i, o, _), dk in zip(full, np.exp(log_d)):
@@ -257,9 +262,12 @@ def search_scalings(P, K, d0) -> np.ndarray:
     # the search sees the frequencies near the peak; where the peak moves elsewhere, those join it (a few rounds)
     best_x, best = np.log(d0), scaled(np.log(d0), range(len(H)))
     near = set(np.flatnonzero(best >= 0.7 * best.max()).tolist())
+    steps = np.linspace(-1.5, 1.5, 5) if d0.size <= 2 else np.linspace(-1.0, 1.0, 3)  # a grid of starts first
+    starts = np.array(np.meshgrid(*[steps] * d0.size, indexing="ij")).reshape(d0.size, -1).T[:SEARCH_EVALUATIONS]
     for _ in range(SEARCH_ROUNDS):
         at = sorted(near)
-        found = minimize(lambda x: scaled(x, at).max(), best_x, method="Nelder-Mead",
+        start = min((best_x + g for g in starts), key=lambda x: scaled(x, at).max())
+        found = minimize(lambda x: scaled(x, at).max(), start, method="Nelder-Mead",
                          options={"maxfev": SEARCH_EVALUATIONS})  # fmt: skip
         whole = scaled(found.x, range(len(H)))
         if whole.max() < best.max():
