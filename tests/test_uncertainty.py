@@ -13,7 +13,7 @@ from polyrob.plant.models import MODELS, UncertaintyModel, model_of
 from polyrob.plant.uncertainty import CHOICES, UncertainPlant, uncertain_plant, upper_lft
 
 #: Models of a computed-torque inner loop only (their own test files build them).
-INNER_LOOP_MODELS = ("inner-gain", "inner-links", "inner-links-real")
+INNER_LOOP_MODELS = ("inner-gain", "inner-links", "inner-links-real", "inner-links-moving")
 
 PAPER_ENTRIES = ("a32", "a33", "a34", "a42", "a43", "a44", "b31", "b32", "b41", "b42")
 
@@ -229,7 +229,9 @@ def _building_jacobians(pldi, n=300):
 
 
 def test_every_model_contains_the_jacobians_it_was_built_from(pldi, built):
-    assert list(MODELS) == ["box", "axes", "lft", "lft-torque", "inertia", "inner-gain", "inner-links", "inner-links-real"]
+    assert list(MODELS) == [
+        "box", "axes", "lft", "lft-torque", "inertia", "inner-gain", "inner-links", "inner-links-real", "inner-links-moving"
+    ]  # fmt: skip
     A, B = _building_jacobians(pldi)
     for name, unc in built.items():
         model = model_of(unc)
@@ -274,10 +276,13 @@ def test_enclosure_is_the_weakest_of_the_inputs(pldi, built):
 
 
 def test_unknown_models_give_clear_errors(pldi, unc):
-    assert CHOICES == ("auto", "box", "axes", "lft", "lft-torque", "inertia", "inner-gain", "inner-links", "inner-links-real")
+    assert CHOICES == (
+        "auto", "box", "axes", "lft", "lft-torque", "inertia", "inner-gain", "inner-links", "inner-links-real",
+        "inner-links-moving",
+    )  # fmt: skip
     msg = (
         "unknown uncertainty model 'cube': use one of auto, box, axes, lft, lft-torque, inertia, inner-gain, "
-        "inner-links, inner-links-real"
+        "inner-links, inner-links-real, inner-links-moving"
     )
     with pytest.raises(ArgumentError, match=msg):
         uncertain_plant(pldi, model="cube")

@@ -374,7 +374,9 @@ class MovingLinksModel(InnerLinksModel):
 
         robot = pldi.source_robot if pldi.source_robot is not None else getattr(pldi.domain, "robot", None)
         if robot is None or getattr(robot, "uncertainty", None) is None:
-            raise ArgumentError("inner-links-moving: no robot-uncertainty set recorded with the PLDI")
+            from polyrob.errors import NotApplicable
+
+            raise NotApplicable("inner-links-moving: no robot-uncertainty set recorded with the PLDI")
         return moving_links_plant(pldi, robot, n_directions=n_directions)
 
     def contains(self, unc, A, B):
