@@ -75,6 +75,7 @@ def test_the_frozen_model_cannot_hold_a_robot_s_motion_with_its_scalars_constant
     """Without the motion blocks the frozen ``inner-links`` model's residual, with each robot's direction scalars
     held at the task's centre, misses the robots: the split is what the constants need."""
     from polyrob.plant.models import inner_links as links
+    from polyrob.plant.models.factor_membership import reached_entries, scaled_residual_norm
 
     loop, domain, _ = moving_model()
     _loop, _domain, frozen = carried_model("ur5")
@@ -88,8 +89,6 @@ def test_the_frozen_model_cannot_hold_a_robot_s_motion_with_its_scalars_constant
         W = frozen.info["residual_weighting"]
         J = links.weighted_factor(K_c, W, np.linalg.inv(W))[0, :, : 2 * loop.m].ravel() / frozen.info["direction_scale"]
         t = frozen.info["state_directions"] @ J
-        from polyrob.plant.models.factor_membership import reached_entries, scaled_residual_norm
-
         for K in links.factor_of(loop, true.robot, q, qdot, a):
             worst = max(worst, scaled_residual_norm(frozen, K, t, 1e-9, reached_entries(frozen)))
     assert worst > 1.0

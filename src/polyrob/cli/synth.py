@@ -255,16 +255,17 @@ def cmd_synth(args) -> int:
         design = design_controller(problem, reduce=args.reduce, reduce_max_order=args.reduce_max_order, **options)
         print_design(design, out)
         extra = None
-    scalings = None
+    scalings, held = None, problem
     if args.tune_moving:  # before the loop at the rate is checked: that check is of the tuned controller
-        design, scalings = moving_tuning_stage(problem, design, args.tune_moving, out)
+        design, scalings, held = moving_tuning_stage(problem, design, args.tune_moving, out)
     doc["synthesis"] = design.summary()
     sampled_record = None
     if sampling is not None:  # the loop as it runs: its certificate is the design's verdict
         design, doc["sampled"] = sampled_check(problem, design, sampling, out)
         # export reads the rate, delay and hold the certificate covers (cli/files.py certified_sampling)
         sampled_record = {k: doc["sampled"][k] for k in ("rate_hz", "delay_samples", "hold", "words")}
-    moving = moving_check(problem, design.controller, out, moving_opts, scalings) if args.moving else None
+    # the moving check on the model of constants the tuning built (a per-link set's is built once)
+    moving = moving_check(held, design.controller, out, moving_opts, scalings) if args.moving else None
     if moving is not None:
         doc["moving"] = moving
     if args.output:
@@ -446,17 +447,20 @@ def add_bandwidth_arguments(p) -> None:
 
 
 def moving_tuning_stage(problem, design, rounds: int, out):
-    """``synth --tune-moving N``: the design's PID tuned on the moving-robot structure; ``(design, scalings)``."""
+    """``synth --tune-moving N``: the design's PID tuned on the moving-robot structure; ``(design, scalings, held)``,
+    ``held`` the problem on its model of constants."""
+    from polyrob.analysis.lpv.constant import moving_problem
     from polyrob.pipeline.design import tuned_for_moving
 
     out.stage(f"tuning for the moving robot (up to {rounds} rounds: scalings, then the PID on mu)")
-    design = tuned_for_moving(problem, design, rounds=rounds)
+    held = moving_problem(problem)
+    design = tuned_for_moving(problem, design, rounds=rounds, held=held)
     tuning = design.record["moving_tuning"]
     out.line(
         f"tuned for the moving robot: merged-structure mu {', '.join(f'{h:.4g}' for h in tuning['history'])} "
         f"({tuning['seconds']:.0f} s); the frozen robot's mu is now {design.certificate.bound:.4g}"
     )
-    return design, tuning["scalings"]
+    return design, tuning["scalings"], held
 
 
 def moving_check(problem, K, out, options=None, scalings=None) -> dict:

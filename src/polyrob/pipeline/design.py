@@ -253,17 +253,21 @@ def certify_design(problem, design: Design) -> Design:
     return design.certified_by(cert if cert is not None else certify_loop(P, K, scope=problem.scope()))
 
 
-def tuned_for_moving(problem, design: Design, *, rounds: int = 3, structure: str = "pid") -> Design:
+def tuned_for_moving(problem, design: Design, *, rounds: int = 3, structure: str = "pid", held=None) -> Design:
     """``design`` with its controller tuned on the moving-robot structure (:mod:`polyrob.synthesis.moving`), certified anew.
 
     The tuning's scalings and history go to ``record["moving_tuning"]`` (the
     moving-robot certificate starts from those scalings); the frozen
-    certificate is the new controller's own.
+    certificate is the new controller's own, on ``problem``.  ``held``: the
+    problem on its model of constants
+    (:func:`~polyrob.analysis.lpv.constant.moving_problem`) when the caller
+    has it already (a per-link set's is built and its coverage measured:
+    minutes on an arm).
     """
     from polyrob.analysis.certificate import certify_loop
     from polyrob.synthesis.moving import tune_for_moving
 
-    tuning = tune_for_moving(problem, design.controller, structure=structure, rounds=rounds)
+    tuning = tune_for_moving(held or problem, design.controller, structure=structure, rounds=rounds)
     cert = certify_loop(problem.P, tuning.controller, scope=problem.scope())
     history = ", ".join(f"{h:.4g}" for h in tuning.history)
     record = {

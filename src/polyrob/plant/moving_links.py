@@ -123,7 +123,6 @@ def motion_witness(unc: UncertainPlant, robot, true_robot, q, qdot, a) -> np.nda
     balls (``t`` within the ranges); an entry no block of its kind reaches
     must match to ``1e-9`` of the factor's size.
     """
-    from polyrob.plant.models.factor_membership import scaled_residuals
     from polyrob.plant.models.inner_links import factor_of, weighted_factor
 
     m, info = len(unc.info["centre"][0]), unc.info
@@ -134,20 +133,21 @@ def motion_witness(unc: UncertainPlant, robot, true_robot, q, qdot, a) -> np.nda
     E_c = K_c - info["K_offset"] - np.tensordot(t, info["K_centres"], axes=1)
     ranges = np.asarray(info["theta_range"], float)
     over = np.divide(np.abs(t), ranges, out=np.where(np.abs(t) > 0, np.inf, 0.0), where=ranges > 0)
-    fixed = max([float(over.max(initial=0.0))] + _norms(unc, E_c, False, scaled_residuals))
-    out = []
-    for K in factor_of(robot, true_robot, q, qdot, a):
-        out.append(max([fixed] + _norms(unc, K - K_c, True, scaled_residuals)))
-    return np.array(out)
+    size = 1.0 + float(np.abs(K_c).max())
+    fixed = max([float(over.max(initial=0.0))] + _norms(unc, E_c, False, size))
+    return np.array([max([fixed] + _norms(unc, K - K_c, True, size)) for K in factor_of(robot, true_robot, q, qdot, a)])
 
 
-def _norms(unc, E, moving: bool, scaled_residuals) -> list[float]:
-    """The scaled norms of ``E`` in the blocks whose ``moving`` flag is ``moving``, and its mismatch off them."""
+def _norms(unc, E, moving: bool, size: float) -> list[float]:
+    """The scaled norms of ``E`` in the blocks whose ``moving`` flag is ``moving``, and its mismatch off them
+    relative to ``1e-9 size`` (the factor's)."""
+    from polyrob.plant.models.factor_membership import scaled_residuals
+
     reached = np.zeros(E.shape, bool)
     for b in unc.info["residual_blocks"]:
         if bool(b.get("moving", False)) is moving:
             reached[np.ix_(b["rows"], b["cols"])] = True
-    mismatch = np.abs(E[~reached]).max(initial=0.0) / (1e-9 * (1.0 + np.abs(E).max()))
+    mismatch = np.abs(E[~reached]).max(initial=0.0) / (1e-9 * size)
     return [mismatch] + [float(np.linalg.norm(S, 2)) for S in scaled_residuals(unc, E, moving)]
 
 

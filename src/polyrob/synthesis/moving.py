@@ -41,7 +41,9 @@ class MovingTuning:
     Attributes
     ----------
     controller : LTI
-        The best controller seen (the start when no round lowered the peak).
+        The controller of the round with the lowest merged peak (the first
+        round's is kept whatever its peak; a later round counts only when
+        it lowers it).
     scalings : ndarray
         Its moving blocks' ``d``.
     history : tuple of float

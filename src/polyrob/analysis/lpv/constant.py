@@ -145,6 +145,17 @@ def _channels(blk, moving=None):
     return real, full
 
 
+def _block_scales(full, d, n_in: int, n_out: int, first_in: int, first_out: int):
+    """``(s_in, s_out)``: ``1/d_i`` on the inputs and ``d_i`` on the outputs of the full blocks ``full`` (from
+    :func:`_channels`), laid out from ``first_in``/``first_out`` in a system of ``n_in`` inputs and ``n_out`` outputs."""
+    s_in, s_out = np.ones(n_in), np.ones(n_out)
+    a, b = first_in, first_out
+    for (i, o, _), dk in zip(full, np.asarray(d, float)):
+        s_in[a : a + len(i)], s_out[b : b + len(o)] = 1.0 / dk, dk
+        a, b = a + len(i), b + len(o)
+    return s_in, s_out
+
+
 def _moving_flags(P) -> list[bool] | None:
     """Which full blocks move with the state (``None``: all of them, as on ``inner-gain``)."""
     blocks = (getattr(getattr(P, "uncertain", None), "info", None) or {}).get("residual_blocks") or []
@@ -195,11 +206,7 @@ def scaled_plant(P, d):
     ins = np.concatenate([i for i, _, _ in real] + [i for i, _, _ in full] + [rng(sl_in["w"]), rng(sl_in["u"])])
     outs = np.concatenate([o for _, o, _ in real] + [o for _, o, _ in full] + [rng(sl_out["z"]), rng(sl_out["y"])])
     n_ri, n_ro = sum(len(i) for i, _, _ in real), sum(len(o) for _, o, _ in real)
-    s_in, s_out = np.ones(ins.size), np.ones(outs.size)
-    a, b = n_ri, n_ro
-    for (i, o, _), di in zip(full, np.asarray(d, float)):
-        s_in[a : a + len(i)], s_out[b : b + len(o)] = 1.0 / di, di
-        a, b = a + len(i), b + len(o)
+    s_in, s_out = _block_scales(full, d, ins.size, outs.size, n_ri, n_ro)
     sys = P.system
     B = np.asarray(sys.B, float)[:, ins] * s_in[None, :]
     C = np.asarray(sys.C, float)[outs] * s_out[:, None]
@@ -247,23 +254,19 @@ def search_scalings(P, K, d0) -> np.ndarray:
     constant, full = _channels(P.block_structure_rs, _moving_flags(P))
     n_c, m_c = sum(len(i) for i, _, _ in constant), sum(len(o) for _, o, _ in constant)
 
-    calls = [0]
+    steps = np.linspace(-1.5, 1.5, 5) if d0.size <= 2 else np.linspace(-1.0, 1.0, 3)  # a grid of starts first
+    starts = np.array(np.meshgrid(*[steps] * d0.size, indexing="ij")).reshape(d0.size, -1).T[:SEARCH_EVALUATIONS]
+    calls, most = [0], 1 + SEARCH_ROUNDS * (len(starts) + SEARCH_EVALUATIONS + 1)
 
     def scaled(log_d, at):
-        calls[0] += 1  # the job's line: at most this many evaluations in all
-        report(calls[0], SEARCH_ROUNDS * (SEARCH_EVALUATIONS + 26))
-        s_out, s_in = np.ones(H.shape[1]), np.ones(H.shape[2])
-        a, b = n_c, m_c
-        for (i, o, _), dk in zip(full, np.exp(log_d)):
-            s_in[a : a + len(i)], s_out[b : b + len(o)] = 1.0 / dk, dk
-            a, b = a + len(i), b + len(o)
+        calls[0] += 1  # the job's line: at most `most` evaluations in all
+        report(calls[0], most)
+        s_in, s_out = _block_scales(full, np.exp(log_d), H.shape[2], H.shape[1], n_c, m_c)
         return np.array([mussv(s_out[:, None] * H[f] * s_in[None, :], blk, lower=False).upper for f in at])
 
     # the search sees the frequencies near the peak; where the peak moves elsewhere, those join it (a few rounds)
     best_x, best = np.log(d0), scaled(np.log(d0), range(len(H)))
     near = set(np.flatnonzero(best >= 0.7 * best.max()).tolist())
-    steps = np.linspace(-1.5, 1.5, 5) if d0.size <= 2 else np.linspace(-1.0, 1.0, 3)  # a grid of starts first
-    starts = np.array(np.meshgrid(*[steps] * d0.size, indexing="ij")).reshape(d0.size, -1).T[:SEARCH_EVALUATIONS]
     for _ in range(SEARCH_ROUNDS):
         at = sorted(near)
         start = min((best_x + g for g in starts), key=lambda x: scaled(x, at).max())

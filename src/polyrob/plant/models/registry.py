@@ -320,13 +320,26 @@ class InnerLinksModel(UncertaintyModel):
         # "inner-links-real": the state columns' residual as one real scalar per entry (tighter, slower μ)
         self.name, self.residual = name, residual
 
+    def set_loop(self, pldi):
+        """The inner loop over a robot-uncertainty set that ``pldi`` was bounded on.
+
+        Raises
+        ------
+        NotApplicable
+            No set recorded with the PLDI.
+        """
+        from polyrob.errors import NotApplicable
+
+        robot = pldi.source_robot if pldi.source_robot is not None else getattr(pldi.domain, "robot", None)
+        if robot is None or getattr(robot, "uncertainty", None) is None:
+            raise NotApplicable(f"{self.name}: no robot-uncertainty set recorded with the PLDI")
+        return robot
+
     def build(self, pldi, *, n_directions: int | None = None, **options):
         from polyrob.errors import NotApplicable
         from polyrob.plant.models.inner_links import inner_links_plant
 
-        robot = pldi.source_robot if pldi.source_robot is not None else getattr(pldi.domain, "robot", None)
-        if robot is None or getattr(robot, "uncertainty", None) is None:
-            raise NotApplicable("inner-links: no robot-uncertainty set recorded with the PLDI")
+        robot = self.set_loop(pldi)
         try:
             return inner_links_plant(pldi, robot, n_directions=n_directions, residual=self.residual)
         except NotApplicable as exc:  # a stated set is carried by this model or refused, never by another one
@@ -372,12 +385,7 @@ class MovingLinksModel(InnerLinksModel):
     def build(self, pldi, *, n_directions: int | None = None, **options):
         from polyrob.plant.moving_links import moving_links_plant
 
-        robot = pldi.source_robot if pldi.source_robot is not None else getattr(pldi.domain, "robot", None)
-        if robot is None or getattr(robot, "uncertainty", None) is None:
-            from polyrob.errors import NotApplicable
-
-            raise NotApplicable("inner-links-moving: no robot-uncertainty set recorded with the PLDI")
-        return moving_links_plant(pldi, robot, n_directions=n_directions)
+        return moving_links_plant(pldi, self.set_loop(pldi), n_directions=n_directions)
 
     def contains(self, unc, A, B):
         # its blocks overlap (the centre's and the motion's on the same entries): membership needs the true
@@ -390,7 +398,9 @@ class MovingLinksModel(InnerLinksModel):
     def describe(self, unc):
         ranges = ", ".join(f"{n} ±{r:.3g}" for n, r in zip(unc.info["factors"], unc.info["theta_range"]))
         norm = unc.info.get("state_residual_norm")
-        state = "none for the state columns" if norm is None else f"the state columns' of norm <= {norm:.3g} in its weights"
+        state = (
+            "none for the state columns" if norm is None else f"the state columns' of norm <= {norm:.3g} in its weights"
+        )
         return (
             f"inner-links-moving: the computed-torque factor split at the task's centre: {len(unc.info['factors'])} "
             f"directions' values there (one repeated real each, constant: {ranges}), the rest there in constant full "
