@@ -541,14 +541,14 @@ def test_the_moving_robot_certificate_is_a_column_and_decides_the_row(pendulums,
     assert "| moving robot |" in markdown_table([row]).splitlines()[0]
     # a frozen certificate with a moving one that does not hold: the row is not certified
     refused = {"computed": True, "certified": False, "status": "NOT_CERTIFIED", "gamma": 1.3, "verdict": "stub"}
-    monkeypatch.setattr(jobs, "moving_stage", lambda problem, K: dict(refused))
+    monkeypatch.setattr(jobs, "moving_stage", lambda problem, K, scalings=None: dict(refused))
     r2 = run_job(job, Settings(**fast, moving=True))
     assert r2.status == "CERTIFIED" and not r2.certified and r2.row()["certified"] is False
     assert "NOT_CERTIFIED (<= 1.3)" in markdown_table([r2.row()])
     # a moving-robot test that cannot run is said in the row, which keeps its frozen certificate
     from polyrob.errors import SolverError
 
-    def broken(problem, K):
+    def broken(problem, K, scalings=None):
         raise SolverError("the LMI solver gave up (a stand-in)")
 
     monkeypatch.setattr(jobs, "moving_stage", broken)
@@ -559,3 +559,31 @@ def test_the_moving_robot_certificate_is_a_column_and_decides_the_row(pendulums,
     # not asked: no column value, and the row is the frozen certificate's
     r3 = run_job(job, Settings(**fast))
     assert r3.moving is None and r3.certified == (r3.status == "CERTIFIED")
+
+
+def test_the_batch_tunes_for_the_moving_robot_and_checks_the_tuned_pid(pendulums):
+    """`batch --tune-moving N`: the row's PID is the tuned one, its frozen certificate made anew, and the moving-robot
+    stage runs on it from the tuning's scalings; a model with no constants keeps its design and says why."""
+    from polyrob.analysis.lpv.constant import constant_parameter_certificate
+    from polyrob.fleet.jobs import _problem
+    from polyrob.fleet.results import controller_system
+
+    bounds = {"samples": 16, "refine": False, "screen": 0, "verify_rounds": 0}
+    fast = dict(FAST, bound_options=bounds, validate=False, analyze=False)
+    job = Job(robot=pendulums[0], q_radius=0.2, qdot_max=0.5, qddot_max=1.0, inner="computed-torque", model_error=0.1)
+    plain = run_job(job, Settings(**fast))
+    tuned = run_job(job, Settings(**fast, tune_moving=1))
+    assert plain.ok and tuned.ok, (plain.message, tuned.message)
+    tuning = tuned.details["moving_tuning"]
+    assert len(tuning["history"]) == 1 and len(tuning["scalings"]) >= 1 and tuned.moving["computed"]
+    assert "moving-robot tuning" in tuned.timings
+    K_plain, K_tuned = controller_system(plain.controller), controller_system(tuned.controller)
+    assert not np.allclose(np.asarray(K_plain.D), np.asarray(K_tuned.D))  # the row carries the tuned PID
+    # the row's moving figure is the tuned PID's, and no worse than the untuned PID's on the same problem
+    problem = _problem(job, Settings(**fast), {})
+    before = constant_parameter_certificate(problem, K_plain, search=True)
+    assert tuned.moving["gamma"] <= before.gamma * 1.001
+    assert tuned.row()["certified"] == (tuned.status == "CERTIFIED" and tuned.moving["certified"])
+    # no model of constants (the robot bare, on its torque box): the design kept, the reason in the row
+    bare = run_job(Job(robot=pendulums[0]), Settings(**fast, tune_moving=1))
+    assert bare.ok and bare.details["moving_tuning"].startswith("not tuned: ")

@@ -129,7 +129,8 @@ def settings_from_args(args) -> dict:
         "true_robots": args.true_robots,
         "at_rate": rate_conditions_dict(args),
         "reduce_max_order": args.reduce_max_order or None,
-        "moving": args.moving,
+        "moving": args.moving or args.tune_moving > 0,
+        "tune_moving": args.tune_moving,
     }
 
 
@@ -170,6 +171,10 @@ def cmd_batch(args) -> int:
         result = str(r.status) if r.ok else f"FAILED {r.error}: {r.message}"
         if r.ok and r.validation:
             result += f"; validation: {r.validation}"
+        tuning = (r.details or {}).get("moving_tuning") if r.ok else None
+        if tuning is not None:  # the rounds' merged-structure mu, or why the design was kept
+            history = ", ".join(f"{h:.4g}" for h in tuning["history"]) if isinstance(tuning, dict) else None
+            result += f"; tuned for the moving robot: merged mu {history}" if history else f"; {tuning}"
         if r.ok and r.moving:
             result += f"; {r.moving['verdict']}"
         if r.ok and r.validation_at_rate:
@@ -278,6 +283,14 @@ def register(sub) -> None:
         "minutes per arm, docs/certificates.md): a column of the rows, and a row is certified only when mu and, "
         "once computed, this certificate both are; with --max-bandwidth on an inner-gain model a factor counts "
         "only when its controller has it too",
+    )
+    g.add_argument(
+        "--tune-moving",
+        type=int_at_least(0),
+        default=0,
+        metavar="ROUNDS",
+        help="tune each controller's per-joint PID on the moving-robot certificate's structure for up to ROUNDS "
+        "rounds before its certificates (as synth --tune-moving; minutes a round on an arm); implies --moving",
     )
     g.add_argument(
         "--reduce-max-order",

@@ -23,6 +23,7 @@ from polyrob.fleet.results import RobotResult, controller_data, controller_syste
 from polyrob.fleet.stages import (
     design_stage,
     moving_stage,
+    moving_tuning_stage,
     one_line,
     rate_validation_stage,
     reduce_stage,
@@ -207,6 +208,11 @@ class Settings:
         the row's ``certified`` with μ, and with the bandwidth search on an
         ``inner-gain`` model a factor counts only when its controller has it
         too (as ``synth --max-bandwidth --moving``).
+    tune_moving : int
+        Rounds of tuning each controller's PID on the moving-robot structure
+        before its certificates (as ``synth --tune-moving N``:
+        :func:`polyrob.pipeline.design.tuned_for_moving`; minutes a round on
+        an arm); 0: none.  Implies ``moving``.
     reduce_max_order : int or None
         A certified full-order controller is reduced to the smallest order up
         to this one that keeps μ < 1 (:func:`polyrob.pipeline.reduce_design`);
@@ -232,6 +238,7 @@ class Settings:
     at_rate: dict = field(default_factory=dict)
     reduce_max_order: int | None = 20
     moving: bool = False
+    tune_moving: int = 0
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
@@ -388,6 +395,9 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
 
         problem = scaled_problem(problem, hyper)  # where the design was certified: the same PLDI and model
     design = reduce_stage(problem, design, settings, timings, details)
+    scalings, held = None, problem
+    if settings.tune_moving:  # before the certificate is read and the loop simulated: they are the tuned PID's
+        design, scalings, held = moving_tuning_stage(problem, design, settings, timings, details)
     description = problem.description()
     description["job"] = job.to_dict()
     cert = design.certificate
@@ -439,10 +449,11 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
             at_rate = {"verdict": f"validation at the rate failed: {type(exc).__name__}: {one_line(exc)}"}
         timings["validation at the rate"] = time.perf_counter() - t1
     moving = None
-    if settings.moving:
+    if settings.moving or settings.tune_moving:
         t1 = time.perf_counter()
         try:
-            details["moving"] = moving_stage(problem, design.controller)
+            # on the model of constants the tuning built (a per-link set's is built once), from its scalings
+            details["moving"] = moving_stage(held, design.controller, scalings)
         except Exception as exc:  # noqa: BLE001 - recorded: the row keeps its frozen certificate and says why
             details["moving"] = {
                 "computed": False, "certified": False, "status": None, "gamma": None,

@@ -11,7 +11,15 @@ import time
 from polyrob.errors import SynthesisError
 from polyrob.fleet.diagnosis import search_skipped
 
-__all__ = ["design_stage", "moving_stage", "reduce_stage", "validate_stage", "rate_validation_stage", "one_line"]
+__all__ = [
+    "design_stage",
+    "moving_stage",
+    "moving_tuning_stage",
+    "reduce_stage",
+    "validate_stage",
+    "rate_validation_stage",
+    "one_line",
+]
 
 
 def validate_stage(problem, K, settings) -> dict:
@@ -56,11 +64,42 @@ def rate_validation_stage(problem, K, settings) -> dict:
     return out
 
 
-def moving_stage(problem, K) -> dict:
-    """The moving-robot certificate of ``K`` (the masses constant, the state at any rate), its summary."""
+def moving_stage(problem, K, scalings=None) -> dict:
+    """The moving-robot certificate of ``K`` (the masses constant, the state at any rate), its summary.
+
+    ``scalings``: the moving blocks' ``d`` to start from (a tuning's own, :func:`moving_tuning_stage`).
+    """
     from polyrob.analysis.lpv.constant import robot_in_motion_certificate
 
-    return robot_in_motion_certificate(problem, K).summary()
+    return robot_in_motion_certificate(problem, K, scalings=scalings).summary()
+
+
+def moving_tuning_stage(problem, design, settings, timings: dict, details: dict):
+    """``settings.tune_moving`` rounds of tuning the design's PID on the moving-robot structure (as ``synth --tune-moving``).
+
+    Returns ``(design, scalings, held)``: the tuned design (its frozen
+    certificate made anew), the moving blocks' ``d`` and the problem on its
+    model of constants, which the moving-robot stage then checks.  A problem
+    with no model of constants, or a tuning that fails, keeps the design as
+    it was and says why in ``details["moving_tuning"]``.
+    """
+    from polyrob.analysis.lpv.constant import moving_problem
+    from polyrob.errors import PolyrobError
+    from polyrob.pipeline.design import tuned_for_moving
+
+    t0 = time.perf_counter()
+    try:
+        held = moving_problem(problem)
+        if held is None:
+            raise SynthesisError(f"no model of constants for the {problem.model!r} model")
+        tuned = tuned_for_moving(problem, design, rounds=settings.tune_moving, held=held)
+    except PolyrobError as exc:  # recorded: the row keeps the untuned design and says why
+        details["moving_tuning"] = f"not tuned: {type(exc).__name__}: {one_line(exc)}"
+        return design, None, problem
+    finally:
+        timings["moving-robot tuning"] = time.perf_counter() - t0
+    details["moving_tuning"] = tuned.record["moving_tuning"]
+    return tuned, tuned.record["moving_tuning"]["scalings"], held
 
 
 def design_stage(problem, settings, timings: dict, details: dict):
