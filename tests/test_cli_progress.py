@@ -236,3 +236,14 @@ def test_analyze_shows_the_job_progress_and_the_mu_sweep_moves_it(capsys, monkey
     assert any(name.endswith(".between") for name, *_ in seen)  # the check between the points reports too
     assert all(inside for *_, inside in seen)  # inside the analysis stage of the command's job
     assert current() is None
+
+
+def test_a_stage_of_rounds_weighs_its_rounds():
+    """`synth --tune-moving 3` showed 5 minutes left when 15 remained: its tuning stage weighed what any other
+    stage does (0.1), while each of its rounds takes about a synthesis' minutes on an arm."""
+    from polyrob.progress import STAGE_WEIGHTS, JobProgress
+
+    one = JobProgress._weight("tuning for the moving robot (up to 1 round")
+    three = JobProgress._weight("tuning for the moving robot (up to 3 rounds: scalings, then the PID on mu)")
+    assert one == STAGE_WEIGHTS["tuning"] and three == pytest.approx(3 * one)
+    assert three > JobProgress._weight("synthesis (pid)") and JobProgress._weight("bounds: ur5") == 0.2

@@ -15,6 +15,7 @@ The progress reads the clock it is given (``clock``, default
 
 from __future__ import annotations
 
+import re
 import sys
 import threading
 import time
@@ -35,6 +36,7 @@ STAGE_WEIGHTS = {
     "analysis": 0.25,
     "validation": 0.1,
     "moving-robot": 0.3,
+    "tuning": 0.4,  # per round ("(up to N rounds"): ur5's per-link PID, 3 rounds about 3 times its synthesis' minutes
 }
 OTHER_WEIGHT = 0.1
 #: Largest share of a stage its own reports may claim before it ends (a loop's count is a hint, not a promise).
@@ -176,8 +178,10 @@ class JobProgress:
 
     @staticmethod
     def _weight(title: str) -> float:
+        """:data:`STAGE_WEIGHTS` of the title's first word, times ``N`` for a stage of ``"(up to N rounds"``."""
         word = title.split()[0].rstrip(":,") if title.split() else ""
-        return STAGE_WEIGHTS.get(word, OTHER_WEIGHT)
+        rounds = re.search(r"\(up to (\d+) rounds?", title)
+        return STAGE_WEIGHTS.get(word, OTHER_WEIGHT) * (max(1, int(rounds.group(1))) if rounds else 1)
 
     @property
     def n(self) -> int:

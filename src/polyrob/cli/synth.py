@@ -208,7 +208,8 @@ def cmd_synth(args) -> int:
     coulomb = coulomb_from_args(args)
     moving_opts = moving_options(args) if args.moving else None  # its refusals before any work
     stages = ["bounds", "largest bandwidth" if args.max_bandwidth else "synthesis"]
-    stages += ["moving-robot tuning"] * (args.tune_moving > 0) + ["moving-robot"] * args.moving
+    tuning = f"tuning for the moving robot (up to {args.tune_moving} rounds"  # weighed per round (progress.py)
+    stages += [tuning] * (args.tune_moving > 0) + ["moving-robot"] * args.moving
     stages += ["validation"] * (at_rate is not None)
     out = Output(args, stages=len(stages), job=stages)
     options = options_from_args(args, out)
