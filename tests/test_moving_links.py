@@ -52,10 +52,7 @@ def witnesses(unc, loop, domain, seed: int) -> np.ndarray:
     robots = draw_true_robots(loop.uncertainty_robot, carried_set("ur5"), 16, seed=seed, extremes=0.5)
     rng = np.random.default_rng(seed)
     return np.array(
-        [
-            motion_witness(unc, loop, true.robot, *drawn_points(domain, rng, k >= 8)).max()
-            for k, true in enumerate(robots)
-        ]
+        [motion_witness(unc, loop, true, *drawn_points(domain, rng, k >= 8)).max() for k, true in enumerate(robots)]
     )
 
 
@@ -94,12 +91,25 @@ def test_the_frozen_model_cannot_hold_a_robot_s_motion_with_its_scalars_constant
     assert worst > 1.0
 
 
-def test_the_blocks_that_move_are_the_motion_s_and_the_constants_are_smaller_than_the_frozen_ranges():
-    _loop, _domain, unc = moving_model()
-    _l, _d, frozen = carried_model("ur5")
+def test_the_blocks_that_move_are_the_motion_s_and_the_links_are_exact_at_the_centre():
+    """Each link's scalar is a real block of its own whose factor is the link's own at the task's centre (exact:
+    no direction and no residual for the links), repeated only as often as that factor's rank; the instrument's part
+    at the centre stays in the constant blocks."""
+    from polyrob.plant.models import inner_links as links
+
+    loop, domain, unc = moving_model()
     flags = [b["moving"] for b in unc.info["residual_blocks"]]
-    assert flags[:2] == [False, False] and all(flags[2:]) and len(flags) > 2  # the centre's state and inertia blocks
-    assert np.all(unc.info["theta_range"] <= frozen.info["theta_range"] * (1 + 1e-12))
+    assert flags[:2] == [False, False] and all(flags[2:]) and len(flags) > 2  # the instrument's blocks at the centre
+    names = unc.info["exact_scalars"]
+    assert len(names) == unc.n_params and not any(n.startswith("payload.") for n in names)
+    assert np.all(unc.info["theta_range"] == 1.0)
+    scalars = {s.name: s for s in links.set_scalars(loop)}
+    K = links.unit_factors(loop, [scalars[n] for n in names], *task_centre(domain))[:, 0]
+    assert np.allclose(unc.info["K_centres"], K, atol=1e-9 * np.abs(K).max())
+    values = np.linalg.svd(K, compute_uv=False)
+    ranks = [max(1, int(np.sum(v > 1e-9 * values.max()))) for v in values]
+    assert [-int(r) for r, c in unc.block_structure if c == 0] == ranks
+    assert sum(ranks) < loop.m * len(names)  # fewer channels than m repeats each: a wrist's mass moves few joints
 
 
 def test_membership_needs_the_true_robot():

@@ -10,13 +10,20 @@ robot's factor at the task's centre ``x_c``::
 
     K(u, x) = K_0 + sum_k t_k(u) K_k,c + E_c(u) + E_m(u, x)
 
-* ``t_k(u) = <J(u, x_c), D_k>``: the directions' values at the centre, real
-  scalars within their reach there (exact in ``u``; the payload at the
-  points of its physical set), **constant** while the robot moves;
-* ``E_c(u)``: the rest of the factor at the centre, the state columns'
-  full block (its norm bound at ``x_c``) and the inertia block at ``q_c``
-  (shaped like the set): **constant** too, so μ's frequency-dependent
-  scalings are valid for them;
+* ``sum_k t_k(u) K_k,c``: by default (``exact=True``) the set's own link
+  and joint scalars, ``t_k = u_k`` within ``±1`` and ``K_k,c = K_k(x_c)``
+  their factors at the centre, each a real block repeated as often as its
+  factor's rank (a wrist's mass moves two joints' loops, not six): the
+  links' part of the factor at the centre is then *exact*, with no
+  direction box and no residual.  With ``exact=False`` the ``inner-links``
+  directions instead, ``t_k(u) = <J(u, x_c), D_k>`` within their reach
+  there.  **Constant** while the robot moves;
+* ``E_c(u)``: the rest of the factor at the centre (the instrument's part
+  with ``exact``, whose physical set -- a mass times a centre-of-mass ball
+  -- no box of its scalars holds without members that are no rigid body),
+  the state columns' full block (its norm bound at ``x_c``) and the inertia
+  block at ``q_c`` (shaped like the set): **constant** too, so μ's
+  frequency-dependent scalings are valid for them;
 * ``E_m(u, x) = K(u, x) - K(u, x_c)``: the motion, bounded entrywise over
   the task's samples (``SPREAD_MARGIN`` wider) and carried by two full
   blocks (state and acceleration columns), marked ``moving``: the only
@@ -28,7 +35,8 @@ scaling), so the certificate covers every motion of the state at any rate
 with the parameters constant, paying for time variation only on what the
 motion moves.  The blocks overlap (``E_c`` and ``E_m`` on the same
 entries), so membership is no test on a Jacobian alone: it needs the true
-robot, whose ``t`` and ``E_c`` come from its factor at the centre and
+robot, whose ``t`` (its own parameters' values, :func:`scalar_values`, or
+the directions' values of its factor) and ``E_c`` come from its factor at the centre and
 ``E_m`` from its factor at each state (:func:`motion_witness`), and the
 coverage is measured that way on fresh true robots of the set at fresh
 points of the task (:func:`motion_coverage`).  Over the task the enclosure
@@ -45,7 +53,7 @@ import numpy as np
 
 from polyrob.plant.lftplant import UncertainPlant
 
-__all__ = ["moving_links_plant", "motion_witness", "motion_coverage", "task_centre"]
+__all__ = ["moving_links_plant", "motion_witness", "motion_coverage", "scalar_units", "scalar_values", "task_centre"]
 
 
 def task_centre(domain):
@@ -54,7 +62,9 @@ def task_centre(domain):
     return domain.split(((lower + upper) / 2)[None, :])
 
 
-def moving_links_plant(pldi, robot, *, n_directions: int | None = None, samples: int = 256) -> UncertainPlant:
+def moving_links_plant(
+    pldi, robot, *, n_directions: int | None = None, samples: int = 256, exact: bool = True
+) -> UncertainPlant:
     """The ``inner-links-moving`` LFT of the module text for ``robot`` (a :class:`~polyrob.model.inner.SetLoopRobot`).
 
     The inertia block at the centre is shaped like the set there; whether
@@ -77,47 +87,71 @@ def moving_links_plant(pldi, robot, *, n_directions: int | None = None, samples:
     raw = links.unit_factors(robot, f.scalars, *centre)  # (N, 1, m, 3m)
     G_exact, kappa = exactly_weighted(robot, centre[0], raw[..., n:], f.W)
     at_centre = links.weighted_factor(raw, f.W, np.linalg.inv(f.W))
-    coeff = at_centre[..., :n].reshape(N, 1, m * n) / f.scale @ f.D.T  # (N, 1, P): t_k(u) = sum_j u_j coeff_jk
-    ranges = links.RANGE_MARGIN * links.reach_of(coeff, f.on_payload, f.pay)[0]
-    rest = at_centre - np.einsum("jsk,kab->jsab", coeff, f.centres)
+    if exact:  # each link's and joint's scalar its own real block, its factor at the centre exact
+        own = ~f.on_payload
+        names = tuple(s.name for s, o in zip(f.scalars, own) if o)
+        ranges, centres = np.ones(len(names)), at_centre[own, 0]
+        rest = np.where(own[:, None, None, None], 0.0, at_centre)  # the payload's part: the blocks
+        flat = np.zeros((1, m, 3 * m))  # the inertia block's own well-posedness at its centre; μ at ω = ∞ the rest
+        block = None if own.all() else inertia_block(
+            np.where(own[:, None, None, None], 0.0, G_exact), rest[..., n:], f.on_payload, f.pay, kappa,
+            np.zeros(1), flat, links.G_MARGIN)  # fmt: skip
+    else:
+        coeff = at_centre[..., :n].reshape(N, 1, m * n) / f.scale @ f.D.T  # (N, 1, P): t_k(u) = sum_j u_j coeff_jk
+        ranges = links.RANGE_MARGIN * links.reach_of(coeff, f.on_payload, f.pay)[0]
+        names, centres = tuple(f"t{k}" for k in range(len(ranges))), f.centres
+        rest = at_centre - np.einsum("jsk,kab->jsab", coeff, f.centres)
+        block = inertia_block(G_exact, at_centre[..., n:], f.on_payload, f.pay, kappa, ranges, f.centres,
+                              links.G_MARGIN)  # fmt: skip
     spread = links.SPREAD_MARGIN * links.entry_bound(rest, f.on_payload, f.pay)
-    norm = links.state_residual_norm_bound(rest[..., :n], f.on_payload, f.pay, spread[:, :n])
-    block = inertia_block(G_exact, at_centre[..., n:], f.on_payload, f.pay, kappa, ranges, f.centres, links.G_MARGIN)
-    motion = links.SPREAD_MARGIN * links.entry_bound(f.Phi - at_centre, f.on_payload, f.pay)
+    norm = links.state_residual_norm_bound(rest[..., :n], f.on_payload, f.pay, spread[:, :n]) if spread.any() else None
+    moved = f.Phi - at_centre
+    motion = links.SPREAD_MARGIN * links.entry_bound(moved, f.on_payload, f.pay)
+    # the entry box of each motion block holds norms no sample reaches: its norm bound over the set at each
+    # sample (as the centre's state block has it) shrinks its ball
+    rho = [links.state_residual_norm_bound(moved[..., c], f.on_payload, f.pay, motion[:, c]) or 1.0
+           for c in (slice(0, n), slice(n, None))]  # fmt: skip
     return factor_lft_plant(
         pldi,
         "inner-links-moving",
-        tuple(f"t{k}" for k in range(len(ranges))),
+        tuple(name.replace(".", "_") for name in names),  # signal names take no dot
         ranges,
-        list(links.weighted_factor(f.centres, np.linalg.inv(f.W), f.W)),
+        list(links.weighted_factor(centres, np.linalg.inv(f.W), f.W)),
         spread,
         {"PLDI": pldi.enclosure, "factors": "sampled"},
         weighting=f.W,
-        g_norm=block.g_norm,
-        g_offset=block.offset,
-        g_shape=block.shape,
+        g_norm=0.0 if block is None else block.g_norm,
+        g_offset=0.0 if block is None else block.offset,
+        g_shape=None if block is None else block.shape,
         state_residual_norm=norm,
         motion_spread=motion,
+        low_rank=exact,
+        motion_norms=tuple(rho),
         info={
+            "exact_scalars": names if exact else (),
+            "exact_units": scalar_units(robot) if exact else (),
             "set": robot.uncertainty.words(),
             "scalars": tuple(s.name for s in f.scalars),
             "state_directions": f.D,
             "direction_scale": f.scale,
             "samples": int(samples),
             "spread_margin": links.SPREAD_MARGIN,
-            "inertia_block": block.kind,
-            "inertia_ball": block.ball,
+            "inertia_block": "none (no payload)" if block is None else block.kind,
+            "inertia_ball": 0.0 if block is None else block.ball,
             "motion_norm": float(np.linalg.norm(motion)),
+            "motion_ball": tuple(float(r) for r in rho),
             "centre": tuple(np.asarray(x, float)[0] for x in centre),
         },
     )
 
 
-def motion_witness(unc: UncertainPlant, robot, true_robot, q, qdot, a) -> np.ndarray:
-    """Per point ``(q, qdot, a)``, the largest scaled part of ``true_robot`` in the model: ``<= 1`` is membership.
+def motion_witness(unc: UncertainPlant, robot, true, q, qdot, a) -> np.ndarray:
+    """Per point ``(q, qdot, a)``, the largest scaled part of the drawn robot ``true`` in the model: ``<= 1`` is membership.
 
-    ``robot`` is the set's loop, ``true_robot`` one robot of the set (a
-    :class:`~polyrob.uncertainty_set.draw.TrueRobot`'s ``robot``); its ``t`` and ``E_c`` come from its factor at the task's centre
+    ``robot`` is the set's loop, ``true`` one robot of the set (a
+    :class:`~polyrob.uncertainty_set.draw.TrueRobot`); its scalars (its own
+    parameters' values, :func:`scalar_values`, or the directions' values of
+    its factor at the task's centre) and ``E_c`` come from its factor at the task's centre
     (``unc.info["centre"]``), the same at every point; ``E_m`` is its factor
     at the point less that at the centre.  Each must lie in its blocks'
     balls (``t`` within the ranges); an entry no block of its kind reaches
@@ -127,15 +161,62 @@ def motion_witness(unc: UncertainPlant, robot, true_robot, q, qdot, a) -> np.nda
 
     m, info = len(unc.info["centre"][0]), unc.info
     W = info["residual_weighting"]
+    true_robot = true.robot
     K_c = factor_of(robot, true_robot, *(x[None, :] for x in info["centre"]))[0]
-    J = weighted_factor(K_c[None], W, np.linalg.inv(W))[0, :, : 2 * m].ravel() / info["direction_scale"]
-    t = info["state_directions"] @ J
+    if info.get("exact_scalars"):  # the robot's own scalars, from its parameters
+        t = scalar_values(info["exact_units"], info["exact_scalars"], robot, true)
+        r = np.asarray(info["theta_range"], float)
+        t = np.where(np.abs(t) <= r * (1 + 1e-9), np.clip(t, -r, r), t)  # a vertex's round-off
+    else:
+        J = weighted_factor(K_c[None], W, np.linalg.inv(W))[0, :, : 2 * m].ravel() / info["direction_scale"]
+        t = info["state_directions"] @ J
     E_c = K_c - info["K_offset"] - np.tensordot(t, info["K_centres"], axes=1)
     ranges = np.asarray(info["theta_range"], float)
     over = np.divide(np.abs(t), ranges, out=np.where(np.abs(t) > 0, np.inf, 0.0), where=ranges > 0)
     size = 1.0 + float(np.abs(K_c).max())
     fixed = max([float(over.max(initial=0.0))] + _norms(unc, E_c, False, size))
     return np.array([max([fixed] + _norms(unc, K - K_c, True, size)) for K in factor_of(robot, true_robot, q, qdot, a)])
+
+
+def scalar_units(robot) -> tuple:
+    """The set's link and joint scalars as the model keeps them for :func:`scalar_values`: per scalar its name,
+    body, joint, the range's middle (viscous friction) and its change of the ten parameters per unit."""
+    from polyrob.plant.models.inner_links import set_scalars
+
+    middle = {f.joint: 0.5 * (f.viscous[0] + f.viscous[1]) for f in robot.uncertainty.friction}
+    joints = robot.uncertainty_robot.joint_names
+    return tuple(
+        {"name": s.name, "body": s.body, "joint": s.joint, "half": s.half_range,
+         "middle": middle[joints[s.joint]] if s.joint >= 0 else 0.0, "unit": s.half_range * np.asarray(s.params)}
+        for s in set_scalars(robot)
+        if not s.name.startswith("payload.")
+    )  # fmt: skip
+
+
+def scalar_values(units, names, robot, true) -> np.ndarray:
+    """The values of the scalars ``names`` (per unit of their half range, :func:`scalar_units`) of a drawn robot.
+
+    A link's scalars span its drawn parameters' change from the model's
+    (the set's box is built so), solved for by least squares on that link's
+    ten parameters with all its scalars (the model drops those that do not
+    move the loop); a joint's viscous scalar is its drawn coefficient less
+    the range's middle.  ``robot``: the set's loop (its nominal links).
+    """
+    from polyrob.uncertainty_set.links import link_names
+
+    bodies = {j: name for name, j in link_names(robot.uncertainty_robot).items()}
+    values, by_body = {}, {}
+    for s in units:
+        if s["joint"] >= 0:
+            values[s["name"]] = (float(true.viscous[s["joint"]]) - s["middle"]) / s["half"]
+        else:
+            by_body.setdefault(s["body"], []).append(s)
+    for body, group in by_body.items():
+        nominal = np.asarray(robot.uncertainty_robot.model.inertias[body].toDynamicParameters(), float)
+        change = np.asarray(true.link_parameters[bodies[body]], float) - nominal
+        solved = np.linalg.lstsq(np.column_stack([s["unit"] for s in group]), change, rcond=None)[0]
+        values.update({s["name"]: float(u) for s, u in zip(group, solved)})
+    return np.array([values[name] for name in names])
 
 
 def _norms(unc, E, moving: bool, size: float) -> list[float]:
@@ -159,7 +240,7 @@ def motion_coverage(unc: UncertainPlant, robot, domain, n: int = 2000, *, points
     corners of the task (:data:`~polyrob.uncertainty_set.draw.EXTREME_SHARE`,
     as :func:`polyrob.plant.coverage.coverage_fraction` draws them).
     """
-    from polyrob.uncertainty_set.draw import EXTREME_SHARE, at_vertices
+    from polyrob.uncertainty_set.draw import EXTREME_SHARE, at_vertices, draw_true_robot
 
     rng = np.random.default_rng([seed, 38])
     robots = max(1, int(n) // points)
@@ -167,10 +248,10 @@ def motion_coverage(unc: UncertainPlant, robot, domain, n: int = 2000, *, points
     lower, upper = np.asarray(domain.lower, float), np.asarray(domain.upper, float)
     found = []
     for k in range(robots):
-        true = robot.drawn(rng, extreme=k >= inside)
+        true = draw_true_robot(robot.uncertainty_robot, robot.uncertainty, rng, extreme=k >= inside)  # as robot.drawn
         if k < inside:
             x = domain.sample_box(points, method="uniform", seed=int(rng.integers(2**31)))
         else:
             x = np.where(rng.integers(0, 2, size=(points, len(lower))) == 1, upper, lower)
-        found.append(motion_witness(unc, robot, true.true_robot, *domain.split(x)) <= 1.0)
+        found.append(motion_witness(unc, robot, true, *domain.split(x)) <= 1.0)
     return float(np.concatenate(found).mean())

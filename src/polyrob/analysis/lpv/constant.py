@@ -336,11 +336,11 @@ def constant_parameter_certificate(
     base = problem.scope() if hasattr(problem, "scope") else Scope()
     names = ", ".join(P.uncertain.parameter_names[: len(real)])
     held = len(constant) - len(real)  # full blocks that stay constant (inner-links-moving: the rest at the centre)
-    if held:
-        names = (
-            f"the set's parameters (the directions' values {names} and {held} full block{'s' * (held > 1)} at the "
-            "task's centre)"
-        )
+    exact = (P.uncertain.info or {}).get("exact_scalars")
+    what = f"its {len(real)} link and joint parameters, exact there" if exact else f"the directions' values {names}"
+    if held or exact:
+        blocks = f" and {held} full block{'s' * (held > 1)}" if held else ""
+        names = f"the set's parameters ({what}{blocks} at the task's centre)"
     words = f"{names} constant (rate 0), the state (q, qdot, qddot) moving at any rate"
     try:
         d0, source = residual_scalings(P, K)

@@ -241,6 +241,8 @@ def factor_lft_plant(
     state_residual_norm: float | None = None,
     g_shape=None,
     motion_spread=None,
+    low_rank: bool = False,
+    motion_norms=None,
 ):
     """The LFT ``a = v + sum_k theta_k K_k,c [x; a] + E [x; a]`` (module text) as an :class:`UncertainPlant`.
 
@@ -277,6 +279,13 @@ def factor_lft_plant(
     (:func:`residual_blocks`) for the part of the factor that moves with the
     state, marked ``moving`` in ``info["residual_blocks"]`` (the others
     ``moving: False``): :mod:`polyrob.plant.moving_links`.
+    ``motion_norms`` ``(rho_x, rho_a)``: the motion's state and acceleration
+    blocks cover norms up to these in their weights instead of 1 (as
+    ``state_residual_norm`` does for the constant state block).
+    ``low_rank``: each ``theta_k`` repeated ``rank(K_k,c)`` times instead of
+    ``m`` (``K_k,c = L_k R_k`` from its SVD): the same LFT with fewer
+    channels, for a model with one scalar per parameter (a link's mass
+    moves the loop of the joints up to it only).
     """
     m, n = pldi.m, 2 * pldi.m
     ranges = np.asarray(ranges, float)
@@ -314,7 +323,11 @@ def factor_lft_plant(
             C[:, n:] = H
             blocks.append({"B": H, "C": C, "rows": np.arange(m), "cols": np.arange(n, 3 * m), "W_l": H, "W_r": H})
     if motion_spread is not None:  # the part that moves with the state: the blocks the moving robot varies in time
-        blocks += [{**b, "moving": True} for b in residual_blocks(np.asarray(motion_spread, float), n)]
+        for b in residual_blocks(np.asarray(motion_spread, float), n):
+            rho = 1.0 if motion_norms is None else float(motion_norms[int(b["cols"].max() >= n)])
+            if not 0.0 < rho <= 1.0:
+                raise ArgumentError(f"motion_norms must lie in (0, 1], got {motion_norms!r}")
+            blocks.append({**b, "B": rho * b["B"], "W_l": rho * np.asarray(b["W_l"]), "moving": True})
     G0 = np.asarray(g_offset, float) * np.eye(m) if np.ndim(g_offset) == 0 else np.asarray(g_offset, float)
     if weighting is not None:
         W = np.asarray(weighting, float)
@@ -337,17 +350,19 @@ def factor_lft_plant(
     # channels: the residual block, then each theta repeated m times, then the entry scalars; every channel
     # enters the accelerations: a = u + sum_j d_j + B_f d_f, and every output reads [x; a]
     gain = np.linalg.inv(np.eye(m) - G0)  # a = gain (u + to_a d) around K_0 = [0, G0]
-    to_a = gain @ np.hstack([Bf if k else np.zeros((m, 0)), np.tile(np.eye(m), P), B_e])  # a = gain u + to_a d
-    reads = np.vstack(([Cf] if k else []) + [r * K for r, K in zip(ranges, centres)] + [C_e])
+    left, right = _repeated_factors(centres, m, low_rank)
+    repeats = [L.shape[1] for L in left]
+    to_a = gain @ np.hstack([Bf if k else np.zeros((m, 0)), *left, B_e])  # a = gain u + to_a d
+    reads = np.vstack(([Cf] if k else []) + [r * R for r, R in zip(ranges, right)] + [C_e])
     C_v, D_vu, D_vd = reads[:, :n], reads[:, n:] @ gain, reads[:, n:] @ to_a
     entry_names = [f"residual[{i},{j}]" for i, j in entries]
     channels = Channels(
         into_accelerations(m) @ to_a,
         C_v,
         D_vu,
-        [[size, size] for size in sizes] + [[-m, 0]] * P + [[-1, 0]] * n_e,
-        [f"res#{i}" for i in range(k)] + [f"{nm}#{i}" for nm in names for i in range(m)] + entry_names,
-        [-1] * k + [j for j in range(P) for _ in range(m)] + list(range(P, P + n_e)),
+        [[size, size] for size in sizes] + [[-r, 0] for r in repeats] + [[-1, 0]] * n_e,
+        [f"res#{i}" for i in range(k)] + [f"{nm}#{i}" for nm, r in zip(names, repeats) for i in range(r)] + entry_names,
+        [-1] * k + [j for j in range(P) for _ in range(repeats[j])] + list(range(P, P + n_e)),
         D_vd,
     )
     centre = (arm_state_matrix(np.zeros((m, n))), into_accelerations(m) @ gain)
@@ -384,6 +399,23 @@ def factor_lft_plant(
             **(info or {}),
         },
     )
+
+
+def _repeated_factors(centres, m: int, low_rank: bool):
+    """``(left, right)``: ``K_k = L_k R_k`` per centre, ``(I, K_k)`` or, with ``low_rank``, from the SVD at its rank
+    (singular values above ``1e-9`` of the largest of all centres; at least one channel per scalar)."""
+    centres = [np.asarray(K, float) for K in centres]
+    if not low_rank:
+        return [np.eye(m)] * len(centres), centres
+    svds = [np.linalg.svd(K, full_matrices=False) for K in centres]
+    top = max([float(s[0]) for _, s, _ in svds] + [1e-300])
+    left, right = [], []
+    for U, s, Vt in svds:
+        r = max(1, int(np.sum(s > 1e-9 * top)))
+        root = np.sqrt(s[:r])
+        left.append(U[:, :r] * root)
+        right.append(root[:, None] * Vt[:r])
+    return left, right
 
 
 def residual_blocks(spread: np.ndarray, n: int) -> list[dict]:

@@ -397,15 +397,22 @@ class MovingLinksModel(InnerLinksModel):
 
     def describe(self, unc):
         ranges = ", ".join(f"{n} ±{r:.3g}" for n, r in zip(unc.info["factors"], unc.info["theta_range"]))
+        scalars = f"{len(unc.info['factors'])} directions' values there (one repeated real each, constant: {ranges})"
+        if unc.info.get("exact_scalars"):
+            scalars = (
+                f"the set's {len(unc.info['factors'])} link and joint scalars, each within ±1 of its half range and "
+                "exact there (one real each, repeated as its factor's rank, constant)"
+            )
         norm = unc.info.get("state_residual_norm")
         state = (
             "none for the state columns" if norm is None else f"the state columns' of norm <= {norm:.3g} in its weights"
         )
         return (
-            f"inner-links-moving: the computed-torque factor split at the task's centre: {len(unc.info['factors'])} "
-            f"directions' values there (one repeated real each, constant: {ranges}), the rest there in constant full "
+            f"inner-links-moving: the computed-torque factor split at the task's centre: {scalars}, the rest there "
+            f"{'(the instrument' + chr(39) + 's part) ' if unc.info.get('exact_scalars') else ''}in constant full "
             f"blocks ({state}; {_inertia_words(unc)}), and the motion K(u, x) - K(u, x_c) in full blocks that vary in time "
-            f"(entry bounds of Frobenius norm {unc.info['motion_norm']:.3g}); set: {unc.info['set']} "
+            f"(entry bounds of Frobenius norm {unc.info['motion_norm']:.3g}, norms at most "
+            f"{', '.join(f'{r:.3g}' for r in unc.info.get('motion_ball', (1.0,)))} in their weights); set: {unc.info['set']} "
             f"({self.enclosure(unc)} enclosure over the task domain)."
         )
 
