@@ -63,9 +63,15 @@ def task_centre(domain):
 
 
 def moving_links_plant(
-    pldi, robot, *, n_directions: int | None = None, samples: int = 256, exact: bool = True
+    pldi, robot, *, n_directions: int | None = None, samples: int = 256, exact: bool = True, motion_balls: bool = True
 ) -> UncertainPlant:
     """The ``inner-links-moving`` LFT of the module text for ``robot`` (a :class:`~polyrob.model.inner.SetLoopRobot`).
+
+    ``exact``: the link and joint scalars themselves at the centre (else
+    the ``inner-links`` directions); ``motion_balls``: the motion blocks'
+    balls shrunk to the motion's norm bound (else their entry boxes'); both
+    as the module text says, the alternatives kept for comparison
+    (``benchmarks/moving_links_models.py``).
 
     The inertia block at the centre is shaped like the set there; whether
     ``I - G`` stays invertible with the motion's acceleration block on top
@@ -110,7 +116,7 @@ def moving_links_plant(
     # the entry box of each motion block holds norms no sample reaches: its norm bound over the set at each
     # sample (as the centre's state block has it) shrinks its ball
     rho = [links.state_residual_norm_bound(moved[..., c], f.on_payload, f.pay, motion[:, c]) or 1.0
-           for c in (slice(0, n), slice(n, None))]  # fmt: skip
+           for c in (slice(0, n), slice(n, None))] if motion_balls else [1.0, 1.0]  # fmt: skip
     return factor_lft_plant(
         pldi,
         "inner-links-moving",

@@ -1,0 +1,139 @@
+"""The moving robot of a per-link set on three cuts of the ``inner-links-moving`` model, for one controller, as JSON.
+
+    python benchmarks/moving_links_models.py CONTROLLER.json [--link-error 10] [--payload-max 0]
+        [--com-radius 0.1] [--robot-uncertainty FILE] [--points 45] [--coverage 200]
+
+The model (:mod:`polyrob.plant.moving_links`) splits each true robot's
+computed-torque factor at the task's centre into constants and the motion.
+For the controller file's robot, task and weights (as ``polyrob synth -o``
+writes them) this builds the model three ways:
+
+* ``directions, entry boxes``: the ``inner-links`` principal directions at
+  the centre, the motion blocks as the entry box's Frobenius covering (the
+  model before commit caaa1d3);
+* ``directions, balls``: the motion blocks' balls shrunk to the motion's
+  norm bound over the set at each sample;
+* ``exact, balls``: the set's link and joint scalars themselves at the
+  centre (the model as it is).
+
+For each it prints the μ upper bound's peak on ``--points`` log-spaced
+frequencies from 0.01 to 3162 rad/s, with the motion blocks merged with the
+performance channels by constant scalings searched as the moving-robot
+certificate does (:func:`~polyrob.analysis.lpv.constant.search_scalings`):
+the moving robot's figure; and with every block a block of its own: the
+frozen robot's figure on that model.  Both are grid figures, not
+certificates (``polyrob analyze ... --moving`` proves one between its
+points).  ``--coverage N``: each model's :func:`~polyrob.plant.moving_links.motion_coverage`
+on N (true robot, point) pairs drawn anew.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+from _results import add_results_option, save_run
+
+VARIANTS = (("directions, entry boxes", False, False), ("directions, balls", False, True), ("exact, balls", True, True))
+
+
+def _spec(args, name):
+    from polyrob.model.robots import load_robot
+    from polyrob.uncertainty_set.spec import RATED_PAYLOAD, PayloadBody, RobotUncertainty
+
+    if args.robot_uncertainty:
+        return RobotUncertainty.from_file(args.robot_uncertainty)
+    rated = RATED_PAYLOAD.get(load_robot(name).name)
+    top = min(args.payload_max, rated.kg) if rated is not None and rated.kg else args.payload_max
+    payload = PayloadBody(0.0, top, com_radius=args.com_radius) if top > 0 else None
+    return RobotUncertainty(link_error=args.link_error / 100.0, payload=payload, source="benchmark options")
+
+
+def peaks(P, K, omega):
+    """``(merged, frozen, d)``: the μ upper bound's peaks and frequencies, merged and with every block its own."""
+    import numpy as np
+
+    from polyrob.analysis.lpv.constant import residual_scalings, scaled_plant, search_scalings
+    from polyrob.analysis.mu.bounds import mussv
+    from polyrob.analysis.mu.frequency import matrix_response
+    from polyrob.plant.loops import lft
+
+    m = P.n_u
+
+    def sweep(system, blk):
+        N = lft(system, K, n_u=m, n_y=m)
+        H = matrix_response(*(np.asarray(X, float) for X in (N.A, N.B, N.C, N.D)))(omega)
+        mu = np.array([mussv(H[k], blk, lower=False).upper for k in range(len(omega))])
+        return {"peak": float(mu.max()), "at_rad_s": float(omega[mu.argmax()])}
+
+    frozen = sweep(P.system, P.block_structure_rp)
+    d = search_scalings(P, K, residual_scalings(P, K)[0])
+    return sweep(*scaled_plant(P, d)), frozen, [float(x) for x in d]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("controller", help="a controller file as `polyrob synth -o` writes it (an inner-links problem)")
+    ap.add_argument("--robot-uncertainty", default=None, help="a robot-uncertainty file (YAML/JSON)")
+    ap.add_argument("--link-error", type=float, default=10.0, help="per-link error in percent (default 10)")
+    ap.add_argument("--payload-max", type=float, default=0.0, help="payload up to this many kg (default 0: none)")
+    ap.add_argument("--com-radius", type=float, default=0.1, help="payload centre of mass within this radius (m)")
+    ap.add_argument("--points", type=int, default=45, help="frequencies of the grid (default 45)")
+    ap.add_argument("--coverage", type=int, default=200, help="(true robot, point) pairs per coverage (0: none)")
+    add_results_option(ap)
+    args = ap.parse_args()
+
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from polyrob.domains.task import TaskDomain
+    from polyrob.io.controller import load_controller, read_controller_file
+    from polyrob.model.inner import inner_loop_of_set
+    from polyrob.model.robots import load_robot
+    from polyrob.plant.generalized import generalized_plant
+    from polyrob.plant.moving_links import motion_coverage, moving_links_plant
+    from polyrob.plant.weights import plant_weights
+
+    t0 = time.perf_counter()
+    doc = read_controller_file(args.controller)
+    info = doc.get("info") or {}
+    robot = load_robot(info["robot"])
+    loop = inner_loop_of_set(robot, "computed-torque", _spec(args, info["robot"]), draws=2)
+    domain = TaskDomain.from_dict(info["domain"], robot=loop)
+    weights = plant_weights({k: tuple(v) for k, v in info["weights"].items()})
+    K = load_controller(args.controller)
+    # the model reads of a PLDI its domain, size and nominal: a stand-in at one point of the task
+    q, qdot, a = domain.split(domain.sample_box(1, method="uniform", seed=0))
+    A0, B0 = loop.jacobians_batch(q, qdot, loop.inverse_dynamics(q, qdot, a))
+    pldi = SimpleNamespace(m=loop.m, domain=domain, A0=A0[0], B0=B0[0], enclosure="sampled", robot_name=loop.name)
+    omega = np.logspace(-2, 3.5, args.points)
+    rows = []
+    for name, exact, balls in VARIANTS:
+        t1 = time.perf_counter()
+        unc = moving_links_plant(pldi, loop, exact=exact, motion_balls=balls)
+        merged, frozen, d = peaks(generalized_plant(unc, **weights), K, omega)
+        cover = motion_coverage(unc, loop, domain, args.coverage) if args.coverage else None
+        rows.append({"model": name, "parameters": int(unc.n_params), "moving": merged, "frozen": frozen,
+                     "scalings": d, "motion_ball": list(unc.info["motion_ball"]), "coverage": cover,
+                     "seconds": round(time.perf_counter() - t1, 1)})  # fmt: skip
+    out = {
+        "controller": args.controller,
+        "robot": robot.name,
+        "set": loop.uncertainty.words(),
+        "grid": f"{args.points} log-spaced frequencies, 0.01 to 3162 rad/s (grid figures, not certificates)",
+        "models": rows,
+        "seconds": round(time.perf_counter() - t0, 1),
+    }
+    print(json.dumps(out, indent=1))
+    table = {
+        "columns": ["model", "moving robot (merged)", "frozen robot", "coverage"],
+        "rows": [[r["model"], f"{r['moving']['peak']:.4g}", f"{r['frozen']['peak']:.4g}", r["coverage"]] for r in rows],
+    }
+    figure = ", ".join(f"{r['model']}: {r['moving']['peak']:.4g} / {r['frozen']['peak']:.4g}" for r in rows)
+    save_run(args.results, "moving_links_models", f"{robot.name}: the moving-links model's cuts", figure, out, table)
+
+
+if __name__ == "__main__":
+    main()
