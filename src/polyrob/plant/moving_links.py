@@ -206,11 +206,13 @@ def scalar_values(units, names, robot, true) -> np.ndarray:
     (the set's box is built so), solved for by least squares on that link's
     ten parameters with all its scalars (the model drops those that do not
     move the loop); a joint's viscous scalar is its drawn coefficient less
-    the range's middle.  ``robot``: the set's loop (its nominal links).
+    the range's middle.  ``robot``: the set's loop (its model's links: the
+    URDF's, or an interval's centre, as the inner layer computes with).
     """
     from polyrob.uncertainty_set.links import link_names
 
     bodies = {j: name for name, j in link_names(robot.uncertainty_robot).items()}
+    explicit = {li.link: np.asarray(li.centre, float) for li in robot.uncertainty.links}  # the model's own links
     values, by_body = {}, {}
     for s in units:
         if s["joint"] >= 0:
@@ -218,7 +220,9 @@ def scalar_values(units, names, robot, true) -> np.ndarray:
         else:
             by_body.setdefault(s["body"], []).append(s)
     for body, group in by_body.items():
-        nominal = np.asarray(robot.uncertainty_robot.model.inertias[body].toDynamicParameters(), float)
+        nominal = explicit.get(bodies[body])
+        if nominal is None:
+            nominal = np.asarray(robot.uncertainty_robot.model.inertias[body].toDynamicParameters(), float)
         change = np.asarray(true.link_parameters[bodies[body]], float) - nominal
         solved = np.linalg.lstsq(np.column_stack([s["unit"] for s in group]), change, rcond=None)[0]
         values.update({s["name"]: float(u) for s, u in zip(group, solved)})
