@@ -141,3 +141,30 @@ def test_the_moving_certificate_merges_only_the_motion_blocks():
     moving = sum(f.rows for f, flag in zip(full, _moving_flags(P)) if flag)
     assert kinds.count("real") == len(unc.info["factors"]) and kinds.count("full") == 3  # two constant, one merged
     assert as_block_structure(blk).blocks[-1].rows == moving + P.n_w
+
+
+def test_a_file_s_friction_and_a_link_s_intervals_off_the_urdf_are_read_as_the_model_has_them():
+    """panda's example file (per-link ±10 %, an instrument, viscous friction ranges) with its forearm given as
+    ten-parameter intervals whose centre is 5 % heavier than the URDF's link: each drawn robot's scalars are read
+    against the inner layer's own links (the interval's centre) and the friction's middle, and it is a member."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from polyrob.uncertainty_set.links import LinkInterval, link_names
+    from polyrob.uncertainty_set.spec import RobotUncertainty
+
+    robot = load_robot("panda")
+    path = Path(__file__).resolve().parents[1] / "examples" / "uncertainty" / "panda.yaml"
+    spec = RobotUncertainty.from_file(path)
+    theta = np.asarray(robot.model.inertias[link_names(robot)["panda_link5"]].toDynamicParameters(), float)
+    centre = 1.05 * theta  # a rigid body still: every parameter scaled by one factor
+    interval = LinkInterval("panda_link5", tuple(centre - 0.05 * np.abs(theta)), tuple(centre + 0.05 * np.abs(theta)))
+    spec = replace(spec, links=(interval,)).bound(robot)
+    loop = inner_loop_of_set(robot, "computed-torque", spec, draws=2)
+    domain = default_task_domain(loop)
+    pldi = SimpleNamespace(m=robot.m, domain=domain, A0=None, B0=None, enclosure="sampled", robot_name=robot.name)
+    unc = moving_links_plant(pldi, loop, samples=32)
+    names = unc.info["exact_scalars"]
+    assert any(n.startswith("panda_link5.") and n[-1].isdigit() for n in names)
+    assert any(n.endswith(".viscous") for n in names)
+    assert motion_coverage(unc, loop, domain, 40, points=5) == 1.0
