@@ -225,3 +225,25 @@ def test_tuning_for_the_moving_robot_needs_a_model_of_constants():
     lft_problem = SimpleNamespace(P=SimpleNamespace(uncertain=SimpleNamespace(model="lft")))
     with pytest.raises(ArgumentError, match="needs a model of constants"):
         tune_for_moving(lft_problem, control.ss([], [], [], np.eye(2)))
+
+
+def test_a_tuning_that_loses_the_frozen_certificate_and_wins_nothing_is_not_kept(problem, monkeypatch):
+    """ur5 per link: three rounds left the merged mu at 1.967 and took the frozen mu from 0.931 to 1.465; the
+    certified design is what the user keeps then, and the record says why."""
+    import polyrob.synthesis.moving as moving
+    from polyrob.analysis.certificate import certify_loop
+    from polyrob.pipeline.design import Design, tuned_for_moving
+    from polyrob.synthesis.moving import MovingTuning
+
+    K = load_controller(FIXTURE)
+    design = Design(controller=K, result=None, reduced=None, record={}).certified_by(certify_loop(problem.P, K))
+    assert design.certificate.certified
+    worse = K * 40.0  # a PID far off the weights: its frozen mu is far above 1
+    monkeypatch.setattr(moving, "tune_for_moving", lambda *a, **k: MovingTuning(worse, np.ones(2), (1.5,), "pid", 0.0))
+    kept = tuned_for_moving(problem, design, rounds=1)
+    assert kept.controller is K and kept.certificate is design.certificate
+    assert kept.record["moving_tuning"]["kept"] is False and kept.record["moving_tuning"]["frozen_mu"] > 1.0
+    assert "the design kept" in kept.notes[-1]
+    # a tuning that reached merged mu below 1 is kept even so
+    monkeypatch.setattr(moving, "tune_for_moving", lambda *a, **k: MovingTuning(worse, np.ones(2), (0.9,), "pid", 0.0))
+    assert tuned_for_moving(problem, design, rounds=1).controller is worse

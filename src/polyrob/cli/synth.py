@@ -457,10 +457,12 @@ def moving_tuning_stage(problem, design, rounds: int, out):
     held = moving_problem(problem)
     design = tuned_for_moving(problem, design, rounds=rounds, held=held)
     tuning = design.record["moving_tuning"]
-    out.line(
-        f"tuned for the moving robot: merged-structure mu {', '.join(f'{h:.4g}' for h in tuning['history'])} "
-        f"({tuning['seconds']:.0f} s); the frozen robot's mu is now {design.certificate.bound:.4g}"
-    )
+    history = f"tuned for the moving robot: merged-structure mu {', '.join(f'{h:.4g}' for h in tuning['history'])}"
+    if not tuning.get("kept", True):  # the tuned PID lost the frozen certificate and won no other: not kept
+        out.line(f"{history} ({tuning['seconds']:.0f} s); not kept: its frozen mu {tuning['frozen_mu']:.4g} lost the "
+                 f"design's certificate (mu {design.certificate.bound:.4g}), the design stays")  # fmt: skip
+        return design, None, held
+    out.line(f"{history} ({tuning['seconds']:.0f} s); the frozen robot's mu is now {design.certificate.bound:.4g}")
     return design, tuning["scalings"], held
 
 

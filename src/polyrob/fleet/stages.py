@@ -98,8 +98,8 @@ def moving_tuning_stage(problem, design, settings, timings: dict, details: dict)
         return design, None, problem
     finally:
         timings["moving-robot tuning"] = time.perf_counter() - t0
-    details["moving_tuning"] = tuned.record["moving_tuning"]
-    return tuned, tuned.record["moving_tuning"]["scalings"], held
+    tuning = details["moving_tuning"] = tuned.record["moving_tuning"]
+    return tuned, tuning["scalings"] if tuning.get("kept", True) else None, held
 
 
 def design_stage(problem, settings, timings: dict, details: dict):
