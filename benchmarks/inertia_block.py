@@ -46,18 +46,7 @@ import sys
 import time
 
 from _results import add_results_option, save_run
-
-
-def _spec(args, name):
-    from polyrob.model.robots import load_robot
-    from polyrob.uncertainty_set.spec import RATED_PAYLOAD, PayloadBody, RobotUncertainty
-
-    if args.robot_uncertainty:
-        return RobotUncertainty.from_file(args.robot_uncertainty)
-    rated = RATED_PAYLOAD.get(load_robot(name).name)
-    top = min(args.payload_max, rated.kg) if rated is not None and rated.kg else args.payload_max
-    payload = PayloadBody(0.0, top, com_radius=args.com_radius) if top > 0 else None
-    return RobotUncertainty(link_error=args.link_error / 100.0, payload=payload, source="benchmark options")
+from _sets import add_set_options, set_of
 
 
 def main() -> None:
@@ -71,10 +60,7 @@ def main() -> None:
     ap.add_argument("--ball", type=int, default=0, help="also search this many symmetric matrices of the unit ball")
     ap.add_argument("--hermitian", action="store_true", help="also mu with the block's real members (symmetric + skew)")
     ap.add_argument("--fixed-positions", action="store_true", help="also mu with the task's positions at its centre")
-    ap.add_argument("--robot-uncertainty", default=None, help="a robot-uncertainty file (YAML/JSON)")
-    ap.add_argument("--link-error", type=float, default=10.0, help="per-link error in percent (default 10)")
-    ap.add_argument("--payload-max", type=float, default=1.5, help="payload up to this many kg (capped at the rated)")
-    ap.add_argument("--com-radius", type=float, default=0.1, help="payload centre of mass within this radius (m)")
+    add_set_options(ap, payload_max=1.5)
     add_results_option(ap)
     args = ap.parse_args()
 
@@ -99,7 +85,7 @@ def main() -> None:
     info, cert = doc.get("info") or {}, doc.get("certificate") or {}
     omega = float(args.omega if args.omega is not None else cert.get("peak_frequency"))
     robot = load_robot(info["robot"])
-    spec = _spec(args, info["robot"])
+    spec = set_of(args, info["robot"])
     loop = inner_loop_of_set(robot, "computed-torque", spec, draws=2)
     domain = TaskDomain.from_dict(info["domain"], robot=loop)
     unc = links.light_model(loop, domain, samples=256)

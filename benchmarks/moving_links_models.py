@@ -34,20 +34,9 @@ import json
 import time
 
 from _results import add_results_option, save_run
+from _sets import add_set_options, set_of
 
 VARIANTS = (("directions, entry boxes", False, False), ("directions, balls", False, True), ("exact, balls", True, True))
-
-
-def _spec(args, name):
-    from polyrob.model.robots import load_robot
-    from polyrob.uncertainty_set.spec import RATED_PAYLOAD, PayloadBody, RobotUncertainty
-
-    if args.robot_uncertainty:
-        return RobotUncertainty.from_file(args.robot_uncertainty)
-    rated = RATED_PAYLOAD.get(load_robot(name).name)
-    top = min(args.payload_max, rated.kg) if rated is not None and rated.kg else args.payload_max
-    payload = PayloadBody(0.0, top, com_radius=args.com_radius) if top > 0 else None
-    return RobotUncertainty(link_error=args.link_error / 100.0, payload=payload, source="benchmark options")
 
 
 def peaks(P, K, omega):
@@ -75,10 +64,7 @@ def peaks(P, K, omega):
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("controller", help="a controller file as `polyrob synth -o` writes it (an inner-links problem)")
-    ap.add_argument("--robot-uncertainty", default=None, help="a robot-uncertainty file (YAML/JSON)")
-    ap.add_argument("--link-error", type=float, default=10.0, help="per-link error in percent (default 10)")
-    ap.add_argument("--payload-max", type=float, default=0.0, help="payload up to this many kg (default 0: none)")
-    ap.add_argument("--com-radius", type=float, default=0.1, help="payload centre of mass within this radius (m)")
+    add_set_options(ap, payload_max=0.0)
     ap.add_argument("--points", type=int, default=45, help="frequencies of the grid (default 45)")
     ap.add_argument("--coverage", type=int, default=200, help="(true robot, point) pairs per coverage (0: none)")
     add_results_option(ap)
@@ -100,7 +86,7 @@ def main() -> None:
     doc = read_controller_file(args.controller)
     info = doc.get("info") or {}
     robot = load_robot(info["robot"])
-    loop = inner_loop_of_set(robot, "computed-torque", _spec(args, info["robot"]), draws=2)
+    loop = inner_loop_of_set(robot, "computed-torque", set_of(args, info["robot"]), draws=2)
     domain = TaskDomain.from_dict(info["domain"], robot=loop)
     weights = plant_weights({k: tuple(v) for k, v in info["weights"].items()})
     K = load_controller(args.controller)
