@@ -5,18 +5,19 @@ enclosure, the branch and bound), with the forms it intersects on a box
 (:mod:`~polyrob.bounds.certified.factors.slope_form`,
 :mod:`~polyrob.bounds.certified.factors.taylor2`) and how tightness is
 measured (:mod:`~polyrob.bounds.certified.factors.width_ratio`); the values
-attained that steer it (:mod:`~polyrob.bounds.certified.factors.attained`).
+attained that steer it (:mod:`~polyrob.bounds.certified.factors.attained`),
+the faces a monotone side needs (:mod:`~polyrob.bounds.certified.factors.monotone`)
+and the scalars proved (:mod:`~polyrob.bounds.certified.factors.directions`).
 """
 
 from polyrob.bounds.certified.factors.attained import attained_range, vertex_ascent
+from polyrob.bounds.certified.factors.directions import Direction, factor_directions
 from polyrob.bounds.certified.factors.ranges import (
     BATCH,
     MAX_BOXES,
     REL_TOL,
-    Direction,
     FactorEnclosure,
     FactorProblem,
-    factor_directions,
     prove_factor_ranges,
 )
 

@@ -46,14 +46,16 @@ def split_map(pool, fn, arrays: tuple, *extra) -> tuple:
 
 def _enclose_part(problem, item) -> tuple:
     boxes, a_lo, a_hi, taylor = item
-    return problem.enclose(*boxes, a_lo, a_hi, taylor=taylor, attained=True)
+    entries = boxes[4] if len(boxes) > 4 else None
+    return problem.enclose(*boxes[:4], a_lo, a_hi, taylor=taylor, attained=True, entries=entries)
 
 
 def enclose_batch(pool, boxes, a_lo, a_hi, *, taylor: bool) -> tuple:
-    """``pool.state.enclose(*boxes, a_lo, a_hi, taylor=taylor, attained=True)``, the boxes shared among the workers.
+    """``pool.state.enclose(*boxes[:4], a_lo, a_hi, taylor=taylor, attained=True, entries=boxes[4])``, shared among the workers.
 
     ``pool``: a :class:`~polyrob.bounds.parallel.WorkerPool` whose state is
     the :class:`~polyrob.bounds.certified.factors.ranges.FactorProblem`;
-    ``boxes``: ``(q_lo, q_hi, qd_lo, qd_hi)``, each ``(B, m)``.
+    ``boxes``: ``(q_lo, q_hi, qd_lo, qd_hi)``, each ``(B, m)``, and
+    optionally the entries still open on each box ``(B, F, m, 3m)``.
     """
     return split_map(pool, _enclose_part, tuple(boxes), a_lo, a_hi, taylor)

@@ -39,7 +39,11 @@ within ``rel_tol`` of the entry's width of the *inner* value (the largest
 attained at a point so far: the sampled search's, this module's pilot, the vertices
 :func:`~polyrob.bounds.certified.factors.attained.vertex_ascent` visits, and
 every box's centre); a box with an open side is split along the
-coordinate that carries most of the over-estimation.  The result is the
+coordinate that carries most of the over-estimation; a side proved
+monotone in a coordinate goes to the face where its extreme lies
+(:mod:`~polyrob.bounds.certified.factors.monotone`), and the open entries'
+Taylor form is bounded on cells of the box
+(:func:`~polyrob.bounds.certified.factors.taylor2.taylor2_cells`).  The result is the
 union of the leaves' enclosures: rigorous whatever the inner values are
 (they only steer), and the work is counted in boxes (:data:`MAX_BOXES`),
 never in seconds.
@@ -58,8 +62,15 @@ from polyrob.bounds.certified.factors.attained import attained_range, vertex_asc
 from polyrob.bounds.certified.factors.box_batches import enclose_batch
 from polyrob.bounds.certified.factors.hessian import box_models, factor_hessians
 from polyrob.bounds.certified.factors.inverse import fixed_point_inverse, jet_parts, taylor_neumann_inverse
+from polyrob.bounds.certified.factors.monotone import gradient_signs, replace_box
 from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread, vertex_gradients
-from polyrob.bounds.certified.factors.taylor2 import at_vertices, taylor2_bounds
+from polyrob.bounds.certified.factors.taylor2 import (
+    at_vertices,
+    cell_grid,
+    gradient_bounds,
+    taylor2_bounds,
+    taylor2_cells,
+)
 from polyrob.bounds.certified.factors.width_ratio import FLOOR, closing_tolerance
 from polyrob.bounds.certified.jet_rnea import PARAMETER_RTOL, Chain, rnea
 from polyrob.bounds.parallel import WorkerPool
@@ -69,7 +80,6 @@ __all__ = [
     "FactorProblem",
     "FactorEnclosure",
     "prove_factor_ranges",
-    "factor_directions",
     "MAX_BOXES",
     "REL_TOL",
     "BATCH",
@@ -127,7 +137,7 @@ class FactorProblem:
 
     @classmethod
     def from_loops(cls, loops) -> FactorProblem:
-        """From ``[(name, loop), ...]``: :func:`factor_directions`, or the plant's ``FactorLoop`` objects.
+        """From ``[(name, loop), ...]``: :func:`~polyrob.bounds.certified.factors.directions.factor_directions`, or the plant's ``FactorLoop`` objects.
 
         ``Delta_k = (true - model) / theta_k`` in the parameters, with a
         radius covering the float arithmetic of the difference.
@@ -308,7 +318,9 @@ class FactorProblem:
             singular,
         )
 
-    def enclose(self, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, *, taylor: bool = False, attained: bool = False):
+    def enclose(
+        self, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, *, taylor: bool = False, attained: bool = False, entries=None
+    ):
         """Proved bounds of every factor entry on each box: ``(lower, upper, contribution)``.
 
         ``q_lo`` ... ``qd_hi``: ``(B, m)``; ``a_lo``, ``a_hi``: ``(m,)`` (the
@@ -317,15 +329,21 @@ class FactorProblem:
         ``contribution``: ``(B, F, m, 3m, 2m)``, the over-estimation bound
         each coordinate (``q``, then ``qdot``) adds to each entry (of the
         mean-value or slope form).  ``taylor``: intersect with the
-        second-order Taylor form (:mod:`polyrob.bounds.certified.factors.taylor2`).
+        second-order Taylor form (:mod:`polyrob.bounds.certified.factors.taylor2`);
+        ``entries`` (bool ``(B, F, m, 3m)``, with ``taylor``): the entries whose
+        Taylor form is also bounded on cells (:func:`~polyrob.bounds.certified.factors.taylor2.taylor2_cells`:
+        the branch and bound's open ones).
         ``attained``: also return the smallest and largest values attained
-        at the box's centre and the acceleration vertices ``(B, F, m, 3m)``.
+        at the box's centre and the acceleration vertices ``(B, F, m, 3m)``,
+        and the proved sign of each entry's gradient over the box at every
+        acceleration vertex ``(B, F, m, 3m, 2m)`` (``+1``, ``-1``, ``0``: not
+        proved; :func:`~polyrob.bounds.certified.factors.monotone.gradient_signs`).
         """
         with np.errstate(over="ignore", invalid="ignore"):  # a box whose M_hat may be singular gets inf
-            out = self._enclose(q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor)
+            out = self._enclose(q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor, entries)
         return out if attained else out[:3]
 
-    def _taylor2(self, centre, M3, h3, Y_centre, Y_box, radii, V):
+    def _taylor2(self, centre, M3, h3, Y_centre, Y_box, radii, V, entries=None):
         """Per-vertex ``(lower, upper)`` ``(B, F, i, 3m, nv)`` of the second-order Taylor form (taylor2.py).
 
         ``centre``: order-3 jets at the boxes' centres; the value and gradient
@@ -336,20 +354,38 @@ class FactorProblem:
         K0p, Kap, _ = self._factors(centre[0].truncated(2), centre[1].truncated(2), Y_centre)
         # the Hessian by Taylor-model jets (hessian.py): ball jets over the box lose the cancellations of Y dM Y dM Y
         K0h, Kah = factor_hessians(self, centre[0], M3, h3, radii)
-        lows, highs, parts = [], [], []
+        lows, highs, parts, g_lows, g_highs = [], [], [], [], []
         for chunk in np.array_split(V, max(1, len(V) // 8)):  # the Hessians at 8 vertices at a time
             vm, vr = at_vertices(K0p.mid[:1], K0p.rad[:1], Kap.mid[:1], Kap.rad[:1], chunk)
             gm, gr = at_vertices(K0p.mid[1:], K0p.rad[1:], Kap.mid[1:], Kap.rad[1:], chunk)
             hm, hr = at_vertices(K0h.mid[1 + n :], K0h.rad[1 + n :], Kah.mid[1 + n :], Kah.rad[1 + n :], chunk)
             hess = (hm.reshape(n, n, *hm.shape[1:]), hr.reshape(n, n, *hr.shape[1:]))
             lo, hi, part = taylor2_bounds((vm[0], vr[0]), (gm, gr), hess, radii)
+            if entries is not None and entries.any():  # the open entries' quadratic on cells (taylor2.py)
+                at = np.nonzero(np.broadcast_to(entries[..., None], lo.shape))
+                every = (slice(None),) + at
+                c_lo, c_hi = taylor2_cells(
+                    (vm[0][at], vr[0][at]),
+                    (gm[every].T, gr[every].T),
+                    (
+                        np.moveaxis(hess[0][(slice(None),) + every], -1, 0),
+                        np.moveaxis(hess[1][(slice(None),) + every], -1, 0),
+                    ),
+                    radii[at[0]],
+                    *cell_grid(len(at[0])),
+                )
+                lo[at], hi[at] = np.maximum(lo[at], c_lo), np.minimum(hi[at], c_hi)
             lows.append(lo)
             highs.append(hi)
             parts.append(part.max(-1))
+            g_lo, g_hi = gradient_bounds((gm, gr), hess, radii)
+            g_lows.append(g_lo)
+            g_highs.append(g_hi)
         contribution = np.moveaxis(np.max(parts, axis=0), 0, -1)  # (B, F, i, 3m, 2m)
-        return np.concatenate(lows, -1), np.concatenate(highs, -1), contribution
+        gradient = (np.concatenate(g_lows, -1), np.concatenate(g_highs, -1))
+        return np.concatenate(lows, -1), np.concatenate(highs, -1), contribution, gradient
 
-    def _enclose(self, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor=False):
+    def _enclose(self, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor=False, entries=None):
         m = self.m
         qc, qr = bj.centre_radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
         vc, vr = bj.centre_radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
@@ -398,64 +434,29 @@ class FactorProblem:
         spread = np.where(narrower, slope, spread)
         contribution = np.where(narrower.all(-1)[..., None], slope_contribution, contribution)
         hi, lo = upper(vm, vrad + spread), lower(vm, vrad + spread)
+        g_lo, g_hi = gm - gr, gm + gr
         if taylor:  # both enclose K at each vertex: their intersection does (M_hat's inverse as proved as above)
             centre = (Mc3, hc3)
-            t_lo, t_hi, t_contribution = self._taylor2(centre, M3, h3, (Yc.mid[0], Yc.rad[0]), Y_box, radii, V)
+            t_lo, t_hi, t_contribution, t_grad = self._taylor2(
+                centre, M3, h3, (Yc.mid[0], Yc.rad[0]), Y_box, radii, V, entries
+            )
             # where the Taylor form is the narrower, its second-order terms say where to split
             narrower = ((t_hi - t_lo) < (hi - lo)).all(-1)
             contribution = np.where(narrower[..., None], t_contribution, contribution)
             hi, lo = np.minimum(hi, t_hi), np.maximum(lo, t_lo)
+            g_lo, g_hi = np.maximum(g_lo, t_grad[0]), np.minimum(g_hi, t_grad[1])
         hi, lo = hi.max(-1), lo.min(-1)
         hi[unbounded], lo[unbounded] = np.inf, -np.inf
+        sign = gradient_signs(g_lo, g_hi)
+        sign[unbounded] = 0
         # values attained at the box's centre and the a-vertices (float midpoints of thin balls): they only steer
-        return lo, hi, contribution, vm.min(-1), vm.max(-1)
+        return lo, hi, contribution, vm.min(-1), vm.max(-1), sign
 
 
 def _columns(Jq, Jqd, G, m):
     """``[J_q J_qd G]``: three ``(B, F, i, m)`` jets side by side, ``(B, F, i, 3m)``."""
     K = type(Jq).stack([Jq, Jqd, G], 3)  # (B, F, i, 3, m)
     return K.reshape(*K.shape[:3], 3 * m)
-
-
-@dataclass(frozen=True, eq=False)
-class Direction:
-    """One scalar in which a true robot differs from the inner layer's model: ``theta`` and that true robot."""
-
-    inner: str
-    model_robot: object
-    true_robot: object
-    theta: float
-
-
-def factor_directions(robot) -> list[tuple[str, Direction]]:
-    """``[(name, Direction)]`` of a computed-torque inner loop (:class:`~polyrob.model.inner.InnerLoopRobot`).
-
-    The same scalars as :func:`polyrob.plant.models.inner_factors.factor_parameters`
-    (the link factor ``theta = p`` at ``s = 1 - p``; the payload mass, half
-    its range above the middle), built here so that the bounds do not
-    import the plant; ``tests/test_certified_arms.py`` checks that the two agree.
-
-    Raises
-    ------
-    CertificationError
-        A payload whose centre of mass ranges (not affine in one scalar).
-    """
-    payload = robot.payload
-    mass, com = payload.midpoint if payload is not None else (0.0, np.zeros(3))
-    if payload is not None and np.any(np.array(payload.com_upper) > np.array(payload.com_lower)):
-        raise CertificationError("proved factor ranges: a payload whose centre of mass ranges is not one scalar")
-    out = []
-    if robot.model_error:
-        p = float(robot.model_error)
-        out.append(
-            ("links", Direction(robot.inner, robot.model_robot, robot.with_true(mass, com, 1.0 - p).true_robot, p))
-        )
-    if payload is not None and payload.mass_upper > payload.mass_lower:
-        r = 0.5 * (payload.mass_upper - payload.mass_lower)
-        out.append(
-            ("payload", Direction(robot.inner, robot.model_robot, robot.with_true(mass + r, com, 1.0).true_robot, r))
-        )
-    return out
 
 
 def prove_factor_ranges(
@@ -478,7 +479,7 @@ def prove_factor_ranges(
     Parameters
     ----------
     loops : list of (str, Direction or FactorLoop)
-        :func:`factor_directions` of the inner loop (names first).
+        :func:`~polyrob.bounds.certified.factors.directions.factor_directions` of the inner loop (names first).
     domain : TaskDomain
         ``q_lower`` ... ``qddot_upper``.
     inner : (lower, upper) arrays (F, m, 3m), optional
@@ -545,7 +546,10 @@ def prove_factor_ranges(
             batch, stack = stack[-BATCH:], stack[:-BATCH]
             boxes += len(batch)
             ql, qh, vl, vh = (np.array([b[k] for b in batch]) for k in range(4))
-            lo, hi, contribution, seen_lo, seen_hi = enclose_batch(pool, (ql, qh, vl, vh), a_lo, a_hi, taylor=taylor)
+            entries = np.array([b[4].any(-1) for b in batch])
+            lo, hi, contribution, seen_lo, seen_hi, sign = enclose_batch(
+                pool, (ql, qh, vl, vh, entries), a_lo, a_hi, taylor=taylor
+            )
             # the inner values grow with every box's centre: an entry's side closes against the best value attained
             finite = np.isfinite(hi).all((1, 2, 3))
             if finite.any():
@@ -570,15 +574,10 @@ def prove_factor_ranges(
                 p = int(np.argmax(scores))
                 if not np.isfinite(scores[p]) or scores[p] <= 0:
                     p = int(np.argmax(np.concatenate([(bqh - bql) / root_q * q_can, (bvh - bvl) / root_v * v_can])))
-                for half in (0, 1):
-                    nql, nqh, nvl, nvh = bql.copy(), bqh.copy(), bvl.copy(), bvh.copy()
-                    if p < m:
-                        mid = 0.5 * (bql[p] + bqh[p])
-                        (nqh if half == 0 else nql)[p] = mid
-                    else:
-                        mid = 0.5 * (bvl[p - m] + bvh[p - m])
-                        (nvh if half == 0 else nvl)[p - m] = mid
-                    stack.append((nql, nqh, nvl, nvh, still, 0.5 * share))
+                # a side monotone in a coordinate needs only the face where its extreme lies (monotone.py)
+                x_lo, x_hi = np.concatenate([bql, bvl]), np.concatenate([bqh, bvh])
+                for c_lo, c_hi, sides, c_share in replace_box(x_lo, x_hi, still, sign[b], p, share):
+                    stack.append((c_lo[:m], c_hi[:m], c_lo[m:], c_hi[m:], sides, c_share))
             # the whole job's fraction: the open work left is each queued box's volume share times its open sides
             closed_share = 1.0 - sum(b[5] * b[4].sum() for b in stack) / total_sides
             if progress is not None:

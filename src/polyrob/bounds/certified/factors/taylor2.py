@@ -28,7 +28,10 @@ import numpy as np
 
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY
 
-__all__ = ["at_vertices", "taylor2_bounds"]
+__all__ = ["at_vertices", "taylor2_bounds", "taylor2_cells", "cell_grid", "gradient_bounds"]
+
+#: Instances times cells :func:`cell_grid` allows one call of :func:`taylor2_cells` (numpy's work).
+CELL_BUDGET = 2**17
 
 
 def at_vertices(mid, rad, a_mid, a_rad, V):
@@ -99,3 +102,119 @@ def taylor2_bounds(value, grad, hess, radii):
     h_abs = np.maximum(np.abs(h_lo), np.abs(h_hi))
     contribution = 0.5 * h_abs * r * r + 0.5 * (pairs.sum(1) + pairs.sum(0))
     return lower - margin, upper + margin, contribution
+
+
+def gradient_bounds(grad, hess, radii):
+    """Proved ``(lower, upper)`` of every gradient component over the box: ``g(c) + H(box) d``.
+
+    The mean-value theorem on each component ``g_p``: ``g_p(c + d) - g_p(c) =
+    sum_l H_pl(xi) d_l`` with ``xi`` in the box, so ``|g_p(x) - g_p(c)| <=
+    sum_l |H_pl| r_l``.  Used by the monotonicity test of the branch and bound
+    (:mod:`~polyrob.bounds.certified.factors.monotone`): the Hessian of the
+    Taylor models keeps the recursion's cancellations that the ball gradient
+    over the box loses.  Arguments as :func:`taylor2_bounds`; returns arrays
+    ``(n, B, ...)``.
+    """
+    n = grad[0].shape[0]
+    extra = grad[0].ndim - 2
+    r = radii.T.reshape(1, n, -1, *([1] * extra))  # (1, l, B, 1, ...)
+    spread = ((np.abs(hess[0]) + hess[1]) * r).sum(1) * (1 + 4 * n * GAMMA) + TINY
+    margin = GAMMA * (np.abs(grad[0]) + grad[1] + spread) + TINY
+    return grad[0] - grad[1] - spread - margin, grad[0] + grad[1] + spread + margin
+
+
+def taylor2_cells(value, grad, hess, radii, split: int = 4, parts: int = 2):
+    """Tighter ``(lower, upper)`` of the same Taylor model, its quadratic bounded on cells of the box.
+
+    The model says ``f(c + d) = f(c) + g.d + d' H(xi) d / 2`` with ``g`` and
+    ``H`` in balls, so ``f(c + d)`` lies within ``T(d) = g_mid.d + d' S d / 2``
+    (``S`` the symmetric part of ``H``'s midpoint, a float quadratic) of
+    ``f(c)`` up to ``g_rad.|d| + |d|' S_rad |d| / 2``.  :func:`taylor2_bounds`
+    bounds the cross terms of ``T`` by their magnitude and each coordinate's
+    own quadratic apart from them, which on an entry whose linear and cross
+    terms oppose each other at the corner the linear part picks (an arm's
+    nearly constant entries) over-estimates by several times the proof's
+    tolerance.  Here ``T`` is re-expanded, exactly (it is a quadratic), at the
+    centres ``d0`` of the ``parts**split`` cells that cut each of the ``split``
+    coordinates carrying most of its cross terms into ``parts``: on each cell ``T(d0)`` and
+    ``g_mid + S d0`` are exact up to rounding (added to the balls) and the
+    cross terms shrink with the cells' radii.  The extremes over the cells,
+    plus the ball parts over the whole box, bound ``f``.  No dynamics are
+    re-evaluated: the cost is numpy on ``n x n`` matrices.
+
+    Parameters
+    ----------
+    value : (mid, rad), arrays (N,)
+    grad : (mid, rad), arrays (N, n)
+    hess : (mid, rad), arrays (N, n, n)
+        The Hessian's balls over the box.
+    radii : ndarray (N, n)
+    split, parts : int
+        Coordinates cut, and into how many parts each (:func:`cell_grid`).
+
+    Returns
+    -------
+    lower, upper : ndarray (N,)
+
+    Examples
+    --------
+    ``f = x0 - x1 + x0 x1`` on ``[-1, 1]^2`` is at most 1: the magnitude bound says 3, the four cells 1.5.
+
+    >>> import numpy as np
+    >>> value, grad = (np.zeros(1), np.zeros(1)), (np.array([[1.0, -1.0]]), np.zeros((1, 2)))
+    >>> hess = (np.array([[[0.0, 1.0], [1.0, 0.0]]]), np.zeros((1, 2, 2)))
+    >>> radii = np.ones((1, 2))
+    >>> float(taylor2_bounds(value, (grad[0].T, grad[1].T), (hess[0].transpose(1, 2, 0), hess[1].transpose(1, 2, 0)), radii)[1][0])
+    3.0...
+    >>> round(float(taylor2_cells(value, grad, hess, radii)[1][0]), 6)
+    1.5
+    """
+    vm, vr = value
+    gm, gr = grad
+    n_inst, n = gm.shape
+    S = 0.5 * (hess[0] + np.swapaxes(hess[0], 1, 2))
+    S_rad = 0.5 * (hess[1] + np.swapaxes(hess[1], 1, 2)) + GAMMA * np.abs(S)
+    S_abs = np.abs(S)
+    r = np.asarray(radii, float)
+    # the ball parts over the whole box: f(c), g's radius and the Hessian's
+    fixed = vr + (gr * r).sum(-1) + 0.5 * np.einsum("np,npl,nl->n", r, S_rad, r)
+    weight = r * np.einsum("npl,nl->np", S_abs, r) - np.einsum("np,np,np->np", r, np.diagonal(S_abs, 0, 1, 2), r)
+    k = min(split, n)
+    chosen = np.argsort(-weight, axis=-1)[:, :k]  # (N, k)
+    cut = np.take_along_axis(r, chosen, -1) / parts  # the cells' radii in the chosen coordinates
+    rho = r.copy()
+    np.put_along_axis(rho, chosen, cut, -1)
+    offsets = 2.0 * np.arange(parts) - (parts - 1)  # cell centres in units of the cells' radii
+    zeros = np.zeros((n, n, n_inst))
+    S_t = np.moveaxis(S, 0, -1)
+    upper, lower = np.full(n_inst, -np.inf), np.full(n_inst, np.inf)
+    for steps in np.array(np.meshgrid(*([offsets] * k), indexing="ij")).reshape(k, -1).T:
+        d0 = np.zeros_like(r)
+        np.put_along_axis(d0, chosen, steps * cut, -1)
+        Sd0 = np.einsum("npl,nl->np", S, d0)
+        g0 = gm + Sd0
+        T0 = (gm * d0).sum(-1) + 0.5 * (d0 * Sd0).sum(-1)
+        a0 = np.abs(d0)
+        Sa = np.einsum("npl,nl->np", S_abs, a0)
+        t_err = GAMMA * (n + 3) * (np.abs(vm) + (np.abs(gm) * a0).sum(-1) + 0.5 * (a0 * Sa).sum(-1)) + TINY
+        g_err = GAMMA * (n + 2) * (np.abs(gm) + Sa) + TINY
+        lo, hi, _ = taylor2_bounds((vm + T0, t_err), (g0.T, g_err.T), (S_t, zeros), rho)
+        upper, lower = np.maximum(upper, hi), np.minimum(lower, lo)
+    margin = GAMMA * (np.abs(upper) + np.abs(lower) + fixed) + TINY
+    return lower - fixed - margin, upper + fixed + margin
+
+
+def cell_grid(instances: int) -> tuple[int, int]:
+    """``(split, parts)`` of :func:`taylor2_cells` for ``instances`` quadratics within :data:`CELL_BUDGET`.
+
+    Few instances (the last open sides of a box) get fine cells, many (a
+    large box where every entry is open) coarse ones.
+
+    >>> cell_grid(64), cell_grid(2000), cell_grid(30000)
+    ((4, 6), (4, 2), (2, 2))
+    """
+    cells = CELL_BUDGET / max(instances, 1)
+    for parts in (6, 4, 3, 2):
+        if parts**4 <= cells:
+            return 4, parts
+    return max(1, int(np.log2(max(cells, 2)))), 2
