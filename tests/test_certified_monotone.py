@@ -85,7 +85,7 @@ def test_proved_gradient_signs_agree_with_finite_differences_on_a_box(ur5):
     assert (sign != 0).mean() > 0.1  # many entries are proved monotone in some coordinates on a small box
     rng = np.random.default_rng(3)
     h = 1e-6
-    for _ in range(10):
+    for _ in range(5):
         q = rng.uniform(box.q_lower, box.q_upper)
         qd = rng.uniform(box.qdot_lower, box.qdot_upper)
         a = np.where(rng.random(m) < 0.5, box.qddot_lower, box.qddot_upper)
