@@ -6,7 +6,7 @@ vertex of the acceleration box), and on ``x_p = lo_p`` when it is proved
 non-positive; its smallest value on the other face.  So a side of an entry
 that is monotone in ``x_p`` needs only that face: the classical monotonicity
 test of interval global optimisation (Hansen and Walster, *Global
-Optimization Using Interval Analysis*, 2004, sec. 12.4), written here
+Optimization Using Interval Analysis*, 2nd ed., 2004), written here
 because the factors' boxes carry hundreds of sides (every entry's lower and
 upper bound) with their own faces.
 
