@@ -180,3 +180,36 @@ def test_two_enclosures_that_do_not_meet_are_an_error_not_a_choice():
         intersect(a, b)
     both = intersect(a, BallJet.constant(np.array([1.05, 2.05]), np.array([0.1, 0.1]), 1, 1))
     assert np.all(both.mid[0] - both.rad[0] <= [0.95, 1.95]) and np.all(both.mid[0] + both.rad[0] >= [1.1, 2.1])
+
+
+def test_the_factors_are_quadratic_in_qdot_so_the_centre_velocity_hessian_bounds_a_box(ur5):
+    import itertools
+
+    loops, problem, domain = ur5
+    m, box = problem.m, _scaled(domain, 0.2)
+    rng = np.random.default_rng(7)
+    # third differences in qdot vanish (to rounding) where second differences do not: K0 is quadratic in qdot
+    q, qd, step = rng.uniform(box.q_lower, box.q_upper), rng.uniform(box.qdot_lower, box.qdot_upper), 0.3
+    e = rng.normal(size=m)
+    K = problem.values(np.repeat(q[None], 4, 0), qd + step * np.arange(4)[:, None] * e, np.zeros((4, m)))
+    second, third = K[2] - 2 * K[1] + K[0], K[3] - 3 * K[2] + 3 * K[1] - K[0]
+    assert np.abs(second).max() > 1e-3 and np.abs(third).max() < 1e-10 * np.abs(K).max()
+    # the Hessian over the box's q part at its centre's qdot is much tighter than over the whole box ...
+    args = (box.q_lower[None], box.q_upper[None], box.qdot_lower[None], box.qdot_upper[None])
+    vc = 0.5 * (box.qdot_lower + box.qdot_upper)[None]
+    _, whole = hessian_enclosure(problem, *args)
+    _, thin = hessian_enclosure(problem, *args[:2], vc, vc)
+    live = whole > 1e-9
+    assert np.all(thin[live] <= whole[live])
+    # measured on this box: the (q, qdot) block 0.15 of the whole box's radii in sum, the (q, q) block 0.80
+    assert thin[:m, m:].sum() < 0.3 * whole[:m, m:].sum() and thin[:m, :m].sum() < 0.9 * whole[:m, :m].sum()
+    # ... and the Taylor form that takes it holds the factors at every corner of the (q, qdot) box
+    a_lo, a_hi = box.qddot_lower, box.qddot_upper
+    lo, hi = problem.enclose(*args, a_lo, a_hi, taylor=True)[:2]
+    plain_lo, plain_hi = problem.enclose(*args, a_lo, a_hi)[:2]
+    assert np.mean(hi - lo < 0.9 * (plain_hi - plain_lo)) > 0.3  # the Taylor form decides most entries
+    corners = np.array(list(itertools.product([0, 1], repeat=2 * m)))
+    x = np.where(corners == 1, np.r_[box.q_upper, box.qdot_upper], np.r_[box.q_lower, box.qdot_lower])
+    a = np.where(rng.random((len(x), m)) < 0.5, a_lo, a_hi)
+    K = problem.values(x[:, :m], x[:, m:], a)
+    assert np.all((K >= lo[0]) & (K <= hi[0]))

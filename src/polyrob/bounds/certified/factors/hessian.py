@@ -25,6 +25,27 @@ at the centre, ``|E|`` and ``|Y|`` the proved bounds over the box).  The
 products keep their linear parts exact, so the Hessian's own first-order
 variation is what it is at the centre and only second-order terms are
 bounded by magnitudes.
+
+The velocity at the box's centre is enough (:func:`centre_velocity_models`).
+At ``a = 0`` the factors are polynomials of degree two in ``qdot`` (the
+torques ``h = C(q)[qdot, qdot] + g(q) + D qdot`` are, and ``M_hat``, ``Y`` do
+not depend on ``qdot``), and their ``a``-coefficients do not depend on it.
+For such an ``f`` and ``x = (q_c + d_q, qdot_c + d_v)``::
+
+    f(x) = f(c) + grad f(c).d + 1/2 d_q' H_qq(xi_1) d_q + d_v' H_vq(xi_2) d_q + 1/2 d_v' H_vv(xi_3) d_v
+
+with every ``xi`` in the box's ``q`` part and ``qdot = qdot_c`` (Taylor's
+theorem in ``q`` on ``f(., qdot_c)`` and the mean-value theorem on
+``f_v(., qdot_c).d_v``; the expansion in ``d_v`` is exact, and ``H_vv``
+does not depend on ``qdot``).  So the Taylor form of
+:mod:`~polyrob.bounds.certified.factors.taylor2` may take the Hessian over
+the box *thin in* ``qdot``: the variation of the third derivatives of
+``C(q)[qdot, qdot]`` with ``qdot`` (the largest part of the models'
+remainders: about three quarters on ur5's boxes of a fifth of its task)
+drops out.  It is not the Hessian at every point of the box: the gradient's
+``q`` components vary with ``qdot`` through the third derivatives, so the
+monotonicity test takes only the ``qdot`` components from it
+(:meth:`FactorProblem._taylor2 <polyrob.bounds.certified.factors.ranges.FactorProblem._taylor2>`).
 """
 
 from __future__ import annotations
@@ -44,6 +65,7 @@ __all__ = [
     "tighter",
     "taylor_dynamics",
     "box_models",
+    "centre_velocity_models",
     "hessian_enclosure",
 ]
 
@@ -127,12 +149,17 @@ def taylor_dynamics(problem, qc, qr, vc, vr, order):
     m = problem.m
     s, c = taylor_sin_cos(qc, qr, order, m)
     M = rnea(problem.chain, s, c, None, np.eye(m), False, problem.params, problem.params_rad).transpose(0, 2, 3, 1)
+    return M.extended(np.concatenate([qr, vr], -1).T), taylor_torques(problem, qc, qr, vc, vr, order)
+
+
+def taylor_torques(problem, qc, qr, vc, vr, order):
+    """The torques ``h`` of :func:`taylor_dynamics` alone (Taylor-model jets linear in ``(q, qdot)``)."""
+    m = problem.m
     x_c, x_r = np.concatenate([qc, vc], -1), np.concatenate([qr, vr], -1)
     # the torques are linear in (q, qdot): their quadratic terms in qdot keep their cancellations too
     s2, c2 = taylor_sin_cos(x_c, np.concatenate([qr, np.zeros_like(vr)], -1), order, 2 * m, x_r)
     qd = TaylorJet.variables(x_c, x_r, order, 2 * m)[:, m:]
-    h = rnea(problem.chain, s2[:, :m], c2[:, :m], qd, None, True, problem.params, problem.params_rad)[:, 0]
-    return M.extended(x_r.T), h
+    return rnea(problem.chain, s2[:, :m], c2[:, :m], qd, None, True, problem.params, problem.params_rad)[:, 0]
 
 
 def box_models(problem, qc, qr, vc, vr, centre, box):
@@ -149,6 +176,27 @@ def box_models(problem, qc, qr, vc, vr, centre, box):
     Mt, ht = taylor_dynamics(problem, qc, qr, vc, vr, 3)
     Mf, hf = (from_ball_jets(c, b, radii, 2 * m).extended(radii.T) for c, b in zip(centre, box))
     return tighter(Mt, Mf), tighter(ht, hf)
+
+
+def centre_velocity_models(problem, M, qc, qr, vc, centre_h, box_h):
+    """``(M, h)``: order-3 Taylor-model jets over the boxes' ``q`` part with ``qdot`` at the centres ``vc``.
+
+    What the factors' Hessian in the Taylor form needs (the module's
+    docstring says why).  ``M``: :func:`box_models`' mass-matrix models
+    (they do not depend on ``qdot``: the same models over the thin boxes);
+    ``centre_h``, ``box_h``: the torques' ball jets (order 3) at the
+    centres and over the whole boxes (which hold the thin ones).
+    """
+    m = problem.m
+    zero = np.zeros_like(qr)
+    radii = np.concatenate([qr, zero], -1)
+    if np.any(M.L[m:]):
+        raise ArgumentError("centre_velocity_models: a mass matrix's model depends on qdot")
+    M = TaylorJet(M.c, M.L, M.R, radii.T.copy(), M.n, M.order, M.packed)
+    h = tighter(
+        taylor_torques(problem, qc, qr, vc, zero, 3), from_ball_jets(centre_h, box_h, radii, 2 * m).extended(radii.T)
+    )
+    return M, h
 
 
 def hessian_enclosure(problem, q_lo, q_hi, qd_lo, qd_hi, method: str = "taylor-model"):

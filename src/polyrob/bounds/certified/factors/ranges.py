@@ -28,7 +28,7 @@ How a box is enclosed (:meth:`FactorProblem.enclose`):
   slope form of :mod:`polyrob.bounds.certified.factors.slope_form` (``Y`` enters
   once); and (``taylor=True``, the branch and bound's default) the
   second-order Taylor form of :mod:`polyrob.bounds.certified.factors.taylor2`
-  (value and gradient exact at the centre, Hessian over the box);
+  (value and gradient exact at the centre, Hessian over the box's ``q`` part at its centre's ``qdot``);
 * ``K`` is affine in the acceleration ``a``: every ``K`` is a convex
   combination of its values at the vertices of the ``a``-box, which are
   enumerated (``2^m``), never split;
@@ -60,7 +60,7 @@ from polyrob.bounds.certified import ball_jets as bj
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, intersect, lower, upper
 from polyrob.bounds.certified.factors.attained import attained_range, vertex_ascent
 from polyrob.bounds.certified.factors.box_batches import enclose_batch
-from polyrob.bounds.certified.factors.hessian import box_models, factor_hessians
+from polyrob.bounds.certified.factors.hessian import box_models, centre_velocity_models, factor_hessians
 from polyrob.bounds.certified.factors.inverse import fixed_point_inverse, jet_parts, taylor_neumann_inverse
 from polyrob.bounds.certified.factors.monotone import gradient_signs, replace_box
 from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread, vertex_gradients
@@ -347,13 +347,18 @@ class FactorProblem:
         """Per-vertex ``(lower, upper)`` ``(B, F, i, 3m, nv)`` of the second-order Taylor form (taylor2.py).
 
         ``centre``: order-3 jets at the boxes' centres; the value and gradient
-        come from them, the Hessian over the box from Taylor-model jets
-        (:func:`~polyrob.bounds.certified.factors.hessian.factor_hessians`).
+        come from them, the Hessian over the box's ``q`` part at the centre's
+        ``qdot`` from Taylor-model jets ``M3``, ``h3``
+        (:func:`~polyrob.bounds.certified.factors.hessian.factor_hessians`,
+        :func:`~polyrob.bounds.certified.factors.hessian.centre_velocity_models`).
+        The gradient bounds returned hold for the ``qdot`` components only
+        (the others are infinite).
         """
         n = 2 * self.m
         K0p, Kap, _ = self._factors(centre[0].truncated(2), centre[1].truncated(2), Y_centre)
         # the Hessian by Taylor-model jets (hessian.py): ball jets over the box lose the cancellations of Y dM Y dM Y
-        K0h, Kah = factor_hessians(self, centre[0], M3, h3, radii)
+        q_only = np.concatenate([radii[:, : self.m], np.zeros_like(radii[:, self.m :])], -1)
+        K0h, Kah = factor_hessians(self, centre[0], M3, h3, q_only)
         lows, highs, parts, g_lows, g_highs = [], [], [], [], []
         for chunk in np.array_split(V, max(1, len(V) // 8)):  # the Hessians at 8 vertices at a time
             vm, vr = at_vertices(K0p.mid[:1], K0p.rad[:1], Kap.mid[:1], Kap.rad[:1], chunk)
@@ -379,6 +384,7 @@ class FactorProblem:
             highs.append(hi)
             parts.append(part.max(-1))
             g_lo, g_hi = gradient_bounds((gm, gr), hess, radii)
+            g_lo[: self.m], g_hi[: self.m] = -np.inf, np.inf  # the q components vary with qdot beyond this Hessian
             g_lows.append(g_lo)
             g_highs.append(g_hi)
         contribution = np.moveaxis(np.max(parts, axis=0), 0, -1)  # (B, F, i, 3m, 2m)
@@ -400,6 +406,8 @@ class FactorProblem:
         if taylor:  # Taylor-model jets over the box: the Hessian's (hessian.py), and their ranges tighten the balls
             M3, h3 = box_models(self, qc, qr, vc, vr, (Mc3, hc3), (Mb, hb))
             Mb, hb = intersect(Mb, M3.to_ball()), intersect(hb, h3.to_ball())
+            # the Hessian's models: qdot at the centre is enough (hessian.py)
+            M3, h3 = centre_velocity_models(self, M3, qc, qr, vc, hc3, hb)
         Y_box = self._box_inverse(Mc2, Mb, radii)  # the Taylor form of M_hat of the highest order at hand
         Mb, hb = Mb.truncated(2), hb.truncated(2)
         K0b, Kab, singular_b = self._factors(Mb, hb, Y_box)
