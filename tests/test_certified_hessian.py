@@ -213,3 +213,26 @@ def test_the_factors_are_quadratic_in_qdot_so_the_centre_velocity_hessian_bounds
     a = np.where(rng.random((len(x), m)) < 0.5, a_lo, a_hi)
     K = problem.values(x[:, :m], x[:, m:], a)
     assert np.all((K >= lo[0]) & (K <= hi[0]))
+
+
+def test_sine_and_cosine_models_hold_every_point_and_the_sine_is_of_third_order_at_zero():
+    from polyrob.bounds.certified.taylor_jets import taylor_sin_cos
+
+    rng = np.random.default_rng(11)
+    centre = np.r_[0.0, 1e-3, rng.uniform(-4, 4, 6)][None]
+    radius = np.r_[0.2, 0.05, rng.uniform(0, 0.5, 6)][None]
+    s, c = taylor_sin_cos(centre, radius, 1, 8)
+    d = rng.uniform(-1, 1, (400, 8)) * radius
+    d[:2] = [radius[0], -radius[0]]  # the ends, where the remainder is largest
+    x = centre + d
+    # component 0: the value; 1 + p: the derivative in x_p (only variable p's own entry is not zero)
+    for jet, value, slope in ((s, np.sin(x), np.cos(x)), (c, np.cos(x), -np.sin(x))):
+        for comp, exact in ((0, value), (1, slope)):
+            idx = 0 if comp == 0 else 1 + np.arange(8)
+            model_c = jet.c[idx, 0, np.arange(8)] if comp else jet.c[0, 0]
+            model_L = jet.L[np.arange(8), idx, 0, np.arange(8)] if comp else jet.L[np.arange(8), 0, 0, np.arange(8)]
+            model_R = jet.R[idx, 0, np.arange(8)] if comp else jet.R[0, 0]
+            assert np.all(np.abs(exact - model_c - model_L * d) <= model_R), (comp, jet is s)
+    # at x = 0 the sine's remainder is r^3 / 6 (and rounding), not r^2 / 2; the cosine's r^2 / 4 + r^3 / 6
+    r = radius[0, 0]
+    assert s.R[0, 0, 0] < 1.01 * r**3 / 6 and c.R[0, 0, 0] < 1.01 * (r**2 / 4 + r**3 / 6)

@@ -521,9 +521,16 @@ def taylor_sin_cos(centre, radius, order: int, k: int, box_radius=None):
     may have radius 0 here and its own half-width there).
 
     Every component of ``sin`` and ``cos`` of ``x_p = c_p + d_p`` is ``±sin``
-    or ``±cos``: ``f(c_p + d_p) in f(c_p) + f'(c_p) d_p ± r_p^2 / 2`` (for
-    ``p < k``; else ``f(c_p) ± (|f'(c_p)| r_p + r_p^2 / 2)``), plus the
-    library's error on ``f(c_p)`` and ``f'(c_p)`` (:data:`~polyrob.bounds.certified.ball_jets.TRIG_MARGIN` each).
+    or ``±cos``, so ``f'' = -f`` and ``|f'''| <= 1``: by Taylor's theorem
+    ``f(c + d) = f(c) + f'(c) d - f(c) d^2 / 2 + t``, ``|t| <= r^3 / 6``, and
+    with ``d^2`` in ``[0, r^2]``::
+
+        f(c_p + d_p) in f(c_p) (1 - r_p^2 / 4) + f'(c_p) d_p ± (|f(c_p)| r_p^2 / 4 + r_p^3 / 6)
+
+    (for ``p < k``; else the linear term goes into the ball too), plus the
+    library's error on ``f(c_p)`` and ``f'(c_p)`` (:data:`~polyrob.bounds.certified.ball_jets.TRIG_MARGIN`
+    each) and the rounding of the product.  Near ``sin(c_p) = 0`` (an arm's
+    zero pose) the sine's ball is of third order in ``r_p``, not of second.
     """
     from polyrob.bounds.certified.ball_jets import TRIG_MARGIN
 
@@ -540,8 +547,9 @@ def taylor_sin_cos(centre, radius, order: int, k: int, box_radius=None):
         for j in range(order + 1):  # component j of variable p: index of d^j / dx_p^j
             for p in range(n):
                 idx = 0 if j == 0 else 1 + sum(n**i for i in range(1, j)) + p * sum(n**i for i in range(j))
-                cm[idx, :, p] = seq[j][:, p]
-                rest = 0.5 * r[:, p] ** 2 + TRIG_MARGIN * (1 + r[:, p])
+                f, rp = seq[j][:, p], r[:, p]
+                cm[idx, :, p] = f * (1.0 - 0.25 * rp * rp)
+                rest = 0.25 * np.abs(f) * rp**2 + rp**3 / 6 + TRIG_MARGIN * (1 + rp + rp * rp) + 4 * GAMMA * np.abs(f)
                 if linear[p]:
                     L[p, idx, :, p] = seq[j + 1][:, p]
                     R[idx, :, p] = rest
