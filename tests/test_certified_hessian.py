@@ -89,7 +89,7 @@ def test_products_skip_zero_linear_coefficients_and_packed_jets_with_the_same_fl
         for a, b in ((x, y), (x.unpack(), y.unpack())) + (((y, x),) if form != "matvec" else ()):
             out = a.form(form, b)
             a2, b2 = TaylorJet(a.c, a.L, a.R, r, n, order, a.packed), TaylorJet(b.c, b.L, b.R, r, n, order, b.packed)
-            a2._live = b2._live = k  # the whole sum f(L_a, c_b) + f(c_a, L_b), every coefficient computed
+            a2._live = b2._live = np.ones(k, bool)  # the whole sum f(L_a, c_b) + f(c_a, L_b), every coefficient computed
             whole = a2.form(form, b2)
             assert out.live() == 3 and all(np.array_equal(getattr(out, f), getattr(whole, f)) for f in "cLR")
         # packed: the whole product's floats at the sorted multi-indices
@@ -216,7 +216,7 @@ def test_the_factors_are_quadratic_in_qdot_so_the_centre_velocity_hessian_bounds
 
 
 def test_sine_and_cosine_models_hold_every_point_and_the_sine_is_of_third_order_at_zero():
-    from polyrob.bounds.certified.taylor_jets import taylor_sin_cos
+    from polyrob.bounds.certified.factors.taylor_inputs import taylor_sin_cos
 
     rng = np.random.default_rng(11)
     centre = np.r_[0.0, 1e-3, rng.uniform(-4, 4, 6)][None]

@@ -18,6 +18,15 @@ the cancellations of ``Y dM Y dM Y`` (``Y = M_hat^-1``, entries of tens on
 the arms' wrists) are lost: the dependency problem this module is for
 (:mod:`polyrob.bounds.certified.factors.hessian`).
 
+With ``pairs = kq`` the models are of second order in the first ``kq``
+variables (the joint angles): the monomials ``w_pl = d_p d_l`` (``p <= l <
+kq``, ``|w_pl| <= r_p r_l``; ``w_pp = d_p^2`` in ``[0, r_p^2]``) are symbols of
+their own, as rows of ``lin`` after the ``k`` variables', and a product
+puts ``(a_q.d_q)(b_q.d_q) = sum_pl a_p b_l w_pl`` there instead of into
+the ball: only third-order terms are bounded by magnitudes.  On ur5's
+boxes those quadratic terms are most of what the Hessians' balls hold
+(:mod:`polyrob.bounds.certified.factors.hessian`).
+
 Outward rounding as in :mod:`~polyrob.bounds.certified.ball_jets`: every
 float error of ``const`` (at most ``GAMMA`` times the magnitude summed) and
 of each ``lin_p`` (the same, times ``r_p``) is added to ``rest``, so the
@@ -48,7 +57,7 @@ from polyrob.bounds.certified.ball_jets import (
     symmetric_indices,
 )
 
-__all__ = ["TaylorJet", "from_ball_jets", "taylor_sin_cos"]
+__all__ = ["TaylorJet", "pair_radii", "SUM_MARGIN"]
 
 #: Relative margin of a float sum of up to a few thousand nonnegative terms (``k u``, ``u = 2^-53``, ``k <= 9000``).
 SUM_MARGIN = 1e-12
@@ -58,13 +67,34 @@ def _inflate(rad, mag):
     return (rad + GAMMA * mag) * (1.0 + GAMMA) + TINY
 
 
-def _product(f, fa, lin, x, y):
-    """``(c, L, R, magnitude)`` of one product-rule term of two pieces ``(c, L, R, spread)`` (before rounding margins)."""
-    (xc, xL, xR, xS), (yc, yL, yR, yS) = x, y
+def pair_radii(r, kq: int):
+    """Half-widths ``(P, B)`` of the monomials ``d_p d_l``, ``p <= l < kq``, from the variables' ``r`` ``(k, B)``."""
+    p, ell = np.triu_indices(kq)
+    return np.asarray(r, float)[p] * np.asarray(r, float)[ell]
+
+
+def _product(f, fa, lin, pairs, x, y):
+    """``(c, L, R, magnitude)`` of one product-rule term of two pieces ``(c, L, R, spread, q spread, other spread)`` (before rounding margins).
+
+    ``pairs``: None, or ``(kq, first, p, l)``: the rows ``first + i`` of
+    the monomials ``d_p[i] d_l[i]`` of the first ``kq`` variables.
+    """
+    (xc, xL, xR, xS, xSq, xSo), (yc, yL, yR, yS, ySq, ySo) = x, y
     xA, yA = np.abs(xc) + xS, np.abs(yc) + yS
     c = f(xc, yc)
     L = lin(xL, yc, xc, yL)
-    R = fa(xS, yS)
+    if pairs is None:
+        R = fa(xS, yS)
+    else:  # (a_q.d_q + a_o.d_o)(b.d): the q-q products as monomials, the rest bounded
+        kq, first, p, ell = pairs
+        R = fa(xSo, yS)
+        R += fa(xSq, ySo)
+        if np.any(xL[:kq]) and np.any(yL[:kq]):
+            W = f(xL[:kq, None], yL[None, :kq])  # (kq, kq, ...)
+            Wp = W[p, ell] + W[ell, p]
+            Wp[p == ell] *= 0.5
+            L[first:] += Wp
+            R += 2 * GAMMA * fa(xSq, ySq)  # the floats of W and of its sums
     R += fa(xA, yR)  # (in place: the floats of the sum)
     R += fa(xR, yA + yR)
     return c, L, R, fa(xA, yA)
@@ -79,18 +109,19 @@ class TaylorJet:
     box variables, whose half-widths are ``r`` ``(k, B)``.
     """
 
-    __slots__ = ("c", "L", "R", "r", "n", "order", "packed", "_S", "_live")
+    __slots__ = ("c", "L", "R", "r", "n", "order", "packed", "pairs", "_S", "_live")
 
-    def __init__(self, c, L, R, r, n: int, order: int, packed: bool = False):
+    def __init__(self, c, L, R, r, n: int, order: int, packed: bool = False, pairs: int = 0):
         self.c, self.L, self.R, self.r, self.n, self.order = c, L, R, r, int(n), int(order)
         self.packed = bool(packed) and self.order >= 2  # the layout of BallJet.pack
-        self._S = None  # spread(), computed once: a jet's arrays are never changed after it is made
-        self._live = None  # live(), likewise
+        self.pairs = int(pairs)  # kq: the monomials of the first kq variables are the last rows of L
+        self._S = None  # spreads(), computed once: a jet's arrays are never changed after it is made
+        self._live = None  # live_rows(), likewise
 
     # ------------------------------------------------------------------ construction and conversion
     @classmethod
-    def variables(cls, centre, radius, order: int, k: int | None = None) -> TaylorJet:
-        """The ``n`` variables themselves on the boxes ``centre ± radius`` ``(B, n)``, linear in the first ``k`` (all)."""
+    def variables(cls, centre, radius, order: int, k: int | None = None, pairs: int = 0) -> TaylorJet:
+        """The ``n`` variables themselves on the boxes ``centre ± radius`` ``(B, n)``, linear in the first ``k`` (all), with the monomials of the first ``pairs``."""
         centre, radius = np.asarray(centre, float), np.asarray(radius, float)
         B, n = centre.shape
         k = n if k is None else k
@@ -100,33 +131,50 @@ class TaylorJet:
             L[p, 0, :, p] = 1.0
         R = np.zeros_like(ball.mid)
         R[0, :, k:] = radius[:, k:]  # the other variables' offsets: in the ball
-        return cls(ball.mid, L, R, radius[:, :k].T.copy(), n, order)
+        return cls(ball.mid, L, R, radius[:, :k].T.copy(), n, order).extended(radius[:, :k].T, pairs)
+
+    @property
+    def linear_r(self):
+        """The half-widths ``(k, B)`` of the variables (``r`` without the monomials' rows)."""
+        return self.r[: len(self.r) - self.pairs * (self.pairs + 1) // 2]
 
     def _rr(self, ndim: int):
         """The half-widths ``r`` shaped against an array ``(k, C, B, ...)`` of ``ndim`` axes."""
         k, B = self.r.shape
         return self.r.reshape(k, 1, B, *([1] * (ndim - 3)))
 
-    def spread(self):
-        """An upper bound of ``sum_p |L_p| r_p`` (shape of ``c``)."""
+    def spreads(self):
+        """Upper bounds ``(S, Sq, So)`` of ``sum_p |L_p| r_p`` over all rows, the first ``pairs`` and the others (shape of ``c``; ``Sq``, ``So`` None without pairs)."""
         if self._S is None:
             if self.L.shape[0] == 0:
-                self._S = np.zeros_like(self.c)
+                self._S = (np.zeros_like(self.c), None, None)
+            elif not self.pairs:
+                self._S = ((np.abs(self.L) * self._rr(self.L.ndim)).sum(0) * (1 + GAMMA), None, None)
             else:
-                self._S = (np.abs(self.L) * self._rr(self.L.ndim)).sum(0) * (1 + GAMMA)
+                terms = np.abs(self.L) * self._rr(self.L.ndim)
+                Sq, So = terms[: self.pairs].sum(0) * (1 + GAMMA), terms[self.pairs :].sum(0) * (1 + GAMMA)
+                self._S = ((Sq + So) * (1 + GAMMA), Sq, So)
         return self._S
 
-    def live(self) -> int:
-        """How many leading box variables the linear parts may depend on: ``L_p`` is exactly zero for ``p >= live()``.
+    def spread(self):
+        """An upper bound of ``sum_p |L_p| r_p`` (shape of ``c``)."""
+        return self.spreads()[0]
+
+    def live_rows(self):
+        """Which rows of ``L`` may be nonzero (bool ``(k,)``): a product need not compute the others.
 
         (``M_hat`` and ``Y`` depend on ``q`` alone: their models' ``qdot``
-        coefficients are zeros, and a product need not compute them.)
+        coefficients are zeros.)
         """
         if self._live is None:
             k = self.L.shape[0]
-            nonzero = np.flatnonzero(np.any(self.L != 0, axis=tuple(range(1, self.L.ndim)))) if k else []
-            self._live = int(nonzero[-1]) + 1 if len(nonzero) else 0
+            self._live = np.any(self.L != 0, axis=tuple(range(1, self.L.ndim))) if k else np.zeros(0, bool)
         return self._live
+
+    def live(self) -> int:
+        """How many leading rows the linear parts may depend on: ``L_p`` is exactly zero for ``p >= live()``."""
+        nonzero = np.flatnonzero(self.live_rows())
+        return int(nonzero[-1]) + 1 if len(nonzero) else 0
 
     def to_ball(self) -> BallJet:
         """The ball jet holding every component over the whole box: ``c ± (R + sum_p |L_p| r_p)``."""
@@ -135,30 +183,41 @@ class TaylorJet:
     # ------------------------------------------------------------------ array manipulation (as BallJet's)
     def _with(self, c, L, R, n=None, order=None) -> TaylorJet:
         order = self.order if order is None else order
-        return TaylorJet(c, L, R, self.r, self.n if n is None else n, order, self.packed)
+        return TaylorJet(c, L, R, self.r, self.n if n is None else n, order, self.packed, self.pairs)
 
     def pack(self) -> TaylorJet:
         """The same models of the distinct components only, as :meth:`BallJet.pack <polyrob.bounds.certified.ball_jets.BallJet.pack>`."""
         if self.packed or self.order < 2:
             return self
         keep = jet_layout(self.n, self.order).distinct
-        return TaylorJet(self.c[keep], self.L[:, keep], self.R[keep], self.r, self.n, self.order, True)
+        return TaylorJet(self.c[keep], self.L[:, keep], self.R[keep], self.r, self.n, self.order, True, self.pairs)
 
     def unpack(self) -> TaylorJet:
         """The whole jet of a packed one (each derivative's model copied to its permuted multi-indices)."""
         if not self.packed:
             return self
         full = jet_layout(self.n, self.order).full
-        out = TaylorJet(self.c[full], self.L[:, full], self.R[full], self.r, self.n, self.order)
-        out._S = None if self._S is None else self._S[full]
+        out = TaylorJet(self.c[full], self.L[:, full], self.R[full], self.r, self.n, self.order, False, self.pairs)
+        out._S = None if self._S is None else tuple(None if S is None else S[full] for S in self._S)
         return out
 
-    def extended(self, r) -> TaylorJet:
-        """The same models linear in more variables: ``r`` ``(k', B)`` the half-widths of all ``k' >= k`` (this jet's first)."""
-        k = self.L.shape[0]
-        L = np.zeros((len(r), *self.L.shape[1:]))
-        L[:k] = self.L
-        return TaylorJet(self.c, L, self.R, np.asarray(r, float), self.n, self.order, self.packed)
+    def extended(self, r, pairs: int | None = None) -> TaylorJet:
+        """The same models linear in more variables: ``r`` ``(k', B)`` the half-widths of all ``k' >= k`` (this jet's first).
+
+        ``pairs``: with the monomials of the first ``pairs`` variables (rows of
+        zeros if this jet has none; by default as many as it has).
+        """
+        pairs = self.pairs if pairs is None else int(pairs)
+        if self.pairs and pairs != self.pairs:
+            raise ValueError("a jet's monomials are of its own first variables")
+        r = np.asarray(r, float)
+        k, P = len(self.linear_r), len(self.r) - len(self.linear_r)
+        L = np.zeros((len(r) + len(pair_radii(r, pairs)), *self.L.shape[1:]))
+        L[:k] = self.L[:k]
+        L[len(r) : len(r) + P] = self.L[k:]
+        return TaylorJet(
+            self.c, L, self.R, np.concatenate([r, pair_radii(r, pairs)]), self.n, self.order, self.packed, pairs
+        )
 
     def _on_components(self, fn) -> TaylorJet:
         """Apply a BallJet operation that acts on the component axis only (to ``c``, ``R`` and each ``L_p``)."""
@@ -167,7 +226,7 @@ class TaylorJet:
         cr = fn(BallJet(self.c, self.R, self.n, self.order))
         moved = np.moveaxis(self.L, 0, -1)
         lin = fn(BallJet(moved, moved, self.n, self.order))
-        return TaylorJet(cr.mid, np.moveaxis(lin.mid, -1, 0), cr.rad, self.r, cr.n, cr.order)
+        return TaylorJet(cr.mid, np.moveaxis(lin.mid, -1, 0), cr.rad, self.r, cr.n, cr.order, False, self.pairs)
 
     def lowered(self, index: int | None, nvars: int) -> TaylorJet:
         """As :meth:`BallJet.lowered <polyrob.bounds.certified.ball_jets.BallJet.lowered>`."""
@@ -198,6 +257,7 @@ class TaylorJet:
             first.r,
             n,
             order,
+            pairs=first.pairs,
         )
 
     @property
@@ -283,24 +343,21 @@ class TaylorJet:
         return self._with(-self.c, -self.L, self.R)
 
     def _pieces(self):
-        """``[(c, L, R, S)]`` of the value, the gradient ``(n, ...)`` and the Hessian ``(n, n, ...)``."""
+        """``[(c, L, R, S, Sq, So)]`` of the value, the gradient ``(n, ...)``, the Hessian ``(n, n, ...)`` and the third derivatives (:meth:`spreads`)."""
         if self.packed:
             raise ValueError("a packed jet: unpack() it first")
-        n, S = self.n, self.spread()
+        n, spreads = self.n, self.spreads()
         out = []
         for start, size, lead in ((0, 1, (1,)), (1, n, (n,)), (1 + n, n * n, (n, n)), (1 + n + n * n, n**3, (n, n, n))):
             if start > 0 and self.order < len(lead):
                 break
             s = slice(start, start + size)
             tail = self.c.shape[1:]
-            out.append(
-                (
-                    self.c[s].reshape(*lead, *tail) if len(lead) > 1 else self.c[s],
-                    self.L[:, s].reshape(self.L.shape[0], *lead, *tail) if len(lead) > 1 else self.L[:, s],
-                    self.R[s].reshape(*lead, *tail) if len(lead) > 1 else self.R[s],
-                    S[s].reshape(*lead, *tail) if len(lead) > 1 else S[s],
-                )
-            )
+            shaped = [self.c[s], self.R[s], *(None if S is None else S[s] for S in spreads)]
+            if len(lead) > 1:
+                shaped = [None if a is None else a.reshape(*lead, *tail) for a in shaped]
+            L = self.L[:, s].reshape(self.L.shape[0], *lead, *tail) if len(lead) > 1 else self.L[:, s]
+            out.append((shaped[0], L, *shaped[1:]))
         return out
 
     def form(self, form: str, other: TaylorJet) -> TaylorJet:
@@ -321,11 +378,11 @@ class TaylorJet:
         order, n = min(self.order, other.order), self.n
 
         def at(piece, key):
-            c, L, R, S = piece
-            return c[key], L[(slice(None), *key)], R[key], S[key]
+            c, L, *rest = piece
+            return c[key], L[(slice(None), *key)], *(None if x is None else x[key] for x in rest)
 
         lin, live = _linear_part(f, self, other)
-        prod = partial(_product, f, fa, lin)
+        prod = partial(_product, f, fa, lin, self._pair_rows(other))
         a, b = self._pieces(), other._pieces()
         groups = [[prod(a[0], b[0])]]
         if order >= 1:
@@ -359,7 +416,7 @@ class TaylorJet:
             Ls.append(L.reshape(L.shape[0], -1, *L.shape[1 + lead :]))
             Rs.append(_inflate(R, mag).reshape(-1, *R.shape[lead:]))
         c, L, R = np.concatenate(cs), np.concatenate(Ls, 1), np.concatenate(Rs)
-        out = TaylorJet(c, L, R, self.r, n, order)
+        out = TaylorJet(c, L, R, self.r, n, order, pairs=self.pairs)
         out._live = live
         return out
 
@@ -371,16 +428,19 @@ class TaylorJet:
         order, n = min(self.order, other.order), self.n
 
         def blocks(jet):
-            """Each order's distinct components ``(c, L, R, S)``, one component axis: the whole tensors' floats there."""
-            S = jet.spread()
-            return [(jet.c[k], jet.L[:, k], jet.R[k], S[k]) for k in jet_layout(n, jet.order).blocks]
+            """Each order's distinct components ``(c, L, R, S, Sq, So)``, one component axis: the whole tensors' floats there."""
+            spreads = jet.spreads()
+            return [
+                (jet.c[k], jet.L[:, k], jet.R[k], *(None if S is None else S[k] for S in spreads))
+                for k in jet_layout(n, jet.order).blocks
+            ]
 
         def at(piece, key):
-            c, L, R, S = piece
-            return c[key], L[:, key], R[key], S[key]
+            c, L, *rest = piece
+            return c[key], L[:, key], *(None if x is None else x[key] for x in rest)
 
         lin, live = _linear_part(f, self, other)
-        prod = partial(_product, f, fa, lin)
+        prod = partial(_product, f, fa, lin, self._pair_rows(other))
         a, b = blocks(self), blocks(other)
         groups = [[prod(a[0], b[0])]]
         groups.append([prod(a[0], b[1]), prod(a[1], b[0])])
@@ -400,9 +460,20 @@ class TaylorJet:
             cs.append(c)
             Ls.append(L)
             Rs.append(_inflate(R, mag))
-        out = TaylorJet(np.concatenate(cs), np.concatenate(Ls, 1), np.concatenate(Rs), self.r, n, order, True)
+        out = TaylorJet(
+            np.concatenate(cs), np.concatenate(Ls, 1), np.concatenate(Rs), self.r, n, order, True, self.pairs
+        )
         out._live = live
         return out
+
+    def _pair_rows(self, other: TaylorJet):
+        """``(kq, first, p, l)`` of :func:`_product` for a product with ``other`` (None without monomials)."""
+        if self.pairs != other.pairs:
+            raise ValueError("a product of jets with monomials of different variables")
+        if not self.pairs:
+            return None
+        p, ell = np.triu_indices(self.pairs)
+        return self.pairs, len(self.linear_r), p, ell
 
     def __mul__(self, other: TaylorJet) -> TaylorJet:
         return self.form("mul", other)
@@ -412,7 +483,7 @@ class TaylorJet:
 
 
 def _linear_part(f, x: TaylorJet, y: TaylorJet):
-    """``(lin, live)``: ``lin(xL, yc, xc, yL) = f(xL, yc) + f(xc, yL)`` on pieces of ``x`` and ``y``, and its :meth:`~TaylorJet.live`.
+    """``(lin, live)``: ``lin(xL, yc, xc, yL) = f(xL, yc) + f(xc, yL)`` on pieces of ``x`` and ``y``, and its :meth:`~TaylorJet.live_rows`.
 
     Why only the live rows are computed: where ``xL_p`` is zero and ``yc``
     finite, ``f(xL_p, yc)`` is exactly zero (a bilinear form of zeros), and
@@ -420,141 +491,20 @@ def _linear_part(f, x: TaylorJet, y: TaylorJet):
     are the ones the whole sum gives.  Where a constant part is not finite
     the whole sum is taken.
     """
-    k, kx, ky = x.L.shape[0], x.live(), y.live()
-    if min(kx, ky) == k or not (np.isfinite(x.c).all() and np.isfinite(y.c).all()):
+    mx, my = x.live_rows(), y.live_rows()
+    if (mx.all() and my.all()) or not (np.isfinite(x.c).all() and np.isfinite(y.c).all()):
         return (lambda xL, yc, xc, yL: f(xL, yc[None]) + f(xc[None], yL)), None
+    kx, ky = np.flatnonzero(mx), np.flatnonzero(my)
+
+    def rows(L, idx):  # a slice where the rows are a leading block (no copy)
+        return L[: len(idx)] if len(idx) == 0 or idx[-1] == len(idx) - 1 else L[idx]
 
     def lin(xL, yc, xc, yL):
-        a, b = f(xc[None], yL[:ky]), f(xL[:kx], yc[None])
-        ka, kb = ky, kx
-        if kx > ky:
-            a, b, ka, kb = b, a, kx, ky
-        shape = (k, *np.broadcast_shapes(a.shape[1:], b.shape[1:]))
-        if a.shape != shape:  # padded with the exact zeros of the rows beyond both (no copy when a has all k rows)
-            a = np.concatenate([np.broadcast_to(a, (ka, *shape[1:])), np.zeros((k - ka, *shape[1:]))])
-        a[:kb] += b
-        return a
-
-    return lin, max(kx, ky)
-
-
-def from_ball_jets(centre: BallJet, box: BallJet, radii, k: int) -> TaylorJet:
-    """The order-3 :class:`TaylorJet` of a function from its jets at a box's centre and over the box (both order 3).
-
-    For a component ``X_j`` (the ``j``-th derivatives, ``j <= 3``), Taylor's
-    theorem on the segment from the centre ``c`` gives, for ``|d| <= r``::
-
-        X_0(c + d) in X_0(c) + X_1(c).d + 1/2 X_2(Q)[d, d]
-        X_1(c + d) in X_1(c) + X_2(c).d + 1/2 X_3(Q)[d, d]
-        X_2(c + d) in X_2(c) + X_3(c).d + (X_3(Q) - X_3(c)).d
-        X_3(c + d) in X_3(Q)
-
-    with ``Q`` the box.  The linear coefficients kept are the midpoints of
-    ``X_{j+1}(c)`` in the first ``k`` variables; their radii, the
-    coefficients of the other variables and the second-order terms go into
-    the ball.  ``radii``: ``(B, N)`` half-widths of the box's variables
-    (the jets' ``n`` are its first ones); ``centre``, ``box``: ``(C, B, ...)``.
-    """
-    n = box.n
-    B = box.mid.shape[1]
-    tail = box.mid.shape[1:]
-    extra = len(tail) - 1
-    r = np.asarray(radii, float)[:, :n].T.reshape(n, B, *([1] * extra))  # (n, B, 1, ...)
-    kk = min(k, n)
-
-    def parts(J):
-        out, start = [], 0
-        for j in range(4):
-            size = n**j
-            out.append(
-                (
-                    J.mid[start : start + size].reshape(*(n,) * j, *tail),
-                    J.rad[start : start + size].reshape(*(n,) * j, *tail),
-                )
-            )
-            start += size
+        a, b = f(xc[None], rows(yL, ky)), f(rows(xL, kx), yc[None])
+        shape = (len(mx), *np.broadcast_shapes(a.shape[1:], b.shape[1:]))
+        out = np.zeros(shape)
+        out[ky] = a
+        out[kx] += b
         return out
 
-    cen, bx = parts(centre), parts(box)
-
-    def absq(part):
-        return np.abs(part[0]) + part[1]
-
-    comps_c, comps_L, comps_R = [], [], []
-    # order 0: value
-    v, g, H, T = cen
-    Hq, Tq = absq(bx[2]), absq(bx[3])
-    r2 = r[:, None] * r[None, :]  # (n, n, B, 1...)
-    lin_other = (np.abs(g[0][kk:]) * r[kk:]).sum(0) if kk < n else 0.0
-    R0 = v[1] + (g[1] * r).sum(0) + lin_other + 0.5 * (Hq * r2).sum((0, 1))
-    comps_c.append(v[0])
-    comps_L.append(g[0][:kk])  # (k, B, ...)
-    comps_R.append(R0)
-    # order 1: gradient component q
-    lin_other = (np.abs(H[0][:, kk:]) * r[kk:][None]).sum(1) if kk < n else 0.0
-    R1 = g[1] + (H[1] * r[None]).sum(1) + lin_other + 0.5 * (Tq * r2[None]).sum((1, 2))
-    comps_c.append(g[0])
-    comps_L.append(np.moveaxis(H[0][:, :kk], 1, 0))  # (k, n, B, ...)
-    comps_R.append(R1)
-    # order 2: Hessian component (q, s)
-    dev = np.abs(bx[3][0] - T[0]) + bx[3][1]
-    lin_other = (np.abs(T[0][:, :, kk:]) * r[kk:][None, None]).sum(2) if kk < n else 0.0
-    R2 = H[1] + (dev * r[None, None]).sum(2) + lin_other
-    comps_c.append(H[0])
-    comps_L.append(np.moveaxis(T[0][:, :, :kk], 2, 0))  # (k, n, n, B, ...)
-    comps_R.append(R2)
-    # order 3: the box's ball
-    comps_c.append(bx[3][0])
-    comps_L.append(np.zeros((kk, *bx[3][0].shape)))
-    comps_R.append(bx[3][1])
-    c = np.concatenate([x.reshape(-1, *tail) for x in comps_c])
-    L = np.concatenate([x.reshape(kk, -1, *tail) for x in comps_L], 1)
-    R = np.concatenate([(x * (1 + SUM_MARGIN) + TINY).reshape(-1, *tail) for x in comps_R])
-    return TaylorJet(c, L, R, np.asarray(radii, float)[:, :kk].T.copy(), n, 3)
-
-
-def taylor_sin_cos(centre, radius, order: int, k: int, box_radius=None):
-    """``(sin, cos)`` :class:`TaylorJet` s of the variables ``centre ± radius`` ``(B, n)``, linear in the first ``k``.
-
-    ``box_radius`` (default ``radius``): the half-widths of the box's
-    variables the models are linear in (a variable whose sine is not taken
-    may have radius 0 here and its own half-width there).
-
-    Every component of ``sin`` and ``cos`` of ``x_p = c_p + d_p`` is ``±sin``
-    or ``±cos``, so ``f'' = -f`` and ``|f'''| <= 1``: by Taylor's theorem
-    ``f(c + d) = f(c) + f'(c) d - f(c) d^2 / 2 + t``, ``|t| <= r^3 / 6``, and
-    with ``d^2`` in ``[0, r^2]``::
-
-        f(c_p + d_p) in f(c_p) (1 - r_p^2 / 4) + f'(c_p) d_p ± (|f(c_p)| r_p^2 / 4 + r_p^3 / 6)
-
-    (for ``p < k``; else the linear term goes into the ball too), plus the
-    library's error on ``f(c_p)`` and ``f'(c_p)`` (:data:`~polyrob.bounds.certified.ball_jets.TRIG_MARGIN`
-    each) and the rounding of the product.  Near ``sin(c_p) = 0`` (an arm's
-    zero pose) the sine's ball is of third order in ``r_p``, not of second.
-    """
-    from polyrob.bounds.certified.ball_jets import TRIG_MARGIN
-
-    c, r = np.asarray(centre, float), np.asarray(radius, float)
-    B, n = c.shape
-    s0, c0 = np.sin(c), np.cos(c)
-    # the derivatives of sin: sin, cos, -sin, -cos, sin; of cos: cos, -sin, -cos, sin, cos
-    sin_seq, cos_seq = (s0, c0, -s0, -c0, s0), (c0, -s0, -c0, s0, c0)
-    linear = np.arange(n) < k
-    out = []
-    for seq in (sin_seq, cos_seq):
-        C = BallJet.size(n, order)
-        cm, R, L = np.zeros((C, B, n)), np.zeros((C, B, n)), np.zeros((k, C, B, n))
-        for j in range(order + 1):  # component j of variable p: index of d^j / dx_p^j
-            for p in range(n):
-                idx = 0 if j == 0 else 1 + sum(n**i for i in range(1, j)) + p * sum(n**i for i in range(j))
-                f, rp = seq[j][:, p], r[:, p]
-                cm[idx, :, p] = f * (1.0 - 0.25 * rp * rp)
-                rest = 0.25 * np.abs(f) * rp**2 + rp**3 / 6 + TRIG_MARGIN * (1 + rp + rp * rp) + 4 * GAMMA * np.abs(f)
-                if linear[p]:
-                    L[p, idx, :, p] = seq[j + 1][:, p]
-                    R[idx, :, p] = rest
-                else:
-                    R[idx, :, p] = np.abs(seq[j + 1][:, p]) * r[:, p] + rest
-        r_box = r if box_radius is None else np.asarray(box_radius, float)
-        out.append(TaylorJet(cm, L, (R * (1 + GAMMA) + TINY) * (R > 0), r_box[:, :k].T.copy(), n, order))
-    return tuple(out)
+    return lin, mx | my

@@ -54,8 +54,9 @@ import numpy as np
 
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, centre_radius, upper
 from polyrob.bounds.certified.factors.inverse import jet_parts, neumann_inverse, residual_ball, taylor_residual
+from polyrob.bounds.certified.factors.taylor_inputs import from_ball_jets, taylor_sin_cos
 from polyrob.bounds.certified.jet_rnea import rnea
-from polyrob.bounds.certified.taylor_jets import TaylorJet, from_ball_jets, taylor_sin_cos
+from polyrob.bounds.certified.taylor_jets import TaylorJet
 from polyrob.errors import ArgumentError
 
 __all__ = [
@@ -132,78 +133,73 @@ def factor_hessians(problem, Mc: BallJet, M: TaylorJet, h: TaylorJet, radii):
     ``Mc``: ``M_hat``'s jets at the boxes' centres (order 2 or more, in
     ``q``); ``M``, ``h``: order-3 Taylor-model jets of ``M_hat`` (in ``q``)
     and of the torques (in ``(q, qdot)``) over the boxes (:func:`taylor_dynamics`,
-    or :func:`~polyrob.bounds.certified.taylor_jets.from_ball_jets`); ``radii`` ``(B, 2m)``.
+    or :func:`~polyrob.bounds.certified.factors.taylor_inputs.from_ball_jets`); ``radii`` ``(B, 2m)``.
     Every component is the range of its Taylor model over the box; the
     Hessian components (``[1 + 2m:]``) are what
     :func:`~polyrob.bounds.certified.factors.taylor2.taylor2_bounds` takes.
     """
     m = problem.m
-    Y0 = inverse_model(Mc, M.to_ball(), radii).extended(M.r)
+    Y0 = inverse_model(Mc, M.to_ball(), radii).extended(M.linear_r, M.pairs)
     Y = inverse_jet(M, Y0, 2 * m)
     K0, Ka, _ = problem._factors(M, h, Y=Y)
     return K0.to_ball(), Ka.to_ball()
 
 
-def taylor_dynamics(problem, qc, qr, vc, vr, order):
-    """``(M, h)`` as :meth:`FactorProblem._dynamics <polyrob.bounds.certified.factors.ranges.FactorProblem._dynamics>`, in Taylor-model jets linear in ``q`` (:mod:`~polyrob.bounds.certified.taylor_jets`)."""
+def taylor_dynamics(problem, qc, qr, vc, vr, order, pairs: bool = False):
+    """``(M, h)`` as :meth:`FactorProblem._dynamics <polyrob.bounds.certified.factors.ranges.FactorProblem._dynamics>`, in Taylor-model jets linear in ``q`` (:mod:`~polyrob.bounds.certified.taylor_jets`).
+
+    ``pairs``: of second order in ``q`` (the monomials ``d_p d_l`` of the
+    joint angles' offsets kept, :class:`~polyrob.bounds.certified.taylor_jets.TaylorJet`).
+    """
     m = problem.m
-    s, c = taylor_sin_cos(qc, qr, order, m)
+    kq = m if pairs else 0
+    s, c = taylor_sin_cos(qc, qr, order, m, pairs=kq)
     M = rnea(problem.chain, s, c, None, np.eye(m), False, problem.params, problem.params_rad).transpose(0, 2, 3, 1)
-    return M.extended(np.concatenate([qr, vr], -1).T), taylor_torques(problem, qc, qr, vc, vr, order)
+    return M.extended(np.concatenate([qr, vr], -1).T), taylor_torques(problem, qc, qr, vc, vr, order, kq)
 
 
-def taylor_torques(problem, qc, qr, vc, vr, order):
-    """The torques ``h`` of :func:`taylor_dynamics` alone (Taylor-model jets linear in ``(q, qdot)``)."""
+def taylor_torques(problem, qc, qr, vc, vr, order, pairs: int = 0):
+    """The torques ``h`` of :func:`taylor_dynamics` alone (Taylor-model jets linear in ``(q, qdot)``; ``pairs``: ``m`` or 0)."""
     m = problem.m
     x_c, x_r = np.concatenate([qc, vc], -1), np.concatenate([qr, vr], -1)
     # the torques are linear in (q, qdot): their quadratic terms in qdot keep their cancellations too
-    s2, c2 = taylor_sin_cos(x_c, np.concatenate([qr, np.zeros_like(vr)], -1), order, 2 * m, x_r)
-    qd = TaylorJet.variables(x_c, x_r, order, 2 * m)[:, m:]
+    s2, c2 = taylor_sin_cos(x_c, np.concatenate([qr, np.zeros_like(vr)], -1), order, 2 * m, x_r, pairs)
+    qd = TaylorJet.variables(x_c, x_r, order, 2 * m, pairs)[:, m:]
     return rnea(problem.chain, s2[:, :m], c2[:, :m], qd, None, True, problem.params, problem.params_rad)[:, 0]
 
 
-def box_models(problem, qc, qr, vc, vr, centre, box):
+def box_models(problem, qc, qr, vc, vr, centre, box, pairs: bool = False):
     """Order-3 Taylor-model jets ``(M, h)`` of ``M_hat`` and the torques over the boxes.
 
     Two models of each: Newton-Euler in Taylor models (:func:`taylor_dynamics`)
     and Taylor's theorem on the ball jets at the centre and over the box
-    (:func:`~polyrob.bounds.certified.taylor_jets.from_ball_jets`); entry by
+    (:func:`~polyrob.bounds.certified.factors.taylor_inputs.from_ball_jets`); entry by
     entry the one with the smaller ball (:func:`~polyrob.bounds.certified.factors.hessian.tighter`).
     ``centre``, ``box``: ``(M, h)`` ball jets of order 3.
     """
     m = problem.m
     radii = np.concatenate([qr, vr], -1)
-    Mt, ht = taylor_dynamics(problem, qc, qr, vc, vr, 3)
-    Mf, hf = (from_ball_jets(c, b, radii, 2 * m).extended(radii.T) for c, b in zip(centre, box))
+    Mt, ht = taylor_dynamics(problem, qc, qr, vc, vr, 3, pairs)
+    Mf, hf = (from_ball_jets(c, b, radii, 2 * m).extended(radii.T, Mt.pairs) for c, b in zip(centre, box))
     return tighter(Mt, Mf), tighter(ht, hf)
 
 
-def centre_velocity_models(problem, M, qc, qr, vc, centre_h, box_h):
-    """``(M, h)``: order-3 Taylor-model jets over the boxes' ``q`` part with ``qdot`` at the centres ``vc``.
+def centre_velocity_models(problem, qc, qr, vc, centre, box):
+    """``(M, h)``: :func:`box_models` over the boxes' ``q`` part with ``qdot`` at the centres ``vc``, of second order in ``q``.
 
     What the factors' Hessian in the Taylor form needs (the module's
-    docstring says why).  ``M``: :func:`box_models`' mass-matrix models
-    (they do not depend on ``qdot``: the same models over the thin boxes);
-    ``centre_h``, ``box_h``: the torques' ball jets (order 3) at the
-    centres and over the whole boxes (which hold the thin ones).
+    docstring says why).  ``centre``, ``box``: ``(M, h)`` ball jets (order
+    3) at the centres and over the whole boxes (which hold the thin ones).
     """
-    m = problem.m
-    zero = np.zeros_like(qr)
-    radii = np.concatenate([qr, zero], -1)
-    if np.any(M.L[m:]):
-        raise ArgumentError("centre_velocity_models: a mass matrix's model depends on qdot")
-    M = TaylorJet(M.c, M.L, M.R, radii.T.copy(), M.n, M.order, M.packed)
-    h = tighter(
-        taylor_torques(problem, qc, qr, vc, zero, 3), from_ball_jets(centre_h, box_h, radii, 2 * m).extended(radii.T)
-    )
-    return M, h
+    return box_models(problem, qc, qr, vc, np.zeros_like(qr), centre, box, pairs=True)
 
 
 def hessian_enclosure(problem, q_lo, q_hi, qd_lo, qd_hi, method: str = "taylor-model"):
     """``(mid, rad)`` of ``problem``'s factors' Hessians in ``(q, qdot)`` at ``a = 0`` over boxes ``(B, m)``: ``(2m, 2m, B, F, m, 3m)``.
 
-    ``method``: ``taylor-model`` (the branch and bound's:
-    :func:`box_models` and :func:`factor_hessians`) or
+    ``method``: ``taylor-model`` (:func:`box_models` and
+    :func:`factor_hessians`), ``second-order`` (the same with the products
+    of ``q``'s offsets kept: the branch and bound's, with ``qdot`` thin) or
     ``balls`` (the earlier one: ball jets over the box, ``Y`` by its
     proved ball).  For measurement and tests.
     """
@@ -214,12 +210,14 @@ def hessian_enclosure(problem, q_lo, q_hi, qd_lo, qd_hi, method: str = "taylor-m
     with np.errstate(over="ignore", invalid="ignore"):
         Mc, hc = problem._dynamics(qc, zero, vc, zero, 3)
         Mb, hb = problem._dynamics(qc, qr, vc, vr, 3)
-        if method == "taylor-model":
-            M, h = box_models(problem, qc, qr, vc, vr, (Mc, hc), (Mb, hb))
+        if method in ("taylor-model", "second-order"):  # linear in q, or with the products of q's offsets
+            M, h = box_models(problem, qc, qr, vc, vr, (Mc, hc), (Mb, hb), pairs=method == "second-order")
             K0 = factor_hessians(problem, Mc, M, h, radii)[0]
         elif method == "balls":
             K0 = problem._factors(Mb, hb, problem._box_inverse(Mc.truncated(2), Mb, radii))[0]
         else:
-            raise ArgumentError(f"hessian_enclosure: method must be 'taylor-model' or 'balls' (got {method!r})")
+            raise ArgumentError(
+                f"hessian_enclosure: method must be 'taylor-model', 'second-order' or 'balls' (got {method!r})"
+            )
     shape = (n, n, *K0.mid.shape[1:])
     return K0.mid[1 + n :].reshape(shape), K0.rad[1 + n :].reshape(shape)

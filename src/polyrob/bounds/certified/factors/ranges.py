@@ -407,7 +407,7 @@ class FactorProblem:
             M3, h3 = box_models(self, qc, qr, vc, vr, (Mc3, hc3), (Mb, hb))
             Mb, hb = intersect(Mb, M3.to_ball()), intersect(hb, h3.to_ball())
             # the Hessian's models: qdot at the centre is enough (hessian.py)
-            M3, h3 = centre_velocity_models(self, M3, qc, qr, vc, hc3, hb)
+            M3, h3 = centre_velocity_models(self, qc, qr, vc, (Mc3, hc3), (Mb, hb))
         Y_box = self._box_inverse(Mc2, Mb, radii)  # the Taylor form of M_hat of the highest order at hand
         Mb, hb = Mb.truncated(2), hb.truncated(2)
         K0b, Kab, singular_b = self._factors(Mb, hb, Y_box)
