@@ -417,7 +417,7 @@ class TaylorJet:
             Rs.append(_inflate(R, mag).reshape(-1, *R.shape[lead:]))
         c, L, R = np.concatenate(cs), np.concatenate(Ls, 1), np.concatenate(Rs)
         out = TaylorJet(c, L, R, self.r, n, order, pairs=self.pairs)
-        out._live = live
+        out._live = None if self.pairs else live  # the products of q rows fill the monomials' rows
         return out
 
     def _packed_form(self, form: str, other: TaylorJet) -> TaylorJet:
@@ -463,7 +463,7 @@ class TaylorJet:
         out = TaylorJet(
             np.concatenate(cs), np.concatenate(Ls, 1), np.concatenate(Rs), self.r, n, order, True, self.pairs
         )
-        out._live = live
+        out._live = None if self.pairs else live  # the products of q rows fill the monomials' rows
         return out
 
     def _pair_rows(self, other: TaylorJet):
