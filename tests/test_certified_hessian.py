@@ -17,7 +17,7 @@ from polyrob import load_robot
 from polyrob.bounds.certified.ball_jets import BallJet, jet_layout, upper
 from polyrob.bounds.certified.factors import FactorProblem
 from polyrob.bounds.certified.factors.hessian import hessian_enclosure, taylor_dynamics
-from polyrob.bounds.certified.taylor_jets import TaylorJet
+from polyrob.bounds.certified.taylor_jets import TaylorJet, monomials
 from polyrob.domains.default_task import default_task_domain, default_task_robot
 from polyrob.plant.models.inner_factors import factor_parameters
 
@@ -156,7 +156,7 @@ def test_newton_euler_in_taylor_models_holds_pinocchio_on_a_box(ur5, pairs):
     qc, qr = 0.5 * (box.q_lower + box.q_upper), 0.5 * (box.q_upper - box.q_lower)
     vc, vr = 0.5 * (box.qdot_lower + box.qdot_upper), 0.5 * (box.qdot_upper - box.qdot_lower)
     M, h = taylor_dynamics(problem, qc[None], qr[None], vc[None], vr[None], 1, pairs)
-    p, ell = np.triu_indices(m if pairs else 0)
+    p, ell = monomials(m if pairs else 0)
     model = loops[0][1].model_robot.model
     data = model.createData()
     rng = np.random.default_rng(4)

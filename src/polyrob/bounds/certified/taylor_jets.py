@@ -57,7 +57,7 @@ from polyrob.bounds.certified.ball_jets import (
     symmetric_indices,
 )
 
-__all__ = ["TaylorJet", "pair_radii", "SUM_MARGIN"]
+__all__ = ["TaylorJet", "monomials", "pair_radii", "SUM_MARGIN"]
 
 #: Relative margin of a float sum of up to a few thousand nonnegative terms (``k u``, ``u = 2^-53``, ``k <= 9000``).
 SUM_MARGIN = 1e-12
@@ -67,17 +67,32 @@ def _inflate(rad, mag):
     return (rad + GAMMA * mag) * (1.0 + GAMMA) + TINY
 
 
+def monomials(kq: int):
+    """``(p, l)``: the monomials ``d_p d_l``, ``p <= l < kq``, in the order of their rows: by ``l``, then ``p``.
+
+    So the monomials of the first ``j`` variables are the first ``j (j + 1) / 2``
+    rows: a chain's first links depend on its first angles only, and their
+    models' live rows stay leading blocks (:func:`_linear_part`).
+
+    >>> [(int(p), int(l)) for p, l in zip(*monomials(3))]
+    [(0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2)]
+    """
+    ell, p = np.tril_indices(kq)
+    return p, ell
+
+
 def pair_radii(r, kq: int):
-    """Half-widths ``(P, B)`` of the monomials ``d_p d_l``, ``p <= l < kq``, from the variables' ``r`` ``(k, B)``."""
-    p, ell = np.triu_indices(kq)
+    """Half-widths ``(P, B)`` of the :func:`monomials` of the first ``kq`` variables from their ``r`` ``(k, B)``."""
+    p, ell = monomials(kq)
     return np.asarray(r, float)[p] * np.asarray(r, float)[ell]
 
 
 def _product(f, fa, lin, pairs, x, y):
     """``(c, L, R, magnitude)`` of one product-rule term of two pieces ``(c, L, R, spread, q spread, other spread)`` (before rounding margins).
 
-    ``pairs``: None, or ``(kq, first, p, l)``: the rows ``first + i`` of
-    the monomials ``d_p[i] d_l[i]`` of the first ``kq`` variables.
+    ``pairs``: None, or :meth:`TaylorJet._pair_rows`'s ``(kq, ix, iy, gathers)``:
+    the rows of ``x`` and ``y`` among the first ``kq`` that may be nonzero,
+    and where each product ``f(x_p, y_l)`` goes among the monomials' rows.
     """
     (xc, xL, xR, xS, xSq, xSo), (yc, yL, yR, yS, ySq, ySo) = x, y
     xA, yA = np.abs(xc) + xS, np.abs(yc) + yS
@@ -86,14 +101,13 @@ def _product(f, fa, lin, pairs, x, y):
     if pairs is None:
         R = fa(xS, yS)
     else:  # (a_q.d_q + a_o.d_o)(b.d): the q-q products as monomials, the rest bounded
-        kq, first, p, ell = pairs
+        kq, ix, iy, gathers = pairs
         R = fa(xSo, yS)
         R += fa(xSq, ySo)
-        if np.any(xL[:kq]) and np.any(yL[:kq]):
-            W = f(xL[:kq, None], yL[None, :kq])  # (kq, kq, ...)
-            Wp = W[p, ell] + W[ell, p]
-            Wp[p == ell] *= 0.5
-            L[first:] += Wp
+        if len(ix) and len(iy):  # f(x_p, y_l) of the live rows only: an arm's first links depend on few angles
+            W = f(_leading(xL, ix)[:, None], _leading(yL, iy)[None])  # (|ix|, |iy|, ...)
+            for rows, at_x, at_y in gathers:  # f(x_p, y_l) to the monomial d_p d_l (p <= l), then f(x_l, y_p)
+                L[rows] += W[at_x, at_y]
             R += 2 * GAMMA * fa(xSq, ySq)  # the floats of W and of its sums
     R += fa(xA, yR)  # (in place: the floats of the sum)
     R += fa(xR, yA + yR)
@@ -467,13 +481,22 @@ class TaylorJet:
         return out
 
     def _pair_rows(self, other: TaylorJet):
-        """``(kq, first, p, l)`` of :func:`_product` for a product with ``other`` (None without monomials)."""
+        """``(kq, ix, iy, gathers)`` of :func:`_product` for a product with ``other`` (None without monomials)."""
         if self.pairs != other.pairs:
             raise ValueError("a product of jets with monomials of different variables")
-        if not self.pairs:
+        kq = self.pairs
+        if not kq:
             return None
-        p, ell = np.triu_indices(self.pairs)
-        return self.pairs, len(self.linear_r), p, ell
+        ix, iy = np.flatnonzero(self.live_rows()[:kq]), np.flatnonzero(other.live_rows()[:kq])
+        at_x, at_y = np.full(kq, -1), np.full(kq, -1)
+        at_x[ix], at_y[iy] = np.arange(len(ix)), np.arange(len(iy))
+        p, ell = monomials(kq)
+        first = len(self.linear_r)
+        gathers = []
+        for a, b, keep in ((p, ell, True), (ell, p, p != ell)):  # W[p, l], then W[l, p] off the diagonal
+            take = keep & (at_x[a] >= 0) & (at_y[b] >= 0)
+            gathers.append((first + np.flatnonzero(take), at_x[a[take]], at_y[b[take]]))
+        return kq, ix, iy, gathers
 
     def __mul__(self, other: TaylorJet) -> TaylorJet:
         return self.form("mul", other)
@@ -494,17 +517,28 @@ def _linear_part(f, x: TaylorJet, y: TaylorJet):
     mx, my = x.live_rows(), y.live_rows()
     if (mx.all() and my.all()) or not (np.isfinite(x.c).all() and np.isfinite(y.c).all()):
         return (lambda xL, yc, xc, yL: f(xL, yc[None]) + f(xc[None], yL)), None
-    kx, ky = np.flatnonzero(mx), np.flatnonzero(my)
-
-    def rows(L, idx):  # a slice where the rows are a leading block (no copy)
-        return L[: len(idx)] if len(idx) == 0 or idx[-1] == len(idx) - 1 else L[idx]
+    runs_x, runs_y = _runs(mx), _runs(my)
 
     def lin(xL, yc, xc, yL):
-        a, b = f(xc[None], rows(yL, ky)), f(rows(xL, kx), yc[None])
-        shape = (len(mx), *np.broadcast_shapes(a.shape[1:], b.shape[1:]))
-        out = np.zeros(shape)
-        out[ky] = a
-        out[kx] += b
+        a = [(s, f(xc[None], yL[s])) for s in runs_y]
+        b = [(s, f(xL[s], yc[None])) for s in runs_x]
+        shapes = [t.shape[1:] for _, t in a + b] or [f(xc[None], yL[:1]).shape[1:]]  # (no live row: zeros)
+        out = np.zeros((len(mx), *np.broadcast_shapes(*shapes)))
+        for s, t in a:
+            out[s] = t
+        for s, t in b:
+            out[s] += t
         return out
 
     return lin, mx | my
+
+
+def _runs(mask):
+    """The slices of the runs of ``True`` in a bool vector."""
+    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(np.int8), 0]))
+    return [slice(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
+
+
+def _leading(L, rows):
+    """``L[rows]``, a view where the rows are a leading block (an arm's chain: the usual case)."""
+    return L[: len(rows)] if rows[-1] == len(rows) - 1 else L[rows]

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, TRIG_MARGIN, BallJet
-from polyrob.bounds.certified.taylor_jets import SUM_MARGIN, TaylorJet, pair_radii
+from polyrob.bounds.certified.taylor_jets import SUM_MARGIN, TaylorJet, monomials, pair_radii
 
 __all__ = ["from_ball_jets", "taylor_sin_cos"]
 
@@ -123,7 +123,7 @@ def taylor_sin_cos(centre, radius, order: int, k: int, box_radius=None, pairs: i
     linear = np.arange(n) < k
     r_box = (r if box_radius is None else np.asarray(box_radius, float))[:, :k].T
     rows = np.concatenate([r_box, pair_radii(r_box, pairs)])
-    pp, ll = np.triu_indices(pairs)
+    pp, ll = monomials(pairs)
     square = k + np.flatnonzero(pp == ll)  # the rows of d_p^2, p < pairs
     out = []
     for seq in (sin_seq, cos_seq):
