@@ -5,9 +5,10 @@ its boxes :data:`~polyrob.bounds.certified.factors.ranges.BATCH` at a time
 (vectorised); :func:`enclose_batch` splits each batch among the workers of a
 :class:`~polyrob.bounds.parallel.WorkerPool` (the problem sent to each worker
 once) and joins the parts in the batch's order.  Every box's enclosure is
-computed on its own, so the joined result does not depend on how many
-workers there were, and the refinement that reads it takes the same path;
-only the time changes.
+computed on its own, except for the grid of the cells the open entries'
+Taylor form is bounded on (:func:`~polyrob.bounds.certified.factors.taylor2.cell_grid`:
+finer when a call holds fewer open entries), so a worker's share of a
+batch may get a slightly tighter bound; each is a proof either way.
 
 Examples
 --------

@@ -514,7 +514,7 @@ def prove_factor_ranges(
         about six times the work per box, far fewer boxes.
     workers : int
         Processes each batch of boxes is shared among (:mod:`~polyrob.bounds.certified.factors.box_batches`):
-        the same result, sooner.
+        the same boxes, sooner (a worker's share may get finer cells, :func:`~polyrob.bounds.certified.factors.taylor2.cell_grid`).
     """
     t0 = time.perf_counter()
     problem = FactorProblem.from_loops(loops)
