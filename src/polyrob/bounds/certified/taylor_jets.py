@@ -185,11 +185,6 @@ class TaylorJet:
             self._live = np.any(self.L != 0, axis=tuple(range(1, self.L.ndim))) if k else np.zeros(0, bool)
         return self._live
 
-    def live(self) -> int:
-        """How many leading rows the linear parts may depend on: ``L_p`` is exactly zero for ``p >= live()``."""
-        nonzero = np.flatnonzero(self.live_rows())
-        return int(nonzero[-1]) + 1 if len(nonzero) else 0
-
     def to_ball(self) -> BallJet:
         """The ball jet holding every component over the whole box: ``c ± (R + sum_p |L_p| r_p)``."""
         return BallJet(self.c, _inflate(self.R + self.spread(), np.abs(self.c)), self.n, self.order)
@@ -225,13 +220,12 @@ class TaylorJet:
         if self.pairs and pairs != self.pairs:
             raise ValueError("a jet's monomials are of its own first variables")
         r = np.asarray(r, float)
+        rows = np.concatenate([r, pair_radii(r, pairs)])
         k, P = len(self.linear_r), len(self.r) - len(self.linear_r)
-        L = np.zeros((len(r) + len(pair_radii(r, pairs)), *self.L.shape[1:]))
+        L = np.zeros((len(rows), *self.L.shape[1:]))
         L[:k] = self.L[:k]
         L[len(r) : len(r) + P] = self.L[k:]
-        return TaylorJet(
-            self.c, L, self.R, np.concatenate([r, pair_radii(r, pairs)]), self.n, self.order, self.packed, pairs
-        )
+        return TaylorJet(self.c, L, self.R, rows, self.n, self.order, self.packed, pairs)
 
     def _on_components(self, fn) -> TaylorJet:
         """Apply a BallJet operation that acts on the component axis only (to ``c``, ``R`` and each ``L_p``)."""
