@@ -60,6 +60,13 @@ def pytest_configure(config):
 _SESSION_FOLDER: list[Path] = []
 
 
+@pytest.fixture(autouse=True)
+def _own_proof_cache(tmp_path_factory, monkeypatch):
+    """Each test its own cache of proofs (``polyrob.io.paths.cache_dir``): a proof another test finished must not
+    be taken for this one's work (its progress, its boxes), and nothing is written to the user's home."""
+    monkeypatch.setenv("POLYROB_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _session_folder(tmp_path_factory):
     """The session's temporary folder, above every xdist worker's own (where :func:`once` keeps its results)."""

@@ -124,7 +124,10 @@ def test_synth_certify_is_refused_in_one_line_where_it_cannot_run(tmp_path, caps
 
     assert main(["synth", "finger_edu", "--max-boxes", "3", "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert "--max-boxes sets the interval-arithmetic proof: use it with --certify" in err and err.count("\n") == 1
+    assert "--max-boxes and --proof-dir set the interval-arithmetic proof: use them with --certify" in err
+    assert err.count("\n") == 1
+    assert main(["synth", "finger_edu", "--proof-dir", str(tmp_path), "--quiet"]) == 2
+    assert "use them with --certify" in capsys.readouterr().err
     assert main(["synth", "finger_edu", "--certify", "--pldi", str(tmp_path / "p.json"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "--pldi holds its bounds already" in err and err.count("\n") == 1

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 
 import pytest
@@ -165,6 +166,11 @@ def test_an_arm_s_proof_moves_the_bounds_job_s_progress_line(capsys, monkeypatch
     assert seen and all(inside for _, _, inside in seen)  # reported while the command's job runs
     assert 0.0 < max(done for done, _, _ in seen) < 1.0
     assert current() is None  # the command's end stopped it
+    # the work is kept (conftest: this test's own cache folder): run again, it goes on from there
+    first = int(re.search(r"(\d+) boxes in all", err).group(1))
+    assert "its state is kept in " + os.environ["POLYROB_CACHE_DIR"] in err
+    code, _, err = _run(capsys, "bounds", "ur5", "--certify", "--max-boxes", "1")
+    assert code == 2 and int(re.search(r"(\d+) boxes in all", err).group(1)) > first
 
 
 def test_a_loop_in_another_thread_neither_moves_nor_narrows_the_job_s_line():

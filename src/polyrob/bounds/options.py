@@ -115,7 +115,10 @@ class BoundOptions:
         :func:`~polyrob.bounds.certified.enclosure.certified_jacobian_bounds`:
         ``rel_tol`` (default here 1e-5), ``max_boxes`` (a count of work),
         ``time_limit`` (s, a safety net the caller sets; default none),
-        ``max_joints`` (default 3).
+        ``max_joints`` (default 3); an arm's factor proof also takes
+        ``checkpoint_dir`` (where it keeps its state and finished proofs,
+        default :func:`~polyrob.io.paths.cache_dir` ``("proofs")``; ``None``
+        keeps nothing).
     workers : int, optional
         Worker processes (spawned; ``1`` runs everything in this process).
         Default: one for robots whose dynamics depend on few positions, else

@@ -154,7 +154,9 @@ def bound_pldi(robot, domain: Domain | None = None, *, options: BoundOptions | N
         raise BoundsError(f"the domain's joints {domain.joint_names} are not the robot's {robot.joint_names}")
     progress = sys.stderr.isatty() if opts.progress is None else opts.progress
     with span(0.0, 0.8 if opts.certify else 0.0):  # a proof takes most of the stage; the sampling the rest
-        factors = _proved_factors(robot, domain, opts, progress) if opts.certify and _factor_task(robot, domain) else None
+        factors = (
+            _proved_factors(robot, domain, opts, progress) if opts.certify and _factor_task(robot, domain) else None
+        )
         # first: it gives up at once
         proved = _certified(robot, domain, opts, progress) if opts.certify and factors is None else None
     problem = search.Problem(robot, domain)
@@ -320,6 +322,7 @@ def _proved_factors(robot, domain, opts: BoundOptions, progress: bool) -> dict:
     left, weighted by the entries still open), with tqdm's ETA.
     """
     from polyrob.bounds.certified import factors as factor_module
+    from polyrob.io.paths import cache_dir
 
     options = dict(opts.certify_options or {})
     loops = factor_module.factor_directions(robot)
@@ -350,6 +353,7 @@ def _proved_factors(robot, domain, opts: BoundOptions, progress: bool) -> dict:
             progress=report,
             seed=opts.seed,
             workers=opts.workers or available_cores(),  # the batches of boxes shared among them
+            checkpoint_dir=options.get("checkpoint_dir", cache_dir("proofs")),  # None: keep nothing
         )
     finally:
         if bar is not None:
@@ -360,6 +364,8 @@ def _proved_factors(robot, domain, opts: BoundOptions, progress: bool) -> dict:
         },
         "boxes": int(enc.boxes),
         "seconds": round(float(enc.seconds), 3),
+        "resumed_boxes": int(enc.resumed_boxes),
+        "checkpoint": enc.checkpoint,
         "covers": "the inner loop's factor ranges over the task box, proved; the A, B intervals sampled",
     }
 

@@ -12,7 +12,7 @@ from polyrob.cli.common import (
     domain_from_args,
     robot_from_args,
 )
-from polyrob.cli.options import fraction, int_at_least, positive_float
+from polyrob.cli.options import add_proof_dir_argument, fraction, int_at_least, positive_float, proof_options
 from polyrob.errors import ArgumentError, CertificationError
 
 __all__ = ["register", "save_pair"]
@@ -41,19 +41,16 @@ def cmd_bounds(args) -> int:
     if args.output:  # before any work: a refused path leaves nothing behind
         for path in (args.output, *pair_paths(args.output)):
             check_output_path(path, "-o")
-    if not args.certify and (args.time_limit is not None or args.rel_tol is not None or args.max_boxes is not None):
+    certify_options = proof_options(args)
+    if not args.certify and certify_options:
         raise ArgumentError(
-            "--time-limit, --rel-tol and --max-boxes set the interval-arithmetic proof: use them with --certify"
+            "--time-limit, --rel-tol, --max-boxes and --proof-dir set the interval-arithmetic proof: "
+            "use them with --certify"
         )
     # one progress line for the whole job (a --certify proof of an arm runs for minutes)
     out = Output(args, stages=2 if args.models else 1, job=["bounds"] + (["uncertainty models"] if args.models else []))
     robot = robot_from_args(args)
     domain = domain_from_args(robot, args)
-    certify_options = {
-        k: v
-        for k, v in (("time_limit", args.time_limit), ("rel_tol", args.rel_tol), ("max_boxes", args.max_boxes))
-        if v is not None
-    }
     out.stage(
         f"bounds: {robot.name} ({robot.m} joints) over domain '{domain.name}'"
         + (", certified by interval arithmetic" if args.certify else "")
@@ -107,9 +104,11 @@ def cmd_bounds(args) -> int:
     factors = (pldi.info.get("certify") or {}).get("factors")
     if factors:
         proof = pldi.info["certify"]
+        kept = proof.get("resumed_boxes") or 0
+        earlier = f", {kept} of them by an earlier run, kept in {proof['checkpoint']}" if kept else ""
         print(
             f"proved by interval arithmetic over the task box: the factor ranges of {', '.join(factors)} "
-            f"({proof['boxes']} boxes, {proof['seconds']:.1f} s); the A, B intervals above are sampled"
+            f"({proof['boxes']} boxes, {proof['seconds']:.1f} s{earlier}); the A, B intervals above are sampled"
         )
     if report["coverage"] is not None:
         variants = getattr(robot, "variants", None)
@@ -157,6 +156,7 @@ def register(sub) -> None:
         help="--certify: a safety net of wall-clock seconds before the proof gives up (default none: the proof "
         "is bounded by its number of boxes, so its answer does not depend on the machine's load)",
     )
+    add_proof_dir_argument(p)
     p.add_argument(
         "--rel-tol",
         type=fraction,

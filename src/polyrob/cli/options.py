@@ -28,6 +28,8 @@ __all__ = [
     "parse_interval",
     "add_robot_uncertainty_arguments",
     "robot_uncertainty_from_args",
+    "add_proof_dir_argument",
+    "proof_options",
     "robot_of_set",
     "uncertainty_options_clash",
     "add_validation_arguments",
@@ -507,3 +509,24 @@ def coulomb_from_args(args):
     if any(v < 0 for v in vals):
         raise ArgumentError(f"--coulomb: give levels >= 0 N m, got '{text}'")
     return vals
+
+
+def add_proof_dir_argument(parser) -> None:
+    """``--proof-dir``: where an arm's ``--certify`` proof keeps its state and its finished proofs."""
+    parser.add_argument(
+        "--proof-dir",
+        default=None,
+        metavar="DIR",
+        help="--certify: where an arm's proof keeps its state (a proof given up goes on from there when run "
+        "again) and its finished proofs (reused at once for the same robot, set and task); default "
+        "$POLYROB_CACHE_DIR/proofs or ~/.cache/polyrob/proofs; 'none' keeps nothing",
+    )
+
+
+def proof_options(args, names=("time_limit", "rel_tol", "max_boxes")) -> dict:
+    """The proof's options the user typed: those of ``names`` given, and ``checkpoint_dir`` (``--proof-dir``)."""
+    out = {k: getattr(args, k) for k in names if getattr(args, k, None) is not None}
+    folder = getattr(args, "proof_dir", None)
+    if folder is not None:
+        out["checkpoint_dir"] = None if folder.strip().lower() == "none" else folder
+    return out

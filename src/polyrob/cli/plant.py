@@ -8,7 +8,7 @@ from polyrob.cli.common import (
     hyperparameters_from_args,
     limit_weights_from_args,
 )
-from polyrob.cli.options import MODEL_CHOICES, int_at_least
+from polyrob.cli.options import MODEL_CHOICES, add_proof_dir_argument, int_at_least, proof_options
 from polyrob.errors import ArgumentError, CertificationError
 
 __all__ = ["add_plant_arguments", "pldi_path", "problem_from_args", "describe_source"]
@@ -43,6 +43,7 @@ def add_plant_arguments(p) -> None:
         default=None,
         help="--certify: boxes the proof evaluates before giving up (a count of work, not seconds)",
     )
+    add_proof_dir_argument(p)
 
 
 def pldi_path(args):
@@ -69,13 +70,13 @@ def problem_from_args(robot, args, out, *, hyperparameters=None, check=None):
         raise ArgumentError("--merge-symmetric applies to the box model: add --uncertainty box")
     pldi = domain = None
     bound_options = getattr(args, "bound_options", None)  # the default task's search effort (cli.common)
-    if getattr(args, "max_boxes", None) is not None and not getattr(args, "certify", False):
-        raise ArgumentError("--max-boxes sets the interval-arithmetic proof: use it with --certify")
+    proof = proof_options(args, ("max_boxes",))  # synth's --time-limit is the synthesis's
+    if proof and not getattr(args, "certify", False):
+        raise ArgumentError("--max-boxes and --proof-dir set the interval-arithmetic proof: use them with --certify")
     if getattr(args, "certify", False):
         if args.pldi:
             raise ArgumentError("--pldi holds its bounds already: drop --certify, or prove them with `polyrob bounds "
                                 "--certify -o STEM` and pass that file")  # fmt: skip
-        proof = {} if args.max_boxes is None else {"max_boxes": args.max_boxes}
         bound_options = {**(bound_options or {}), "certify": True, "certify_options": proof}
     if args.pldi:
         from polyrob.bounds.pldi import PLDI

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from polyrob.errors import ArgumentError
 
-__all__ = ["check_output_path", "pair_paths"]
+__all__ = ["check_output_path", "pair_paths", "cache_dir"]
 
 #: Suffixes that name one file of a JSON + .npz pair (the stem is what is left).
 PAIR_SUFFIXES = (".json", ".npz")
@@ -86,3 +86,24 @@ def check_output_path(path, option: str = "-o") -> Path:
     if not os.access(anchor, os.W_OK | os.X_OK):
         raise ArgumentError(f"{option} {raw}: cannot write in {anchor} (permission denied)")
     return path
+
+
+def cache_dir(topic: str) -> Path:
+    """Where polyrob keeps work worth keeping between commands (a proof's state): ``<root>/<topic>``.
+
+    ``<root>``: ``$POLYROB_CACHE_DIR``, else ``$XDG_CACHE_HOME/polyrob``, else
+    ``~/.cache/polyrob`` (the XDG convention).  Not created here.
+
+    Examples
+    --------
+    >>> import os
+    >>> os.environ["POLYROB_CACHE_DIR"] = "/var/tmp/polyrob-cache"
+    >>> str(cache_dir("proofs"))
+    '/var/tmp/polyrob-cache/proofs'
+    >>> del os.environ["POLYROB_CACHE_DIR"]
+    """
+    root = os.environ.get("POLYROB_CACHE_DIR")
+    if not root:
+        xdg = os.environ.get("XDG_CACHE_HOME")
+        root = Path(xdg) / "polyrob" if xdg else Path.home() / ".cache" / "polyrob"
+    return Path(root) / topic

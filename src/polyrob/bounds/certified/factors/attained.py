@@ -2,7 +2,7 @@
 
 A side of an entry closes on a box when its proved bound is within the
 tolerance of the largest value *attained* so far
-(:func:`~polyrob.bounds.certified.factors.ranges.prove_factor_ranges`).
+(:func:`~polyrob.bounds.certified.factors.proof.prove_factor_ranges`).
 On an arm's task box the entries' extremes sit at or near the box's
 vertices in ``(q, qdot)`` (the box is small against the arm's curvature),
 where neither random points nor the centres of the boxes the search

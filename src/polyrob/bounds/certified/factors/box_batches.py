@@ -1,7 +1,7 @@
 """The branch and bound's batches of boxes, enclosed on worker processes.
 
-:func:`~polyrob.bounds.certified.factors.ranges.prove_factor_ranges` encloses
-its boxes :data:`~polyrob.bounds.certified.factors.ranges.BATCH` at a time
+:func:`~polyrob.bounds.certified.factors.proof.prove_factor_ranges` encloses
+its boxes :data:`~polyrob.bounds.certified.factors.proof.BATCH` at a time
 (vectorised); :func:`enclose_batch` splits each batch among the workers of a
 :class:`~polyrob.bounds.parallel.WorkerPool` (the problem sent to each worker
 once) and joins the parts in the batch's order.  Every box's enclosure is

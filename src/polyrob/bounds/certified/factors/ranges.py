@@ -34,35 +34,21 @@ How a box is enclosed (:meth:`FactorProblem.enclose`):
   enumerated (``2^m``), never split;
 * ``qdot`` is split like ``q``.
 
-Branch and bound: an entry's side is closed on a box when its bound is
-within ``rel_tol`` of the entry's width of the *inner* value (the largest
-attained at a point so far: the sampled search's, this module's pilot, the vertices
-:func:`~polyrob.bounds.certified.factors.attained.vertex_ascent` visits, and
-every box's centre); a box with an open side is split along the
-coordinate that carries most of the over-estimation; a side proved
-monotone in a coordinate goes to the face where its extreme lies
-(:mod:`~polyrob.bounds.certified.factors.monotone`), and the open entries'
-Taylor form is bounded on cells of the box
-(:func:`~polyrob.bounds.certified.factors.taylor2.taylor2_cells`).  The result is the
-union of the leaves' enclosures: rigorous whatever the inner values are
-(they only steer), and the work is counted in boxes (:data:`MAX_BOXES`),
-never in seconds.
+The branch and bound over the task box that calls :meth:`FactorProblem.enclose`
+on batches of boxes is :mod:`~polyrob.bounds.certified.factors.proof`.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from polyrob.bounds.certified import ball_jets as bj
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, intersect, lower, upper
-from polyrob.bounds.certified.factors.attained import attained_range, vertex_ascent
-from polyrob.bounds.certified.factors.box_batches import enclose_batch
 from polyrob.bounds.certified.factors.hessian import box_models, centre_velocity_models, factor_hessians
 from polyrob.bounds.certified.factors.inverse import fixed_point_inverse, jet_parts, taylor_neumann_inverse
-from polyrob.bounds.certified.factors.monotone import gradient_signs, replace_box
+from polyrob.bounds.certified.factors.monotone import gradient_signs
 from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread, vertex_gradients
 from polyrob.bounds.certified.factors.taylor2 import (
     at_vertices,
@@ -71,55 +57,10 @@ from polyrob.bounds.certified.factors.taylor2 import (
     taylor2_bounds,
     taylor2_cells,
 )
-from polyrob.bounds.certified.factors.width_ratio import FLOOR, closing_tolerance
 from polyrob.bounds.certified.jet_rnea import PARAMETER_RTOL, Chain, rnea
-from polyrob.bounds.parallel import WorkerPool
 from polyrob.errors import CertificationError
 
-__all__ = [
-    "FactorProblem",
-    "FactorEnclosure",
-    "prove_factor_ranges",
-    "MAX_BOXES",
-    "REL_TOL",
-    "BATCH",
-]
-
-#: Boxes the branch and bound evaluates before giving up (a count of work, not of seconds): with the
-#: Taylor form (1-2 s a box for ur5 and panda on a loaded 2-core machine), five to ten minutes.
-MAX_BOXES = 300
-#: Default tolerance: a side closes within 4 % of its entry's width of the inner value (both sides: a ratio
-#: of at most 1.08 to the attained width, under issue 41's bar of 1.10).
-REL_TOL = 0.04
-#: Boxes evaluated together (vectorised).
-BATCH = 16
-
-
-@dataclass(frozen=True, eq=False)
-class FactorEnclosure:
-    """Proved entrywise ranges ``lower <= K_k(x) <= upper`` of each factor over the box.
-
-    Attributes
-    ----------
-    names : tuple of str
-        The factors (``links``, ``payload``).
-    lower, upper : ndarray (F, m, 3m)
-        Columns: ``q``, ``qdot``, then ``a`` (the factor's ``G``).
-    boxes : int
-        Boxes evaluated.
-    seconds : float
-    """
-
-    names: tuple
-    lower: np.ndarray
-    upper: np.ndarray
-    boxes: int
-    seconds: float
-
-    def contains(self, K) -> np.ndarray:
-        """Whether factor values ``K`` (``(n, F, m, 3m)``) lie in the ranges: one bool per point."""
-        K = np.asarray(K, float)
-        return np.all((K >= self.lower) & (K <= self.upper), axis=(1, 2, 3))
+__all__ = ["FactorProblem"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -465,134 +406,3 @@ def _columns(Jq, Jqd, G, m):
     """``[J_q J_qd G]``: three ``(B, F, i, m)`` jets side by side, ``(B, F, i, 3m)``."""
     K = type(Jq).stack([Jq, Jqd, G], 3)  # (B, F, i, 3, m)
     return K.reshape(*K.shape[:3], 3 * m)
-
-
-def prove_factor_ranges(
-    loops,
-    domain,
-    *,
-    inner=None,
-    rel_tol: float = REL_TOL,
-    max_boxes: int = MAX_BOXES,
-    time_limit: float | None = None,
-    progress=None,
-    pilot: int = 256,
-    seed: int = 0,
-    taylor: bool = True,
-    ascent_rounds: int = 8,
-    workers: int = 1,
-) -> FactorEnclosure:
-    """Proved ranges of the factors of ``loops`` over a task ``domain`` (a branch and bound on its ``(q, qdot)`` box).
-
-    Parameters
-    ----------
-    loops : list of (str, Direction or FactorLoop)
-        :func:`~polyrob.bounds.certified.factors.directions.factor_directions` of the inner loop (names first).
-    domain : TaskDomain
-        ``q_lower`` ... ``qddot_upper``.
-    inner : (lower, upper) arrays (F, m, 3m), optional
-        Attained values (the sampled search's) that steer the refinement;
-        by default a pilot of ``pilot`` points.  They never enter the bounds.
-    rel_tol : float
-        A side of an entry is closed on a box when its bound is within
-        ``rel_tol`` of the entry's (inner) width of the inner value; for an
-        entry thinner than :data:`~polyrob.bounds.certified.factors.width_ratio.FLOOR`
-        of its factor's scale, within ``rel_tol`` of that floor.
-    max_boxes : int
-        Give up (:class:`~polyrob.errors.CertificationError`) after this many boxes.
-    time_limit : float, optional
-        A wall-clock safety net the caller sets (none by default).
-    progress : callable, optional
-        ``progress(fraction, boxes, eta_seconds)``: the whole job's fraction
-        of open volume closed.
-    ascent_rounds : int
-        Rounds of :func:`~polyrob.bounds.certified.factors.attained.vertex_ascent`
-        added to the pilot's values (0: the pilot alone).
-    taylor : bool
-        Intersect each box's mean-value and slope forms with the
-        second-order Taylor form (:mod:`polyrob.bounds.certified.factors.taylor2`):
-        about six times the work per box, far fewer boxes.
-    workers : int
-        Processes each batch of boxes is shared among (:mod:`~polyrob.bounds.certified.factors.box_batches`):
-        the same boxes, sooner (a worker's share may get finer cells, :func:`~polyrob.bounds.certified.factors.taylor2.cell_grid`).
-    """
-    t0 = time.perf_counter()
-    problem = FactorProblem.from_loops(loops)
-    m = problem.m
-    q_lo, q_hi = np.asarray(domain.q_lower, float), np.asarray(domain.q_upper, float)
-    v_lo, v_hi = np.asarray(domain.qdot_lower, float), np.asarray(domain.qdot_upper, float)
-    a_lo, a_hi = np.asarray(domain.qddot_lower, float), np.asarray(domain.qddot_upper, float)
-    rng = np.random.default_rng(seed)
-    p_lo, p_hi = attained_range(problem, q_lo, q_hi, v_lo, v_hi, a_lo, a_hi, pilot, rng)
-    if ascent_rounds:  # the extremes at the box's vertices, which no box centre reaches (attained.py)
-        x_lo, x_hi = np.concatenate([q_lo, v_lo]), np.concatenate([q_hi, v_hi])
-        at_lo, at_hi = vertex_ascent(problem, x_lo, x_hi, a_lo, a_hi, rounds=ascent_rounds)
-        p_lo, p_hi = np.minimum(p_lo, at_lo), np.maximum(p_hi, at_hi)
-    if inner is not None:
-        p_lo, p_hi = np.minimum(p_lo, inner[0]), np.maximum(p_hi, inner[1])
-    tol = closing_tolerance(p_lo, p_hi, rel_tol, FLOOR)
-    F = len(problem.names)
-    out_lo, out_hi = np.full((F, m, 3 * m), np.inf), np.full((F, m, 3 * m), -np.inf)
-    root_q, root_v = np.where(q_hi > q_lo, q_hi - q_lo, 1.0), np.where(v_hi > v_lo, v_hi - v_lo, 1.0)
-    # boxes: (q_lo, q_hi, qd_lo, qd_hi, open sides (F, m, 3m, 2), volume share)
-    stack = [(q_lo, q_hi, v_lo, v_hi, np.ones((F, m, 3 * m, 2), bool), 1.0)]
-    total_sides = F * m * 3 * m * 2
-    closed_share, boxes = 0.0, 0
-    with WorkerPool(problem, workers) as pool:
-        while stack:
-            if boxes >= max_boxes or (time_limit is not None and time.perf_counter() - t0 > time_limit):
-                what = (
-                    f"the limit of {max_boxes} boxes reached"
-                    if boxes >= max_boxes
-                    else f"stopped by the time limit of {time_limit:g} s you set"
-                )
-                raise CertificationError(
-                    f"proved factor ranges: {what} with {len(stack)} boxes still open "
-                    f"({100 * closed_share:.1f} % of the work done); raise the tolerance (rel_tol) or the work "
-                    "limit (max_boxes), or shrink the task; or drop --certify (sampled bounds)"
-                )
-            batch, stack = stack[-BATCH:], stack[:-BATCH]
-            boxes += len(batch)
-            ql, qh, vl, vh = (np.array([b[k] for b in batch]) for k in range(4))
-            entries = np.array([b[4].any(-1) for b in batch])
-            lo, hi, contribution, seen_lo, seen_hi, sign = enclose_batch(
-                pool, (ql, qh, vl, vh, entries), a_lo, a_hi, taylor=taylor
-            )
-            # the inner values grow with every box's centre: an entry's side closes against the best value attained
-            finite = np.isfinite(hi).all((1, 2, 3))
-            if finite.any():
-                p_lo = np.minimum(p_lo, seen_lo[finite].min(0))
-                p_hi = np.maximum(p_hi, seen_hi[finite].max(0))
-            for b, (bql, bqh, bvl, bvh, open_, share) in enumerate(batch):
-                done_hi = hi[b] <= p_hi + tol
-                done_lo = lo[b] >= p_lo - tol
-                q_can = (bqh - bql) > 1e-6 * root_q
-                v_can = (bvh - bvl) > 1e-3 * root_v
-                still = open_ & ~np.stack([done_lo, done_hi], -1)
-                if not (q_can.any() or v_can.any()):
-                    still[:] = False  # cannot refine further: keep this box's enclosure
-                closing = open_ & ~still
-                out_lo = np.where(closing[..., 0], np.minimum(out_lo, lo[b]), out_lo)
-                out_hi = np.where(closing[..., 1], np.maximum(out_hi, hi[b]), out_hi)
-                if not still.any():
-                    continue
-                # split where the open entries' over-estimation comes from (relative to their tolerance)
-                weight = still.any(-1) / tol
-                scores = np.einsum("fie,fiep->p", weight, contribution[b]) * np.concatenate([q_can, v_can])
-                p = int(np.argmax(scores))
-                if not np.isfinite(scores[p]) or scores[p] <= 0:
-                    p = int(np.argmax(np.concatenate([(bqh - bql) / root_q * q_can, (bvh - bvl) / root_v * v_can])))
-                # a side monotone in a coordinate needs only the face where its extreme lies (monotone.py)
-                x_lo, x_hi = np.concatenate([bql, bvl]), np.concatenate([bqh, bvh])
-                for c_lo, c_hi, sides, c_share in replace_box(x_lo, x_hi, still, sign[b], p, share):
-                    stack.append((c_lo[:m], c_hi[:m], c_lo[m:], c_hi[m:], sides, c_share))
-            # the whole job's fraction: the open work left is each queued box's volume share times its open sides
-            closed_share = 1.0 - sum(b[5] * b[4].sum() for b in stack) / total_sides
-            if progress is not None:
-                done = closed_share
-                elapsed = time.perf_counter() - t0
-                eta = elapsed * (1 - done) / done if done > 0 else float("nan")
-                progress(done, boxes, eta)
-    if not (np.all(np.isfinite(out_lo)) and np.all(np.isfinite(out_hi))):
-        raise CertificationError("proved factor ranges: some entry could not be bounded")
-    return FactorEnclosure(problem.names, out_lo, out_hi, boxes, time.perf_counter() - t0)

@@ -1,0 +1,93 @@
+"""The factors' proof keeps what it finished: checkpoints, resumption, the cache of finished proofs (proof.py)."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+
+import polyrob.bounds.certified.factors.proof as proof
+from polyrob import load_robot
+from polyrob.bounds.certified.factors import FactorProblem, prove_factor_ranges
+from polyrob.domains.default_task import default_task_domain, default_task_robot
+from polyrob.errors import CertificationError
+from polyrob.plant.models.inner_factors import factor_parameters
+
+CHEAP = dict(pilot=32, ascent_rounds=0)  # the steering's pilot small: these tests are about the state, not tightness
+
+
+@functools.cache
+def finger():
+    """finger_edu's factors on a fiftieth of its task: 31 boxes in two batches, about 3 s."""
+    robot = default_task_robot(load_robot("finger_edu"))
+    loops = [(name, loop) for name, _, loop in factor_parameters(robot)]
+    box = default_task_domain(robot).scaled(0.02)
+    return loops, box, prove_factor_ranges(loops, box, **CHEAP)
+
+
+def test_a_proof_given_up_goes_on_from_its_checkpoint_to_the_uninterrupted_result(tmp_path):
+    loops, box, whole = finger()
+    with pytest.raises(CertificationError, match="its state is kept in .*factor-proof-.*npz: the same call goes on"):
+        prove_factor_ranges(loops, box, max_boxes=1, checkpoint_dir=tmp_path, **CHEAP)
+    (kept,) = tmp_path.glob("factor-proof-*.npz")
+    resumed = prove_factor_ranges(loops, box, checkpoint_dir=tmp_path, **CHEAP)
+    assert resumed.resumed_boxes == 1 and resumed.boxes == whole.boxes == 31  # the root box was the first batch
+    assert np.array_equal(resumed.lower, whole.lower) and np.array_equal(resumed.upper, whole.upper)
+    assert resumed.checkpoint == str(kept)
+    # finished: the next call takes it from the file without a box more, and says the work is all done
+    seen = []
+    again = prove_factor_ranges(loops, box, checkpoint_dir=tmp_path, progress=lambda *a: seen.append(a), **CHEAP)
+    assert again.boxes == again.resumed_boxes == 31 and np.array_equal(again.upper, whole.upper)
+    assert seen == [(1.0, 31, 0.0)]
+
+
+def test_an_interrupted_batch_leaves_the_state_of_the_batch_before(tmp_path, monkeypatch):
+    loops, box, whole = finger()
+    calls = []
+    enclose = proof.enclose_batch
+
+    def interrupted(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:  # Ctrl-C while the second batch is enclosed
+            raise KeyboardInterrupt
+        return enclose(*args, **kwargs)
+
+    monkeypatch.setattr(proof, "enclose_batch", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        prove_factor_ranges(loops, box, checkpoint_dir=tmp_path, **CHEAP)
+    monkeypatch.setattr(proof, "enclose_batch", enclose)
+    resumed = prove_factor_ranges(loops, box, checkpoint_dir=tmp_path, **CHEAP)
+    assert resumed.resumed_boxes == 1 and resumed.boxes == whole.boxes
+    assert np.array_equal(resumed.lower, whole.lower) and np.array_equal(resumed.upper, whole.upper)
+
+
+def test_a_damaged_file_or_another_proofs_state_is_not_gone_on_from(tmp_path):
+    loops, box, whole = finger()
+    problem = FactorProblem.from_loops(loops)
+    settings = dict(rel_tol=proof.REL_TOL, pilot=32, seed=0, taylor=True, ascent=0, batch=proof.BATCH)
+    path = tmp_path / f"factor-proof-{proof.proof_fingerprint(problem, box, **settings)}.npz"
+    path.write_bytes(b"not a checkpoint")
+    fresh = prove_factor_ranges(loops, box, checkpoint_dir=tmp_path, **CHEAP)
+    assert fresh.resumed_boxes == 0 and np.array_equal(fresh.upper, whole.upper)
+    assert fresh.checkpoint == str(path)  # rewritten whole
+    # a state whose fingerprint is another proof's (a file renamed by hand) is not read either
+    other = tmp_path / "other"
+    other.mkdir()
+    path.rename(other / path.name)
+    with np.load(other / path.name) as data:
+        arrays = dict(data)
+    arrays["fingerprint"] = np.array("0" * 24)
+    np.savez(path, **arrays)
+    assert prove_factor_ranges(loops, box, checkpoint_dir=tmp_path, **CHEAP).resumed_boxes == 0
+
+
+def test_the_fingerprint_follows_the_task_the_tolerance_and_the_robot():
+    loops, box, _ = finger()
+    problem = FactorProblem.from_loops(loops)
+    base = proof.proof_fingerprint(problem, box, rel_tol=0.04)
+    assert base == proof.proof_fingerprint(problem, box, rel_tol=0.04)
+    assert base != proof.proof_fingerprint(problem, box.scaled(0.5), rel_tol=0.04)
+    assert base != proof.proof_fingerprint(problem, box, rel_tol=0.05)
+    heavier = FactorProblem(problem.chain, problem.names, problem.params * 1.001, problem.params_rad)
+    assert base != proof.proof_fingerprint(heavier, box, rel_tol=0.04)
