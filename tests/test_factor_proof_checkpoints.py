@@ -68,18 +68,21 @@ def test_a_damaged_file_or_another_proofs_state_is_not_gone_on_from(tmp_path):
     settings = dict(rel_tol=proof.REL_TOL, pilot=32, seed=0, taylor=True, ascent=0, batch=proof.BATCH)
     path = tmp_path / f"factor-proof-{proof.proof_fingerprint(problem, box, **settings)}.npz"
     path.write_bytes(b"not a checkpoint")
-    fresh = prove_factor_ranges(loops, box, checkpoint_dir=tmp_path, **CHEAP)
-    assert fresh.resumed_boxes == 0 and np.array_equal(fresh.upper, whole.upper)
-    assert fresh.checkpoint == str(path)  # rewritten whole
-    # a state whose fingerprint is another proof's (a file renamed by hand) is not read either
-    other = tmp_path / "other"
-    other.mkdir()
-    path.rename(other / path.name)
-    with np.load(other / path.name) as data:
+    with pytest.raises(CertificationError, match=r"\(\d+\.\d % of the work done, 1 box in all"):  # from the root
+        prove_factor_ranges(loops, box, max_boxes=1, checkpoint_dir=tmp_path, **CHEAP)
+    with np.load(path) as data:  # rewritten whole: this proof's state after its first box
+        assert int(data["boxes"]) == 1 and len(data["share"]) > 0
         arrays = dict(data)
-    arrays["fingerprint"] = np.array("0" * 24)
+    # a finished state whose fingerprint is another proof's (a file renamed by hand) is not read either
+    arrays.update(fingerprint=np.array("0" * 24), out_lo=whole.lower, out_hi=whole.upper, boxes=np.array(31))
+    arrays.update({k: arrays[k][:0] for k in ("q_lo", "q_hi", "qd_lo", "qd_hi", "open", "share")})
     np.savez(path, **arrays)
-    assert prove_factor_ranges(loops, box, checkpoint_dir=tmp_path, **CHEAP).resumed_boxes == 0
+    with pytest.raises(CertificationError, match="1 box in all"):  # started afresh, not returned as finished
+        prove_factor_ranges(loops, box, max_boxes=1, checkpoint_dir=tmp_path, **CHEAP)
+    arrays["fingerprint"] = np.array(path.stem.removeprefix("factor-proof-"))
+    np.savez(path, **arrays)  # the same finished state under its own fingerprint is taken as it is
+    taken = prove_factor_ranges(loops, box, max_boxes=1, checkpoint_dir=tmp_path, **CHEAP)
+    assert taken.resumed_boxes == 31 and np.array_equal(taken.lower, whole.lower)
 
 
 def test_the_fingerprint_follows_the_task_the_tolerance_and_the_robot():

@@ -358,7 +358,8 @@ def _gave_up(state, max_boxes, time_limit, total_sides, path) -> str:
     kept = f"; its state is kept in {path}: the same call goes on from there" if path is not None else ""
     return (
         f"proved factor ranges: {what} with {len(state.stack)} boxes still open "
-        f"({100 * state.done_share(total_sides):.1f} % of the work done, {state.boxes} boxes in all{kept}); "
+        f"({100 * state.done_share(total_sides):.1f} % of the work done, {state.boxes} "
+        f"{'box' if state.boxes == 1 else 'boxes'} in all{kept}); "
         "raise the tolerance (rel_tol) or the work limit (max_boxes), or shrink the task; "
         "or drop --certify (sampled bounds)"
     )
