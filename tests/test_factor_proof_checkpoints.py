@@ -94,3 +94,17 @@ def test_the_fingerprint_follows_the_task_the_tolerance_and_the_robot():
     assert base != proof.proof_fingerprint(problem, box, rel_tol=0.05)
     heavier = FactorProblem(problem.chain, problem.names, problem.params * 1.001, problem.params_rad)
     assert base != proof.proof_fingerprint(heavier, box, rel_tol=0.04)
+
+
+def test_at_the_work_limit_what_is_proved_by_then_holds_every_point_and_the_finished_proof():
+    loops, box, whole = finger()
+    part = prove_factor_ranges(loops, box, max_boxes=1, partial=True, **CHEAP)
+    assert part.boxes == 1 and 0.0 < part.done < 1.0 and whole.done == 1.0
+    assert np.all(part.lower <= whole.lower) and np.all(part.upper >= whole.upper)
+    assert np.any(part.upper > whole.upper) and np.any(part.lower < whole.lower)  # the work left is tightness
+    problem = FactorProblem.from_loops(loops)
+    rng = np.random.default_rng(41)
+    q = rng.uniform(box.q_lower, box.q_upper, (400, problem.m))
+    qd = rng.uniform(box.qdot_lower, box.qdot_upper, (400, problem.m))
+    a = np.where(rng.integers(0, 2, (400, problem.m)) == 1, box.qddot_upper, box.qddot_lower)
+    assert part.contains(problem.values(q, qd, a)).all()

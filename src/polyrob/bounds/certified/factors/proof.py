@@ -12,10 +12,14 @@ coordinate that carries most of the over-estimation; a side proved
 monotone in a coordinate goes to the face where its extreme lies
 (:mod:`~polyrob.bounds.certified.factors.monotone`), and the open entries'
 Taylor form is bounded on cells of the box
-(:func:`~polyrob.bounds.certified.factors.taylor2.taylor2_cells`).  The result is the
-union of the leaves' enclosures: rigorous whatever the inner values are
-(they only steer), and the work is counted in boxes (:data:`MAX_BOXES`),
-never in seconds.
+(:func:`~polyrob.bounds.certified.factors.taylor2.taylor2_cells`).  A box's
+enclosure is intersected with its parent's (both hold on it: a child, or a
+face, is part of its parent).  The result is the union of the leaves'
+enclosures: rigorous whatever the inner values are (they only steer), and
+the work is counted in boxes (:data:`MAX_BOXES`), never in seconds.  At
+any moment every side is enclosed over the whole task (its closed bound,
+and the enclosures of the boxes where it is still open): with
+``partial=True`` that is what the work limit returns, proved and wider.
 
 Checkpoints (``checkpoint_dir``): the proof's state -- the boxes still open
 with their open sides, the bounds of the sides closed, the values attained
@@ -93,6 +97,10 @@ class FactorEnclosure:
         Of ``boxes``, those a checkpoint held when this call began (0 without one).
     checkpoint : str or None
         The file that holds the proof's state.
+    done : float
+        The refinement's fraction of work done: 1 when every side closed within
+        the tolerance, less when the ranges are those proved by the work limit
+        (``prove_factor_ranges(..., partial=True)``): proved, and wider.
     """
 
     names: tuple
@@ -102,6 +110,7 @@ class FactorEnclosure:
     seconds: float
     resumed_boxes: int = 0
     checkpoint: str | None = None
+    done: float = 1.0
 
     def contains(self, K) -> np.ndarray:
         """Whether factor values ``K`` (``(n, F, m, 3m)``) lie in the ranges: one bool per point."""
@@ -150,7 +159,7 @@ def proof_fingerprint(problem: FactorProblem, domain, **settings) -> str:
 class _State:
     """The branch and bound between two batches: what a checkpoint holds."""
 
-    stack: list  # boxes: (q_lo, q_hi, qd_lo, qd_hi, open sides (F, m, 3m, 2), volume share)
+    stack: list  # boxes: (q_lo, q_hi, qd_lo, qd_hi, open sides (F, m, 3m, 2), volume share, lower, upper)
     out_lo: np.ndarray
     out_hi: np.ndarray
     p_lo: np.ndarray  # the values attained (they steer)
@@ -162,7 +171,7 @@ class _State:
     def save(self, path: Path, fingerprint: str) -> None:
         from polyrob.io.atomic import atomic_write
 
-        columns = list(zip(*self.stack)) if self.stack else [()] * 6
+        columns = list(zip(*self.stack)) if self.stack else [()] * 8
         F, m = self.out_lo.shape[:2]
         arrays = {
             "fingerprint": np.array(fingerprint),
@@ -174,6 +183,8 @@ class _State:
             arrays[name] = np.array(columns[k], float).reshape(-1, m)
         arrays["open"] = np.array(columns[4], bool).reshape(-1, F, m, 3 * m, 2)
         arrays["share"] = np.array(columns[5], float)
+        arrays["box_lo"] = np.array(columns[6], float).reshape(-1, F, m, 3 * m)
+        arrays["box_hi"] = np.array(columns[7], float).reshape(-1, F, m, 3 * m)
         atomic_write(path, lambda f: np.savez_compressed(f, **arrays), binary=True)
 
     @classmethod
@@ -183,8 +194,11 @@ class _State:
             with np.load(path) as data:
                 if str(data["fingerprint"]) != fingerprint:
                     return None
-                parts = [data[k] for k in ("q_lo", "q_hi", "qd_lo", "qd_hi", "open", "share")]
-                stack = [tuple(x[i] for x in parts[:5]) + (float(parts[5][i]),) for i in range(len(parts[5]))]
+                parts = [data[k] for k in ("q_lo", "q_hi", "qd_lo", "qd_hi", "open", "share", "box_lo", "box_hi")]
+                stack = [
+                    tuple(x[i] for x in parts[:5]) + (float(parts[5][i]), parts[6][i], parts[7][i])
+                    for i in range(len(parts[5]))
+                ]
                 return cls(
                     stack,
                     *(data[k].copy() for k in ("out_lo", "out_hi", "p_lo", "p_hi", "tol")),
@@ -193,6 +207,21 @@ class _State:
                 )
         except (OSError, KeyError, ValueError, EOFError):
             return None
+
+    def enclosure(self):
+        """``(lower, upper)`` proved now, however far the refinement is: each side's closed bound and the
+        enclosures of the boxes where it is still open (``inf`` before the first box).
+
+        Every point of the task lies in a leaf -- a box closed for the side, or one
+        still queued -- or in a half dropped for that side because its extreme lies
+        on the face kept (:mod:`~polyrob.bounds.certified.factors.monotone`).
+        """
+        lower, upper = self.out_lo.copy(), self.out_hi.copy()
+        for box in self.stack:
+            open_ = box[4]
+            lower = np.where(open_[..., 0], np.minimum(lower, box[6]), lower)
+            upper = np.where(open_[..., 1], np.maximum(upper, box[7]), upper)
+        return lower, upper
 
     def done_share(self, total_sides: int) -> float:
         """The whole job's fraction: the open work left is each queued box's volume share times its open sides."""
@@ -214,6 +243,7 @@ def prove_factor_ranges(
     ascent_rounds: int = 8,
     workers: int = 1,
     checkpoint_dir=None,
+    partial: bool = False,
 ) -> FactorEnclosure:
     """Proved ranges of the factors of ``loops`` over a task ``domain`` (a branch and bound on its ``(q, qdot)`` box).
 
@@ -252,6 +282,10 @@ def prove_factor_ranges(
     checkpoint_dir : path, optional
         Keep the proof's state there and go on from it (the module text);
         a proof given up says where its state is.
+    partial : bool
+        At the work limit, return what is proved by then instead of giving
+        up: every entry enclosed (the sides not yet within ``rel_tol`` by the
+        enclosures of the boxes where they are open), ``done < 1``.
 
     Examples
     --------
@@ -308,7 +342,9 @@ def prove_factor_ranges(
                 if state.boxes - resumed >= max_boxes or (
                     time_limit is not None and time.perf_counter() - t0 > time_limit
                 ):
-                    raise CertificationError(_gave_up(state, max_boxes, time_limit, total_sides, path))
+                    if not partial:
+                        raise CertificationError(_gave_up(state, max_boxes, time_limit, total_sides, path))
+                    break
                 _one_batch(state, pool, a_lo, a_hi, taylor, root_q, root_v)
                 batches += 1
                 if batches % SAVE_EVERY == 0:
@@ -321,16 +357,18 @@ def prove_factor_ranges(
         keep()
     if progress is not None and batches == 0:
         progress(1.0, state.boxes, 0.0)
-    if not (np.all(np.isfinite(state.out_lo)) and np.all(np.isfinite(state.out_hi))):
+    lower, upper = state.enclosure()
+    if not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))):
         raise CertificationError("proved factor ranges: some entry could not be bounded")
     return FactorEnclosure(
         problem.names,
-        state.out_lo,
-        state.out_hi,
+        lower,
+        upper,
         state.boxes,
         state.seconds,
         resumed,
         None if path is None else str(path),
+        state.done_share(total_sides),
     )
 
 
@@ -345,7 +383,8 @@ def _start(problem, q_lo, q_hi, v_lo, v_hi, a_lo, a_hi, rel_tol, pilot, seed, as
         p_lo, p_hi = np.minimum(p_lo, at_lo), np.maximum(p_hi, at_hi)
     tol = closing_tolerance(p_lo, p_hi, rel_tol, FLOOR)
     out_lo, out_hi = np.full((F, m, 3 * m), np.inf), np.full((F, m, 3 * m), -np.inf)
-    root = (q_lo, q_hi, v_lo, v_hi, np.ones((F, m, 3 * m, 2), bool), 1.0)
+    root = (q_lo, q_hi, v_lo, v_hi, np.ones((F, m, 3 * m, 2), bool), 1.0, out_lo.copy(), out_hi.copy())
+    root[6][:], root[7][:] = -np.inf, np.inf  # nothing known of the task yet
     return _State([root], out_lo, out_hi, p_lo, p_hi, tol, 0, 0.0)
 
 
@@ -385,7 +424,10 @@ def _one_batch(state: _State, pool, a_lo, a_hi, taylor, root_q, root_v) -> None:
         p_lo = np.minimum(p_lo, seen_lo[finite].min(0))
         p_hi = np.maximum(p_hi, seen_hi[finite].max(0))
     out_lo, out_hi, children = state.out_lo, state.out_hi, []
-    for b, (bql, bqh, bvl, bvh, open_, share) in enumerate(batch):
+    # a box's enclosure and its parent's both hold on it (a child, or a face, is part of its parent)
+    lo = np.maximum(lo, np.array([b[6] for b in batch]))
+    hi = np.minimum(hi, np.array([b[7] for b in batch]))
+    for b, (bql, bqh, bvl, bvh, open_, share, _, _) in enumerate(batch):
         done_hi = hi[b] <= p_hi + tol
         done_lo = lo[b] >= p_lo - tol
         q_can = (bqh - bql) > 1e-6 * root_q
@@ -407,6 +449,6 @@ def _one_batch(state: _State, pool, a_lo, a_hi, taylor, root_q, root_v) -> None:
         # a side monotone in a coordinate needs only the face where its extreme lies (monotone.py)
         x_lo, x_hi = np.concatenate([bql, bvl]), np.concatenate([bqh, bvh])
         for c_lo, c_hi, sides, c_share in replace_box(x_lo, x_hi, still, sign[b], p, share):
-            children.append((c_lo[:m], c_hi[:m], c_lo[m:], c_hi[m:], sides, c_share))
+            children.append((c_lo[:m], c_hi[:m], c_lo[m:], c_hi[m:], sides, c_share, lo[b], hi[b]))
     state.stack, state.out_lo, state.out_hi = rest + children, out_lo, out_hi
     state.p_lo, state.p_hi, state.boxes = p_lo, p_hi, state.boxes + len(batch)
