@@ -339,11 +339,11 @@ def prove_factor_ranges(
     try:
         with WorkerPool(problem, workers) as pool:
             while state.stack:
-                if state.boxes - resumed >= max_boxes or (
-                    time_limit is not None and time.perf_counter() - t0 > time_limit
-                ):
+                counted = state.boxes - resumed >= max_boxes  # this call's work
+                if counted or (time_limit is not None and time.perf_counter() - t0 > time_limit):
                     if not partial:
-                        raise CertificationError(_gave_up(state, max_boxes, time_limit, total_sides, path))
+                        what = f"the limit of {max_boxes} boxes" if counted else f"the time limit of {time_limit:g} s"
+                        raise CertificationError(_gave_up(state, what, total_sides, path))
                     break
                 _one_batch(state, pool, a_lo, a_hi, taylor, root_q, root_v)
                 batches += 1
@@ -355,8 +355,8 @@ def prove_factor_ranges(
                     progress(done, state.boxes, (1 - done) / pace if pace > 0 else float("nan"))
     finally:
         keep()
-    if progress is not None and batches == 0:
-        progress(1.0, state.boxes, 0.0)
+    if progress is not None and batches == 0:  # a finished proof read back (or no work allowed)
+        progress(state.done_share(total_sides), state.boxes, 0.0)
     lower, upper = state.enclosure()
     if not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))):
         raise CertificationError("proved factor ranges: some entry could not be bounded")
@@ -388,12 +388,8 @@ def _start(problem, q_lo, q_hi, v_lo, v_hi, a_lo, a_hi, rel_tol, pilot, seed, as
     return _State([root], out_lo, out_hi, p_lo, p_hi, tol, 0, 0.0)
 
 
-def _gave_up(state, max_boxes, time_limit, total_sides, path) -> str:
-    what = (
-        f"the limit of {max_boxes} boxes reached"
-        if time_limit is None or state.boxes >= max_boxes
-        else f"stopped by the time limit of {time_limit:g} s you set"
-    )
+def _gave_up(state, limit: str, total_sides, path) -> str:
+    what = f"{limit} reached" if "boxes" in limit else f"stopped by {limit} you set"
     kept = f"; its state is kept in {path}: the same call goes on from there" if path is not None else ""
     return (
         f"proved factor ranges: {what} with {len(state.stack)} boxes still open "
