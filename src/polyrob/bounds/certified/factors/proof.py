@@ -342,7 +342,11 @@ def prove_factor_ranges(
                 counted = state.boxes - resumed >= max_boxes  # this call's work
                 if counted or (time_limit is not None and time.perf_counter() - t0 > time_limit):
                     if not partial:
-                        what = f"the limit of {max_boxes} boxes" if counted else f"the time limit of {time_limit:g} s"
+                        what = (
+                            f"the limit of {max_boxes} boxes reached"
+                            if counted
+                            else f"stopped by the time limit of {time_limit:g} s you set"
+                        )
                         raise CertificationError(_gave_up(state, what, total_sides, path))
                     break
                 _one_batch(state, pool, a_lo, a_hi, taylor, root_q, root_v)
@@ -354,7 +358,8 @@ def prove_factor_ranges(
                     pace = (done - done_before) / (time.perf_counter() - t0)
                     progress(done, state.boxes, (1 - done) / pace if pace > 0 else float("nan"))
     finally:
-        keep()
+        if batches:  # a state read back and not changed is not written again
+            keep()
     if progress is not None and batches == 0:  # a finished proof read back (or no work allowed)
         progress(state.done_share(total_sides), state.boxes, 0.0)
     lower, upper = state.enclosure()
@@ -388,8 +393,7 @@ def _start(problem, q_lo, q_hi, v_lo, v_hi, a_lo, a_hi, rel_tol, pilot, seed, as
     return _State([root], out_lo, out_hi, p_lo, p_hi, tol, 0, 0.0)
 
 
-def _gave_up(state, limit: str, total_sides, path) -> str:
-    what = f"{limit} reached" if "boxes" in limit else f"stopped by {limit} you set"
+def _gave_up(state, what: str, total_sides, path) -> str:
     kept = f"; its state is kept in {path}: the same call goes on from there" if path is not None else ""
     return (
         f"proved factor ranges: {what} with {len(state.stack)} boxes still open "
