@@ -114,6 +114,14 @@ def test_the_inner_gain_model_rests_on_the_proved_factor_ranges_alone(finger, mo
     assert scope.enclosure == "certified" and "proved (interval arithmetic)" in scope.sentence()
     # the PLDI's sampled intervals are named as what they are: not what the certificate rests on
     assert "are not what the model rests on" in scope.sentence() and "; bounds sampled at" not in scope.sentence()
+    # the proof closed every side: within 1 + 2 rel_tol of the values attained; stopped at its work limit, the
+    # certificate would name it (its ranges hold, wider than the tolerance)
+    proof_info = pldi.info["certify"]
+    assert proof_info["done"] == 1.0 and proof_info["tightness"]["max"] <= 1.0801
+    assert "work limit" not in scope.sentence()
+    proof_info.update(done=0.42, tightness={**proof_info["tightness"], "max": 3.5})
+    sentence = problem.scope().sentence()
+    assert "factor ranges proved at the proof's work limit" in sentence and "42.0 %" in sentence and "3.5x" in sentence
     # without the proof the same model is sampled, and says it rests on the PLDI too
     sampled = uncertain_plant(bound_pldi(robot, small, **cheap), model="inner-gain", coverage=0, volume_samples=0)
     assert model_of(sampled).enclosure(sampled) == "sampled" and "PLDI" in enclosure_inputs(sampled)
@@ -131,12 +139,11 @@ def test_synth_certify_is_refused_in_one_line_where_it_cannot_run(tmp_path, caps
     assert main(["synth", "finger_edu", "--certify", "--pldi", str(tmp_path / "p.json"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "--pldi holds its bounds already" in err and err.count("\n") == 1
-    # a proof out of its counted work: one line naming the option the command has, nothing written
-    out = tmp_path / "K.json"
-    assert main(["synth", "finger_edu", "--certify", "--max-boxes", "1", "--quiet", "-o", str(out)]) == 2
+    # an arm's proof at its work limit is not refused: its ranges are taken (test_cli_progress.py)
+    # a torque box's proof keeps no state: --proof-dir there is refused in one line (it was a traceback)
+    assert main(["bounds", "planar_2r", "--certify", "--proof-dir", str(tmp_path), "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert "the limit of 1 boxes" in err and "raise the work limit (--max-boxes)" in err and "rel_tol" not in err
-    assert err.count("\n") == 1 and not list(tmp_path.iterdir())
+    assert "a torque box's proof keeps no state: drop it" in err and err.count("\n") == 1
     # a torque box's proof names the options of `polyrob bounds`, which this command does not have: it says so
     assert main(["synth", "planar_2r", "--certify", "--max-boxes", "1", "--quiet"]) == 2
     err = capsys.readouterr().err

@@ -424,3 +424,16 @@ def test_a_lower_bound_whose_svd_does_not_converge_falls_back_and_stays_a_lower_
     monkeypatch.setattr(lower.np.linalg, "svd", failing(2))
     lo, delta, _ = lower.lower_bound(M, st)
     assert lo == 0.0 and not np.any(delta)
+
+
+def test_a_candidate_whose_check_overflows_is_not_verified_and_never_a_crash():
+    """`analyze ur5` on proved factor ranges crashed: a candidate perturbation of 1e300 made ``I - M Delta``
+    overflow, and the SVD that verifies ``det = 0`` raised.  Such a candidate is now not verified (the lower
+    bound rests only on a singular matrix that was checked); a true one still is."""
+    import polyrob.analysis.mu.lower as lower
+
+    M = np.array([[0.5, 0.0], [0.0, 0.25]], complex)
+    assert lower._singular(M, np.diag([2.0, 0.0]).astype(complex))  # det(I - M Delta) = 0
+    assert not lower._singular(M, np.diag([1.0, 0.0]).astype(complex))
+    assert not lower._singular(M, np.diag([np.inf, 1.0]).astype(complex))  # inf, nan: not verified
+    assert not lower._singular(np.full((2, 2), 1e300, complex), np.full((2, 2), 1e300, complex))

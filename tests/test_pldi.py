@@ -154,11 +154,11 @@ def test_cli_bounds_writes_the_pldi(tmp_path, capsys):
 
 def test_cli_bounds_certify_on_seven_joints_is_one_line(tmp_path, capsys):
     """panda keeps its default task under --certify (before: the URDF limits, then 'up to 3 joints');
-    a proof that runs out of its counted work is one line naming the options."""
+    a proof asked to complete that runs out of its counted work is one line naming the options."""
     from polyrob.cli import main
 
     out = tmp_path / "p.json"
-    code = main(["bounds", "panda", "--certify", "--max-boxes", "1", "--quiet", "-o", str(out)])
+    code = main(["bounds", "panda", "--certify", "--max-boxes", "1", "--complete-proof", "--quiet", "-o", str(out)])
     err = capsys.readouterr().err
     assert code == 2 and "proved factor ranges: the limit of 1 boxes" in err and err.count("\n") == 1
     assert "--max-boxes" in err and "--rel-tol" in err and "max_boxes" not in err

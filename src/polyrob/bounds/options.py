@@ -118,7 +118,10 @@ class BoundOptions:
         ``max_joints`` (default 3); an arm's factor proof also takes
         ``checkpoint_dir`` (where it keeps its state and finished proofs,
         default :func:`~polyrob.io.paths.cache_dir` ``("proofs")``; ``None``
-        keeps nothing).
+        keeps nothing) and ``partial`` (default ``True``: at ``max_boxes``, the
+        ranges proved by then, wider than its tolerance, their fraction of the
+        refinement done and tightness in ``info["certify"]``; ``False`` gives up
+        there).
     workers : int, optional
         Worker processes (spawned; ``1`` runs everything in this process).
         Default: one for robots whose dynamics depend on few positions, else

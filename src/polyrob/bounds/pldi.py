@@ -71,7 +71,7 @@ from polyrob.bounds.pldi_result import PLDI, entry_name
 from polyrob.bounds.polytope import COVERAGE_RTOL, VERTEX_MAX_DIM, Polytope, build_polytope, principal_directions
 from polyrob.bounds.supports import support_values
 from polyrob.domains.torque_box import Domain
-from polyrob.errors import BoundsError, CertificationError
+from polyrob.errors import ArgumentError, BoundsError, CertificationError
 from polyrob.progress import report as job_report
 from polyrob.progress import span
 
@@ -180,9 +180,14 @@ def bound_pldi(robot, domain: Domain | None = None, *, options: BoundOptions | N
     notes = [] if fallback is None else [fallback]
     if factors is not None:
         matrices, cert_info = _interval_matrices(robot, domain, index, lower, upper, opts.seed), factors
+        at_limit = (
+            ""
+            if factors["done"] >= 1.0
+            else f", at the work limit: {100 * factors['done']:.1f} % of its refinement done"
+        )
         notes.append(
             "the factor ranges of the inner loop are proved by interval arithmetic over the task box "
-            f"({factors['boxes']} boxes); the A, B intervals themselves are sampled"
+            f"({factors['boxes']} boxes{at_limit}); the A, B intervals themselves are sampled"
         )
     elif proved is None:
         matrices, cert_info = _interval_matrices(robot, domain, index, lower, upper, opts.seed), None
@@ -319,7 +324,11 @@ def _proved_factors(robot, domain, opts: BoundOptions, progress: bool) -> dict:
     """The proved ranges of the inner loop's factors (:mod:`polyrob.bounds.certified.factors`), as ``info["certify"]``.
 
     Progress is the whole proof's fraction of work done (the open volume
-    left, weighted by the entries still open), with tqdm's ETA.
+    left, weighted by the entries still open), with tqdm's ETA.  At the work
+    limit the ranges are those proved by then (``partial``, the default): every
+    one proved, the sides not yet closed wider than the tolerance; ``done`` and
+    ``tightness`` (proved over attained widths) say how far, and ``covers``
+    says it in words.
     """
     from polyrob.bounds.certified import factors as factor_module
     from polyrob.io.paths import cache_dir
@@ -354,10 +363,18 @@ def _proved_factors(robot, domain, opts: BoundOptions, progress: bool) -> dict:
             seed=opts.seed,
             workers=opts.workers or available_cores(),  # the batches of boxes shared among them
             checkpoint_dir=options.get("checkpoint_dir", cache_dir("proofs")),  # None: keep nothing
+            partial=options.get("partial", True),
         )
     finally:
         if bar is not None:
             bar.close()
+    tight = enc.tightness()
+    limit = (
+        ""
+        if enc.done >= 1.0
+        else f" at the work limit ({100 * enc.done:.1f} % of the refinement done; widths up to "
+        f"{tight['max']:.3g}x the values attained, median {tight['median']:.3g})"
+    )
     return {
         "factors": {
             name: {"lower": enc.lower[k].tolist(), "upper": enc.upper[k].tolist()} for k, name in enumerate(enc.names)
@@ -366,7 +383,9 @@ def _proved_factors(robot, domain, opts: BoundOptions, progress: bool) -> dict:
         "seconds": round(float(enc.seconds), 3),
         "resumed_boxes": int(enc.resumed_boxes),
         "checkpoint": enc.checkpoint,
-        "covers": "the inner loop's factor ranges over the task box, proved; the A, B intervals sampled",
+        "done": float(enc.done),
+        "tightness": tight,
+        "covers": f"the inner loop's factor ranges over the task box, proved{limit}; the A, B intervals sampled",
     }
 
 
@@ -386,7 +405,13 @@ def _certified(robot, domain: Domain, opts: BoundOptions, progress: bool):
             "dynamics); analytic models get sampled bounds only: drop --certify"
         )
     # 1e-5 of each width: tight enough for the paper's printed digits, ~1 s on a 2R
-    options = {"rel_tol": 1e-5, **(opts.certify_options or {})}
+    given = dict(opts.certify_options or {})
+    if given.pop("checkpoint_dir", None) is not None:
+        raise ArgumentError(
+            "--proof-dir keeps an arm's factor proof over its task; a torque box's proof keeps no state: drop it"
+        )
+    given.pop("partial", None)  # a torque box's proof closes within its tolerance or gives up: no partial ranges
+    options = {"rel_tol": 1e-5, **given}
     enc = certify_module.certified_jacobian_bounds(
         model,
         robot.damping,

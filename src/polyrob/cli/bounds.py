@@ -41,11 +41,11 @@ def cmd_bounds(args) -> int:
     if args.output:  # before any work: a refused path leaves nothing behind
         for path in (args.output, *pair_paths(args.output)):
             check_output_path(path, "-o")
-    certify_options = proof_options(args)
+    certify_options = proof_options(args, ("time_limit", "rel_tol", "max_boxes", "partial"))
     if not args.certify and certify_options:
         raise ArgumentError(
-            "--time-limit, --rel-tol, --max-boxes and --proof-dir set the interval-arithmetic proof: "
-            "use them with --certify"
+            "--time-limit, --rel-tol, --max-boxes, --complete-proof and --proof-dir set the interval-arithmetic "
+            "proof: use them with --certify"
         )
     # one progress line for the whole job (a --certify proof of an arm runs for minutes)
     out = Output(args, stages=2 if args.models else 1, job=["bounds"] + (["uncertainty models"] if args.models else []))
@@ -110,6 +110,19 @@ def cmd_bounds(args) -> int:
             f"proved by interval arithmetic over the task box: the factor ranges of {', '.join(factors)} "
             f"({proof['boxes']} boxes, {proof['seconds']:.1f} s{earlier}); the A, B intervals above are sampled"
         )
+        tight = proof["tightness"]
+        if proof["done"] < 1.0:
+            print(
+                f"the proof stopped at its work limit with {100 * proof['done']:.1f} % of its refinement done: "
+                f"the ranges proved by then hold, wider than its tolerance (widths up to {tight['max']:.3g}x the "
+                f"values attained, median {tight['median']:.3g}); the same command again goes on from there "
+                "(--max-boxes N boxes more) and tightens them"
+            )
+        else:
+            print(
+                f"within the tolerance: widths up to {tight['max']:.3g}x the values attained "
+                f"(median {tight['median']:.3g})"
+            )
     if report["coverage"] is not None:
         variants = getattr(robot, "variants", None)
         listed = len(variants()) if callable(variants) else 1
@@ -157,6 +170,14 @@ def register(sub) -> None:
         "is bounded by its number of boxes, so its answer does not depend on the machine's load)",
     )
     add_proof_dir_argument(p)
+    p.add_argument(
+        "--complete-proof",
+        dest="partial",
+        action="store_false",
+        default=None,
+        help="--certify of an arm: refuse ranges the proof has not closed within its tolerance by the work limit "
+        "(default: the ranges proved by then are taken, wider, and the output says how far the proof got)",
+    )
     p.add_argument(
         "--rel-tol",
         type=fraction,

@@ -192,9 +192,23 @@ class Problem:
             domain=_domain_words(self.domain),
             notes=tuple(getattr(self.robot, "notes", ()) or ())
             + (f"reflected rotor inertia: {getattr(self.robot, 'reflected_inertia', 'unknown')}",)
-            + ((self.robot.words(bounds_used=on_pldi),) if hasattr(self.robot, "inner") else ()),
+            + ((self.robot.words(bounds_used=on_pldi),) if hasattr(self.robot, "inner") else ())
+            + _work_limit_words(self.pldi, enclosure),
             robot=str(self.robot.name),
         )
+
+
+def _work_limit_words(pldi, enclosure: str) -> tuple:
+    """A note when the proved factor ranges a certificate rests on are those of a proof stopped at its work limit."""
+    proof = (pldi.info or {}).get("certify") or {}
+    if enclosure != "certified" or not proof.get("factors") or proof.get("done", 1.0) >= 1.0:
+        return ()
+    tight = proof.get("tightness") or {}
+    return (
+        f"factor ranges proved at the proof's work limit ({proof['boxes']} boxes, "
+        f"{100 * proof['done']:.1f} % of its refinement done): they hold, wider than its tolerance "
+        f"(widths up to {tight.get('max', float('nan')):.3g}x the values attained)",
+    )
 
 
 def _domain_words(domain) -> str:

@@ -346,6 +346,17 @@ def lower_bound(Ms, st, *, starts=4, refine=True, seed=0, init=None, real_starts
 
 
 def _singular(Ms, delta_sq, tol=1e-7):
-    """Verify det(I - M Delta) = 0 via the smallest singular value."""
-    A = np.eye(Ms.shape[0]) - Ms @ delta_sq
-    return np.linalg.svd(A, compute_uv=False)[-1] <= tol * max(1.0, np.linalg.norm(A, 2))
+    """Verify det(I - M Delta) = 0 via the smallest singular value.
+
+    A candidate whose product overflows (a badly scaled ``M``) is not verified:
+    the lower bound must rest on a singular matrix that was checked.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        A = np.eye(Ms.shape[0]) - Ms @ delta_sq
+    if not np.all(np.isfinite(A)):
+        return False
+    try:
+        s = np.linalg.svd(A, compute_uv=False)
+    except np.linalg.LinAlgError:
+        return False
+    return s[-1] <= tol * max(1.0, s[0])

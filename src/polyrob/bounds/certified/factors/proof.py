@@ -53,7 +53,7 @@ from polyrob.bounds.certified.factors.attained import attained_range, vertex_asc
 from polyrob.bounds.certified.factors.box_batches import enclose_batch
 from polyrob.bounds.certified.factors.monotone import replace_box
 from polyrob.bounds.certified.factors.ranges import FactorProblem
-from polyrob.bounds.certified.factors.width_ratio import FLOOR, closing_tolerance
+from polyrob.bounds.certified.factors.width_ratio import FLOOR, closing_tolerance, width_ratios
 from polyrob.bounds.parallel import WorkerPool
 from polyrob.errors import CertificationError
 
@@ -101,6 +101,10 @@ class FactorEnclosure:
         The refinement's fraction of work done: 1 when every side closed within
         the tolerance, less when the ranges are those proved by the work limit
         (``prove_factor_ranges(..., partial=True)``): proved, and wider.
+    attained_lower, attained_upper : ndarray (F, m, 3m) or None
+        The extremes of the values attained at points (the pilot's, the
+        ascent's, every box centre's): inner bounds, which steer the proof
+        and measure its tightness (:meth:`tightness`), never bound anything.
     """
 
     names: tuple
@@ -111,6 +115,18 @@ class FactorEnclosure:
     resumed_boxes: int = 0
     checkpoint: str | None = None
     done: float = 1.0
+    attained_lower: np.ndarray | None = None
+    attained_upper: np.ndarray | None = None
+
+    def tightness(self) -> dict:
+        """:func:`~polyrob.bounds.certified.factors.width_ratio.width_ratios` of the proved ranges to the attained ones.
+
+        Upper bounds of the over-estimation (the attained widths are inner
+        bounds): at most ``1 + 2 rel_tol`` when ``done == 1``.
+        """
+        if self.attained_lower is None:
+            raise CertificationError("no values attained were kept with these ranges")
+        return width_ratios(self.lower, self.upper, self.attained_lower, self.attained_upper, FLOOR)
 
     def contains(self, K) -> np.ndarray:
         """Whether factor values ``K`` (``(n, F, m, 3m)``) lie in the ranges: one bool per point."""
@@ -374,6 +390,8 @@ def prove_factor_ranges(
         resumed,
         None if path is None else str(path),
         state.done_share(total_sides),
+        state.p_lo.copy(),
+        state.p_hi.copy(),
     )
 
 
