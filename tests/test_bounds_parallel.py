@@ -77,6 +77,29 @@ def test_off_a_terminal_a_long_map_logs_its_progress_with_an_eta(monkeypatch):
     assert handler.lines == []
 
 
+def test_a_map_that_is_one_step_of_a_reporting_loop_leaves_the_job_s_line_to_it():
+    """The factors' proof shares each batch of boxes between the workers: the map's own count (1 of 2 parts done)
+    claimed the proof's whole span, so `analyze panda --certify` showed 36 % of the job from its first batch on,
+    and logged 'tasks: 1 of 2' lines.  A map with ``own_progress=False`` neither moves the line nor logs."""
+    import io
+
+    from polyrob.progress import JobProgress, report, span
+
+    job = JobProgress(["bounds"], stream=io.StringIO(), clock=lambda: 0.0).start()
+    try:
+        job._stop.set()  # no ticking thread: the share is read directly
+        job.begin(1, "bounds")
+        with span(0.0, 0.8), WorkerPool(2, workers=1) as pool:
+            assert pool.map(scaled, range(2), own_progress=False) == [0, 2]
+            assert job.share == 0.0
+            report(0.25, 1.0)  # the loop's own fraction of work done
+            assert job.share == pytest.approx(0.2)
+            pool.map(scaled, range(2))  # a map that is the loop itself fills the span
+            assert job.share == pytest.approx(0.8)
+    finally:
+        job.stop()
+
+
 def test_a_state_that_cannot_be_pickled_runs_here_and_says_so():
     state = lambda: 2  # noqa: E731  (a closure cannot be sent to another process)
     with WorkerPool(state, workers=2) as pool:

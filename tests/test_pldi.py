@@ -153,16 +153,25 @@ def test_cli_bounds_writes_the_pldi(tmp_path, capsys):
 
 
 def test_cli_bounds_certify_on_seven_joints_is_one_line(tmp_path, capsys):
-    """panda keeps its default task under --certify (before: the URDF limits, then 'up to 3 joints');
-    a proof asked to complete that runs out of its counted work is one line naming the options."""
+    """panda keeps its default task under --certify (before: the URDF limits, then 'up to 3 joints'); one box of
+    its whole task bounds no entry (M_hat is not proved invertible on it), which is one line naming the options
+    (before: 'some entry could not be bounded'); a proof asked to complete that runs out of its counted work too."""
     from polyrob.cli import main
 
     out = tmp_path / "p.json"
-    code = main(["bounds", "panda", "--certify", "--max-boxes", "1", "--complete-proof", "--quiet", "-o", str(out)])
+    code = main(["bounds", "panda", "--certify", "--max-boxes", "1", "--quiet", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "proved factor ranges: 294 of 294 entries not bounded yet after 1 boxes" in err
+    assert "M_hat is not proved invertible on the boxes where they are still open" in err
+    assert err.count("\n") == 1 and "--max-boxes" in err and "max_boxes" not in err
+    assert not out.exists() and not list(tmp_path.iterdir())  # nothing half-written
+    code = main(
+        ["bounds", "finger_edu", "--certify", "--max-boxes", "1", "--complete-proof", "--quiet", "-o", str(out)]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "proved factor ranges: the limit of 1 boxes" in err and err.count("\n") == 1
     assert "--max-boxes" in err and "--rel-tol" in err and "max_boxes" not in err
-    assert not out.exists() and not list(tmp_path.iterdir())  # nothing half-written
+    assert not out.exists() and not list(tmp_path.iterdir())
 
 
 def test_landscape_peaks_start_on_separate_hills():

@@ -51,11 +51,12 @@ class _Progress:
     A bound of a six-joint arm takes minutes: a pipe or a log file must show that it advances, with an ETA.
     """
 
-    def __init__(self, total: int, label: str, progress: bool):
+    def __init__(self, total: int, label: str, progress: bool, own: bool = True):
         from tqdm.auto import tqdm
 
         self.bar = tqdm(total=total, desc=label, disable=not progress, leave=False)
-        self.total, self.label, self.done, self.log = total, label or "tasks", 0, not progress
+        self.total, self.label, self.done, self.log = total, label or "tasks", 0, own and not progress
+        self.own = own
         self.t0 = self.last = time.perf_counter()
 
     def update(self) -> None:
@@ -63,7 +64,8 @@ class _Progress:
 
         self.bar.update()
         self.done += 1
-        report(self.done, self.total)  # the whole job's progress line, when a command shows one
+        if self.own:  # the whole job's progress line, when a command shows one
+            report(self.done, self.total)
         now = time.perf_counter()
         if self.log and now - self.last >= LOG_EVERY and self.done < self.total:
             self.last = now
@@ -154,13 +156,16 @@ class WorkerPool:
         self.close()
 
     # ------------------------------------------------------------------ running
-    def map(self, fn, items, *, progress: bool = False, label: str = "") -> list:
+    def map(self, fn, items, *, progress: bool = False, label: str = "", own_progress: bool = True) -> list:
         """``[fn(state, item) for item in items]``, on the workers when there are any.
 
         ``fn`` must be a module-level function (it is pickled by name).
+        ``own_progress=False``: the items are parts of one step of a loop that
+        reports its own progress (a batch of the factors' proof): the map
+        neither moves the job's line nor logs its count.
         """
         items = list(items)
-        bar = _Progress(len(items), label, progress)
+        bar = _Progress(len(items), label, progress, own_progress)
         try:
             if self.workers > 1 and len(items) > 1 and self._start():
                 return self._map_workers(fn, items, bar)

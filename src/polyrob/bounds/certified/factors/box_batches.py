@@ -41,7 +41,7 @@ def split_map(pool, fn, arrays: tuple, *extra) -> tuple:
     items = [(tuple(x[c] for x in arrays), *extra) for c in cuts]
     if len(items) == 1:
         return fn(pool.state, items[0])
-    parts = pool.map(fn, items)
+    parts = pool.map(fn, items, own_progress=False)  # one step of the caller's loop, which reports its progress
     return tuple(np.concatenate([p[k] for p in parts]) for k in range(len(parts[0])))
 
 

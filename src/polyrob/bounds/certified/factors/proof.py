@@ -379,8 +379,15 @@ def prove_factor_ranges(
     if progress is not None and batches == 0:  # a finished proof read back (or no work allowed)
         progress(state.done_share(total_sides), state.boxes, 0.0)
     lower, upper = state.enclosure()
-    if not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))):
-        raise CertificationError("proved factor ranges: some entry could not be bounded")
+    unbounded = ~(np.isfinite(lower) & np.isfinite(upper))
+    if unbounded.any():  # a box's enclosure is infinite where M_hat is not proved invertible on all of it
+        kept = f"; its state is kept in {path}: the same call goes on from there" if path is not None else ""
+        raise CertificationError(
+            f"proved factor ranges: {int(unbounded.sum())} of {unbounded.size} entries not bounded yet after "
+            f"{state.boxes} boxes ({100 * state.done_share(total_sides):.1f} % of the work done): M_hat is not "
+            f"proved invertible on the boxes where they are still open{kept}; raise the work limit (max_boxes), "
+            "or shrink the task; or drop --certify (sampled bounds)"
+        )
     return FactorEnclosure(
         problem.names,
         lower,
