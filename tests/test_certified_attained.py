@@ -125,6 +125,13 @@ def test_the_inner_gain_model_rests_on_the_proved_factor_ranges_alone(finger, mo
     # without the proof the same model is sampled, and says it rests on the PLDI too
     sampled = uncertain_plant(bound_pldi(robot, small, **cheap), model="inner-gain", coverage=0, volume_samples=0)
     assert model_of(sampled).enclosure(sampled) == "sampled" and "PLDI" in enclosure_inputs(sampled)
+    # the commands' summary line names what the model rests on (it said "sampled PLDI" on proved ranges)
+    from types import SimpleNamespace
+
+    from polyrob.cli.plant import bounds_words
+
+    assert bounds_words(problem) == "proved factor ranges"
+    assert bounds_words(SimpleNamespace(unc=sampled, pldi=SimpleNamespace(enclosure="sampled"))) == "sampled PLDI"
 
 
 def test_synth_certify_is_refused_in_one_line_where_it_cannot_run(tmp_path, capsys):

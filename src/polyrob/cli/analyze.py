@@ -20,7 +20,7 @@ from polyrob.cli.options import (
     positive_float,
     sampling_from_args,
 )
-from polyrob.cli.plant import add_plant_arguments, problem_from_args
+from polyrob.cli.plant import add_plant_arguments, bounds_words, problem_from_args
 from polyrob.errors import PolyrobError
 
 __all__ = ["register", "print_analysis", "jerk_bound", "check_jerk_applies"]
@@ -157,7 +157,7 @@ def cmd_analyze(args) -> int:
     }
     out.document(report)
     out.line(
-        f"robot {robot.name}: {problem.unc.n_params} real parameters ({problem.pldi.enclosure} PLDI, "
+        f"robot {robot.name}: {problem.unc.n_params} real parameters ({bounds_words(problem)}, "
         f"{problem.model} model), controller order {a.order}"
     )
     if not info and source != "the paper's K*":

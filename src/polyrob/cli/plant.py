@@ -57,6 +57,21 @@ def describe_source(robot, args) -> str:
     return f"reading the PLDI {pldi_path(args)}" if args.pldi else f"bounds: {robot.name} ({robot.m} joints)"
 
 
+def bounds_words(problem) -> str:
+    """What the uncertainty model's ranges come from, for a command's summary line.
+
+    The PLDI and its enclosure, or, for a model that rests on an arm's proved
+    factor ranges alone (``inner-gain`` under ``--certify``), those: its
+    sampled A, B intervals are not what the certificate rests on.
+    """
+    from polyrob.plant.models.registry import enclosure_inputs
+
+    inputs = enclosure_inputs(problem.unc)
+    if "PLDI" not in inputs and inputs.get("factors") == "certified":
+        return "proved factor ranges"
+    return f"{problem.pldi.enclosure} PLDI"
+
+
 def problem_from_args(robot, args, out, *, hyperparameters=None, check=None):
     """Domain (or ``--pldi``), weights and uncertainty model -> :class:`polyrob.pipeline.Problem`.
 

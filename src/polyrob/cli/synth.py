@@ -30,7 +30,7 @@ from polyrob.cli.options import (
     rate_conditions_from_args,
     sampling_from_args,
 )
-from polyrob.cli.plant import add_plant_arguments, problem_from_args
+from polyrob.cli.plant import add_plant_arguments, bounds_words, problem_from_args
 from polyrob.errors import ArgumentError
 
 __all__ = [
@@ -239,7 +239,7 @@ def cmd_synth(args) -> int:
         if applies(problem) and problem.model not in MOVING_MODEL:
             raise ArgumentError(f"--tune-moving needs a model of constants: {applies(problem)}")
     out.line(
-        f"robot {robot.name}: {problem.unc.n_params} real parameters ({problem.pldi.enclosure} PLDI, "
+        f"robot {robot.name}: {problem.unc.n_params} real parameters ({bounds_words(problem)}, "
         f"{problem.model} model), structure {args.structure}"
     )
     doc = {"robot": robot.name, "problem": problem.description()}
