@@ -323,8 +323,9 @@ def _factor_task(robot, domain) -> bool:
 def _proved_factors(robot, domain, opts: BoundOptions, progress: bool) -> dict:
     """The proved ranges of the inner loop's factors (:mod:`polyrob.bounds.certified.factors`), as ``info["certify"]``.
 
-    Progress is the whole proof's fraction of work done (the open volume
-    left, weighted by the entries still open), with tqdm's ETA.  At the work
+    Progress is the proof's fraction of its work (the open volume closed,
+    weighted by the entries still open, or the share of its work limit,
+    whichever is further), with tqdm's ETA.  At the work
     limit the ranges are those proved by then (``partial``, the default): every
     one proved, the sides not yet closed wider than the tolerance; ``done`` and
     ``tightness`` (proved over attained widths) say how far, and ``covers``

@@ -283,8 +283,11 @@ def prove_factor_ranges(
     time_limit : float, optional
         A wall-clock safety net the caller sets (none by default).
     progress : callable, optional
-        ``progress(fraction, boxes, eta_seconds)``: the whole job's fraction
-        of open volume closed.
+        ``progress(fraction, boxes, eta_seconds)``: the call's fraction of
+        its work, the open volume closed (weighted by the entries still open)
+        or the share of ``max_boxes`` evaluated, whichever is further: the call
+        ends at either (on panda's whole task no side closes for thousands of
+        boxes, and the work limit is what ends it).
     ascent_rounds : int
         Rounds of :func:`~polyrob.bounds.certified.factors.attained.vertex_ascent`
         added to the pilot's values (0: the pilot alone).
@@ -370,7 +373,7 @@ def prove_factor_ranges(
                 if batches % SAVE_EVERY == 0:
                     keep()
                 if progress is not None:  # the ETA from this call's pace (a resumed proof began at done_before)
-                    done = state.done_share(total_sides)
+                    done = max(state.done_share(total_sides), min(1.0, (state.boxes - resumed) / max_boxes))
                     pace = (done - done_before) / (time.perf_counter() - t0)
                     progress(done, state.boxes, (1 - done) / pace if pace > 0 else float("nan"))
     finally:
