@@ -160,7 +160,7 @@ def register(sub) -> None:
         "--max-boxes",
         type=int_at_least(1),
         default=None,
-        help="--certify: boxes the proof evaluates before giving up (a count of work, not seconds)",
+        help="--certify: boxes the proof evaluates before it stops (a count of work, not seconds); an arm's proof then gives the ranges proved by then, wider than its tolerance, unless --complete-proof; a torque box's gives up",
     )
     p.add_argument(
         "--time-limit",

@@ -41,7 +41,7 @@ def add_plant_arguments(p) -> None:
         "--max-boxes",
         type=int_at_least(1),
         default=None,
-        help="--certify: boxes the proof evaluates before giving up (a count of work, not seconds)",
+        help="--certify: boxes the proof evaluates before it stops (a count of work, not seconds); an arm's proof then gives the ranges proved by then, wider than its tolerance; a torque box's gives up",
     )
     add_proof_dir_argument(p)
 
