@@ -118,6 +118,10 @@ def test_the_inner_gain_model_rests_on_the_proved_factor_ranges_alone(finger, mo
     # certificate would name it (its ranges hold, wider than the tolerance)
     proof_info = pldi.info["certify"]
     assert proof_info["done"] == 1.0 and proof_info["tightness"]["max"] <= 1.0801
+    from polyrob.pipeline.reports import pldi_report
+
+    reported = pldi_report(pldi)["factor_proof"]  # `bounds --json`: how far the proof got, not its ranges
+    assert reported["done"] == 1.0 and reported["boxes"] == proof_info["boxes"] and "factors" not in reported
     assert "work limit" not in scope.sentence()
     proof_info.update(done=0.42, tightness={**proof_info["tightness"], "max": 3.5})
     sentence = problem.scope().sentence()

@@ -41,7 +41,7 @@ def robot_report(robot, domain) -> dict:
 
 
 def pldi_report(pldi, joint_names=None) -> dict:
-    """The figures of a PLDI a user reads: entries, polytope, search, coverage, time."""
+    """The figures of a PLDI a user reads: entries, polytope, search, coverage, time, and an arm's factor proof."""
     import numpy as np
 
     poly = pldi.polytope
@@ -75,6 +75,9 @@ def pldi_report(pldi, joint_names=None) -> dict:
             "entry": pldi.entries[worst],
             "verification_rounds": int(pldi.info.get("verification_rounds", 0)),
         }
+    proof = (pldi.info or {}).get("certify") or {}
+    if proof.get("factors"):  # an arm's factor proof: how far it got, without its ranges (they are in the file)
+        out["factor_proof"] = {key: v for key, v in proof.items() if key != "factors"}
     return out
 
 
