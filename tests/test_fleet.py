@@ -438,6 +438,23 @@ def test_cli_validation_and_reduction_options_reach_the_settings():
     Settings(**given)  # every key is a field
 
 
+def test_cli_certify_reaches_every_job_s_bounds_and_max_boxes_needs_it():
+    """`batch --certify` proves each job's bounds (an arm's factor ranges to its work limit); a row then says
+    "certified" where its certificate rests on them (`polyrob batch finger_edu --certify --max-boxes 4`)."""
+    from polyrob.cli import PolyrobParser
+    from polyrob.cli import batch as batch_cli
+    from polyrob.errors import ArgumentError
+
+    parser = PolyrobParser(prog="polyrob")
+    batch_cli.register(parser.add_subparsers(dest="command", required=True, parser_class=PolyrobParser))
+    given = batch_cli.settings_from_args(parser.parse_args(["batch", "ur5", "--certify", "--max-boxes", "64"]))
+    assert given["bound_options"] == {"certify": True, "certify_options": {"max_boxes": 64}}
+    assert batch_cli.settings_from_args(parser.parse_args(["batch", "ur5"]))["bound_options"] == {}
+    with pytest.raises(ArgumentError, match="--max-boxes sets the interval-arithmetic proof: use it with --certify"):
+        batch_cli.settings_from_args(parser.parse_args(["batch", "ur5", "--max-boxes", "64"]))
+    Settings(**given)
+
+
 def test_a_task_job_with_an_inner_layer_says_domain_inner_layer_and_reflected_inertia(pendulums):
     job = Job(robot=pendulums[0], q_radius=0.2, qdot_max=0.5, qddot_max=1.0, inner="gravity", model_error=0.1)
     r = run_job(job, Settings(**dict(FAST, validate=False, analyze=False)))

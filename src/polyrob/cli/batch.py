@@ -114,6 +114,12 @@ def settings_from_args(args) -> dict:
     if args.max_iter is not None:
         synthesis["max_iter"] = args.max_iter
     bound_options = {} if args.samples is None else {"samples": args.samples}
+    if args.max_boxes is not None and not args.certify:
+        raise ArgumentError("--max-boxes sets the interval-arithmetic proof: use it with --certify")
+    if args.certify:  # each job proves its bounds (an arm's factor ranges over its task), on its own worker
+        bound_options["certify"] = True
+        if args.max_boxes is not None:
+            bound_options["certify_options"] = {"max_boxes": args.max_boxes}
     return {
         "bound_options": bound_options,
         "synthesis": synthesis,
@@ -270,6 +276,19 @@ def register(sub) -> None:
     )
     g = p.add_argument_group("work per robot")
     g.add_argument("--samples", type=int_at_least(2), default=None, help="bounds: Sobol' positions")
+    g.add_argument(
+        "--certify",
+        action="store_true",
+        help="prove the bounds each model rests on by interval arithmetic (as synth --certify): an arm's "
+        "computed-torque factor ranges over its task, to the work limit, or a torque box's intervals (up to 3 "
+        "joints); minutes per arm, and a robot whose proof bounds nothing by then fails its row",
+    )
+    g.add_argument(
+        "--max-boxes",
+        type=int_at_least(1),
+        default=None,
+        help="--certify: boxes each proof evaluates before it stops (a count of work, not seconds)",
+    )
     g.add_argument("--structure", default="full", help="controller structure (full, tfN, pid, ss:N)")
     g.add_argument("--max-iter", type=int_at_least(1), default=None, help="D-K iterations")
     g.add_argument("--omega", default=None, help="frequency grid LO:HI:N (rad/s) of synthesis and analysis")

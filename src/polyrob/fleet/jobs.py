@@ -478,7 +478,7 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
         entries=len(problem.pldi.entries),
         parameters=int(problem.unc.n_params),
         model=problem.model,
-        enclosure=problem.pldi.enclosure,
+        enclosure=problem.scope().enclosure,  # what the certificate rests on: proved factor ranges under --certify
         domain=problem.domain.name,
         inner=problem.robot.words() if hasattr(problem.robot, "inner") else "none",
         reflected_inertia=str(getattr(problem.robot, "reflected_inertia", "unknown")),
