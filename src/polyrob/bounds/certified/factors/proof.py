@@ -122,7 +122,9 @@ class FactorEnclosure:
         """:func:`~polyrob.bounds.certified.factors.width_ratio.width_ratios` of the proved ranges to the attained ones.
 
         Upper bounds of the over-estimation (the attained widths are inner
-        bounds): at most ``1 + 2 rel_tol`` when ``done == 1``.
+        bounds): when ``done == 1``, at most ``1 + 2 rel_tol`` on the
+        significant entries, up to the tolerance's ``1e-8`` of the factor's
+        scale (:func:`~polyrob.bounds.certified.factors.width_ratio.closing_tolerance`).
         """
         if self.attained_lower is None:
             raise CertificationError("no values attained were kept with these ranges")
