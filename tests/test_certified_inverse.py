@@ -106,3 +106,61 @@ def test_panda_whole_task_is_split_not_proved_in_one_box():
     mid, rad, proved = problem.inverse_enclosure(box.q_lower[None], box.q_upper[None])
     Y = _pinocchio_inverses(loops, box, 100, seed=3)
     assert proved[0] and np.all((Y >= lower(mid, rad)[0]) & (Y <= upper(mid, rad)[0]))
+
+
+@pytest.fixture(scope="module")
+def panda():
+    return _arm("panda")
+
+
+def test_the_loewner_bound_holds_pinocchios_inverse_and_a_shrunk_one_is_caught(panda):
+    loops, problem, domain = panda
+    box = _box(domain, 0.25)
+    mid, rad, proved = problem.inverse_enclosure(box.q_lower[None], box.q_upper[None], "loewner")
+    Y = _pinocchio_inverses(loops, box, 200, seed=4)
+    assert proved[0] and np.all((Y >= lower(mid, rad)[0]) & (Y <= upper(mid, rad)[0]))
+    # the bound is not loose by more than a few times: half its radius misses some of Pinocchio's inverses
+    assert not np.all((Y >= lower(mid, 0.5 * rad)[0]) & (Y <= upper(mid, 0.5 * rad)[0]))
+    # at a point (width 0) it is Pinocchio's inverse to round-off
+    pose = 0.5 * (domain.q_lower + domain.q_upper)
+    mid, rad, proved = problem.inverse_enclosure(pose[None], pose[None], "loewner")
+    Y = _pinocchio_inverses(loops, replace(domain, q_lower=pose, q_upper=pose), 1, seed=5)[0]
+    assert proved[0] and np.all(rad[0] <= 1e-8 * np.abs(Y).max())
+    assert np.all((Y >= lower(mid, rad)[0]) & (Y <= upper(mid, rad)[0]))
+
+
+def test_the_branch_and_bound_proves_panda_on_half_its_task_where_the_neumann_bound_cannot(panda):
+    loops, problem, domain = panda
+    box = _box(domain, 0.5)
+    # the Neumann bound needs a quarter of the task; the Loewner bounds (M_hat positive definite) prove half
+    _, _, neumann = problem.inverse_enclosure(box.q_lower[None], box.q_upper[None], "taylor3")
+    mid, rad, proved = problem.inverse_enclosure(box.q_lower[None], box.q_upper[None], "branch-and-bound")
+    assert not neumann[0] and proved[0]
+    Y = _pinocchio_inverses(loops, box, 200, seed=6)
+    assert np.all((Y >= lower(mid, rad)[0]) & (Y <= upper(mid, rad)[0]))
+    # a box proved by neither is split along the position that moves M_hat most, never along a velocity
+    _, hi, contribution = problem.enclose(domain.q_lower[None], domain.q_upper[None], domain.qdot_lower[None],
+                                          domain.qdot_upper[None], domain.qddot_lower, domain.qddot_upper)  # fmt: skip
+    assert np.all(np.isinf(hi))
+    m = len(domain.q_lower)
+    assert np.all(contribution[..., m:] == 0) and contribution[..., :m].max() > 0
+    assert np.argmax(contribution[0, 0, 0, 0]) != 0  # the base joint leaves panda's inertia as it is
+
+
+def test_checking_the_inverse_first_skips_only_boxes_it_does_not_prove(panda):
+    loops, problem, domain = panda
+    whole = (domain.q_lower[None], domain.q_upper[None], domain.qdot_lower[None], domain.qdot_upper[None])
+    # panda's whole task: M_hat^-1 is not proved, so the box gets infinite bounds and a split along a position
+    lo, hi, contribution, seen_lo, _, sign = problem.enclose(
+        *whole, domain.qddot_lower, domain.qddot_upper, taylor=True, attained=True, check_inverse=np.array([True])
+    )
+    m = len(domain.q_lower)
+    assert np.all(np.isinf(hi)) and np.all(np.isinf(lo)) and np.all(np.isnan(seen_lo)) and not sign.any()
+    assert np.all(contribution[..., m:] == 0) and np.argmax(contribution[0, 0, 0, 0]) != 0
+    # on a box where it is proved the check changes nothing
+    small = _box(domain, 0.02)
+    box = (small.q_lower[None], small.q_upper[None], small.qdot_lower[None], small.qdot_upper[None])
+    plain = problem.enclose(*box, small.qddot_lower, small.qddot_upper, taylor=True)
+    checked = problem.enclose(*box, small.qddot_lower, small.qddot_upper, taylor=True, check_inverse=np.array([True]))
+    for a, b in zip(plain, checked):
+        assert np.array_equal(a, b)

@@ -48,15 +48,17 @@ def split_map(pool, fn, arrays: tuple, *extra) -> tuple:
 def _enclose_part(problem, item) -> tuple:
     boxes, a_lo, a_hi, taylor = item
     entries = boxes[4] if len(boxes) > 4 else None
-    return problem.enclose(*boxes[:4], a_lo, a_hi, taylor=taylor, attained=True, entries=entries)
+    check = boxes[5] if len(boxes) > 5 else None
+    return problem.enclose(*boxes[:4], a_lo, a_hi, taylor=taylor, attained=True, entries=entries, check_inverse=check)
 
 
 def enclose_batch(pool, boxes, a_lo, a_hi, *, taylor: bool) -> tuple:
-    """``pool.state.enclose(*boxes[:4], a_lo, a_hi, taylor=taylor, attained=True, entries=boxes[4])``, shared among the workers.
+    """``pool.state.enclose(*boxes[:4], a_lo, a_hi, taylor=taylor, attained=True, entries=boxes[4], check_inverse=boxes[5])``, shared among the workers.
 
     ``pool``: a :class:`~polyrob.bounds.parallel.WorkerPool` whose state is
     the :class:`~polyrob.bounds.certified.factors.ranges.FactorProblem`;
     ``boxes``: ``(q_lo, q_hi, qd_lo, qd_hi)``, each ``(B, m)``, and
-    optionally the entries still open on each box ``(B, F, m, 3m)``.
+    optionally the entries still open on each box ``(B, F, m, 3m)`` and the
+    boxes whose inverse is checked first ``(B,)`` (``check_inverse``).
     """
     return split_map(pool, _enclose_part, tuple(boxes), a_lo, a_hi, taylor)

@@ -224,7 +224,7 @@ def hessian_enclosure(problem, q_lo, q_hi, qd_lo, qd_hi, method: str = "taylor-m
             M, h = box_models(problem, qc, qr, vc, vr, (Mc, hc), (Mb, hb), pairs=method == "second-order")
             K0 = factor_hessians(problem, Mc, M, h, radii)[0]
         elif method == "balls":
-            K0 = problem._factors(Mb, hb, problem._box_inverse(Mc.truncated(2), Mb, radii))[0]
+            K0 = problem._factors(Mb, hb, problem._box_inverse(Mc.truncated(2), Mb, radii)[:2])[0]
         else:
             raise ArgumentError(
                 f"hessian_enclosure: method must be 'taylor-model', 'second-order' or 'balls' (got {method!r})"

@@ -1,7 +1,7 @@
 """Proved enclosures of ``M_hat(q)^-1`` over a task box: the model's mass matrix provably invertible on the whole box.
 
-Two proved enclosures of ``Y(q) = M_hat(q)^-1`` for every ``q`` of a box
-``|q - c| <= r``, both around the float inverse ``C`` of ``M_hat(c)``:
+Three proved enclosures of ``Y(q) = M_hat(q)^-1`` for every ``q`` of a box
+``|q - c| <= r``, each built from ``M_hat(c)``'s float inverse (or its root):
 
 * :func:`taylor_neumann_inverse` (the one the branch and bound uses):
   ``E(q) = I - C M_hat(q)`` is enclosed by a Taylor form of ``M_hat`` (value
@@ -14,6 +14,12 @@ Two proved enclosures of ``Y(q) = M_hat(q)^-1`` for every ``q`` of a box
   invertible on the whole box, and ``Y = sum_k E^k C`` lies in
   ``C + E C + ... + E^(K-1) C`` (ball products) plus a tail bounded by
   ``(|E|^K v)_i max_l(|C|_lj / v_l) / (1 - alpha)``;
+* :func:`loewner_inverse` (the branch and bound's where the first proves
+  nothing): ``M_hat(q)`` is symmetric positive definite, and its spectrum
+  relative to ``M_hat(c)`` is bounded over the box at the vertices of its
+  affine Taylor part (plus a norm bound of the rest); the inverse follows
+  from those Loewner bounds, wider, on boxes twice as wide as the first
+  needs on panda;
 * :func:`fixed_point_inverse` (the earlier one, kept for comparison): grow a
   ball ``Yhat`` around ``Y(c)`` until ``Y(c) + sum_p Yhat dM_hat/dq_p(Q) Yhat [-r_p, r_p]``
   lies inside it.
@@ -28,9 +34,9 @@ the Taylor form with the exact centre gradient gives 3.4 (second order) and
 root of 0.13), so the third-order
 form proves ur5's ``M_hat`` invertible on the whole task in one box.  On
 panda's full task the sampled ``|I - C M_hat(q)|`` itself has a spectral
-radius of 1.56: no enclosure around one centre's inverse can prove it, and
-the box must be split (at a fifth of the task the third-order form gives
-0.35).  Where both methods prove, the first is also the tighter: the
+radius of 1.56: no entrywise enclosure around one centre's inverse can
+prove it, and the box must be split (at a fifth of the task the third-order
+form gives 0.35; the Loewner bounds prove half the task).  Where both methods prove, the first is also the tighter: the
 first-order part of ``E C`` is ``-sum_p C dM_hat/dq_p(c) C d_p`` with thin
 factors, so its cancellations are kept, where the fixed point multiplies
 two balls of ``Y`` over the box by ``dM_hat/dq`` over the box (ur5 at 0.05
@@ -55,7 +61,12 @@ __all__ = [
     "neumann_inverse",
     "taylor_neumann_inverse",
     "fixed_point_inverse",
+    "loewner_inverse",
 ]
+
+#: Relative margin on a symmetric eigensolver's eigenvalues: LAPACK's ``syevd`` is backward stable, its
+#: eigenvalues exact for ``X + E`` with ``||E||_2 <= p(m) u ||X||_2`` (``u = 2^-53``, ``p`` modest in ``m <= 7``).
+EIGEN_MARGIN = 1e-11
 
 #: Relative margin of a float sum of up to a few thousand nonnegative terms (``k u``, ``u = 2^-53``, ``k <= 9000``).
 SUM_MARGIN = 1e-12
@@ -256,3 +267,120 @@ def fixed_point_inverse(Y_centre, dM, radii):
         new = T(np.where(proved[:, None, None], final, 0.0))
         final = np.where(proved[:, None, None], np.minimum(final, new), final)
     return np.where(proved[:, None, None], final, np.inf), proved
+
+
+def _transformed(T, mid, rad):
+    """The balls of ``T X T^T`` for the float ``T`` ``(B, m, m)`` and the balls ``X`` ``(..., B, m, m)``."""
+    left = _ball_product(T, mid, rad)
+    out = BallJet(left[0][None], left[1][None], 0, 0).const_form("matmul", np.swapaxes(T, -1, -2), left=False)
+    return out.mid[0], out.rad[0]
+
+
+def loewner_inverse(centre, box, radii):
+    """``(mid, rad, sensitivity)``: ``M(q)^-1`` enclosed by its Loewner bounds, for boxes the Neumann bound cannot prove.
+
+    The model's mass matrix is symmetric positive definite at every ``q``;
+    the entrywise bound of :func:`taylor_neumann_inverse` forgets it, and on
+    panda's task the sampled ``|I - C M_hat(q)|`` itself has a spectral radius
+    above 1 until the box is a quarter of the task wide.  Here, with ``T``
+    the float ``M(c)^-1/2``, the Taylor form ``A(d) = T M(c + d) T^T`` splits
+    into its affine part's midpoints ``A_0 + sum_p d_p A_p`` and a rest
+    (the balls' radii, every term of order two and more, the float
+    products' rounding) whose 2-norm is at most ``eta`` (the Perron bound
+    of its entrywise bound, symmetrised: :func:`perron_bound`).  The smallest
+    eigenvalue of a symmetric matrix is concave in it and the largest
+    convex, so over the box they are extreme at the affine part's vertices
+    (``2^m`` symmetric eigenproblems, each widened by
+    :data:`EIGEN_MARGIN`): ``lam_lo I <= A(d) <= lam_hi I`` with
+    ``lam_lo = min_v lambda_min - eta``.  Where ``lam_lo > 0``,
+    ``Y = M^-1 = T^T Z T`` with the eigenvalues of ``Z = A^-1`` in
+    ``[1/lam_hi, 1/lam_lo]``: ``Y_ij`` lies in ``c (T^T T)_ij +- Delta |t_i| |t_j|``
+    (``c`` and ``Delta`` the middle and half width of that interval, ``t_i``
+    the columns of ``T``).
+
+    Wider than the Neumann bound where both prove (an entry's radius is
+    ``Delta`` times its row's and column's scale), but it proves on boxes
+    twice as wide on panda (half its task, with the branch and bound's
+    Taylor-model jets: ``tests/test_certified_inverse.py``), and a finite
+    enclosure there lets the branch and bound's ranges be finite at its
+    work limit.  Why by hand: no library bounds a matrix function's
+    spectrum over a box with outward rounding.
+
+    Parameters
+    ----------
+    centre : list of (mid, rad)
+        ``D^j M(c)`` for ``j = 0 .. k-1`` (``k >= 2``), shapes ``(m,)*j + (B, m, m)``.
+    box : (mid, rad)
+        ``D^k M`` over the box, shape ``(m,)*k + (B, m, m)``.
+    radii : ndarray (B, m)
+        The box's half-widths in ``q``.
+
+    Returns
+    -------
+    mid, rad : ndarray (B, m, m)
+        ``rad = inf`` where ``lam_lo <= 0`` (nothing proved).
+    sensitivity : ndarray (B, m)
+        ``r_p max |A_p|``: how much each coordinate moves ``A`` (where to split).
+    """
+    M0 = centre[0][0]
+    B, m = M0.shape[0], M0.shape[-1]
+    T = _inverse_root(M0)
+    terms = list(centre) + [box]
+    A0m, A0r = _transformed(T, *terms[0])
+    A1m, A1r = _transformed(T, *terms[1])  # (m, B, m, m)
+    # the rest: the affine part's radii, every higher term's magnitude, entrywise
+    rest = A0r + (A1r * radii.T[:, :, None, None]).sum(0)
+    for j in range(2, len(terms)):
+        mid, rad = _transformed(T, *terms[j])
+        weight = np.ones((B,) + (1,) * j)
+        for axis in range(j):
+            shape = [B] + [1] * j
+            shape[1 + axis] = m
+            weight = weight * radii.reshape(shape)
+        weight = np.moveaxis(weight, 0, -1)[..., None, None]
+        rest = rest + ((np.abs(mid) + rad) * weight).reshape(-1, B, m, m).sum(0) / factorial(j)
+    scaled = A1m * radii.T[:, :, None, None]  # (m, B, m, m): r_p A_p
+    magnitude = np.abs(A0m) + np.abs(scaled).sum(0)
+    rest = (rest * (1 + SUM_MARGIN) + GAMMA * (m + 2) * magnitude) * (1 + GAMMA) + TINY  # the vertices' sums
+    with np.errstate(all="ignore"):
+        # ||X||_2 <= rho(N) for |X| <= N symmetric nonnegative (N the rest, symmetrised upwards)
+        eta = perron_bound(np.maximum(rest, np.swapaxes(rest, -1, -2)))[0]
+        lam_lo, lam_hi = np.full(B, np.inf), np.full(B, -np.inf)
+        moving = np.flatnonzero((radii > 0).any(0))
+        for k in range(2 ** len(moving)):
+            signs = np.zeros(m)
+            signs[moving] = np.where((k >> np.arange(len(moving))) & 1, 1.0, -1.0)
+            X = A0m + np.einsum("p,pbij->bij", signs, scaled)
+            X = 0.5 * (X + np.swapaxes(X, -1, -2))  # A(d) is symmetric: its skew part is in the rest
+            values = np.linalg.eigvalsh(np.where(np.isfinite(X), X, 0.0))
+            size = EIGEN_MARGIN * np.sqrt((X**2).sum((-1, -2)))
+            lam_lo = np.minimum(lam_lo, values[:, 0] - size)
+            lam_hi = np.maximum(lam_hi, values[:, -1] + size)
+        lam_lo, lam_hi = lower(lam_lo - eta, 0.0), upper(lam_hi + eta, 0.0)
+        ok = np.isfinite(rest).all((-1, -2)) & (lam_lo > 0) & np.isfinite(lam_hi)
+        lo, hi = np.where(ok, lam_lo, 1.0), np.where(ok, lam_hi, 1.0)
+        inv_lo, inv_hi = upper(1.0 / lo, 0.0), lower(1.0 / hi, 0.0)  # 1/lam_lo from above, 1/lam_hi from below
+        c = 0.5 * (inv_lo + inv_hi)
+        half = upper(0.5 * (inv_lo - inv_hi), 0.0) + GAMMA * c
+        Tt = np.swapaxes(T, -1, -2)
+        T2 = Tt @ T
+        T2_err = GAMMA * (m + 1) * (np.abs(Tt) @ np.abs(T))
+        row = upper(np.sqrt((T**2).sum(-2)), 0.0)  # |t_i|, the columns' norms
+        mid = c[:, None, None] * T2
+        rad = (half[:, None, None] * row[:, :, None] * row[:, None, :] + c[:, None, None] * T2_err
+               + GAMMA * np.abs(mid)) * (1 + GAMMA) + TINY  # fmt: skip
+    rad = np.where(ok[:, None, None] & np.isfinite(rad), rad, np.inf)
+    sensitivity = np.abs(scaled).max((-1, -2)).T  # (B, m)
+    return mid, rad, np.where(np.isfinite(sensitivity), sensitivity, 0.0)
+
+
+def _inverse_root(M0):
+    """Float ``M0^-1/2`` per box (symmetrised; the identity where ``M0`` is not positive definite: any float ``T``
+    gives a valid bound, a poor one only fails to prove)."""
+    with np.errstate(all="ignore"):
+        S = 0.5 * (M0 + np.swapaxes(M0, -1, -2))
+        good = np.isfinite(S).all((-1, -2))
+        w, U = np.linalg.eigh(np.where(good[:, None, None], S, np.eye(S.shape[-1])))
+        good &= (w > 0).all(-1)
+        root = (U * np.where(good[:, None], w, 1.0)[:, None, :] ** -0.5) @ np.swapaxes(U, -1, -2)
+    return np.where(good[:, None, None], root, np.eye(S.shape[-1]))

@@ -461,8 +461,9 @@ def _one_batch(state: _State, pool, a_lo, a_hi, taylor, root_q, root_v) -> None:
     batch, rest = _next_batch(state.stack)
     ql, qh, vl, vh = (np.array([b[k] for b in batch]) for k in range(4))
     entries = np.array([b[4].any(-1) for b in batch])
+    unproved_parent = np.array([not np.isfinite(b[7]).all() for b in batch])  # its M_hat^-1 was not proved
     lo, hi, contribution, seen_lo, seen_hi, sign = enclose_batch(
-        pool, (ql, qh, vl, vh, entries), a_lo, a_hi, taylor=taylor
+        pool, (ql, qh, vl, vh, entries, unproved_parent), a_lo, a_hi, taylor=taylor
     )
     # the inner values grow with every box's centre: an entry's side closes against the best value attained
     p_lo, p_hi, tol = state.p_lo, state.p_hi, state.tol

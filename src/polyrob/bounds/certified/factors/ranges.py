@@ -47,7 +47,12 @@ import numpy as np
 from polyrob.bounds.certified import ball_jets as bj
 from polyrob.bounds.certified.ball_jets import GAMMA, TINY, BallJet, ball_inverse, ball_sin_cos, intersect, lower, upper
 from polyrob.bounds.certified.factors.hessian import box_models, centre_velocity_models, factor_hessians
-from polyrob.bounds.certified.factors.inverse import fixed_point_inverse, jet_parts, taylor_neumann_inverse
+from polyrob.bounds.certified.factors.inverse import (
+    fixed_point_inverse,
+    jet_parts,
+    loewner_inverse,
+    taylor_neumann_inverse,
+)
 from polyrob.bounds.certified.factors.monotone import gradient_signs
 from polyrob.bounds.certified.factors.slope_form import residuals, slope_spread, vertex_gradients
 from polyrob.bounds.certified.factors.taylor2 import (
@@ -131,7 +136,7 @@ class FactorProblem:
         radii = np.concatenate([qr, vr], -1)
         with np.errstate(over="ignore", invalid="ignore"):
             Mb, hb = self._dynamics(qc, qr, vc, vr, 2)
-            Y_box = self._box_inverse(self._dynamics(qc, zero, vc, zero, 1)[0], Mb, radii)
+            Y_box = self._box_inverse(self._dynamics(qc, zero, vc, zero, 1)[0], Mb, radii)[:2]
             K0b, _, _ = self._factors(Mb, hb, Y_box)
         return K0b.mid[1:], K0b.rad[1:]
 
@@ -156,26 +161,44 @@ class FactorProblem:
 
     @staticmethod
     def _box_inverse(Mc, Mb, radii):
-        """``(mid, rad)`` ``(B, m, m)`` of ``M_hat(q)^-1`` on each box (``rad = inf`` where not proved invertible).
+        """``(mid, rad, sensitivity)`` of ``M_hat(q)^-1`` on each box (``rad = inf`` where not proved invertible).
 
         :func:`~polyrob.bounds.certified.factors.inverse.taylor_neumann_inverse`
         with the Taylor form of the highest order the jets allow: ``Mc`` the
-        jets at the centre (thin), ``Mb`` over the box, both in ``q``.
+        jets at the centre (thin), ``Mb`` over the box, both in ``q``; where
+        it proves nothing, the wider
+        :func:`~polyrob.bounds.certified.factors.inverse.loewner_inverse`,
+        whose ``sensitivity`` ``(B, m)`` says which position moves ``M_hat``
+        most (where to split a box on which neither proves).
         """
         k = min(Mb.order, Mc.order + 1)
-        mid, rad, _ = taylor_neumann_inverse(jet_parts(Mc, k - 1), jet_parts(Mb, k)[k], radii[:, : Mc.n])
-        return mid, rad
+        centre, box, qr = jet_parts(Mc, k - 1), jet_parts(Mb, k)[k], radii[:, : Mc.n]
+        mid, rad, _ = taylor_neumann_inverse(centre, box, qr)
+        sensitivity = np.zeros_like(qr)
+        failed = ~np.isfinite(rad).all((-1, -2))
+        if failed.any():  # the Loewner bounds on the boxes the Neumann bound leaves
+            pick = [(x[0][..., failed, :, :], x[1][..., failed, :, :]) for x in centre]
+            l_mid, l_rad, sensitivity[failed] = loewner_inverse(
+                pick, (box[0][..., failed, :, :], box[1][..., failed, :, :]), qr[failed]
+            )
+            mid[failed], rad[failed] = l_mid, l_rad
+        return mid, rad, sensitivity
 
     def inverse_enclosure(self, q_lo, q_hi, method: str = "taylor3"):
         """``(mid, rad, proved)`` of ``M_hat(q)^-1`` over boxes ``(B, m)`` in ``q`` (for measurement and tests).
 
         ``method``: ``taylor3`` or ``taylor2`` (the Taylor form of that order
         and the Perron-weighted Neumann bound, :mod:`~polyrob.bounds.certified.factors.inverse`;
-        the branch and bound's is ``taylor3``), or ``fixed-point`` (the earlier
-        method, a ball around the centre's inverse).
+        with ball jets), ``loewner``
+        (:func:`~polyrob.bounds.certified.factors.inverse.loewner_inverse`
+        with the third-order form of ball jets), ``branch-and-bound`` (what
+        the branch and bound's boxes get: the ball jets tightened by the
+        Taylor models', then ``taylor3``, and ``loewner`` where it fails),
+        or ``fixed-point`` (the earlier method, a ball around the centre's
+        inverse).
         """
         qc, qr = bj.centre_radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
-        order = {"taylor3": 3, "taylor2": 2, "fixed-point": 1}[method]
+        order = {"taylor3": 3, "taylor2": 2, "fixed-point": 1, "loewner": 3, "branch-and-bound": 3}[method]
         zero = np.zeros_like(qr)
         with np.errstate(over="ignore", invalid="ignore"):
             Mc = self._dynamics(qc, zero, zero, zero, max(order - 1, 1))[0]
@@ -185,7 +208,11 @@ class FactorProblem:
                 dM = jet_parts(Mb, 1)[1]
                 rad, proved = fixed_point_inverse((Yc.mid[0], Yc.rad[0]), dM, qr)
                 return Yc.mid[0], rad, proved
-            mid, rad, _ = taylor_neumann_inverse(jet_parts(Mc, order - 1), jet_parts(Mb, order)[order], qr)
+            if method == "branch-and-bound":
+                mid, rad, _ = self._bnb_inverse(np.asarray(q_lo, float), np.asarray(q_hi, float))
+                return mid, rad, np.isfinite(rad).all((-1, -2))
+            form = loewner_inverse if method == "loewner" else taylor_neumann_inverse
+            mid, rad, _ = form(jet_parts(Mc, order - 1), jet_parts(Mb, order)[order], qr)
         return mid, rad, np.isfinite(rad).all((-1, -2))
 
     def _inverse(self, M, Y_box):
@@ -260,7 +287,18 @@ class FactorProblem:
         )
 
     def enclose(
-        self, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, *, taylor: bool = False, attained: bool = False, entries=None
+        self,
+        q_lo,
+        q_hi,
+        qd_lo,
+        qd_hi,
+        a_lo,
+        a_hi,
+        *,
+        taylor: bool = False,
+        attained: bool = False,
+        entries=None,
+        check_inverse=None,
     ):
         """Proved bounds of every factor entry on each box: ``(lower, upper, contribution)``.
 
@@ -279,10 +317,57 @@ class FactorProblem:
         and the proved sign of each entry's gradient over the box at every
         acceleration vertex ``(B, F, m, 3m, 2m)`` (``+1``, ``-1``, ``0``: not
         proved; :func:`~polyrob.bounds.certified.factors.monotone.gradient_signs`).
+        ``check_inverse`` (bool ``(B,)``, with ``taylor``): the boxes whose
+        ``M_hat`` may not be invertible (their parent's was not proved): its
+        inverse is checked first (``inverse_enclosure(..., "branch-and-bound")``,
+        an eighth of a box's cost on panda), and a box where it is not
+        proved gets infinite bounds (values attained: NaN) without the rest.
         """
+        B = len(q_lo)
+        skip = np.zeros(B, bool)
+        if taylor and check_inverse is not None and np.any(check_inverse):
+            at = np.flatnonzero(check_inverse)
+            proved, sensitivity = self._inverse_check(np.asarray(q_lo, float)[at], np.asarray(q_hi, float)[at])
+            skip[at[~proved]] = True
         with np.errstate(over="ignore", invalid="ignore"):  # a box whose M_hat may be singular gets inf
-            out = self._enclose(q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor, entries)
+            if not skip.any():
+                out = self._enclose(q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor, entries)
+            else:
+                keep = ~skip
+                part = None
+                if keep.any():
+                    part = self._enclose(*(np.asarray(x)[keep] for x in (q_lo, q_hi, qd_lo, qd_hi)), a_lo, a_hi,
+                                         taylor, None if entries is None else np.asarray(entries)[keep])  # fmt: skip
+                F, m = len(self.names), self.m
+                lo, hi = np.full((B, F, m, 3 * m), -np.inf), np.full((B, F, m, 3 * m), np.inf)
+                contribution = np.zeros((B, F, m, 3 * m, 2 * m))
+                seen_lo, seen_hi = np.full((B, F, m, 3 * m), np.nan), np.full((B, F, m, 3 * m), np.nan)
+                sign = np.zeros((B, F, m, 3 * m, 2 * m), int)
+                out = (lo, hi, contribution, seen_lo, seen_hi, sign)
+                if part is not None:
+                    for full, piece in zip(out, part):
+                        full[keep] = piece
+                # split the position that moves M_hat most (the inverse depends on q alone)
+                contribution[skip, ..., :m] = sensitivity[~proved][:, None, None, None, :]
         return out if attained else out[:3]
+
+    def _inverse_check(self, q_lo, q_hi):
+        """``(proved, sensitivity)``: where ``inverse_enclosure(..., "branch-and-bound")`` proves ``M_hat``
+        invertible, and per box how much each position moves it (:func:`~polyrob.bounds.certified.factors.inverse.loewner_inverse`)."""
+        _, rad, sensitivity = self._bnb_inverse(q_lo, q_hi)
+        return np.isfinite(rad).all((-1, -2)), sensitivity
+
+    def _bnb_inverse(self, q_lo, q_hi):
+        """:meth:`_box_inverse` on boxes in ``q`` with the ball jets the branch and bound's boxes have (tightened by
+        the Taylor models')."""
+        qc, qr = bj.centre_radius(q_lo, q_hi)
+        zero = np.zeros_like(qr)
+        with np.errstate(over="ignore", invalid="ignore"):
+            Mc3, hc3 = self._dynamics(qc, zero, zero, zero, 3)
+            Mb3, hb3 = self._dynamics(qc, qr, zero, zero, 3)
+            M3 = box_models(self, qc, qr, zero, zero, (Mc3, hc3), (Mb3, hb3))[0]
+            radii = np.concatenate([qr, zero], -1)
+            return self._box_inverse(Mc3.truncated(2), intersect(Mb3, M3.to_ball()), radii)
 
     def _taylor2(self, centre, M3, h3, Y_centre, Y_box, radii, V, entries=None):
         """Per-vertex ``(lower, upper)`` ``(B, F, i, 3m, nv)`` of the second-order Taylor form (taylor2.py).
@@ -349,7 +434,7 @@ class FactorProblem:
             Mb, hb = intersect(Mb, M3.to_ball()), intersect(hb, h3.to_ball())
             # the Hessian's models: qdot at the centre is enough (hessian.py)
             M3, h3 = centre_velocity_models(self, qc, qr, vc, (Mc3, hc3), (Mb, hb))
-        Y_box = self._box_inverse(Mc2, Mb, radii)  # the Taylor form of M_hat of the highest order at hand
+        *Y_box, sensitivity = self._box_inverse(Mc2, Mb, radii)  # the Taylor form of M_hat of the highest order
         Mb, hb = Mb.truncated(2), hb.truncated(2)
         K0b, Kab, singular_b = self._factors(Mb, hb, Y_box)
         g0, ga, Yb = self._factors(Mb, hb, Y_box, residual=(K0c, Kac))
@@ -396,6 +481,11 @@ class FactorProblem:
             g_lo, g_hi = np.maximum(g_lo, t_grad[0]), np.minimum(g_hi, t_grad[1])
         hi, lo = hi.max(-1), lo.min(-1)
         hi[unbounded], lo[unbounded] = np.inf, -np.inf
+        # a box where M_hat is not proved invertible: split the position that moves M_hat most (the inverse
+        # depends on q alone; a split in qdot would not help it)
+        contribution[unbounded] = np.concatenate([sensitivity, np.zeros_like(sensitivity)], -1)[
+            np.nonzero(unbounded)[0]
+        ][:, None, None, None, :]
         sign = gradient_signs(g_lo, g_hi)
         sign[unbounded] = 0
         # values attained at the box's centre and the a-vertices (float midpoints of thin balls): they only steer
