@@ -108,3 +108,15 @@ def test_at_the_work_limit_what_is_proved_by_then_holds_every_point_and_the_fini
     qd = rng.uniform(box.qdot_lower, box.qdot_upper, (400, problem.m))
     a = np.where(rng.integers(0, 2, (400, problem.m)) == 1, box.qddot_upper, box.qddot_lower)
     assert part.contains(problem.values(q, qd, a)).all()
+
+
+def test_boxes_with_no_finite_enclosure_yet_come_first():
+    # (q_lo, q_hi, v_lo, v_hi, open sides, volume share, parent's lower, parent's upper)
+    sides = np.ones((1, 2, 3, 2), bool)
+    finite = (np.zeros(2), np.ones(2), np.zeros(2), np.ones(2), sides, 0.5, np.zeros((1, 2, 3)), np.ones((1, 2, 3)))
+    small = (np.zeros(2), np.ones(2), np.zeros(2), np.ones(2), sides, 1e-3, np.full((1, 2, 3), -np.inf),
+             np.full((1, 2, 3), np.inf))  # fmt: skip
+    stack = [small] + [finite] * proof.BATCH
+    batch, rest = proof._next_batch(stack)
+    # the tiny box whose parent's M_hat^-1 was not proved is taken before sixteen boxes of 500 times its share
+    assert any(b is small for b in batch) and len(rest) == 1 and rest[0] is finite

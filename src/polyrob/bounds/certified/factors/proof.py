@@ -441,11 +441,14 @@ def _next_batch(stack):
     a side that needs many small boxes there holds the whole search; the
     largest open work first keeps every side's worst box refined, so the
     ranges proved by the work limit (``partial``) and the fraction done move
-    together.  Ties keep the stack's order (the later first).
+    together.  Boxes whose parent has no finite enclosure (``M_hat^-1`` not
+    proved on it) come before all others: until each has one, no range at
+    the work limit is finite.  Ties keep the stack's order (the later first).
     """
     if len(stack) <= BATCH:
         return stack, []
-    work = np.array([b[5] * np.count_nonzero(b[4]) for b in stack])
+    unbounded = np.array([not np.isfinite(b[7]).all() for b in stack])
+    work = np.array([b[5] * np.count_nonzero(b[4]) for b in stack]) + np.where(unbounded, 2.0 * stack[0][4].size, 0.0)
     order = np.argsort(-work[::-1], kind="stable")[:BATCH]
     chosen = set((len(stack) - 1 - order).tolist())
     return [stack[i] for i in sorted(chosen)], [b for i, b in enumerate(stack) if i not in chosen]
@@ -461,7 +464,9 @@ def _one_batch(state: _State, pool, a_lo, a_hi, taylor, root_q, root_v) -> None:
     batch, rest = _next_batch(state.stack)
     ql, qh, vl, vh = (np.array([b[k] for b in batch]) for k in range(4))
     entries = np.array([b[4].any(-1) for b in batch])
-    unproved_parent = np.array([not np.isfinite(b[7]).all() for b in batch])  # its M_hat^-1 was not proved
+    # a box whose parent's M_hat^-1 was not proved: its inverse checked first, then its first finite enclosure
+    # (ranges.py); the root gets every form at once (on most arms its inverse is proved)
+    unproved_parent = np.array([not np.isfinite(b[7]).all() and b[5] < 1.0 for b in batch])
     lo, hi, contribution, seen_lo, seen_hi, sign = enclose_batch(
         pool, (ql, qh, vl, vh, entries, unproved_parent), a_lo, a_hi, taylor=taylor
     )

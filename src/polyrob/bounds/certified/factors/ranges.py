@@ -319,35 +319,40 @@ class FactorProblem:
         proved; :func:`~polyrob.bounds.certified.factors.monotone.gradient_signs`).
         ``check_inverse`` (bool ``(B,)``, with ``taylor``): the boxes whose
         ``M_hat`` may not be invertible (their parent's was not proved): its
-        inverse is checked first (``inverse_enclosure(..., "branch-and-bound")``,
-        an eighth of a box's cost on panda), and a box where it is not
-        proved gets infinite bounds (values attained: NaN) without the rest.
+        inverse is checked first (``inverse_enclosure(..., "branch-and-bound")``),
+        a box where it is not proved gets infinite bounds (values attained:
+        NaN) without the rest, and one where it is gets the first-order and
+        slope forms on the Taylor models' ranges, without the second-order
+        Taylor form: its first finite enclosure, at a thirtieth of the cost
+        on panda's wide boxes (its children get every form).
         """
         B = len(q_lo)
-        skip = np.zeros(B, bool)
+        # per box: 0 skipped (M_hat^-1 not proved), 1 first-order forms only (proved, its parent's not), 2 all forms
+        kind = np.full(B, 2 if taylor else 0)
         if taylor and check_inverse is not None and np.any(check_inverse):
             at = np.flatnonzero(check_inverse)
             proved, sensitivity = self._inverse_check(np.asarray(q_lo, float)[at], np.asarray(q_hi, float)[at])
-            skip[at[~proved]] = True
+            kind[at] = np.where(proved, 1, 0)
         with np.errstate(over="ignore", invalid="ignore"):  # a box whose M_hat may be singular gets inf
-            if not skip.any():
+            if not taylor or (kind == 2).all():
                 out = self._enclose(q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor, entries)
             else:
-                keep = ~skip
-                part = None
-                if keep.any():
-                    part = self._enclose(*(np.asarray(x)[keep] for x in (q_lo, q_hi, qd_lo, qd_hi)), a_lo, a_hi,
-                                         taylor, None if entries is None else np.asarray(entries)[keep])  # fmt: skip
                 F, m = len(self.names), self.m
                 lo, hi = np.full((B, F, m, 3 * m), -np.inf), np.full((B, F, m, 3 * m), np.inf)
                 contribution = np.zeros((B, F, m, 3 * m, 2 * m))
                 seen_lo, seen_hi = np.full((B, F, m, 3 * m), np.nan), np.full((B, F, m, 3 * m), np.nan)
                 sign = np.zeros((B, F, m, 3 * m, 2 * m), int)
                 out = (lo, hi, contribution, seen_lo, seen_hi, sign)
-                if part is not None:
-                    for full, piece in zip(out, part):
-                        full[keep] = piece
+                for level in (1, 2):
+                    pick = kind == level
+                    if pick.any():
+                        part = self._enclose(*(np.asarray(x)[pick] for x in (q_lo, q_hi, qd_lo, qd_hi)), a_lo, a_hi,
+                                             True, None if entries is None else np.asarray(entries)[pick],
+                                             hessians=level == 2)  # fmt: skip
+                        for full, piece in zip(out, part):
+                            full[pick] = piece
                 # split the position that moves M_hat most (the inverse depends on q alone)
+                skip = kind == 0
                 contribution[skip, ..., :m] = sensitivity[~proved][:, None, None, None, :]
         return out if attained else out[:3]
 
@@ -417,7 +422,7 @@ class FactorProblem:
         gradient = (np.concatenate(g_lows, -1), np.concatenate(g_highs, -1))
         return np.concatenate(lows, -1), np.concatenate(highs, -1), contribution, gradient
 
-    def _enclose(self, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor=False, entries=None):
+    def _enclose(self, q_lo, q_hi, qd_lo, qd_hi, a_lo, a_hi, taylor=False, entries=None, hessians=True):
         m = self.m
         qc, qr = bj.centre_radius(np.asarray(q_lo, float), np.asarray(q_hi, float))
         vc, vr = bj.centre_radius(np.asarray(qd_lo, float), np.asarray(qd_hi, float))
@@ -432,8 +437,8 @@ class FactorProblem:
         if taylor:  # Taylor-model jets over the box: the Hessian's (hessian.py), and their ranges tighten the balls
             M3, h3 = box_models(self, qc, qr, vc, vr, (Mc3, hc3), (Mb, hb))
             Mb, hb = intersect(Mb, M3.to_ball()), intersect(hb, h3.to_ball())
-            # the Hessian's models: qdot at the centre is enough (hessian.py)
-            M3, h3 = centre_velocity_models(self, qc, qr, vc, (Mc3, hc3), (Mb, hb))
+            if hessians:  # the Hessian's models: qdot at the centre is enough (hessian.py)
+                M3, h3 = centre_velocity_models(self, qc, qr, vc, (Mc3, hc3), (Mb, hb))
         *Y_box, sensitivity = self._box_inverse(Mc2, Mb, radii)  # the Taylor form of M_hat of the highest order
         Mb, hb = Mb.truncated(2), hb.truncated(2)
         K0b, Kab, singular_b = self._factors(Mb, hb, Y_box)
@@ -469,7 +474,7 @@ class FactorProblem:
         contribution = np.where(narrower.all(-1)[..., None], slope_contribution, contribution)
         hi, lo = upper(vm, vrad + spread), lower(vm, vrad + spread)
         g_lo, g_hi = gm - gr, gm + gr
-        if taylor:  # both enclose K at each vertex: their intersection does (M_hat's inverse as proved as above)
+        if taylor and hessians:  # both enclose K at each vertex: their intersection does (M_hat's inverse as proved)
             centre = (Mc3, hc3)
             t_lo, t_hi, t_contribution, t_grad = self._taylor2(
                 centre, M3, h3, (Yc.mid[0], Yc.rad[0]), Y_box, radii, V, entries
