@@ -323,7 +323,7 @@ class FactorProblem:
         a box where it is not proved gets infinite bounds (values attained:
         NaN) without the rest, and one where it is gets the first-order and
         slope forms on the Taylor models' ranges, without the second-order
-        Taylor form: its first finite enclosure, at a thirtieth of the cost
+        Taylor form: its first finite enclosure, at about a quarter of the cost
         on panda's wide boxes (its children get every form).
         """
         B = len(q_lo)
