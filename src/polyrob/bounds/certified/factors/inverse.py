@@ -125,18 +125,23 @@ def taylor_residual(C, centre, box, radii):
     for j in range(2 if k >= 2 else 1, k + 1):
         mid, rad = _ball_product(C, *terms[j])
         magnitude = np.abs(mid) + rad  # (m,)*j + (B, m, m)
-        weight = np.ones((B,) + (1,) * j)
-        for axis in range(j):  # r_p r_l ... over the j derivative axes, each (B, m) placed on its own axis
-            shape = [B] + [1] * j
-            shape[1 + axis] = m
-            weight = weight * radii.reshape(shape)
-        weight = np.moveaxis(weight, 0, -1)[..., None, None]  # (m,)*j + (B, 1, 1)
-        contribution = (magnitude * weight).reshape(-1, B, m, m).sum(0) / factorial(j)
+        contribution = (magnitude * _term_weight(radii, j)).reshape(-1, B, m, m).sum(0) / factorial(j)
         E_rad = E_rad + contribution * (1 + SUM_MARGIN)
     rest = (E_mid, (E_rad + GAMMA * np.abs(E_mid)) * (1 + SUM_MARGIN) + TINY)
     if g_mid is None:  # k = 1: the mean-value form, every term in the rest
         return None, rest
     return (-g_mid, g_rad), rest
+
+
+def _term_weight(radii, j: int) -> np.ndarray:
+    """``r_p r_l ...`` over the ``j`` derivative axes of an order-``j`` term, shape ``(m,)*j + (B, 1, 1)``."""
+    B, m = radii.shape
+    weight = np.ones((B,) + (1,) * j)
+    for axis in range(j):  # each (B, m) placed on its own axis
+        shape = [B] + [1] * j
+        shape[1 + axis] = m
+        weight = weight * radii.reshape(shape)
+    return np.moveaxis(weight, 0, -1)[..., None, None]
 
 
 def residual_ball(linear, rest, radii):
@@ -332,13 +337,7 @@ def loewner_inverse(centre, box, radii):
     rest = A0r + (A1r * radii.T[:, :, None, None]).sum(0)
     for j in range(2, len(terms)):
         mid, rad = _transformed(T, *terms[j])
-        weight = np.ones((B,) + (1,) * j)
-        for axis in range(j):
-            shape = [B] + [1] * j
-            shape[1 + axis] = m
-            weight = weight * radii.reshape(shape)
-        weight = np.moveaxis(weight, 0, -1)[..., None, None]
-        rest = rest + ((np.abs(mid) + rad) * weight).reshape(-1, B, m, m).sum(0) / factorial(j)
+        rest = rest + ((np.abs(mid) + rad) * _term_weight(radii, j)).reshape(-1, B, m, m).sum(0) / factorial(j)
     scaled = A1m * radii.T[:, :, None, None]  # (m, B, m, m): r_p A_p
     magnitude = np.abs(A0m) + np.abs(scaled).sum(0)
     rest = (rest * (1 + SUM_MARGIN) + GAMMA * (m + 2) * magnitude) * (1 + GAMMA) + TINY  # the vertices' sums
