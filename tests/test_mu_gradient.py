@@ -40,6 +40,20 @@ def test_descent_reaches_the_lmi_optimum_and_its_scalings_certify_it(seed):
     assert certified_beta(st.pad(M), D @ D, G)[0] == pytest.approx(beta, rel=1e-6)
 
 
+def test_scalings_many_orders_apart_certify_what_they_prove():
+    """``M = [[0, 1e8], [1e-8, 0]]`` against two complex scalars has μ = 1, reached by ``D = diag(1e-8, 1)``: its
+    ``P = D^2`` is 1e16 times ill-conditioned but definite, and the bound re-derived from it is 1 (it was 3162 when a
+    conditioning test took such a ``P`` for a barely definite one and shifted it); the descent reaches it too."""
+    M = np.array([[0.0, 1e8], [1e-8, 0.0]], complex)
+    zero = np.zeros((2, 2), complex)
+    assert certified_beta(M, np.diag([1e-16, 1.0]).astype(complex), zero)[0] == pytest.approx(1.0, rel=1e-9)
+    assert certified_beta(M, np.diag([1e-12, 1.0]).astype(complex), zero)[0] == pytest.approx(100.0, rel=1e-9)
+    st = as_block_structure([[1, 0], [1, 0]])
+    assert GradientUpper(st)(st.pad(M))[0] == pytest.approx(1.0, rel=1e-6)
+    # a P that is barely definite in every coordinate is still shifted (an SDP solver's noise): never below μ
+    assert certified_beta(M, np.diag([1.0, 1.0]).astype(complex) * 1e-30 + np.diag([0.0, 1.0]), zero)[0] >= 1.0
+
+
 def test_a_repeated_real_scalar_with_real_eigenvalues_gives_the_real_spectral_radius():
     """μ against δ I is max |real eigenvalue|; with real eigenvalues a full D reaches it."""
     rng = np.random.default_rng(3)
