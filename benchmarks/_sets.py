@@ -5,7 +5,9 @@ from __future__ import annotations
 
 def add_set_options(parser, payload_max: float) -> None:
     """``--robot-uncertainty FILE`` or ``--link-error P --payload-max KG --com-radius M``."""
-    parser.add_argument("--robot-uncertainty", default=None, help="a robot-uncertainty file (YAML/JSON)")
+    parser.add_argument(
+        "--robot-uncertainty", default=None, help="a robot-uncertainty file (YAML/JSON), or 'default' (the CLI's)"
+    )
     parser.add_argument("--link-error", type=float, default=10.0, help="per-link error in percent (default 10)")
     parser.add_argument(
         "--payload-max", type=float, default=payload_max,
@@ -19,6 +21,10 @@ def set_of(args, name: str):
     from polyrob.model.robots import load_robot
     from polyrob.uncertainty_set.spec import RATED_PAYLOAD, PayloadBody, RobotUncertainty
 
+    if args.robot_uncertainty == "default":  # as the CLI's --robot-uncertainty default
+        from polyrob.uncertainty_set.default_set import default_set
+
+        return default_set(load_robot(name))
     if args.robot_uncertainty:
         return RobotUncertainty.from_file(args.robot_uncertainty)
     rated = RATED_PAYLOAD.get(load_robot(name).name)

@@ -14,7 +14,12 @@ writes them) this builds the model three ways:
 * ``directions, balls``: the motion blocks' balls shrunk to the motion's
   norm bound over the set at each sample;
 * ``exact, balls``: the set's link and joint scalars themselves at the
-  centre (the model as it is).
+  centre, the instrument's part there in the constant blocks (the model
+  before the instrument's exact LFT);
+* ``exact, instrument exact``: the same with the instrument's part at the
+  centre the exact LFT in its mass and centre of mass
+  (:mod:`polyrob.plant.payload_lft`: the model as it is).  On a set without
+  an instrument it is the row above.
 
 For each it prints the μ upper bound's peak on ``--points`` log-spaced
 frequencies from 0.01 to 3162 rad/s, with the motion blocks merged with the
@@ -36,7 +41,12 @@ import time
 from _results import add_results_option, save_run
 from _sets import add_set_options, set_of
 
-VARIANTS = (("directions, entry boxes", False, False), ("directions, balls", False, True), ("exact, balls", True, True))
+VARIANTS = (
+    ("directions, entry boxes", False, False, False),
+    ("directions, balls", False, True, False),
+    ("exact, balls", True, True, False),
+    ("exact, instrument exact", True, True, True),
+)
 
 
 def peaks(P, K, omega):
@@ -67,6 +77,7 @@ def main() -> None:
     add_set_options(ap, payload_max=0.0)
     ap.add_argument("--points", type=int, default=45, help="frequencies of the grid (default 45)")
     ap.add_argument("--coverage", type=int, default=200, help="(true robot, point) pairs per coverage (0: none)")
+    ap.add_argument("--models", default=None, help="only these models, by their names, separated by semicolons")
     add_results_option(ap)
     args = ap.parse_args()
 
@@ -96,9 +107,12 @@ def main() -> None:
     pldi = SimpleNamespace(m=loop.m, domain=domain, A0=A0[0], B0=B0[0], enclosure="sampled", robot_name=loop.name)
     omega = np.logspace(-2, 3.5, args.points)
     rows = []
-    for name, exact, balls in VARIANTS:
+    chosen = None if args.models is None else {name.strip() for name in args.models.split(";")}
+    for name, exact, balls, payload in VARIANTS:
+        if chosen is not None and name not in chosen:
+            continue
         t1 = time.perf_counter()
-        unc = moving_links_plant(pldi, loop, exact=exact, motion_balls=balls)
+        unc = moving_links_plant(pldi, loop, exact=exact, motion_balls=balls, exact_payload=payload)
         merged, frozen, d = peaks(generalized_plant(unc, **weights), K, omega)
         cover = motion_coverage(unc, loop, domain, args.coverage) if args.coverage else None
         rows.append({"model": name, "parameters": int(unc.n_params), "moving": merged, "frozen": frozen,

@@ -29,14 +29,15 @@ from polyrob.uncertainty_set.draw import draw_true_robots
 
 
 @functools.cache
-def moving_model(shrunk: bool = False):
-    """ur5's loop over the default set, its task, and the moving model of that set (or of the shrunk one)."""
+def moving_model(shrunk: bool = False, exact_payload: bool = False):
+    """ur5's loop over the default set, its task, and the moving model of that set (or of the shrunk one), with the
+    instrument's part at the centre in the constant blocks or (``exact_payload``) as its exact LFT."""
     robot = load_robot("ur5")
     loop = inner_loop_of_set(robot, "computed-torque", carried_set("ur5"), draws=2)
     domain = default_task_domain(loop)
     built = loop if not shrunk else inner_loop_of_set(robot, "computed-torque", spec_of("ur5", SHRUNK_SET), draws=2)
     pldi = SimpleNamespace(m=robot.m, domain=domain, A0=None, B0=None, enclosure="sampled", robot_name=robot.name)
-    return loop, domain, moving_links_plant(pldi, built, samples=64)
+    return loop, domain, moving_links_plant(pldi, built, samples=64, exact_payload=exact_payload)
 
 
 def drawn_points(domain, rng, corners: bool):
@@ -56,15 +57,17 @@ def witnesses(unc, loop, domain, seed: int) -> np.ndarray:
     )
 
 
-def test_each_true_robot_is_a_member_with_its_parameters_constant_over_the_task():
-    loop, domain, unc = moving_model()
+@pytest.mark.parametrize("exact_payload", [False, True])
+def test_each_true_robot_is_a_member_with_its_parameters_constant_over_the_task(exact_payload):
+    loop, domain, unc = moving_model(exact_payload=exact_payload)
     assert unc.model == "inner-links-moving"
     assert witnesses(unc, loop, domain, seed=3).max() <= 1.0
 
 
-def test_a_model_of_a_smaller_set_misses_true_robots_of_the_set():
+@pytest.mark.parametrize("exact_payload", [False, True])
+def test_a_model_of_a_smaller_set_misses_true_robots_of_the_set(exact_payload):
     loop, domain, _ = moving_model()
-    _loop, _domain, shrunk = moving_model(shrunk=True)
+    _loop, _domain, shrunk = moving_model(shrunk=True, exact_payload=exact_payload)
     assert witnesses(shrunk, loop, domain, seed=3).max() > 1.0
 
 
@@ -112,6 +115,51 @@ def test_the_blocks_that_move_are_the_motion_s_and_the_links_are_exact_at_the_ce
     assert sum(ranks) < loop.m * len(names)  # fewer channels than m repeats each: a wrist's mass moves few joints
 
 
+def test_with_the_instrument_s_exact_lft_the_only_full_blocks_are_the_motion_s():
+    """With ``exact_payload`` the instrument's part at the centre is its exact LFT (four scalars after the links',
+    each repeated as its channels need), so the only full blocks are the motion's."""
+    from polyrob.plant.models import inner_links as links
+    from polyrob.plant.payload_lft import PAYLOAD_SCALARS
+
+    loop, domain, unc = moving_model(exact_payload=True)
+    flags = [b["moving"] for b in unc.info["residual_blocks"]]
+    assert all(flags) and len(flags) == 2  # the motion's state and acceleration blocks, nothing constant
+    names = unc.info["exact_scalars"]
+    assert not any(n.startswith("payload") for n in names)
+    assert unc.n_params == len(names) + 4 and unc.info["inertia_block"] == "none (the payload's exact LFT)"
+    assert np.all(unc.info["theta_range"] == 1.0)
+    scalars = {s.name: s for s in links.set_scalars(loop)}
+    K = links.unit_factors(loop, [scalars[n] for n in names], *task_centre(domain))[:, 0]
+    assert np.allclose(unc.info["K_centres"], K, atol=1e-9 * np.abs(K).max())
+    values = np.linalg.svd(K, compute_uv=False)
+    ranks = [max(1, int(np.sum(v > 1e-9 * values.max()))) for v in values]
+    reals = [-int(r) for r, c in unc.block_structure if c == 0]
+    assert reals[: len(names)] == ranks and reals[len(names) :] == list(unc.info["payload_lft"].sizes)
+    assert sum(ranks) < loop.m * len(names)  # fewer channels than m repeats each: a wrist's mass moves few joints
+    assert unc.parameter_names[len(names) :] == PAYLOAD_SCALARS
+
+
+def test_the_instrument_s_lft_is_its_factor_at_every_mass_and_centre_of_mass_of_the_box():
+    """Closed at a payload's scalars, the LFT is the factor's payload part there, computed from the ten parameters
+    by Pinocchio (one true robot per parameter), to rounding; at the box's corners too (the cube around the ball)."""
+    from polyrob.plant.models import inner_links as links
+    from polyrob.uncertainty_set.payload_body import payload_coordinates
+
+    loop, domain, unc = moving_model(exact_payload=True)
+    lft = unc.info["payload_lft"]
+    body = loop.uncertainty.payload
+    on = [s for s in links.set_scalars(loop) if s.name.startswith("payload.")]
+    K = links.unit_factors(loop, on, *task_centre(domain))[:, 0]
+    rng = np.random.default_rng(5)
+    for delta in np.vstack([rng.uniform(-1, 1, (6, 4)), rng.choice([-1.0, 1.0], (4, 4))]):
+        mass, com = lft.mass[0] + lft.mass[1] * delta[0], lft.com[0] + lft.com[1] * delta[1:]
+        coords = payload_coordinates(body, mass, com)
+        direct = np.tensordot([coords[s.name] / s.half_range for s in on], K, axes=1)
+        assert np.allclose(lft.closed(delta), direct, rtol=0, atol=1e-9 * np.abs(direct).max())
+        assert np.allclose(lft.units(mass, com), delta)
+    assert "the cube around its ball" in lft.covers
+
+
 def test_membership_needs_the_true_robot():
     _loop, _domain, unc = moving_model()
     with pytest.raises(ArgumentError, match="needs the true robot"):
@@ -125,21 +173,25 @@ def test_the_coverage_counts_members_among_fresh_robots_and_points():
     assert motion_coverage(shrunk, loop, domain, 40, points=5) < 1.0
 
 
-def test_the_moving_certificate_merges_only_the_motion_blocks():
+@pytest.mark.parametrize("exact_payload", [False, True])
+def test_the_moving_certificate_merges_only_the_motion_blocks(exact_payload):
     from polyrob.analysis.lpv.constant import _moving_flags, scaled_plant
     from polyrob.analysis.mu.blocks import as_block_structure
     from polyrob.pipeline.problem import default_hyperparameters
     from polyrob.plant.generalized import generalized_plant
     from polyrob.plant.weights import plant_weights
 
-    _loop, _domain, unc = moving_model()
+    _loop, _domain, unc = moving_model(exact_payload=exact_payload)
     P = generalized_plant(unc, **plant_weights(default_hyperparameters(6)))
     assert _moving_flags(P) == [b["moving"] for b in unc.info["residual_blocks"]]
     _plant, blk = scaled_plant(P, np.ones(sum(_moving_flags(P))))
     kinds = [b.kind for b in as_block_structure(blk).blocks]
     full = [b for b in as_block_structure(P.block_structure_rs).blocks if b.kind != "real"]
     moving = sum(f.rows for f, flag in zip(full, _moving_flags(P)) if flag)
-    assert kinds.count("real") == len(unc.info["factors"]) and kinds.count("full") == 3  # two constant, one merged
+    if exact_payload:  # the links' and the instrument's scalars, and only the merged full block
+        assert kinds.count("real") == len(unc.info["factors"]) + 4 and kinds.count("full") == 1
+    else:
+        assert kinds.count("real") == len(unc.info["factors"]) and kinds.count("full") == 3  # two constant, one merged
     assert as_block_structure(blk).blocks[-1].rows == moving + P.n_w
 
 

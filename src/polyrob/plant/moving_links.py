@@ -20,10 +20,14 @@ robot's factor at the task's centre ``x_c``::
   there.  **Constant** while the robot moves;
 * ``E_c(u)``: the rest of the factor at the centre (the instrument's part
   with ``exact``, whose physical set -- a mass times a centre-of-mass ball
-  -- no box of its scalars holds without members that are no rigid body),
-  the state columns' full block (its norm bound at ``x_c``) and the inertia
-  block at ``q_c`` (shaped like the set): **constant** too, so μ's
-  frequency-dependent scalings are valid for them;
+  -- no box of its ten parameters holds without members that are no rigid
+  body), the state columns' full block (its norm bound at ``x_c``) and the
+  inertia block at ``q_c`` (shaped like the set): **constant** too, so μ's
+  frequency-dependent scalings are valid for them.  With
+  ``exact_payload`` the instrument's part is instead the exact LFT in its
+  mass and centre of mass of :mod:`polyrob.plant.payload_lft` (four
+  repeated reals; the centre of mass over the box that holds its set), and
+  no constant full block is left;
 * ``E_m(u, x) = K(u, x) - K(u, x_c)``: the motion, bounded entrywise over
   the task's samples (``SPREAD_MARGIN`` wider) and carried by two full
   blocks (state and acceleration columns), marked ``moving``: the only
@@ -63,7 +67,14 @@ def task_centre(domain):
 
 
 def moving_links_plant(
-    pldi, robot, *, n_directions: int | None = None, samples: int = 256, exact: bool = True, motion_balls: bool = True
+    pldi,
+    robot,
+    *,
+    n_directions: int | None = None,
+    samples: int = 256,
+    exact: bool = True,
+    motion_balls: bool = True,
+    exact_payload: bool = False,
 ) -> UncertainPlant:
     """The ``inner-links-moving`` LFT of the module text for ``robot`` (a :class:`~polyrob.model.inner.SetLoopRobot`).
 
@@ -71,7 +82,11 @@ def moving_links_plant(
     the ``inner-links`` directions); ``motion_balls``: the motion blocks'
     balls shrunk to the motion's norm bound (else their entry boxes'); both
     as the module text says, the alternatives kept for comparison
-    (``benchmarks/moving_links_models.py``).
+    (``benchmarks/moving_links_models.py``).  ``exact_payload`` (with
+    ``exact``): the instrument's part at the centre as the exact LFT in its
+    mass and centre of mass of :mod:`polyrob.plant.payload_lft` (its
+    centre of mass over the box that holds its ball), else in the constant
+    state and inertia blocks.
 
     The inertia block at the centre is shaped like the set there; whether
     ``I - G`` stays invertible with the motion's acceleration block on top
@@ -88,6 +103,7 @@ def moving_links_plant(
     from polyrob.plant.models.inner_links_inertia import exactly_weighted, inertia_block
 
     f = links.set_factors(pldi, robot, n_directions=n_directions, samples=samples)
+    payload = None
     m, n, N = pldi.m, 2 * pldi.m, len(f.scalars)
     centre = task_centre(pldi.domain)
     raw = links.unit_factors(robot, f.scalars, *centre)  # (N, 1, m, 3m)
@@ -99,9 +115,12 @@ def moving_links_plant(
         ranges, centres = np.ones(len(names)), at_centre[own, 0]
         rest = np.where(own[:, None, None, None], 0.0, at_centre)  # the payload's part: the blocks
         flat = np.zeros((1, m, 3 * m))  # the inertia block's own well-posedness at its centre; μ at ω = ∞ the rest
-        block = None if own.all() else inertia_block(
-            np.where(own[:, None, None, None], 0.0, G_exact), rest[..., n:], f.on_payload, f.pay, kappa,
-            np.zeros(1), flat, links.G_MARGIN)  # fmt: skip
+        if exact_payload and not own.all():  # ... or the payload's exact LFT instead
+            payload, rest, block = _payload_at_centre(robot, f, raw), np.zeros_like(rest), None
+        else:
+            block = None if own.all() else inertia_block(
+                np.where(own[:, None, None, None], 0.0, G_exact), rest[..., n:], f.on_payload, f.pay, kappa,
+                np.zeros(1), flat, links.G_MARGIN)  # fmt: skip
     else:
         coeff = at_centre[..., :n].reshape(N, 1, m * n) / f.scale @ f.D.T  # (N, 1, P): t_k(u) = sum_j u_j coeff_jk
         ranges = links.RANGE_MARGIN * links.reach_of(coeff, f.on_payload, f.pay)[0]
@@ -133,7 +152,9 @@ def moving_links_plant(
         motion_spread=motion,
         low_rank=exact,
         motion_norms=tuple(rho),
+        payload=payload,
         info={
+            "payload_lft": payload,
             "exact_scalars": names if exact else (),
             "exact_units": scalar_units(robot) if exact else (),
             "set": robot.uncertainty.words(),
@@ -142,13 +163,35 @@ def moving_links_plant(
             "direction_scale": f.scale,
             "samples": int(samples),
             "spread_margin": links.SPREAD_MARGIN,
-            "inertia_block": "none (no payload)" if block is None else block.kind,
+            "inertia_block": ("none (no payload)" if payload is None else "none (the payload's exact LFT)")
+            if block is None
+            else block.kind,
             "inertia_ball": 0.0 if block is None else block.ball,
             "motion_norm": float(np.linalg.norm(motion)),
             "motion_ball": tuple(float(r) for r in rho),
             "centre": tuple(np.asarray(x, float)[0] for x in centre),
         },
     )
+
+
+def _payload_at_centre(robot, f, raw):
+    """The payload's part of the factor at the task's centre as its exact LFT (:func:`~polyrob.plant.payload_lft.payload_lft`).
+
+    ``raw`` ``(N, 1, m, 3m)``: every scalar's factor per unit at the centre,
+    the payload's scalars marked by ``f.on_payload``.
+    """
+    from polyrob.plant.payload_lft import payload_lft
+    from polyrob.uncertainty_set.payload_body import payload_coordinates
+
+    body = robot.uncertainty.payload
+    on = [s for s, o in zip(f.scalars, f.on_payload) if o]
+    per_unit = raw[f.on_payload, 0]
+
+    def value(mass, com):
+        coords = payload_coordinates(body, mass, com)
+        return np.tensordot(np.array([coords[s.name] / s.half_range for s in on]), per_unit, axes=1)
+
+    return payload_lft(value, body)
 
 
 def motion_witness(unc: UncertainPlant, robot, true, q, qdot, a) -> np.ndarray:
@@ -179,6 +222,10 @@ def motion_witness(unc: UncertainPlant, robot, true, q, qdot, a) -> np.ndarray:
     E_c = K_c - info["K_offset"] - np.tensordot(t, info["K_centres"], axes=1)
     ranges = np.asarray(info["theta_range"], float)
     over = np.divide(np.abs(t), ranges, out=np.where(np.abs(t) > 0, np.inf, 0.0), where=ranges > 0)
+    payload = info.get("payload_lft")
+    if payload is not None:  # its exact part (its offset is in K_offset already) and its scalars within ±1
+        E_c = E_c - (payload.value(true.payload_mass, true.payload_com) - payload.offset)
+        over = np.r_[over, np.abs(payload.units(true.payload_mass, true.payload_com)) / (1 + 1e-9)]
     size = 1.0 + float(np.abs(K_c).max())
     fixed = max([float(over.max(initial=0.0))] + _norms(unc, E_c, False, size))
     return np.array([max([fixed] + _norms(unc, K - K_c, True, size)) for K in factor_of(robot, true_robot, q, qdot, a)])

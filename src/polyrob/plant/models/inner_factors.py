@@ -243,6 +243,7 @@ def factor_lft_plant(
     motion_spread=None,
     low_rank: bool = False,
     motion_norms=None,
+    payload=None,
 ):
     """The LFT ``a = v + sum_k theta_k K_k,c [x; a] + E [x; a]`` (module text) as an :class:`UncertainPlant`.
 
@@ -286,6 +287,9 @@ def factor_lft_plant(
     ``m`` (``K_k,c = L_k R_k`` from its SVD): the same LFT with fewer
     channels, for a model with one scalar per parameter (a link's mass
     moves the loop of the joints up to it only).
+    ``payload``: a :class:`~polyrob.plant.payload_lft.PayloadLFT` (``K``'s own
+    coordinates) whose channels follow the others, one repeated real per
+    scalar, and whose ``offset`` joins ``K_0`` (state columns too).
     """
     m, n = pldi.m, 2 * pldi.m
     ranges = np.asarray(ranges, float)
@@ -336,6 +340,9 @@ def factor_lft_plant(
         back[n:, n:] = W
         for b in blocks:
             b["B"], b["C"] = np.linalg.solve(W, b["B"]), b["C"] @ back
+    J0 = np.zeros((m, n))
+    if payload is not None:  # its constant part joins K_0's (state columns too)
+        J0, G0 = J0 + payload.offset[:, :n], G0 + payload.offset[:, n:]
     sizes = [b["B"].shape[1] for b in blocks]
     Bf = np.hstack([b["B"] for b in blocks]) if blocks else None
     Cf = np.vstack([b["C"] for b in blocks]) if blocks else None
@@ -349,30 +356,46 @@ def factor_lft_plant(
     C_e[np.arange(n_e), entries[:, 1]] = entry_radii
     # channels: the residual block, then each theta repeated m times, then the entry scalars; every channel
     # enters the accelerations: a = u + sum_j d_j + B_f d_f, and every output reads [x; a]
-    gain = np.linalg.inv(np.eye(m) - G0)  # a = gain (u + to_a d) around K_0 = [0, G0]
+    gain = np.linalg.inv(np.eye(m) - G0)  # a = gain (u + J0 x + to_a d) around K_0 = [J0, G0]
     left, right = _repeated_factors(centres, m, low_rank)
     repeats = [L.shape[1] for L in left]
-    to_a = gain @ np.hstack([Bf if k else np.zeros((m, 0)), *left, B_e])  # a = gain u + to_a d
-    reads = np.vstack(([Cf] if k else []) + [r * R for r, R in zip(ranges, right)] + [C_e])
-    C_v, D_vu, D_vd = reads[:, :n], reads[:, n:] @ gain, reads[:, n:] @ to_a
+    pay_B, pay_C, pay_names, pay_sizes = np.zeros((m, 0)), np.zeros((0, 3 * m)), (), ()
+    if payload is not None:
+        from polyrob.plant.payload_lft import PAYLOAD_SCALARS
+
+        live = [s for s, r in enumerate(payload.sizes) if r]  # a centre of mass without width has no channel
+        pay_B, pay_C = payload.B, payload.C
+        pay_names, pay_sizes = tuple(PAYLOAD_SCALARS[s] for s in live), tuple(payload.sizes[s] for s in live)
+    to_a = gain @ np.hstack([Bf if k else np.zeros((m, 0)), *left, B_e, pay_B])  # a = gain (u + J0 x) + to_a d
+    reads = np.vstack(([Cf] if k else []) + [r * R for r, R in zip(ranges, right)] + [C_e, pay_C])
+    C_v, D_vu, D_vd = reads[:, :n] + reads[:, n:] @ gain @ J0, reads[:, n:] @ gain, reads[:, n:] @ to_a
+    if payload is not None:  # the payload's channels also read each other (its polynomial's Horner form)
+        D_vd[-len(payload.parameter) :, -len(payload.parameter) :] += payload.D
     entry_names = [f"residual[{i},{j}]" for i, j in entries]
     channels = Channels(
         into_accelerations(m) @ to_a,
         C_v,
         D_vu,
-        [[size, size] for size in sizes] + [[-r, 0] for r in repeats] + [[-1, 0]] * n_e,
-        [f"res#{i}" for i in range(k)] + [f"{nm}#{i}" for nm, r in zip(names, repeats) for i in range(r)] + entry_names,
-        [-1] * k + [j for j in range(P) for _ in range(repeats[j])] + list(range(P, P + n_e)),
+        [[size, size] for size in sizes] + [[-r, 0] for r in repeats] + [[-1, 0]] * n_e
+        + [[-r, 0] for r in pay_sizes],
+        [f"res#{i}" for i in range(k)] + [f"{nm}#{i}" for nm, r in zip(names, repeats) for i in range(r)] + entry_names
+        + [f"{nm}#{i}" for nm, r in zip(pay_names, pay_sizes) for i in range(r)],
+        [-1] * k + [j for j in range(P) for _ in range(repeats[j])] + list(range(P, P + n_e))
+        + [P + n_e + s for s, r in enumerate(pay_sizes) for _ in range(r)],
         D_vd,
-    )
-    centre = (arm_state_matrix(np.zeros((m, n))), into_accelerations(m) @ gain)
-    centred = bool(np.any(G0 != 0.0))
+    )  # fmt: skip
+    centre = (arm_state_matrix(gain @ J0), into_accelerations(m) @ gain)
+    centred = bool(np.any(G0 != 0.0) or np.any(J0 != 0.0))
     return model_plant(
         pldi,
         model,
         centre,
         channels,
-        (tuple(names) + tuple(entry_names), -np.r_[ranges, entry_radii], np.r_[ranges, entry_radii]),
+        (
+            tuple(names) + tuple(entry_names) + tuple(pay_names),
+            -np.r_[ranges, entry_radii, np.ones(len(pay_names))],
+            np.r_[ranges, entry_radii, np.ones(len(pay_names))],
+        ),
         A_nom=np.asarray(pldi.A0, float) if not centred else centre[0],
         B_nom=np.asarray(pldi.B0, float) if not centred else centre[1],
         info={
@@ -394,7 +417,7 @@ def factor_lft_plant(
             "residual_entry_radii": entry_radii,
             **({} if weighting is None else {"residual_weighting": np.asarray(weighting, float)}),
             **({} if g_norm is None else {"residual_g_norm": float(g_norm)}),
-            "K_offset": np.hstack([np.zeros((m, n)), G0]),
+            "K_offset": np.hstack([J0, G0]),
             **({} if g_shape is None else {"residual_g_shape": np.asarray(g_shape, float)}),
             **(info or {}),
         },

@@ -407,10 +407,17 @@ class MovingLinksModel(InnerLinksModel):
         state = (
             "none for the state columns" if norm is None else f"the state columns' of norm <= {norm:.3g} in its weights"
         )
+        payload = unc.info.get("payload_lft")
+        if payload is not None:  # the instrument exact at the centre: no constant full block is left
+            rest = f"the instrument's part there an exact LFT in its mass and centre of mass ({payload.covers}; 4 reals, constant)"
+        else:
+            rest = (
+                f"the rest there {'(the instrument' + chr(39) + 's part) ' if unc.info.get('exact_scalars') else ''}"
+                f"in constant full blocks ({state}; {_inertia_words(unc)})"
+            )
         return (
-            f"inner-links-moving: the computed-torque factor split at the task's centre: {scalars}, the rest there "
-            f"{'(the instrument' + chr(39) + 's part) ' if unc.info.get('exact_scalars') else ''}in constant full "
-            f"blocks ({state}; {_inertia_words(unc)}), and the motion K(u, x) - K(u, x_c) in full blocks that vary in time "
+            f"inner-links-moving: the computed-torque factor split at the task's centre: {scalars}, {rest}, "
+            f"and the motion K(u, x) - K(u, x_c) in full blocks that vary in time "
             f"(entry bounds of Frobenius norm {unc.info['motion_norm']:.3g}, norms at most "
             f"{', '.join(f'{r:.3g}' for r in unc.info.get('motion_ball', (1.0,)))} in their weights); set: {unc.info['set']} "
             f"({self.enclosure(unc)} enclosure over the task domain)."
