@@ -94,49 +94,36 @@ def test_the_frozen_model_cannot_hold_a_robot_s_motion_with_its_scalars_constant
     assert worst > 1.0
 
 
-def test_the_blocks_that_move_are_the_motion_s_and_the_links_are_exact_at_the_centre():
+@pytest.mark.parametrize("exact_payload", [False, True])
+def test_the_blocks_that_move_are_the_motion_s_and_the_links_are_exact_at_the_centre(exact_payload):
     """Each link's scalar is a real block of its own whose factor is the link's own at the task's centre (exact:
     no direction and no residual for the links), repeated only as often as that factor's rank; the instrument's part
-    at the centre stays in the constant blocks."""
-    from polyrob.plant.models import inner_links as links
-
-    loop, domain, unc = moving_model()
-    flags = [b["moving"] for b in unc.info["residual_blocks"]]
-    assert flags[:2] == [False, False] and all(flags[2:]) and len(flags) > 2  # the instrument's blocks at the centre
-    names = unc.info["exact_scalars"]
-    assert len(names) == unc.n_params and not any(n.startswith("payload.") for n in names)
-    assert np.all(unc.info["theta_range"] == 1.0)
-    scalars = {s.name: s for s in links.set_scalars(loop)}
-    K = links.unit_factors(loop, [scalars[n] for n in names], *task_centre(domain))[:, 0]
-    assert np.allclose(unc.info["K_centres"], K, atol=1e-9 * np.abs(K).max())
-    values = np.linalg.svd(K, compute_uv=False)
-    ranks = [max(1, int(np.sum(v > 1e-9 * values.max()))) for v in values]
-    assert [-int(r) for r, c in unc.block_structure if c == 0] == ranks
-    assert sum(ranks) < loop.m * len(names)  # fewer channels than m repeats each: a wrist's mass moves few joints
-
-
-def test_with_the_instrument_s_exact_lft_the_only_full_blocks_are_the_motion_s():
-    """With ``exact_payload`` the instrument's part at the centre is its exact LFT (four scalars after the links',
-    each repeated as its channels need), so the only full blocks are the motion's."""
+    at the centre stays in the constant blocks, or (``exact_payload``) is its exact LFT, four scalars after the
+    links', and then the only full blocks are the motion's."""
     from polyrob.plant.models import inner_links as links
     from polyrob.plant.payload_lft import PAYLOAD_SCALARS
 
-    loop, domain, unc = moving_model(exact_payload=True)
+    loop, domain, unc = moving_model(exact_payload=exact_payload)
     flags = [b["moving"] for b in unc.info["residual_blocks"]]
-    assert all(flags) and len(flags) == 2  # the motion's state and acceleration blocks, nothing constant
     names = unc.info["exact_scalars"]
     assert not any(n.startswith("payload") for n in names)
-    assert unc.n_params == len(names) + 4 and unc.info["inertia_block"] == "none (the payload's exact LFT)"
+    reals = [-int(r) for r, c in unc.block_structure if c == 0]
+    if exact_payload:
+        assert flags == [True, True]  # the motion's state and acceleration blocks, nothing constant
+        assert unc.parameter_names[len(names) :] == PAYLOAD_SCALARS
+        assert reals[len(names) :] == list(unc.info["payload_lft"].sizes)
+        assert unc.info["inertia_block"] == "none (the payload's exact LFT)"
+    else:
+        assert flags[:2] == [False, False] and all(flags[2:]) and len(flags) > 2  # the instrument's at the centre
+        assert len(names) == unc.n_params
     assert np.all(unc.info["theta_range"] == 1.0)
     scalars = {s.name: s for s in links.set_scalars(loop)}
     K = links.unit_factors(loop, [scalars[n] for n in names], *task_centre(domain))[:, 0]
     assert np.allclose(unc.info["K_centres"], K, atol=1e-9 * np.abs(K).max())
     values = np.linalg.svd(K, compute_uv=False)
     ranks = [max(1, int(np.sum(v > 1e-9 * values.max()))) for v in values]
-    reals = [-int(r) for r, c in unc.block_structure if c == 0]
-    assert reals[: len(names)] == ranks and reals[len(names) :] == list(unc.info["payload_lft"].sizes)
+    assert reals[: len(names)] == ranks
     assert sum(ranks) < loop.m * len(names)  # fewer channels than m repeats each: a wrist's mass moves few joints
-    assert unc.parameter_names[len(names) :] == PAYLOAD_SCALARS
 
 
 def test_the_instrument_s_lft_is_its_factor_at_every_mass_and_centre_of_mass_of_the_box():
