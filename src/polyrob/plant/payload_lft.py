@@ -63,13 +63,21 @@ class PayloadLFT:
     phi0: np.ndarray
     phi1: np.ndarray  # (3, m, 3m)
     phi2: dict  # (j, l), j <= l -> (m, 3m)
-    offset: np.ndarray
     B: np.ndarray
     C: np.ndarray
     D: np.ndarray
     parameter: np.ndarray
-    sizes: tuple
     covers: str
+
+    @property
+    def offset(self) -> np.ndarray:
+        """``K_pay`` at the scalars' zero: ``K_00 + m_0 Phi_0``."""
+        return self.base + self.mass[0] * self.phi0
+
+    @property
+    def sizes(self) -> tuple:
+        """Each scalar's repeats (its channels), in :data:`PAYLOAD_SCALARS` order."""
+        return tuple(int(np.sum(self.parameter == s)) for s in range(len(PAYLOAD_SCALARS)))
 
     def units(self, mass, com) -> np.ndarray:
         """The scalars ``(delta_m, d_x, d_y, d_z)`` of a payload ``(mass, com)`` (within ``±1`` on the set)."""
@@ -175,7 +183,6 @@ def payload_lft(value, body) -> PayloadLFT:
             C[es] = Rf
             D[fs, es] = Q.T @ L  # f_j reads e_jl
     parameter = np.concatenate([np.full(g[3], g[0]) for g in groups]).astype(int)
-    sizes = tuple(int(np.sum(parameter == s)) for s in range(4))
     ball = body.com_radius is not None
     covers = (
         f"payload {lo:g}-{hi:g} kg, its centre of mass in the box "
@@ -183,4 +190,4 @@ def payload_lft(value, body) -> PayloadLFT:
         + (" m (the cube around its ball)" if ball else " m")
         + ", exact in the mass and centre of mass (a rigid body)"
     )
-    return PayloadLFT((m0, mr), (c0, R), base, phi0, phi1, phi2, base + m0 * phi0, B, C, D, parameter, sizes, covers)
+    return PayloadLFT((m0, mr), (c0, R), base, phi0, phi1, phi2, B, C, D, parameter, covers)

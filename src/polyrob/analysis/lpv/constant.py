@@ -338,10 +338,11 @@ def constant_parameter_certificate(
     held = len(constant) - len(real)  # full blocks that stay constant (inner-links-moving: the rest at the centre)
     exact = (P.uncertain.info or {}).get("exact_scalars")
     what = f"its {len(real)} link and joint parameters, exact there" if exact else f"the directions' values {names}"
-    if exact and (P.uncertain.info or {}).get("payload_lft") is not None:  # its last four: the instrument's
-        what = (
-            f"its {len(real) - 4} link and joint parameters and the instrument's mass and centre of mass, exact there"
-        )
+    if exact and (P.uncertain.info or {}).get("payload_lft") is not None:  # the instrument's scalars come last
+        from polyrob.plant.payload_lft import PAYLOAD_SCALARS
+
+        links = len(real) - sum(name in PAYLOAD_SCALARS for name in P.uncertain.parameter_names)
+        what = f"its {links} link and joint parameters and the instrument's mass and centre of mass, exact there"
     if held or exact:
         blocks = f" and {held} full block{'s' * (held > 1)}" if held else ""
         names = f"the set's parameters ({what}{blocks} at the task's centre)"
