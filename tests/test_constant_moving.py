@@ -30,6 +30,7 @@ from polyrob.analysis.lpv.constant import (
     residual_scalings,
     robot_in_motion_certificate,
     scaled_plant,
+    without_motion,
 )
 from polyrob.analysis.norms import hinf_norm
 from polyrob.domains.task import TaskDomain
@@ -247,3 +248,21 @@ def test_a_tuning_that_loses_the_frozen_certificate_and_wins_nothing_is_not_kept
     # a tuning that reached merged mu below 1 is kept even so
     monkeypatch.setattr(moving, "tune_for_moving", lambda *a, **k: MovingTuning(worse, np.ones(2), (0.9,), "pid", 0.0))
     assert tuned_for_moving(problem, design, rounds=1).controller is worse
+
+
+def test_without_motion_keeps_the_constant_blocks_and_the_performance_channels():
+    """Closing the moving blocks at zero drops their channels only; without flags every full block moves (``inner-gain``)."""
+    from types import SimpleNamespace
+
+    blk = np.array([[2, 2], [-1, 0], [3, 3], [-2, 0]])  # full (moving), real, full (constant), repeated real
+    flags = [{"moving": True}, {"moving": False}]
+    P = SimpleNamespace(
+        block_structure_rs=blk, n_w=4, n_z=5, uncertain=SimpleNamespace(info={"residual_blocks": flags})
+    )
+    outs, ins, kept = without_motion(P)
+    assert ins.tolist() == list(range(2, 12)) and outs.tolist() == list(range(2, 13))  # d 0-7, w 8-11; v 0-7, z 8-12
+    assert kept.tolist() == [[-1, 0], [3, 3], [-2, 0], [4, 5]]
+    gain = SimpleNamespace(block_structure_rs=blk, n_w=4, n_z=5, uncertain=SimpleNamespace(info={}))
+    outs, ins, kept = without_motion(gain)
+    assert ins.tolist() == [2, 6, 7, 8, 9, 10, 11] and outs.tolist() == [2, 6, 7, 8, 9, 10, 11, 12]
+    assert kept.tolist() == [[-1, 0], [-2, 0], [4, 5]]

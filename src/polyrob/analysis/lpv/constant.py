@@ -63,6 +63,7 @@ __all__ = [
     "moving_problem",
     "residual_scalings",
     "scaled_plant",
+    "without_motion",
     "constant_parameter_certificate",
     "robot_in_motion_certificate",
     "check_jerk",
@@ -184,6 +185,28 @@ def residual_scalings(P, K):
         start += len(i)
     d = np.sqrt(np.maximum(np.array(per[:-1]), 1e-300) / max(per[-1], 1e-300))
     return d, f"the constant-D small gain at delta = 0 ({res.gamma:.4g})"
+
+
+def without_motion(P) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(outputs, inputs, blk)``: the robust-performance loop of ``P`` with its moving blocks closed at zero.
+
+    The rows (``v`` and ``z``) and columns (``d`` and ``w``) of the loop
+    ``lft(P, K)`` that stay, and their structure (MATLAB ``blk``: the
+    constant blocks in order, then the performance block).  On an
+    ``inner-links-moving`` model the motion ``E_m(u, x) = K(u, x) - K(u,
+    x_c)`` is zero at the task's centre, so this is the frozen robot there:
+    each true robot's factor exact in its scalars, no motion
+    (:mod:`polyrob.plant.moving_links`).  On a model whose blocks carry no
+    ``moving`` flag (``inner-gain``) every full block moves, as the
+    moving-robot certificate takes them.
+    """
+    real, full = _channels(P.block_structure_rs, _moving_flags(P))
+    kept = sorted(real, key=lambda block: block[0][0])  # the constant blocks in the structure's own order
+    n_d, n_v = (sum(len(c[k]) for c in real + full) for k in (0, 1))  # the d inputs, then the v outputs
+    ins = np.concatenate([i for i, _, _ in kept] + [np.arange(n_d, n_d + P.n_w)]).astype(int)
+    outs = np.concatenate([o for _, o, _ in kept] + [np.arange(n_v, n_v + P.n_z)]).astype(int)
+    blk = np.array([list(block.matlab) for _, _, block in kept] + [[P.n_w, P.n_z]])
+    return outs, ins, blk
 
 
 def scaled_plant(P, d):
