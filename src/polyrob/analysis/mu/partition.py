@@ -154,7 +154,7 @@ def partition_mu(Ms, blk, level: float = 1.0, *, max_cells: int = 256, maxiter: 
     cells, proved, root, worst = 0, 0.0, np.nan, 0.0
     while stack:
         if cells >= max_cells:
-            return PartitionResult("unknown", level, cells, proved, root, worst, tuple(splits))
+            return PartitionResult("unknown", level, cells, proved, root, worst, tuple(int(s) for s in splits))
         centre, radius, x0 = stack.pop()
         cells += 1
         shift, scale = np.zeros(n), np.ones(n)
@@ -163,7 +163,7 @@ def partition_mu(Ms, blk, level: float = 1.0, *, max_cells: int = 256, maxiter: 
         A = np.eye(n) - M * shift[None, :]  # I - M Δ_c (Δ_c diagonal: its real blocks are scalars times I)
         cond = np.linalg.cond(A)
         if not np.isfinite(cond) or cond > SINGULAR_CONDITION:
-            return PartitionResult("member", level, cells, proved, root, worst, tuple(splits), centre)
+            return PartitionResult("member", level, cells, proved, root, worst, tuple(int(s) for s in splits), centre)
         N = np.linalg.solve(A, M * scale[None, :])
         bound, _D, _G, x = descent(N, x0)
         widened = bound * (1.0 + SOLVE_MARGIN * n * np.finfo(float).eps * cond)
@@ -175,7 +175,7 @@ def partition_mu(Ms, blk, level: float = 1.0, *, max_cells: int = 256, maxiter: 
             continue
         if not real or lower_bound(N, st, starts=1, refine=False)[0] >= 1.0:
             verdict = "member" if real else "unknown"  # no real scalar to split: the D-G bound is all there is
-            return PartitionResult(verdict, level, cells, proved, root, worst, tuple(splits), centre if real else None)
+            return PartitionResult(verdict, level, cells, proved, root, worst, tuple(int(s) for s in splits), centre if real else None)
         weight = [np.linalg.norm(N[slices[i], :], 2) * np.linalg.norm(N[:, slices[i]], 2) for i in real]
         k = int(np.argmax(weight))
         splits[k] += 1
@@ -184,4 +184,4 @@ def partition_mu(Ms, blk, level: float = 1.0, *, max_cells: int = 256, maxiter: 
             r[k] = radius[k] / 2
             c[k] = centre[k] + side * r[k]
             stack.append((c, r, x))
-    return PartitionResult("proved", level, cells, 1.0, root, worst, tuple(splits))
+    return PartitionResult("proved", level, cells, 1.0, root, worst, tuple(int(s) for s in splits))
