@@ -42,6 +42,7 @@ def test_partition_closes_the_dg_gap_of_repeated_real_scalars():
     above = partition_mu(M + 0j, st, level=1.05 * mu)
     assert above.verdict == "proved" and above.proved_fraction == 1.0
     assert above.root_upper > 1.0 and above.worst_leaf < 1.0 and sum(above.splits) >= 1
+    assert all(type(s) is int for s in above.splits)  # a JSON document takes them
     below = partition_mu(M + 0j, st, level=0.97 * mu)
     assert below.verdict == "member"
     # the member's cell centre lies in the box
