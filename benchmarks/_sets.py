@@ -31,3 +31,29 @@ def set_of(args, name: str):
     top = min(args.payload_max, rated.kg) if rated is not None and rated.kg else args.payload_max
     payload = PayloadBody(0.0, top, com_radius=args.com_radius) if top > 0 else None
     return RobotUncertainty(link_error=args.link_error / 100.0, payload=payload, source="benchmark options")
+
+
+def controller_problem(args, path: str):
+    """``(robot, loop, domain, weights, K, pldi)`` of a controller file (as ``polyrob synth -o`` writes it) on the set of :func:`add_set_options`.
+
+    ``loop``: the computed-torque loop of that set; ``pldi``: a stand-in
+    with what the models read of a PLDI (its domain, size and nominal at one
+    point of the task).
+    """
+    from types import SimpleNamespace
+
+    from polyrob.domains.task import TaskDomain
+    from polyrob.io.controller import load_controller, read_controller_file
+    from polyrob.model.inner import inner_loop_of_set
+    from polyrob.model.robots import load_robot
+    from polyrob.plant.weights import plant_weights
+
+    info = read_controller_file(path).get("info") or {}
+    robot = load_robot(info["robot"])
+    loop = inner_loop_of_set(robot, "computed-torque", set_of(args, info["robot"]), draws=2)
+    domain = TaskDomain.from_dict(info["domain"], robot=loop)
+    weights = plant_weights({k: tuple(v) for k, v in info["weights"].items()})
+    q, qdot, a = domain.split(domain.sample_box(1, method="uniform", seed=0))
+    A0, B0 = loop.jacobians_batch(q, qdot, loop.inverse_dynamics(q, qdot, a))
+    pldi = SimpleNamespace(m=loop.m, domain=domain, A0=A0[0], B0=B0[0], enclosure="sampled", robot_name=loop.name)
+    return robot, loop, domain, weights, load_controller(path), pldi

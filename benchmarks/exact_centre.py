@@ -34,7 +34,7 @@ import json
 import time
 
 from _results import add_results_option, save_run
-from _sets import add_set_options, set_of
+from _sets import add_set_options, controller_problem
 
 
 def main() -> None:
@@ -48,8 +48,6 @@ def main() -> None:
     add_results_option(ap)
     args = ap.parse_args()
 
-    from types import SimpleNamespace
-
     import numpy as np
 
     from polyrob.analysis.lpv.constant import without_motion
@@ -57,27 +55,12 @@ def main() -> None:
     from polyrob.analysis.mu.bounds import mussv
     from polyrob.analysis.mu.frequency import matrix_response
     from polyrob.analysis.mu.partition import partition_mu
-    from polyrob.domains.task import TaskDomain
-    from polyrob.io.controller import load_controller, read_controller_file
-    from polyrob.model.inner import inner_loop_of_set
-    from polyrob.model.robots import load_robot
     from polyrob.plant.generalized import generalized_plant
     from polyrob.plant.loops import lft
     from polyrob.plant.moving_links import moving_links_plant
-    from polyrob.plant.weights import plant_weights
 
     t0 = time.perf_counter()
-    doc = read_controller_file(args.controller)
-    info = doc.get("info") or {}
-    robot = load_robot(info["robot"])
-    loop = inner_loop_of_set(robot, "computed-torque", set_of(args, info["robot"]), draws=2)
-    domain = TaskDomain.from_dict(info["domain"], robot=loop)
-    weights = plant_weights({k: tuple(v) for k, v in info["weights"].items()})
-    K = load_controller(args.controller)
-    # the model reads of a PLDI its domain, size and nominal: a stand-in at one point of the task
-    q, qdot, a = domain.split(domain.sample_box(1, method="uniform", seed=0))
-    A0, B0 = loop.jacobians_batch(q, qdot, loop.inverse_dynamics(q, qdot, a))
-    pldi = SimpleNamespace(m=loop.m, domain=domain, A0=A0[0], B0=B0[0], enclosure="sampled", robot_name=loop.name)
+    robot, loop, domain, weights, K, pldi = controller_problem(args, args.controller)
     unc = moving_links_plant(pldi, loop, exact=True, exact_payload=args.instrument == "exact")
     P = generalized_plant(unc, **weights)
     N = lft(P.system, K, n_u=P.n_u, n_y=P.n_u)

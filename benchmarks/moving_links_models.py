@@ -39,7 +39,7 @@ import json
 import time
 
 from _results import add_results_option, save_run
-from _sets import add_set_options, set_of
+from _sets import add_set_options, controller_problem
 
 VARIANTS = (
     ("directions, entry boxes", False, False, False),
@@ -81,30 +81,13 @@ def main() -> None:
     add_results_option(ap)
     args = ap.parse_args()
 
-    from types import SimpleNamespace
-
     import numpy as np
 
-    from polyrob.domains.task import TaskDomain
-    from polyrob.io.controller import load_controller, read_controller_file
-    from polyrob.model.inner import inner_loop_of_set
-    from polyrob.model.robots import load_robot
     from polyrob.plant.generalized import generalized_plant
     from polyrob.plant.moving_links import motion_coverage, moving_links_plant
-    from polyrob.plant.weights import plant_weights
 
     t0 = time.perf_counter()
-    doc = read_controller_file(args.controller)
-    info = doc.get("info") or {}
-    robot = load_robot(info["robot"])
-    loop = inner_loop_of_set(robot, "computed-torque", set_of(args, info["robot"]), draws=2)
-    domain = TaskDomain.from_dict(info["domain"], robot=loop)
-    weights = plant_weights({k: tuple(v) for k, v in info["weights"].items()})
-    K = load_controller(args.controller)
-    # the model reads of a PLDI its domain, size and nominal: a stand-in at one point of the task
-    q, qdot, a = domain.split(domain.sample_box(1, method="uniform", seed=0))
-    A0, B0 = loop.jacobians_batch(q, qdot, loop.inverse_dynamics(q, qdot, a))
-    pldi = SimpleNamespace(m=loop.m, domain=domain, A0=A0[0], B0=B0[0], enclosure="sampled", robot_name=loop.name)
+    robot, loop, domain, weights, K, pldi = controller_problem(args, args.controller)
     omega = np.logspace(-2, 3.5, args.points)
     rows = []
     chosen = None if args.models is None else {name.strip() for name in args.models.split(";")}
