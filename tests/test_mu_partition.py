@@ -89,5 +89,7 @@ def test_bad_level_and_shape_are_refused():
     st = as_block_structure(TWO_REPEATED)
     with pytest.raises(ArgumentError, match="level"):
         partition_mu(np.eye(4), st, level=0.0)
+    with pytest.raises(ArgumentError, match="max_cells"):
+        partition_mu(np.eye(4), st, max_cells=0)
     with pytest.raises(ArgumentError, match="4 x 4"):
         partition_mu(np.eye(3), st)

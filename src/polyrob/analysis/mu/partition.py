@@ -135,7 +135,7 @@ def partition_mu(Ms, blk, level: float = 1.0, *, max_cells: int = 256, maxiter: 
     Raises
     ------
     ArgumentError
-        A level that is not positive, or a matrix that does not fit the structure.
+        A level that is not positive, no cell allowed, or a matrix that does not fit the structure.
     """
     st: BlockStructure = as_block_structure(blk)
     Ms = np.asarray(Ms, complex)
@@ -144,6 +144,8 @@ def partition_mu(Ms, blk, level: float = 1.0, *, max_cells: int = 256, maxiter: 
         raise ArgumentError(f"partition_mu: a padded {n} x {n} matrix is needed for {st}, got {Ms.shape}")
     if not (np.isfinite(level) and level > 0):
         raise ArgumentError(f"partition_mu: the level must be positive and finite, got {level}")
+    if int(max_cells) < 1:
+        raise ArgumentError(f"partition_mu: max_cells must be at least 1 (the whole box), got {max_cells}")
     M = Ms / level
     slices = st.padded_slices
     real = [i for i, b in enumerate(st.blocks) if b.kind == "real"]
@@ -175,7 +177,9 @@ def partition_mu(Ms, blk, level: float = 1.0, *, max_cells: int = 256, maxiter: 
             continue
         if not real or lower_bound(N, st, starts=1, refine=False)[0] >= 1.0:
             verdict = "member" if real else "unknown"  # no real scalar to split: the D-G bound is all there is
-            return PartitionResult(verdict, level, cells, proved, root, worst, tuple(int(s) for s in splits), centre if real else None)
+            return PartitionResult(
+                verdict, level, cells, proved, root, worst, tuple(int(s) for s in splits), centre if real else None
+            )
         weight = [np.linalg.norm(N[slices[i], :], 2) * np.linalg.norm(N[:, slices[i]], 2) for i in real]
         k = int(np.argmax(weight))
         splits[k] += 1
