@@ -199,3 +199,29 @@ def test_a_loop_whose_check_between_grid_points_cannot_run_is_not_certified():
     assert certified.status is Status.CERTIFIED and certified.certified and certified.reasons == ()
     assert certified.bound == pytest.approx(0.504, abs=0.005) and certified.bound >= 0.5
     assert certified.verdict.startswith("robust performance CERTIFIED: mu <= ")
+
+
+def test_analyze_wcgain_bounds_the_whole_sets_gain_beside_the_verdict(small_domain, tmp_path_factory):
+    """``--wcgain``: the worst-case gain over the whole set (MATLAB's wcgain), its upper bound proved at every frequency.
+
+    On the small domain robust performance is certified with ``mu <= b < 1``
+    at every frequency, which itself bounds every member's gain by ``b``: the
+    worst-case gain lies between the nominal loop's gain (a member) and
+    about ``b``.
+    """
+    code, doc, _ = cli_json(
+        tmp_path_factory,
+        "certificates_analyze_wcgain",
+        lambda d: (
+            ["analyze", "paper_2r", "--pldi", small_domain, "--controller", "paper", *BOX, *ANALYSIS]
+            + ["--no-moving", "--wcgain", "--json", "--quiet"]
+        ),
+    )
+    check_document(doc, doc["status"])
+    wc = doc["worst_case"]
+    assert wc["proved"] is True and wc["certificate"]["status"] == "CERTIFIED"
+    assert wc["certificate"]["scope"]["kind"] == "worst-case gain"
+    assert wc["certificate"]["scope"]["frequencies"] == "every frequency"
+    nominal, bound = doc["nominal_performance_hinf"], doc["robust_performance"]["certificate"]["bound"]
+    assert nominal * (1 - 1e-2) <= wc["lower"] <= wc["upper"] <= 1.05 * bound  # the lower on the grid
+    assert code == 0 and doc["status"] == "CERTIFIED"  # a figure beside the verdict, which stays the same

@@ -70,6 +70,8 @@ def print_analysis(a, out) -> None:
     out.line(f"worst sampled          max Re(pole) = {s.worst_abscissa:.4g}")
     if getattr(a, "true_robots", None) is not None:  # the set's own robots: how much of mu is the model's
         out.line(a.true_robots.words())
+    if getattr(a, "worst_case", None) is not None:
+        out.line(f"worst-case gain        {a.worst_case.sentence()}")
     mv = getattr(a, "moving", None)
     if mv is not None:  # the third verdict: the linearised robot moving within the domain's rates
         out.line(mv.verdict)
@@ -144,6 +146,7 @@ def cmd_analyze(args) -> int:
         moving=moving_asked(args),
         moving_options=moving_opts,
         sampled_loop=sampling,
+        worst_case=args.wcgain,
     )
     report = {
         "robot": robot.name,
@@ -177,6 +180,17 @@ def add_moving_argument(p) -> None:
     )
     add_moving_harmonics_argument(p)
     add_jerk_argument(p)
+
+
+def add_wcgain_argument(p) -> None:
+    """``--wcgain`` (``analyze`` and ``run``)."""
+    p.add_argument(
+        "--wcgain",
+        action="store_true",
+        help="also bound the worst-case weighted gain over the whole uncertainty set (MATLAB's wcgain): every "
+        "member stable and its gain below the upper bound, proved at every frequency (about twice the robust "
+        "performance sweep; docs/certificates.md)",
+    )
 
 
 def add_jerk_argument(p) -> None:
@@ -314,6 +328,7 @@ def register(sub) -> None:
         "or the constant-D small gain), the one that covers the moving robot",
     )
     add_moving_argument(p)
+    add_wcgain_argument(p)
     add_sampling_arguments(p)
     add_output_flags(p)
     p.set_defaults(func=cmd_analyze)

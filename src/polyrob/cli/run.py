@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from polyrob.cli.analyze import (
     add_moving_argument,
+    add_wcgain_argument,
     check_jerk_applies,
     moving_asked,
     moving_options,
@@ -172,6 +173,7 @@ def cmd_run(args) -> int:
         limit=None if args.max_bandwidth else limit,  # the limit printed above is factor 1's
         certificate=design.certificate,  # decided again, not swept again, when it is of the same loop and grid
         sampled_loop=sampling,  # --rate HZ: the sampled loop's certificate is the verdict
+        worst_case=args.wcgain,
     )
     print_analysis(a, out)
     design = design.certified_by(a.certificate)  # the analysis' certificate is the design's: one call, one verdict
@@ -285,6 +287,7 @@ def register(sub) -> None:
     )
     p.add_argument("--omega", default=None, help="analysis frequency grid LO:HI:N in rad/s (default automatic)")
     add_moving_argument(p)
+    add_wcgain_argument(p)
     add_validation_arguments(p)
     add_coulomb_argument(p)
     p.add_argument(

@@ -26,7 +26,8 @@ __all__ = [
 def instead_line(problem, analysis, limit: dict | None = None) -> str:
     """One line, when robust performance is not certified: what the controller certifies instead, and what stands in the way.
 
-    Instead: robust stability when its own certificate holds, and the
+    Instead: robust stability when its own certificate holds, the worst-case
+    gain over the whole set when it was asked for and proved, and the
     robust-performance margin (``analysis.margin``: the μ level proved at every
     frequency, i.e. the performance level kept on a share of the modelled
     parameter ranges).  In the way: the frequency of the μ peak and the
@@ -40,6 +41,9 @@ def instead_line(problem, analysis, limit: dict | None = None) -> str:
         return ""
     rs, m = analysis.robust_stability.certificate, analysis.margin
     got = [rs.verdict] if rs.certified else []  # the words of its own certificate
+    wc = analysis.worst_case
+    if wc is not None and wc.proved:  # the whole set at a weaker performance level
+        got.append(f"on the whole set, {wc.sentence()}")
     if m is not None and (m.proved or not got):
         got.append(m.sentence())
     instead = "; ".join(got) or "no margin computed"
@@ -149,6 +153,10 @@ class ControllerAnalysis:
     instead : str
         The one line of what the controller certifies instead and what stands
         in the way (:func:`instead_line`); empty when certified.
+    worst_case : WorstCaseGain or None
+        The worst-case weighted gain over the whole set with its upper bound
+        at every frequency (:func:`polyrob.analysis.worst_case.wcgain`,
+        MATLAB's ``wcgain``); ``None`` when not asked for.
     true_robots : TrueRobotCheck or None
         On a task domain behind an inner layer with something to draw (a
         robot-uncertainty set, or the layer's model error or payload range):
@@ -170,6 +178,7 @@ class ControllerAnalysis:
     instead: str = ""
     sampled: object = None
     true_robots: object = None
+    worst_case: object = None
 
     @property
     def certificate(self):
@@ -208,6 +217,7 @@ class ControllerAnalysis:
             "instead": self.instead or None,
             "sampled": None if self.sampled is None else self.sampled.summary(),
             "true_robots": None if self.true_robots is None else self.true_robots.to_dict(),
+            "worst_case": None if self.worst_case is None else self.worst_case.summary(),
         }
 
 
@@ -226,6 +236,7 @@ def analyze_controller(
     limit: dict | None = None,
     certificate=None,
     sampled_loop=None,
+    worst_case: bool = False,
 ) -> ControllerAnalysis:
     """Nominal/robust stability and performance of ``K`` on ``problem``, and sampled stability.
 
@@ -272,6 +283,11 @@ def analyze_controller(
         The loop sampled at a rate with a delay
         (:func:`polyrob.analysis.sampled_data.sampled_certificate`): its
         certificate is then the verdict; the continuous figures stay beside it.
+    worst_case : bool
+        Also bound the worst-case weighted gain over the whole set
+        (:func:`polyrob.analysis.worst_case.wcgain`: a bisection on the
+        performance level, then one certificate; about twice the robust
+        performance sweep).  A figure beside the verdict, not a verdict.
     """
     from polyrob.analysis.robust import nominal_performance, robperf, robstab, robstab_implied, sample_stability
 
@@ -322,6 +338,11 @@ def analyze_controller(
         from polyrob.analysis.sampled_data import sampled_certificate
 
         sampled = sampled_certificate(problem.P, K, sampled_loop, scope=problem.scope(), progress=progress)
+    wc = None
+    if worst_case:
+        from polyrob.analysis.worst_case import wcgain
+
+        wc = wcgain(problem.P, K, omega=omega, scope=problem.scope(), progress=progress)
     analysis = ControllerAnalysis(
         robust_stability=rs,
         robust_performance=rp,
@@ -334,6 +355,7 @@ def analyze_controller(
         margin=margin,
         sampled=sampled,
         true_robots=true_robots,
+        worst_case=wc,
     )
     if sampled is not None and not sampled.certificate.certified and margin is None:
         return replace(analysis, instead=sampled.instead_line(rp.certificate))
