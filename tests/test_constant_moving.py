@@ -266,3 +266,23 @@ def test_without_motion_keeps_the_constant_blocks_and_the_performance_channels()
     outs, ins, kept = without_motion(gain)
     assert ins.tolist() == [2, 6, 7, 8, 9, 10, 11] and outs.tolist() == [2, 6, 7, 8, 9, 10, 11, 12]
     assert kept.tolist() == [[-1, 0], [-2, 0], [4, 5]]
+
+
+def test_the_moving_robots_worst_case_gain_is_bounded_on_the_same_structure(problem):
+    """``worst_case=True``: the moving robot's weighted gain over the whole set, proved at every frequency.
+
+    Robust performance is certified here (μ ≤ b < 1 on the merged
+    structure), so the level is at most about ``b``; the nominal loop is one
+    of the moving robots (the constants at their centre, the residual at
+    zero), so the level is at least its gain.  No member is claimed.
+    """
+    from polyrob.analysis.robust import nominal_performance
+
+    K = load_controller(FIXTURE)
+    mv = constant_parameter_certificate(problem, K, worst_case=True)
+    wc = mv.worst_case
+    assert wc.proved and wc.certificate.certified and wc.lower == 0.0
+    assert nominal_performance(problem.P, K) <= wc.upper <= 1.02 * mv.certificate.bound
+    assert "in motion inside the domain" in wc.certificate.scope.variation
+    assert "moving robot over the whole set: every motion stable, weighted gain <=" in mv.details()
+    assert mv.summary()["worst_case"]["proved"] is True

@@ -287,7 +287,8 @@ def analyze_controller(
         Also bound the worst-case weighted gain over the whole set
         (:func:`polyrob.analysis.worst_case.wcgain`: a bisection on the
         performance level, then one certificate; about twice the robust
-        performance sweep).  A figure beside the verdict, not a verdict.
+        performance sweep), and the moving robot's on the constant-parameter
+        route when it is computed.  A figure beside the verdict, not a verdict.
     """
     from polyrob.analysis.robust import nominal_performance, robperf, robstab, robstab_implied, sample_stability
 
@@ -329,7 +330,7 @@ def analyze_controller(
     else:  # a task domain's goes to polyrob.analysis.lpv.task (its Jacobians depend on the accelerations too)
         with span(0.3, 0.95):  # asked for, the search is most of the stage (minutes); its solves report inside
             mv = robot_in_motion_certificate(problem, K, auto=moving is None, time_varying=tv,
-                                             **dict(moving_options or {}))  # fmt: skip
+                                             worst_case=worst_case, **dict(moving_options or {}))  # fmt: skip
     from polyrob.analysis.margins import robust_margin
 
     margin = None if rp.certificate.certified else robust_margin(rp.certificate)

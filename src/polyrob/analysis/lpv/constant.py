@@ -306,7 +306,15 @@ def search_scalings(P, K, d0) -> np.ndarray:
 
 
 def constant_parameter_certificate(
-    problem, K, *, auto: bool = False, tries=(1.0, 1.05, 0.95), scalings=None, search: bool = False, **mu_options
+    problem,
+    K,
+    *,
+    auto: bool = False,
+    tries=(1.0, 1.05, 0.95),
+    scalings=None,
+    search: bool = False,
+    worst_case: bool = False,
+    **mu_options,
 ):
     """The moving-robot certificate of ``K`` on an ``inner-gain`` problem: constants fixed, the state at any rate.
 
@@ -325,6 +333,11 @@ def constant_parameter_certificate(
         (a synthesis' own, :mod:`polyrob.synthesis.moving`).
     search : bool
         Search ``d`` first (:func:`search_scalings`), then certify that one.
+    worst_case : bool
+        Also bound the moving robot's weighted gain over the whole set on
+        the same structure (:func:`polyrob.analysis.worst_case.wcgain` with
+        the performance inputs scaled inside the merged block: the small
+        gain with the constant ``d`` then bounds the gain by the level).
     **mu_options
         Passed to :func:`polyrob.analysis.certificate.certify_loop`.
 
@@ -401,6 +414,12 @@ def constant_parameter_certificate(
         notes=notes + tuple(cert.scope.notes),
     )
     cert = replace(cert, scope=scope)
+    wc = None
+    if worst_case:
+        from polyrob.analysis.worst_case import wcgain
+
+        plant, blk = scaled_plant(P, d0 * factor)
+        wc = wcgain(plant, K, blk, n_u=m, n_y=m, n_w=P.n_w, n_z=P.n_z, members=False, scope=scope, **mu_options)
     return MovingRobotCertificate(
         computed=True,
         gamma=float(cert.bound),
@@ -411,6 +430,7 @@ def constant_parameter_certificate(
         scope=scope,
         decided=cert,
         seconds=time.perf_counter() - t0,
+        worst_case=wc,
     )
 
 
@@ -449,13 +469,14 @@ def check_jerk(problem, jerk) -> None:
 
 
 def robot_in_motion_certificate(
-    problem, K, *, auto: bool = False, time_varying=None, jerk=None, scalings=None, **options
+    problem, K, *, auto: bool = False, time_varying=None, jerk=None, scalings=None, worst_case=False, **options
 ):
     """The moving-robot certificate that fits ``problem``'s model and domain.
 
     An inner-gain model (physical constants and state-dependent residual
     blocks): :func:`constant_parameter_certificate`, its scalings searched
-    unless ``auto`` (``scalings``: a synthesis' own to start from).  A task domain (the
+    unless ``auto`` (``scalings``: a synthesis' own to start from; ``worst_case``:
+    its gain over the whole set too).  A task domain (the
     torques by inverse dynamics): the robot scheduled on its positions,
     velocities and accelerations,
     :func:`polyrob.analysis.lpv.task.task_motion_certificate` (with the
@@ -478,7 +499,9 @@ def robot_in_motion_certificate(
     why = applies(problem)
     if why is None or _model(problem) in MOVING_MODEL:
         # asked for (not auto): the moving blocks' scalings searched, worth its minutes on an arm
-        return constant_parameter_certificate(problem, K, auto=auto, scalings=scalings, search=not auto)
+        return constant_parameter_certificate(
+            problem, K, auto=auto, scalings=scalings, search=not auto, worst_case=worst_case
+        )
     from polyrob.model.inner import InnerLoopRobot
 
     if isinstance(getattr(problem, "robot", None), InnerLoopRobot):

@@ -68,6 +68,11 @@ class MovingRobotCertificate:
     seconds : float
     decided : Certificate or None
         The certificate when another test decided it (μ, :mod:`polyrob.analysis.lpv.constant`).
+    worst_case : WorstCaseGain or None
+        On the constant-parameter route, when asked for: the weighted gain
+        of the moving robot over the whole set, bounded at every frequency
+        on the same merged structure (:func:`polyrob.analysis.worst_case.wcgain`,
+        no member claimed: the structure is a sufficient test).
     """
 
     #: The key of its figures in a run's certificate record (:mod:`polyrob.report.certificates`).
@@ -87,6 +92,7 @@ class MovingRobotCertificate:
     lower: dict = field(default_factory=dict)
     seconds: float = 0.0
     decided: object = None
+    worst_case: object = None
 
     @classmethod
     def not_computed(cls, why: str) -> MovingRobotCertificate:
@@ -125,9 +131,10 @@ class MovingRobotCertificate:
             return ""
         lines = [f"covers: {self.certificate.scope.sentence()}"]
         if self.decided is not None:
-            return "\n".join(
-                lines + [f"mu lower bound {self.decided.mu_lower:.4g}; {self.grid_words}; {self.seconds:.0f} s"]
-            )
+            lines.append(f"mu lower bound {self.decided.mu_lower:.4g}; {self.grid_words}; {self.seconds:.0f} s")
+            if self.worst_case is not None:  # the whole set in motion, at a weaker performance level
+                lines.append(f"moving robot over the whole set: {moving_gain_words(self.worst_case)}")
+            return "\n".join(lines)
         lines.append(
             f"frozen peak over the grid {self.frozen_gamma:.4g} (not a lower bound: the robot cannot rest at most grid points); "
             f"{self.grid_words}; {self.seconds:.0f} s"
@@ -173,7 +180,15 @@ class MovingRobotCertificate:
             "lower_bound": finite_or_none(float(self.lower["gamma"])) if self.lower else None,
             "seconds": round(float(self.seconds), 3),
             "verdict": self.verdict,
+            "worst_case": None if self.worst_case is None else self.worst_case.summary(),
         }
+
+
+def moving_gain_words(wc) -> str:
+    """The moving robot's worst-case gain in words: an upper bound only (its structure is a sufficient test)."""
+    if wc.proved:
+        return f"every motion stable, weighted gain <= {wc.upper:.3g} (at every frequency)"
+    return f"no gain bound proved ({wc.reason})"
 
 
 def refuses(summary: dict | None) -> bool:
