@@ -68,6 +68,8 @@ TRIES = 3
 RAISE = 1.1
 #: Shares of the job's line: the grid's level (of which the first pass), then the certificate.
 GRID_SHARE, FIRST_SHARE = 0.5, 0.7
+#: Frequencies (the first pass's hardest) where members are also searched at levels below the grid's.
+MEMBER_FREQUENCIES = 5
 #: ``γ`` doublings before a frequency is declared unbounded (μ of the uncertainty alone near or above 1).
 MAX_DOUBLINGS = 40
 
@@ -145,19 +147,27 @@ def performance_scaled(system, gamma: float, n_w: int, n_u: int):
 
 
 def _member_gain(H, delta, n_d: int, n_v: int) -> float:
-    """``σ̄(F_u(H, Δ_u))`` of the uncertainty part of ``delta`` brought inside the unit ball (``inf``: singular)."""
+    """The largest ``σ̄(F_u(H, Δ_u))`` of the uncertainty part of ``delta``, brought into the set or onto its boundary.
+
+    ``inf`` when ``I - H_vd Δ_u`` is singular (condition above 1e12).  The
+    μ lower bound's perturbation is on the structure's own blocks, its
+    largest block of size ``1/ℓ``: shrunk into the set when ``ℓ < 1``, and
+    also scaled onto the boundary (the largest block of size 1), which is a
+    member too and often a worse one.  The largest block's size is the
+    block-diagonal matrix's norm.
+    """
     Du = np.asarray(delta)[:n_d, :n_v]
     size = float(np.linalg.norm(Du, 2)) if Du.size else 0.0
     if size == 0.0:
         return float(np.linalg.norm(H[n_v:, n_d:], 2))
-    # the lower bound's perturbation is on the structure's own blocks; its largest block may be above 1
-    # (mu < 1): shrink it into the set.  Per-block sizes are at most the whole matrix's norm.
-    Du = Du / max(1.0, size)
-    A = np.eye(n_v) - H[:n_v, :n_d] @ Du
-    if np.linalg.cond(A) > 1e12:
-        return float("inf")
-    F = H[n_v:, n_d:] + H[n_v:, :n_d] @ Du @ np.linalg.solve(A, H[:n_v, n_d:])
-    return float(np.linalg.norm(F, 2))
+    best = 0.0
+    for scale in {1.0 / max(1.0, size), 1.0 / size}:
+        A = np.eye(n_v) - H[:n_v, :n_d] @ (scale * Du)
+        if np.linalg.cond(A) > 1e12:
+            return float("inf")
+        F = H[n_v:, n_d:] + H[n_v:, :n_d] @ (scale * Du) @ np.linalg.solve(A, H[:n_v, n_d:])
+        best = max(best, float(np.linalg.norm(F, 2)))
+    return best
 
 
 class _Skewed:
@@ -188,9 +198,15 @@ class _Skewed:
 
         if self.descent is None:
             return float(mussv(self._scaled(k, gamma), self.st, lower=False).upper)
-        # from this frequency's last scalings, else the neighbour's (descent also tries its own start)
-        beta, _, _, self.x[k] = self.descent(self.st.pad(self._scaled(k, gamma)), x0=self.x.get(k, self.last))
-        self.last = self.x[k]
+        # from this frequency's last scalings, else the neighbour's (descent also tries its own start); a
+        # warm start can settle in a poor stationary point (docs/mu.md): where the bound decides (>= 1), cold too
+        Ms = self.st.pad(self._scaled(k, gamma))
+        beta, _, _, x = self.descent(Ms, x0=self.x.get(k, self.last))
+        if beta >= 1.0 and (k in self.x or self.last is not None):
+            cold = self.descent(Ms, x0=None)
+            if cold[0] < beta:
+                beta, x = cold[0], cold[3]
+        self.x[k] = self.last = x
         return float(beta)
 
     def member(self, k: int, gamma: float) -> None:
@@ -242,8 +258,10 @@ def _grid_level(H, st, n_d: int, n_v: int, members: bool, rtol: float):
             lo, hi = (lo, mid) if skewed.upper(k, mid) < 1.0 else (mid, hi)
         skewed.member(k, lo)  # a member near the boundary: μ there is at least about 1
         grid_level = hi
-    if members and grid_level == gamma:  # no frequency needed more than the nominal gain: try the hardest one
-        skewed.member(int(np.argmax(first)), gamma)
+    if members:  # where the first pass was hardest, members between the nominal gain and the level
+        for k in np.argsort(-first)[:MEMBER_FREQUENCIES]:
+            for g in {gamma, float(np.sqrt(gamma * grid_level))} if np.isfinite(grid_level) else {gamma}:
+                skewed.member(int(k), g)
     return grid_level, skewed, first
 
 
