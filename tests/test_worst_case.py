@@ -62,6 +62,7 @@ def test_no_upper_bound_without_robust_stability():
 def test_a_sufficient_structure_claims_no_member():
     g = wcgain(two_parameter_loop(0.5, 1.0), 0.0, [[-1, 0], [-1, 0], [1, 1]], n_u=1, n_y=1, members=False)
     assert g.proved and g.lower == 0.0
+    assert g.summary()["critical_frequency"] is None  # strict JSON: no member, no frequency
 
 
 def test_performance_scaled_divides_the_performance_inputs_only():

@@ -122,11 +122,14 @@ class WorstCaseGain:
         return f"worst-case gain at least {low}; no upper bound proved ({self.reason})"
 
     def summary(self) -> dict:
+        """Strict JSON (no NaN)."""
+        from polyrob.analysis.scope import finite_or_none
+
         return {
             "lower": float(self.lower) if np.isfinite(self.lower) else "inf",
             "upper": float(self.upper) if self.proved else None,
             "proved": bool(self.proved),
-            "critical_frequency": float(self.critical_frequency),
+            "critical_frequency": finite_or_none(self.critical_frequency),  # none: no member was claimed
             "grid_level": float(self.grid_level) if np.isfinite(self.grid_level) else "inf",
             "reason": self.reason,
             "certificate": None if self.certificate is None else self.certificate.summary(),
