@@ -85,10 +85,8 @@ class WorstCaseGain:
         ``critical_frequency`` (``inf``: a member makes the loop singular
         there).  A lower bound of the worst case.
     upper : float
-        Proved at every frequency when ``proved`` (every member of the set
-        stable with ``||W F||_∞ ≤ upper``); otherwise the grid's figure or
-        ``inf``, bounding nothing.
-    proved : bool
+        Proved at every frequency when :attr:`proved` (every member of the
+        set stable with ``||W F||_∞ ≤ upper``); ``inf`` otherwise.
     critical_frequency : float
         Where the lower bound was found (rad/s).
     grid_level : float
@@ -96,7 +94,7 @@ class WorstCaseGain:
         point (``inf`` when some point has none).
     certificate : Certificate or None
         The certificate of the loop with its performance inputs divided by
-        the ``γ`` tried last (its status decides ``proved``).
+        the ``γ`` tried last (its status decides :attr:`proved`).
     reason : str
         Why no upper bound was proved (empty when one was).
     seconds : float
@@ -104,12 +102,16 @@ class WorstCaseGain:
 
     lower: float
     upper: float
-    proved: bool
     critical_frequency: float
     grid_level: float
     certificate: object | None
     reason: str = ""
     seconds: float = 0.0
+
+    @property
+    def proved(self) -> bool:
+        """The upper bound holds at every frequency: its certificate's status is CERTIFIED."""
+        return self.certificate is not None and self.certificate.certified
 
     def sentence(self) -> str:
         """One line in MATLAB's words: the two bounds and what the upper one covers."""
@@ -224,7 +226,7 @@ class _Skewed:
 
 
 def _grid_level(H, st, n_d: int, n_v: int, members: bool, rtol: float):
-    """``(γ, skewed, first)``: the smallest ``γ`` (within ``rtol``) whose μ upper bound is below 1 at every grid point.
+    """``(γ, skewed)``: the smallest ``γ`` (within ``rtol``) whose μ upper bound is below 1 at every grid point.
 
     Each frequency is tried at the largest ``γ`` found so far (most pass at
     once); where it does not, ``γ`` is doubled until it does (``inf`` after
@@ -255,7 +257,7 @@ def _grid_level(H, st, n_d: int, n_v: int, members: bool, rtol: float):
                 break
         if not np.isfinite(hi):
             skewed.member(k, lo)
-            return hi, skewed, first
+            return hi, skewed
         while hi / lo > 1.0 + rtol:
             mid = np.sqrt(lo * hi)
             lo, hi = (lo, mid) if skewed.upper(k, mid) < 1.0 else (mid, hi)
@@ -265,7 +267,7 @@ def _grid_level(H, st, n_d: int, n_v: int, members: bool, rtol: float):
         for k in np.argsort(-first)[:MEMBER_FREQUENCIES]:
             for g in {gamma, float(np.sqrt(gamma * grid_level))} if np.isfinite(grid_level) else {gamma}:
                 skewed.member(int(k), g)
-    return grid_level, skewed, first
+    return grid_level, skewed
 
 
 def wcgain(
@@ -356,10 +358,10 @@ def wcgain(
     w = np.union1d(w, [0.0])  # real μ is discontinuous there, and a gain often peaks there
     H = matrix_response(*(np.asarray(X, float) for X in (N.A, N.B, N.C, N.D)))(w)
     with single_blas_thread(), span(0.0, GRID_SHARE):  # small dense problems one after another (as mu_bounds)
-        grid_level, skewed, first = _grid_level(H, st, n_d, n_v, members, rtol)
+        grid_level, skewed = _grid_level(H, st, n_d, n_v, members, rtol)
     lower, at = skewed.lower, float(w[skewed.at]) if skewed.at is not None else float("nan")
     if not np.isfinite(grid_level):
-        return WorstCaseGain(lower, float("inf"), False, at, grid_level, None,
+        return WorstCaseGain(lower, float("inf"), at, grid_level, None,
                              "mu of the uncertainty channels alone reaches 1 on the grid: robust stability is not proved",
                              time.perf_counter() - t0)  # fmt: skip
     cert, level, tries = None, grid_level * (1.0 + rtol), max(1, int(tries))
@@ -376,7 +378,6 @@ def wcgain(
         upper = float(cert.bound) * level  # b γ: μ ≤ b < 1 covers every member with ||Δ|| ≤ 1/b
         note = f"the performance inputs divided by {level:.4g}: mu <= {cert.bound:.4g} gives the gain <= {upper:.4g}"
         cert = replace(cert, scope=replace(cert.scope, kind="worst-case gain", notes=(note,) + tuple(cert.scope.notes)))
-        return WorstCaseGain(lower, upper, True, at, grid_level, cert, "", seconds)
+        return WorstCaseGain(lower, upper, at, grid_level, cert, "", seconds)
     why = "; ".join(cert.reasons) or str(cert.status)
-    return WorstCaseGain(lower, float(cert.mu_upper_grid) * level, False, at, grid_level, cert,
-                         f"not certified at {level:.4g}: {why}", seconds)  # fmt: skip
+    return WorstCaseGain(lower, float("inf"), at, grid_level, cert, f"not certified at {level:.4g}: {why}", seconds)

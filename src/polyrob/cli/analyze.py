@@ -188,8 +188,8 @@ def add_wcgain_argument(p) -> None:
         "--wcgain",
         action="store_true",
         help="also bound the worst-case weighted gain over the whole uncertainty set (MATLAB's wcgain): every "
-        "member stable and its gain below the upper bound, proved at every frequency (about twice the robust "
-        "performance sweep; docs/certificates.md)",
+        "member stable and its gain below the upper bound, proved at every frequency (a bisection on the "
+        "performance level, then one more certificate sweep; docs/certificates.md)",
     )
 
 

@@ -286,9 +286,9 @@ def analyze_controller(
     worst_case : bool
         Also bound the worst-case weighted gain over the whole set
         (:func:`polyrob.analysis.worst_case.wcgain`: a bisection on the
-        performance level, then one certificate; about twice the robust
-        performance sweep), and the moving robot's on the constant-parameter
-        route when it is computed.  A figure beside the verdict, not a verdict.
+        performance level, then one more certificate sweep), and the moving
+        robot's on the constant-parameter route when it is computed.  A
+        figure beside the verdict, not a verdict.
     """
     from polyrob.analysis.robust import nominal_performance, robperf, robstab, robstab_implied, sample_stability
 
