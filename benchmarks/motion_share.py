@@ -1,0 +1,123 @@
+"""Which of the task's coordinates lift a per-link set's frozen μ: the model over sub-boxes of the task, as JSON.
+
+    python benchmarks/motion_share.py CONTROLLER.json [--robot-uncertainty FILE|default] [--link-error 10]
+        [--payload-max 0] [--com-radius 0.1] [--rad-s 79] [--cases "q=0;q.4=0;..."]
+
+For the controller file's robot, task and weights (as ``polyrob synth -o``
+writes them) this builds the ``inner-links-moving`` model
+(:mod:`polyrob.plant.moving_links`: the link scalars exact at the task's
+centre, the instrument's part its exact LFT, the motion over the task in
+two full blocks) over the whole task and over sub-boxes of it, each
+centred where the task is, and prints μ's bounds (descent's D-G upper
+bound and the power iteration's lower bound) of the robust-performance
+loop, every block constant (the model's frozen figure), at one frequency.
+
+A case is a list of ``GROUP[.JOINT]=FACTOR`` separated by commas, the
+cases by semicolons: ``q.4=0`` fixes joint 4's position at the centre
+(index from 0), ``qdot=0.5`` halves every velocity range, ``q=0,qdot=0,
+qddot=0`` is the task's centre alone (the exact model there); the items
+apply in order, and a range fixed stays fixed (``q.4=0,q=0.5``: joint 4's
+position fixed, the others' halved).  The
+default cases are the whole task, each joint's position fixed in turn,
+the velocities fixed, the accelerations fixed, and the centre.
+
+Grid figures at one frequency, not certificates: they say which
+coordinates' ranges the model's motion blocks pay for, where a true robot
+at each point pays for its own point only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+from _results import add_results_option, save_run
+from _sets import add_set_options, controller_problem
+
+#: A range fixed "at the centre" keeps this half-width (the sampled model needs a box, not a point).
+POINT = 1e-6
+
+
+def sub_task(domain, robot, case: str):
+    """The task domain with the ranges of ``case`` (``GROUP[.JOINT]=FACTOR,...``) scaled about their centres."""
+    from polyrob.domains.task import TaskDomain
+
+    data = json.loads(json.dumps(domain.to_dict()))
+    joints = data["joints"]
+    for item in (x.strip() for x in case.split(",") if x.strip()):
+        target, _, factor = item.partition("=")
+        group, _, joint = target.partition(".")
+        if group not in ("q", "qdot", "qddot") or not factor:
+            raise SystemExit(f"case {item!r}: expected GROUP[.JOINT]=FACTOR with GROUP q, qdot or qddot")
+        for k, name in enumerate(joints):
+            if joint and int(joint) != k:
+                continue
+            lo, hi = data[group][name]
+            centre, half = (lo + hi) / 2, max((hi - lo) / 2 * float(factor), POINT)
+            data[group][name] = [centre - half, centre + half]
+    return TaskDomain.from_dict(data, robot=robot)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("controller", help="a controller file as `polyrob synth -o` writes it (an inner-links problem)")
+    add_set_options(ap, payload_max=0.0)
+    ap.add_argument("--rad-s", type=float, default=79.0, help="the frequency (rad/s; default 79)")
+    ap.add_argument("--cases", default=None, help="cases separated by ';' (default: the module text's)")
+    add_results_option(ap)
+    args = ap.parse_args()
+
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from polyrob._threads import single_blas_thread
+    from polyrob.analysis.mu.bounds import mussv
+    from polyrob.analysis.mu.frequency import matrix_response
+    from polyrob.plant.generalized import generalized_plant
+    from polyrob.plant.loops import lft
+    from polyrob.plant.moving_links import moving_links_plant
+
+    t0 = time.perf_counter()
+    robot, loop, domain, weights, K, _ = controller_problem(args, args.controller)
+    m = loop.m
+    cases = args.cases.split(";") if args.cases is not None else (
+        [""] + [f"q.{k}=0" for k in range(m)] + ["qdot=0", "qddot=0", "q=0,qdot=0,qddot=0"])  # fmt: skip
+    rows = []
+    for case in cases:
+        t1 = time.perf_counter()
+        task = sub_task(domain, loop, case)
+        q, qdot, a = task.split(task.sample_box(1, method="uniform", seed=0))
+        A0, B0 = loop.jacobians_batch(q, qdot, loop.inverse_dynamics(q, qdot, a))
+        pldi = SimpleNamespace(m=m, domain=task, A0=A0[0], B0=B0[0], enclosure="sampled", robot_name=loop.name)
+        P = generalized_plant(moving_links_plant(pldi, loop, exact=True, exact_payload=True), **weights)
+        N = lft(P.system, K, n_u=P.n_u, n_y=P.n_u)
+        H = matrix_response(*(np.asarray(X, float) for X in (N.A, N.B, N.C, N.D)))(np.array([args.rad_s]))[0]
+        with single_blas_thread():
+            mu = mussv(H, P.block_structure_rp, method="gradient")
+        row = {"case": case or "whole task", "lower": round(float(mu.lower), 4), "upper": round(float(mu.upper), 4),
+               "seconds": round(time.perf_counter() - t1, 1)}  # fmt: skip
+        print(json.dumps(row), flush=True)
+        rows.append(row)
+    out = {
+        "controller": args.controller,
+        "robot": robot.name,
+        "set": loop.uncertainty.words(),
+        "rad_s": args.rad_s,
+        "grid": f"one frequency, {args.rad_s:g} rad/s (a grid figure, not a certificate)",
+        "rows": rows,
+        "seconds": round(time.perf_counter() - t0, 1),
+    }
+    print(json.dumps(out, indent=1))
+    table = {
+        "columns": ["ranges (fixed at the centre: =0)", "μ lower", "μ upper (D-G)"],
+        "rows": [[r["case"], f"{r['lower']:.3f}", f"{r['upper']:.3f}"] for r in rows],
+    }
+    whole = rows[0]["upper"] if rows else float("nan")
+    figure = f"the whole task's upper bound {whole:.4g} at {args.rad_s:g} rad/s; lowest case {min(r['upper'] for r in rows):.4g}"
+    save_run(args.results, "motion_share", f"{robot.name}: which ranges lift the frozen μ", figure, out, table)
+
+
+if __name__ == "__main__":
+    main()
