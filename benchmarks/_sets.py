@@ -40,8 +40,6 @@ def controller_problem(args, path: str):
     with what the models read of a PLDI (its domain, size and nominal at one
     point of the task).
     """
-    from types import SimpleNamespace
-
     from polyrob.domains.task import TaskDomain
     from polyrob.io.controller import load_controller, read_controller_file
     from polyrob.model.inner import inner_loop_of_set
@@ -53,7 +51,13 @@ def controller_problem(args, path: str):
     loop = inner_loop_of_set(robot, "computed-torque", set_of(args, info["robot"]), draws=2)
     domain = TaskDomain.from_dict(info["domain"], robot=loop)
     weights = plant_weights({k: tuple(v) for k, v in info["weights"].items()})
+    return robot, loop, domain, weights, load_controller(path), pldi_stand_in(loop, domain)
+
+
+def pldi_stand_in(loop, domain):
+    """What the models read of a PLDI (its domain, size and nominal at one point of the task), for ``loop`` on ``domain``."""
+    from types import SimpleNamespace
+
     q, qdot, a = domain.split(domain.sample_box(1, method="uniform", seed=0))
     A0, B0 = loop.jacobians_batch(q, qdot, loop.inverse_dynamics(q, qdot, a))
-    pldi = SimpleNamespace(m=loop.m, domain=domain, A0=A0[0], B0=B0[0], enclosure="sampled", robot_name=loop.name)
-    return robot, loop, domain, weights, load_controller(path), pldi
+    return SimpleNamespace(m=loop.m, domain=domain, A0=A0[0], B0=B0[0], enclosure="sampled", robot_name=loop.name)

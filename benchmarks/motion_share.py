@@ -33,7 +33,7 @@ import json
 import time
 
 from _results import add_results_option, save_run
-from _sets import add_set_options, controller_problem
+from _sets import add_set_options, controller_problem, pldi_stand_in
 
 #: A range fixed "at the centre" keeps this half-width (the sampled model needs a box, not a point).
 POINT = 1e-6
@@ -68,8 +68,6 @@ def main() -> None:
     add_results_option(ap)
     args = ap.parse_args()
 
-    from types import SimpleNamespace
-
     import numpy as np
 
     from polyrob._threads import single_blas_thread
@@ -87,10 +85,7 @@ def main() -> None:
     rows = []
     for case in cases:
         t1 = time.perf_counter()
-        task = sub_task(domain, loop, case)
-        q, qdot, a = task.split(task.sample_box(1, method="uniform", seed=0))
-        A0, B0 = loop.jacobians_batch(q, qdot, loop.inverse_dynamics(q, qdot, a))
-        pldi = SimpleNamespace(m=m, domain=task, A0=A0[0], B0=B0[0], enclosure="sampled", robot_name=loop.name)
+        pldi = pldi_stand_in(loop, sub_task(domain, loop, case))
         P = generalized_plant(moving_links_plant(pldi, loop, exact=True, exact_payload=True), **weights)
         N = lft(P.system, K, n_u=P.n_u, n_y=P.n_u)
         H = matrix_response(*(np.asarray(X, float) for X in (N.A, N.B, N.C, N.D)))(np.array([args.rad_s]))[0]
