@@ -112,6 +112,8 @@ def test_robots_json_is_one_document(capsys):
         (["run", "--mc", "-2"], "--mc"),
         (["analyze", "--controller", "paper", "--omega", "1:0.1:5"], "--omega"),
         (["analyze", "--controller", "paper", "--omega", "0.1:inf:5"], "--omega"),
+        (["analyze", "--controller", "paper", "--frozen-cells", "0"], "--frozen-cells"),
+        (["analyze", "--controller", "paper", "--frozen-cells", "4"], "--frozen-cells"),  # no per-link set
         (["synth", "--max-bandwidth", "--alphas", "0.5,-1"], "--alphas"),
         (["synth", "--max-bandwidth", "--scale-only", "bandwidth"], "--scale-only"),
         (["run", "--max-bandwidth", "--alphas", "0.5,-1"], "--alphas"),  # was: --max-bandwidth not an option of run

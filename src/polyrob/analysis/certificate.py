@@ -48,6 +48,7 @@ import numpy as np
 
 from polyrob.analysis.loop_sweep import FLAT_RTOL, POINTS_PER_DECADE, RESPONSE_BITS, RESPONSE_TOL, grid_words
 from polyrob.analysis.scope import ARBITRARY, FROZEN, Scope, finite_or_none, strict_json, weakest_enclosure
+from polyrob.errors import ArgumentError
 
 __all__ = [
     "Status",
@@ -56,6 +57,7 @@ __all__ = [
     "certify_loop",
     "certificate_of_sweep",
     "rescoped",
+    "union_certificate",
     "decide_mu",
     "decide_gain",
     "decide_gridded_gain",
@@ -436,6 +438,51 @@ def certify_loop(
             lower_bound_disproves=lower_bound_disproves,
         )
     return replace(cert, default_grid=omega is None)
+
+
+def union_certificate(parts, scope: Scope, what: str = "cells") -> Certificate:
+    """One decision over a set covered by the union of ``parts`` (one certificate each, of its own part).
+
+    Every robot of the set lies in some part, so the union is CERTIFIED when
+    every part is, with the largest of their bounds; VIOLATED when a part is
+    (a member of that part's model, as for one model); else the worst of the
+    others, with the parts that fail counted in its reason.  The returned
+    certificate carries the μ sweep of the part with the largest bound.
+
+    >>> ok = Certificate(Status.CERTIFIED, 0.9, 0.89, 0.88, None, Scope(), bound_everywhere=True)
+    >>> both = union_certificate([ok, replace(ok, bound=0.95)], Scope())
+    >>> both.status.value, both.mu_upper
+    ('CERTIFIED', 0.95)
+    >>> no = Certificate(Status.NOT_CERTIFIED, 1.1, 1.1, 0.98, None, Scope(), ("mu in [0.98, 1.1] on the grid",))
+    >>> union_certificate([ok, no], Scope()).reasons[0]
+    '1 of 2 cells not certified; the worst: mu in [0.98, 1.1] on the grid'
+    """
+    parts = list(parts)
+    if not parts:
+        raise ArgumentError("union_certificate: no part to decide")
+    order = (Status.VIOLATED, Status.NOT_CERTIFIED, Status.GRID_ONLY, Status.CERTIFIED)
+    status = min((c.status for c in parts), key=order.index)
+    same = [c for c in parts if c.status is status]
+    worst = max(same, key=lambda c: (c.bound if np.isfinite(c.bound) else np.inf, c.mu_lower))
+    everywhere = status is Status.CERTIFIED and all(c.bound_everywhere for c in parts)
+    reasons = ()
+    if status is not Status.CERTIFIED:
+        failing = sum(not c.certified for c in parts)
+        head = f"{failing} of {len(parts)} {what} not certified; the worst: "
+        reasons = ((head + (worst.reasons[0] if worst.reasons else str(status))),) + tuple(worst.reasons[1:])
+    return Certificate(
+        status=status,
+        bound=max(float(c.bound) for c in parts) if status is Status.CERTIFIED else float(worst.bound),
+        mu_upper_grid=max(float(c.mu_upper_grid) for c in parts),
+        mu_lower=max(float(c.mu_lower) for c in parts),
+        stable_at_delta0=worst.stable_at_delta0,
+        scope=replace(scope, kind=worst.scope.kind, frequencies=worst.scope.frequencies),
+        reasons=reasons,
+        mu=worst.mu,
+        closed_loop=worst.closed_loop,
+        bound_everywhere=everywhere,
+        lower_bound_disproves=worst.lower_bound_disproves,
+    )
 
 
 def rescoped(cert: Certificate, scope: Scope) -> Certificate:

@@ -21,7 +21,7 @@ from polyrob.cli.options import (
     sampling_from_args,
 )
 from polyrob.cli.plant import add_plant_arguments, bounds_words, problem_from_args
-from polyrob.errors import PolyrobError
+from polyrob.errors import ArgumentError, PolyrobError
 
 __all__ = ["register", "print_analysis", "jerk_bound", "check_jerk_applies"]
 
@@ -84,6 +84,10 @@ def print_analysis(a, out) -> None:
         out.line(tv.verdict)
         constants = mv is not None and getattr(mv, "decided", None) is not None
         out.line(f"which covers the robot: {covers_nonlinear(tv.method, constants)}")
+    cells = getattr(a, "frozen_cells", None)
+    if cells is not None:  # the frozen robot cell by cell, where the whole task's model did not certify it
+        out.line(cells.verdict)
+        out.line(cells.words())
     sampled = getattr(a, "sampled", None)
     if sampled is not None:  # the loop as it runs: its certificate is the verdict
         out.line(sampled.line())
@@ -106,6 +110,7 @@ def cmd_analyze(args) -> int:
     omega_spec = parse_frequencies(args.omega)
     sampling = sampling_from_args(args)
     moving_opts = moving_options(args)  # its refusals before any work (and before the job's progress line)
+    check_frozen_cells_apply(args)
     out = Output(args, stages=2, job=["bounds", "analysis"])  # minutes on an arm: one line for the whole job
     K, info, source = load_controller_args(args.controller)
     robot = robot_from_args(args)
@@ -127,6 +132,7 @@ def cmd_analyze(args) -> int:
 
     problem = problem_from_args(robot, args, out, check=check if info or stored else None)
     check_jerk_applies(args, problem)
+    check_frozen_cells_apply(args, problem)
     if info:
         check_controller_problem(info, problem, source)
     omega = frequency_grid(*omega_spec) if omega_spec else None
@@ -147,6 +153,7 @@ def cmd_analyze(args) -> int:
         moving_options=moving_opts,
         sampled_loop=sampling,
         worst_case=args.wcgain,
+        frozen_cells=args.frozen_cells,
     )
     report = {
         "robot": robot.name,
@@ -191,6 +198,35 @@ def add_wcgain_argument(p) -> None:
         "member stable and its gain below the upper bound, proved at every frequency (a bisection on the "
         "performance level, then one more certificate sweep; docs/certificates.md)",
     )
+
+
+def add_frozen_cells_argument(p) -> None:
+    """``--frozen-cells N`` (``analyze``)."""
+    p.add_argument(
+        "--frozen-cells",
+        type=int_at_least(1),
+        default=None,
+        metavar="N",
+        help="when the whole task's model does not certify the frozen robot: cut the task's positions into at most "
+        "N cells, each with its own model (the links exact at its centre), and certify their union (a per-link "
+        "robot-uncertainty set on a task; minutes per cell; docs/certificates.md)",
+    )
+
+
+def check_frozen_cells_apply(args, problem=None) -> None:
+    """``--frozen-cells`` needs a per-link set's model on a task domain and the continuous loop: refused otherwise
+    (before any work when no set is given; the model once the problem is built)."""
+    if getattr(args, "frozen_cells", None) is None:
+        return
+    stated = getattr(args, "robot_uncertainty", None) is not None or getattr(args, "link_error", None) is not None
+    if not stated or (problem is not None and not str(problem.model).startswith("inner-links")):
+        model = "no robot-uncertainty set" if problem is None else f"the {problem.model!r} model"
+        raise ArgumentError(
+            f"--frozen-cells: cells carry a per-link robot-uncertainty set on a task (this problem has {model}): "
+            "add --robot-uncertainty FILE|default or --link-error P, or drop --frozen-cells"
+        )
+    if sampling_from_args(args) is not None:
+        raise ArgumentError("--frozen-cells certifies the continuous loop: drop --rate or --frozen-cells")
 
 
 def add_jerk_argument(p) -> None:
@@ -329,6 +365,7 @@ def register(sub) -> None:
     )
     add_moving_argument(p)
     add_wcgain_argument(p)
+    add_frozen_cells_argument(p)
     add_sampling_arguments(p)
     add_output_flags(p)
     p.set_defaults(func=cmd_analyze)

@@ -164,6 +164,12 @@ class ControllerAnalysis:
         (:func:`polyrob.synthesis.true_robots.check_of_problem`), a sampled
         lower bound of the set's worst case printed beside μ (how much of μ is
         the model's); ``None`` otherwise.
+    frozen_cells : TaskCellsCertificate or None
+        When asked for and the whole task's certificate fails: the frozen
+        robot's certificate over cells of the task
+        (:func:`polyrob.analysis.frozen_cells.frozen_cells_certificate`); when
+        it certifies, it is the verdict (the same robots, the same frozen
+        variation, another model per cell).
     """
 
     robust_stability: object
@@ -179,12 +185,16 @@ class ControllerAnalysis:
     sampled: object = None
     true_robots: object = None
     worst_case: object = None
+    frozen_cells: object = None
 
     @property
     def certificate(self):
-        """The robust-performance certificate: the verdict of the analysis (the sampled loop's, when asked for)."""
+        """The robust-performance certificate: the verdict of the analysis (the sampled loop's, when asked for;
+        the task cells' when they certify what the whole task's model did not)."""
         if self.sampled is not None:
             return self.sampled.certificate
+        if self.frozen_cells is not None and self.frozen_cells.certified:
+            return self.frozen_cells.certificate
         return self.robust_performance.certificate
 
     @property
@@ -218,6 +228,7 @@ class ControllerAnalysis:
             "sampled": None if self.sampled is None else self.sampled.summary(),
             "true_robots": None if self.true_robots is None else self.true_robots.to_dict(),
             "worst_case": None if self.worst_case is None else self.worst_case.summary(),
+            "frozen_cells": None if self.frozen_cells is None else self.frozen_cells.summary(),
         }
 
 
@@ -237,6 +248,7 @@ def analyze_controller(
     certificate=None,
     sampled_loop=None,
     worst_case: bool = False,
+    frozen_cells: int | None = None,
 ) -> ControllerAnalysis:
     """Nominal/robust stability and performance of ``K`` on ``problem``, and sampled stability.
 
@@ -289,6 +301,12 @@ def analyze_controller(
         performance level, then one more certificate sweep), and the moving
         robot's on the constant-parameter route when it is computed.  A
         figure beside the verdict, not a verdict.
+    frozen_cells : int, optional
+        When robust performance over the whole task is not certified, cut
+        the task's positions into at most this many cells, each with its own
+        model (:func:`polyrob.analysis.frozen_cells.frozen_cells_certificate`;
+        a per-link set on a task domain, the continuous loop): the verdict
+        when every cell is certified.
     """
     from polyrob.analysis.robust import nominal_performance, robperf, robstab, robstab_implied, sample_stability
 
@@ -298,11 +316,14 @@ def analyze_controller(
     options = {"progress": progress, "scope": problem.scope()}
     if stability not in ("sweep", "implied"):
         raise ArgumentError(f"stability must be 'sweep' or 'implied', got {stability!r}")
-    from polyrob.progress import span
+    from polyrob.progress import report, span
 
     own = reusable_certificate(certificate, problem.P, K, problem.scope()) if omega is None else None
     # the job's line: the two μ sweeps are most of the stage unless the moving robot's search follows (minutes)
     ends = (0.2, 0.27, 0.3) if moving is not False else (0.6, 0.85, 1.0)
+    last = 0.95
+    if frozen_cells:  # the cells (a model and a sweep each, minutes) would be most of the stage
+        ends, last = tuple(e / 4 for e in ends), 0.3
     with span(0.0, ends[0]):
         rp = robperf(problem.P, K, omega, certificate=own, **options)
     rs = robstab_implied(rp) if stability == "implied" else None
@@ -328,12 +349,21 @@ def analyze_controller(
     if moving is False:
         mv = MovingRobotCertificate.not_computed("not asked for (--no-moving)")
     else:  # a task domain's goes to polyrob.analysis.lpv.task (its Jacobians depend on the accelerations too)
-        with span(0.3, 0.95):  # asked for, the search is most of the stage (minutes); its solves report inside
+        with span(ends[2], last):  # asked for, the search is most of the stage (minutes); its solves report inside
             mv = robot_in_motion_certificate(problem, K, auto=moving is None, time_varying=tv,
                                              worst_case=worst_case, **dict(moving_options or {}))  # fmt: skip
     from polyrob.analysis.margins import robust_margin
 
     margin = None if rp.certificate.certified else robust_margin(rp.certificate)
+    cells = None
+    if frozen_cells and not rp.certificate.certified and sampled_loop is None:
+        from polyrob.analysis.frozen_cells import frozen_cells_certificate
+
+        with span(last, 1.0):
+            cells = frozen_cells_certificate(
+                problem, K, max_cells=int(frozen_cells), screen_at=[rp.critical_frequency], progress=report
+            )
+        margin = None if cells.certified else margin
     sampled = None
     if sampled_loop is not None:
         from polyrob.analysis.sampled_data import sampled_certificate
@@ -350,13 +380,20 @@ def analyze_controller(
         nominal_performance=float(npf),
         sampling=sampling,
         order=controller_order(K),
-        covers=str(covers if sampled is None else sampled.certificate.scope.sentence()),  # the verdict's
+        covers=str(
+            sampled.certificate.scope.sentence()
+            if sampled is not None
+            else cells.certificate.scope.sentence()
+            if cells is not None and cells.certified
+            else covers
+        ),  # the verdict's
         time_varying=tv,
         moving=mv,
         margin=margin,
         sampled=sampled,
         true_robots=true_robots,
         worst_case=wc,
+        frozen_cells=cells,
     )
     if sampled is not None and not sampled.certificate.certified and margin is None:
         return replace(analysis, instead=sampled.instead_line(rp.certificate))
