@@ -1,0 +1,106 @@
+"""The frozen robot over task cells for a saved controller, as JSON: each cell's certificate and the union's verdict.
+
+    python benchmarks/frozen_cells.py CONTROLLER.json [--robot-uncertainty FILE|default] [--link-error 10]
+        [--payload-max 0] [--com-radius 0.1] [--max-cells 8] [--screen-at 130.6] [--coverage-points 200]
+
+For the controller file's robot, task and weights (as ``polyrob synth -o``
+writes them) and the set the options state, this bounds the task as
+``polyrob analyze`` does, then runs
+:func:`polyrob.analysis.frozen_cells.frozen_cells_certificate` (what
+``polyrob analyze --frozen-cells N`` runs when the whole task's model does
+not certify the controller), screening the cells at ``--screen-at`` (rad/s;
+``polyrob analyze`` screens at the whole task's μ peak).  Prints one line
+per cell visited (its progress) and one JSON document: the union's verdict
+and covers line, and per cell kept its positions' box, coverage, status, μ
+bounds and seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+from _results import add_results_option, save_run
+from _sets import add_set_options, set_of
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("controller", help="a controller file as `polyrob synth -o` writes it (a per-link set's problem)")
+    add_set_options(ap, payload_max=0.0)
+    ap.add_argument("--max-cells", type=int, default=8, help="cells at most (default 8)")
+    ap.add_argument("--screen-at", default="", help="frequencies (rad/s, comma-separated) the cells are screened at")
+    ap.add_argument("--coverage-points", type=int, default=200, help="fresh (robot, point) pairs per cell")
+    add_results_option(ap)
+    args = ap.parse_args()
+
+    from polyrob.analysis.frozen_cells import frozen_cells_certificate
+    from polyrob.domains.task import TaskDomain
+    from polyrob.io.controller import load_controller, read_controller_file
+    from polyrob.model.inner import inner_loop_of_set
+    from polyrob.model.robots import load_robot
+    from polyrob.pipeline.problem import build_problem
+
+    t0 = time.perf_counter()
+    info = read_controller_file(args.controller).get("info") or {}
+    robot = load_robot(info["robot"])
+    loop = inner_loop_of_set(robot, "computed-torque", set_of(args, info["robot"]), draws=2)
+    domain = TaskDomain.from_dict(info["domain"], robot=loop)
+    weights = {k: tuple(v) for k, v in info["weights"].items()}
+    problem = build_problem(loop, domain, hyperparameters=weights, progress=False)
+    screen = [float(w) for w in args.screen_at.split(",") if w.strip()]
+
+    def progress(done, total):
+        print(
+            json.dumps({"visited": done, "at_most": total, "seconds": round(time.perf_counter() - t0, 1)}), flush=True
+        )
+
+    result = frozen_cells_certificate(
+        problem,
+        load_controller(args.controller),
+        max_cells=args.max_cells,
+        coverage_points=args.coverage_points,
+        screen_at=screen,
+        progress=progress,
+    )
+    out = {
+        "controller": args.controller,
+        "robot": robot.name,
+        "set": loop.uncertainty.words(),
+        "screen_at": screen,
+        "verdict": result.verdict,
+        "covers": result.certificate.scope.sentence(),
+        "cells": result.words(),
+        "result": result.summary(),
+        "seconds": round(time.perf_counter() - t0, 1),
+    }
+    print(json.dumps(out, indent=1))
+    table = {
+        "columns": [
+            "cell (positions, rad)",
+            "coverage",
+            "status",
+            "μ upper (every frequency)",
+            "μ grid [lower, upper]",
+            "s",
+        ],
+        "rows": [
+            [
+                ", ".join(f"[{lo:.3f}, {hi:.3f}]" for lo, hi in zip(c["q_lower"], c["q_upper"])),
+                f"{c['coverage']:.4g}",
+                c["status"],
+                "-" if c["mu_upper"] is None else f"{c['mu_upper']:.4f}",
+                f"[{c['mu_lower']:.4f}, {c['mu_upper_grid']:.4f}]",
+                f"{c['seconds']:.0f}",
+            ]
+            for c in out["result"]["cells"]
+        ],
+    }
+    save_run(
+        args.results, "frozen_cells", f"{robot.name}: the frozen robot over task cells", result.verdict, out, table
+    )
+
+
+if __name__ == "__main__":
+    main()
