@@ -10,6 +10,7 @@ robots at the points of its own cell (finger_edu with the engineer's set).
 from __future__ import annotations
 
 import functools
+import json
 from dataclasses import replace
 from types import SimpleNamespace
 
@@ -138,6 +139,10 @@ def test_cells_are_split_until_each_holds_and_the_union_is_certified(fake_cells)
     # after the first failure its peak screens the cells wider than 0.2 rad without a certificate
     assert result.screened > 0 and max(fake_cells["certified"][1:]) <= 0.2 + 1e-9
     assert "64 task cells" in result.certificate.scope.model and "1/4, 1/4, 1/4" in result.certificate.scope.notes[-1]
+    assert result.verdict.startswith("frozen robot on 64 task cells: robust performance CERTIFIED")
+    assert result.words().startswith("task cells: 64 of 64 certified (at most 64)")
+    summary = json.loads(json.dumps(result.summary()))
+    assert summary["certificate"]["certified"] and len(summary["cells"]) == 64
 
 
 def test_at_the_cell_limit_the_failing_cells_are_kept_and_the_union_is_not_certified(fake_cells):
