@@ -9,8 +9,8 @@ writes them) and the set the options state, this bounds the task as
 :func:`polyrob.analysis.frozen_cells.frozen_cells_certificate` (what
 ``polyrob analyze --frozen-cells N`` runs when the whole task's model does
 not certify the controller), screening the cells at ``--screen-at`` (rad/s;
-``polyrob analyze`` screens at the whole task's μ peak).  Prints one line
-per cell visited (its progress) and one JSON document: the union's verdict
+``polyrob analyze`` screens at the whole task's μ peak).  Prints two lines
+per cell visited (its progress; its box and outcome) and one JSON document: the union's verdict
 and covers line, and per cell kept its positions' box, coverage, status, μ
 bounds and seconds.
 """
@@ -63,6 +63,7 @@ def main() -> None:
         coverage_points=args.coverage_points,
         screen_at=screen,
         progress=progress,
+        on_cell=lambda record: print(json.dumps(record), flush=True),
     )
     out = {
         "controller": args.controller,

@@ -126,7 +126,10 @@ def fake_cells(monkeypatch):
 
 
 def test_cells_are_split_until_each_holds_and_the_union_is_certified(fake_cells):
-    result = fc.frozen_cells_certificate(fake_problem(), None, max_cells=64, coverage_points=0)
+    log = []
+    result = fc.frozen_cells_certificate(fake_problem(), None, max_cells=64, coverage_points=0, on_cell=log.append)
+    assert len(log) == result.visited and sum("screened_out_at" in r for r in log) == result.screened
+    assert sum(r.get("status") == "CERTIFIED" for r in log) == 64
     # finger_edu's task is 0.4 rad wide on each of 3 joints: cells of 0.1 rad, 4 per joint
     assert result.certified and len(result.cells) == 4**3
     assert all(np.max(c.q_upper - c.q_lower) <= 0.1 + 1e-9 for c in result.cells)

@@ -237,6 +237,7 @@ def frozen_cells_certificate(
     coverage_points: int = COVERAGE_POINTS,
     screen_at=(),
     progress=None,
+    on_cell=None,
 ) -> TaskCellsCertificate:
     """Robust performance of ``K`` for every frozen robot of ``problem``'s per-link set over its task, cell by cell.
 
@@ -250,7 +251,9 @@ def frozen_cells_certificate(
     :func:`~polyrob.analysis.certificate.union_certificate`, its scope naming
     the cells, their model and the smallest coverage among them.
     ``progress(done, total)``: after each cell, ``total`` the most cells
-    the limit lets the bisection visit.
+    the limit lets the bisection visit; ``on_cell(record)``: after each
+    cell too, its box and what became of it (screened out, or its
+    certificate's status and μ bounds), for a log.
 
     Raises
     ------
@@ -276,16 +279,21 @@ def frozen_cells_certificate(
         unc, P = _cell_plant(problem, sub)
         visited += 1
         room = len(done) + len(open_cells) + 2 <= max_cells
+        record = {"q_lower": lo.tolist(), "q_upper": hi.tolist()}
         if room and screened_out(P, K, peaks):
             screened += 1
             open_cells += list(bisect((lo, hi), split_position(problem.robot, sub)))
+            record["screened_out_at"] = list(peaks)
         else:
             coverage, cert = _cell_certificate(problem, K, sub, unc, P, coverage_points)
+            record.update(TaskCell(lo, hi, coverage, cert, time.perf_counter() - t1).summary())
             if cert.certified or not room:
                 done.append(TaskCell(lo, hi, coverage, cert, time.perf_counter() - t1))
             else:
                 peaks.append(float(getattr(cert.mu, "peak_upper_frequency", np.nan)) if cert.mu is not None else np.nan)
                 open_cells += list(bisect((lo, hi), split_position(problem.robot, sub)))
+        if on_cell is not None:
+            on_cell(record)
         if progress is not None:
             progress(visited, budget)
     coverages = [c.coverage for c in done if np.isfinite(c.coverage)]
