@@ -244,3 +244,15 @@ def test_the_taylor_form_holds_pinocchio_and_is_tight_on_a_small_box(ur5):
     # the mean-value and slope forms alone: ratio up to 3.6 (median 1.2) and an excess of 3.9 % of the scale
     r = width_ratios(lo[0], hi[0], s_lo, s_hi)
     assert r["entries"] >= 30 and r["max"] <= 1.3 and r["median"] <= 1.05 and r["excess_max"] <= 1e-3
+
+
+def test_a_per_link_set_is_refused_by_the_proof_with_what_to_change():
+    """Its models rest on sampled factors: the proof of the common factor says so, not "no factor to prove"."""
+    import polyrob
+    from polyrob.model.inner import inner_loop_of_set
+    from polyrob.uncertainty_set.default_set import default_set
+
+    robot = load_robot("finger_edu")
+    loop = inner_loop_of_set(robot, "computed-torque", default_set(robot), draws=2)
+    with pytest.raises(CertificationError, match="per-link robot-uncertainty set.*drop --certify"):
+        polyrob.bound_pldi(loop, default_task_domain(loop), certify=True, progress=False)

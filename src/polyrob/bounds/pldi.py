@@ -335,6 +335,12 @@ def _proved_factors(robot, domain, opts: BoundOptions, progress: bool) -> dict:
     from polyrob.io.paths import cache_dir
 
     options = dict(opts.certify_options or {})
+    if getattr(robot, "uncertainty", None) is not None:  # before the proof: "no factor to prove" would mislead
+        raise CertificationError(
+            "proved factor ranges cover the common-factor model (inner-gain: one link factor, the payload mass); "
+            "a per-link robot-uncertainty set's models rest on factors sampled over the task: drop --certify, "
+            "or state the error as --model-error"
+        )
     loops = factor_module.factor_directions(robot)
     bar = None
     if progress:
