@@ -163,7 +163,7 @@ def split_position(loop, domain) -> int:
     q, qdot, a = task_centre(domain)
     half = 0.5 * (domain.q_upper - domain.q_lower)
     scalars = links.set_scalars(loop)
-    W = links._weighting(loop, domain)
+    W = links.residual_weighting(loop, domain)
     W_inv = np.linalg.inv(W)
     share = np.zeros(loop.m)
     for k in np.flatnonzero(half > 0):

@@ -98,6 +98,8 @@ __all__ = [
     "SAMPLE_SEED",
     "payload_sampling_words",
     "unit_factors",
+    "residual_weighting",
+    "weighted_factor",
     "factor_of",
     "inner_links_plant",
     "light_model",
@@ -465,7 +467,7 @@ def set_factors(pldi, robot, *, n_directions: int | None = None, samples: int = 
     on_payload = np.array([s.name.startswith("payload.") for s in scalars])
     pay = payload_set_points(robot.uncertainty.payload, scalars) if on_payload.any() else np.zeros((1, 0))
     # in M_hat^{1/2} coordinates at the task's centre: K -> W K diag(I, W^-1)
-    W = _weighting(robot, pldi.domain)
+    W = residual_weighting(robot, pldi.domain)
     G_exact, kappa = exactly_weighted(robot, q, Phi[..., n:], W)
     Phi = weighted_factor(Phi, W, np.linalg.inv(W))
     # principal directions D_k of the state columns J_j(x) in matrix space, over the scalars and the samples
@@ -526,7 +528,7 @@ def state_residual_norm_bound(rest, on_payload, pay, spread) -> float | None:
     return float(min(1.0, SPREAD_MARGIN * bound.max()))
 
 
-def _weighting(robot, domain) -> np.ndarray:
+def residual_weighting(robot, domain) -> np.ndarray:
     """``W = M_hat^{1/2}`` at the centre of the task domain (symmetric square root)."""
     centre = 0.5 * (np.asarray(domain.lower, float) + np.asarray(domain.upper, float))
     M = robot.model_robot.mass_matrix(centre[: robot.m])
