@@ -99,7 +99,6 @@ __all__ = [
     "payload_sampling_words",
     "unit_factors",
     "residual_weighting",
-    "weighted_factor",
     "factor_of",
     "inner_links_plant",
     "light_model",
