@@ -2,6 +2,7 @@
 
     python benchmarks/frozen_cells.py CONTROLLER.json [--robot-uncertainty FILE|default] [--link-error 10]
         [--payload-max 0] [--com-radius 0.1] [--max-cells 8] [--screen-at 130.6] [--coverage-points 200]
+        [--cells-dir DIR]
 
 For the controller file's robot, task and weights (as ``polyrob synth -o``
 writes them) and the set the options state, this bounds the task as
@@ -12,7 +13,9 @@ not certify the controller), screening the cells at ``--screen-at`` (rad/s;
 ``polyrob analyze`` screens at the whole task's μ peak).  Prints two lines
 per cell visited (its progress; its box and outcome) and one JSON document: the union's verdict
 and covers line, and per cell kept its positions' box, coverage, status, μ
-bounds and seconds.
+bounds and seconds.  ``--cells-dir`` keeps each finished cell's
+certificate there, so a run stopped goes on where it stopped (as
+``polyrob analyze --cells-dir``).
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ def main() -> None:
     ap.add_argument("--max-cells", type=int, default=8, help="cells at most (default 8)")
     ap.add_argument("--screen-at", default="", help="frequencies (rad/s, comma-separated) the cells are screened at")
     ap.add_argument("--coverage-points", type=int, default=200, help="fresh (robot, point) pairs per cell")
+    ap.add_argument("--cells-dir", default=None, help="where each finished cell's certificate is kept (default: none)")
     add_results_option(ap)
     args = ap.parse_args()
 
@@ -64,6 +68,7 @@ def main() -> None:
         screen_at=screen,
         progress=progress,
         on_cell=lambda record: print(json.dumps(record), flush=True),
+        cells_dir=args.cells_dir,
     )
     out = {
         "controller": args.controller,

@@ -114,6 +114,7 @@ def test_robots_json_is_one_document(capsys):
         (["analyze", "--controller", "paper", "--omega", "0.1:inf:5"], "--omega"),
         (["analyze", "--controller", "paper", "--frozen-cells", "0"], "--frozen-cells"),
         (["analyze", "--controller", "paper", "--frozen-cells", "4"], "--frozen-cells"),  # no per-link set
+        (["analyze", "--controller", "paper", "--cells-dir", "/tmp/x"], "--cells-dir"),  # without --frozen-cells
         (["synth", "--max-bandwidth", "--alphas", "0.5,-1"], "--alphas"),
         (["synth", "--max-bandwidth", "--scale-only", "bandwidth"], "--scale-only"),
         (["run", "--max-bandwidth", "--alphas", "0.5,-1"], "--alphas"),  # was: --max-bandwidth not an option of run

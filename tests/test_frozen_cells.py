@@ -162,3 +162,36 @@ def test_a_problem_without_a_task_is_refused():
         fc.frozen_cells_certificate(problem, None)
     with pytest.raises(ArgumentError, match="max_cells"):
         fc.frozen_cells_certificate(fake_problem(), None, max_cells=0)
+
+
+def test_finished_cells_are_kept_and_a_second_run_decides_none_again(fake_cells, monkeypatch, tmp_path):
+    monkeypatch.setattr(fc, "cell_fingerprint", lambda P, K, n, d: f"{d.q_lower.tolist()}{d.q_upper.tolist()}"[:200])
+    first = fc.frozen_cells_certificate(fake_problem(), None, max_cells=8, coverage_points=0, cells_dir=tmp_path)
+    decided = len(fake_cells["certified"])
+    assert decided > 0 and first.kept == 0 and len(list(tmp_path.glob("*.pkl"))) == decided
+    log = []
+    again = fc.frozen_cells_certificate(
+        fake_problem(), None, max_cells=8, coverage_points=0, cells_dir=tmp_path, on_cell=log.append
+    )
+    assert len(fake_cells["certified"]) == decided  # nothing decided anew
+    assert again.kept == decided and "kept by an earlier run" in again.words()
+    assert again.certificate.status is first.certificate.status and len(again.cells) == len(first.cells)
+    assert [c.certificate.bound for c in again.cells] == [c.certificate.bound for c in first.cells]
+    assert sum("kept_from" in r for r in log) == decided
+
+
+def test_a_real_certificate_is_kept_whole_and_its_fingerprint_names_the_controller(tmp_path):
+    import control
+
+    from polyrob.analysis.certificate import certify_loop
+
+    # a stable bare plant (inputs d, u; outputs v, y), one complex block, under a static gain
+    G = control.ss([[-1.0]], [[1.0, 1.0]], [[1.0], [0.5]], [[0.0, 0.0], [0.0, 0.0]])
+    blk = [[1, 1]]
+    made = certify_loop(G, control.ss([], [], [], [[-0.5]]), blk=blk, n_u=1, n_y=1, progress=False)
+    calls = []
+    _, a, kept_a = fc._kept_certificate(tmp_path, "k1", lambda: calls.append(1) or (1.0, made))
+    _, b, kept_b = fc._kept_certificate(tmp_path, "k1", lambda: calls.append(1) or (1.0, made))
+    assert calls == [1] and (kept_a, kept_b) == (False, True)
+    assert b.status is a.status and b.bound == a.bound and b.closed_loop is None
+    assert b.mu.between is not None and np.allclose(b.mu.upper, a.mu.upper)

@@ -26,6 +26,15 @@ grid point only; what it does not cover is the robot in motion (a moving
 robot crosses cells: :mod:`polyrob.analysis.lpv.constant` is that
 certificate).
 
+A cell near μ = 1 takes minutes to tens of minutes, so each finished cell
+is kept (``cells_dir``): its coverage and certificate, under a hash of
+everything it was decided from (the cell's generalized plant and block
+structure, the controller, the coverage count and the source of
+:mod:`polyrob`), written whole (a temporary file, then a rename).  A run
+that finds a cell kept takes it as it is; the bisection visits cells in the
+same order, so an interrupted run goes on where it stopped and ends as one
+uninterrupted run would.
+
 Examples
 --------
 >>> import numpy as np
@@ -36,8 +45,12 @@ Examples
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import pickle
 import time
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -51,6 +64,7 @@ __all__ = [
     "bisect",
     "split_position",
     "screened_out",
+    "cell_fingerprint",
 ]
 
 #: Cells certified at most, by default (each one a model and a μ sweep: about a minute on a 5-6 joint arm).
@@ -97,6 +111,7 @@ class TaskCellsCertificate:
     screened: int
     seconds: float
     max_cells: int
+    kept: int = 0
 
     @property
     def certified(self) -> bool:
@@ -109,9 +124,10 @@ class TaskCellsCertificate:
     def words(self) -> str:
         """One line: the cells kept and certified, those visited and screened out, the time."""
         held = sum(c.certificate.certified for c in self.cells)
+        earlier = f" ({self.kept} certificates kept by an earlier run)" if self.kept else ""
         return (
             f"task cells: {held} of {len(self.cells)} certified (at most {self.max_cells}); {self.visited} visited, "
-            f"{self.screened} split after a screen at one frequency; {self.seconds:.0f} s"
+            f"{self.screened} split after a screen at one frequency; {self.seconds:.0f} s{earlier}"
         )
 
     def summary(self) -> dict:
@@ -122,6 +138,7 @@ class TaskCellsCertificate:
             "visited": self.visited,
             "screened": self.screened,
             "max_cells": self.max_cells,
+            "kept": self.kept,
             "seconds": round(self.seconds, 1),
         }
 
@@ -229,6 +246,69 @@ def _cell_certificate(problem, K, domain, unc, P, coverage_points: int):
     return coverage, certify_loop(P, K, scope=scope)
 
 
+@functools.cache
+def _source_digest() -> str:
+    """A hash of polyrob's source (a kept cell is never reused by changed code)."""
+    root = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(str(path.relative_to(root)).encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def cell_fingerprint(P, K, coverage_points: int, domain) -> str:
+    """A hash of what one cell's certificate is decided from: its plant, the controller, the coverage count, the code.
+
+    ``domain`` is the cell's (its ``to_dict()``: the box, velocities,
+    accelerations, the set's words); ``P`` its generalized plant.
+
+    Examples
+    --------
+    >>> import control
+    >>> from types import SimpleNamespace
+    >>> P = SimpleNamespace(system=control.ss(-1, 1, 1, 0), block_structure_rp=[[1, 1]], n_u=1)
+    >>> cell = SimpleNamespace(to_dict=lambda: {"q": {"j": [0.0, 0.1]}})
+    >>> a = cell_fingerprint(P, control.ss(0, 0, 0, 2.0), 200, cell)
+    >>> len(a), a == cell_fingerprint(P, control.ss(0, 0, 0, 2.5), 200, cell)
+    (24, False)
+    """
+    import json
+
+    digest = hashlib.sha256(b"polyrob frozen cell 1")
+    digest.update(_source_digest().encode())
+    for sys in (P.system, K):
+        for X in (sys.A, sys.B, sys.C, sys.D):
+            x = np.ascontiguousarray(np.asarray(X, float))
+            digest.update(repr(x.shape).encode())
+            digest.update(x.tobytes())
+    digest.update(repr((P.block_structure_rp, getattr(P, "n_u", None), int(coverage_points))).encode())
+    digest.update(json.dumps(domain.to_dict(), sort_keys=True, default=str).encode())
+    return digest.hexdigest()[:24]
+
+
+def _kept_certificate(folder, key, decide):
+    """``(coverage, certificate, kept)``: ``decide()``'s (then kept in ``folder``), or the one kept under ``key``."""
+    if folder is None:
+        return (*decide(), False)
+    from polyrob.io.atomic import atomic_write
+
+    path = Path(folder) / f"{key}.pkl"
+    if path.exists():
+        try:
+            with open(path, "rb") as f:
+                kept = pickle.load(f)
+            if kept.get("key") == key:
+                return kept["coverage"], kept["certificate"], True
+        except (OSError, pickle.UnpicklingError, EOFError, AttributeError, KeyError, TypeError):
+            pass  # unreadable (another version's objects): decided again and written anew
+    coverage, cert = decide()
+    # the closed loop (a control.StateSpace) does not pickle; the decision does not need it once made
+    record = {"key": key, "coverage": coverage, "certificate": replace(cert, closed_loop=None)}
+    atomic_write(path, lambda f: pickle.dump(record, f), binary=True)
+    return coverage, cert, False
+
+
 def frozen_cells_certificate(
     problem,
     K,
@@ -238,6 +318,7 @@ def frozen_cells_certificate(
     screen_at=(),
     progress=None,
     on_cell=None,
+    cells_dir=None,
 ) -> TaskCellsCertificate:
     """Robust performance of ``K`` for every frozen robot of ``problem``'s per-link set over its task, cell by cell.
 
@@ -253,7 +334,9 @@ def frozen_cells_certificate(
     ``progress(done, total)``: after each cell, ``total`` the most cells
     the limit lets the bisection visit; ``on_cell(record)``: after each
     cell too, its box and what became of it (screened out, or its
-    certificate's status and μ bounds), for a log.
+    certificate's status and μ bounds), for a log.  ``cells_dir``: where
+    each finished cell's certificate is kept and found again (module
+    docstring); ``None`` keeps nothing.
 
     Raises
     ------
@@ -271,7 +354,7 @@ def frozen_cells_certificate(
     t0 = time.perf_counter()
     budget = 2 * int(max_cells) - 1  # a bisection tree of max_cells leaves visits this many cells at most
     peaks = [float(w) for w in screen_at]
-    open_cells, done, visited, screened = [(domain.q_lower.copy(), domain.q_upper.copy())], [], 0, 0
+    open_cells, done, visited, screened, reused = [(domain.q_lower.copy(), domain.q_upper.copy())], [], 0, 0, 0
     while open_cells:
         lo, hi = open_cells.pop(0)
         t1 = time.perf_counter()
@@ -285,8 +368,14 @@ def frozen_cells_certificate(
             open_cells += list(bisect((lo, hi), split_position(problem.robot, sub)))
             record["screened_out_at"] = list(peaks)
         else:
-            coverage, cert = _cell_certificate(problem, K, sub, unc, P, coverage_points)
+            key = cell_fingerprint(P, K, coverage_points, sub) if cells_dir is not None else None
+            coverage, cert, kept = _kept_certificate(
+                cells_dir, key, lambda: _cell_certificate(problem, K, sub, unc, P, coverage_points)
+            )
             record.update(TaskCell(lo, hi, coverage, cert, time.perf_counter() - t1).summary())
+            reused += kept
+            if kept:
+                record["kept_from"] = str(Path(cells_dir) / f"{key}.pkl")
             if cert.certified or not room:
                 done.append(TaskCell(lo, hi, coverage, cert, time.perf_counter() - t1))
             else:
@@ -306,7 +395,8 @@ def frozen_cells_certificate(
         notes=base.notes + (_cells_words(domain, done),),
     )
     union = union_certificate([c.certificate for c in done], scope)
-    return TaskCellsCertificate(union, tuple(done), visited, screened, time.perf_counter() - t0, int(max_cells))
+    seconds = time.perf_counter() - t0
+    return TaskCellsCertificate(union, tuple(done), visited, screened, seconds, int(max_cells), reused)
 
 
 def _count(n: int) -> str:

@@ -154,6 +154,7 @@ def cmd_analyze(args) -> int:
         sampled_loop=sampling,
         worst_case=args.wcgain,
         frozen_cells=args.frozen_cells,
+        cells_dir=cells_dir_of(args) if args.frozen_cells else None,
     )
     report = {
         "robot": robot.name,
@@ -211,12 +212,32 @@ def add_frozen_cells_argument(p) -> None:
         "N cells, each with its own model (the links exact at its centre), and certify their union (a per-link "
         "robot-uncertainty set on a task; minutes per cell; docs/certificates.md)",
     )
+    p.add_argument(
+        "--cells-dir",
+        default=None,
+        metavar="DIR",
+        help="--frozen-cells: where each finished cell's certificate is kept (a run stopped goes on from there "
+        "when run again, for the same controller, set, task and polyrob); default $POLYROB_CACHE_DIR/frozen_cells "
+        "or ~/.cache/polyrob/frozen_cells; 'none' keeps nothing",
+    )
+
+
+def cells_dir_of(args):
+    """The folder ``--cells-dir`` names (its default: the cache's ``frozen_cells``), or ``None`` for 'none'."""
+    from polyrob.io.paths import cache_dir
+
+    folder = getattr(args, "cells_dir", None)
+    if folder is None:
+        return cache_dir("frozen_cells")
+    return None if folder.strip().lower() == "none" else folder
 
 
 def check_frozen_cells_apply(args, problem=None) -> None:
     """``--frozen-cells`` needs a per-link set's model on a task domain and the continuous loop: refused otherwise
     (before any work when no set is given; the model once the problem is built)."""
     if getattr(args, "frozen_cells", None) is None:
+        if getattr(args, "cells_dir", None) is not None:
+            raise ArgumentError("--cells-dir keeps the cells of --frozen-cells: add --frozen-cells N or drop it")
         return
     stated = getattr(args, "robot_uncertainty", None) is not None or getattr(args, "link_error", None) is not None
     if not stated or (problem is not None and not str(problem.model).startswith("inner-links")):

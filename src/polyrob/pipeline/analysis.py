@@ -249,6 +249,7 @@ def analyze_controller(
     sampled_loop=None,
     worst_case: bool = False,
     frozen_cells: int | None = None,
+    cells_dir=None,
 ) -> ControllerAnalysis:
     """Nominal/robust stability and performance of ``K`` on ``problem``, and sampled stability.
 
@@ -307,6 +308,9 @@ def analyze_controller(
         model (:func:`polyrob.analysis.frozen_cells.frozen_cells_certificate`;
         a per-link set on a task domain, the continuous loop): the verdict
         when every cell is certified.
+    cells_dir : str or Path, optional
+        Where each finished cell's certificate is kept, and found again by a
+        later call on the same cell, controller and code (``None``: nothing kept).
     """
     from polyrob.analysis.robust import nominal_performance, robperf, robstab, robstab_implied, sample_stability
 
@@ -361,7 +365,12 @@ def analyze_controller(
 
         with span(last, 1.0):
             cells = frozen_cells_certificate(
-                problem, K, max_cells=int(frozen_cells), screen_at=[rp.critical_frequency], progress=report
+                problem,
+                K,
+                max_cells=int(frozen_cells),
+                screen_at=[rp.critical_frequency],
+                progress=report,
+                cells_dir=cells_dir,
             )
         margin = None if cells.certified else margin
     sampled = None
