@@ -8,7 +8,7 @@ import control
 import numpy as np
 import pytest
 
-from polyrob.analysis.mu.between import crossing_frequencies, verify_between
+from polyrob.analysis.mu.between import crossing_frequencies, crossings_around, verify_between
 from polyrob.analysis.mu.bounds import mu_bounds
 
 
@@ -19,6 +19,43 @@ def test_crossing_of_a_gain_level_is_where_the_magnitude_meets_it():
     w = crossing_frequencies(A, B, C, D, np.eye(1), np.zeros((1, 1)), 0.5)
     assert w is not None and np.allclose(w, [np.sqrt(3.0)], rtol=1e-9)
     assert crossing_frequencies(A, B, C, D, np.eye(1), np.zeros((1, 1)), 1.5).size == 0
+
+
+def test_with_the_axis_turned_the_crossings_are_the_loop_s_own_and_a_singular_phi_at_infinity_is_no_obstacle():
+    """M = -0.9 + 1/(s + 1): |M(jω)|² = 0.81 - 0.8/(1 + ω²), so Φ = |M|² - β² crosses 0 at ω² = 0.8/(0.81 - β²) - 1.
+
+    At β = 0.6 both tests find ω = sqrt(0.8/0.45 - 1) from any centre; at β = 0.9, Φ(∞) = 0: the plain test
+    does not apply, and with the axis turned the only crossing is at infinity (Φ < 0 at every finite ω; rounding
+    puts it at a finite but huge frequency).
+    """
+    A, B, C, D = np.array([[-1.0]]), np.array([[1.0]]), np.array([[1.0]]), np.array([[-0.9]])
+    P, G = np.eye(1), np.zeros((1, 1))
+    exact = np.sqrt(0.8 / 0.45 - 1.0)
+    assert np.allclose(crossing_frequencies(A, B, C, D, P, G, 0.6), [exact], rtol=1e-9)
+    for centre in (0.0, 0.3, 2.0, 50.0):
+        assert np.allclose(crossings_around(A, B, C, D, P, G, 0.6, centre), [exact], rtol=1e-8)
+    assert crossing_frequencies(A, B, C, D, P, G, 0.9) is None
+    for centre in (0.0, 0.3, 2.0):
+        found = crossings_around(A, B, C, D, P, G, 0.9, centre)
+        assert found is not None and np.all(found > 1e6)  # infinity, as near as rounding puts it
+
+
+def test_the_turned_axis_covers_the_intervals_when_the_plain_test_never_applies(monkeypatch):
+    """so101's cells at low frequency: scalings over many decades and a large feedthrough make Φ(∞) singular for
+    every end, so the plain Hamiltonian test never runs; with the axis turned at each end the check holds
+    without the perturbation radii or the scalings' powers, and without it nothing is covered."""
+    import polyrob.analysis.mu.between as mb
+
+    monkeypatch.setattr(mb, "crossing_frequencies", lambda *a: None)
+    monkeypatch.setattr(mb, "covering_radius", lambda *a: 0.0)
+    monkeypatch.setattr(mb, "TEMPERED", ())
+    G = control.tf([1], [1, 0.02, 1])
+    sweep = mu_bounds(G, [[1, 1]], progress=False)
+    ok = verify_between(G, sweep, max_points=40)
+    assert ok.holds and ok.by_radius == 0 and ok.level >= sweep.peak_upper
+    monkeypatch.setattr(mb, "crossings_around", lambda *a: None)
+    stuck = verify_between(G, sweep, max_points=40)
+    assert not stuck.holds and stuck.intervals == 0
 
 
 def test_a_resonance_the_grid_misses_is_found_and_a_fine_grid_is_verified():

@@ -54,6 +54,7 @@ def test_check_without_hamiltonian_still_covers_smooth_loops_and_finds_resonance
         return original(*args) if len(calls) == 1 else None
 
     monkeypatch.setattr(between, "crossing_frequencies", only_the_first)
+    monkeypatch.setattr(between, "crossings_around", lambda *a: None)  # nor with the axis turned
     smooth = control.tf([1], [1, 1])
     ok = between.verify_between(smooth, mu_bounds(smooth, [[1, 1]], progress=False))
     assert ok.holds and ok.level >= 1.0 and "perturbation bounds" in ok.sentence()
@@ -119,8 +120,9 @@ def test_a_power_of_the_scalings_keeps_their_structure_and_is_what_the_test_read
 
 
 def test_where_an_ends_own_scalings_cannot_be_tested_their_powers_cover_the_interval(monkeypatch):
-    """The Hamiltonian test made inapplicable (``None``) for the ends' own scalings and the radii switched off:
-    the check still holds through the powers of the scalings (between.TEMPERED), and without them it gives up."""
+    """The Hamiltonian test made inapplicable (``None``, also with the axis turned) for the ends' own scalings
+    and the radii switched off: the check still holds through the powers of the scalings (between.TEMPERED),
+    and without them it gives up."""
     original_loop, original_crossings, last = between.normalised_loop, between.crossing_frequencies, []
 
     def loop(*args):
@@ -129,6 +131,7 @@ def test_where_an_ends_own_scalings_cannot_be_tested_their_powers_cover_the_inte
 
     monkeypatch.setattr(between, "normalised_loop", loop)
     monkeypatch.setattr(between, "crossing_frequencies", lambda *a: None if last[-1] == 1.0 else original_crossings(*a))
+    monkeypatch.setattr(between, "crossings_around", lambda *a: None)  # nor with the axis turned
     monkeypatch.setattr(between, "covering_radius", lambda *a: 0.0)
     smooth = control.tf([1], [1, 1])
     mu = mu_bounds(smooth, [[1, 1]], progress=False)

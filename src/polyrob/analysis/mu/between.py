@@ -47,7 +47,14 @@ from polyrob.analysis.mu.radius import covering_radius
 from polyrob.errors import ArgumentError
 from polyrob.progress import report
 
-__all__ = ["BetweenGridResult", "verify_between", "with_between", "crossing_frequencies", "normalised_loop"]
+__all__ = [
+    "BetweenGridResult",
+    "verify_between",
+    "with_between",
+    "crossing_frequencies",
+    "crossings_around",
+    "normalised_loop",
+]
 
 #: Level above the grid's peak upper bound that is checked by default (relative).
 LEVEL_MARGIN = 1e-2
@@ -156,11 +163,11 @@ def _padded_state_space(sys, st):
     return A, B @ Er.T, Ec @ C, Ec @ D @ Er.T
 
 
-def crossing_frequencies(A, B, C, D, P, G, level) -> np.ndarray | None:
-    """Frequencies ``ω ≥ 0`` where ``Φ(ω)`` (module docstring) is singular.
+def _hamiltonian_eigenvalues(A, B, C, D, P, G, level):
+    """``(λ, ‖H‖_F)``: the eigenvalues of the Hamiltonian of ``Φ(s)``; ``None`` when ``Φ(∞)`` is singular.
 
-    ``None`` when the test does not apply (``Φ(∞)`` singular).  ``A`` must have
-    no eigenvalue on the imaginary axis.
+    Complex ``A, B, C, D`` are allowed (:func:`crossings_around`); every
+    transpose is the conjugate one.
     """
     n, k = A.shape[0], B.shape[1]
     Pi = np.block([[P, -1j * G], [1j * G, -(level**2) * P]])
@@ -178,10 +185,67 @@ def crossing_frequencies(A, B, C, D, P, G, level) -> np.ndarray | None:
     H = np.block(
         [[A - B @ Rinv @ S.conj().T, -B @ Rinv @ Bh], [-Q + S @ Rinv @ S.conj().T, -A.conj().T + S @ Rinv @ Bh]]
     )
-    lam = np.linalg.eigvals(H)
-    near = np.abs(lam.real) <= CANDIDATE_TOL * (np.abs(lam) + np.linalg.norm(H))
+    return np.linalg.eigvals(H), np.linalg.norm(H)
+
+
+def _near_imaginary(lam, norm) -> np.ndarray:
+    """The eigenvalues that are candidate crossings (:data:`CANDIDATE_TOL`)."""
+    return lam[np.abs(lam.real) <= CANDIDATE_TOL * (np.abs(lam) + norm)]
+
+
+def crossing_frequencies(A, B, C, D, P, G, level) -> np.ndarray | None:
+    """Frequencies ``ω ≥ 0`` where ``Φ(ω)`` (module docstring) is singular.
+
+    ``None`` when the test does not apply (``Φ(∞)`` singular).  ``A`` must have
+    no eigenvalue on the imaginary axis.
+    """
+    eig = _hamiltonian_eigenvalues(A, B, C, D, P, G, level)
+    if eig is None:
+        return None
     scale = CROSSING_TOL * level**2 * max(1.0, np.linalg.norm(P, 2))
-    found = [w for w in np.unique(np.abs(lam[near].imag)) if _largest_eigenvalue(A, B, C, D, P, G, level, w) > -scale]
+    candidates = np.unique(np.abs(_near_imaginary(*eig).imag))
+    found = [w for w in candidates if _largest_eigenvalue(A, B, C, D, P, G, level, w) > -scale]
+    return np.array(found, float)
+
+
+def crossings_around(A, B, C, D, P, G, level, centre: float) -> np.ndarray | None:
+    """:func:`crossing_frequencies` with the frequency axis turned so that ``ω = ∞`` lands on ``centre``.
+
+    The Hamiltonian test needs ``Φ(∞)`` nonsingular, which fails for scalings
+    that spread over many decades on a loop with a large feedthrough (so101's
+    cells at low frequency: ``Φ(∞)`` of order 1e14 against ``Φ(ω_i)`` of
+    order 1), although the scalings certify the level over a wide interval
+    around their own frequency.  ``s = jω_c + ω_k / z`` maps the imaginary
+    axis of ``z`` onto that of ``s`` and ``z = ∞`` onto ``s = jω_c``, so the
+    loop ``M(jω_c + ω_k/z)`` -- a complex realisation: ``A_c = A - jω_c I``,
+    ``(ω_k A_c^-1, ω_k A_c^-1 B, -C A_c^-1, M(jω_c))`` -- has ``Φ(jω_c)`` as
+    its value at infinity, negative definite at the end's own frequency
+    ``ω_c`` (the caller's condition), and its Hamiltonian's imaginary
+    eigenvalues ``jν`` are the crossings ``ω = ω_c - ω_k / ν`` of the loop
+    itself (``|ω|``: ``Φ(-ω)`` of a real loop has the eigenvalues of
+    ``Φ(ω)``; ``ν = 0`` is ``ω = ∞``).  Each candidate is evaluated on the
+    loop itself, as in :func:`crossing_frequencies`.  ``None`` when the
+    test does not apply here either (``Φ(jω_c)`` singular, or ``A_c`` is).
+    """
+    n = A.shape[0]
+    if not n:
+        return np.zeros(0)
+    k = float(centre) if centre > 0 else 1.0
+    Ac = A - 1j * float(centre) * np.eye(n)
+    try:
+        Ai = np.linalg.inv(Ac)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.isfinite(Ai)):
+        return None
+    eig = _hamiltonian_eigenvalues(k * Ai, k * (Ai @ B), -(C @ Ai), D - C @ (Ai @ B), P, G, level)
+    if eig is None:
+        return None
+    nu = _near_imaginary(*eig).imag
+    tiny = np.abs(nu) <= 1e-300
+    omega = np.where(tiny, np.inf, np.abs(float(centre) - k / np.where(tiny, 1.0, nu)))
+    scale = CROSSING_TOL * level**2 * max(1.0, np.linalg.norm(P, 2))
+    found = [w for w in np.unique(omega) if _largest_eigenvalue(A, B, C, D, P, G, level, w) > -scale]
     return np.array(found, float)
 
 
@@ -326,7 +390,11 @@ def verify_between(
         if key not in memo:
             # Φ ≺ 0 iff D^-1 Φ D^-1 ≺ 0: the test runs on the normalised loop
             scaled = normalised(scaling, at, power) + (beta,)
-            cross = crossing_frequencies(*scaled) if _negative_at(*scaled, at) else None
+            cross = None
+            if _negative_at(*scaled, at):
+                cross = crossing_frequencies(*scaled)
+                if cross is None and np.isfinite(at):  # Φ(∞) singular: the axis turned to put ∞ at the end
+                    cross = crossings_around(*scaled, at)
             memo[key] = (scaled, cross)
         return memo[key]
 
