@@ -69,6 +69,7 @@ __all__ = [
     "canonical_json",
     "sha256_file",
     "sha256_text",
+    "source_digest",
     "problem_inputs",
     "differences",
     "command_line",
@@ -128,6 +129,26 @@ def sha256_file(path) -> str:
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
             digest.update(block)
+    return digest.hexdigest()
+
+
+@functools.cache
+def source_digest(root) -> str:
+    """SHA-256 (hex) of the ``*.py`` files under ``root`` (a folder of polyrob's source), names and bytes.
+
+    What a kept result (a proof's checkpoint, a task cell's certificate) is
+    keyed on, so that changed code never reuses it.
+
+    >>> import polyrob
+    >>> from pathlib import Path
+    >>> len(source_digest(Path(polyrob.__file__).parent / "bounds"))
+    64
+    """
+    root = Path(root).resolve()
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(str(path.relative_to(root)).encode())
+        digest.update(path.read_bytes())
     return digest.hexdigest()
 
 

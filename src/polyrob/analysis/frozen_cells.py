@@ -45,7 +45,6 @@ Examples
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import pickle
 import time
@@ -55,6 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from polyrob.errors import ArgumentError
+from polyrob.provenance import source_digest
 
 __all__ = [
     "TaskCell",
@@ -246,17 +246,6 @@ def _cell_certificate(problem, K, domain, unc, P, coverage_points: int):
     return coverage, certify_loop(P, K, scope=scope)
 
 
-@functools.cache
-def _source_digest() -> str:
-    """A hash of polyrob's source (a kept cell is never reused by changed code)."""
-    root = Path(__file__).resolve().parents[1]
-    digest = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
-        digest.update(str(path.relative_to(root)).encode())
-        digest.update(path.read_bytes())
-    return digest.hexdigest()
-
-
 def cell_fingerprint(P, K, coverage_points: int, domain) -> str:
     """A hash of what one cell's certificate is decided from: its plant, the controller, the coverage count, the code.
 
@@ -276,7 +265,7 @@ def cell_fingerprint(P, K, coverage_points: int, domain) -> str:
     import json
 
     digest = hashlib.sha256(b"polyrob frozen cell 1")
-    digest.update(_source_digest().encode())
+    digest.update(source_digest(Path(__file__).resolve().parents[1]).encode())  # changed code never reuses a cell
     for sys in (P.system, K):
         for X in (sys.A, sys.B, sys.C, sys.D):
             x = np.ascontiguousarray(np.asarray(X, float))

@@ -40,7 +40,6 @@ bound's own (numpy arrays in one ``.npz``); no library keeps it.
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import time
 import warnings
@@ -56,6 +55,7 @@ from polyrob.bounds.certified.factors.ranges import FactorProblem
 from polyrob.bounds.certified.factors.width_ratio import FLOOR, closing_tolerance, width_ratios
 from polyrob.bounds.parallel import WorkerPool
 from polyrob.errors import CertificationError
+from polyrob.provenance import source_digest
 
 __all__ = [
     "FactorEnclosure",
@@ -136,17 +136,6 @@ class FactorEnclosure:
         return np.all((K >= self.lower) & (K <= self.upper), axis=(1, 2, 3))
 
 
-@functools.cache
-def _source_digest() -> str:
-    """A hash of the source of :mod:`polyrob.bounds.certified` (every module the enclosures run)."""
-    root = Path(__file__).resolve().parents[1]
-    digest = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
-        digest.update(str(path.relative_to(root)).encode())
-        digest.update(path.read_bytes())
-    return digest.hexdigest()
-
-
 def proof_fingerprint(problem: FactorProblem, domain, **settings) -> str:
     """A hash of what the proof's boxes depend on: ``problem``, the task box, ``settings`` and the enclosures' source.
 
@@ -163,7 +152,7 @@ def proof_fingerprint(problem: FactorProblem, domain, **settings) -> str:
     (24, False, True)
     """
     digest = hashlib.sha256(b"polyrob factor proof 1")
-    digest.update(_source_digest().encode())
+    digest.update(source_digest(Path(__file__).resolve().parents[1]).encode())  # polyrob.bounds.certified
     chain = problem.chain
     arrays = [chain.axes, chain.rotations, chain.translations, chain.gravity, problem.params, problem.params_rad]
     arrays += [getattr(domain, f"{v}_{s}") for v in ("q", "qdot", "qddot") for s in ("lower", "upper")]
