@@ -120,7 +120,7 @@ def fake_cells(monkeypatch):
 
     monkeypatch.setattr(fc, "_cell_certificate", certificate)
     monkeypatch.setattr(fc, "screened_out", screen)
-    monkeypatch.setattr(fc, "_cell_plant", plant)
+    monkeypatch.setattr(fc, "cell_plant", plant)
     monkeypatch.setattr(fc, "split_position", lambda loop, d: int(np.argmax(d.q_upper - d.q_lower)))
     return calls
 

@@ -61,6 +61,7 @@ __all__ = [
     "TaskCellsCertificate",
     "frozen_cells_certificate",
     "cell_domain",
+    "cell_plant",
     "bisect",
     "split_position",
     "screened_out",
@@ -195,7 +196,7 @@ def split_position(loop, domain) -> int:
     return int(np.argmax(share))
 
 
-def _cell_plant(problem, domain):
+def cell_plant(problem, domain):
     """``(unc, P)``: the ``inner-links-moving`` model of one cell and its generalized plant (the problem's weights)."""
     from polyrob.plant.generalized import generalized_plant
     from polyrob.plant.moving_links import moving_links_plant
@@ -348,7 +349,7 @@ def frozen_cells_certificate(
         lo, hi = open_cells.pop(0)
         t1 = time.perf_counter()
         sub = cell_domain(domain, lo, hi)
-        unc, P = _cell_plant(problem, sub)
+        unc, P = cell_plant(problem, sub)
         visited += 1
         room = len(done) + len(open_cells) + 2 <= max_cells
         record = {"q_lower": lo.tolist(), "q_upper": hi.tolist()}
