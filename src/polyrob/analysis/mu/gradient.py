@@ -102,6 +102,7 @@ class GradientUpper:
             k += nt + ng
         self.size = k
         self._iu = {}
+        self._index()
         # scalar scalings stay within e^+-30 of each other (beyond, products overflow)
         self._bounds = [(None, None)] * k
         for _, _, full_t, st_t, _ in self._layout:
@@ -127,46 +128,89 @@ class GradientUpper:
                 x[st_t] = np.log(d[sl.start])
         return x
 
+    def _index(self):
+        """Gather/scatter indices of the block-diagonal ``T``, ``T^-1`` and ``G~`` in the parameter vector.
+
+        The scalings are assembled and the gradient read with a few fancy-index
+        operations instead of a Python loop over the blocks (a 90-channel
+        structure has 20-odd blocks; the loop was most of an objective's time).
+        """
+        nn = self.st.padded_size
+        t_flat, t_flat_tr, t_re, t_im = [], [], [], []  # full T: entries, their transposes, parameters
+        s_diag, s_block, s_param = [], [], []  # t*I blocks: diagonal positions, block number, parameter
+        g_diag, g_diag_param, g_up, g_lo, g_up_re, g_up_im = [], [], [], [], [], []
+        gs_diag, gs_block, gs_param = [], [], []  # g*I blocks
+        by_size = {}
+        for sl, n, full_t, st_t, st_g in self._layout:
+            s0 = sl.start
+            rows, cols = np.divmod(np.arange(n * n), n)
+            if full_t:
+                t_flat.append((s0 + rows) * nn + s0 + cols)
+                t_flat_tr.append((s0 + cols) * nn + s0 + rows)
+                t_re.append(st_t.start + np.arange(n * n))
+                t_im.append(st_t.start + n * n + np.arange(n * n))
+                by_size.setdefault(n, []).append(s0)
+            else:
+                s_diag.append(s0 + np.arange(n))
+                s_block.append(np.full(n, len(s_param)))
+                s_param.append(st_t.start)
+            if st_g.stop > st_g.start:
+                if full_t:
+                    iu = self._triu(n)
+                    m = len(iu[0])
+                    g_diag.append((s0 + np.arange(n)) * (nn + 1))
+                    g_diag_param.append(st_g.start + np.arange(n))
+                    g_up.append((s0 + iu[0]) * nn + s0 + iu[1])
+                    g_lo.append((s0 + iu[1]) * nn + s0 + iu[0])
+                    g_up_re.append(st_g.start + n + np.arange(m))
+                    g_up_im.append(st_g.start + n + m + np.arange(m))
+                else:
+                    gs_diag.append(s0 + np.arange(n))
+                    gs_block.append(np.full(n, len(gs_param)))
+                    gs_param.append(st_g.start)
+
+        def cat(parts):
+            return np.concatenate(parts).astype(np.intp) if parts else np.zeros(0, np.intp)
+
+        self._t_flat, self._t_flat_tr, self._t_re, self._t_im = map(cat, (t_flat, t_flat_tr, t_re, t_im))
+        self._s_diag, self._s_block = cat(s_diag), cat(s_block)
+        self._s_param = np.asarray(s_param, np.intp)
+        self._g_diag, self._g_diag_param = cat(g_diag), cat(g_diag_param)
+        self._g_up, self._g_lo, self._g_up_re, self._g_up_im = map(cat, (g_up, g_lo, g_up_re, g_up_im))
+        self._gs_diag, self._gs_block = cat(gs_diag), cat(gs_block)
+        self._gs_param = np.asarray(gs_param, np.intp)
+        # full T blocks of one size are inverted together: (rows, cols) of each stacked block
+        self._t_sizes = []
+        for n, starts in by_size.items():
+            starts = np.asarray(starts)
+            r = starts[:, None, None] + np.arange(n)[None, :, None]
+            c = starts[:, None, None] + np.arange(n)[None, None, :]
+            self._t_sizes.append((r * nn + c).reshape(len(starts), n, n))
+
     def _unpack(self, x):
         nn = self.st.padded_size
         T, Ti, Gt = np.zeros((nn, nn), complex), np.zeros((nn, nn), complex), np.zeros((nn, nn), complex)
-        for sl, n, full_t, st_t, st_g in self._layout:
-            if full_t:
-                v = x[st_t]
-                Tb = (v[: n * n] + 1j * v[n * n :]).reshape(n, n)
-                T[sl, sl] = Tb
-                Ti[sl, sl] = np.linalg.inv(Tb)
-            else:
-                t = np.exp(np.clip(x[st_t][0], -300, 300))
-                T[sl, sl] = t * np.eye(n)
-                Ti[sl, sl] = np.eye(n) / t
-            if st_g.stop > st_g.start:
-                g = x[st_g]
-                if full_t:
-                    Gb = np.diag(g[:n]).astype(complex)
-                    iu = self._triu(n)
-                    m = len(iu[0])
-                    Gb[iu] = g[n : n + m] + 1j * g[n + m :]
-                    Gb = Gb + np.triu(Gb, 1).conj().T
-                    Gt[sl, sl] = Gb
-                else:
-                    Gt[sl, sl] = g[0] * np.eye(n)
+        T.flat[self._t_flat] = x[self._t_re] + 1j * x[self._t_im]
+        for flat in self._t_sizes:
+            Ti.flat[flat] = np.linalg.inv(T.flat[flat])
+        t = np.exp(np.clip(x[self._s_param], -300, 300))
+        T.flat[self._s_diag * (nn + 1)] = t[self._s_block]
+        Ti.flat[self._s_diag * (nn + 1)] = 1.0 / t[self._s_block]
+        Gt.flat[self._g_diag] = x[self._g_diag_param]
+        up = x[self._g_up_re] + 1j * x[self._g_up_im]
+        Gt.flat[self._g_up] = up
+        Gt.flat[self._g_lo] = up.conj()
+        Gt.flat[self._gs_diag * (nn + 1)] = x[self._gs_param][self._gs_block]
         return T, Ti, Gt
 
     def _scaled(self, Ms, T, Ti):
-        """``T Ms T^-1`` block by block (``T`` is block diagonal)."""
-        Mt = Ms.copy()
-        for sl, *_ in self._layout:
-            Mt[sl, :] = T[sl, sl] @ Mt[sl, :]
-            Mt[:, sl] = Mt[:, sl] @ Ti[sl, sl]
-        return Mt
+        """``T Ms T^-1`` (``T`` is block diagonal; one product each side beats a loop over the blocks)."""
+        return T @ Ms @ Ti
 
     def _hermitian(self, Ms, x):
         T, Ti, Gt = self._unpack(x)
         Mt = self._scaled(Ms, T, Ti)
-        GM = np.zeros_like(Mt)
-        for sl, *_ in self._layout:
-            GM[sl, :] = Gt[sl, sl] @ Mt[sl, :]
+        GM = Gt @ Mt
         H = Mt.conj().T @ Mt + 1j * (GM - GM.conj().T)
         return (H + H.conj().T) / 2, Mt, T, Ti, Gt
 
@@ -206,33 +250,28 @@ class GradientUpper:
         #   = 2 Re tr(Phi dMt) + 2 Re tr(Y dGt),  Phi = W (Mt^H + j Gt),  Y = j Mt W,
         #   dMt = E Mt - Mt E with E = dT T^-1, so the T part is 2 Re tr(T^-1 (Mt Phi - Phi Mt) dT);
         # only the diagonal blocks are needed, each from the low-rank factors.
-        Z = V.conj().T @ Mt.conj().T  # Z = V^H (Mt^H + j Gt), Phi = V diag(p) Z
-        for sl, *_ in self._layout:
-            Z[:, sl] += 1j * (V[sl].conj().T @ Gt[sl, sl])
-        MV = Mt @ V
-        ZM = Z @ Mt
+        # every block's diagonal block at once: X = (Mt V) diag(p) Z - V diag(p) Z Mt, A = T^-1 X, Y = j Mt W
+        Vh = V.conj().T
+        Z = Vh @ Mt.conj().T + 1j * (Vh @ Gt)  # Z = V^H (Mt^H + j Gt), Phi = V diag(p) Z
+        MVp = (Mt @ V) * p
+        A = Ti @ (MVp @ Z - (V * p) @ (Z @ Mt))
         g = np.zeros_like(x)
-        for sl, n, full_t, st_t, st_g in self._layout:
-            Vb = V[sl]
-            X = (MV[sl] * p) @ Z[:, sl] - (Vb * p) @ ZM[:, sl]
-            Ab = Ti[sl, sl] @ X
-            if full_t:
-                g[st_t] = np.concatenate([2 * Ab.T.real.ravel(), -2 * Ab.T.imag.ravel()])
-            else:
-                g[st_t] = 2 * np.trace(Ab).real * T[sl.start, sl.start].real
-            if st_g.stop > st_g.start:
-                Yb = 1j * ((MV[sl] * p) @ Vb.conj().T)
-                if full_t:
-                    iu = self._triu(n)
-                    g[st_g] = np.concatenate(
-                        [
-                            2 * np.diag(Yb).real,
-                            2 * (Yb.T[iu] + Yb[iu]).real,
-                            2 * (Yb[iu] - Yb.T[iu]).imag,
-                        ]
-                    )
-                else:
-                    g[st_g] = 2 * np.trace(Yb).real
+        a = A.ravel()[self._t_flat_tr]  # Ab.T of each full block, row by row
+        g[self._t_re] = 2 * a.real
+        g[self._t_im] = -2 * a.imag
+        nn = Mt.shape[0]
+        if len(self._s_param):
+            tr = np.bincount(self._s_block, weights=A.diagonal()[self._s_diag].real, minlength=len(self._s_param))
+            g[self._s_param] = 2 * tr * np.exp(np.clip(x[self._s_param], -300, 300))
+        if len(self._g_diag_param) or len(self._gs_param):
+            y = (1j * (MVp @ Vh)).ravel()
+            g[self._g_diag_param] = 2 * y[self._g_diag].real
+            up, lo = y[self._g_up], y[self._g_lo]
+            g[self._g_up_re] = 2 * (lo + up).real
+            g[self._g_up_im] = 2 * (up - lo).imag
+            if len(self._gs_param):
+                yd = y[self._gs_diag * (nn + 1)].real
+                g[self._gs_param] = 2 * np.bincount(self._gs_block, weights=yd, minlength=len(self._gs_param))
         return f, g
 
     def scalings(self, x) -> tuple[np.ndarray, np.ndarray]:
