@@ -16,15 +16,44 @@ def _random(st, rng):
     return rng.standard_normal(st.m_shape) + 1j * rng.standard_normal(st.m_shape)
 
 
-def test_the_gradient_of_the_smoothed_bound_matches_finite_differences():
+@pytest.mark.parametrize(
+    "blk, hermitian",
+    [(MIXED, ()), (MIXED + [[3, 3], [-2, 0], [1, 1], [-1, 0]], (5,))],
+    ids=["mixed", "with-hermitian-and-repeated-blocks-of-one-size"],
+)
+def test_the_gradient_of_the_smoothed_bound_matches_finite_differences(blk, hermitian):
+    """Every parameter's derivative, read by index arrays from whole products (full ``T`` blocks of one size inverted
+    together, scalar blocks' traces summed per block, a Hermitian block's ``G``), against finite differences."""
     rng = np.random.default_rng(1)
-    st = as_block_structure(MIXED)
-    gu = GradientUpper(st)
+    st = as_block_structure(blk)
+    gu = GradientUpper(st, hermitian=hermitian)
     Ms = st.pad(_random(st, rng))
     x = gu.initial(Ms) + 0.1 * rng.standard_normal(gu.size)
     f, g = gu._objective(x, Ms, 0.1)
     err = optimize.check_grad(lambda y: gu._objective(y, Ms, 0.1)[0], lambda y: gu._objective(y, Ms, 0.1)[1], x)
     assert err < 1e-4 * np.linalg.norm(g)
+
+
+def test_the_scalings_are_block_diagonal_with_the_parameters_in_their_blocks():
+    """``P = T^* T`` and ``G`` assembled by index arrays: zero off the blocks, each block from its own parameters."""
+    rng = np.random.default_rng(3)
+    st = as_block_structure(MIXED + [[3, 3], [-2, 0]])
+    gu = GradientUpper(st, hermitian=(5,))
+    x = rng.standard_normal(gu.size)
+    P, G = gu.scalings(x)
+    T, Ti, Gt = gu._unpack(x)
+    assert np.allclose(T @ Ti, np.eye(st.padded_size), atol=1e-10)
+    for sl, n, full_t, st_t, st_g in gu._layout:
+        v = x[st_t]
+        Tb = (v[: n * n] + 1j * v[n * n :]).reshape(n, n) if full_t else np.exp(v[0]) * np.eye(n)
+        assert np.allclose(P[sl, sl], Tb.conj().T @ Tb)
+        off = np.ones(st.padded_size, bool)
+        off[sl] = False
+        assert not np.any(P[sl][:, off]) and not np.any(G[sl][:, off])
+        if st_g.stop == st_g.start:
+            assert not np.any(G[sl, sl])
+        else:
+            assert np.allclose(Gt[sl, sl], Gt[sl, sl].conj().T)  # G~ Hermitian on the block
 
 
 @pytest.mark.parametrize("seed", range(4))
