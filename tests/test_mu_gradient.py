@@ -171,3 +171,18 @@ def test_only_square_full_blocks_can_be_hermitian():
 
     with pytest.raises(ArgumentError, match="not a square full block"):
         GradientUpper(as_block_structure([[-2, 0], [1, 2]]), hermitian=[1])
+
+
+def test_the_descent_counts_its_evaluations(monkeypatch):
+    """``evaluations``: one per evaluation of the smoothed bound and its gradient (what a benchmark divides by)."""
+    rng = np.random.default_rng(4)
+    st = as_block_structure(MIXED)
+    gu = GradientUpper(st, maxiter=20)
+    raw, seen = gu._objective_raw, []
+    monkeypatch.setattr(gu, "_objective_raw", lambda *a: seen.append(1) or raw(*a))
+    assert gu.evaluations == 0
+    Ms = st.pad(_random(st, rng))
+    x = gu(Ms)[3]
+    first = gu.evaluations
+    gu(Ms, x)
+    assert 0 < first < gu.evaluations == len(seen)

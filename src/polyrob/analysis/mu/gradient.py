@@ -91,6 +91,8 @@ class GradientUpper:
                 raise ArgumentError(f"hermitian: block {i} is not a square full block ({b.matlab})")
         #: eigenpairs computed per step (doubled while they all weigh in the smoothed maximum)
         self.top = 16
+        #: evaluations of the smoothed bound and its gradient so far (the descent's unit of work)
+        self.evaluations = 0
         self._layout = []
         k = 0
         for i, (b, sl) in enumerate(zip(st.blocks, st.padded_slices)):
@@ -230,6 +232,7 @@ class GradientUpper:
         # A block that barely couples to the rest drives its scaling to infinity (the bound's
         # infimum is not attained): where the numbers overflow, report +inf so the line search
         # steps back, instead of warnings and NaN.
+        self.evaluations += 1
         with np.errstate(all="ignore"):
             try:
                 f, g = self._objective_raw(x, Ms, temp)
