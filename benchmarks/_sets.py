@@ -54,6 +54,28 @@ def controller_problem(args, path: str):
     return robot, loop, domain, weights, load_controller(path), pldi_stand_in(loop, domain)
 
 
+def controller_file_problem(args, path: str):
+    """``(robot, loop, problem, K)``: a controller file's problem bounded as ``polyrob analyze`` bounds it, on the set of :func:`add_set_options`.
+
+    ``loop``: the computed-torque loop of that set; ``problem``: its
+    :func:`polyrob.pipeline.problem.build_problem` on the file's task and
+    weights; ``K`` the file's controller.
+    """
+    from polyrob.domains.task import TaskDomain
+    from polyrob.io.controller import load_controller, read_controller_file
+    from polyrob.model.inner import inner_loop_of_set
+    from polyrob.model.robots import load_robot
+    from polyrob.pipeline.problem import build_problem
+
+    info = read_controller_file(path).get("info") or {}
+    robot = load_robot(info["robot"])
+    loop = inner_loop_of_set(robot, "computed-torque", set_of(args, info["robot"]), draws=2)
+    domain = TaskDomain.from_dict(info["domain"], robot=loop)
+    weights = {k: tuple(v) for k, v in info["weights"].items()}
+    problem = build_problem(loop, domain, hyperparameters=weights, progress=False)
+    return robot, loop, problem, load_controller(path)
+
+
 def pldi_stand_in(loop, domain):
     """What the models read of a PLDI (its domain, size and nominal at one point of the task), for ``loop`` on ``domain``."""
     from types import SimpleNamespace

@@ -25,7 +25,7 @@ import json
 import time
 
 from _results import add_results_option, save_run
-from _sets import add_set_options, set_of
+from _sets import add_set_options, controller_file_problem
 
 
 def main() -> None:
@@ -40,19 +40,9 @@ def main() -> None:
     args = ap.parse_args()
 
     from polyrob.analysis.frozen_cells import frozen_cells_certificate
-    from polyrob.domains.task import TaskDomain
-    from polyrob.io.controller import load_controller, read_controller_file
-    from polyrob.model.inner import inner_loop_of_set
-    from polyrob.model.robots import load_robot
-    from polyrob.pipeline.problem import build_problem
 
     t0 = time.perf_counter()
-    info = read_controller_file(args.controller).get("info") or {}
-    robot = load_robot(info["robot"])
-    loop = inner_loop_of_set(robot, "computed-torque", set_of(args, info["robot"]), draws=2)
-    domain = TaskDomain.from_dict(info["domain"], robot=loop)
-    weights = {k: tuple(v) for k, v in info["weights"].items()}
-    problem = build_problem(loop, domain, hyperparameters=weights, progress=False)
+    robot, loop, problem, K = controller_file_problem(args, args.controller)
     screen = [float(w) for w in args.screen_at.split(",") if w.strip()]
 
     def progress(done, total):
@@ -62,7 +52,7 @@ def main() -> None:
 
     result = frozen_cells_certificate(
         problem,
-        load_controller(args.controller),
+        K,
         max_cells=args.max_cells,
         coverage_points=args.coverage_points,
         screen_at=screen,

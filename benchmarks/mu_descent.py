@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 from _results import add_results_option, save_run
-from _sets import add_set_options, set_of
+from _sets import add_set_options, controller_file_problem
 
 DEFAULT_CONTROLLER = Path(__file__).parent / "controllers" / "so101_engineer_set_pid.json"
 
@@ -54,24 +54,15 @@ def main() -> None:
     from polyrob.analysis.mu.blocks import as_block_structure
     from polyrob.analysis.mu.frequency import matrix_response
     from polyrob.analysis.mu.gradient import GradientUpper
-    from polyrob.domains.task import TaskDomain
-    from polyrob.io.controller import load_controller, read_controller_file
-    from polyrob.model.inner import inner_loop_of_set
-    from polyrob.model.robots import load_robot
-    from polyrob.pipeline.problem import build_problem
     from polyrob.plant.loops import lft
 
     t0 = time.perf_counter()
-    info = read_controller_file(args.controller).get("info") or {}
-    robot = load_robot(info["robot"])
-    loop = inner_loop_of_set(robot, "computed-torque", set_of(args, info["robot"]), draws=2)
-    domain = TaskDomain.from_dict(info["domain"], robot=loop)
-    weights = {k: tuple(v) for k, v in info["weights"].items()}
-    problem = build_problem(loop, domain, hyperparameters=weights, progress=False)
+    robot, loop, problem, K = controller_file_problem(args, args.controller)
+    domain = problem.domain
     centre = 0.5 * (domain.q_lower + domain.q_upper)
     half = 0.5 * args.fraction * (domain.q_upper - domain.q_lower)
     _, P = cell_plant(problem, cell_domain(domain, centre - half, centre + half))
-    N = lft(P, load_controller(args.controller))
+    N = lft(P, K)
     st = as_block_structure(P.block_structure_rp)
     built = time.perf_counter() - t0
 
