@@ -1,7 +1,8 @@
 """What the ``inner-links`` model's inertia block costs μ at one frequency, against the drawn robots' own inertia errors, as JSON.
 
     python benchmarks/inertia_block.py CONTROLLER.json [--omega W] [-n 60] [--seed 5] [--extremes 0.5]
-        [--com-box] [--ball 0] [--robot-uncertainty FILE | --link-error 10 --payload-max 1.5 --com-radius 0.1]
+        [--com-box] [--ball 0] [--hermitian] [--fixed-positions] [--exact-links K ...]
+        [--robot-uncertainty FILE | --link-error 10 --payload-max 1.5 --com-radius 0.1]
 
 The model (:mod:`polyrob.plant.models.inner_links`) carries the relative
 inertia error of the computed-torque loop (the acceleration columns of the
@@ -35,7 +36,16 @@ what a model that carried the block so would certify at this frequency (the
 model does not yet).  ``--fixed-positions`` rebuilds the model with the
 task's positions held at its centre (velocities and accelerations as they
 are) and prints its μ: what the inertia's and the stiffness's change over
-the positions costs.
+the positions costs.  ``--exact-links K ...`` rebuilds the model with the
+links' inertia exact in their parameters: each link scalar's acceleration
+columns at the mean of the model's samples as one real scalar of its own
+(repeated as often as their rank), and for each ``K`` the instrument's
+acceleration columns at that mean on ``K`` principal directions of its
+physical set (real scalars within their reach); what that leaves (the
+change over the task, the instrument beyond its directions) stays in the
+shaped block.  It prints μ's bounds for each ``K`` and, for the first, with
+the block left out and with the links' scalars left out (which of them
+carries μ).  These are experiments on the model, not a model polyrob uses.
 """
 
 from __future__ import annotations
@@ -60,6 +70,10 @@ def main() -> None:
     ap.add_argument("--ball", type=int, default=0, help="also search this many symmetric matrices of the unit ball")
     ap.add_argument("--hermitian", action="store_true", help="also mu with the block's real members (symmetric + skew)")
     ap.add_argument("--fixed-positions", action="store_true", help="also mu with the task's positions at its centre")
+    ap.add_argument(
+        "--exact-links", type=int, nargs="+", default=None, metavar="K",
+        help="also mu with the links' inertia exact (real scalars) and K directions of the instrument's",
+    )  # fmt: skip
     add_set_options(ap, payload_max=1.5)
     add_results_option(ap)
     args = ap.parse_args()
@@ -171,12 +185,19 @@ def main() -> None:
         )
         out["mu_positions_at_centre"] = [round(float(at.lower), 4), round(float(at.upper), 4)]
         out["inertia_block_norm_positions_at_centre"] = round(float(unc_fixed.info["residual_g_norm"]), 4)
+    if args.exact_links:
+        out["exact_links"] = _exact_links(
+            args.exact_links, loop, domain, plant_weights(weights), load_controller(args.controller), omega
+        )
     out["seconds"] = round(time.perf_counter() - t0, 1)
     figure = (
         f"{robot.name} at {omega:.4g} rad/s: mu {out['mu']} with the inertia block, "
         f"{out['mu_without_inertia_block']} without it, worst {out['mu_closed_at_drawn']['worst']} "
         f"with it closed at {len(trues)} drawn robots' own errors"
     )
+    if args.exact_links:
+        first = out["exact_links"][f"instrument_directions_{args.exact_links[0]}"]["mu"]
+        figure += f"; with the links' inertia exact {first}"
     save_run(args.results, "inertia_block", "The inertia block's cost against drawn robots' errors", figure, out)
     print(json.dumps(out, indent=1))
     print(figure, file=sys.stderr)
@@ -233,6 +254,91 @@ def _hermitian_split(loop, domain, unc, M, i, blocks) -> dict:
         "inertia_skew_part_norm": round(size, 4),
         "mu_upper_inertia_block_real": round(float(bound), 4),
     }
+
+
+def _exact_links_model(loop, domain, directions: int):
+    """The ``inner-links`` model with the links' inertia scalars exact at the samples' mean (``--exact-links``).
+
+    Returns the model and the indices of its real scalars that carry the links' inertia.
+    """
+    import numpy as np
+    from _sets import pldi_stand_in
+
+    from polyrob.plant.models import inner_links as links
+    from polyrob.plant.models.inner_factors import factor_lft_plant
+    from polyrob.plant.models.inner_links_inertia import g_norm_bound, shape_of
+
+    pldi = pldi_stand_in(loop, domain)
+    f = links.set_factors(pldi, loop, samples=256)
+    m, n = loop.m, 2 * loop.m
+    on, pay = f.on_payload, f.pay
+    ranges = links.RANGE_MARGIN * links.reach_of(f.coeff, on, pay).max(axis=0)
+    rest = f.Phi - np.einsum("jsk,kab->jsab", f.coeff, f.centres)
+    spread = links.SPREAD_MARGIN * links.entry_bound(rest, on, pay)
+    state_norm = links.state_residual_norm_bound(rest[..., :n], on, pay, spread[:, :n])
+    G = f.Phi[..., n:].copy()  # (N, S, m, m) in the fixed weighting
+    # the links: each scalar's acceleration columns at the mean, exact over the box (|u_j| <= 1); the change over
+    # the task stays in the block
+    G0 = G[~on].mean(axis=1)
+    link_centres = np.zeros((len(G0), m, 3 * m))
+    link_centres[..., n:] = G0
+    G[~on] -= G0[:, None]
+    centres, ranges = np.concatenate([f.centres, link_centres]), np.r_[ranges, np.ones(len(G0))]
+    link_scalars = np.arange(len(f.centres), len(centres))
+    if directions and on.any():  # the instrument: principal directions of its physical set at the mean
+        points = np.einsum("pi,iab->pab", pay, G[on].mean(axis=1)).reshape(len(pay), -1)
+        E = np.linalg.svd(points, full_matrices=False)[2][:directions].reshape(-1, m, m)
+        coeff = np.einsum("isab,kab->isk", G[on], E)
+        reach = np.abs(np.einsum("pi,isk->psk", pay, coeff)).max(axis=(0, 1))
+        G[on] -= np.einsum("isk,kab->isab", coeff, E)
+        payload_centres = np.zeros((len(E), m, 3 * m))
+        payload_centres[..., n:] = E
+        centres, ranges = np.concatenate([centres, payload_centres]), np.r_[ranges, reach]
+    shape, centre = shape_of(G[~on], G[on], pay)
+    g, t = g_norm_bound(G[~on], G[on], pay, np.ones(G.shape[1]), shape=shape, centre=centre)
+    model = factor_lft_plant(
+        pldi, "inner-links", tuple(f"t{k}" for k in range(len(ranges))), ranges,
+        list(links.weighted_factor(centres, np.linalg.inv(f.W), f.W)), spread,
+        {"PLDI": pldi.enclosure, "factors": "sampled"}, weighting=f.W, g_norm=links.G_MARGIN * g,
+        g_offset=centre + t * shape, g_shape=shape, state_residual_norm=state_norm, low_rank=True,
+    )  # fmt: skip
+    return model, link_scalars
+
+
+def _exact_links(directions, loop, domain, weights, K, omega) -> dict:
+    """μ's bounds at ``omega`` on :func:`_exact_links_model` for each count of the instrument's directions."""
+    import numpy as np
+
+    from polyrob._threads import single_blas_thread
+    from polyrob.analysis.mu.blocks import as_block_structure
+    from polyrob.analysis.mu.bounds import mussv
+    from polyrob.plant.generalized import generalized_plant, lft
+
+    out = {}
+    for k in directions:
+        model, link_scalars = _exact_links_model(loop, domain, k)
+        P = generalized_plant(model, **weights)
+        M = np.asarray(lft(P, K)(1j * omega), complex)
+        blocks = list(as_block_structure(P.block_structure_rp).blocks)
+        rows, cols = np.cumsum([0] + [b.cols for b in blocks]), np.cumsum([0] + [b.rows for b in blocks])
+        full = [i for i, b in enumerate(blocks) if b.kind != "real"]
+        inertia = full[-2]  # the complex blocks: the state residual, the inertia block, the performance block
+
+        def bounds(left_out=()):
+            keep = [i for i in range(len(blocks)) if i not in left_out]
+            r = np.concatenate([np.arange(rows[i], rows[i + 1]) for i in keep])
+            c = np.concatenate([np.arange(cols[i], cols[i + 1]) for i in keep])
+            with single_blas_thread():
+                mu = mussv(M[np.ix_(r, c)], [blocks[i].matlab for i in keep])
+            return [round(float(mu.lower), 4), round(float(mu.upper), 4)]
+
+        row = {"mu": bounds(), "channels": int(M.shape[1])}
+        if k == directions[0]:
+            real = [i for i, b in enumerate(blocks) if b.kind == "real"]
+            row["mu_without_inertia_block"] = bounds([inertia])
+            row["mu_without_link_scalars"] = bounds([real[j] for j in link_scalars])
+        out[f"instrument_directions_{k}"] = row
+    return out
 
 
 if __name__ == "__main__":
