@@ -186,3 +186,50 @@ def test_the_descent_counts_its_evaluations(monkeypatch):
     first = gu.evaluations
     gu(Ms, x)
     assert 0 < first < gu.evaluations == len(seen)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_enough_stops_a_stalled_descent_below_it_and_changes_nothing_above_it(seed):
+    """``enough``: below it a run may stop where it stalls (fewer evaluations, a bound below ``enough`` that its
+    scalings certify); a level the bound never reaches leaves the descent exactly as without it."""
+    rng = np.random.default_rng(seed)
+    st = as_block_structure(MIXED)
+    Ms = st.pad(_random(st, rng))
+    full = GradientUpper(st)
+    beta, _, _, _ = full(Ms)
+    never = GradientUpper(st)
+    assert never(Ms, enough=0.5 * beta)[0] == beta and never.evaluations == full.evaluations
+    loose = GradientUpper(st)
+    beta_loose, D, G, _ = loose(Ms, enough=2.0 * beta)
+    assert loose.evaluations < full.evaluations
+    assert beta * (1 - 1e-3) <= beta_loose < 2.0 * beta
+    assert certified_beta(Ms, D @ D, G)[0] == pytest.approx(beta_loose, rel=1e-6)
+
+
+def test_a_sweep_bounds_points_far_below_its_peak_loosely_and_its_peak_in_full(monkeypatch):
+    """``LOOSE_BELOW``: the points whose bound stays below that share of the peak so far may stop where their
+    descent stalls; the peak is the same to the descent's accuracy, and every point's bound is certified."""
+    import control
+
+    import polyrob.analysis.mu.sweep as sweep
+    from polyrob.analysis.mu.frequency import freqresp
+
+    st = as_block_structure([[-4, 0]] * 8 + [[3, 6]])
+    np.random.seed(7)
+    sys = control.rss(6, st.m_shape[0], st.m_shape[1], strictly_proper=False)
+    sys = control.ss(sys.A - 0.5 * np.eye(6) * (np.abs(np.linalg.eigvals(sys.A)).max() + 1), sys.B, sys.C, sys.D)
+    omega = np.logspace(-2, 3, 12)
+    calls = []
+    original = GradientUpper.__call__
+    monkeypatch.setattr(GradientUpper, "__call__", lambda self, Ms, x0=None, enough=None: calls.append(enough)
+                        or original(self, Ms, x0, enough=enough))  # fmt: skip
+    loose = mu_bounds(sys, st, omega, refine_peak=False, progress=False)
+    assert any(e is not None for e in calls)
+    monkeypatch.setattr(sweep, "LOOSE_BELOW", 0.0)
+    calls.clear()
+    tight = mu_bounds(sys, st, omega, refine_peak=False, progress=False)
+    assert all(e is None for e in calls)
+    assert loose.peak_upper == pytest.approx(tight.peak_upper, rel=1e-3)
+    H = st.pad(freqresp(sys, loose.omega))
+    for k in range(loose.omega.size):
+        assert certified_beta(H[k], loose.D[k] @ loose.D[k], loose.G[k])[0] <= loose.upper[k] * (1 + 1e-6)
