@@ -37,11 +37,6 @@ __all__ = ["GradientUpper"]
 
 #: Temperatures of the smoothed largest eigenvalue, relative to the current bound.
 _TEMPERATURES = (1e-2, 1e-3)
-#: With ``enough`` given, a run stops once its objective fell by less than this fraction over the last
-#: :data:`STALL_WINDOW` iterations while its bound is below ``enough`` (a point far below a sweep's peak).
-STALL_RTOL = 1e-5
-#: Iterations over which :data:`STALL_RTOL` is measured.
-STALL_WINDOW = 10
 
 
 class GradientUpper:
@@ -287,7 +282,7 @@ class GradientUpper:
         T, _, Gt = self._unpack(x)
         return T.conj().T @ T, T.conj().T @ Gt @ T
 
-    def __call__(self, Ms: np.ndarray, x0: np.ndarray | None = None, enough: float | None = None):
+    def __call__(self, Ms: np.ndarray, x0: np.ndarray | None = None):
         """Upper bound of ``μ(Ms)`` on the padded square problem.
 
         Parameters
@@ -297,13 +292,6 @@ class GradientUpper:
         x0 : ndarray, optional
             Parameters to start from (e.g. the previous frequency's); the
             Perron scaling otherwise.
-        enough : float, optional
-            A bound below this need not be tight (a sweep's point far below
-            its peak): each L-BFGS run stops once its bound is below it and
-            its objective has stalled (:data:`STALL_RTOL` over
-            :data:`STALL_WINDOW` iterations) instead of at ``maxiter``.  The
-            bound returned is certified either way; it can be looser in its
-            last digits.
 
         Returns
         -------
@@ -333,7 +321,6 @@ class GradientUpper:
                 method="L-BFGS-B",
                 bounds=self._bounds,
                 options={"maxiter": self.maxiter, "ftol": 1e-12, "gtol": 1e-10},
-                callback=None if enough is None else _stall_stop(enough),
             )
             if np.all(np.isfinite(res.x)):
                 x = res.x
@@ -347,21 +334,3 @@ class GradientUpper:
         beta, P, G = best
         D = sla.sqrtm(P)
         return float(beta), (D + D.conj().T) / 2, (G + G.conj().T) / 2, x
-
-
-def _stall_stop(enough: float):
-    """An L-BFGS callback that stops the run once its objective is below ``enough**2`` and has stalled.
-
-    The objective (the smoothed largest eigenvalue of the scaled matrix) is
-    at least the square of the bound its scalings certify, so below
-    ``enough**2`` the bound is below ``enough``.
-    """
-    level, history = float(enough) ** 2, []
-
-    def callback(intermediate_result):
-        f = float(intermediate_result.fun)
-        history.append(f)
-        if f < level and len(history) > STALL_WINDOW and history[-1 - STALL_WINDOW] - f <= STALL_RTOL * abs(f):
-            raise StopIteration
-
-    return callback

@@ -26,7 +26,6 @@ __all__ = [
     "relaxed_is_cheap",
     "AB13MD_SAFETY_TIMEOUT",
     "LARGE_AB13MD_TIMEOUT",
-    "LOOSE_BELOW",
 ]
 
 #: ``method="auto"`` bounds repeated scalar blocks by descent on the D-G scalings above this padded
@@ -43,11 +42,6 @@ MANY_REAL_SCALARS = 16
 SECOND_BOUND_GAP = 1.02
 #: ... at the frequencies whose bound is at least this fraction of the sweep's peak (or at least 1).
 SECOND_BOUND_PEAK = 0.9
-#: A grid point is bounded in full only while its bound may reach this fraction of the peak so far;
-#: below it the descent stops where it stalls (:class:`~polyrob.analysis.mu.gradient.GradientUpper`'s
-#: ``enough``): a bound far below the peak decides nothing, and its last digits cost most of its
-#: evaluations (``benchmarks/mu_descent.py``).
-LOOSE_BELOW = 0.9
 #: Wall-clock seconds a cold AB13MD call of a sweep may take before it is taken for hung (default
 #: of :func:`mu_bounds`' ``ab13md_timeout`` and ``warm_timeout``).  A safety net, not a choice of
 #: method: it must never fire on a call that is merely slow or on a busy machine.  Slow calls do
@@ -104,14 +98,14 @@ def run_sweep(
     state = {"x": None, "pi": None, "xg": None}
     n = st.padded_size
 
-    def upper_at(Ms, lo=0.0, enough=None):
+    def upper_at(Ms, lo=0.0):
         nonlocal fallbacks, guard
         if not np.all(np.isfinite(Ms)):  # on a pole of M: mu is infinite
             return np.inf, np.eye(n), np.zeros((n, n))
         if lmi is not None:
             return lmi(Ms, lo=lo, rtol=rtol)
         if descent is not None:
-            up, D, G, state["xg"] = descent(Ms, state["xg"], enough=enough)
+            up, D, G, state["xg"] = descent(Ms, state["xg"])
             return up, D, G
         res = None
         if guard is not None and state["x"] is not None and np.any(Ms):
@@ -174,10 +168,7 @@ def run_sweep(
         for i in tqdm(range(omega.size), disable=None if show else True, desc="mu", leave=False):
             if lmi is not None:  # the bisection wants the lower bound as bracket
                 lo[i], deltas[i] = lower_at(H[i])
-            # a point whose bound ends well below the peak so far needs no last digits: its descent may stop
-            # where it stalls (GradientUpper's enough); the peak's points, and all refined ones, run in full
-            enough = LOOSE_BELOW * float(np.max(up[:i][np.isfinite(up[:i])], initial=0.0)) or None
-            up[i], Ds[i], Gs[i] = upper_at(H[i], lo[i], enough=enough)
+            up[i], Ds[i], Gs[i] = upper_at(H[i], lo[i])
             l2, d2 = lower_at(H[i], D=Ds[i])
             if l2 >= lo[i]:
                 lo[i], deltas[i] = l2, d2
