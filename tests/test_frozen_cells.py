@@ -110,16 +110,16 @@ def fake_cells(monkeypatch):
         c = cert(Status.CERTIFIED, 0.9) if width <= 0.1 + 1e-9 else cert(Status.NOT_CERTIFIED, 1.0 + width)
         return 1.0, replace(c, mu=SimpleNamespace(peak_upper_frequency=10.0))
 
-    def screen(P, K, frequencies):
+    def screen(P, K, frequencies):  # mu's bound at the screen: 1 + the cell's width where it screens out
         calls["screened"].append(tuple(frequencies))
-        return bool(len(frequencies)) and calls["width"] > 0.2 + 1e-9
+        return 1.0 + calls["width"] if len(frequencies) and calls["width"] > 0.2 + 1e-9 else 0.5
 
     def plant(problem, domain):
         calls["width"] = float(np.max(domain.q_upper - domain.q_lower))
         return None, None
 
     monkeypatch.setattr(fc, "_cell_certificate", certificate)
-    monkeypatch.setattr(fc, "screened_out", screen)
+    monkeypatch.setattr(fc, "screen_bound", screen)
     monkeypatch.setattr(fc, "cell_plant", plant)
     monkeypatch.setattr(fc, "split_position", lambda loop, d: int(np.argmax(d.q_upper - d.q_lower)))
     return calls
@@ -129,6 +129,9 @@ def test_cells_are_split_until_each_holds_and_the_union_is_certified(fake_cells)
     log = []
     result = fc.frozen_cells_certificate(fake_problem(), None, max_cells=64, coverage_points=0, on_cell=log.append)
     assert len(log) == result.visited and sum("screened_out_at" in r for r in log) == result.screened
+    # a screened cell's record keeps the bound that screened it out
+    assert all(r["screen_mu_upper"] == pytest.approx(1 + max(np.subtract(r["q_upper"], r["q_lower"])), abs=1e-4)
+               for r in log if "screened_out_at" in r)  # fmt: skip
     assert sum(r.get("status") == "CERTIFIED" for r in log) == 64
     # finger_edu's task is 0.4 rad wide on each of 3 joints: cells of 0.1 rad, 4 per joint
     assert result.certified and len(result.cells) == 4**3

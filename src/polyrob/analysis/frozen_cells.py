@@ -65,6 +65,7 @@ __all__ = [
     "bisect",
     "split_position",
     "screened_out",
+    "screen_bound",
     "cell_fingerprint",
 ]
 
@@ -214,16 +215,25 @@ def screened_out(P, K, frequencies) -> bool:
     there too (the same descent); it only decides where the work goes, and
     no screened cell enters the union.
     """
+    return screen_bound(P, K, frequencies) >= 1.0
+
+
+def screen_bound(P, K, frequencies) -> float:
+    """The largest of μ's upper bounds of ``K`` on ``P`` at ``frequencies`` (rad/s; 0 when none is given).
+
+    The figure :func:`screened_out` compares with 1, kept in a cell's record
+    (how far a screened cell is from a certificate).
+    """
     from polyrob.analysis.mu.bounds import mussv
     from polyrob.analysis.mu.frequency import matrix_response
     from polyrob.plant.loops import lft
 
     w = np.asarray(sorted(set(float(f) for f in frequencies if np.isfinite(f) and f > 0)), float)
     if not len(w):
-        return False
+        return 0.0
     N = lft(P.system, K, n_u=P.n_u, n_y=P.n_u)
     response = matrix_response(*(np.asarray(X, float) for X in (N.A, N.B, N.C, N.D)))(w)
-    return any(float(mussv(H, P.block_structure_rp, method="gradient").upper) >= 1.0 for H in response)
+    return max(float(mussv(H, P.block_structure_rp, method="gradient").upper) for H in response)
 
 
 def _cell_certificate(problem, K, domain, unc, P, coverage_points: int):
@@ -324,7 +334,7 @@ def frozen_cells_certificate(
     ``progress(done, total)``: after each cell, ``total`` the most cells
     the limit lets the bisection visit; ``on_cell(record)``: after each
     cell too, its box and what became of it (screened out, or its
-    certificate's status and μ bounds), for a log.  ``cells_dir``: where
+    certificate's status and μ bounds; a screened cell's bound at the screen, ``screen_mu_upper``), for a log.  ``cells_dir``: where
     each finished cell's certificate is kept and found again (module
     docstring); ``None`` keeps nothing.
 
@@ -353,10 +363,12 @@ def frozen_cells_certificate(
         visited += 1
         room = len(done) + len(open_cells) + 2 <= max_cells
         record = {"q_lower": lo.tolist(), "q_upper": hi.tolist()}
-        if room and screened_out(P, K, peaks):
+        screen = screen_bound(P, K, peaks) if room else 0.0
+        if screen >= 1.0:
             screened += 1
             open_cells += list(bisect((lo, hi), split_position(problem.robot, sub)))
             record["screened_out_at"] = list(peaks)
+            record["screen_mu_upper"] = round(screen, 4)
         else:
             key = cell_fingerprint(P, K, coverage_points, sub) if cells_dir is not None else None
             coverage, cert, kept = _kept_certificate(
