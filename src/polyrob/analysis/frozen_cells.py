@@ -333,10 +333,11 @@ def frozen_cells_certificate(
     the cells, their model and the smallest coverage among them.
     ``progress(done, total)``: after each cell, ``total`` the most cells
     the limit lets the bisection visit; ``on_cell(record)``: after each
-    cell too, its box and what became of it (screened out, or its
-    certificate's status and μ bounds; a screened cell's bound at the screen, ``screen_mu_upper``), for a log.  ``cells_dir``: where
-    each finished cell's certificate is kept and found again (module
-    docstring); ``None`` keeps nothing.
+    cell too, its box and what became of it (screened out, with μ's bound
+    at the screen, ``screen_mu_upper``; or its certificate's status and μ
+    bounds), for a log.  ``cells_dir``: where each finished cell's
+    certificate is kept and found again (module docstring); ``None`` keeps
+    nothing.
 
     Raises
     ------
