@@ -33,6 +33,21 @@ def set_of(args, name: str):
     return RobotUncertainty(link_error=args.link_error / 100.0, payload=payload, source="benchmark options")
 
 
+def _file_loop(args, path: str):
+    """``(robot, loop, domain, weights)`` of a controller file: its robot, the computed-torque loop of the set of
+    :func:`add_set_options`, its task and its weights as the file states them (tuples)."""
+    from polyrob.domains.task import TaskDomain
+    from polyrob.io.controller import read_controller_file
+    from polyrob.model.inner import inner_loop_of_set
+    from polyrob.model.robots import load_robot
+
+    info = read_controller_file(path).get("info") or {}
+    robot = load_robot(info["robot"])
+    loop = inner_loop_of_set(robot, "computed-torque", set_of(args, info["robot"]), draws=2)
+    domain = TaskDomain.from_dict(info["domain"], robot=loop)
+    return robot, loop, domain, {k: tuple(v) for k, v in info["weights"].items()}
+
+
 def controller_problem(args, path: str):
     """``(robot, loop, domain, weights, K, pldi)`` of a controller file (as ``polyrob synth -o`` writes it) on the set of :func:`add_set_options`.
 
@@ -40,18 +55,11 @@ def controller_problem(args, path: str):
     with what the models read of a PLDI (its domain, size and nominal at one
     point of the task).
     """
-    from polyrob.domains.task import TaskDomain
-    from polyrob.io.controller import load_controller, read_controller_file
-    from polyrob.model.inner import inner_loop_of_set
-    from polyrob.model.robots import load_robot
+    from polyrob.io.controller import load_controller
     from polyrob.plant.weights import plant_weights
 
-    info = read_controller_file(path).get("info") or {}
-    robot = load_robot(info["robot"])
-    loop = inner_loop_of_set(robot, "computed-torque", set_of(args, info["robot"]), draws=2)
-    domain = TaskDomain.from_dict(info["domain"], robot=loop)
-    weights = plant_weights({k: tuple(v) for k, v in info["weights"].items()})
-    return robot, loop, domain, weights, load_controller(path), pldi_stand_in(loop, domain)
+    robot, loop, domain, weights = _file_loop(args, path)
+    return robot, loop, domain, plant_weights(weights), load_controller(path), pldi_stand_in(loop, domain)
 
 
 def controller_file_problem(args, path: str):
@@ -61,17 +69,10 @@ def controller_file_problem(args, path: str):
     :func:`polyrob.pipeline.problem.build_problem` on the file's task and
     weights; ``K`` the file's controller.
     """
-    from polyrob.domains.task import TaskDomain
-    from polyrob.io.controller import load_controller, read_controller_file
-    from polyrob.model.inner import inner_loop_of_set
-    from polyrob.model.robots import load_robot
+    from polyrob.io.controller import load_controller
     from polyrob.pipeline.problem import build_problem
 
-    info = read_controller_file(path).get("info") or {}
-    robot = load_robot(info["robot"])
-    loop = inner_loop_of_set(robot, "computed-torque", set_of(args, info["robot"]), draws=2)
-    domain = TaskDomain.from_dict(info["domain"], robot=loop)
-    weights = {k: tuple(v) for k, v in info["weights"].items()}
+    robot, loop, domain, weights = _file_loop(args, path)
     problem = build_problem(loop, domain, hyperparameters=weights, progress=False)
     return robot, loop, problem, load_controller(path)
 
