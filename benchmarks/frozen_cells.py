@@ -15,13 +15,18 @@ per cell visited (its progress; its box and outcome) and one JSON document: the 
 and covers line, and per cell kept its positions' box, coverage, status, μ
 bounds and seconds.  ``--cells-dir`` keeps each finished cell's
 certificate there, so a run stopped goes on where it stopped (as
-``polyrob analyze --cells-dir``).
+``polyrob analyze --cells-dir``).  A run stopped with Ctrl-C (or SIGTERM)
+before its verdict prints, and with ``--results`` saves, the cells it
+visited as they were (each screened cell's bound, each decided cell's
+certificate), marked ``"stopped": true`` and with no verdict: a cell
+limit in hours can still leave a measured record.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import signal
 import time
 
 from _results import add_results_option, save_run
@@ -50,21 +55,35 @@ def main() -> None:
             json.dumps({"visited": done, "at_most": total, "seconds": round(time.perf_counter() - t0, 1)}), flush=True
         )
 
-    result = frozen_cells_certificate(
-        problem,
-        K,
-        max_cells=args.max_cells,
-        coverage_points=args.coverage_points,
-        screen_at=screen,
-        progress=progress,
-        on_cell=lambda record: print(json.dumps(record), flush=True),
-        cells_dir=args.cells_dir,
-    )
-    out = {
+    visited = []
+
+    def on_cell(record):
+        visited.append(record)
+        print(json.dumps(record), flush=True)
+
+    head = {
         "controller": args.controller,
         "robot": robot.name,
         "set": loop.uncertainty.words(),
         "screen_at": screen,
+    }
+    signal.signal(signal.SIGTERM, signal.default_int_handler)  # `kill` stops it as Ctrl-C does: what it visited is kept
+    try:
+        result = frozen_cells_certificate(
+            problem,
+            K,
+            max_cells=args.max_cells,
+            coverage_points=args.coverage_points,
+            screen_at=screen,
+            progress=progress,
+            on_cell=on_cell,
+            cells_dir=args.cells_dir,
+        )
+    except KeyboardInterrupt:
+        _save_stopped(args, head, visited, time.perf_counter() - t0)
+        raise SystemExit(130) from None
+    out = {
+        **head,
         "verdict": result.verdict,
         "covers": result.certificate.scope.sentence(),
         "cells": result.words(),
@@ -95,6 +114,33 @@ def main() -> None:
     }
     save_run(
         args.results, "frozen_cells", f"{robot.name}: the frozen robot over task cells", result.verdict, out, table
+    )
+
+
+def _save_stopped(args, head: dict, visited: list, seconds: float) -> None:
+    """Print and save (``--results``) the cells a stopped run visited: no verdict, each cell as it was left."""
+    out = {**head, "stopped": True, "visited": visited, "seconds": round(seconds, 1)}
+    print(json.dumps(out, indent=1))
+
+    def outcome(c):
+        if "screen_mu_upper" in c:
+            return (
+                "screened out",
+                f"{c['screen_mu_upper']:.4f} at {', '.join(f'{w:g}' for w in c['screened_out_at'])} rad/s",
+            )
+        upper = "-" if c["mu_upper"] is None else f"{c['mu_upper']:.4f}"
+        return c["status"], f"{upper} (grid [{c['mu_lower']:.4f}, {c['mu_upper_grid']:.4f}])"
+
+    table = {
+        "columns": ["cell (positions, rad)", "outcome", "μ upper"],
+        "rows": [
+            [", ".join(f"[{lo:.3f}, {hi:.3f}]" for lo, hi in zip(c["q_lower"], c["q_upper"])), *outcome(c)]
+            for c in visited
+        ],
+    }
+    figure = f"stopped after {len(visited)} cells, before a verdict"
+    save_run(
+        args.results, "frozen_cells", f"{head['robot']}: the frozen robot over task cells (stopped)", figure, out, table
     )
 
 
