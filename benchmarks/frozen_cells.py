@@ -132,7 +132,11 @@ def _save_stopped(args, head: dict, visited: list, seconds: float) -> None:
         return c["status"], f"{upper} (grid [{c['mu_lower']:.4f}, {c['mu_upper_grid']:.4f}])"
 
     table = {
-        "columns": ["cell (positions, rad)", "outcome", "μ upper"],
+        "columns": [
+            "cell (positions, rad)",
+            "outcome",
+            "μ upper (screened out: at those frequencies only; decided: every frequency)",
+        ],
         "rows": [
             [", ".join(f"[{lo:.3f}, {hi:.3f}]" for lo, hi in zip(c["q_lower"], c["q_upper"])), *outcome(c)]
             for c in visited
