@@ -64,7 +64,6 @@ __all__ = [
     "cell_plant",
     "bisect",
     "split_position",
-    "screened_out",
     "screen_bound",
     "cell_fingerprint",
 ]
@@ -207,22 +206,14 @@ def cell_plant(problem, domain):
     return unc, generalized_plant(unc, **plant_weights(problem.hyperparameters))
 
 
-def screened_out(P, K, frequencies) -> bool:
-    """Whether μ's upper bound of ``K`` on ``P`` (every block constant) reaches 1 at one of ``frequencies`` (rad/s).
-
-    A screen, not a decision: a cell it screens out is split without its
-    certificate, whose sweep would most likely find its peak at or above 1
-    there too (the same descent); it only decides where the work goes, and
-    no screened cell enters the union.
-    """
-    return screen_bound(P, K, frequencies) >= 1.0
-
-
 def screen_bound(P, K, frequencies) -> float:
-    """The largest of μ's upper bounds of ``K`` on ``P`` at ``frequencies`` (rad/s; 0 when none is given).
+    """The largest of μ's upper bounds of ``K`` on ``P`` (every block constant) at ``frequencies`` (rad/s; 0 when none is given).
 
-    The figure :func:`screened_out` compares with 1, kept in a cell's record
-    (how far a screened cell is from a certificate).
+    A screen, not a decision: a cell whose bound reaches 1 here is split
+    without its certificate, whose sweep would most likely find its peak at
+    or above 1 there too (the same descent); it only decides where the work
+    goes, and no screened cell enters the union.  The bound is kept in the
+    cell's record (how far a screened cell is from a certificate).
     """
     from polyrob.analysis.mu.bounds import mussv
     from polyrob.analysis.mu.frequency import matrix_response
@@ -325,7 +316,7 @@ def frozen_cells_certificate(
     ``problem``: a per-link set's problem on a task domain (its ``inner-links``
     or ``inner-links-moving`` model; the cells build their own).  A cell is
     first screened at the frequencies ``screen_at`` and at the peaks of the
-    cells that failed before it (:func:`screened_out`), then certified; one
+    cells that failed before it (:func:`screen_bound` reaching 1), then certified; one
     that fails either is bisected (:func:`split_position`) while the count
     of cells stays within ``max_cells`` (at the limit it is kept with its
     certificate, made then).  The union is decided by
