@@ -17,7 +17,13 @@ cases by semicolons: ``q.4=0`` fixes joint 4's position at the centre
 (index from 0), ``qdot=0.5`` halves every velocity range, ``q=0,qdot=0,
 qddot=0`` is the task's centre alone (the exact model there); the items
 apply in order, and a range fixed stays fixed (``q.4=0,q=0.5``: joint 4's
-position fixed, the others' halved).  The
+position fixed, the others' halved).  The item ``first=q`` (or ``first=x``)
+takes the motion's first-order part in the positions (or in the whole
+state: positions, velocities, accelerations) out of the motion blocks, each
+sample's ``sum_i (x_i - c_i) dK/dx_i`` at the centre (central differences
+of the unit factors), and carries it nowhere: what a model carrying that
+part exactly (an LFT first-order in the state) could reach at best, since
+its own blocks would add to μ; a what-if, a bound of no set.  The
 default cases are the whole task, each joint's position fixed in turn,
 the velocities fixed, the accelerations fixed, and the centre.
 
@@ -47,6 +53,8 @@ def sub_task(domain, robot, case: str):
     joints = data["joints"]
     for item in (x.strip() for x in case.split(",") if x.strip()):
         target, _, factor = item.partition("=")
+        if target == "first":
+            continue
         group, _, joint = target.partition(".")
         if group not in ("q", "qdot", "qddot") or not factor:
             raise SystemExit(f"case {item!r}: expected GROUP[.JOINT]=FACTOR with GROUP q, qdot or qddot")
@@ -57,6 +65,47 @@ def sub_task(domain, robot, case: str):
             centre, half = (lo + hi) / 2, max((hi - lo) / 2 * float(factor), POINT)
             data[group][name] = [centre - half, centre + half]
     return TaskDomain.from_dict(data, robot=robot)
+
+
+def first_order_removed(case: str):
+    """A context in which ``inner_links.set_factors`` returns the samples' factors less their first-order part (module text).
+
+    ``case``'s ``first=q`` or ``first=x`` item says which coordinates; none:
+    the factors as they are.
+    """
+    import contextlib
+    from dataclasses import replace
+    from unittest import mock
+
+    import numpy as np
+
+    from polyrob.plant.models import inner_links as links
+    from polyrob.plant.moving_links import task_centre
+
+    which = [x.strip()[6:] for x in case.split(",") if x.strip().startswith("first=")]
+    if not which:
+        return contextlib.nullcontext()
+    if which[-1] not in ("q", "x"):
+        raise SystemExit(f"case {case!r}: first= takes q or x")
+    original = links.set_factors
+
+    def without_first_order(pldi, robot, **options):
+        f = original(pldi, robot, **options)
+        samples = links.model_samples(pldi.domain, options.get("samples", 256))
+        centre = task_centre(pldi.domain)
+        W, W_inv = f.W, np.linalg.inv(f.W)
+        part = np.zeros_like(f.Phi)
+        for g in range(3 if which[-1] == "x" else 1):  # q, qdot, a
+            for i in range(robot.m):
+                step = [np.zeros_like(c) for c in centre]
+                step[g][0, i] = 1e-4
+                up = links.unit_factors(robot, f.scalars, *(c + s for c, s in zip(centre, step)))
+                down = links.unit_factors(robot, f.scalars, *(c - s for c, s in zip(centre, step)))
+                slope = links.weighted_factor(up - down, W, W_inv)[:, 0] / 2e-4  # (N, m, 3m)
+                part += (samples[g][:, i] - centre[g][0, i])[None, :, None, None] * slope[:, None]
+        return replace(f, Phi=f.Phi - part)
+
+    return mock.patch.object(links, "set_factors", without_first_order)
 
 
 def main() -> None:
@@ -86,7 +135,8 @@ def main() -> None:
     for case in cases:
         t1 = time.perf_counter()
         pldi = pldi_stand_in(loop, sub_task(domain, loop, case))
-        P = generalized_plant(moving_links_plant(pldi, loop, exact=True, exact_payload=True), **weights)
+        with first_order_removed(case):
+            P = generalized_plant(moving_links_plant(pldi, loop, exact=True, exact_payload=True), **weights)
         N = lft(P.system, K, n_u=P.n_u, n_y=P.n_u)
         H = matrix_response(*(np.asarray(X, float) for X in (N.A, N.B, N.C, N.D)))(np.array([args.rad_s]))[0]
         with single_blas_thread():
