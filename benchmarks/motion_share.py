@@ -105,6 +105,7 @@ def first_order_removed(case: str):
                 part += (samples[g][:, i] - centre[g][0, i])[None, :, None, None] * slope[:, None]
         return replace(f, Phi=f.Phi - part)
 
+    # patched here, not a keyword of moving_links_plant: a what-if of this benchmark, no model polyrob offers
     return mock.patch.object(links, "set_factors", without_first_order)
 
 
