@@ -6,8 +6,10 @@ Prints one JSON document::
      "robots": [{"robot", "joints", "entries" (uncertain parameters before
                  reduction: one per varying Jacobian entry, the paper's box),
                  "parameters" (after: the model "auto" resolves to), "model",
+                 "uncertainty" (the set in one phrase), "inner_layer",
                  "bound_s", "synthesis_s", "analysis_s", "mu_upper", "mu_upper_grid",
-                 "certified", "order", "alpha", "validation", "reason", "error"}, ...],
+                 "certified", "order", "structure", "alpha", "bandwidth" (rad/s),
+                 "moving" (with --moving), "validation", "reason", "error"}, ...],
      "batch_seconds": ...,
      "speedup": {"robots": [...], "seconds_1_worker", "seconds_2_workers", "speedup"}}
 
@@ -26,6 +28,8 @@ and on the engineer's set of each arm (per-link ±10 %, an instrument of 0-1.5 k
 within 0.1 m of the flange, friction: docs/uncertainty.md)::
 
     python benchmarks/fleet.py --all-serial --max-bandwidth --speedup-robots "" --robot-uncertainty default
+
+``--moving`` adds each row's moving-robot certificate (``polyrob batch --moving``).
 
 A robot is ``NAME`` or ``NAME:DOMAIN`` (a named domain, e.g. ``paper_2r:paper``).
 The robots of ``--robots`` run in one batch with ``-j`` workers; the speed-up
@@ -61,6 +65,8 @@ def _row(r) -> dict:
         "robot": r.name,
         "domain": r.domain,
         "inner": r.inner,
+        "inner_layer": r.inner_layer,
+        "uncertainty": r.uncertainty,
         "reflected_inertia": r.reflected_inertia,
         "status": r.status,
         "joints": r.joints,
@@ -79,7 +85,10 @@ def _row(r) -> dict:
         "mu_lower": r.mu_lower,
         "certified": r.certified,
         "order": r.order,
+        "structure": r.structure,
         "alpha": r.alpha,
+        "bandwidth": r.bandwidth,
+        "moving": r.moving,
         "validation": r.validation,
         "reason": r.reason,
         "error": None if r.ok else f"{r.error}: {r.message}",
@@ -106,6 +115,7 @@ def main(argv=None) -> int:
         default=None,
         help="a robot-uncertainty set for every job: 'default' (the engineer's set of each arm) or a YAML/JSON file",
     )
+    p.add_argument("--moving", action="store_true", help="each row's moving-robot certificate too (batch --moving)")
     p.add_argument("--no-validate", action="store_true")
     p.add_argument(
         "--no-analysis", action="store_true", help="skip the mu analysis sweeps (the row: the synthesis certificate)"
@@ -131,6 +141,7 @@ def main(argv=None) -> int:
         validate=not args.no_validate,
         analyze=not args.no_analysis,
         search_bandwidth=args.max_bandwidth,
+        moving=args.moving,
         alphas=None if args.alphas is None else tuple(float(a) for a in args.alphas.split(",")),
     )
     if args.omega is not None:
@@ -169,8 +180,12 @@ def main(argv=None) -> int:
             "cores": len(os.sched_getaffinity(0)),
             "load_average_at_start": os.getloadavg(),
         },
-        "settings": {**options, "uncertainty": args.uncertainty, "robot_uncertainty": args.robot_uncertainty,
-                     "workers": args.workers},
+        "settings": {
+            **options,
+            "uncertainty": args.uncertainty,
+            "robot_uncertainty": args.robot_uncertainty,
+            "workers": args.workers,
+        },
     }
     res = run_batch(jobs(args.robots), workers=args.workers, progress=show, **options)
     doc["robots"] = [_row(r) for r in res.results]
@@ -195,25 +210,33 @@ def main(argv=None) -> int:
 
 def fleet_record(doc: dict) -> dict:
     """The batch's results-file record: the robots' table and the count certified, with the command and machine."""
+    from polyrob.fleet.outputs import controller_words, moving_words
+
     rows = doc["robots"]
     certified = sum(bool(r["certified"]) for r in rows)
-    columns = ["robot", "model (real scalars)", "status", "μ at every frequency", "μ on the grid", "factor α", "order"]
-    columns += ["validation", "bounds s", "robot s"]
+    columns = ["robot", "uncertainty", "inner layer", "model (real scalars)", "status", "frozen μ at every frequency"]
+    columns += ["μ on the grid", "moving robot", "controller", "bandwidth rad/s", "factor α", "validation"]
+    columns += ["bounds s", "robot s"]
     why = any(r.get("reason") for r in rows)
     columns += ["what stands in the way"] if why else []
     table = [
         [
             r["robot"],
+            r.get("uncertainty") or "–",
+            r.get("inner_layer") or "–",
             f"{r['model']} ({r['parameters']})" if r["model"] else "–",
             r["status"] or f"FAILED: {r['error']}",
             "–" if r["mu_upper"] is None else f"{r['mu_upper']:.4f}",
             "–" if r["mu_upper_grid"] is None else f"{r['mu_upper_grid']:.4g}",
+            moving_words(r.get("moving")) or "not asked (--moving)",
+            controller_words(r) or "–",
+            "–" if r.get("bandwidth") is None else f"{r['bandwidth']:.3g}",
             "–" if r["alpha"] is None else f"{r['alpha']:.4g}",
-            "–" if r["order"] is None else str(r["order"]),
             r["validation"] or "–",
             "–" if r["bound_s"] is None else f"{r['bound_s']:.0f}",
             f"{r['total_s']:.0f}",
-        ] + ([r.get("reason") or "–"] if why else [])
+        ]
+        + ([r.get("reason") or "–"] if why else [])
         for r in rows
     ]
     figure = f"{certified} of {len(rows)} robots CERTIFIED; {doc['batch_seconds']:.0f} s"

@@ -133,18 +133,28 @@ def test_the_benchmarks_turn_their_json_into_records(monkeypatch):
         robot="ur5", model="inner-gain", parameters=2, status="CERTIFIED", mu_upper=0.66521, alpha=32.0, order=12
     )
     row.update(validation="settled, inside", bound_s=108.2, total_s=183.4, certified=True, error=None)
-    row.update(mu_upper_grid=0.6601, reason=None)
+    row.update(mu_upper_grid=0.6601, reason=None, uncertainty="links ±10 % (all by one factor); no payload")
+    row.update(inner_layer="computed-torque", structure="pid", bandwidth=31.24, moving=None)
     failed = dict(row, robot="TwoDofs", model=None, status=None, mu_upper=None, alpha=None, order=None, certified=False)
     failed.update(validation=None, bound_s=None, total_s=5.0, error="PerformanceLimit: >= 1", mu_upper_grid=None)
-    failed.update(reason="performance limit 1.3 at the weights used")
-    record = fleet.fleet_record({"robots": [row, failed], "batch_seconds": 1154.4})
+    failed.update(reason="performance limit 1.3 at the weights used", uncertainty=None, inner_layer="none")
+    failed.update(structure=None, bandwidth=None)
+    moving = {"computed": True, "certified": True, "status": "CERTIFIED", "gamma": 0.9123}
+    record = fleet.fleet_record({"robots": [dict(row, moving=moving), failed], "batch_seconds": 1154.4})
     assert record["figure"] == "1 of 2 robots CERTIFIED; 1154 s" and record["id"].startswith("batch-")
-    assert record["table"]["columns"][4] == "μ on the grid" and record["table"]["columns"][-1] == "what stands in the way"
+    columns = record["table"]["columns"]
+    assert columns[:3] == ["robot", "uncertainty", "inner layer"] and columns[-1] == "what stands in the way"
+    assert columns[5:8] == ["frozen μ at every frequency", "μ on the grid", "moving robot"]
+    assert columns[8:10] == ["controller", "bandwidth rad/s"]
     assert record["table"]["rows"] == [
-        ["ur5", "inner-gain (2)", "CERTIFIED", "0.6652", "0.6601", "32", "12", "settled, inside", "108", "183", "–"],
-        ["TwoDofs", "–", "FAILED: PerformanceLimit: >= 1", "–", "–", "–", "–", "–", "–", "5",
-         "performance limit 1.3 at the weights used"],
+        ["ur5", "links ±10 % (all by one factor); no payload", "computed-torque", "inner-gain (2)", "CERTIFIED",
+         "0.6652", "0.6601", "CERTIFIED (<= 0.9123)", "per-joint PID", "31.2", "32", "settled, inside", "108", "183",
+         "–"],
+        ["TwoDofs", "–", "none", "–", "FAILED: PerformanceLimit: >= 1", "–", "–", "not asked (--moving)", "–", "–",
+         "–", "–", "–", "5", "performance limit 1.3 at the weights used"],
     ]  # fmt: skip
+    no_pid = fleet.fleet_record({"robots": [dict(row, structure="full")], "batch_seconds": 1.0})
+    assert no_pid["table"]["rows"][0][8] == "full, order 12"
     runs = [
         {
             "command": "run --json --quiet",

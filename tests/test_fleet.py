@@ -604,3 +604,64 @@ def test_the_batch_tunes_for_the_moving_robot_and_checks_the_tuned_pid(pendulums
     # no model of constants (the robot bare, on its torque box): the design kept, the reason in the row
     bare = run_job(Job(robot=pendulums[0]), Settings(**fast, tune_moving=1))
     assert bare.ok and bare.details["moving_tuning"].startswith("not tuned: ")
+
+
+def test_a_row_says_uncertainty_inner_layer_controller_and_bandwidth(pendulums, monkeypatch):
+    """Issue 38's fleet table: robot, uncertainty, inner layer, frozen mu, moving robot, controller, bandwidth, time.
+
+    The bandwidth is the nominal loop's crossover of the row's own controller; a job whose synthesis fails
+    after its problem was built keeps what the problem says (before, such a row was all dashes)."""
+    import polyrob.fleet.jobs as jobs
+    from polyrob.errors import SynthesisError
+    from polyrob.fleet.jobs import _problem
+    from polyrob.fleet.outputs import markdown_table
+    from polyrob.fleet.results import controller_system
+    from polyrob.synthesis.bandwidth_stop import loop_crossover
+
+    bounds = {"samples": 16, "refine": False, "screen": 0, "verify_rounds": 0}
+    fast = dict(FAST, bound_options=bounds, validate=False, analyze=False)
+    job = Job(robot=pendulums[0], q_radius=0.2, qdot_max=0.5, qddot_max=1.0, inner="computed-torque", model_error=0.1)
+    r = run_job(job, Settings(**fast))
+    assert r.ok, r.message
+    row = r.row()
+    assert (
+        row["inner_layer"] == "computed-torque" and row["uncertainty"] == "links ±10 % (all by one factor); no payload"
+    )
+    assert row["structure"] == "pid"  # the arms' computed-torque loops start from (and keep) the tuned PID
+    problem = _problem(job, Settings(**fast), {})
+    assert row["bandwidth"] == pytest.approx(loop_crossover(problem.P, controller_system(r.controller)), rel=1e-9)
+    assert 0 < row["bandwidth"] < math.inf
+    header, _, line = markdown_table([row]).splitlines()
+    for title in (
+        "uncertainty",
+        "inner layer",
+        "mu bound",
+        "moving robot",
+        "controller",
+        "bandwidth (rad/s)",
+        "time (s)",
+    ):
+        assert f"| {title} |" in header
+    assert "| computed-torque |" in line and "| per-joint PID |" in line and f"| {row['bandwidth']:.4g} |" in line
+    # without an inner layer: no parameter set is stated (the model is the domain's Jacobians)
+    bare = run_job(Job(robot=pendulums[0]), Settings(**fast)).row()
+    assert bare["inner_layer"] == "none" and bare["uncertainty"] is None
+
+    def fails(problem, settings, timings, details):
+        raise SynthesisError("no bandwidth factor certifies (a stand-in)")
+
+    monkeypatch.setattr(jobs, "design_stage", fails)
+    lost = run_job(job, Settings(**fast)).row()
+    assert not lost["ok"] and lost["error"] == "SynthesisError" and lost["order"] is None
+    assert lost["uncertainty"] == row["uncertainty"] and lost["model"] == row["model"] and lost["joints"] == 1
+    assert "| FAILED: SynthesisError: no bandwidth factor certifies (a stand-in) |" in markdown_table([lost])
+
+
+def test_the_controller_cell_names_the_structure_and_order():
+    from polyrob.fleet.outputs import controller_words, moving_words
+
+    assert controller_words({"structure": "pid", "order": 2}) == "per-joint PID"
+    assert controller_words({"structure": "full", "order": 14}) == "full, order 14"
+    assert controller_words({"order": None}) is None
+    assert moving_words(None) is None and moving_words({"computed": False}) == "not computed"
+    assert moving_words({"computed": True, "status": "CERTIFIED", "gamma": 0.91}) == "CERTIFIED (<= 0.91)"

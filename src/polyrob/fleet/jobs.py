@@ -369,25 +369,46 @@ def run_job(job: Job, settings: Settings) -> RobotResult:
 
     t0 = time.perf_counter()
     timings: dict = {}
+    known: dict = {}  # what the problem says, once it is built: a row that fails later keeps it
     with single_blas_thread():
         try:
-            return _run(job, settings, timings, t0)
+            return _run(job, settings, timings, t0, known)
         except Exception as exc:  # noqa: BLE001 - one robot's failure is data (recorded), not the batch's end
             return RobotResult(
                 name=job.name,
-                robot=str(job.robot),
                 ok=False,
                 error=type(exc).__name__,
                 message=one_line(exc),
                 seconds=time.perf_counter() - t0,
                 timings=timings,
+                **{"robot": str(job.robot), **known},
             )
 
 
-def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
+def _problem_fields(problem) -> dict:
+    """The row's fields that the problem alone decides (its robot, domain, model and set)."""
+    robot = problem.robot
+    return {
+        "robot": robot.name,
+        "joints": int(robot.m),
+        "entries": len(problem.pldi.entries),
+        "parameters": int(problem.unc.n_params),
+        "model": problem.model,
+        "enclosure": problem.scope().enclosure,  # what the certificate rests on: proved factor ranges under --certify
+        "domain": problem.domain.name,
+        "inner": robot.words() if hasattr(robot, "inner") else "none",
+        "inner_layer": getattr(robot, "inner", "none"),
+        "uncertainty": robot.set_words() if hasattr(robot, "set_words") else None,
+        "reflected_inertia": str(getattr(robot, "reflected_inertia", "unknown")),
+    }
+
+
+def _run(job: Job, settings: Settings, timings: dict, t0: float, known: dict) -> RobotResult:
     from polyrob.pipeline import analyze_controller
+    from polyrob.synthesis.bandwidth_stop import loop_crossover
 
     problem = _problem(job, settings, timings)
+    known.update(_problem_fields(problem))
     details = {}
     design, alpha, hyper, omega, skipped = design_stage(problem, settings, timings, details)
     if alpha is not None:
@@ -472,22 +493,16 @@ def _run(job: Job, settings: Settings, timings: dict, t0: float) -> RobotResult:
     K = controller_data(design.controller)
     return RobotResult(
         name=job.name,
-        robot=problem.robot.name,
         ok=True,
-        joints=int(problem.robot.m),
-        entries=len(problem.pldi.entries),
-        parameters=int(problem.unc.n_params),
-        model=problem.model,
-        enclosure=problem.scope().enclosure,  # what the certificate rests on: proved factor ranges under --certify
-        domain=problem.domain.name,
-        inner=problem.robot.words() if hasattr(problem.robot, "inner") else "none",
-        reflected_inertia=str(getattr(problem.robot, "reflected_inertia", "unknown")),
+        **_problem_fields(problem),  # the scaled problem's, where the design was certified
         mu_upper=float(cert.mu_upper) if math.isfinite(cert.mu_upper) else None,
         mu_upper_grid=float(cert.mu_upper_grid),
         mu_lower=float(cert.mu_lower),
         status=cert.status.value,
         order=int(design.record.get("order", design.result.order)),
+        structure=design.record.get("structure", getattr(design.result, "structure", None)),
         alpha=alpha,
+        bandwidth=float(loop_crossover(problem.P, design.controller)),
         verdict="verdict: " + cert.verdict,
         validation=validation,
         validation_at_rate=at_rate,

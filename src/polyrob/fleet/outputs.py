@@ -23,20 +23,30 @@ import math
 import re
 from pathlib import Path
 
-__all__ = ["robot_dir_name", "write_robot", "write_summary", "markdown_table", "plain"]
+__all__ = [
+    "robot_dir_name",
+    "write_robot",
+    "write_summary",
+    "markdown_table",
+    "controller_words",
+    "moving_words",
+    "plain",
+]
 
 COLUMNS = (
     ("robot", "robot"),
     ("joints", "joints"),
-    ("entries", "entries"),
+    ("uncertainty", "uncertainty"),
+    ("inner_layer", "inner layer"),
     ("parameters", "parameters"),
     ("mu_upper", "mu bound"),
     ("mu_upper_grid", "mu peak (grid)"),
-    ("order", "order"),
-    ("alpha", "bandwidth factor"),
-    ("seconds", "time (s)"),
     ("status", "status"),
     ("moving_status", "moving robot"),
+    ("controller_words", "controller"),
+    ("bandwidth", "bandwidth (rad/s)"),
+    ("alpha", "bandwidth factor"),
+    ("seconds", "time (s)"),
     ("validation", "validation"),
     ("at_rate", "validation at the rate"),
 )
@@ -109,7 +119,7 @@ def _status(row: dict) -> str:
     return str(row.get("status") or "-")
 
 
-def _moving(moving: dict) -> str | None:
+def moving_words(moving: dict | None) -> str | None:
     """The moving-robot cell: its status and bound, why it was not computed, or nothing (not asked)."""
     if not moving:
         return None
@@ -117,6 +127,15 @@ def _moving(moving: dict) -> str | None:
         return "not computed"
     gamma = moving.get("gamma")
     return f"{moving.get('status')}" + ("" if gamma is None else f" (<= {gamma:.4g})")
+
+
+def controller_words(row: dict) -> str | None:
+    """The controller in a few words: ``"per-joint PID"`` or its structure and order (``None``: no controller)."""
+    if row.get("order") is None:
+        return None
+    if row.get("structure") == "pid":
+        return "per-joint PID"
+    return f"{row.get('structure') or 'state space'}, order {row['order']}"
 
 
 def _cell(value) -> str:
@@ -133,7 +152,13 @@ def markdown_table(rows) -> str:
     for row in rows:
         at_rate = row.get("validation_at_rate") or {}
         moving = row.get("moving") or {}
-        row = dict(row, status=_status(row), at_rate=at_rate.get("verdict"), moving_status=_moving(moving))
+        row = dict(
+            row,
+            status=_status(row),
+            at_rate=at_rate.get("verdict"),
+            moving_status=moving_words(moving),
+            controller_words=controller_words(row),
+        )
         lines.append("| " + " | ".join(_cell(row.get(key)) for key, _ in COLUMNS) + " |")
     return "\n".join(lines) + "\n"
 

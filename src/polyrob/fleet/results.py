@@ -32,8 +32,17 @@ class RobotResult:
     positive definite (:func:`polyrob.plant.coverage.input_definiteness`),
     or neither found (then μ ≥ 1 is the synthesis' best).  ``domain`` is the
     domain's name (a task domain's says pose, radius and rate bounds),
-    ``inner`` the inner layer with its ranges (``"none"``), and
+    ``inner`` the inner layer with its ranges (``"none"``), ``inner_layer``
+    its kind alone (``"computed-torque"``, ``"gravity"``, ``"none"``),
+    ``uncertainty`` the set of true robots in one phrase (``None``: none is
+    stated; the model is the Jacobians over the domain), and
     ``reflected_inertia`` whether and whence rotor inertia is in ``M(q)``.
+    ``structure`` is the controller's (``"pid"``: per-joint PID; ``"full"``:
+    full order, reduced to ``order`` when the reduction kept one) and
+    ``bandwidth`` the nominal loop's largest gain crossover in rad/s
+    (:func:`~polyrob.synthesis.bandwidth_stop.loop_crossover`).  A job that
+    fails after its problem is built keeps what the problem says (joints,
+    model, domain, inner layer, uncertainty).
     ``moving`` is the moving-robot certificate when the batch computed it
     (``Settings.moving``): its status, bound and verdict line; once computed
     it decides :attr:`certified` with μ.
@@ -51,13 +60,17 @@ class RobotResult:
     enclosure: str | None = None
     domain: str | None = None
     inner: str | None = None
+    inner_layer: str | None = None
+    uncertainty: str | None = None
     reflected_inertia: str | None = None
     mu_upper: float | None = None
     mu_upper_grid: float | None = None
     mu_lower: float | None = None
     status: str | None = None
     order: int | None = None
+    structure: str | None = None
     alpha: float | None = None
+    bandwidth: float | None = None
     verdict: str | None = None
     validation: str | None = None
     validation_at_rate: dict | None = None
@@ -97,13 +110,17 @@ class RobotResult:
             "enclosure",
             "domain",
             "inner",
+            "inner_layer",
+            "uncertainty",
             "reflected_inertia",
             "mu_upper",
             "mu_upper_grid",
             "mu_lower",
             "status",
             "order",
+            "structure",
             "alpha",
+            "bandwidth",
             "verdict",
             "validation",
             "validation_at_rate",

@@ -227,6 +227,12 @@ class InnerLoopRobot(Manipulator):
             parts.append(_bounds_words(len(self._scenarios) + 1, "range corners", bounds_used))
         return "; ".join(parts)
 
+    def set_words(self) -> str:
+        """The set of true robots in one phrase (a batch row's uncertainty): the link factor and the payload."""
+        parts = [f"links ±{100 * self.model_error:g} % (all by one factor)"] if self.model_error else ["links nominal"]
+        parts.append(self.payload.words() if self.payload is not None else "no payload")
+        return "; ".join(parts)
+
     def describe(self) -> dict:
         out = super().describe()
         out["inner"] = {"layer": self.inner, "model_error": self.model_error}
@@ -329,6 +335,9 @@ class SetLoopRobot(InnerLoopRobot):
         if len(self._scenarios):
             parts.append(_bounds_words(len(self._scenarios) + 1, "the model and random draws", bounds_used))
         return "; ".join(parts)
+
+    def set_words(self) -> str:
+        return self.uncertainty.words()
 
     def describe(self) -> dict:
         out = super().describe()
