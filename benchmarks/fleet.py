@@ -213,6 +213,7 @@ def fleet_record(doc: dict) -> dict:
     from polyrob.fleet.outputs import controller_words, moving_words
 
     rows = doc["robots"]
+    asked = bool(doc.get("settings", {}).get("moving"))  # a row that failed before its moving-robot stage: "–"
     certified = sum(bool(r["certified"]) for r in rows)
     columns = ["robot", "uncertainty", "inner layer", "model (real scalars)", "status", "frozen μ at every frequency"]
     columns += ["μ on the grid", "moving robot", "controller", "bandwidth rad/s", "factor α", "validation"]
@@ -228,7 +229,7 @@ def fleet_record(doc: dict) -> dict:
             r["status"] or f"FAILED: {r['error']}",
             "–" if r["mu_upper"] is None else f"{r['mu_upper']:.4f}",
             "–" if r["mu_upper_grid"] is None else f"{r['mu_upper_grid']:.4g}",
-            moving_words(r.get("moving")) or "not asked (--moving)",
+            moving_words(r.get("moving")) or ("–" if asked or r.get("error") else "not asked (--moving)"),
             controller_words(r) or "–",
             "–" if r.get("bandwidth") is None else f"{r['bandwidth']:.3g}",
             "–" if r["alpha"] is None else f"{r['alpha']:.4g}",

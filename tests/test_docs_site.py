@@ -150,11 +150,13 @@ def test_the_benchmarks_turn_their_json_into_records(monkeypatch):
         ["ur5", "links ±10 % (all by one factor); no payload", "computed-torque", "inner-gain (2)", "CERTIFIED",
          "0.6652", "0.6601", "CERTIFIED (<= 0.9123)", "per-joint PID", "31.2", "32", "settled, inside", "108", "183",
          "–"],
-        ["TwoDofs", "–", "none", "–", "FAILED: PerformanceLimit: >= 1", "–", "–", "not asked (--moving)", "–", "–",
+        ["TwoDofs", "–", "none", "–", "FAILED: PerformanceLimit: >= 1", "–", "–", "–", "–", "–",
          "–", "–", "–", "5", "performance limit 1.3 at the weights used"],
     ]  # fmt: skip
     no_pid = fleet.fleet_record({"robots": [dict(row, structure="full")], "batch_seconds": 1.0})
-    assert no_pid["table"]["rows"][0][8] == "full, order 12"
+    assert no_pid["table"]["rows"][0][7:9] == ["not asked (--moving)", "full, order 12"]
+    asked = fleet.fleet_record({"robots": [row], "batch_seconds": 1.0, "settings": {"moving": True}})
+    assert asked["table"]["rows"][0][7] == "–"
     runs = [
         {
             "command": "run --json --quiet",

@@ -561,7 +561,7 @@ def test_the_moving_robot_certificate_is_a_column_and_decides_the_row(pendulums,
     monkeypatch.setattr(jobs, "moving_stage", lambda problem, K, scalings=None: dict(refused))
     r2 = run_job(job, Settings(**fast, moving=True))
     assert r2.status == "CERTIFIED" and not r2.certified and r2.row()["certified"] is False
-    assert "NOT_CERTIFIED (<= 1.3)" in markdown_table([r2.row()])
+    assert "NOT_CERTIFIED (1.3 on its grid)" in markdown_table([r2.row()])  # no bound: its test's grid figure
     # a moving-robot test that cannot run is said in the row, which keeps its frozen certificate
     from polyrob.errors import SolverError
 
@@ -664,4 +664,10 @@ def test_the_controller_cell_names_the_structure_and_order():
     assert controller_words({"structure": "full", "order": 14}) == "full, order 14"
     assert controller_words({"order": None}) is None
     assert moving_words(None) is None and moving_words({"computed": False}) == "not computed"
-    assert moving_words({"computed": True, "status": "CERTIFIED", "gamma": 0.91}) == "CERTIFIED (<= 0.91)"
+    assert (
+        moving_words({"computed": True, "certified": True, "status": "CERTIFIED", "gamma": 0.91})
+        == "CERTIFIED (<= 0.91)"
+    )
+    # a moving-robot test that does not hold gives no bound: finger_edu's read "NOT_CERTIFIED (<= 4.797)" before
+    refused = {"computed": True, "certified": False, "status": "NOT_CERTIFIED", "gamma": 4.797}
+    assert moving_words(refused) == "NOT_CERTIFIED (4.797 on its grid)"

@@ -120,13 +120,21 @@ def _status(row: dict) -> str:
 
 
 def moving_words(moving: dict | None) -> str | None:
-    """The moving-robot cell: its status and bound, why it was not computed, or nothing (not asked)."""
+    """The moving-robot cell: its status and figure, why it was not computed, or nothing (not asked).
+
+    The figure is a bound (``<=``) only when the certificate holds; otherwise
+    ``gamma`` is what its test reached on its grid (the μ route's grid peak
+    of a sufficient test, or the L2 gain's level at the grid's points), no
+    bound of the moving robot's gain, and the cell says so.
+    """
     if not moving:
         return None
     if not moving.get("computed"):
         return "not computed"
-    gamma = moving.get("gamma")
-    return f"{moving.get('status')}" + ("" if gamma is None else f" (<= {gamma:.4g})")
+    gamma, status = moving.get("gamma"), f"{moving.get('status')}"
+    if gamma is None:
+        return status
+    return f"{status} (<= {gamma:.4g})" if moving.get("certified") else f"{status} ({gamma:.4g} on its grid)"
 
 
 def controller_words(row: dict) -> str | None:
