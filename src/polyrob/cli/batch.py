@@ -146,6 +146,7 @@ def _fmt(value, spec: str = ".4g") -> str:
 
 def cmd_batch(args) -> int:
     from polyrob.fleet import run_batch
+    from polyrob.fleet.outputs import controller_words
 
     out = Output(args, stages=1)
     if args.output:
@@ -169,8 +170,8 @@ def cmd_batch(args) -> int:
         doc["files"] = res.files
     out.document(doc)
     out.line(
-        f"{'robot':<22}{'joints':>7}{'params':>8}{'mu bound':>10}{'mu grid':>9}{'order':>7}{'alpha':>8}{'time s':>9}"
-        "  result"
+        f"{'robot':<22}{'joints':>7}{'layer':>17}{'params':>8}{'mu bound':>10}{'mu grid':>9}{'controller':>15}"
+        f"{'rad/s':>8}{'alpha':>8}{'time s':>9}  result"
     )
     problem_lines = []
     for r in res.results:
@@ -187,16 +188,18 @@ def cmd_batch(args) -> int:
             result += f"; at the rate: {r.validation_at_rate['verdict']}"
         if r.ok and r.reason:
             result += f"; why: {r.reason}"
+        controller = controller_words(r.row()) or "-"
         out.line(
-            f"{r.name:<22}{_fmt(r.joints, 'd'):>7}{_fmt(r.parameters, 'd'):>8}{_fmt(r.mu_upper):>10}"
-            f"{_fmt(r.mu_upper_grid):>9}{_fmt(r.order, 'd'):>7}{_fmt(r.alpha):>8}{r.seconds:>9.1f}  {result}"
+            f"{r.name:<22}{_fmt(r.joints, 'd'):>7}{r.inner_layer or '-':>17}{_fmt(r.parameters, 'd'):>8}"
+            f"{_fmt(r.mu_upper):>10}{_fmt(r.mu_upper_grid):>9}{controller:>15}{_fmt(r.bandwidth, '.3g'):>8}"
+            f"{_fmt(r.alpha):>8}{r.seconds:>9.1f}  {result}"
         )
-        if r.ok:
+        if r.domain is not None:  # a row that failed after its problem was built says it too
             problem_lines.append(
                 f"  {r.name}: domain {r.domain}; {r.inner}; reflected rotor inertia: {r.reflected_inertia}"
             )
     if problem_lines:
-        out.line("problems (domain; inner layer; reflected rotor inertia):")
+        out.line("problems (domain; inner layer and the set of true robots; reflected rotor inertia):")
         for line in problem_lines:
             out.line(line)
     out.line(
