@@ -29,7 +29,8 @@ within 0.1 m of the flange, friction: docs/uncertainty.md)::
 
     python benchmarks/fleet.py --all-serial --max-bandwidth --speedup-robots "" --robot-uncertainty default
 
-``--moving`` adds each row's moving-robot certificate (``polyrob batch --moving``).
+``--moving`` adds each row's moving-robot certificate (``polyrob batch --moving``);
+``--only so101,ur5`` keeps those of ``--all-serial``'s robots, with its defaults.
 
 A robot is ``NAME`` or ``NAME:DOMAIN`` (a named domain, e.g. ``paper_2r:paper``).
 The robots of ``--robots`` run in one batch with ``-j`` workers; the speed-up
@@ -101,6 +102,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--robots", default="planar_2r,paper_2r:paper,TwoDofs,so101")
     p.add_argument("--all-serial", action="store_true", help="polyrob.fleet.SERIAL_ARMS with the batch's defaults")
+    p.add_argument(
+        "--only", default=None, help="with --all-serial: only these of its robots (comma-separated), the same defaults"
+    )
     p.add_argument("--speedup-robots", default="planar_2r,TwoDofs")
     p.add_argument("-j", "--workers", type=int, default=2, help="workers of the main batch")
     p.add_argument("--samples", type=int, default=None, help="bounds: Sobol' positions (default 256)")
@@ -129,7 +133,12 @@ def main(argv=None) -> int:
     if args.all_serial:
         from polyrob.fleet import serial_arms
 
-        args.robots = ",".join(serial_arms())
+        only = None if args.only is None else {name.strip() for name in args.only.split(",") if name.strip()}
+        if only is not None and not only <= set(serial_arms()):
+            raise SystemExit(
+                f"--only {args.only}: not serial arms of this installation: {sorted(only - set(serial_arms()))}"
+            )
+        args.robots = ",".join(name for name in serial_arms() if only is None or name in only)
     else:  # the settings of the first figures of docs/fleet.md
         defaults = {"samples": 256, "max_iter": 2, "omega": "0.01:1000:30", "mc": 50}
         for key, value in defaults.items():
