@@ -31,6 +31,8 @@ within 0.1 m of the flange, friction: docs/uncertainty.md)::
 
 ``--moving`` adds each row's moving-robot certificate (``polyrob batch --moving``);
 ``--only so101,ur5`` keeps those of ``--all-serial``'s robots, with its defaults.
+A run stopped with Ctrl-C (or SIGTERM) prints and saves (``--results``) the
+robots it finished, as a record titled "(stopped)" that names the others.
 
 A robot is ``NAME`` or ``NAME:DOMAIN`` (a named domain, e.g. ``paper_2r:paper``).
 The robots of ``--robots`` run in one batch with ``-j`` workers; the speed-up
@@ -43,7 +45,9 @@ import argparse
 import json
 import os
 import platform
+import signal
 import sys
+import time
 
 from _results import append_record, new_record, stamp
 
@@ -170,7 +174,10 @@ def main(argv=None) -> int:
     def jobs(text):
         return [dict(j, uncertainty=args.uncertainty, **extra) for j in _jobs(text)]
 
+    finished = []  # the robots done, in the order they finished (what a stopped run keeps)
+
     def show(r, done, total):
+        finished.append(r)
         print(
             f"[{done}/{total}] {r.name}: "
             + (
@@ -196,7 +203,19 @@ def main(argv=None) -> int:
             "workers": args.workers,
         },
     }
-    res = run_batch(jobs(args.robots), workers=args.workers, progress=show, **options)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)  # `kill` stops it as Ctrl-C does: the rows done are kept
+    t0 = time.perf_counter()
+    try:
+        res = run_batch(jobs(args.robots), workers=args.workers, progress=show, **options)
+    except KeyboardInterrupt:  # the batch cancelled its queue and ended its workers: keep the robots it finished
+        names = [j["label"] for j in jobs(args.robots)]
+        doc.update(robots=[_row(r) for r in finished], stopped=True, batch_seconds=round(time.perf_counter() - t0, 1))
+        doc["asked"], doc["unfinished"] = names, [n for n in names if n not in {r.name for r in finished}]
+        doc["load_average_at_end"] = os.getloadavg()
+        print(json.dumps(doc, indent=1, default=str))
+        if args.results:
+            append_record(args.results, "fleet", "benchmarks/fleet.py", fleet_record(doc))
+        return 130
     doc["robots"] = [_row(r) for r in res.results]
     doc["batch_seconds"] = round(res.seconds, 1)
     if args.speedup_robots:
@@ -250,9 +269,15 @@ def fleet_record(doc: dict) -> dict:
         for r in rows
     ]
     figure = f"{certified} of {len(rows)} robots CERTIFIED; {doc['batch_seconds']:.0f} s"
+    title = "Batch of " + ", ".join(doc.get("asked") or [r["robot"] for r in rows])
+    if doc.get("stopped"):  # a stopped run: the robots it finished, the others named, no whole-batch time
+        unfinished = doc.get("unfinished", [])
+        figure = f"stopped after {doc['batch_seconds']:.0f} s: {len(rows)} robot(s) done, {certified} CERTIFIED"
+        figure += f"; not finished: {', '.join(unfinished)}" if unfinished else ""
+        title += " (stopped)"
     return new_record(
         "batch-" + stamp(),
-        "Batch of " + ", ".join(r["robot"] for r in rows),
+        title,
         figure,
         table={"columns": columns, "rows": table},
         data=doc,
