@@ -7,9 +7,11 @@ machine made L-BFGS-B, SLSQP and eig calls 5-30x slower.
 
 from __future__ import annotations
 
+import ctypes
 import os
+import threading
 
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 __all__ = ["single_blas_thread", "single_blas_thread_for_life"]
 
@@ -17,9 +19,56 @@ __all__ = ["single_blas_thread", "single_blas_thread_for_life"]
 THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
+_CONTROLLER: list = [None, -1]  # the process's ThreadpoolController and the count of shared objects it saw
+_LOCK = threading.Lock()
+
+
+def _loaded_objects() -> int:
+    """How many shared objects this process has loaded (``dl_iterate_phdr``; -1 where it is unavailable)."""
+    try:
+        libc = ctypes.CDLL(None)
+        count = [0]
+
+        def one(info, size, data):
+            count[0] += 1
+            return 0
+
+        libc.dl_iterate_phdr(_PHDR_CALLBACK(one), None)
+        return count[0]
+    except (AttributeError, OSError):
+        return -1
+
+
+_PHDR_CALLBACK = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p)
+
+
+def _controller() -> ThreadpoolController:
+    """One ``ThreadpoolController`` per process, found again when a library was loaded since.
+
+    ``threadpool_limits`` builds a controller at every call, which scans the
+    process's shared objects and opens each BLAS one (about 1 ms); μ bounds
+    take the limit once per matrix, tens of thousands of times in a sweep.
+    Counting the loaded objects costs about 40 µs and says when a copy of
+    BLAS may have come in (slycot's, loaded late), so none is left unlimited.
+    """
+    loaded = _loaded_objects()
+    with _LOCK:
+        if _CONTROLLER[0] is None or loaded < 0 or loaded != _CONTROLLER[1]:
+            _CONTROLLER[:] = [ThreadpoolController(), loaded]
+        return _CONTROLLER[0]
+
+
 def single_blas_thread():
-    """A context manager limiting BLAS to one thread."""
-    return threadpool_limits(limits=1, user_api="blas")
+    """A context manager limiting BLAS to one thread.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> with single_blas_thread():
+    ...     float(np.linalg.norm(np.eye(3)))
+    1.7320508075688772
+    """
+    return _controller().limit(limits=1, user_api="blas")
 
 
 def single_blas_thread_for_life():
