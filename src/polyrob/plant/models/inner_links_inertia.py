@@ -84,6 +84,7 @@ def spectrum_bounds(box_rest, payload_rest, pay) -> tuple[np.ndarray, np.ndarray
     A = np.einsum("...ab,...b,...cb->...ac", vectors, np.abs(values), vectors).sum(axis=0)  # (S, m, m)
     skew = skew.sum(axis=0)
     if len(payload_rest):
+        pay = np.asarray(pay, float)[_distinct(pay)[0]]  # the extremes over the points: the distinct ones suffice
         S_p, skew_p = _sym_skew(np.einsum("pi,isab->psab", pay, payload_rest))
         top = np.linalg.eigvalsh(S_p + A).max(axis=-1)
         bottom = np.linalg.eigvalsh(S_p - A).min(axis=-1)
@@ -101,6 +102,21 @@ def _dilation(X) -> np.ndarray:
     out[..., :r, r:] = X
     out[..., r:, :r] = np.swapaxes(X, -1, -2)
     return out
+
+
+def _distinct(pay) -> tuple[np.ndarray, np.ndarray]:
+    """``(first, inverse)``: a row of ``pay`` for each distinct point, and each row's among them (``pay[first][inverse] == pay``).
+
+    A payload whose mass range starts at 0 has one point at that end for
+    all its centres of mass (half of :func:`payload_points`); the largest
+    eigenvalues over the points are taken on the distinct ones, the same
+    values at half the work.
+    """
+    pay = np.asarray(pay, float)
+    if pay.ndim != 2 or not len(pay):
+        return np.arange(len(pay)), np.arange(len(pay))
+    _, first, inverse = np.unique(pay, axis=0, return_index=True, return_inverse=True)
+    return first, np.asarray(inverse).reshape(-1)
 
 
 @dataclass(frozen=True)
@@ -246,12 +262,15 @@ def g_norm_bound(box_rest, payload_rest, pay, kappa, shape=None, centre=None) ->
     A = _absolute_sum(box_rest)  # (S, 2m, 2m)
     R = np.einsum("pi,isab->psab", pay, payload_rest) if len(payload_rest) else np.zeros((1,) + box_rest.shape[1:])
 
+    first, inverse = _distinct(pay) if len(payload_rest) else (np.zeros(1, int), np.zeros(1, int))
+
     def largest(g, rows, chunk=32):  # (rows, S): the dilation's largest eigenvalue at each payload point and sample
-        out = np.empty((len(rows), A.shape[0]))
+        distinct, back = np.unique(inverse[rows], return_inverse=True)  # each distinct point once
+        out = np.empty((len(distinct), A.shape[0]))
         for start in range(0, A.shape[0], chunk):  # a payload's 1300 points times 512 samples: a gigabyte at once
             part = slice(start, start + chunk)
-            out[:, part] = np.linalg.eigvalsh(_dilation(R[rows, part] - g * eye) + A[part]).max(axis=-1)
-        return out
+            out[:, part] = np.linalg.eigvalsh(_dilation(R[first[distinct], part] - g * eye) + A[part]).max(axis=-1)
+        return out[np.asarray(back).reshape(-1)]
 
     bottom, top, _ = spectrum_bounds(box_rest, payload_rest, pay[::16])  # a start: any centre gives a bound
     g_c = 0.5 * (float(top.max()) + float(bottom.min()))
@@ -303,6 +322,7 @@ def shape_of(box_rest, payload_rest, pay, ridge: float = RIDGE, rounds: int = SH
     n_samples = (box_rest if len(box_rest) else payload_rest).shape[1]
     A = _absolute_sum(box_rest) if len(box_rest) else np.zeros((n_samples, 2 * m, 2 * m))
     X = np.einsum("pi,isab->psab", pay, payload_rest) if len(payload_rest) else np.zeros((1, n_samples, m, m))
+    first, inverse = _distinct(pay) if len(payload_rest) else (np.zeros(1, int), np.zeros(1, int))
     pairs = {
         (p, s) for p in range(0, len(X), max(1, len(X) // 16)) for s in range(0, n_samples, max(1, n_samples // 4))
     }
@@ -332,10 +352,11 @@ def shape_of(box_rest, payload_rest, pay, ridge: float = RIDGE, rounds: int = SH
         # the pairs it violates most: the dilation's largest eigenvalue in the shape's coordinates
         T = (vectors / np.sqrt(values)) @ vectors.T
         T2 = np.kron(np.eye(2), T)
-        worst = np.empty((len(X), n_samples))
+        worst = np.empty((len(first), n_samples))  # at the distinct points, then at every point
         for start in range(0, n_samples, 32):
             part = slice(start, start + 32)
-            worst[:, part] = np.linalg.eigvalsh(T2 @ (_dilation(X[:, part] - C) + A[part]) @ T2).max(axis=-1)
+            worst[:, part] = np.linalg.eigvalsh(T2 @ (_dilation(X[first, part] - C) + A[part]) @ T2).max(axis=-1)
+        worst = worst[inverse]
         new = {
             tuple(ij) for ij in np.argwhere(worst > 1.0 + 1e-6)[np.argsort(-worst[worst > 1.0 + 1e-6])][:24].tolist()
         }
@@ -366,6 +387,7 @@ def residual_norm_bounds(box_rest, payload_rest, pay, chunk: int = 16) -> np.nda
     A = _absolute_sum(box_rest)
     if not len(payload_rest):
         return np.linalg.eigvalsh(A).max(axis=-1)
+    pay = np.asarray(pay, float)[_distinct(pay)[0]]  # the largest over the points: the distinct ones suffice
     out = np.empty(box_rest.shape[1])
     for start in range(0, len(out), chunk):
         part = slice(start, start + chunk)
