@@ -67,7 +67,7 @@ def test_the_two_first_commands_are_the_main_job_and_the_tests():
 
 def test_ci_runs_exactly_the_readmes_test_command():
     first_block = re.search(r"```bash\n(.*?)```", README.read_text(), flags=re.S).group(1).splitlines()
-    pytest_command = first_block[1].split("#")[0].split("&&")[1].strip()  # python -m pytest -q -n 2
+    pytest_command = first_block[1].split("#")[0].split("&&")[1].strip()  # python -m pytest -q -n 2 --dist worksteal
     ci = (ROOT / ".ci" / "run").read_text()
     assert f'python -m pip install -q -e ".[test]" && {pytest_command}\n' in ci
 
