@@ -204,11 +204,12 @@ def main(argv=None) -> int:
         },
     }
     signal.signal(signal.SIGTERM, signal.default_int_handler)  # `kill` stops it as Ctrl-C does: the rows done are kept
+    batch_jobs = jobs(args.robots)
     t0 = time.perf_counter()
     try:
-        res = run_batch(jobs(args.robots), workers=args.workers, progress=show, **options)
+        res = run_batch(batch_jobs, workers=args.workers, progress=show, **options)
     except KeyboardInterrupt:  # the batch cancelled its queue and ended its workers: keep the robots it finished
-        names = [j["label"] for j in jobs(args.robots)]
+        names = [j["label"] for j in batch_jobs]
         doc.update(robots=[_row(r) for r in finished], stopped=True, batch_seconds=round(time.perf_counter() - t0, 1))
         doc["asked"], doc["unfinished"] = names, [n for n in names if n not in {r.name for r in finished}]
         doc["load_average_at_end"] = os.getloadavg()

@@ -23,23 +23,23 @@ _CONTROLLER: list = [None, -1]  # the process's ThreadpoolController and the cou
 _LOCK = threading.Lock()
 
 
+#: ``int callback(struct dl_phdr_info *, size_t, void *)`` of ``dl_iterate_phdr``.
+_PHDR_CALLBACK = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p)
+
+
 def _loaded_objects() -> int:
     """How many shared objects this process has loaded (``dl_iterate_phdr``; -1 where it is unavailable)."""
+    count = [0]
+
+    def one(info, size, data):
+        count[0] += 1
+        return 0
+
     try:
-        libc = ctypes.CDLL(None)
-        count = [0]
-
-        def one(info, size, data):
-            count[0] += 1
-            return 0
-
-        libc.dl_iterate_phdr(_PHDR_CALLBACK(one), None)
-        return count[0]
+        ctypes.CDLL(None).dl_iterate_phdr(_PHDR_CALLBACK(one), None)
     except (AttributeError, OSError):
         return -1
-
-
-_PHDR_CALLBACK = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p)
+    return count[0]
 
 
 def _controller() -> ThreadpoolController:
