@@ -4,7 +4,7 @@ Pinocchio's ``rnea`` re-run on :class:`~polyrob.bounds.certified.ball_jets.BallJ
 scalars: body-fixed frames, joint placements, axes and inertias read from
 the Pinocchio model (revolute joints of a serial chain), gravity as a base
 acceleration.  The torques are linear in the inertial parameters
-``(m, m c, I_origin)``, so one kinematic pass serves several parameter
+``(m, m c, I_origin)`` and the joints' armature, so one kinematic pass serves several parameter
 sets (the model's and the directions in which its true robots differ:
 :mod:`polyrob.bounds.certified.factors`).
 
@@ -13,6 +13,7 @@ Examples
 >>> import numpy as np, pinocchio as pin
 >>> from polyrob.bounds.certified.ball_jets import ball_sin_cos
 >>> model = pin.buildModelFromUrdf("urdf/planar_2r.urdf")
+>>> model.armature[:] = [0.05, 0.02]
 >>> chain = Chain.from_model(model)
 >>> q, v, a = np.array([0.3, -0.4]), np.array([0.5, 0.2]), np.array([1.0, -2.0])
 >>> s, c = ball_sin_cos(q[None], np.zeros((1, 2)), 0)
@@ -78,16 +79,19 @@ class Chain:
 
     @staticmethod
     def parameters(model) -> np.ndarray:
-        """The inertial parameters ``(m, h = m c, I about the joint origin)`` of every body: ``(m, 13)``.
+        """The inertial parameters ``(m, h = m c, I about the joint origin)`` of every body and its joint's armature: ``(m, 14)``.
 
-        Layout per body: mass, ``h`` (3), ``I_o`` row-major (9).
+        Layout per body: mass, ``h`` (3), ``I_o`` row-major (9), the
+        reflected rotor inertia ``model.armature`` that Pinocchio adds to
+        ``M(q)``'s diagonal (zero where the model has none).
         """
         out = []
+        armature = np.asarray(getattr(model, "armature", np.zeros(model.nv)), float)
         for i in range(1, model.njoints):
             Y = model.inertias[i]
             mass, c, Ic = float(Y.mass), np.asarray(Y.lever, float), np.asarray(Y.inertia, float)
             Io = Ic + mass * (c @ c * np.eye(3) - np.outer(c, c))
-            out.append(np.concatenate([[mass], mass * c, Io.ravel()]))
+            out.append(np.concatenate([[mass], mass * c, Io.ravel(), [armature[i - 1]]]))
         return np.array(out)
 
     def rotation(self, i: int, sin: BallJet, cos: BallJet) -> BallJet:
@@ -104,14 +108,15 @@ class Chain:
 
 
 def _split(params: np.ndarray, rad: np.ndarray):
-    """``(mass, h, I_o)`` balls of a parameter array ``(P, m, 13)``."""
+    """``(mass, h, I_o, armature)`` balls of a parameter array ``(P, m, 14)``."""
     return (
         (params[..., 0], rad[..., 0]),
         (params[..., 1:4], rad[..., 1:4]),
         (
-            params[..., 4:].reshape(*params.shape[:-1], 3, 3),
-            rad[..., 4:].reshape(*rad.shape[:-1], 3, 3),
+            params[..., 4:13].reshape(*params.shape[:-1], 3, 3),
+            rad[..., 4:13].reshape(*rad.shape[:-1], 3, 3),
         ),
+        (params[..., 13], rad[..., 13]),
     )
 
 
@@ -130,13 +135,13 @@ def rnea(chain: Chain, sin: BallJet, cos: BallJet, qd, acc, gravity: bool, param
         Joint accelerations, exact (``S`` sets; ``None``: zero, ``S = 1``).
     gravity : bool
         Whether the chain's gravity acts.
-    params : ndarray (P, m, 13)
+    params : ndarray (P, m, 14)
         Inertial parameters (:meth:`Chain.parameters`); ``params_rad`` their radii.
     """
     m = chain.m
     params = np.asarray(params, float)
     prad = np.zeros_like(params) if params_rad is None else np.asarray(params_rad, float)
-    (mass, mass_r), (h, h_r), (Io, Io_r) = _split(params, prad)
+    (mass, mass_r), (h, h_r), (Io, Io_r), (armature, armature_r) = _split(params, prad)
     B = sin.shape[0]
     # the whole recursion on the distinct derivatives only (BallJet.pack): the same floats, fewer of them
     sin, cos = sin.pack(), cos.pack()
@@ -192,4 +197,12 @@ def rnea(chain: Chain, sin: BallJet, cos: BallJet, qd, acc, gravity: bool, param
         f = forces[i] + Rf
         nm = moments[i] + R.form("matvec", nm) + Rf.const_form("cross", chain.translations[i + 1])
         taus[i] = nm.const_form("dot", chain.axes[i], left=False)
+    if acc is not None and np.any(armature != 0):
+        # the rotor's torque armature_i qddot_i (Pinocchio's rnea and crba add it); acc is exact, the product rounded
+        for i in range(m):
+            value = acc[None, :, None, i] * armature[None, None, :, i]  # (1, S, P)
+            rad = np.abs(acc[None, :, None, i]) * armature_r[None, None, :, i] + np.abs(value) * 2.0**-52
+            taus[i] = taus[i] + taus[i].constant_like(
+                np.broadcast_to(value, taus[i].shape), np.broadcast_to(rad, taus[i].shape)
+            )
     return type(taus[0]).stack(taus, len(taus[0].shape)).unpack()

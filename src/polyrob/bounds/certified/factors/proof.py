@@ -145,7 +145,7 @@ def proof_fingerprint(problem: FactorProblem, domain, **settings) -> str:
     >>> import numpy as np
     >>> from polyrob.bounds.certified.jet_rnea import Chain
     >>> chain = Chain(np.eye(3)[:2], np.stack([np.eye(3)] * 2), np.zeros((2, 3)), np.array([0, 0, -9.81]))
-    >>> problem = FactorProblem(chain, ("links",), np.ones((2, 2, 13)), np.zeros((2, 2, 13)))
+    >>> problem = FactorProblem(chain, ("links",), np.ones((2, 2, 14)), np.zeros((2, 2, 14)))
     >>> box = SimpleNamespace(**{f"{v}_{s}": np.zeros(2) for v in ("q", "qdot", "qddot") for s in ("lower", "upper")})
     >>> a, b = proof_fingerprint(problem, box, rel_tol=0.04), proof_fingerprint(problem, box, rel_tol=0.05)
     >>> len(a), a == b, a == proof_fingerprint(problem, box, rel_tol=0.04)

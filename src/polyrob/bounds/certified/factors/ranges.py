@@ -74,7 +74,7 @@ class FactorProblem:
 
     chain: Chain
     names: tuple
-    params: np.ndarray  # (1 + F, m, 13): the model, then each Delta_k
+    params: np.ndarray  # (1 + F, m, 14): the model, then each Delta_k (Chain.parameters)
     params_rad: np.ndarray
 
     @property
