@@ -116,6 +116,18 @@ def test_factors_at_degenerate_boxes_agree_with_pinocchio(ur5):
         assert np.abs(0.5 * (hi + lo)[0] - K_ref[k]).max() <= 1e-11 * scale
 
 
+def _agrees_with_pinocchio_at_points(robot, seed):
+    """The factors at two points of the default task and a width-0 box's enclosure hold FactorLoop's floats."""
+    loops = [(name, loop) for name, _, loop in factor_parameters(default_task_robot(robot))]
+    problem, domain = FactorProblem.from_loops(loops), default_task_domain(robot)
+    q, qd, a = _points(domain, 2, seed=seed)
+    K_ref = _reference(loops, q, qd, a)
+    scale = 1.0 + np.abs(K_ref).max()
+    assert np.abs(problem.values(q, qd, a) - K_ref).max() <= 1e-11 * scale
+    lo, hi, _ = problem.enclose(q[:1], q[:1], qd[:1], qd[:1], a[0], a[0])
+    assert np.all(lo[0] - 1e-12 * scale <= K_ref[0]) and np.all(K_ref[0] <= hi[0] + 1e-12 * scale)
+
+
 def test_the_rotors_armature_is_in_the_proofs_inertia():
     # talos' arm has armature 0.1 on every joint: Pinocchio adds it to M(q)'s diagonal, so must the proof's M_hat
     robot = load_robot("talos_left_arm")
@@ -127,14 +139,14 @@ def test_the_rotors_armature_is_in_the_proofs_inertia():
     tau = rnea(Chain.from_model(model), s, c, None, a[None], False, Chain.parameters(model)[None])
     ref = pin.rnea(model, data, q, np.zeros(6), a) - pin.computeGeneralizedGravity(model, data, q)
     assert np.all(np.abs(tau.mid[0, 0, 0] - ref) <= tau.rad[0, 0, 0] + 1e-12 * np.abs(ref).max())
-    loops = [(name, loop) for name, _, loop in factor_parameters(default_task_robot(robot))]
-    problem, domain = FactorProblem.from_loops(loops), default_task_domain(robot)
-    q, qd, a = _points(domain, 2, seed=5)
-    K_ref = _reference(loops, q, qd, a)
-    scale = 1.0 + np.abs(K_ref).max()
-    assert np.abs(problem.values(q, qd, a) - K_ref).max() <= 1e-12 * scale  # was off by 5x the largest entry
-    lo, hi, _ = problem.enclose(q[:1], q[:1], qd[:1], qd[:1], a[0], a[0])
-    assert np.all(lo[0] - 1e-12 * scale <= K_ref[0]) and np.all(K_ref[0] <= hi[0] + 1e-12 * scale)
+    _agrees_with_pinocchio_at_points(robot, seed=5)  # without the armature: off by 5 times the largest entry
+
+
+def test_continuous_joints_are_revolute_joints_to_the_proof():
+    # three of kinova's joints are continuous (Pinocchio stores (cos q, sin q)); before, the proof refused them
+    robot = load_robot("kinova")
+    assert robot.joint_kinds.count("continuous") == 3
+    _agrees_with_pinocchio_at_points(robot, seed=6)
 
 
 def test_random_points_of_a_small_box_lie_in_its_enclosure_and_a_shrunk_interval_is_caught(ur5):

@@ -34,6 +34,8 @@ from polyrob.errors import CertificationError
 __all__ = ["Chain", "rnea", "BallJet"]
 
 _AXES = {"JointModelRX": (1.0, 0.0, 0.0), "JointModelRY": (0.0, 1.0, 0.0), "JointModelRZ": (0.0, 0.0, 1.0)}
+# a continuous joint is a revolute one whose angle Pinocchio stores as (cos q, sin q): polyrob's coordinate is q
+_AXES.update({k.replace("JointModelR", "JointModelRUB"): v for k, v in _AXES.items()})
 #: Relative radius given to inertial parameters computed in floats (products, differences): 100 ulps.
 PARAMETER_RTOL = 1e-14
 
@@ -57,7 +59,7 @@ class Chain:
 
     @classmethod
     def from_model(cls, model) -> Chain:
-        """The chain of a Pinocchio model; refuses joints other than revolute ones and branching trees."""
+        """The chain of a Pinocchio model; refuses joints other than revolute ones (continuous included) and branching trees."""
         axes, rots, trans = [], [], []
         for i in range(1, model.njoints):
             joint = model.joints[i]
@@ -66,7 +68,7 @@ class Chain:
                 raise CertificationError(f"proved enclosures need a serial chain; joint {model.names[i]} branches")
             if kind in _AXES:
                 axis = np.array(_AXES[kind])
-            elif kind == "JointModelRevoluteUnaligned":
+            elif kind in ("JointModelRevoluteUnaligned", "JointModelRevoluteUnboundedUnaligned"):
                 axis = np.asarray(joint.extract().axis, float)
             else:
                 raise CertificationError(

@@ -152,13 +152,15 @@ class FactorProblem:
         M, dM = np.empty((n, P, m, m)), np.empty((n, P, m, m, m))  # dM[..., j, i, p] = d M_ij / d q_p
         zero, unit = np.zeros(m), np.eye(m)
         for P_k, model in enumerate(self.float_models):
-            data = model.createData()
+            data, config = model.createData(), _configuration(model, q)
             for b in range(n):
-                dq, dv, da = pinocchio.computeRNEADerivatives(model, data, q[b], qd[b], zero)
+                dq, dv, da = pinocchio.computeRNEADerivatives(model, data, config[b], qd[b], zero)
                 h[b, P_k], dhq[b, P_k], dhv[b, P_k], M[b, P_k] = data.tau, dq, dv, da
                 for j in range(m):
                     # the returned arrays are views of data's buffers: subtract the copy kept above
-                    dM[b, P_k, j] = pinocchio.computeRNEADerivatives(model, data, q[b], qd[b], unit[j])[0] - dhq[b, P_k]
+                    dM[b, P_k, j] = (
+                        pinocchio.computeRNEADerivatives(model, data, config[b], qd[b], unit[j])[0] - dhq[b, P_k]
+                    )
         M = np.triu(M) + np.swapaxes(np.triu(M, 1), -1, -2)  # Pinocchio fills the upper triangle
         dM = dM.transpose(0, 1, 4, 3, 2)  # (n, P, p, i, j)
         theta = np.asarray(self.thetas, float)
@@ -552,6 +554,18 @@ class FactorProblem:
         sign[unbounded] = 0
         # values attained at the box's centre and the a-vertices (float midpoints of thin balls): they only steer
         return lo, hi, contribution, vm.min(-1), vm.max(-1), sign
+
+
+def _configuration(model, q):
+    """Pinocchio's configurations ``(n, nq)`` of joint angles ``q`` ``(n, m)``: a continuous joint's as ``(cos, sin)``."""
+    out = np.empty((len(q), model.nq))
+    for i in range(1, model.njoints):
+        k, j = model.joints[i].idx_q, i - 1
+        if model.joints[i].nq == 2:
+            out[:, k], out[:, k + 1] = np.cos(q[:, j]), np.sin(q[:, j])
+        else:
+            out[:, k] = q[:, j]
+    return out
 
 
 def _columns(Jq, Jqd, G, m):
