@@ -366,9 +366,7 @@ def inner_links_plant(
     ranges = RANGE_MARGIN * reach_of(f.coeff, on_payload, pay).max(axis=0)
     rest = Phi - np.einsum("jsk,kab->jsab", f.coeff, centres)  # R_j(x) = K_j(x) - sum_k coeff_jk(x) D_k
     spread = SPREAD_MARGIN * entry_bound(rest, on_payload, pay)
-    block_residual = residual == "block"
-    residual_norm = state_residual_norm_bound(rest[..., :n], on_payload, pay, spread[:, :n]) if block_residual else None
-    # the acceleration columns: one norm-bounded block, shaped like the set where that is well posed
+    # the acceleration columns: one norm-bounded block, shaped like the set where well posed (first: a refusal is cheap)
     block = inertia_block(f.G_exact, Phi[..., n:], on_payload, pay, f.kappa, ranges, centres, G_MARGIN)
     g_norm, margin = block.g_norm, block.margin
     if margin <= 0.0:
@@ -379,6 +377,8 @@ def inner_links_plant(
             f"the centre leaves; the true robots' inertia ranges from {lo:.2g} to {hi:.2g} times the model's "
             "(eigenvalues of M_hat^-1 M, sampled), so the outer loop's gain varies that much"
         )
+    block_residual = residual == "block"
+    residual_norm = state_residual_norm_bound(rest[..., :n], on_payload, pay, spread[:, :n]) if block_residual else None
     # back to K's own coordinates; the residual stays weighted
     centres = weighted_factor(centres, np.linalg.inv(f.W), f.W)
     inertia = inertia_ratio(robot, scalars, q, _moved)
