@@ -23,6 +23,10 @@ vertices :func:`~polyrob.bounds.certified.factors.vertex_ascent` visits
 are taken on the entries whose sampled width is at least ``--floor`` of
 their factor's largest entry; on the others the excess of the proved width
 over the sampled one is reported relative to that scale (``excess_max``).
+The sampled values are Pinocchio's floats (``FactorProblem.value_parts``),
+computed apart from the proof's interval recursion, so ``outside`` (the
+entries whose sampled values leave the proved interval) checks the proof:
+it must read 0.
 
 - ``inverse``: per scale of ``--scales``, the proved enclosure of
   ``M_hat(q)^-1`` over the box by each method of

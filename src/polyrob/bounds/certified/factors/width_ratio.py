@@ -15,14 +15,20 @@ thousands out of an excess the model never feels.  So:
 
 The sampled width is attained (a lower bound of the true width), so both
 figures are upper bounds of the true over-estimation, up to sampling.
+``outside`` counts the entries whose sampled values leave the proved
+interval by more than :data:`OUTSIDE_TOL` of the factor's scale: with
+values computed apart from the proof (Pinocchio's floats), a check of the
+proof itself, which must read 0.
 
 Examples
 --------
 >>> import numpy as np
 >>> lo, hi = np.array([[[0.0, -1e-3]]]), np.array([[[1.1, 1e-3]]])
 >>> r = width_ratios(lo, hi, np.array([[[0.0, -1e-7]]]), np.array([[[1.0, 1e-7]]]))
->>> r["max"], r["entries"], r["excess_max"]
-(1.1, 1, 0.0019998)
+>>> r["max"], r["entries"], r["excess_max"], r["outside"]
+(1.1, 1, 0.0019998, 0)
+>>> width_ratios(lo, hi, np.array([[[0.0, -1e-7]]]), np.array([[[1.2, 1e-7]]]))["outside"]  # 1.2 > 1.1
+1
 """
 
 from __future__ import annotations
@@ -33,6 +39,9 @@ __all__ = ["width_ratios", "closing_tolerance", "FLOOR"]
 
 #: An entry whose sampled width is below this fraction of its factor's scale is reported by its excess, not its ratio.
 FLOOR = 1e-3
+#: A sampled value beyond a proved bound by more than this fraction of its factor's scale is outside (float samples
+#: carry their own rounding, about 1e-13 of the scale).
+OUTSIDE_TOL = 1e-9
 
 
 def width_ratios(lower, upper, sampled_lower, sampled_upper, floor: float = FLOOR) -> dict:
@@ -43,8 +52,9 @@ def width_ratios(lower, upper, sampled_lower, sampled_upper, floor: float = FLOO
     dict
         ``max``, ``median`` (ratios on the significant entries, ``nan`` if
         none), ``entries`` (how many), ``floor``, ``excess_max`` (largest
-        ``(proved - sampled width) / scale`` on the other entries, 0 if none)
-        and ``thin_entries`` (how many).
+        ``(proved - sampled width) / scale`` on the other entries, 0 if none),
+        ``thin_entries`` (how many) and ``outside`` (entries whose sampled
+        values leave the proved interval: 0 for a proof that holds them).
     """
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     s_lo, s_hi = np.asarray(sampled_lower, float), np.asarray(sampled_upper, float)
@@ -61,6 +71,7 @@ def width_ratios(lower, upper, sampled_lower, sampled_upper, floor: float = FLOO
         "floor": floor,
         "excess_max": round(float(excess.max()), 12) if excess.size else 0.0,
         "thin_entries": int((~significant).sum()),
+        "outside": int(((s_lo < lower - OUTSIDE_TOL * scale) | (s_hi > upper + OUTSIDE_TOL * scale)).sum()),
     }
 
 
