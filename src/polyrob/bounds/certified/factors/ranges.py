@@ -121,7 +121,7 @@ class FactorProblem:
         return cls(chain, names, np.array(params), np.array(rads), tuple(models), tuple(thetas))
 
     def values(self, q, qd, a):
-        """Float values of every factor at points ``(n, m)``: ``(n, F, m, 3m)`` (midpoints of thin enclosures)."""
+        """Float values of every factor at points ``(n, m)``: ``(n, F, m, 3m)`` (:meth:`value_parts`'s)."""
         K, Ka = self.value_parts(q, qd)
         K[..., : self.m] += np.einsum("bfipj,bj->bfip", Ka, a)
         return K
@@ -143,7 +143,7 @@ class FactorProblem:
 
         The torques are linear in ``a``, so the derivatives at ``e_j`` less those
         at 0 are ``d(M e_j)/dq``; each direction ``Delta_k`` is its true robot
-        less the model, over ``theta_k`` (about 30 times faster than the ball
+        less the model, over ``theta_k`` (about 17 times faster than the ball
         recursion, which the proof needs only for its bounds).
         """
         n, m = q.shape
