@@ -16,7 +16,8 @@ import pytest
 from polyrob import load_robot
 from polyrob.bounds.certified.ball_jets import BallJet, ball_inverse, ball_sin_cos, jet_layout, lower, upper
 from polyrob.bounds.certified.factors import FactorProblem, attained_range, factor_directions, prove_factor_ranges
-from polyrob.bounds.certified.factors.width_ratio import width_ratios
+from polyrob.bounds.certified.factors.proof import REL_TOL
+from polyrob.bounds.certified.factors.width_ratio import closing_tolerance, width_ratios
 from polyrob.bounds.certified.jet_rnea import Chain, rnea
 from polyrob.domains.default_task import default_task_domain, default_task_robot
 from polyrob.errors import CertificationError
@@ -190,17 +191,26 @@ def test_branch_and_bound_proves_a_small_box_and_gives_up_on_counted_work(ur5):
 
 
 def test_boxes_shared_among_workers_give_the_same_proof():
-    """Each batch of boxes split between two worker processes: the same boxes and path as in one, the same bounds up to the cells."""
+    """Each batch of boxes split between two worker processes: the same proof as in one, up to the cells.
+
+    A worker's half of a batch may get finer cells (taylor2.cell_grid), which may close a side a box sooner
+    and so change which sides the next boxes' vertex ascent searches: the path may differ by a few boxes.
+    """
     robot = load_robot("finger_edu")  # a 3-joint arm: many cheap boxes (ur5's small boxes close in one or need ~20)
     loops = [(name, loop) for name, _, loop in factor_parameters(default_task_robot(robot))]
-    box = default_task_domain(robot).scaled(0.16)  # 37 boxes (at 0.15 the first split closes it: 2)
-    one, two = (prove_factor_ranges(loops, box, max_boxes=60, pilot=32, ascent_rounds=1, workers=w) for w in (1, 2))
-    assert one.boxes == two.boxes > 10
-    # the cells' grid follows how many open entries one call holds (taylor2.cell_grid): a worker's half of a
-    # batch may get finer cells, so a bound may be tighter there (measured: 6e-5 on entries of up to 46)
-    scale = np.abs(one.upper).max()
-    assert np.allclose(one.lower, two.lower, rtol=0, atol=1e-5 * scale)
-    assert np.allclose(one.upper, two.upper, rtol=0, atol=1e-5 * scale)
+    box = default_task_domain(robot).scaled(0.3)  # 29 boxes, each with its vertex ascent on the workers (at 0.2: 9)
+    one, two = (
+        prove_factor_ranges(loops, box, max_boxes=60, pilot=32, ascent_rounds=1, box_ascent_rounds=4, workers=w)
+        for w in (1, 2)
+    )
+    assert one.boxes > 10 and two.boxes > 10 and abs(one.boxes - two.boxes) <= 0.2 * one.boxes  # measured 29, 27
+    # each side closes between the true extreme and the tolerance past its values attained (which never pass
+    # the extreme): the two differ by at most the larger tolerance (measured 0.0043 on an entry of width 1.35)
+    tol = closing_tolerance(
+        np.minimum(one.attained_lower, two.attained_lower), np.maximum(one.attained_upper, two.attained_upper), REL_TOL
+    )
+    assert np.all(np.abs(one.lower - two.lower) <= tol) and np.all(np.abs(one.upper - two.upper) <= tol)
+    assert one.tightness()["outside"] == two.tightness()["outside"] == 0
 
 
 def test_the_slope_form_tightens_the_acceleration_columns_and_still_holds_every_point(ur5):

@@ -14,7 +14,9 @@ from polyrob.domains.default_task import default_task_domain, default_task_robot
 from polyrob.errors import CertificationError
 from polyrob.plant.models.inner_factors import factor_parameters
 
-CHEAP = dict(pilot=32, ascent_rounds=0)  # the steering's pilot small: these tests are about the state, not tightness
+CHEAP = dict(
+    pilot=32, ascent_rounds=0, box_ascent_rounds=0
+)  # the steering's pilot small: these tests are about the state, not tightness
 
 
 @functools.cache
@@ -65,7 +67,7 @@ def test_an_interrupted_batch_leaves_the_state_of_the_batch_before(tmp_path, mon
 def test_a_damaged_file_or_another_proofs_state_is_not_gone_on_from(tmp_path):
     loops, box, whole = finger()
     problem = FactorProblem.from_loops(loops)
-    settings = dict(rel_tol=proof.REL_TOL, pilot=32, seed=0, taylor=True, ascent=0, batch=proof.BATCH)
+    settings = dict(rel_tol=proof.REL_TOL, pilot=32, seed=0, taylor=True, ascent=0, batch=proof.BATCH, box_ascent=0)
     path = tmp_path / f"factor-proof-{proof.proof_fingerprint(problem, box, **settings)}.npz"
     path.write_bytes(b"not a checkpoint")
     with pytest.raises(CertificationError, match=r"\(\d+\.\d % of the work done, 1 box in all"):  # from the root

@@ -12,7 +12,8 @@ the search keeps splitting the corner (``tests/test_certified_attained.py``:
 on a tenth of finger_edu's task the proof gives up with the random pilot
 alone and closes in a few boxes with :func:`vertex_ascent`'s values).
 
-The values here are float evaluations (midpoints of thin enclosures):
+The values here are float evaluations (Pinocchio's,
+:meth:`~polyrob.bounds.certified.factors.ranges.FactorProblem.value_parts`):
 they only steer, and never enter a proved bound.
 """
 
@@ -62,7 +63,7 @@ def extremes_over_accelerations(problem, x, a_lo, a_hi):
     return np.concatenate(lows), np.concatenate(highs)
 
 
-def vertex_ascent(problem, x_lo, x_hi, a_lo, a_hi, *, rounds: int = 8):
+def vertex_ascent(problem, x_lo, x_hi, a_lo, a_hi, *, rounds: int = 8, sides=None):
     """Extremes attained at vertices of the box ``[x_lo, x_hi]`` of ``x = (q, qdot)``, found by flipping one coordinate at a time.
 
     Every side of every entry (its largest and its smallest value) starts
@@ -73,10 +74,16 @@ def vertex_ascent(problem, x_lo, x_hi, a_lo, a_hi, *, rounds: int = 8):
     entry is monotone near them, and a lower bound of the true extremes
     always.  Sides that share a vertex share its evaluation.
 
+    ``sides`` (bool ``(F, m, 3m, 2)``: the smallest, then the largest
+    value) restricts the search to those sides, which costs less: the
+    branch and bound's boxes search only their open sides
+    (:func:`~polyrob.bounds.certified.factors.box_batches.enclose_batch`).
+
     Returns
     -------
     lower, upper : ndarray (F, m, 3m)
-        The smallest and largest values attained at the vertices visited.
+        The smallest and largest values attained at the vertices visited
+        (``+inf`` and ``-inf`` on the sides not searched).
     """
     x_lo, x_hi = np.asarray(x_lo, float), np.asarray(x_hi, float)
     n = len(x_lo)
@@ -85,21 +92,22 @@ def vertex_ascent(problem, x_lo, x_hi, a_lo, a_hi, *, rounds: int = 8):
     free = np.flatnonzero(radius > 0)
     pts = np.vstack([centre + step[p] * np.eye(n)[p] for p in free] + [centre - step[p] * np.eye(n)[p] for p in free])
     low, high = extremes_over_accelerations(problem, pts, a_lo, a_hi)
-    sides = np.stack([-low, high], -1)  # maximise both: (n_pts, F, i, e, 2)
-    shape = sides.shape[1:]
-    slope = sides[: len(free)] - sides[len(free) :]  # (free, S...)
-    bits = np.zeros((int(np.prod(shape)), n), bool)
-    bits[:, free] = (slope.reshape(len(free), -1) > 0).T
+    objective = np.stack([-low, high], -1)  # maximise both: (n_pts, F, i, e, 2)
+    shape = objective.shape[1:]
+    slope = (objective[: len(free)] - objective[len(free) :]).reshape(len(free), -1)  # (free, S)
+    searched = np.arange(slope.shape[1]) if sides is None else np.flatnonzero(np.asarray(sides, bool).reshape(-1))
+    bits = np.zeros((len(searched), n), bool)
+    bits[:, free] = (slope[:, searched] > 0).T
     best = np.full(len(bits), -np.inf)
     flips = np.eye(n, dtype=bool)[free]
     seen: dict[bytes, np.ndarray] = {}  # a vertex is evaluated once, however many rounds and sides visit it
-    for _ in range(rounds):
+    for _ in range(rounds if len(searched) else 0):
         candidates = np.concatenate([bits[None], bits[None] ^ flips[:, None]])  # (1 + free, S, n)
         unique, where = np.unique(candidates.reshape(-1, n), axis=0, return_inverse=True)
         new = [u for u in unique if u.tobytes() not in seen]
         if new:
             low, high = extremes_over_accelerations(problem, np.where(np.array(new), x_hi, x_lo), a_lo, a_hi)
-            for u, row in zip(new, np.stack([-low, high], -1).reshape(len(new), -1)):
+            for u, row in zip(new, np.stack([-low, high], -1).reshape(len(new), -1)[:, searched]):
                 seen[u.tobytes()] = row
         values = np.array([seen[u.tobytes()] for u in unique])
         S = len(bits)
@@ -110,5 +118,7 @@ def vertex_ascent(problem, x_lo, x_hi, a_lo, a_hi, *, rounds: int = 8):
         bits = candidates[pick, np.arange(S)]
         if not gained.any():
             break
-    best = best.reshape(shape)
-    return -best[..., 0], best[..., 1]
+    full = np.full(int(np.prod(shape)), -np.inf)
+    full[searched] = best
+    full = full.reshape(shape)
+    return -full[..., 0], full[..., 1]

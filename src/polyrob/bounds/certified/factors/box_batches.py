@@ -26,7 +26,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["enclose_batch", "split_map"]
+from polyrob.bounds.certified.factors.attained import vertex_ascent
+
+__all__ = ["enclose_batch", "split_map", "NEAR"]
+
+#: A box's vertex ascent searches the open sides whose bound is within this many tolerances of the value
+#: attained: a better inner value closes those; a wider gap is the enclosure's, and only a split closes it.
+NEAR = 3.0
 
 
 def split_map(pool, fn, arrays: tuple, *extra) -> tuple:
@@ -46,19 +52,46 @@ def split_map(pool, fn, arrays: tuple, *extra) -> tuple:
 
 
 def _enclose_part(problem, item) -> tuple:
-    boxes, a_lo, a_hi, taylor = item
+    boxes, a_lo, a_hi, taylor, *ascent = item
     entries = boxes[4] if len(boxes) > 4 else None
     check = boxes[5] if len(boxes) > 5 else None
-    return problem.enclose(*boxes[:4], a_lo, a_hi, taylor=taylor, attained=True, entries=entries, check_inverse=check)
+    out = problem.enclose(*boxes[:4], a_lo, a_hi, taylor=taylor, attained=True, entries=entries, check_inverse=check)
+    if ascent and ascent[0] is not None and len(boxes) > 6:
+        _ascend_open_sides(problem, boxes, out, a_lo, a_hi, *ascent[0])
+    return out
 
 
-def enclose_batch(pool, boxes, a_lo, a_hi, *, taylor: bool) -> tuple:
+def _ascend_open_sides(problem, boxes, out, a_lo, a_hi, rounds, p_lo, p_hi, tol) -> None:
+    """Add to each box's values attained those :func:`~polyrob.bounds.certified.factors.attained.vertex_ascent` finds on its sides still open.
+
+    A side is still open when it was open on the box (``boxes[6]``) and its
+    bound here is not within ``tol`` of the values attained so far
+    (``p_lo``, ``p_hi``): the only sides whose closing waits for a better
+    inner value.  Their extremes often lie at the box's own vertices, where
+    no centre lands; the values only steer (``out[3]``, ``out[4]``, in place).
+    """
+    lo, hi, _, seen_lo, seen_hi, _ = out
+    for b in np.flatnonzero(np.isfinite(hi).all((1, 2, 3)) & np.isfinite(lo).all((1, 2, 3))):
+        gap = np.stack([p_lo - lo[b], hi[b] - p_hi], -1) / tol[..., None]  # in tolerances
+        still = boxes[6][b] & (gap > 1) & (gap <= NEAR)
+        if still.any():
+            x_lo, x_hi = np.concatenate([boxes[0][b], boxes[2][b]]), np.concatenate([boxes[1][b], boxes[3][b]])
+            at_lo, at_hi = vertex_ascent(problem, x_lo, x_hi, a_lo, a_hi, rounds=rounds, sides=still)
+            seen_lo[b], seen_hi[b] = np.fmin(seen_lo[b], at_lo), np.fmax(seen_hi[b], at_hi)
+
+
+def enclose_batch(pool, boxes, a_lo, a_hi, *, taylor: bool, ascent=None) -> tuple:
     """``pool.state.enclose(*boxes[:4], a_lo, a_hi, taylor=taylor, attained=True, entries=boxes[4], check_inverse=boxes[5])``, shared among the workers.
 
     ``pool``: a :class:`~polyrob.bounds.parallel.WorkerPool` whose state is
     the :class:`~polyrob.bounds.certified.factors.ranges.FactorProblem`;
     ``boxes``: ``(q_lo, q_hi, qd_lo, qd_hi)``, each ``(B, m)``, and
-    optionally the entries still open on each box ``(B, F, m, 3m)`` and the
-    boxes whose inverse is checked first ``(B,)`` (``check_inverse``).
+    optionally the entries still open on each box ``(B, F, m, 3m)``, the
+    boxes whose inverse is checked first ``(B,)`` (``check_inverse``) and
+    the sides open on each box ``(B, F, m, 3m, 2)``.  ``ascent``, with the
+    open sides: ``(rounds, p_lo, p_hi, tol)``, a vertex ascent of that
+    many rounds on each box's sides that its enclosure leaves open against
+    the values attained ``p_lo``, ``p_hi`` (:func:`_ascend_open_sides`),
+    on the workers too.
     """
-    return split_map(pool, _enclose_part, tuple(boxes), a_lo, a_hi, taylor)
+    return split_map(pool, _enclose_part, tuple(boxes), a_lo, a_hi, taylor, ascent)
