@@ -64,11 +64,13 @@ def _enclose_part(problem, item) -> tuple:
 def _ascend_open_sides(problem, boxes, out, a_lo, a_hi, rounds, p_lo, p_hi, tol) -> None:
     """Add to each box's values attained those :func:`~polyrob.bounds.certified.factors.attained.vertex_ascent` finds on its sides still open.
 
-    A side is still open when it was open on the box (``boxes[6]``) and its
-    bound here is not within ``tol`` of the values attained so far
-    (``p_lo``, ``p_hi``): the only sides whose closing waits for a better
-    inner value.  Their extremes often lie at the box's own vertices, where
-    no centre lands; the values only steer (``out[3]``, ``out[4]``, in place).
+    A side is searched when it was open on the box (``boxes[6]``) and its
+    bound here is more than ``tol`` and at most :data:`NEAR` times ``tol``
+    past the values attained so far (``p_lo``, ``p_hi``, as the batch
+    began; the bound before the intersection with the parent's): the sides
+    whose closing waits for a better inner value.  Their extremes often lie
+    at the box's own vertices, where no centre lands; the values only steer
+    (``out[3]``, ``out[4]``, in place).
     """
     lo, hi, _, seen_lo, seen_hi, _ = out
     for b in np.flatnonzero(np.isfinite(hi).all((1, 2, 3)) & np.isfinite(lo).all((1, 2, 3))):
