@@ -334,8 +334,8 @@ def prove_factor_ranges(
     a_lo, a_hi = np.asarray(domain.qddot_lower, float), np.asarray(domain.qddot_upper, float)
     path, fingerprint, state = None, None, None
     if checkpoint_dir is not None:
-        settings = dict(rel_tol=rel_tol, pilot=pilot, seed=seed, taylor=taylor, ascent=ascent_rounds, batch=BATCH)
-        settings["box_ascent"] = box_ascent_rounds
+        settings = dict(rel_tol=rel_tol, pilot=pilot, seed=seed, taylor=taylor, ascent=ascent_rounds, batch=BATCH,
+                        box_ascent=box_ascent_rounds)  # fmt: skip
         fingerprint = proof_fingerprint(problem, domain, **settings)
         path = Path(checkpoint_dir) / f"factor-proof-{fingerprint}.npz"
         state = _State.load(path, fingerprint)
@@ -464,11 +464,11 @@ def _one_batch(state: _State, pool, a_lo, a_hi, taylor, root_q, root_v, box_asce
     m = len(root_q)
     batch, rest = _next_batch(state.stack)
     ql, qh, vl, vh = (np.array([b[k] for b in batch]) for k in range(4))
-    entries = np.array([b[4].any(-1) for b in batch])
+    sides = np.array([b[4] for b in batch])  # (B, F, m, 3m, 2): the open sides
+    entries = sides.any(-1)
     # a box whose parent's M_hat^-1 was not proved: its inverse checked first, then its first finite enclosure
     # (ranges.py); the root gets every form at once (on most arms its inverse is proved)
     unproved_parent = np.array([not np.isfinite(b[7]).all() and b[5] < 1.0 for b in batch])
-    sides = np.array([b[4] for b in batch])
     ascent = (box_ascent_rounds, state.p_lo, state.p_hi, state.tol) if box_ascent_rounds else None
     lo, hi, contribution, seen_lo, seen_hi, sign = enclose_batch(
         pool, (ql, qh, vl, vh, entries, unproved_parent, sides), a_lo, a_hi, taylor=taylor, ascent=ascent
